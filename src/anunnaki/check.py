@@ -1,0 +1,300 @@
+"""Static checks of a goal model, its platform binding and its tactics (``anunnaki check``).
+
+Every finding names the file, the line and the element, and most carry a hint. Checks:
+
+* each file loads (shape, types, bounds; hostile content refused);
+* duplicate ids, unknown children / obstructed goals / resolution goals, refinement cycles,
+  an ambiguous root, dependency cycles through resolution goals;
+* expressions parse and name known agents and attributes (the binding says which topics
+  carry which attributes), agents referenced by expressions publish some topic;
+* leaf goals without a utility (error) or a responsible agent (warning);
+* tactics name known goals, known endpoints of the right kind (topic vs service) with
+  payloads that fit the endpoint's schema, and valid expressions;
+* (warning) goals whose violation no tactic addresses: a goal is addressed when a tactic's
+  precondition names it or an ancestor as unsatisfied/unknown, when it is AND-refined and
+  all its children are addressed, or OR-refined and one child is.
+
+Exit codes of the command: 0 clean, 1 findings (errors or warnings), 2 a file unreadable.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from anunnaki._findings import Finding
+from anunnaki.errors import ExpressionError, ModelFileError
+from anunnaki.goals import (
+    Binding,
+    EndpointSpec,
+    Evaluator,
+    GoalModel,
+    compile_expression,
+    load_binding,
+    load_goal_model,
+)
+from anunnaki.tactics import GoalState, TacticSet, load_tactics
+
+__all__ = ["CheckResult", "check_files", "check_tactics"]
+
+
+@dataclass
+class CheckResult:
+    """What :func:`check_files` found."""
+
+    findings: list[Finding] = field(default_factory=list)
+    unreadable: bool = False
+    model: GoalModel | None = None
+    tactics: TacticSet | None = None
+
+    @property
+    def exit_code(self) -> int:
+        """0 clean, 1 findings, 2 a file could not be read."""
+        if self.unreadable:
+            return 2
+        return 1 if self.findings else 0
+
+    @property
+    def errors(self) -> list[Finding]:
+        """Error-level findings."""
+        return [f for f in self.findings if f.severity == "error"]
+
+    @property
+    def warnings(self) -> list[Finding]:
+        """Warning-level findings."""
+        return [f for f in self.findings if f.severity == "warning"]
+
+
+def _sniff_kind(path: str | Path) -> str:
+    """Guess whether a file is a binding or tactics by extension and format tag."""
+    p = Path(path)
+    if p.suffix.lower() == ".xml":
+        return "tactics"
+    try:
+        head = p.read_text(encoding="utf-8", errors="replace")[:4096]
+    except OSError:
+        return "unknown"
+    if "binding/1" in head:
+        return "binding"
+    if "tactics/1" in head or head.lstrip().startswith("<"):
+        return "tactics"
+    return "unknown"
+
+
+def check_files(
+    model_path: str | Path,
+    *extra: str | Path,
+    binding: str | Path | None = None,
+    tactics: str | Path | None = None,
+) -> CheckResult:
+    """Check a goal model with an optional binding and tactics file.
+
+    ``extra`` files are recognised by their format tag (``binding/1``, ``tactics/1``) or
+    extension (``.xml`` = tactics), so ``check MODEL TACTICS`` works without a binding.
+    """
+    result = CheckResult()
+    for path in extra:
+        kind = _sniff_kind(path)
+        if kind == "binding" and binding is None:
+            binding = path
+        elif kind == "tactics" and tactics is None:
+            tactics = path
+        else:
+            result.findings.append(
+                Finding(
+                    "error",
+                    "cannot tell whether this is a binding or a tactics file",
+                    str(path),
+                    1,
+                    hint="start it with 'anunnaki: binding/1' or 'anunnaki: tactics/1'",
+                )
+            )
+            result.unreadable = True
+    loaded_binding: Binding | None = None
+    if binding is not None:
+        try:
+            loaded_binding = load_binding(binding)
+        except ModelFileError as exc:
+            result.findings.append(Finding.from_error(exc))
+            result.unreadable = True
+    try:
+        model = load_goal_model(model_path, loaded_binding, strict=False)
+    except ModelFileError as exc:
+        result.findings.append(Finding.from_error(exc))
+        result.unreadable = True
+        return result
+    result.model = model
+    result.findings.extend(model.findings)
+    if not model.errors():
+        try:
+            Evaluator(model)
+        except ModelFileError as exc:
+            result.findings.append(Finding.from_error(exc))
+    if tactics is not None:
+        try:
+            ts = load_tactics(tactics)
+        except ModelFileError as exc:
+            result.findings.append(Finding.from_error(exc))
+            result.unreadable = True
+            return result
+        result.tactics = ts
+        result.findings.extend(check_tactics(model, ts, str(tactics)))
+        result.findings.extend(_unaddressed(model, ts))
+    return result
+
+
+def check_tactics(model: GoalModel, ts: TacticSet, path: str | None) -> list[Finding]:
+    """Check that tactics name known goals, endpoints and attributes."""
+    out: list[Finding] = []
+    for goal, refs in ts.referenced_goals().items():
+        if goal not in model.goals:
+            from anunnaki.goals._model import _did_you_mean
+
+            for ref in refs:
+                out.append(
+                    Finding(
+                        "error",
+                        f"unknown goal '{goal}'",
+                        path,
+                        ref.line,
+                        ref.element,
+                        _did_you_mean(goal, model.goals),
+                    )
+                )
+    for ep in ts.referenced_endpoints():
+        spec = model.endpoints.get(ep.name)
+        if spec is None:
+            known = sorted(n for n, e in model.endpoints.items() if e.kind == ep.kind)
+            out.append(
+                Finding(
+                    "error",
+                    f"unknown {ep.kind} {ep.name}",
+                    path,
+                    ep.line,
+                    ep.element,
+                    f"the binding's {ep.kind}s: {', '.join(known) or 'none'}",
+                )
+            )
+            continue
+        if spec.kind != ep.kind:
+            out.append(
+                Finding(
+                    "error",
+                    f"{ep.name} is a {spec.kind}, not a {ep.kind}",
+                    path,
+                    ep.line,
+                    ep.element,
+                    "publish to topics, request services",
+                )
+            )
+        for problem in _payload_problems(spec, ep.payload):
+            out.append(Finding("error", problem, path, ep.line, ep.element))
+    for ref in ts.expressions():
+        try:
+            expr = compile_expression(ref.expression, path=path, line=ref.line, element=ref.element)
+        except ExpressionError as exc:
+            out.append(Finding.from_error(exc))
+            continue
+        for agent in sorted(expr.agents):
+            if agent not in model.agents:
+                out.append(
+                    Finding("error", f"unknown agent '{agent}' in '{expr.text}'", path,
+                            ref.line, ref.element)
+                )
+        for attr in sorted(expr.refs):
+            agent_obj = model.agents.get(attr.agent)
+            if agent_obj is not None and attr.attribute not in agent_obj.attributes:
+                out.append(
+                    Finding(
+                        "error",
+                        f"unknown attribute '{attr}' in '{expr.text}'",
+                        path,
+                        ref.line,
+                        ref.element,
+                        f"{attr.agent} publishes: "
+                        + (", ".join(sorted(agent_obj.attributes)) or "none"),
+                    )
+                )
+    return out
+
+
+_JSON_TYPES: dict[str, tuple[type, ...]] = {
+    "string": (str,),
+    "number": (int, float),
+    "integer": (int,),
+    "boolean": (bool,),
+    "object": (dict,),
+    "array": (list,),
+}
+
+
+def _payload_problems(spec: EndpointSpec, payload: dict[str, Any]) -> list[str]:
+    problems: list[str] = []
+    if not spec.payload:
+        return problems
+    for name, value in payload.items():
+        fld = spec.payload.get(name)
+        if fld is None:
+            problems.append(
+                f"{spec.name} takes no field '{name}' (fields: {', '.join(spec.payload)})"
+            )
+            continue
+        types = _JSON_TYPES.get(fld.type)
+        bad_type = types is not None and (
+            not isinstance(value, types) or (fld.type != "boolean" and isinstance(value, bool))
+        )
+        if bad_type:
+            problems.append(f"field '{name}' of {spec.name} must be a {fld.type}, got {value!r}")
+        elif fld.enum is not None and value not in fld.enum:
+            choices = ", ".join(map(str, fld.enum))
+            problems.append(f"field '{name}' of {spec.name} must be one of {choices}; got {value!r}")
+    for name, fld in spec.payload.items():
+        if fld.required and name not in payload:
+            problems.append(f"{spec.name} needs field '{name}'")
+    return problems
+
+
+def _unaddressed(model: GoalModel, ts: TacticSet) -> list[Finding]:
+    named: set[str] = set()
+    for tactic in ts.tactics:
+        for cond in tactic.preconditions:
+            if isinstance(cond, GoalState) and cond.state in ("unsatisfied", "unknown"):
+                named.add(cond.goal)
+    covered: dict[str, bool] = {}
+
+    def has_named_ancestor(goal: str, seen: set[str]) -> bool:
+        for parent in model.parents.get(goal, []):
+            if parent in seen:
+                continue
+            seen.add(parent)
+            if parent in named or has_named_ancestor(parent, seen):
+                return True
+        return False
+
+    def cover(goal: str, depth: int = 0) -> bool:
+        if goal in covered:
+            return covered[goal]
+        g = model.goals[goal]
+        ok = goal in named
+        if not ok and g.children and depth < 256:
+            kids = [cover(c, depth + 1) for c in g.children if c in model.goals]
+            ok = all(kids) if g.refinement == "and" else any(kids)
+        covered[goal] = ok
+        return ok
+
+    out: list[Finding] = []
+    for gid in model.goals:
+        if not cover(gid) and not has_named_ancestor(gid, set()):
+            out.append(
+                Finding(
+                    "warning",
+                    "no tactic addresses a violation of this goal",
+                    model.path,
+                    model.line_of("goals", gid),
+                    f"goals[{gid}]",
+                    f"add a tactic with precondition 'goal: {gid}, state: unsatisfied' "
+                    "(or on an ancestor)",
+                )
+            )
+    return out

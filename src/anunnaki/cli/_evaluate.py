@@ -1,0 +1,185 @@
+"""``anunnaki evaluate MODEL --trace TRACE``: replay a trace and show the goal tree at each change."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from typing import Any
+
+from rich.console import Console
+from rich.text import Text
+from rich.tree import Tree
+
+from anunnaki.goals import Evaluator, GoalModel, load_goal_model, status_name
+from anunnaki.trace import Phase, Record, iter_trace
+
+_STYLE = {"satisfied": "green", "unsatisfied": "bold red", "unknown": "grey50"}
+_OBSTACLE = {"satisfied": "holds", "unsatisfied": "absent", "unknown": "unknown"}
+
+
+def add_parser(sub: Any) -> None:
+    """Register the sub-command."""
+    p: argparse.ArgumentParser = sub.add_parser(
+        "evaluate",
+        help="replay a trace against a goal model and print the goal tree at each change",
+        description=(
+            "Replay a JSONL trace (docs/traces.md) against a goal model and print the goal "
+            "tree with utilities whenever a goal's status changes or a utility moves by at "
+            "least --delta. Colour on a terminal, plain text when piped; --json for machines."
+        ),
+    )
+    p.add_argument("model", help="goal-model YAML file")
+    p.add_argument("--binding", "-b", help="platform-binding YAML file")
+    p.add_argument("--trace", "-t", required=True, help="JSONL trace to replay")
+    p.add_argument("--json", action="store_true", help="one JSON object per change on stdout")
+    p.add_argument(
+        "--delta",
+        type=float,
+        default=0.05,
+        help="also report a utility change of at least this much (default 0.05)",
+    )
+    p.add_argument("--explain", metavar="GOAL", help="print GOAL's explanation at each change")
+    p.set_defaults(run=run)
+
+
+def _fmt_u(u: float | None) -> str:
+    return "  ?  " if u is None else f"{u:.3f}"
+
+
+def render_tree(ev: Evaluator) -> Tree:
+    """The goal tree with utilities and statuses, obstacles under the goals they obstruct."""
+    model = ev.model
+
+    def label(node: str) -> Text:
+        st = ev.state(node)
+        name = st.status_name
+        desc = model.nodes()[node].description
+        if st.kind == "obstacle":
+            word = _OBSTACLE[name]
+            style = {"holds": "bold red", "absent": "green", "unknown": "grey50"}[word]
+            return Text.assemble(
+                ("⊘ ", style), (f"{node} ", "bold"), (f"{word:<11}", style),
+                f" {_fmt_u(st.utility)}  ", (desc, "dim"),
+            )
+        return Text.assemble(
+            (f"{node} ", "bold"), (f"{name:<11}", _STYLE[name]),
+            f" {_fmt_u(st.utility)}  ", (desc, "dim"),
+        )
+
+    root = Tree(label(model.root))
+
+    def grow(tree: Tree, node: str, depth: int) -> None:
+        if depth > 64:
+            return
+        for oid in model.obstructed_by.get(node, []):
+            tree.add(label(oid))
+        for child in model.goals[node].children if node in model.goals else []:
+            grow(tree.add(label(child)), child, depth + 1)
+
+    grow(root, model.root, 0)
+    return root
+
+
+def run(args: argparse.Namespace) -> int:
+    """Replay the trace; exit 0 when done (the goal statuses are the output, not the code)."""
+    model: GoalModel = load_goal_model(args.model, args.binding)
+    ev = Evaluator(model)
+    console = Console(highlight=False)
+    if not console.is_terminal:
+        console = Console(highlight=False, width=160)
+    last_u: dict[str, float | None] = {n: ev.state(n).utility for n in ev.ids}
+    last_s: dict[str, Any] = {n: ev.state(n).status for n in ev.ids}
+    phase: str | None = None
+    ev.drain_changes()
+    summary: list[dict[str, Any]] = []
+
+    def report(t: float) -> None:
+        changed = ev.drain_changes()
+        notable = []
+        for n in changed:
+            st = ev.state(n)
+            prev_u = last_u[n]
+            moved = (
+                (st.utility is None) != (prev_u is None)
+                or (st.utility is not None and prev_u is not None
+                    and abs(st.utility - prev_u) >= args.delta)
+            )
+            if st.status is not last_s[n] or moved:
+                notable.append((n, last_s[n], st.status, prev_u, st.utility))
+                last_u[n] = st.utility
+                last_s[n] = st.status
+        if not notable:
+            return
+        if args.json:
+            out = {
+                "t": t,
+                "phase": phase,
+                "changed": [
+                    {"node": n, "from": status_name(a), "to": status_name(b),
+                     "utility_from": ua, "utility": ub}
+                    for n, a, b, ua, ub in notable
+                ],
+                "nodes": {
+                    n: {"utility": ev.util[i], "status": status_name(ev.stat[i])}
+                    for i, n in enumerate(ev.ids)
+                },
+            }
+            if args.explain:
+                out["explanation"] = ev.explain(args.explain).to_dict()
+            sys.stdout.write(json.dumps(out) + "\n")
+            return
+        def word(node: str, s: Any) -> str:
+            if node in model.obstacles:
+                return _OBSTACLE[status_name(s)]
+            return status_name(s)
+
+        what = ", ".join(
+            f"{n} {word(n, a)}→{word(n, b)}" if a is not b
+            else f"{n} {_fmt_u(ua).strip()}→{_fmt_u(ub).strip()}"
+            for n, a, b, ua, ub in notable
+        )
+        console.print(Text.assemble((f"t = {t:8.3f} s  ", "bold cyan"), what), soft_wrap=True)
+        console.print(render_tree(ev))
+        if args.explain:
+            console.print(ev.explain(args.explain).render())
+        console.print()
+
+    t = 0.0
+    count = 0
+    for item in iter_trace(args.trace):
+        if isinstance(item, dict):
+            continue
+        if item.t != t:
+            report(t)  # everything that happened at the previous instant, as one change
+            t = item.t
+        ev.tick(t)
+        if isinstance(item, Phase):
+            report(t)
+            if phase is not None:
+                summary.append({"phase": phase, "end": t, "root": ev.root.status_name})
+            phase = item.phase
+            if not args.json:
+                console.rule(Text(f"phase {item.phase}: {item.note}", style="bold"))
+            continue
+        assert isinstance(item, Record)
+        ev.observe(item.topic, item.msg, t)
+        count += 1
+    report(t)
+    ev.tick(t)
+    report(t)
+    if phase is not None:
+        summary.append({"phase": phase, "end": t, "root": ev.root.status_name})
+    if args.json:
+        sys.stdout.write(json.dumps({"summary": summary, "messages": count}) + "\n")
+    else:
+        console.rule(Text("summary", style="bold"))
+        for row in summary:
+            console.print(
+                Text.assemble(
+                    f"{row['phase']:<24} root {model.root} at end of phase: ",
+                    (row["root"], _STYLE[row["root"]]),
+                )
+            )
+        console.print(f"{count} messages replayed from {args.trace}")
+    return 0

@@ -1,0 +1,53 @@
+"""The ``anunnaki`` command line.
+
+Sub-commands are small modules in this package; each adds its parser and a ``run(args)``
+that returns the exit code. Errors about user files print as ``file:line: element: message``
+and exit with 2; a traceback is a bug.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from collections.abc import Sequence
+
+from anunnaki import __version__
+from anunnaki.errors import AnunnakiError
+
+__all__ = ["build_parser", "main"]
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """Build the argument parser with every sub-command."""
+    from anunnaki.cli import _check, _evaluate
+
+    parser = argparse.ArgumentParser(
+        prog="anunnaki",
+        description="Keep learning-enabled systems trustworthy at run time.",
+    )
+    parser.add_argument("--version", action="version", version=f"anunnaki {__version__}")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+    sub.required = True
+    _check.add_parser(sub)
+    _evaluate.add_parser(sub)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Run the command line; returns the exit code."""
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    try:
+        code: int = args.run(args)
+    except AnunnakiError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        return 130
+    except BrokenPipeError:  # output piped into `head`
+        return 0
+    return code
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

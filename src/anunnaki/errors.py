@@ -1,0 +1,76 @@
+"""The exceptions Anunnaki raises.
+
+Every error derives from :class:`AnunnakiError`. Errors about a file a user wrote
+(goal model, binding, tactics, trace, config) are :class:`ModelFileError`: they carry
+the file, the line, the element and a hint on what to do, and render as one
+``file:line: element: message (hint)`` line that editors and terminals understand.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+__all__ = [
+    "AnunnakiError",
+    "ExpressionError",
+    "MissingExtraError",
+    "ModelFileError",
+]
+
+
+class AnunnakiError(Exception):
+    """Base class of every error Anunnaki raises on purpose."""
+
+
+class ModelFileError(AnunnakiError):
+    """A user-written file is unreadable, hostile or invalid.
+
+    Args:
+        message: What is wrong, in one sentence.
+        path: The file, when there is one (``None`` for text given in memory).
+        line: 1-based line number of the offending element, when known.
+        element: The element at fault, e.g. ``goals[G6].utility`` or ``tactic fail-safe``.
+        hint: What to do about it.
+    """
+
+    def __init__(
+        self,
+        message: str,
+        *,
+        path: str | Path | None = None,
+        line: int | None = None,
+        element: str | None = None,
+        hint: str | None = None,
+    ) -> None:
+        self.message = message
+        self.path = str(path) if path is not None else None
+        self.line = line
+        self.element = element
+        self.hint = hint
+        super().__init__(self.render())
+
+    def render(self) -> str:
+        """Return ``file:line: element: message (hint: …)``."""
+        where = self.path or "<input>"
+        if self.line is not None:
+            where += f":{self.line}"
+        text = f"{where}: "
+        if self.element:
+            text += f"{self.element}: "
+        text += self.message
+        if self.hint:
+            text += ("\n" if "\n" in self.message else " ") + f"(hint: {self.hint})"
+        return text
+
+
+class ExpressionError(ModelFileError):
+    """A utility or precondition expression does not parse or is out of bounds."""
+
+
+class MissingExtraError(AnunnakiError, ImportError):
+    """An optional dependency is missing; the message names the ``pip install`` command."""
+
+    def __init__(self, module: str, extra: str) -> None:
+        super().__init__(
+            f"{module} is not installed; install it with: pip install 'anunnaki[{extra}]'"
+        )

@@ -1,0 +1,231 @@
+"""The file formats: goal models (``goal-model/1``) and platform bindings (``binding/1``).
+
+These pydantic models check the *shape* of a file (fields, types, bounds). Whether the
+references between elements make sense (children that exist, agents that publish the
+attributes an expression reads, cycles) is the job of :mod:`anunnaki.goals._model`, which
+reports every such problem as a located finding.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from typing import Annotated, Any, Literal
+
+from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
+
+from anunnaki.goals._relax import RelaxSpec
+
+__all__ = [
+    "AgentBinding",
+    "AgentSpec",
+    "BindingSpec",
+    "DomainPropertySpec",
+    "EndpointSpec",
+    "GoalModelSpec",
+    "GoalSpec",
+    "ObstacleSpec",
+    "PayloadField",
+    "TopicBinding",
+]
+
+ID_PATTERN = r"^[A-Za-z][A-Za-z0-9_\-]*$"
+ROS_NAME = re.compile(r"^(/[A-Za-z0-9_]+)+$")
+FIELD_PATH = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*(\.[A-Za-z_][A-Za-z0-9_]*)*$")
+
+Ident = Annotated[str, Field(pattern=ID_PATTERN, max_length=64)]
+
+
+class _Strict(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True, str_strip_whitespace=True)
+
+
+def _ros_name(value: str) -> str:
+    if not ROS_NAME.match(value):
+        raise ValueError(
+            f"'{value}' is not a ROS-style name: it must start with '/' and use "
+            "letters, digits and '_' in '/'-separated parts, e.g. /utu/oracle/output"
+        )
+    return value
+
+
+class TopicBinding(_Strict):
+    """A topic an agent publishes, and which message fields become its attributes.
+
+    ``attributes`` maps attribute names to dotted field paths in the message
+    (``{category: category, conf: assessment.confidence}``); a list ``[mode, buzzer]`` is
+    shorthand for fields of the same name.
+    """
+
+    topic: str
+    attributes: dict[str, str] = Field(default_factory=dict)
+
+    @field_validator("topic")
+    @classmethod
+    def _check_topic(cls, v: str) -> str:
+        return _ros_name(v)
+
+    @field_validator("attributes", mode="before")
+    @classmethod
+    def _list_shorthand(cls, v: Any) -> Any:
+        if isinstance(v, list):
+            return {str(x): str(x) for x in v}
+        return v
+
+    @field_validator("attributes")
+    @classmethod
+    def _check_attributes(cls, v: dict[str, str]) -> dict[str, str]:
+        for name, path in v.items():
+            if not re.match(r"^[A-Za-z_][A-Za-z0-9_]*$", name):
+                raise ValueError(f"attribute name '{name}' must be an identifier")
+            if not FIELD_PATH.match(path):
+                raise ValueError(
+                    f"field path '{path}' of attribute '{name}' must be dotted identifiers, "
+                    "e.g. assessment.category"
+                )
+        return v
+
+
+class AgentSpec(_Strict):
+    """A KAOS agent: a component (or person) responsible for goals; it publishes state."""
+
+    id: Ident
+    description: str = ""
+    kind: Literal["software", "hardware", "human", "environment"] | None = None
+    topics: list[TopicBinding] = Field(default_factory=list)
+    staleness: Annotated[float, Field(gt=0)] | None = None
+
+
+class GoalSpec(_Strict):
+    """A KAOS goal: refined into children, or a leaf with a utility function."""
+
+    id: Ident
+    description: str = ""
+    objective: Literal["achieve", "maintain", "avoid"] = "achieve"
+    refinement: Literal["and", "or"] | None = None
+    children: list[Ident] = Field(default_factory=list)
+    utility: str | None = None
+    relax: RelaxSpec | None = None
+    threshold: Annotated[float, Field(gt=0, le=1)] | None = None
+    agents: list[Ident] = Field(default_factory=list)
+
+    @model_validator(mode="after")
+    def _shape(self) -> GoalSpec:
+        if self.children and self.refinement is None:
+            raise ValueError(
+                "a goal with children needs 'refinement: and' or 'refinement: or'"
+            )
+        if self.refinement is not None and not self.children:
+            raise ValueError("a refined goal needs at least one child in 'children'")
+        if self.children and self.utility is not None:
+            raise ValueError(
+                "a refined goal takes its utility from its children; move 'utility' "
+                "to a leaf goal"
+            )
+        if self.relax is not None and self.children:
+            raise ValueError("'relax' applies to leaf goals with a utility, not to refined goals")
+        if getattr(self.relax, "operator", None) == "may_or" and self.utility is not None:
+            raise ValueError(
+                "a may_or goal takes its utility from 'alternatives'; remove 'utility'"
+            )
+        if self.relax is not None and self.threshold is None:
+            raise ValueError(
+                "a RELAX-ed goal states its satisfaction 'threshold' (e.g. 0.5): "
+                "the utility at which the relaxed requirement counts as met"
+            )
+        return self
+
+
+class ObstacleSpec(_Strict):
+    """A KAOS obstacle: a condition that obstructs goals, possibly resolved by other goals."""
+
+    id: Ident
+    description: str = ""
+    obstructs: list[Ident] = Field(min_length=1)
+    condition: str | None = None
+    threshold: Annotated[float, Field(gt=0, le=1)] = 1.0
+    resolutions: list[Ident] = Field(default_factory=list)
+    agents: list[Ident] = Field(default_factory=list)
+
+
+class DomainPropertySpec(_Strict):
+    """A domain property: a fact assumed about the environment (documentation, checked refs)."""
+
+    id: Ident
+    description: str = ""
+    condition: str | None = None
+
+
+PayloadType = Literal["string", "number", "integer", "boolean", "object", "array", "any"]
+
+
+class PayloadField(_Strict):
+    """One field of an endpoint's payload."""
+
+    type: PayloadType = "any"
+    enum: list[str | int | float | bool] | None = None
+    required: bool = True
+    description: str = ""
+
+    @field_validator("enum")
+    @classmethod
+    def _finite(cls, v: list[Any] | None) -> list[Any] | None:
+        if v is not None and any(isinstance(x, float) and not math.isfinite(x) for x in v):
+            raise ValueError("enum values must be finite")
+        return v
+
+
+class EndpointSpec(_Strict):
+    """An actuation endpoint of the managed system: a command topic or a service."""
+
+    name: str
+    kind: Literal["topic", "service"]
+    description: str = ""
+    payload: dict[str, PayloadField] = Field(default_factory=dict)
+
+    @field_validator("name")
+    @classmethod
+    def _check_name(cls, v: str) -> str:
+        return _ros_name(v)
+
+    @field_validator("payload", mode="before")
+    @classmethod
+    def _shorthand(cls, v: Any) -> Any:
+        # ``payload: {mode: string}`` is shorthand for ``{mode: {type: string}}``.
+        if isinstance(v, dict):
+            return {k: ({"type": x} if isinstance(x, str) else x) for k, x in v.items()}
+        return v
+
+
+class GoalModelSpec(_Strict):
+    """A goal-model file."""
+
+    anunnaki: Literal["goal-model/1"]
+    name: str
+    description: str = ""
+    root: Ident | None = None
+    unknown_policy: Literal["unsatisfied", "satisfied"] = "unsatisfied"
+    staleness: Annotated[float, Field(gt=0)] = 2.0
+    rate_window: Annotated[int, Field(ge=1, le=1000)] = 10
+    agents: list[AgentSpec] = Field(default_factory=list)
+    goals: list[GoalSpec] = Field(min_length=1)
+    obstacles: list[ObstacleSpec] = Field(default_factory=list)
+    domain_properties: list[DomainPropertySpec] = Field(default_factory=list)
+    endpoints: list[EndpointSpec] = Field(default_factory=list)
+
+
+class AgentBinding(_Strict):
+    """How one agent is observed on one platform."""
+
+    topics: list[TopicBinding] = Field(min_length=1)
+    staleness: Annotated[float, Field(gt=0)] | None = None
+
+
+class BindingSpec(_Strict):
+    """A platform-binding file: agents → topics and fields, plus actuation endpoints."""
+
+    anunnaki: Literal["binding/1"]
+    platform: str
+    description: str = ""
+    agents: dict[Ident, AgentBinding] = Field(default_factory=dict)
+    endpoints: list[EndpointSpec] = Field(default_factory=list)
