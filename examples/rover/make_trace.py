@@ -25,7 +25,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "src"))
 
-from anunnaki.trace import Phase, Record, write_trace  # noqa: E402
+from anunnaki.trace import Phase, Record, write_trace
 
 END = 50.0
 
@@ -54,7 +54,11 @@ def build() -> list[Record | Phase]:
     for k in range(int(END * 2)):
         t = k / 2
         warning = 20.0 <= t < 25.5  # the buzzer sounds until the way is clear
-        at(t, "/rover/status", {"mode": mode(t), "buzzer": warning, "bumper": False, "lights": True})
+        at(
+            t,
+            "/rover/status",
+            {"mode": mode(t), "buzzer": warning, "bumper": False, "lights": True},
+        )
     # A2: camera metadata at 5 Hz (pixels never go into a trace).
     for k in range(int(END * 5)):
         at(k / 5, "/rover/camera/info", {"seq": k, "width": 128, "height": 128})
@@ -75,7 +79,10 @@ def build() -> list[Record | Phase]:
 
 def main() -> None:
     out = Path(__file__).with_name("trace.jsonl")
-    header = {"name": "rover-phases", "description": "the rover through nominal and violated phases"}
+    header = {
+        "name": "rover-phases",
+        "description": "the rover through nominal and violated phases",
+    }
     write_trace(out, build(), header)
     print(f"wrote {out}")
 

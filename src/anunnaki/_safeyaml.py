@@ -99,7 +99,7 @@ class _GuardedLoader(yaml.SafeLoader):
     field named ``on`` into ``True``.
     """
 
-    yaml_implicit_resolvers = {
+    yaml_implicit_resolvers = {  # noqa: RUF012 - PyYAML's own class-level table
         first: [(tag, rx) for tag, rx in resolvers if tag != "tag:yaml.org,2002:bool"]
         for first, resolvers in yaml.SafeLoader.yaml_implicit_resolvers.items()
     }
@@ -112,19 +112,20 @@ class _GuardedLoader(yaml.SafeLoader):
         self._depth = 0
 
     def compose_node(self, parent: Node | None, index: Any) -> Node | None:
-        event = self.peek_event()
+        event = self.peek_event()  # type: ignore[no-untyped-call]
+        line = event.start_mark.line + 1 if event.start_mark is not None else None
         if isinstance(event, AliasEvent):
             raise ModelFileError(
                 f"YAML alias '*{event.anchor}' is not allowed",
                 path=self.source,
-                line=event.start_mark.line + 1,
+                line=line,
                 hint="write the value out in full; anchors and aliases are refused",
             )
         if isinstance(event, ScalarEvent | CollectionStartEvent) and event.anchor is not None:
             raise ModelFileError(
                 f"YAML anchor '&{event.anchor}' is not allowed",
                 path=self.source,
-                line=event.start_mark.line + 1,
+                line=line,
                 hint="remove the anchor; anchors and aliases are refused",
             )
         self._depth += 1
@@ -132,11 +133,11 @@ class _GuardedLoader(yaml.SafeLoader):
             raise ModelFileError(
                 f"nesting deeper than {self.max_depth} levels",
                 path=self.source,
-                line=event.start_mark.line + 1,
+                line=line,
                 hint="flatten the structure",
             )
         try:
-            return super().compose_node(parent, index)  # type: ignore[no-any-return]
+            return super().compose_node(parent, index)
         finally:
             self._depth -= 1
 
@@ -181,11 +182,18 @@ def _construct(loader: _GuardedLoader, node: Node, path: Path_, lines: LineMap) 
             out[key] = _construct(loader, value_node, (*path, str(key)), lines)
         return out
     if isinstance(node, SequenceNode):
-        return [
-            _construct(loader, item, (*path, i), lines) for i, item in enumerate(node.value)
-        ]
+        return [_construct(loader, item, (*path, i), lines) for i, item in enumerate(node.value)]
     assert isinstance(node, ScalarNode)
-    return loader.construct_object(node, deep=True)
+    try:
+        return loader.construct_object(node, deep=True)
+    except (ValueError, OverflowError) as exc:  # e.g. an int of 5,000 digits, 2024-13-45
+        raise ModelFileError(
+            f"cannot read value {node.value[:40]!r}: {exc}",
+            path=loader.source,
+            line=node.start_mark.line + 1,
+            element=_render_path(path),
+            hint="quote it to make it a string, or fix the number or date",
+        ) from None
 
 
 def _render_path(path: Sequence[str | int]) -> str:
@@ -215,6 +223,7 @@ def load_yaml(
 
     Raises:
         ModelFileError: unreadable, hostile or malformed YAML, naming file and line.
+
     """
     if text is None:
         text = read_text_limited(source, max_bytes=max_bytes)
@@ -279,10 +288,13 @@ def describe_path(data: Any, loc: Sequence[str | int]) -> tuple[tuple[str | int,
             node = item
             real.append(part)
             text += f"[{label}]"
-        elif isinstance(part, str) and part not in ("function-after", "function-before"):
+        elif (
+            isinstance(part, str)
+            and part not in ("function-after", "function-before")
+            and not (isinstance(node, dict) and node.get("operator") == part)
+        ):
             # A key that is missing from the file (e.g. a required field): name it.
-            if not (isinstance(node, dict) and node.get("operator") == part):
-                text += f".{part}" if text else part
+            text += f".{part}" if text else part
     return tuple(real), text or "<document>"
 
 

@@ -190,17 +190,24 @@ def check_tactics(model: GoalModel, ts: TacticSet, path: str | None) -> list[Fin
             )
         for problem in _payload_problems(spec, ep.payload):
             out.append(Finding("error", problem, path, ep.line, ep.element))
-    for ref in ts.expressions():
+    for eref in ts.expressions():
         try:
-            expr = compile_expression(ref.expression, path=path, line=ref.line, element=ref.element)
+            expr = compile_expression(
+                eref.expression, path=path, line=eref.line, element=eref.element
+            )
         except ExpressionError as exc:
             out.append(Finding.from_error(exc))
             continue
         for agent in sorted(expr.agents):
             if agent not in model.agents:
                 out.append(
-                    Finding("error", f"unknown agent '{agent}' in '{expr.text}'", path,
-                            ref.line, ref.element)
+                    Finding(
+                        "error",
+                        f"unknown agent '{agent}' in '{expr.text}'",
+                        path,
+                        eref.line,
+                        eref.element,
+                    )
                 )
         for attr in sorted(expr.refs):
             agent_obj = model.agents.get(attr.agent)
@@ -210,8 +217,8 @@ def check_tactics(model: GoalModel, ts: TacticSet, path: str | None) -> list[Fin
                         "error",
                         f"unknown attribute '{attr}' in '{expr.text}'",
                         path,
-                        ref.line,
-                        ref.element,
+                        eref.line,
+                        eref.element,
                         f"{attr.agent} publishes: "
                         + (", ".join(sorted(agent_obj.attributes)) or "none"),
                     )
@@ -248,7 +255,9 @@ def _payload_problems(spec: EndpointSpec, payload: dict[str, Any]) -> list[str]:
             problems.append(f"field '{name}' of {spec.name} must be a {fld.type}, got {value!r}")
         elif fld.enum is not None and value not in fld.enum:
             choices = ", ".join(map(str, fld.enum))
-            problems.append(f"field '{name}' of {spec.name} must be one of {choices}; got {value!r}")
+            problems.append(
+                f"field '{name}' of {spec.name} must be one of {choices}; got {value!r}"
+            )
     for name, fld in spec.payload.items():
         if fld.required and name not in payload:
             problems.append(f"{spec.name} needs field '{name}'")

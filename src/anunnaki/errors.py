@@ -31,6 +31,7 @@ class ModelFileError(AnunnakiError):
         line: 1-based line number of the offending element, when known.
         element: The element at fault, e.g. ``goals[G6].utility`` or ``tactic fail-safe``.
         hint: What to do about it.
+
     """
 
     def __init__(

@@ -133,6 +133,7 @@ def iter_trace(source: str | Path | IO[str]) -> Iterator[dict[str, Any] | Record
 
     Raises:
         ModelFileError: a malformed line, naming the file and line and what to fix.
+
     """
     if isinstance(source, str | Path):
         path = str(source)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import itertools
 import math
 from pathlib import Path
 
@@ -173,7 +174,7 @@ def test_rate_decays_continuously_through_a_silence() -> None:
     assert rates[0] == pytest.approx(5.0)
     assert rates[1] == pytest.approx(5.0)  # gap = mean interval: no change yet
     assert rates[2] == pytest.approx(10 / (2.0 + 0.05))  # then the open gap counts
-    assert all(a > b for a, b in zip(rates[2:], rates[3:], strict=False))
+    assert all(a > b for a, b in itertools.pairwise(rates[2:]))
     assert ev.state("G6").status is False
 
 
@@ -321,8 +322,11 @@ def test_incremental_equals_full(updates: list[tuple[str, dict[str, object], flo
 @settings(max_examples=100, deadline=None)
 @given(
     st.lists(
-        st.tuples(st.sampled_from(["/rover/status", "/utu/oracle/output", "/rover/ultrasonic"]),
-                  st.integers(0, 2), st.floats(0.01, 0.6)),
+        st.tuples(
+            st.sampled_from(["/rover/status", "/utu/oracle/output", "/rover/ultrasonic"]),
+            st.integers(0, 2),
+            st.floats(0.01, 0.6),
+        ),
         max_size=60,
     )
 )
@@ -332,8 +336,11 @@ def test_incremental_equals_full_on_the_rover(updates: list[tuple[str, int, floa
     for topic, k, dt in updates:
         now += dt
         msg: dict[str, object] = {
-            "/rover/status": {"mode": ["autonomous", "manual", "x"][k], "buzzer": k == 1,
-                              "bumper": k == 2},
+            "/rover/status": {
+                "mode": ["autonomous", "manual", "x"][k],
+                "buzzer": k == 1,
+                "bumper": k == 2,
+            },
             "/utu/oracle/output": {"category": k, "confidence": 0.5},
             "/rover/ultrasonic": {"range": float(k)},
         }[topic]

@@ -80,7 +80,9 @@ def test_rate_reads_the_rate_slot() -> None:
         ("A1.z or 1.0", {}, 1.0),
     ],
 )
-def test_unknown_propagates_by_kleene(text: str, attrs: dict[str, object], expected: object) -> None:
+def test_unknown_propagates_by_kleene(
+    text: str, attrs: dict[str, object], expected: object
+) -> None:
     assert ev(text, **attrs) == expected
 
 
@@ -119,8 +121,15 @@ def test_errors_name_the_problem(text: str, needle: str) -> None:
 
 
 def test_attribute_names_may_contain_keywords_as_prefix() -> None:
-    assert ev("A1.order >= 1 and A1.index > 0 and A1.notice", A1__order=2, A1__index=1,
-              A1__notice=True) is True
+    assert (
+        ev(
+            "A1.order >= 1 and A1.index > 0 and A1.notice",
+            A1__order=2,
+            A1__index=1,
+            A1__notice=True,
+        )
+        is True
+    )
 
 
 @given(st.one_of(st.none(), st.booleans(), st.floats(allow_nan=True), st.integers(), st.text()))

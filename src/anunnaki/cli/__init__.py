@@ -1,0 +1,1 @@
+"""The ``anunnaki`` command line (see :mod:`anunnaki.cli.main`)."""

@@ -64,8 +64,14 @@ def run(args: argparse.Namespace) -> int:
         console.print(Text("a file could not be read", style="bold red"))
     elif not result.findings:
         model = result.model
-        parts = [f"{len(model.goals)} goals, {len(model.obstacles)} obstacles, "
-                 f"{len(model.agents)} agents"] if model else []
+        parts = (
+            [
+                f"{len(model.goals)} goals, {len(model.obstacles)} obstacles, "
+                f"{len(model.agents)} agents"
+            ]
+            if model
+            else []
+        )
         if result.tactics is not None:
             parts.append(f"{len(result.tactics.tactics)} tactics")
         console.print(Text(f"ok: {'; '.join(parts)}", style="green"))

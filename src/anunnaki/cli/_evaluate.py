@@ -1,4 +1,4 @@
-"""``anunnaki evaluate MODEL --trace TRACE``: replay a trace and show the goal tree at each change."""
+"""``anunnaki evaluate MODEL --trace TRACE``: replay a trace, show the goal tree at each change."""
 
 from __future__ import annotations
 
@@ -59,12 +59,17 @@ def render_tree(ev: Evaluator) -> Tree:
             word = _OBSTACLE[name]
             style = {"holds": "bold red", "absent": "green", "unknown": "grey50"}[word]
             return Text.assemble(
-                ("⊘ ", style), (f"{node} ", "bold"), (f"{word:<11}", style),
-                f" {_fmt_u(st.utility)}  ", (desc, "dim"),
+                ("⊘ ", style),
+                (f"{node} ", "bold"),
+                (f"{word:<11}", style),
+                f" {_fmt_u(st.utility)}  ",
+                (desc, "dim"),
             )
         return Text.assemble(
-            (f"{node} ", "bold"), (f"{name:<11}", _STYLE[name]),
-            f" {_fmt_u(st.utility)}  ", (desc, "dim"),
+            (f"{node} ", "bold"),
+            (f"{name:<11}", _STYLE[name]),
+            f" {_fmt_u(st.utility)}  ",
+            (desc, "dim"),
         )
 
     root = Tree(label(model.root))
@@ -100,10 +105,10 @@ def run(args: argparse.Namespace) -> int:
         for n in changed:
             st = ev.state(n)
             prev_u = last_u[n]
-            moved = (
-                (st.utility is None) != (prev_u is None)
-                or (st.utility is not None and prev_u is not None
-                    and abs(st.utility - prev_u) >= args.delta)
+            moved = (st.utility is None) != (prev_u is None) or (
+                st.utility is not None
+                and prev_u is not None
+                and abs(st.utility - prev_u) >= args.delta
             )
             if st.status is not last_s[n] or moved:
                 notable.append((n, last_s[n], st.status, prev_u, st.utility))
@@ -116,8 +121,13 @@ def run(args: argparse.Namespace) -> int:
                 "t": t,
                 "phase": phase,
                 "changed": [
-                    {"node": n, "from": status_name(a), "to": status_name(b),
-                     "utility_from": ua, "utility": ub}
+                    {
+                        "node": n,
+                        "from": status_name(a),
+                        "to": status_name(b),
+                        "utility_from": ua,
+                        "utility": ub,
+                    }
                     for n, a, b, ua, ub in notable
                 ],
                 "nodes": {
@@ -129,13 +139,15 @@ def run(args: argparse.Namespace) -> int:
                 out["explanation"] = ev.explain(args.explain).to_dict()
             sys.stdout.write(json.dumps(out) + "\n")
             return
+
         def word(node: str, s: Any) -> str:
             if node in model.obstacles:
                 return _OBSTACLE[status_name(s)]
             return status_name(s)
 
         what = ", ".join(
-            f"{n} {word(n, a)}→{word(n, b)}" if a is not b
+            f"{n} {word(n, a)}→{word(n, b)}"
+            if a is not b
             else f"{n} {_fmt_u(ua).strip()}→{_fmt_u(ub).strip()}"
             for n, a, b, ua, ub in notable
         )

@@ -38,9 +38,9 @@ from anunnaki.errors import ModelFileError
 from anunnaki.goals._expr import ABSENT, AttrRef, Expression, truth
 from anunnaki.goals._model import GoalModel
 from anunnaki.goals._relax import (
-    MayOrOperator,
     AtemporalOperator,
     History,
+    MayOrOperator,
     RelaxOperator,
     TemporalOperator,
 )
@@ -167,6 +167,7 @@ class Evaluator:
         model: The resolved goal model.
         on_error: Called with (node id, exception) when a node's computation raises; the
             node becomes unknown and evaluation goes on. Defaults to ignoring.
+
     """
 
     def __init__(
@@ -279,16 +280,16 @@ class Evaluator:
             if expr is not None:
                 self._fn[i] = self._bind(i, expr)
         for gid, obstacle_ids in m.obstructed_by.items():
-            g = self.index[gid]
-            entries = []
+            gi = self.index[gid]
+            entries: list[tuple[int, tuple[int, ...]]] = []
             for oid in obstacle_ids:
-                o = self.index[oid]
+                oi = self.index[oid]
                 res = tuple(self.index[r] for r in m.obstacles[oid].resolutions if r in m.goals)
-                entries.append((o, res))
-                self._deps[o].append(g)
+                entries.append((oi, res))
+                self._deps[oi].append(gi)
                 for r in res:
-                    self._deps[r].append(g)
-            self._obstr[g] = tuple(entries)
+                    self._deps[r].append(gi)
+            self._obstr[gi] = tuple(entries)
 
     def _setup_relax(self, i: int, gid: str, op: RelaxOperator) -> None:
         m = self.model
@@ -323,8 +324,7 @@ class Evaluator:
         if len(order) != n:
             stuck = sorted(self.ids[i] for i in range(n) if indeg[i] > 0)
             raise ModelFileError(
-                "the goal model's dependencies form a cycle through "
-                + ", ".join(stuck),
+                "the goal model's dependencies form a cycle through " + ", ".join(stuck),
                 path=self.model.path,
                 element="obstacles",
                 hint="a resolution goal may not depend on the goal its obstacle obstructs",
@@ -383,12 +383,21 @@ class Evaluator:
         k = self._kind[i]
         u: float | None
         s: Status
-        if k == _LEAF or k == _OBSTACLE:
-            if k == _LEAF:
-                u = self._leaf_utility(i)
+        if k in (_LEAF, _OBSTACLE):
+            fn = self._fn[i]
+            if k == _OBSTACLE or (self._relax[i] is None and not self._avoid[i]):
+                # The common case, inlined: a crisp expression mapped to [0, 1].
+                v = fn(self.slots) if fn is not None else None
+                if v is True:
+                    u = 1.0
+                elif v is False:
+                    u = 0.0
+                elif v is None:
+                    u = None
+                else:
+                    u = truth(v)
             else:
-                fn = self._fn[i]
-                u = truth(fn(self.slots)) if fn is not None else None
+                u = self._leaf_utility(i)
             s = None if u is None else u >= self._thresh[i] - _EPS
         elif k == _AND:
             util, stat = self.util, self.stat
@@ -458,19 +467,29 @@ class Evaluator:
             return None, None
 
     def _propagate(self, dirty: Iterable[int]) -> None:
+        """Re-evaluate ``dirty`` nodes, then their dependents while results change.
+
+        Nodes are processed in topological order (a heap keyed by position), so each node is
+        computed after every changed input it reads; a node whose result is unchanged stops
+        the propagation along that path.
+        """
         height = self._height
-        heap: list[tuple[int, int]] = []
-        queued: set[int] = set()
-        for i in dirty:
-            if i not in queued:
-                queued.add(i)
-                heap.append((height[i], i))
-        heapq.heapify(heap)
+        heap = [(height[i], i) for i in set(dirty)]
+        if len(heap) > 1:
+            heapq.heapify(heap)
+        queued = {i for _, i in heap}
         util, stat, deps, changed = self.util, self.stat, self._deps_t, self._changed
+        compute = self._compute
+        pop, push = heapq.heappop, heapq.heappush
         while heap:
-            _, i = heapq.heappop(heap)
+            i = pop(heap)[1]
             queued.discard(i)
-            u, s = self._safe_compute(i)
+            try:
+                u, s = compute(i)
+            except Exception as exc:  # a misbehaving operator must not kill the loop
+                if self._on_error is not None:
+                    self._on_error(self.ids[i], exc)
+                u, s = None, None
             if u != util[i] or s is not stat[i]:
                 util[i] = u
                 stat[i] = s
@@ -478,7 +497,7 @@ class Evaluator:
                 for j in deps[i]:
                     if j not in queued:
                         queued.add(j)
-                        heapq.heappush(heap, (height[j], j))
+                        push(heap, (height[j], j))
 
     # -- inputs -------------------------------------------------------------------------
     def observe(self, topic: str, message: Mapping[str, Any], now: float) -> None:
@@ -488,16 +507,14 @@ class Evaluator:
         the message makes ``has`` false and the value unknown); topics nobody reads are
         ignored. Only the nodes that read a changed value are re-evaluated.
         """
-        if now > self.now:
-            self.now = now
+        self.now = max(self.now, now)
         tp = self._topics.get(topic)
         if tp is None:
             return
         tp.last = now
         tp.stale = False
         deadline = now + tp.staleness
-        if deadline < self._next_stale:
-            self._next_stale = deadline
+        self._next_stale = min(self._next_stale, deadline)
         slots = self.slots
         readers = self._reader_tuples
         dirty: list[int] = []
@@ -523,8 +540,7 @@ class Evaluator:
 
     def set_value(self, ref: AttrRef | str, value: Any, now: float) -> None:
         """Set one attribute directly (tools and tests; live inputs go through observe)."""
-        if now > self.now:
-            self.now = now
+        self.now = max(self.now, now)
         if isinstance(ref, str):
             agent, _, attr = ref.partition(".")
             ref = AttrRef(agent, attr)
@@ -555,8 +571,7 @@ class Evaluator:
         Values of topics silent past their staleness deadline become unknown; rates decay
         through silences; temporal RELAX goals are re-evaluated.
         """
-        if now > self.now:
-            self.now = now
+        self.now = max(self.now, now)
         slots = self.slots
         readers = self._reader_tuples
         dirty: list[int] = []
@@ -676,9 +691,7 @@ class Evaluator:
         leaves: dict[str, Any] = {}
         if k in (_LEAF, _OBSTACLE):
             leaves = self._leaf_inputs(i)
-            expr = self.model.expressions.get(
-                (nid, "utility" if k == _LEAF else "condition")
-            )
+            expr = self.model.expressions.get((nid, "utility" if k == _LEAF else "condition"))
             text = expr.text if expr is not None else "<no utility>"
             inputs = ", ".join(f"{key} = {_fmt(v)}" for key, v in leaves.items())
             detail = f"{text}" + (f" with {inputs}" if inputs else "")

@@ -101,7 +101,7 @@ def truth(value: Value) -> float | None:
     if value is False:
         return 0.0
     v = float(value)
-    if v != v:  # NaN
+    if math.isnan(v):
         return None
     return 0.0 if v < 0.0 else 1.0 if v > 1.0 else v
 
@@ -143,10 +143,10 @@ def _arith_fn(op: str) -> Callable[[Any, Any], Value]:
         return a * b  # type: ignore[no-any-return]
 
     def div(a: Any, b: Any) -> Value:
-        return None if b == 0 else a / b  # type: ignore[no-any-return]
+        return None if b == 0 else a / b
 
     def mod(a: Any, b: Any) -> Value:
-        return None if b == 0 else a % b  # type: ignore[no-any-return]
+        return None if b == 0 else a % b
 
     return {"+": add, "-": sub, "*": mul, "/": div, "%": mod}[op]
 
@@ -164,6 +164,7 @@ class Expression:
         rated: Agents whose message rate ``rate(A)`` the expression reads.
         agents: Every agent named.
         value_type: The static type of the result, when it can be known.
+
     """
 
     __slots__ = ("_tree", "agents", "rated", "refs", "text", "value_type")
@@ -199,6 +200,7 @@ class Expression:
 
         Returns:
             ``fn(slots) -> value``; ``None`` means unknown.
+
         """
         return _Compiler(slot_of, rate_slot_of).compile(self._tree)
 
@@ -236,7 +238,40 @@ class _Compiler:
         self.slot_of = slot_of
         self.rate_slot_of = rate_slot_of
 
-    def compile(self, node: Tree[Token] | Token) -> Fn:  # noqa: C901 - one branch per rule
+    def _compare_attr_literal(
+        self,
+        left: Tree[Token],
+        right: Tree[Token],
+        op: Callable[[Any, Any], bool],
+        equality: bool,
+    ) -> Fn:
+        i = self.slot_of(AttrRef(str(left.children[0]), str(left.children[1])))
+        lit = self.compile(right)([])
+        absent = ABSENT
+        if equality:
+
+            def cmp_eq(s: Slots) -> Value:
+                x = s[i]
+                if x is None or x is absent:
+                    return None
+                return op(x, lit)
+
+            return cmp_eq
+        numeric = type(lit) in _NUMERIC
+        lit_type = type(lit)
+
+        def cmp_lit(s: Slots) -> Value:
+            x = s[i]
+            if x is None or x is absent:
+                return None
+            tx = type(x)
+            if (numeric and tx in _NUMERIC) or tx is lit_type:
+                return op(x, lit)
+            return None
+
+        return cmp_lit
+
+    def compile(self, node: Tree[Token] | Token) -> Fn:
         if isinstance(node, Token):  # pragma: no cover - grammar never yields bare tokens
             raise AssertionError(node)
         rule = node.data
@@ -259,7 +294,7 @@ class _Compiler:
 
             def read(s: Slots) -> Value:
                 v = s[i]
-                return None if v is ABSENT else v  # type: ignore[no-any-return]
+                return None if v is ABSENT else v
 
             return read
         if rule in ("has", "has_no"):
@@ -275,17 +310,17 @@ class _Compiler:
             return has
         if rule == "rate":
             i = self.rate_slot_of(str(kids[0]))
-            return lambda s: s[i]  # type: ignore[no-any-return]
+            return lambda s: s[i]
         if rule == "neg":
-            f = self.compile(kids[0])  # type: ignore[arg-type]
+            f = self.compile(kids[0])
 
             def neg_fn(s: Slots) -> Value:
                 v = f(s)
-                return -v if _is_num(v) else None
+                return -v if isinstance(v, int | float) else None
 
             return neg_fn
         if rule == "not_":
-            f = self.compile(kids[0])  # type: ignore[arg-type]
+            f = self.compile(kids[0])
 
             def not_fn(s: Slots) -> Value:
                 v = f(s)
@@ -296,13 +331,22 @@ class _Compiler:
 
             return not_fn
         if rule in ("and_", "or_"):
-            fs = [self.compile(k) for k in kids]  # type: ignore[arg-type]
+            fs = [self.compile(k) for k in kids]
             return _and_fn(fs) if rule == "and_" else _or_fn(fs)
         if rule == "compare":
-            a = self.compile(kids[0])  # type: ignore[arg-type]
-            b = self.compile(kids[2])  # type: ignore[arg-type]
             op = _COMPARE[str(kids[1])]
             equality = str(kids[1]) in ("==", "!=")
+            left, right = kids[0], kids[2]
+            if (
+                isinstance(left, Tree)
+                and left.data == "attr"
+                and isinstance(right, Tree)
+                and right.data in ("number", "neg_number", "true", "false", "string")
+            ):
+                # The common case, ``A.x >= 0.5``: one slot read against a literal.
+                return self._compare_attr_literal(left, right, op, equality)
+            a = self.compile(left)
+            b = self.compile(right)
 
             def cmp(s: Slots) -> Value:
                 x = a(s)
@@ -317,8 +361,10 @@ class _Compiler:
 
             return cmp
         if rule in ("in_", "not_in"):
-            f = self.compile(kids[0])  # type: ignore[arg-type]
-            items = tuple(self.compile(k)([]) for k in kids[1].children if k is not None)  # type: ignore[union-attr,arg-type]
+            f = self.compile(kids[0])
+            lst = kids[1]
+            assert isinstance(lst, Tree)
+            items = tuple(self.compile(k)([]) for k in lst.children if k is not None)
             want_in = rule == "in_"
 
             def member(s: Slots) -> Value:
@@ -329,8 +375,8 @@ class _Compiler:
 
             return member
         if rule == "arith":
-            a = self.compile(kids[0])  # type: ignore[arg-type]
-            b = self.compile(kids[2])  # type: ignore[arg-type]
+            a = self.compile(kids[0])
+            b = self.compile(kids[2])
             fn = _arith_fn(str(kids[1]))
 
             def arith(s: Slots) -> Value:
@@ -338,15 +384,20 @@ class _Compiler:
                 y = b(s)
                 if _is_num(x) and _is_num(y):
                     r = fn(x, y)
-                    return None if r is None or (isinstance(r, float) and not math.isfinite(r)) else r
+                    return (
+                        None if r is None or (isinstance(r, float) and not math.isfinite(r)) else r
+                    )
                 return None
 
             return arith
         if rule == "call":
             name = str(kids[0])
-            fs = [self.compile(k) for k in kids[1:]]  # type: ignore[arg-type]
+            fs = [self.compile(k) for k in kids[1:]]
             return _call_fn(name, fs)
         raise AssertionError(f"unhandled rule {rule}")  # pragma: no cover
+
+
+_NUMERIC = (int, float, bool)
 
 
 def _and_fn(fs: Sequence[Fn]) -> Fn:
@@ -405,7 +456,7 @@ def _call_fn(name: str, fs: Sequence[Fn]) -> Fn:
 
         def abs_fn(s: Slots) -> Value:
             v = f(s)
-            return abs(v) if _is_num(v) else None
+            return abs(v) if isinstance(v, int | float) else None
 
         return abs_fn
     pick = min if name == "min" else max
@@ -440,7 +491,7 @@ class _Checker:
     def fail(self, message: str, hint: str | None = None) -> ExpressionError:
         return ExpressionError(f"{message} in expression '{self.text}'", hint=hint, **self.where)
 
-    def check(self, node: Tree[Token], depth: int = 0) -> ValueType:  # noqa: C901
+    def check(self, node: Tree[Token], depth: int = 0) -> ValueType:
         self.nodes += 1
         if depth > MAX_DEPTH or self.nodes > MAX_NODES:
             raise self.fail(
@@ -515,6 +566,7 @@ def compile_expression(
     Raises:
         ExpressionError: a syntax error (with the column), an expression over the size or
             depth bounds, or a static type clash.
+
     """
     where: dict[str, Any] = {"path": path, "line": line, "element": element}
     if not isinstance(text, str) or not text.strip():
@@ -537,7 +589,8 @@ def compile_expression(
             got = "end of expression" if exc.token.type == "$END" else f"'{exc.token}'"
             msg = f"unexpected {got}"
         elif isinstance(exc, UnexpectedCharacters):
-            msg = f"unexpected character '{text[exc.pos_in_stream]}'"
+            pos = exc.pos_in_stream if exc.pos_in_stream is not None else 0
+            msg = f"unexpected character '{text[pos]}'"
         else:  # pragma: no cover - UnexpectedEOF with LALR
             msg = "unexpected end of expression"
         pointer = f"{text}\n{' ' * ((col or 1) - 1)}^"

@@ -137,6 +137,7 @@ class GoalModel:
             ``condition``, ``event`` and ``alternative<i>``.
         relax: Leaf goal id → built RELAX operator.
         findings: Every problem found while resolving (errors and warnings).
+
     """
 
     def __init__(
@@ -193,9 +194,7 @@ class GoalModel:
             line = self.line_of(section, ident, *key)
         if element is None and section and ident:
             element = f"{section}[{ident}]" + "".join(f".{k}" for k in key)
-        self.findings.append(
-            Finding(severity, message, path or self.path, line, element, hint)
-        )
+        self.findings.append(Finding(severity, message, path or self.path, line, element, hint))
 
     # -- resolution ---------------------------------------------------------------------
     def _resolve(self) -> None:
@@ -229,13 +228,12 @@ class GoalModel:
                 line = self.lines.line((section, i))
                 seen[item.id] = f"{section} at line {line}" if line else section
                 self._index[(section, item.id)] = i
-                target: dict[str, Any] = {
-                    "goals": self.goals,
-                    "obstacles": self.obstacles,
-                    "domain_properties": self.domain_properties,
-                    "agents": {},
-                }[section]
-                target[item.id] = item
+                if section == "goals":
+                    self.goals[item.id] = item
+                elif section == "obstacles":
+                    self.obstacles[item.id] = item
+                elif section == "domain_properties":
+                    self.domain_properties[item.id] = item
         for i, ep in enumerate(self.spec.endpoints):
             self._index[("endpoints", ep.name)] = i
             self.endpoints[ep.name] = ep
@@ -589,6 +587,7 @@ def load_goal_model(
 
     Raises:
         ModelFileError: the file is unreadable, hostile, malformed, or (strict) inconsistent.
+
     """
     if binding is not None and not isinstance(binding, Binding):
         binding = load_binding(binding)

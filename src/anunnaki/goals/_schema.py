@@ -112,15 +112,12 @@ class GoalSpec(_Strict):
     @model_validator(mode="after")
     def _shape(self) -> GoalSpec:
         if self.children and self.refinement is None:
-            raise ValueError(
-                "a goal with children needs 'refinement: and' or 'refinement: or'"
-            )
+            raise ValueError("a goal with children needs 'refinement: and' or 'refinement: or'")
         if self.refinement is not None and not self.children:
             raise ValueError("a refined goal needs at least one child in 'children'")
         if self.children and self.utility is not None:
             raise ValueError(
-                "a refined goal takes its utility from its children; move 'utility' "
-                "to a leaf goal"
+                "a refined goal takes its utility from its children; move 'utility' to a leaf goal"
             )
         if self.relax is not None and self.children:
             raise ValueError("'relax' applies to leaf goals with a utility, not to refined goals")
