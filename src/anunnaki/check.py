@@ -12,7 +12,8 @@ Every finding names the file, the line and the element, and most carry a hint. C
   payloads that fit the endpoint's schema, and valid expressions;
 * (warning) goals whose violation no tactic addresses: a goal is addressed when a tactic's
   precondition names it or an ancestor as unsatisfied/unknown, when it is AND-refined and
-  all its children are addressed, or OR-refined and one child is.
+  all its children are addressed, or OR-refined and one child is. Goals that only serve as
+  resolutions of obstacles are exempt.
 
 Exit codes of the command: 0 clean, 1 findings (errors or warnings), 2 a file unreadable.
 """
@@ -292,8 +293,18 @@ def _unaddressed(model: GoalModel, ts: TacticSet) -> list[Finding]:
         covered[goal] = ok
         return ok
 
+    # Goals that serve only as resolutions of obstacles are not requirements of their own:
+    # while one is unsatisfied its obstacle simply obstructs, which the tree handles.
+    resolution_only = {
+        g
+        for o in model.obstacles.values()
+        for g in o.resolutions
+        if not model.parents.get(g) and g != model.root
+    }
     out: list[Finding] = []
     for gid in model.goals:
+        if gid in resolution_only:
+            continue
         if not cover(gid) and not has_named_ancestor(gid, set()):
             out.append(
                 Finding(

@@ -1,0 +1,86 @@
+"""Phenomena: parameterised, deterministic image perturbations, each a plugin.
+
+A phenomenon (fog, a raindrop on the lens, poor lighting, ...) turns a camera frame and a
+small vector of named, bounded parameters into a perturbed frame. Enlil and Enki search over
+those parameters (the paper's "contexts", §3.2, §4.1.2, §4.2.1); scenario files ramp them
+with a scalar strength; oracles report them. Images are ``(height, width, 3)`` ``uint8`` RGB
+arrays; anything else is rejected with a :class:`PhenomenonError` that says how to convert.
+
+Using one::
+
+    from anunnaki.phenomena import get_phenomenon, synthetic_scene
+
+    fog = get_phenomenon("fog")                 # or pass a Phenomenon instance anywhere
+    frame = synthetic_scene(128, 128)
+    foggy = fog.apply(frame, {"density": 4, "intensity": 0.3}, seed=7)
+
+The contract (:class:`Phenomenon`), shared by every built-in and plugin:
+
+* ``name`` and ``params`` (a tuple of :class:`ParamSpec`: name, bounds, unit, description,
+  identity value, optional default, integer flag);
+* ``bounds()`` → ``[(low, high), ...]``, ``to_vector(params)`` → ``np.ndarray``,
+  ``from_vector(vector)`` → ``dict`` — the fixed-length view pyribs archives need;
+* ``validate(params)`` fills optional parameters, rounds integer ones and rejects unknown,
+  missing, non-finite and out-of-bounds values, naming the parameter, value, bounds and unit;
+* ``identity_params()`` (zero strength: the image is returned unchanged, byte for byte) and
+  ``strength_params(s)`` for ``s`` in ``[0, 1]``;
+* ``apply(image, params, seed)`` is deterministic: the same image, parameters and seed give
+  the same bytes; the only randomness is ``numpy.random.default_rng(seed)``. The input is
+  never modified. ``stochastic`` says whether the seed matters at all.
+
+Built-ins (``available_phenomena()``): ``brightness``, ``fog``, ``hsl``, ``motion_blur``,
+``noise``, ``rain``, ``raindrop``, ``snow``. ``compose("fog", "raindrop")`` (or the name
+``"fog+raindrop"``) chains phenomena into one :class:`Composition` whose parameters are
+prefixed with the step label (``fog.density``, ``raindrop.x``; repeats become ``raindrop_2``)
+and whose steps get seeds spawned from the one seed.
+
+Plugins: subclass :class:`Phenomenon`, then either call :func:`register_phenomenon` or
+declare an entry point in the ``anunnaki.phenomena`` group of your package (see
+``docs/phenomena.md``). Importing this package needs only numpy; OpenCV and albumentations
+(the ``vision`` extra) are imported when a phenomenon that needs them is first applied, and a
+missing one raises :class:`~anunnaki.errors.MissingExtraError` naming ``anunnaki[phenomena]``.
+"""
+
+from anunnaki.phenomena._base import Image, ParamSpec, Phenomenon, PhenomenonError
+from anunnaki.phenomena._color import HSL, Brightness
+from anunnaki.phenomena._composition import Composition, CompositionStep, StepLike, compose
+from anunnaki.phenomena._fog import Fog
+from anunnaki.phenomena._raindrop import Raindrop
+from anunnaki.phenomena._registry import (
+    ENTRY_POINT_GROUP,
+    PhenomenonRegistry,
+    available_phenomena,
+    default_registry,
+    get_phenomenon,
+    register_phenomenon,
+)
+from anunnaki.phenomena._scene import synthetic_scene
+from anunnaki.phenomena._sensor import MotionBlur, Noise, motion_kernel
+from anunnaki.phenomena._weather import Rain, Snow
+
+__all__ = [
+    "ENTRY_POINT_GROUP",
+    "HSL",
+    "Brightness",
+    "Composition",
+    "CompositionStep",
+    "Fog",
+    "Image",
+    "MotionBlur",
+    "Noise",
+    "ParamSpec",
+    "Phenomenon",
+    "PhenomenonError",
+    "PhenomenonRegistry",
+    "Rain",
+    "Raindrop",
+    "Snow",
+    "StepLike",
+    "available_phenomena",
+    "compose",
+    "default_registry",
+    "get_phenomenon",
+    "motion_kernel",
+    "register_phenomenon",
+    "synthetic_scene",
+]

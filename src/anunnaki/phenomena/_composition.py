@@ -1,0 +1,151 @@
+"""Compositions: several phenomena applied in order, as one phenomenon.
+
+A composition's parameter space is the concatenation of its steps' spaces, each name prefixed
+with the step's label (``fog.density``, ``raindrop.x``); a phenomenon used twice gets labels
+``raindrop``, ``raindrop_2``, ... So a searcher sees one fixed-length vector, and "three
+raindrops in fog" is just ``compose("fog", "raindrop", "raindrop", "raindrop")``.
+
+A step may pin some of its parameters: ``compose(("rain", {"slant": 20}), "fog")`` keeps the
+slant at 20 degrees and leaves it out of the search space.
+
+Each step gets its own seed, ``SeedSequence(seed).spawn(len(steps))[i]``, so adding or
+changing a step never changes the randomness of the others.
+"""
+
+from __future__ import annotations
+
+import re
+from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any, TypeAlias
+
+import numpy as np
+
+from anunnaki.phenomena._base import Image, Phenomenon, PhenomenonError
+
+if TYPE_CHECKING:
+    from anunnaki.phenomena._registry import PhenomenonRegistry
+
+__all__ = ["Composition", "CompositionStep", "StepLike", "compose"]
+
+#: What a composition step may be given as: a name, an instance, or either with pinned params.
+StepLike: TypeAlias = "str | Phenomenon | tuple[str | Phenomenon, Mapping[str, float]]"
+
+
+@dataclass(frozen=True)
+class CompositionStep:
+    """One resolved step: its label (the parameter prefix), phenomenon and pinned parameters."""
+
+    label: str
+    phenomenon: Phenomenon
+    fixed: Mapping[str, float]
+
+    @property
+    def free_names(self) -> tuple[str, ...]:
+        """The step's parameter names that are part of the composition's space."""
+        return tuple(n for n in self.phenomenon.param_names if n not in self.fixed)
+
+
+def _child_seed(child: np.random.SeedSequence) -> int:
+    return int(child.generate_state(1, dtype=np.uint64)[0])
+
+
+class Composition(Phenomenon):
+    """An ordered sequence of phenomena, itself a :class:`Phenomenon`.
+
+    Args:
+        *steps: Each a registered name, a :class:`Phenomenon` instance, or a
+            ``(name_or_instance, pinned_params)`` pair.
+        registry: Where names are looked up (default: the global registry).
+
+    Raises:
+        PhenomenonError: No steps, an unknown name, or invalid pinned parameters.
+
+    """
+
+    def __init__(self, *steps: StepLike, registry: PhenomenonRegistry | None = None) -> None:
+        if registry is None:
+            from anunnaki.phenomena._registry import default_registry
+
+            registry = default_registry()
+        if not steps:
+            raise PhenomenonError("a composition needs at least one step", phenomenon="compose")
+        resolved: list[CompositionStep] = []
+        used: dict[str, int] = {}
+        for step in steps:
+            target: Any
+            fixed_raw: Mapping[str, Any]
+            if isinstance(step, tuple):
+                if len(step) != 2 or not isinstance(step[1], Mapping):
+                    raise PhenomenonError(
+                        f"a step with pinned parameters must be a (phenomenon, {{name: value}}) "
+                        f"pair, got {step!r}",
+                        phenomenon="compose",
+                    )
+                target, fixed_raw = step
+            else:
+                target, fixed_raw = step, {}
+            phenomenon = registry.get(target)
+            fixed = _pin(phenomenon, fixed_raw)
+            base = re.sub(r"\W", "_", phenomenon.name)
+            used[base] = used.get(base, 0) + 1
+            label = base if used[base] == 1 else f"{base}_{used[base]}"
+            resolved.append(CompositionStep(label, phenomenon, fixed))
+        self.steps: tuple[CompositionStep, ...] = tuple(resolved)
+        self.name = "+".join(step.phenomenon.name for step in self.steps)
+        self.params = tuple(
+            step.phenomenon.spec(name).prefixed(step.label)
+            for step in self.steps
+            for name in step.free_names
+        )
+        self.stochastic = any(step.phenomenon.stochastic for step in self.steps)
+
+    def split(self, params: Mapping[str, Any]) -> dict[str, dict[str, float]]:
+        """Validate *params* and return each step's complete parameters, keyed by label."""
+        valid = self.validate(params)
+        return {
+            step.label: {
+                **step.fixed,
+                **{name: valid[f"{step.label}.{name}"] for name in step.free_names},
+            }
+            for step in self.steps
+        }
+
+    def strength_params(self, strength: float) -> dict[str, float]:
+        """Every step at the same strength (pinned parameters stay pinned)."""
+        s = self._check_strength(strength)
+        merged: dict[str, float] = {}
+        for step in self.steps:
+            sub = step.phenomenon.strength_params(s)
+            merged.update({f"{step.label}.{name}": sub[name] for name in step.free_names})
+        return self.validate(merged)
+
+    def perturb(self, image: Image, params: dict[str, float], seed: int) -> Image:
+        """Apply the steps in order, step *i* with the *i*-th spawned seed."""
+        per_step = self.split(params)
+        children = np.random.SeedSequence(seed).spawn(len(self.steps))
+        out = image
+        for step, child in zip(self.steps, children, strict=True):
+            out = step.phenomenon.apply(out, per_step[step.label], _child_seed(child))
+        return out
+
+    def __repr__(self) -> str:
+        parts = [
+            f"({step.phenomenon!r}, {dict(step.fixed)!r})" if step.fixed else repr(step.phenomenon)
+            for step in self.steps
+        ]
+        return f"Composition({', '.join(parts)})"
+
+
+def _pin(phenomenon: Phenomenon, fixed: Mapping[str, Any]) -> dict[str, float]:
+    """Check pinned values against the step's specs (unknown names, bounds, finiteness)."""
+    pinned: dict[str, float] = {}
+    for key, value in fixed.items():
+        spec = phenomenon.spec(key)  # raises for an unknown name, listing the valid ones
+        pinned[key] = phenomenon._check_value(spec, value)
+    return pinned
+
+
+def compose(*steps: StepLike, registry: PhenomenonRegistry | None = None) -> Composition:
+    """Return a :class:`Composition` of *steps*, e.g. ``compose("fog", "raindrop")``."""
+    return Composition(*steps, registry=registry)
