@@ -25,7 +25,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "src"))
 
-from anunnaki.trace import Phase, Record, write_trace  # noqa: E402
+from anunnaki.trace import Phase, Record, write_trace
 
 END = 80.0
 
