@@ -165,6 +165,8 @@ class Evaluator:
 
     Args:
         model: The resolved goal model.
+        conditions: Extra named expressions over the same inputs (e.g. tactic
+            preconditions), read on demand with :meth:`condition`.
         on_error: Called with (node id, exception) when a node's computation raises; the
             node becomes unknown and evaluation goes on. Defaults to ignoring.
 
@@ -174,6 +176,7 @@ class Evaluator:
         self,
         model: GoalModel,
         *,
+        conditions: Mapping[str, Expression] | None = None,
         on_error: Callable[[str, BaseException], None] | None = None,
     ) -> None:
         self.model = model
@@ -203,6 +206,9 @@ class Evaluator:
         self._rate_slot: dict[str, int] = {}
         self._slot_readers: list[list[int]] = []
         self._build_slots_and_nodes()
+        self._conditions: dict[str, Callable[[list[Any]], Any]] = {}
+        for name, expr in (conditions or {}).items():
+            self._conditions[name] = expr.bind(self._slot, self._rslot)
         self._order = self._topological_order()
         self._height = [0] * n
         for pos, i in enumerate(self._order):
@@ -565,11 +571,12 @@ class Evaluator:
             if e_hist is not None and event_fn is not None:
                 e_hist.append(self.now, _holds(event_fn(self.slots)))
 
-    def tick(self, now: float) -> None:
+    def tick(self, now: float) -> bool:
         """Apply what the passing of time changes, up to ``now``.
 
         Values of topics silent past their staleness deadline become unknown; rates decay
-        through silences; temporal RELAX goals are re-evaluated.
+        through silences; temporal RELAX goals are re-evaluated. Returns whether any input
+        value changed (a replay must then tick at the same instant to agree).
         """
         self.now = max(self.now, now)
         slots = self.slots
@@ -596,11 +603,13 @@ class Evaluator:
                 if slots[slot] != value:
                     slots[slot] = value
                     dirty.extend(readers[slot])
+        changed = bool(dirty)
         if self._temporal:
             self._sample_temporal(dirty)
             dirty.extend(self._temporal)
         if dirty:
             self._propagate(dirty)
+        return changed
 
     def evaluate_all(self, now: float | None = None) -> None:
         """Recompute every node from the current values, children first."""
@@ -645,6 +654,11 @@ class Evaluator:
         if s is None:
             return self.model.unknown_policy == "satisfied"
         return s
+
+    def condition(self, name: str) -> Any:
+        """The current value of a named condition given at construction (``None`` = unknown)."""
+        value = self._conditions[name](self.slots)
+        return None if value is ABSENT else value
 
     def value(self, ref: AttrRef | str) -> Any:
         """The current value of an attribute (``None`` = unknown) or of ``rate(A)``."""

@@ -1,0 +1,111 @@
+"""Utu's configuration file (``anunnaki: utu/1``), validated on load.
+
+A configuration names the goal model, binding and tactics (paths relative to the config
+file), the knowledge database, the bus, the clock and the policies of the MAPE-K loop::
+
+    anunnaki: utu/1
+    name: rover
+    goal_model: goals.yaml
+    binding: binding.yaml
+    tactics: tactics.xml
+    knowledge: rover-run.db        # ":memory:" for throw-away runs
+    clock: wall                    # or "sim": time from the simulator's /clock topic
+    bus: {kind: inproc}            # or {kind: zenoh, ...}: see docs/bus.md
+    rate: 20                       # Hz: how often time-driven checks run in spin()
+    dwell: 0.0                     # s a precondition must hold before its tactic is queued
+    warmup: 2.0                    # s at start when unknown goals trigger nothing
+    failsafe: fail-safe            # tactic to escalate to when a postcondition fails
+    run_stop: {service: /rover/stop}
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated, Any, Literal
+
+from pydantic import BaseModel, ConfigDict, Field, ValidationError
+
+from anunnaki._safeyaml import LineMap, load_yaml, validation_error
+from anunnaki.errors import ModelFileError
+
+__all__ = ["RunStopConfig", "UtuConfig", "load_config", "parse_config"]
+
+
+class _Strict(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+
+class RunStopConfig(_Strict):
+    """What a run-stop does to the managed system (guideline S4)."""
+
+    service: str | None = None
+    topic: str | None = None
+    payload: dict[str, Any] = Field(default_factory=lambda: {"reason": "run-stop"})
+    timeout: Annotated[float, Field(gt=0)] = 2.0
+
+
+class UtuConfig(_Strict):
+    """A Utu configuration file."""
+
+    anunnaki: Literal["utu/1"]
+    name: str = "utu"
+    goal_model: str
+    binding: str | None = None
+    tactics: str | None = None
+    knowledge: str = ":memory:"
+    clock: Literal["wall", "sim"] = "wall"
+    clock_topic: str = "/clock"
+    bus: dict[str, Any] = Field(default_factory=lambda: {"kind": "inproc"})
+    rate: Annotated[float, Field(gt=0, le=10_000)] = 20.0
+    dwell: Annotated[float, Field(ge=0)] = 0.0
+    warmup: Annotated[float, Field(ge=0)] = 2.0
+    failsafe: str | None = None
+    escalate_to_run_stop: bool = True
+    run_stop: RunStopConfig = Field(default_factory=RunStopConfig)
+    queue: Annotated[int, Field(ge=1, le=1_000_000)] = 1024
+    notify: dict[str, Any] = Field(default_factory=dict)
+    publish_state: bool = True
+
+    def resolve(self, base: Path) -> UtuConfig:
+        """Return a copy with file paths made absolute against ``base``."""
+
+        def fix(p: str | None) -> str | None:
+            if p is None or p == ":memory:":
+                return p
+            path = Path(p)
+            return str(path if path.is_absolute() else (base / path))
+
+        return self.model_copy(
+            update={
+                "goal_model": fix(self.goal_model),
+                "binding": fix(self.binding),
+                "tactics": fix(self.tactics),
+                "knowledge": fix(self.knowledge),
+            }
+        )
+
+
+def _parse(data: Any, lines: LineMap | None, path: str) -> UtuConfig:
+    if not isinstance(data, dict) or data.get("anunnaki") != "utu/1":
+        raise ModelFileError(
+            "not a Utu configuration",
+            path=path,
+            line=1,
+            hint="start the file with 'anunnaki: utu/1'",
+        )
+    try:
+        return UtuConfig.model_validate(data)
+    except ValidationError as exc:
+        raise validation_error(exc, data, lines, path) from None
+
+
+def parse_config(text: str, *, source: str = "<config>", base: Path | None = None) -> UtuConfig:
+    """Parse a configuration from YAML text; paths resolve against ``base`` (default: cwd)."""
+    data, lines = load_yaml(source, text=text)
+    return _parse(data, lines, source).resolve(base or Path.cwd())
+
+
+def load_config(path: str | Path) -> UtuConfig:
+    """Load a configuration file; its paths resolve against the file's folder."""
+    data, lines = load_yaml(path)
+    return _parse(data, lines, str(path)).resolve(Path(path).resolve().parent)

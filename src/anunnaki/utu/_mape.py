@@ -1,0 +1,568 @@
+"""The four MAPE parts of Utu: Monitor, Analyzer, Planner, Executor.
+
+Each part is a plain class with its dependencies passed in; the
+:class:`~anunnaki.utu.AutonomicManager` composes them with the Knowledge base and owns the
+step. None of them reads a clock: every method that needs the time takes ``now``.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections import deque
+from collections.abc import Callable, Iterable, Mapping
+from dataclasses import dataclass, field
+from typing import Any, Literal, Protocol
+
+from anunnaki.goals import Evaluator, Expression, GoalModel, compile_expression, status_name
+from anunnaki.tactics import (
+    ChangeModeAction,
+    ExpressionCondition,
+    GoalState,
+    NotifyAction,
+    PublishAction,
+    RequestAction,
+    SwapModelAction,
+    Tactic,
+    TacticSet,
+)
+from anunnaki.utu._knowledge import Knowledge, TacticRow
+
+__all__ = [
+    "ActionOutcome",
+    "Actuator",
+    "Analyzer",
+    "Executor",
+    "Monitor",
+    "Planner",
+    "TacticRuntime",
+]
+
+log = logging.getLogger("anunnaki.utu")
+
+TacticState = Literal["idle", "pending", "queued", "running", "awaiting", "rejected"]
+
+
+# -- Monitor -------------------------------------------------------------------------------
+@dataclass
+class TopicStats:
+    """What the Monitor knows of one topic: last value, arrivals, rate."""
+
+    topic: str
+    agents: list[str]
+    staleness: float
+    last_t: float | None = None
+    last_msg: dict[str, Any] | None = None
+    count: int = 0
+    recent: deque[tuple[float, dict[str, Any]]] = field(default_factory=lambda: deque(maxlen=64))
+
+    def rate(self) -> float | None:
+        """Mean message rate (Hz) over the recent arrivals."""
+        if len(self.recent) < 2:
+            return None
+        span = self.recent[-1][0] - self.recent[0][0]
+        return (len(self.recent) - 1) / span if span > 0 else None
+
+    def stale(self, now: float) -> bool:
+        """Whether the topic has been silent past its deadline (or never spoke)."""
+        return self.last_t is None or now - self.last_t > self.staleness
+
+
+class Monitor:
+    """Takes the managed system's messages on the topics the goal model's binding names.
+
+    The topics come from the model (``GoalModel.topic_routes``), never from code. Each
+    message is recorded in Knowledge (every input except images) and handed on.
+    """
+
+    def __init__(self, model: GoalModel, knowledge: Knowledge) -> None:
+        self.knowledge = knowledge
+        self.topics: dict[str, TopicStats] = {}
+        self.set_model(model)
+
+    def set_model(self, model: GoalModel) -> None:
+        """Watch the topics of ``model`` (keeps what is known of topics that remain)."""
+        old = self.topics
+        self.topics = {}
+        for agent in model.agents.values():
+            for tb in agent.topics:
+                ts = (
+                    self.topics.get(tb.topic)
+                    or old.get(tb.topic)
+                    or TopicStats(tb.topic, [], agent.staleness)
+                )
+                ts.agents = (
+                    sorted({*ts.agents, agent.id}) if tb.topic in self.topics else [agent.id]
+                )
+                ts.staleness = min(ts.staleness, agent.staleness)
+                self.topics[tb.topic] = ts
+
+    def take(self, topic: str, msg: Mapping[str, Any], now: float) -> bool:
+        """Record one message; returns whether the topic is monitored."""
+        ts = self.topics.get(topic)
+        if ts is None:
+            return False
+        body = dict(msg)
+        self.knowledge.record_input(now, topic, body)
+        ts.last_t = now
+        ts.last_msg = body
+        ts.count += 1
+        ts.recent.append((now, body))
+        return True
+
+    def snapshot(self, now: float) -> dict[str, dict[str, Any]]:
+        """Per topic: agents, last value, rate and staleness (for displays)."""
+        return {
+            name: {
+                "agents": ts.agents,
+                "last": ts.last_msg,
+                "last_t": ts.last_t,
+                "count": ts.count,
+                "rate": ts.rate(),
+                "stale": ts.stale(now),
+            }
+            for name, ts in self.topics.items()
+        }
+
+
+# -- Analyzer ------------------------------------------------------------------------------
+class Analyzer:
+    """Evaluates the goal model on every change and selects the tactics whose preconditions hold."""
+
+    def __init__(self, model: GoalModel, tactics: TacticSet, knowledge: Knowledge) -> None:
+        self.knowledge = knowledge
+        self.model = model
+        self.tactics = tactics
+        self._conditions: dict[str, Expression] = {}
+        for tactic in tactics.tactics:
+            for i, cond in enumerate(tactic.preconditions):
+                if isinstance(cond, ExpressionCondition):
+                    key = f"{tactic.name}#{i}"
+                    self._conditions[key] = compile_expression(
+                        cond.expression,
+                        path=cond.source.path,
+                        line=cond.source.line,
+                        element=f"tactics[{tactic.name}].preconditions[{i}]",
+                    )
+        self.evaluator = Evaluator(model, conditions=self._conditions, on_error=self._node_error)
+        self.evaluator.drain_changes()
+        self.errors = 0
+        # During warm-up (set by the manager) an unknown goal satisfies no precondition:
+        # inputs have not all arrived yet, which is not a violation.
+        self.warming_up = False
+
+    def _node_error(self, node: str, exc: BaseException) -> None:
+        self.errors += 1
+        log.warning("evaluating %s raised %r; it is unknown until its inputs change", node, exc)
+
+    def observe(self, topic: str, msg: Mapping[str, Any], now: float) -> None:
+        """Feed one message."""
+        self.evaluator.observe(topic, msg, now)
+
+    def tick(self, now: float) -> bool:
+        """Apply the passing of time; returns whether an input changed."""
+        return self.evaluator.tick(now)
+
+    def record_changes(self, now: float) -> list[str]:
+        """Record every changed verdict in Knowledge; returns the changed nodes."""
+        changed = self.evaluator.drain_changes()
+        for node in changed:
+            st = self.evaluator.state(node)
+            self.knowledge.record_verdict(now, node, st.utility, status_name(st.status))
+        return changed
+
+    def holds(self, cond: GoalState | ExpressionCondition, key: str) -> bool:
+        """Whether one precondition holds now (unknown counts by the model's policy)."""
+        ev = self.evaluator
+        if isinstance(cond, GoalState):
+            if cond.goal not in ev.index:
+                return False
+            status = ev.state(cond.goal).status
+            if cond.state == "unknown":
+                return status is None
+            if status is None:
+                if self.warming_up:
+                    return False
+                satisfied = ev.satisfied_for_tactics(cond.goal)
+                return satisfied if cond.state == "satisfied" else not satisfied
+            return status is (cond.state == "satisfied")
+        value = ev.condition(key)
+        return value is True or (isinstance(value, int | float) and value >= 1.0)
+
+    def eligible(self) -> list[str]:
+        """Names of the tactics whose preconditions all hold now."""
+        out = []
+        for tactic in self.tactics.tactics:
+            if all(
+                self.holds(cond, f"{tactic.name}#{i}")
+                for i, cond in enumerate(tactic.preconditions)
+            ):
+                out.append(tactic.name)
+        return out
+
+    def postconditions_hold(self, tactic: Tactic) -> bool:
+        """Whether every postcondition of ``tactic`` holds now."""
+        return all(self.holds(cond, "") for cond in tactic.postconditions)
+
+    def state_message(self, now: float, eligible: Iterable[str]) -> dict[str, Any]:
+        """The analysis as a message: utilities, statuses, violations, applicable tactics."""
+        ev = self.evaluator
+        nodes = {n: [ev.util[i], status_name(ev.stat[i])] for i, n in enumerate(ev.ids)}
+        violated = [n for n in self.model.goals if ev.state(n).status is not True]
+        return {
+            "t": now,
+            "root": self.model.root,
+            "nodes": nodes,
+            "violated": violated,
+            "tactics": sorted(eligible),
+        }
+
+
+# -- Planner -------------------------------------------------------------------------------
+@dataclass
+class TacticRuntime:
+    """A tactic's life in the loop."""
+
+    tactic: Tactic
+    state: TacticState = "idle"
+    eligible_since: float | None = None
+    started: float | None = None
+    deadline: float | None = None
+    next_action: int = 0
+    cooldown_until: float | None = None
+    attempt: int = 0
+    reason: str | None = None
+    blocked_logged: str | None = None
+
+    @property
+    def name(self) -> str:
+        """The tactic's name."""
+        return self.tactic.name
+
+    @property
+    def in_flight(self) -> bool:
+        """Whether its actions are running or its postconditions are awaited."""
+        return self.state in ("running", "awaiting")
+
+    def row(self) -> TacticRow:
+        """The persistent form."""
+        state = self.state if self.state in ("running", "awaiting", "pending") else "idle"
+        return TacticRow(
+            self.name,
+            state,
+            self.started,
+            self.deadline,
+            self.next_action,
+            self.cooldown_until,
+            self.attempt,
+            self.reason,
+        )
+
+
+def _endpoints(tactic: Tactic) -> set[str]:
+    return {ep.name for ep in tactic.referenced_endpoints()}
+
+
+class Planner:
+    """A priority-sorted queue of selected tactics.
+
+    * a tactic becomes a candidate when its preconditions have held for ``dwell`` seconds
+      (hysteresis: a flickering input does not make the system oscillate);
+    * it is not queued while it is in flight, in its cooldown, or while a tactic it
+      conflicts with is in flight — explicitly (``conflicts``) or because both actuate the
+      same endpoint;
+    * a tactic marked ``requires_approval`` waits as *pending* until an operator approves it;
+    * queued tactics start highest priority first.
+    """
+
+    def __init__(self, tactics: TacticSet, knowledge: Knowledge, *, dwell: float = 0.0) -> None:
+        self.knowledge = knowledge
+        self.dwell = dwell
+        self.runtimes: dict[str, TacticRuntime] = {}
+        self.set_tactics(tactics)
+
+    def set_tactics(self, tactics: TacticSet) -> None:
+        """Use a new tactic set, keeping the runtime state of tactics that remain."""
+        old = self.runtimes
+        self.tactics = tactics
+        self.runtimes = {}
+        for t in tactics.tactics:
+            rt = old.get(t.name)
+            if rt is not None:
+                rt.tactic = t
+            self.runtimes[t.name] = rt or TacticRuntime(t)
+        self._endpoints = {t.name: _endpoints(t) for t in tactics.tactics}
+
+    def restore(self, rows: Mapping[str, TacticRow]) -> list[TacticRuntime]:
+        """Take persisted state after a restart; returns the tactics that were in flight."""
+        resumed = []
+        for name, row in rows.items():
+            rt = self.runtimes.get(name)
+            if rt is None:
+                continue
+            rt.cooldown_until = row.cooldown_until
+            rt.attempt = row.attempt
+            if row.state in ("running", "awaiting"):
+                rt.state = row.state  # type: ignore[assignment]
+                rt.started = row.started
+                rt.deadline = row.deadline
+                rt.next_action = row.next_action
+                resumed.append(rt)
+            elif row.state == "pending":
+                rt.state = "pending"
+        return resumed
+
+    def conflicts(self, a: str, b: str) -> bool:
+        """Whether two tactics may not be in flight together."""
+        if a == b:
+            return True
+        if self.tactics.in_conflict(a, b):
+            return True
+        return bool(self._endpoints.get(a, set()) & self._endpoints.get(b, set()))
+
+    def _blocked(self, rt: TacticRuntime, now: float) -> str | None:
+        if rt.cooldown_until is not None and now < rt.cooldown_until:
+            return f"cooldown until {rt.cooldown_until:.3f}"
+        for other in self.runtimes.values():
+            if other.in_flight and self.conflicts(rt.name, other.name):
+                return f"conflicts with {other.name}, in flight"
+        return None
+
+    def update(self, eligible: Iterable[str], now: float) -> list[TacticRuntime]:
+        """Take the tactics whose preconditions hold; return those to start now."""
+        eligible_set = set(eligible)
+        for name, rt in self.runtimes.items():
+            if name not in eligible_set:
+                rt.eligible_since = None
+                rt.blocked_logged = None
+                if rt.state == "pending":
+                    rt.state = "idle"
+                    self._save(rt)
+                    self.knowledge.record_decision(
+                        now, "withdrawn", name, reason="preconditions no longer hold"
+                    )
+                elif rt.state in ("queued", "rejected"):
+                    rt.state = "idle"
+                continue
+            if rt.eligible_since is None:
+                rt.eligible_since = now
+                self.knowledge.record_decision(now, "selected", name, priority=rt.tactic.priority)
+            if rt.state != "idle" or now - rt.eligible_since < self.dwell - 1e-12:
+                continue
+            if rt.tactic.requires_approval:
+                rt.state = "pending"
+                self._save(rt)
+                self.knowledge.record_decision(now, "pending_approval", name)
+            else:
+                rt.state = "queued"
+        return self._dispatch(now)
+
+    def _dispatch(self, now: float) -> list[TacticRuntime]:
+        queue = sorted(
+            (rt for rt in self.runtimes.values() if rt.state == "queued"),
+            key=lambda rt: (-rt.tactic.priority, self.tactics.tactics.index(rt.tactic)),
+        )
+        start: list[TacticRuntime] = []
+        for rt in queue:
+            reason = self._blocked(rt, now) or next(
+                (
+                    f"conflicts with {s.name}, starting"
+                    for s in start
+                    if self.conflicts(rt.name, s.name)
+                ),
+                None,
+            )
+            if reason is not None:
+                if rt.blocked_logged != reason:
+                    rt.blocked_logged = reason
+                    self.knowledge.record_decision(now, "deferred", rt.name, reason=reason)
+                continue
+            start.append(rt)
+        return start
+
+    def queue(self) -> list[dict[str, Any]]:
+        """The priority-sorted queue (queued, pending approval and in flight)."""
+        rts = [rt for rt in self.runtimes.values() if rt.state != "idle"]
+        rts.sort(key=lambda rt: -rt.tactic.priority)
+        return [
+            {
+                "tactic": rt.name,
+                "priority": rt.tactic.priority,
+                "state": rt.state,
+                "deadline": rt.deadline,
+            }
+            for rt in rts
+        ]
+
+    def approve(self, name: str, approve: bool, caller: str, now: float) -> str:
+        """An operator approves or rejects a pending tactic; returns what happened."""
+        rt = self.runtimes.get(name)
+        if rt is None:
+            return f"unknown tactic {name!r}"
+        if rt.state != "pending":
+            return f"tactic {name!r} is not pending approval (it is {rt.state})"
+        rt.state = "queued" if approve else "rejected"
+        self._save(rt)
+        self.knowledge.record_decision(
+            now, "approved" if approve else "rejected", name, caller=caller
+        )
+        return "approved" if approve else "rejected"
+
+    def _save(self, rt: TacticRuntime) -> None:
+        self.knowledge.save_tactic(rt.row())
+
+
+# -- Executor ------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class ActionOutcome:
+    """The result of one action."""
+
+    ok: bool
+    detail: str = ""
+    reply: dict[str, Any] | None = None
+
+
+class Actuator(Protocol):
+    """How actions reach the managed system."""
+
+    def publish(self, topic: str, payload: Mapping[str, Any]) -> ActionOutcome:
+        """Publish a message on a topic."""
+        ...
+
+    def request(self, service: str, payload: Mapping[str, Any], timeout: float) -> ActionOutcome:
+        """Request a service and wait for the reply."""
+        ...
+
+    def notify(self, action: NotifyAction, tactic: str, now: float) -> ActionOutcome:
+        """Send a notification (may complete in the background)."""
+        ...
+
+
+class Executor:
+    """Performs a tactic's actions in order, then checks its postconditions by the deadline.
+
+    Before each action its index is persisted (write-ahead), so a manager killed mid-action
+    and restarted continues with the *next* action: an action runs at most once.
+    """
+
+    def __init__(
+        self,
+        actuator: Actuator,
+        knowledge: Knowledge,
+        *,
+        on_failure: Callable[[TacticRuntime, float], None],
+    ) -> None:
+        self.actuator = actuator
+        self.knowledge = knowledge
+        self.on_failure = on_failure
+
+    def start(self, rt: TacticRuntime, now: float, *, reason: str = "preconditions hold") -> None:
+        """Start a tactic: persist, then run its actions."""
+        rt.state = "running"
+        rt.started = now
+        rt.deadline = now + rt.tactic.deadline
+        rt.next_action = 0
+        rt.attempt += 1
+        rt.reason = reason
+        self.knowledge.save_tactic(rt.row())
+        self.knowledge.record_decision(
+            now,
+            "started",
+            rt.name,
+            priority=rt.tactic.priority,
+            deadline=rt.deadline,
+            reason=reason,
+            attempt=rt.attempt,
+        )
+        self.run_actions(rt, now)
+
+    def run_actions(self, rt: TacticRuntime, now: float) -> None:
+        """Run the remaining actions of a running tactic."""
+        actions = rt.tactic.actions
+        while rt.next_action < len(actions):
+            i = rt.next_action
+            action = actions[i]
+            rt.next_action = i + 1
+            self.knowledge.save_tactic(rt.row())  # write-ahead: action i is dispatched
+            outcome = self._perform(action, rt.name, now)
+            self.knowledge.record_decision(
+                now,
+                "action",
+                rt.name,
+                index=i,
+                type=action.type,
+                ok=outcome.ok,
+                detail=outcome.detail,
+                **_describe(action),
+            )
+        if rt.tactic.postconditions:
+            rt.state = "awaiting"
+            self.knowledge.save_tactic(rt.row())
+        else:
+            self._finish(rt, now, ok=True, note="no postconditions")
+
+    def _perform(self, action: Any, tactic: str, now: float) -> ActionOutcome:
+        try:
+            if isinstance(action, PublishAction):
+                return self.actuator.publish(action.topic, action.payload)
+            if isinstance(action, RequestAction):
+                return self.actuator.request(action.service, action.payload, action.timeout)
+            if isinstance(action, ChangeModeAction):
+                return self.actuator.request(action.service, {"mode": action.mode}, 2.0)
+            if isinstance(action, SwapModelAction):
+                payload: dict[str, Any] = {"lec": action.lec}
+                if action.model is not None:
+                    payload["model"] = action.model
+                if action.domain is not None:
+                    payload["domain"] = action.domain
+                return self.actuator.request(action.service, payload, 5.0)
+            if isinstance(action, NotifyAction):
+                return self.actuator.notify(action, tactic, now)
+        except Exception as exc:  # an actuator must never kill the loop
+            log.warning("action of %s raised %r", tactic, exc)
+            return ActionOutcome(False, f"{type(exc).__name__}: {exc}")
+        return ActionOutcome(False, f"unknown action type {type(action).__name__}")
+
+    def check(self, rt: TacticRuntime, analyzer: Analyzer, now: float) -> None:
+        """Check an awaiting tactic's postconditions: verified, still waiting, or failed."""
+        if rt.state != "awaiting":
+            return
+        if analyzer.postconditions_hold(rt.tactic):
+            self._finish(rt, now, ok=True, note="postconditions verified")
+        elif rt.deadline is not None and now >= rt.deadline:
+            states = {
+                c.goal: status_name(analyzer.evaluator.state(c.goal).status)
+                for c in rt.tactic.postconditions
+                if c.goal in analyzer.evaluator.index
+            }
+            self._finish(rt, now, ok=False, note="deadline passed", goals=states)
+
+    def _finish(self, rt: TacticRuntime, now: float, *, ok: bool, note: str, **data: Any) -> None:
+        kind = "postcondition_ok" if ok else "postcondition_failed"
+        if not rt.tactic.postconditions:
+            kind = "completed"
+        rt.state = "idle"
+        rt.cooldown_until = now + rt.tactic.cooldown
+        rt.deadline = None
+        self.knowledge.save_tactic(rt.row())
+        self.knowledge.record_decision(now, kind, rt.name, note=note, **data)
+        if not ok:
+            self.on_failure(rt, now)
+
+
+def _describe(action: Any) -> dict[str, Any]:
+    if isinstance(action, PublishAction):
+        return {"topic": action.topic, "payload": action.payload}
+    if isinstance(action, RequestAction):
+        return {"service": action.service, "payload": action.payload}
+    if isinstance(action, ChangeModeAction):
+        return {"service": action.service, "mode": action.mode}
+    if isinstance(action, SwapModelAction):
+        return {
+            "service": action.service,
+            "lec": action.lec,
+            "model": action.model,
+            "domain": action.domain,
+        }
+    if isinstance(action, NotifyAction):
+        return {"channel": action.channel, "to": action.to, "subject": action.subject}
+    return {}
