@@ -611,6 +611,24 @@ class Evaluator:
             self._propagate(dirty)
         return changed
 
+    def expire(self, topic: str, now: float) -> None:
+        """Make a topic's values unknown now (its publisher is known to be gone)."""
+        if now > self.now:
+            self.now = now
+        tp = self._topics.get(topic)
+        if tp is None:
+            return
+        tp.stale = True
+        dirty: list[int] = []
+        for slot, _ in tp.fields:
+            if self.slots[slot] is not None:
+                self.slots[slot] = None
+                dirty.extend(self._reader_tuples[slot])
+        if self._temporal:
+            self._sample_temporal(dirty)
+        if dirty:
+            self._propagate(dirty)
+
     def evaluate_all(self, now: float | None = None) -> None:
         """Recompute every node from the current values, children first."""
         if now is not None and now > self.now:

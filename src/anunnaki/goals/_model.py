@@ -49,6 +49,22 @@ __all__ = [
 
 NodeKind = Literal["goal", "obstacle"]
 
+RESERVED_WORDS = (
+    "and",
+    "or",
+    "not",
+    "in",
+    "has",
+    "no",
+    "true",
+    "false",
+    "rate",
+    "min",
+    "max",
+    "abs",
+)
+"""Words of the expression language; an agent id that is one of them cannot be named."""
+
 
 @dataclass(frozen=True)
 class Binding:
@@ -72,6 +88,7 @@ class Agent:
     description: str
     topics: list[TopicBinding]
     staleness: float
+    node: str | None = None
     # attribute name -> (topic, dotted field path)
     attributes: dict[str, tuple[str, str]] = field(default_factory=dict)
 
@@ -200,9 +217,27 @@ class GoalModel:
     def _resolve(self) -> None:
         self._collect()
         self._bind_agents()
+        self._check_agent_ids()
         self._link()
         self._find_root()
+        self._find_detached()
         self._compile()
+
+    def _check_agent_ids(self) -> None:
+        # Ids may contain '-' and may be words the expression language reserves; an agent
+        # with such an id cannot be named in an expression ('A-1.x' reads as 'A - 1.x').
+        for aid in self.agents:
+            try:
+                compile_expression(f"{aid}.x == 1 and {aid} has x and rate({aid}) > 0")
+            except ExpressionError:
+                self._add(
+                    "warning",
+                    f"agent id '{aid}' cannot be named in expressions",
+                    section="agents",
+                    ident=aid,
+                    hint="use letters, digits and '_' only, and none of the words "
+                    + ", ".join(RESERVED_WORDS),
+                )
 
     def _collect(self) -> None:
         seen: dict[str, str] = {}
@@ -235,6 +270,15 @@ class GoalModel:
                 elif section == "domain_properties":
                     self.domain_properties[item.id] = item
         for i, ep in enumerate(self.spec.endpoints):
+            if ep.name in self.endpoints:
+                self._add(
+                    "error",
+                    f"endpoint {ep.name} is declared twice",
+                    line=self.lines.line(("endpoints", i)),
+                    element=f"endpoints[{ep.name}]",
+                    hint="declare each topic or service once",
+                )
+                continue
             self._index[("endpoints", ep.name)] = i
             self.endpoints[ep.name] = ep
 
@@ -246,10 +290,12 @@ class GoalModel:
         for aid, a in inline.items():
             topics = list(a.topics)
             staleness = a.staleness
+            node = a.node
             if aid in bound:
                 topics = list(bound[aid].topics)
                 staleness = bound[aid].staleness or staleness
-            agent = Agent(aid, a.description, topics, staleness or self.spec.staleness)
+                node = bound[aid].node or node
+            agent = Agent(aid, a.description, topics, staleness or self.spec.staleness, node)
             for tb in topics:
                 for attr, fpath in tb.attributes.items():
                     agent.attributes.setdefault(attr, (tb.topic, fpath))
@@ -265,7 +311,19 @@ class GoalModel:
                         element=f"agents.{aid}",
                         hint=f"declared agents: {', '.join(sorted(inline)) or 'none'}",
                     )
+            in_binding: set[str] = set()
             for i, ep in enumerate(self.binding.spec.endpoints):
+                if ep.name in in_binding:
+                    self._add(
+                        "error",
+                        f"endpoint {ep.name} is declared twice",
+                        path=self.binding.path,
+                        line=self.binding.lines.line(("endpoints", i)),
+                        element=f"endpoints[{ep.name}]",
+                        hint="declare each topic or service once",
+                    )
+                    continue
+                in_binding.add(ep.name)
                 if ep.name in self.endpoints and ep != self.endpoints[ep.name]:
                     self._add(
                         "warning",
@@ -278,6 +336,25 @@ class GoalModel:
 
     def _link(self) -> None:
         for g in self.goals.values():
+            if g.children and g.threshold is not None:
+                self._add(
+                    "warning",
+                    "'threshold' is ignored on a refined goal: it is satisfied by the "
+                    f"{g.refinement.upper() if g.refinement else 'AND'} of its children",
+                    section="goals",
+                    ident=g.id,
+                    key=("threshold",),
+                    hint="remove it, or give the threshold to the leaf goals",
+                )
+            for c in sorted({c for c in g.children if g.children.count(c) > 1}):
+                self._add(
+                    "warning",
+                    f"child goal '{c}' is listed twice",
+                    section="goals",
+                    ident=g.id,
+                    key=("children",),
+                    hint="list each child once",
+                )
             for c in g.children:
                 if c not in self.goals:
                     self._add(
@@ -390,6 +467,31 @@ class GoalModel:
                 hint=f"add 'root: {tops[0]}' at the top, or make the others children",
             )
 
+    def _find_detached(self) -> None:
+        # Goals outside the tree under the root (and outside every resolution goal's own
+        # sub-tree) are evaluated, but no parent reads them and `evaluate` does not show them.
+        if not self.root or any(f.element == "goals" for f in self.findings):
+            return  # no root, or "several goals refine nothing" already names them
+        resolution = [g for o in self.obstacles.values() for g in o.resolutions]
+        reached: set[str] = set()
+        stack = [self.root, *(g for g in resolution if g in self.goals)]
+        while stack:
+            gid = stack.pop()
+            if gid in reached:
+                continue
+            reached.add(gid)
+            stack.extend(c for c in self.goals[gid].children if c in self.goals)
+        for gid in self.goals:
+            if gid not in reached and not self.parents.get(gid):
+                self._add(
+                    "warning",
+                    f"goal '{gid}' is not under the root goal {self.root}, nor a resolution "
+                    "of an obstacle: nothing reads its status",
+                    section="goals",
+                    ident=gid,
+                    hint=f"add it to the children of a goal under {self.root}, or remove it",
+                )
+
     def _compile_one(
         self, section: str, ident: str, key: str, text: str | None, role: str
     ) -> Expression | None:
@@ -473,7 +575,16 @@ class GoalModel:
                     hint="list the agents responsible for it under 'agents:'",
                 )
         for o in self.obstacles.values():
-            self._compile_one("obstacles", o.id, "condition", o.condition, "condition")
+            cond = self._compile_one("obstacles", o.id, "condition", o.condition, "condition")
+            if cond is not None and cond.value_type == "string":
+                self._add(
+                    "error",
+                    f"condition '{cond.text}' is a string; a condition is a boolean or a number",
+                    section="obstacles",
+                    ident=o.id,
+                    key=("condition",),
+                    hint="compare it, e.g. A1.mode == 'manual'",
+                )
             if o.condition is None:
                 self._add(
                     "error",

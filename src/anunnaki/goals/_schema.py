@@ -40,11 +40,26 @@ class _Strict(BaseModel):
     model_config = ConfigDict(extra="forbid", frozen=True, str_strip_whitespace=True)
 
 
+# The bus keeps services under ``<namespace>/srv/…`` (anunnaki.bus, ``SERVICE_SEGMENT``), so
+# a topic may not start with this segment: the bus would refuse to publish or subscribe it.
+_SERVICE_SEGMENT = "srv"
+
+
 def _ros_name(value: str) -> str:
     if not ROS_NAME.match(value):
         raise ValueError(
             f"'{value}' is not a ROS-style name: it must start with '/' and use "
             "letters, digits and '_' in '/'-separated parts, e.g. /utu/oracle/output"
+        )
+    return value
+
+
+def _topic_name(value: str) -> str:
+    _ros_name(value)
+    if value.split("/")[1] == _SERVICE_SEGMENT:
+        raise ValueError(
+            f"'{value}' cannot be a topic: the first part '/{_SERVICE_SEGMENT}' is reserved "
+            "for services on the bus; rename the topic"
         )
     return value
 
@@ -63,7 +78,7 @@ class TopicBinding(_Strict):
     @field_validator("topic")
     @classmethod
     def _check_topic(cls, v: str) -> str:
-        return _ros_name(v)
+        return _topic_name(v)
 
     @field_validator("attributes", mode="before")
     @classmethod
@@ -87,13 +102,19 @@ class TopicBinding(_Strict):
 
 
 class AgentSpec(_Strict):
-    """A KAOS agent: a component (or person) responsible for goals; it publishes state."""
+    """A KAOS agent: a component (or person) responsible for goals; it publishes state.
+
+    ``node`` names the bus node whose liveliness vouches for the agent: when that node's
+    liveliness token disappears (its process died), the agent's values become unknown at
+    once instead of at their staleness deadline.
+    """
 
     id: Ident
     description: str = ""
     kind: Literal["software", "hardware", "human", "environment"] | None = None
     topics: list[TopicBinding] = Field(default_factory=list)
     staleness: Annotated[float, Field(gt=0)] | None = None
+    node: str | None = None
 
 
 class GoalSpec(_Strict):
@@ -193,6 +214,12 @@ class EndpointSpec(_Strict):
             return {k: ({"type": x} if isinstance(x, str) else x) for k, x in v.items()}
         return v
 
+    @model_validator(mode="after")
+    def _topic_not_reserved(self) -> EndpointSpec:
+        if self.kind == "topic":
+            _topic_name(self.name)
+        return self
+
 
 class GoalModelSpec(_Strict):
     """A goal-model file."""
@@ -216,6 +243,7 @@ class AgentBinding(_Strict):
 
     topics: list[TopicBinding] = Field(min_length=1)
     staleness: Annotated[float, Field(gt=0)] | None = None
+    node: str | None = None
 
 
 class BindingSpec(_Strict):

@@ -292,6 +292,8 @@ class AutonomicManager:
         for topic in self.monitor.topics:
             self._subscribe_topic(topic)
         self._declared.append(bus.subscribe("/utu/run_stop", self._on_run_stop_topic, queue=16))
+        if any(a.node for a in self.model.agents.values()):
+            self._declared.append(bus.watch_liveliness(self._on_liveliness))
         services: dict[str, Callable[[Any], Any]] = {
             "/utu/run_stop": lambda m: self._op_service("run_stop", m),
             "/utu/pause": lambda m: self._op_service("pause", m),
@@ -336,6 +338,10 @@ class AutonomicManager:
                 "reason": str(body.get("reason", "run-stop topic")),
             }
         )
+
+    def _on_liveliness(self, node: str, alive: bool) -> None:
+        if not alive:
+            self._enqueue_op({"op": "node_lost", "node": node, "caller": "liveliness"})
 
     def feed(self, topic: str, msg: Mapping[str, Any]) -> None:
         """Queue one input message (what the bus subscription does); processed by ``step``."""
@@ -488,6 +494,16 @@ class AutonomicManager:
                 self.knowledge.record_decision(
                     t, "operator_refused", str(op.get("tactic")), caller=caller, reason=result
                 )
+        elif kind == "node_lost":
+            node = str(op.get("node"))
+            agents = [a for a in self.model.agents.values() if a.node == node]
+            for agent in agents:
+                for tb in agent.topics:
+                    self.analyzer.evaluator.expire(tb.topic, t)
+            self.analyzer.record_changes(t)
+            self.knowledge.record_decision(
+                t, "liveliness_lost", None, node=node, agents=[a.id for a in agents]
+            )
         elif kind == "run_stop":
             self._do_run_stop(t, caller=caller, reason=str(op.get("reason", "operator")))
         else:
