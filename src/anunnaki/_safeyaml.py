@@ -23,6 +23,7 @@ from typing import Any
 import yaml
 from yaml.events import AliasEvent, CollectionStartEvent, ScalarEvent
 from yaml.nodes import MappingNode, Node, ScalarNode, SequenceNode
+from yaml.reader import ReaderError
 
 from anunnaki.errors import ModelFileError
 
@@ -86,8 +87,13 @@ def read_text_limited(path: str | Path, *, max_bytes: int = MAX_BYTES) -> str:
     try:
         return p.read_text(encoding="utf-8")
     except UnicodeDecodeError as exc:
+        line = exc.object[: exc.start].count(b"\n") + 1
+        column = exc.start - (exc.object.rfind(b"\n", 0, exc.start) + 1) + 1
         raise ModelFileError(
-            f"not UTF-8 text (byte {exc.start})", path=p, hint="save the file as UTF-8"
+            f"not UTF-8 text (byte 0x{exc.object[exc.start]:02x} at column {column})",
+            path=p,
+            line=line,
+            hint="save the file as UTF-8",
         ) from exc
 
 
@@ -231,7 +237,10 @@ def load_yaml(
         raise ModelFileError(
             f"document over the limit of {max_bytes} bytes", path=source, hint="split it"
         )
-    loader = _GuardedLoader(text)
+    try:
+        loader = _GuardedLoader(text)
+    except ReaderError as exc:  # a control character: refused before parsing
+        raise _reader_error(exc, text, source) from None
     loader.source = str(source)
     loader.max_depth = max_depth
     lines = LineMap()
@@ -240,6 +249,8 @@ def load_yaml(
         if node is None:
             raise ModelFileError("the file is empty", path=source, hint="write a YAML mapping")
         return _construct(loader, node, (), lines), lines
+    except ReaderError as exc:
+        raise _reader_error(exc, text, source) from None
     except yaml.MarkedYAMLError as exc:
         mark = exc.problem_mark or exc.context_mark
         raise ModelFileError(
@@ -256,6 +267,16 @@ def load_yaml(
         ) from None
     finally:
         loader.dispose()
+
+
+def _reader_error(exc: ReaderError, text: str, source: str | Path) -> ModelFileError:
+    position = min(max(exc.position, 0), len(text))
+    return ModelFileError(
+        f"character U+{exc.character:04X} is not allowed in YAML",
+        path=source,
+        line=text.count("\n", 0, position) + 1,
+        hint='remove it, or write it as an escape in a double-quoted string ("\\a")',
+    )
 
 
 def element_path(path: Sequence[str | int]) -> str:
@@ -311,6 +332,11 @@ def validation_error(
         hint = hint or "check the spelling; see the format in docs/"
     elif first["type"] == "missing":
         msg = f"missing required field '{first['loc'][-1]}'"
+    elif first["type"] == "string_type" and not isinstance(first.get("input"), dict | list):
+        # YAML reads 5, 1.0, true and 2024-01-01 as numbers, booleans and dates.
+        value = first.get("input")
+        shown = str(value).lower() if isinstance(value, bool) else str(value)
+        hint = hint or f"put the value in quotes to make it text: '{shown}'"
     more = len(errors) - 1
     if more:
         msg += f" (and {more} more problem{'s' if more > 1 else ''})"

@@ -20,6 +20,7 @@ Exit codes of the command: 0 clean, 1 findings (errors or warnings), 2 a file un
 
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -67,18 +68,33 @@ class CheckResult:
         return [f for f in self.findings if f.severity == "warning"]
 
 
+_TAG = re.compile(r"""^anunnaki:[ \t]*['"]?([A-Za-z-]+/[0-9]+)""", re.MULTILINE)
+_KINDS = {"binding/1": "binding", "tactics/1": "tactics", "goal-model/1": "goal model"}
+
+
 def _sniff_kind(path: str | Path) -> str:
-    """Guess whether a file is a binding or tactics by extension and format tag."""
+    """Tell a binding from a tactics file by extension and format tag.
+
+    Returns ``binding``, ``tactics``, ``goal model`` or ``unknown``.
+
+    Raises:
+        ModelFileError: the file cannot be read.
+
+    """
     p = Path(path)
     if p.suffix.lower() == ".xml":
         return "tactics"
     try:
-        head = p.read_text(encoding="utf-8", errors="replace")[:4096]
-    except OSError:
-        return "unknown"
-    if "binding/1" in head:
-        return "binding"
-    if "tactics/1" in head or head.lstrip().startswith("<"):
+        with p.open("rb") as fh:
+            head = fh.read(4096).decode("utf-8", errors="replace")
+    except OSError as exc:
+        raise ModelFileError(
+            f"cannot read file: {exc.strerror}", path=p, hint="check the path"
+        ) from exc
+    found = _TAG.search(head)
+    if found is not None:
+        return _KINDS.get(found.group(1), "unknown")
+    if head.lstrip("\ufeff \t\r\n").startswith("<"):
         return "tactics"
     return "unknown"
 
@@ -96,22 +112,27 @@ def check_files(
     """
     result = CheckResult()
     for path in extra:
-        kind = _sniff_kind(path)
+        try:
+            kind = _sniff_kind(path)
+        except ModelFileError as exc:
+            result.findings.append(Finding.from_error(exc))
+            result.unreadable = True
+            continue
         if kind == "binding" and binding is None:
             binding = path
-        elif kind == "tactics" and tactics is None:
+            continue
+        if kind == "tactics" and tactics is None:
             tactics = path
+            continue
+        if kind in ("binding", "tactics"):
+            message, hint = f"a second {kind} file", "give one binding and one tactics file"
+        elif kind == "goal model":
+            message, hint = "a second goal model", "give the goal model first, then the others"
         else:
-            result.findings.append(
-                Finding(
-                    "error",
-                    "cannot tell whether this is a binding or a tactics file",
-                    str(path),
-                    1,
-                    hint="start it with 'anunnaki: binding/1' or 'anunnaki: tactics/1'",
-                )
-            )
-            result.unreadable = True
+            message = "cannot tell whether this is a binding or a tactics file"
+            hint = "start it with 'anunnaki: binding/1' or 'anunnaki: tactics/1'"
+        result.findings.append(Finding("error", message, str(path), 1, hint=hint))
+        result.unreadable = True
     loaded_binding: Binding | None = None
     if binding is not None:
         try:
@@ -126,6 +147,10 @@ def check_files(
         result.unreadable = True
         return result
     result.model = model
+    if result.unreadable:
+        # Without its binding every agent looks unobserved and every endpoint unknown: a
+        # list of such findings would only hide the one that matters.
+        return result
     result.findings.extend(model.findings)
     if not model.errors():
         try:

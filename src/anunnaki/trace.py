@@ -10,19 +10,26 @@ replayed. The format (version ``trace/1``)::
     {"t": 0.1, "topic": "/rover/ultrasonic", "msg": {"range": 3.0}}
     {"t": 10.0, "phase": "degraded", "note": "light dims; the oracle reports category 1"}
 
-* The first line may be a header (``"anunnaki": "trace/1"`` plus free metadata).
+* The first line may be a header (``"anunnaki": "trace/1"`` plus free metadata); at most one.
 * A message record has ``t`` (seconds, any origin; non-decreasing through the file),
   ``topic`` (ROS-style name, starting with ``/``) and ``msg`` (a JSON object).
-* A phase record has ``t`` and ``phase`` (a label) and an optional ``note``: it marks where a
-  scripted condition begins, for people reading the output; it carries no data.
-* Blank lines are ignored. Images are never stored in traces (guideline P1): a camera
-  topic's record carries its metadata (sequence number, size), not pixels.
+* A phase record has ``t`` and ``phase`` (a label) and an optional ``note`` (text): it marks
+  where a scripted condition begins, for people reading the output; it carries no data.
+* Blank lines are ignored; a UTF-8 byte-order mark before the first line is skipped. Numbers
+  are finite (no ``NaN``/``Infinity``) and a key appears once per object. Images are never
+  stored in traces (guideline P1): a camera topic's record carries its metadata (sequence
+  number, size), not pixels.
+
+The reader refuses a bad line with a :class:`~anunnaki.errors.ModelFileError` naming file and
+line; the writer refuses (``ValueError``) to write what the reader would refuse, so whatever
+:class:`TraceWriter` writes reads back equal. See docs/traces.md.
 """
 
 from __future__ import annotations
 
 import json
 import math
+import re
 from collections.abc import Iterable, Iterator, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -43,6 +50,10 @@ __all__ = [
 
 FORMAT = "trace/1"
 MAX_LINE = 1_000_000
+"""Longest line accepted, in bytes (characters when reading a text stream)."""
+
+TOPIC = re.compile(r"(/[A-Za-z0-9_]+)+")
+"""A ROS-style topic name, as in goal models and bindings: ``/utu/oracle/output``."""
 
 
 @dataclass(frozen=True)
@@ -55,8 +66,13 @@ class Record:
     line: int | None = field(default=None, compare=False)
 
     def to_json(self) -> str:
-        """One JSONL line (without the newline)."""
-        return json.dumps({"t": self.t, "topic": self.topic, "msg": self.msg}, sort_keys=True)
+        """One JSONL line (without the newline), keys sorted at every level.
+
+        Raises:
+            ValueError: the record holds a non-finite number (JSON has no NaN or infinity).
+
+        """
+        return _dumps({"t": self.t, "topic": self.topic, "msg": self.msg}, self)
 
 
 @dataclass(frozen=True)
@@ -73,7 +89,18 @@ class Phase:
         out: dict[str, Any] = {"t": self.t, "phase": self.phase}
         if self.note:
             out["note"] = self.note
-        return json.dumps(out, sort_keys=True)
+        return _dumps(out, self)
+
+
+def _dumps(obj: Mapping[str, Any], what: object) -> str:
+    try:
+        return json.dumps(obj, sort_keys=True, allow_nan=False)
+    except ValueError:
+        name = what if isinstance(what, str) else repr(what)
+        raise ValueError(
+            f"cannot write {name}: a trace holds finite numbers only (JSON has no NaN or "
+            "infinity); replace the value, e.g. by null"
+        ) from None
 
 
 @dataclass
@@ -112,11 +139,28 @@ def _reject_constant(name: str) -> Any:
     raise ValueError(f"{name} is not valid JSON")
 
 
+class _DuplicateKeyError(ValueError):
+    pass
+
+
+def _unique_keys(pairs: list[tuple[str, Any]]) -> dict[str, Any]:
+    out = dict(pairs)
+    if len(out) != len(pairs):
+        seen: set[str] = set()
+        for key, _ in pairs:
+            if key in seen:
+                raise _DuplicateKeyError(key)
+            seen.add(key)
+    return out
+
+
 def _parse_line(text: str, path: str, lineno: int) -> dict[str, Any]:
-    if len(text) > MAX_LINE:
-        raise _fail(path, lineno, f"line longer than {MAX_LINE} characters")
     try:
-        obj = json.loads(text, parse_constant=_reject_constant)
+        obj = json.loads(text, parse_constant=_reject_constant, object_pairs_hook=_unique_keys)
+    except _DuplicateKeyError as exc:
+        raise _fail(
+            path, lineno, f"duplicate key '{exc}'", "each key may appear once in an object"
+        ) from None
     except (json.JSONDecodeError, ValueError) as exc:
         raise _fail(
             path, lineno, f"not valid JSON: {exc}", "each line is one JSON object"
@@ -128,27 +172,67 @@ def _parse_line(text: str, path: str, lineno: int) -> dict[str, Any]:
     return obj
 
 
+def _file_lines(fh: IO[bytes], path: str) -> Iterator[tuple[int, str]]:
+    """Numbered lines of a file, each decoded on its own so a bad byte names its line."""
+    lineno = 0
+    while True:
+        raw = fh.readline(MAX_LINE + 1)
+        if not raw:
+            return
+        lineno += 1
+        if len(raw) > MAX_LINE:
+            raise _fail(path, lineno, f"line longer than {MAX_LINE} bytes")
+        if lineno == 1 and raw.startswith(b"\xef\xbb\xbf"):
+            raw = raw[3:]  # a UTF-8 byte-order mark
+        try:
+            yield lineno, raw.decode("utf-8")
+        except UnicodeDecodeError as exc:
+            raise ModelFileError(
+                f"not UTF-8 text (byte 0x{raw[exc.start]:02x} at column {exc.start + 1})",
+                path=path,
+                line=lineno,
+                hint="save the trace as UTF-8",
+            ) from None
+
+
+def _stream_lines(fh: IO[str], path: str) -> Iterator[tuple[int, str]]:
+    for lineno, text in enumerate(fh, start=1):
+        if len(text) > MAX_LINE:
+            raise _fail(path, lineno, f"line longer than {MAX_LINE} characters")
+        yield lineno, text.lstrip("\ufeff") if lineno == 1 else text
+
+
 def iter_trace(source: str | Path | IO[str]) -> Iterator[dict[str, Any] | Record | Phase]:
     """Stream a trace: yields the header (a dict) first if present, then records and phases.
+
+    Args:
+        source: A path, or an open text stream (``io.StringIO``, ``sys.stdin``).
 
     Raises:
         ModelFileError: a malformed line, naming the file and line and what to fix.
 
     """
+    fh: IO[bytes] | IO[str]
     if isinstance(source, str | Path):
         path = str(source)
         try:
-            fh: IO[str] = open(source, encoding="utf-8")  # noqa: SIM115 - closed below
+            fh = open(source, "rb")  # noqa: SIM115 - closed below
         except OSError as exc:
-            raise ModelFileError(f"cannot read trace: {exc.strerror}", path=path) from exc
+            raise ModelFileError(
+                f"cannot read trace: {exc.strerror}", path=path, hint="check the path"
+            ) from exc
+        lines = _file_lines(fh, path)
         close = True
     else:
-        path = getattr(source, "name", "<trace>")
+        path = str(getattr(source, "name", "<trace>"))
         fh = source
+        lines = _stream_lines(source, path)
         close = False
     try:
         last_t = -math.inf
-        for lineno, raw in enumerate(fh, start=1):
+        header_line: int | None = None
+        started = False
+        for lineno, raw in lines:
             text = raw.strip()
             if not text:
                 continue
@@ -161,15 +245,25 @@ def iter_trace(source: str | Path | IO[str]) -> Iterator[dict[str, Any] | Record
                         f"unsupported trace format {obj['anunnaki']!r}",
                         f"this version reads '{FORMAT}'",
                     )
-                if lineno != 1 and last_t != -math.inf:
+                if header_line is not None:
+                    raise _fail(
+                        path,
+                        lineno,
+                        f"a second header (the first is on line {header_line})",
+                        "a trace has at most one header",
+                    )
+                if started:
                     raise _fail(path, lineno, "the header must be the first line")
+                header_line = lineno
                 yield obj
                 continue
-            yield _record(obj, path, lineno, last_t)
-            last_t = float(obj["t"])
-    except UnicodeDecodeError as exc:
+            item = _record(obj, path, lineno, last_t)
+            started = True
+            last_t = item.t
+            yield item
+    except UnicodeDecodeError as exc:  # a text stream that was not opened as UTF-8
         raise ModelFileError(
-            f"not UTF-8 text (byte {exc.start})", path=path, hint="save the trace as UTF-8"
+            f"not UTF-8 text ({exc.reason})", path=path, hint="save the trace as UTF-8"
         ) from None
     finally:
         if close:
@@ -189,9 +283,15 @@ def _record(obj: dict[str, Any], path: str, lineno: int, last_t: float) -> Recor
         )
     if "phase" in obj:
         extra = set(obj) - {"t", "phase", "note"}
-        if extra or not isinstance(obj["phase"], str):
-            raise _fail(path, lineno, "a phase record has 't', 'phase' (text) and 'note' only")
-        return Phase(float(t), obj["phase"], str(obj.get("note", "")), lineno)
+        label, note = obj["phase"], obj.get("note", "")
+        if extra or not isinstance(label, str) or not label or not isinstance(note, str):
+            raise _fail(
+                path,
+                lineno,
+                "a phase record has 't', 'phase' (a non-empty label) and 'note' (text) only",
+                '{"t": 10.0, "phase": "dim-light", "note": "the light dims"}',
+            )
+        return Phase(float(t), label, note, lineno)
     extra = set(obj) - {"t", "topic", "msg"}
     if extra:
         raise _fail(
@@ -201,9 +301,12 @@ def _record(obj: dict[str, Any], path: str, lineno: int, last_t: float) -> Recor
             "a record has 't', 'topic' and 'msg'",
         )
     topic = obj.get("topic")
-    if not isinstance(topic, str) or not topic.startswith("/"):
+    if not isinstance(topic, str) or not TOPIC.fullmatch(topic):
         raise _fail(
-            path, lineno, "'topic' must be a ROS-style name starting with '/'", '"/rover/status"'
+            path,
+            lineno,
+            f"'topic' must be a ROS-style name starting with '/', got {topic!r}",
+            "letters, digits and '_' in '/'-separated parts, e.g. \"/rover/status\"",
         )
     msg = obj.get("msg")
     if not isinstance(msg, dict):
@@ -226,16 +329,51 @@ def read_trace(source: str | Path | IO[str]) -> Trace:
 
 
 class TraceWriter:
-    """Append records to a trace file; a context manager."""
+    """Write a trace file, header first; a context manager.
+
+    Every item is checked as the reader checks it — ``t`` finite and not going backwards,
+    ``topic`` a ROS-style name, ``msg`` a mapping of finite JSON values, a phase a non-empty
+    label — and refused with ``ValueError`` before anything is written.
+
+    Args:
+        path: The file to (over)write.
+        header: Free metadata (``name``, ``description``, …); ``anunnaki: trace/1`` is added.
+
+    """
 
     def __init__(self, path: str | Path, header: Mapping[str, Any] | None = None) -> None:
+        head = _dumps({**(header or {}), "anunnaki": FORMAT}, "the header")
+        self._last_t = -math.inf
         self._fh = open(path, "w", encoding="utf-8")  # noqa: SIM115 - closed in close()
-        head = {"anunnaki": FORMAT, **(header or {})}
-        self._fh.write(json.dumps(head, sort_keys=True) + "\n")
+        self._fh.write(head + "\n")
 
     def write(self, item: Record | Phase) -> None:
-        """Write one record or phase marker."""
-        self._fh.write(item.to_json() + "\n")
+        """Write one record or phase marker.
+
+        Raises:
+            ValueError: the item would not read back (see the class docstring).
+
+        """
+        t = item.t
+        if isinstance(t, bool) or not isinstance(t, int | float) or not math.isfinite(t):
+            raise ValueError(f"cannot write {item!r}: 't' must be a finite number of seconds")
+        if t < self._last_t:
+            raise ValueError(
+                f"cannot write {item!r}: time goes backwards ({t} after {self._last_t})"
+            )
+        if isinstance(item, Record):
+            if not isinstance(item.topic, str) or not TOPIC.fullmatch(item.topic):
+                raise ValueError(
+                    f"cannot write {item!r}: {item.topic!r} is not a ROS-style topic name "
+                    "such as /rover/status"
+                )
+            if not isinstance(item.msg, Mapping):
+                raise ValueError(f"cannot write {item!r}: 'msg' must be a mapping")
+        elif not isinstance(item.phase, str) or not item.phase or not isinstance(item.note, str):
+            raise ValueError(f"cannot write {item!r}: a phase needs a non-empty label")
+        line = item.to_json()
+        self._last_t = t
+        self._fh.write(line + "\n")
 
     def message(self, t: float, topic: str, msg: Mapping[str, Any]) -> None:
         """Write one message record."""

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import sys
 from typing import Any
 
@@ -11,6 +12,7 @@ from rich.console import Console
 from rich.text import Text
 from rich.tree import Tree
 
+from anunnaki.errors import AnunnakiError
 from anunnaki.goals import Evaluator, GoalModel, load_goal_model, status_name
 from anunnaki.trace import Phase, Record, iter_trace
 
@@ -35,12 +37,22 @@ def add_parser(sub: Any) -> None:
     p.add_argument("--json", action="store_true", help="one JSON object per change on stdout")
     p.add_argument(
         "--delta",
-        type=float,
+        type=_delta,
         default=0.05,
         help="also report a utility change of at least this much (default 0.05)",
     )
     p.add_argument("--explain", metavar="GOAL", help="print GOAL's explanation at each change")
     p.set_defaults(run=run)
+
+
+def _delta(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
+    if not math.isfinite(value) or value < 0:
+        raise argparse.ArgumentTypeError(f"must be a number of 0 or more, got {text}")
+    return value
 
 
 def _fmt_u(u: float | None) -> str:
@@ -90,6 +102,13 @@ def run(args: argparse.Namespace) -> int:
     """Replay the trace; exit 0 when done (the goal statuses are the output, not the code)."""
     model: GoalModel = load_goal_model(args.model, args.binding)
     ev = Evaluator(model)
+    if args.explain is not None and args.explain not in ev.index:
+        known = ", ".join(ev.ids)
+        raise AnunnakiError(
+            f"--explain {args.explain}: the goal model has no goal or obstacle "
+            f"'{args.explain}' (it has: {known})"
+        )
+    seen: dict[str, int] = dict.fromkeys(model.topic_routes(), 0)
     console = Console(highlight=False)
     if not console.is_terminal:
         console = Console(highlight=False, width=160)
@@ -154,7 +173,7 @@ def run(args: argparse.Namespace) -> int:
         console.print(Text.assemble((f"t = {t:8.3f} s  ", "bold cyan"), what), soft_wrap=True)
         console.print(render_tree(ev))
         if args.explain:
-            console.print(ev.explain(args.explain).render())
+            console.print(Text(ev.explain(args.explain).render()))
         console.print()
 
     t = 0.0
@@ -172,18 +191,26 @@ def run(args: argparse.Namespace) -> int:
                 summary.append({"phase": phase, "end": t, "root": ev.root.status_name})
             phase = item.phase
             if not args.json:
-                console.rule(Text(f"phase {item.phase}: {item.note}", style="bold"))
+                title = f"phase {item.phase}" + (f": {item.note}" if item.note else "")
+                console.rule(Text(title, style="bold"))
             continue
         assert isinstance(item, Record)
         ev.observe(item.topic, item.msg, t)
         count += 1
+        if item.topic in seen:
+            seen[item.topic] += 1
     report(t)
     ev.tick(t)
     report(t)
     if phase is not None:
         summary.append({"phase": phase, "end": t, "root": ev.root.status_name})
+    routes = model.topic_routes()
+    silent = {
+        topic: sorted({agent for agent, _ in routes[topic]}) for topic, n in seen.items() if not n
+    }
     if args.json:
-        sys.stdout.write(json.dumps({"summary": summary, "messages": count}) + "\n")
+        out = {"summary": summary, "messages": count, "silent_topics": silent}
+        sys.stdout.write(json.dumps(out) + "\n")
     else:
         console.rule(Text("summary", style="bold"))
         for row in summary:
@@ -193,5 +220,15 @@ def run(args: argparse.Namespace) -> int:
                     (row["root"], _STYLE[row["root"]]),
                 )
             )
-        console.print(f"{count} messages replayed from {args.trace}")
+        console.print(Text(f"{count} messages replayed from {args.trace}"))
+        if silent:
+            names = ", ".join(f"{t} ({', '.join(a)})" for t, a in silent.items())
+            console.print(
+                Text(
+                    f"no message on {names}: what these agents publish stayed unknown; "
+                    "does the trace come from the platform of the binding?",
+                    style="yellow",
+                ),
+                soft_wrap=True,
+            )
     return 0

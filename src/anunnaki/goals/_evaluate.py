@@ -613,8 +613,7 @@ class Evaluator:
 
     def expire(self, topic: str, now: float) -> None:
         """Make a topic's values unknown now (its publisher is known to be gone)."""
-        if now > self.now:
-            self.now = now
+        self.now = max(self.now, now)
         tp = self._topics.get(topic)
         if tp is None:
             return
