@@ -85,9 +85,16 @@ class RecordingActuator:
 class BusActuator:
     """Actions over the bus: publish on topics, request services, notify through a Notifier."""
 
-    def __init__(self, bus: Any, notifier: Any | None = None) -> None:
+    def __init__(
+        self,
+        bus: Any,
+        notifier: Any | None = None,
+        *,
+        on_notified: Callable[[str, Any], None] | None = None,
+    ) -> None:
         self.bus = bus
         self.notifier = notifier
+        self.on_notified = on_notified
 
     def publish(self, topic: str, payload: Mapping[str, Any]) -> ActionOutcome:
         """Publish ``payload`` as a Generic message on ``topic``."""
@@ -128,7 +135,13 @@ class BusActuator:
             t=now,
             details={},
         )
-        self.notifier.send_in_background(note, lambda result: None)
+        callback = self.on_notified
+
+        def done(result: Any) -> None:
+            if callback is not None:
+                callback(tactic, result)
+
+        self.notifier.send_in_background(note, done)
         return ActionOutcome(True, f"{action.channel} notification queued")
 
 
@@ -207,6 +220,8 @@ class AutonomicManager:
         self._declared: list[Any] = []
         self._pull: dict[str, Any] = {}
         self._queue_bound = queue
+        if isinstance(self.actuator, BusActuator) and self.actuator.on_notified is None:
+            self.actuator.on_notified = self._notified
         self._resume_after_restart()
         if bus is not None:
             self._connect(bus, queue)
@@ -337,6 +352,21 @@ class AutonomicManager:
                 "caller": caller,
                 "reason": str(body.get("reason", "run-stop topic")),
             }
+        )
+
+    def _notified(self, tactic: str, result: Any) -> None:
+        # Called from the notifier's worker thread; Knowledge is thread-safe. Delivery
+        # results arrive asynchronously, so replay does not compare them.
+        if self._closed:
+            return
+        self.knowledge.record_decision(
+            self.now,
+            "notify_result",
+            tactic,
+            ok=bool(getattr(result, "ok", False)),
+            channel=getattr(result, "channel", None),
+            to=getattr(result, "to", None),
+            error=getattr(result, "error", None),
         )
 
     def _on_liveliness(self, node: str, alive: bool) -> None:
@@ -599,8 +629,15 @@ class AutonomicManager:
             ):
                 if path is not None:
                     sources[kind] = (path, Path(path).read_text(encoding="utf-8"))
-            model = _model_from_sources(sources)
-            ts = _tactics_from_sources(sources)
+            if goal_model is None and binding is None:
+                model = self.model
+            elif "goal_model" not in sources:
+                raise ModelFileError(
+                    "this manager was built without its goal-model file; give goal_model too"
+                )
+            else:
+                model = _model_from_sources(sources)
+            ts = _tactics_from_sources(sources) if "tactics" in sources else self.tactics
             from anunnaki.check import check_tactics
 
             problems = [f.render() for f in model.findings if f.severity == "error"]

@@ -232,6 +232,7 @@ class TacticRuntime:
     attempt: int = 0
     reason: str | None = None
     blocked_logged: str | None = None
+    fired: bool = False  # started during the current episode of its preconditions
 
     @property
     def name(self) -> str:
@@ -271,6 +272,8 @@ class Planner:
       conflicts with is in flight — explicitly (``conflicts``) or because both actuate the
       same endpoint;
     * a tactic marked ``requires_approval`` waits as *pending* until an operator approves it;
+    * a tactic fires once per episode of its preconditions holding; with a cooldown it may
+      fire again once the cooldown has passed if they still hold (a retry);
     * queued tactics start highest priority first.
     """
 
@@ -334,6 +337,7 @@ class Planner:
             if name not in eligible_set:
                 rt.eligible_since = None
                 rt.blocked_logged = None
+                rt.fired = False
                 if rt.state == "pending":
                     rt.state = "idle"
                     self._save(rt)
@@ -348,6 +352,8 @@ class Planner:
                 self.knowledge.record_decision(now, "selected", name, priority=rt.tactic.priority)
             if rt.state != "idle" or now - rt.eligible_since < self.dwell - 1e-12:
                 continue
+            if rt.fired and rt.tactic.cooldown <= 0:
+                continue  # once per episode: it re-arms when its preconditions clear
             if rt.tactic.requires_approval:
                 rt.state = "pending"
                 self._save(rt)
@@ -458,6 +464,7 @@ class Executor:
     def start(self, rt: TacticRuntime, now: float, *, reason: str = "preconditions hold") -> None:
         """Start a tactic: persist, then run its actions."""
         rt.state = "running"
+        rt.fired = True
         rt.started = now
         rt.deadline = now + rt.tactic.deadline
         rt.next_action = 0

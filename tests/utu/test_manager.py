@@ -1,0 +1,404 @@
+"""The autonomic manager end to end on the in-process bus, driven by step(now)."""
+
+from __future__ import annotations
+
+import threading
+import time
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+
+from anunnaki.bus import open_bus
+from anunnaki.clock import ManualClock, SimClock, WallClock
+from anunnaki.goals import load_binding, parse_goal_model
+from anunnaki.managed import ScriptedSystem
+from anunnaki.tactics import load_tactics, parse_tactics_yaml
+from anunnaki.trace import Record
+from anunnaki.utu import AutonomicManager, Knowledge, RecordingActuator, parse_config
+
+ROVER = Path(__file__).parents[2] / "examples" / "rover"
+
+
+def rover_model(text: str | None = None):  # type: ignore[no-untyped-def]
+    binding = load_binding(ROVER / "binding.yaml")
+    return parse_goal_model(text or (ROVER / "goals.yaml").read_text(), binding=binding)
+
+
+@pytest.fixture
+def bus() -> Iterator[object]:
+    with open_bus("inproc") as b:
+        yield b
+
+
+def run_rover(bus, model, *, until: float = 45.0, **kw):  # type: ignore[no-untyped-def]
+    system = ScriptedSystem(bus, ROVER / "trace.jsonl")
+    manager = AutonomicManager(
+        model,
+        load_tactics(ROVER / "tactics.xml"),
+        bus=bus,
+        failsafe="fail-safe",
+        run_stop_service="/rover/stop",
+        warmup=2.0,
+        **kw,
+    )
+    for t in system.instants():
+        if t > until:
+            break
+        system.step(t)
+        manager.step(t)
+    return system, manager
+
+
+def kinds(
+    manager: AutonomicManager, tactic: str | None = None
+) -> list[tuple[float, str, str | None]]:
+    return [
+        (d.t, d.kind, d.tactic)
+        for d in manager.knowledge.decisions()
+        if tactic is None or d.tactic == tactic
+    ]
+
+
+def test_rover_fail_safe_end_to_end(bus) -> None:  # type: ignore[no-untyped-def]
+    system, manager = run_rover(bus, rover_model())
+    try:
+        ev = manager.analyzer.evaluator
+        fs = kinds(manager, "fail-safe")
+        assert [k for _, k, _ in fs] == [
+            "selected",
+            "started",
+            "action",
+            "action",
+            "postcondition_ok",
+        ]
+        assert fs[1][0] == 25.0  # started the moment A4.category turned 1
+        assert system.state()["mode"] == "manual"
+        assert system.commands[0][1:] == ("set_mode", {"mode": "manual"})
+        # G3 and G1 satisfied again while the category stays 1: the postcondition held
+        assert ev.value("A4.category") == 1
+        assert ev.state("O1").status is True
+        assert ev.state("G3").status is True
+        assert ev.state("G1").status is True
+        # the verdicts tell the story
+        verdicts = [(v.t, v.node, v.status) for v in manager.knowledge.verdicts()]
+        assert (25.0, "G3", "unsatisfied") in verdicts
+        assert (25.0, "G1", "unsatisfied") in verdicts
+        assert any(t > 25.0 and n == "G1" and s == "satisfied" for t, n, s in verdicts)
+        # no other tactic had to act
+        assert {tac for _, k, tac in kinds(manager) if k == "started"} == {"fail-safe"}
+    finally:
+        manager.close()
+        system.close()
+
+
+def test_without_the_manual_branch_the_postcondition_fails_and_escalates(bus) -> None:  # type: ignore[no-untyped-def]
+    text = (ROVER / "goals.yaml").read_text().replace("children: [G4, G11]", "children: [G4]")
+    system, manager = run_rover(bus, rover_model(text))
+    try:
+        decided = kinds(manager)
+        fs = [k for _, k, tac in decided if tac == "fail-safe"]
+        assert fs == [
+            "selected",
+            "started",
+            "action",
+            "action",
+            "postcondition_failed",
+            "escalated",
+        ]
+        failed = next(d for d in manager.knowledge.decisions() if d.kind == "postcondition_failed")
+        assert failed.t == pytest.approx(30.0)  # deadline 5 s after the start at 25 s
+        assert failed.data["goals"] == {"G3": "unsatisfied"}
+        escalated = next(d for d in manager.knowledge.decisions() if d.kind == "escalated")
+        assert escalated.data["to"] == "run-stop"  # no other tactic; the fail-safe itself failed
+        run_stop = next(d for d in manager.knowledge.decisions() if d.kind == "run_stop")
+        assert run_stop.data["caller"] == "escalation:fail-safe"
+        assert system.state()["stopped"] is True
+        assert manager.run_stopped
+    finally:
+        manager.close()
+        system.close()
+
+
+TACTICS = """\
+anunnaki: tactics/1
+tactics:
+  - name: hand-over
+    priority: 10
+    cooldown: {cooldown}
+    requires_approval: {approval}
+    preconditions: [{{goal: G3, state: unsatisfied}}]
+    actions: [{{type: change_mode, service: /rover/set_mode, mode: manual}}]
+    postconditions: [{{goal: G3, state: satisfied}}]
+    deadline: 2
+  - name: beep
+    priority: 50
+    preconditions: [{{expression: "A4.category >= 1"}}]
+    actions: [{{type: publish, topic: /rover/buzzer, payload: {{"on": true}}}}]
+"""
+
+
+def feed_nominal(
+    m: AutonomicManager, t: float, category: int = 0, mode: str = "autonomous"
+) -> None:
+    m.feed("/rover/status", {"mode": mode, "buzzer": False, "bumper": False})
+    m.feed("/rover/camera/info", {"seq": int(t * 10)})
+    m.feed("/rover/ultrasonic", {"range": 3.0})
+    m.feed("/utu/oracle/output", {"category": category, "confidence": 0.9})
+
+
+def make(cooldown: float = 0.0, approval: bool = False, dwell: float = 0.0):  # type: ignore[no-untyped-def]
+    tactics = parse_tactics_yaml(TACTICS.format(cooldown=cooldown, approval=str(approval).lower()))
+    act = RecordingActuator()
+    m = AutonomicManager(rover_model(), tactics, actuator=act, dwell=dwell, warmup=0.5)
+    return m, act
+
+
+def drive(
+    m: AutonomicManager, times: list[float], category_at=lambda t: 0, mode_at=lambda t: "autonomous"
+) -> None:  # type: ignore[no-untyped-def]
+    for t in times:
+        feed_nominal(m, t, category_at(t), mode_at(t))
+        m.step(t)
+
+
+def ticks(a: float, b: float, dt: float = 0.1) -> list[float]:
+    n = round((b - a) / dt)
+    return [round(a + i * dt, 6) for i in range(n + 1)]
+
+
+def test_priority_order_and_expression_preconditions() -> None:
+    m, act = make()
+    drive(m, ticks(0, 1.0))
+    drive(m, ticks(1.1, 1.5), category_at=lambda t: 1)
+    started = [tac for _, k, tac in kinds(m) if k == "started"]
+    assert started[:2] == ["beep", "hand-over"]  # priority 50 before 10
+    assert act.calls[0] == ("publish", "/rover/buzzer", {"on": True})
+    assert act.calls[1] == ("request", "/rover/set_mode", {"mode": "manual"})
+
+
+def test_dwell_hysteresis_ignores_a_flickering_input() -> None:
+    m, act = make(dwell=0.5)
+    drive(m, ticks(0, 1.0))
+    # category flickers 1/0 every 0.1 s: never holds for 0.5 s
+    drive(m, ticks(1.1, 3.0), category_at=lambda t: round(t * 10) % 2)
+    assert [k for _, k, _ in kinds(m) if k == "started"] == []
+    assert act.calls == []
+    # then it holds: the tactics start once, 0.5 s after it began holding
+    drive(m, ticks(3.1, 4.0), category_at=lambda t: 1)
+    starts = [(t, tac) for t, k, tac in kinds(m) if k == "started"]
+    assert {tac for _, tac in starts} == {"beep", "hand-over"}
+    assert all(t == pytest.approx(3.6) for t, _ in starts)
+
+
+def test_cooldown_defers_a_repeat() -> None:
+    m, _ = make(cooldown=10.0)
+    drive(m, ticks(0, 1.0))
+    drive(m, ticks(1.1, 1.2), category_at=lambda t: 1)  # hand-over starts at 1.1
+    drive(m, ticks(1.3, 3.5), category_at=lambda t: 1)  # postcondition fails at 3.1
+    handover = [(t, k) for t, k, tac in kinds(m, "hand-over")]
+    assert (1.1, "started") in handover
+    assert any(k == "postcondition_failed" for _, k in handover)
+    drive(m, ticks(3.6, 4.0))
+    drive(m, ticks(4.1, 4.3), category_at=lambda t: 1)  # eligible again within the cooldown
+    deferred = [
+        d for d in m.knowledge.decisions() if d.kind == "deferred" and d.tactic == "hand-over"
+    ]
+    assert deferred and deferred[-1].data["reason"].startswith("cooldown until")
+    assert [k for _, k in handover].count("started") == 1
+
+
+def test_requires_approval_waits_for_an_operator() -> None:
+    m, act = make(approval=True)
+    drive(m, ticks(0, 1.0))
+    drive(m, ticks(1.1, 1.5), category_at=lambda t: 1)
+    assert [k for _, k, _ in kinds(m, "hand-over")] == ["selected", "pending_approval"]
+    assert m.planner.queue()[0] == {
+        "tactic": "hand-over",
+        "priority": 10,
+        "state": "pending",
+        "deadline": None,
+    }
+    m.approve("hand-over", caller="operator-ana")
+    drive(m, ticks(1.6, 1.6), category_at=lambda t: 1)
+    approved = next(d for d in m.knowledge.decisions() if d.kind == "approved")
+    assert approved.data["caller"] == "operator-ana"
+    assert ("request", "/rover/set_mode", {"mode": "manual"}) in act.calls
+
+
+def test_rejected_tactic_does_not_run_until_its_preconditions_recur() -> None:
+    m, act = make(approval=True)
+    drive(m, ticks(0, 1.0))
+    drive(m, ticks(1.1, 1.2), category_at=lambda t: 1)
+    m.approve("hand-over", approve=False, caller="operator-bo")
+    drive(m, ticks(1.3, 2.0), category_at=lambda t: 1)
+    assert ("request", "/rover/set_mode", {"mode": "manual"}) not in act.calls
+    assert any(
+        d.kind == "rejected" and d.data["caller"] == "operator-bo" for d in m.knowledge.decisions()
+    )
+    drive(m, ticks(2.1, 2.5))  # the condition clears ...
+    drive(m, ticks(2.6, 2.7), category_at=lambda t: 1)  # ... and recurs: asked again
+    assert [k for _, k, _ in kinds(m, "hand-over")].count("pending_approval") == 2
+
+
+def test_pause_resume_and_run_stop_are_recorded_with_their_caller() -> None:
+    m, _ = make()
+    drive(m, ticks(0, 1.0))
+    m.pause(caller="dashboard:ana")
+    drive(m, ticks(1.1, 1.5), category_at=lambda t: 1)
+    assert [k for _, k, _ in kinds(m) if k == "started"] == []
+    m.resume(caller="dashboard:ana")
+    drive(m, ticks(1.6, 1.7), category_at=lambda t: 1)
+    assert {tac for _, k, tac in kinds(m) if k == "started"} == {"beep", "hand-over"}
+    m.run_stop(caller="safety-officer", reason="test")
+    drive(m, ticks(1.8, 1.8), category_at=lambda t: 1)
+    rs = next(d for d in m.knowledge.decisions() if d.kind == "run_stop")
+    assert rs.data["caller"] == "safety-officer"
+    assert m.run_stopped and m.paused
+    calls = [
+        d.data.get("caller")
+        for d in m.knowledge.decisions()
+        if d.kind in ("paused", "resumed_adaptation")
+    ]
+    assert calls == ["dashboard:ana", "dashboard:ana"]
+
+
+def test_operator_services_on_the_bus(bus) -> None:  # type: ignore[no-untyped-def]
+    tactics = parse_tactics_yaml(TACTICS.format(cooldown=0, approval="true"))
+    m = AutonomicManager(rover_model(), tactics, bus=bus, actuator=RecordingActuator())
+    try:
+        assert bus.request("/utu/ready", {}).to_body()["ready"] is True
+        reply = bus.request("/utu/pause", {"caller": "ops-console"}).to_body()
+        assert reply == {"ok": True, "queued": "pause", "caller": "ops-console"}
+        bad = bus.request("/utu/approve", {"caller": "x"}).to_body()
+        assert bad["ok"] is False
+        m.step(1.0)
+        assert m.paused
+        # run-stop announced by another node on the topic
+        from anunnaki.bus import RunStop
+
+        bus.publish("/utu/run_stop", RunStop(reason="e-stop pressed", caller="teleop-node"))
+        deadline = time.monotonic() + 5
+        while not m._ops and time.monotonic() < deadline:
+            time.sleep(0.005)
+        m.step(2.0)
+        rs = next(d for d in m.knowledge.decisions() if d.kind == "run_stop")
+        assert rs.data["caller"] == "teleop-node"
+        q = bus.request("/utu/knowledge/query", {"what": "decisions", "limit": 5}).to_body()
+        assert q["ok"] and q["decisions"][-1]["kind"] == "run_stop"
+    finally:
+        m.close()
+
+
+def test_hot_reload_swaps_valid_files_and_refuses_invalid_ones(tmp_path: Path) -> None:
+    m, _ = make()
+    drive(m, ticks(0, 1.0))
+    bad = tmp_path / "bad.yaml"
+    bad.write_text(TACTICS.format(cooldown=0, approval="false").replace("G3", "G99"))
+    problems = m.reload(tactics=str(bad))
+    assert problems and "unknown goal 'G99'" in problems[0]
+    assert any(d.kind == "reload_refused" for d in m.knowledge.decisions())
+    assert {t.name for t in m.tactics.tactics} == {"hand-over", "beep"}  # the old set stays
+    good = tmp_path / "good.yaml"
+    good.write_text(
+        TACTICS.format(cooldown=0, approval="false").replace("name: beep", "name: chirp")
+    )
+    assert m.reload(tactics=str(good)) == []
+    assert {t.name for t in m.tactics.tactics} == {"hand-over", "chirp"}
+    # the loop goes on with the new tactics and the old inputs (rates too)
+    drive(m, ticks(1.1, 1.3), category_at=lambda t: 1)
+    assert "chirp" in {tac for _, k, tac in kinds(m) if k == "started"}
+    assert m.analyzer.evaluator.value("rate(A3)") is not None
+
+
+def test_manager_resumes_tactic_state_from_its_knowledge(tmp_path: Path) -> None:
+    db = tmp_path / "run.db"
+    tactics = parse_tactics_yaml(TACTICS.format(cooldown=30, approval="false"))
+    m = AutonomicManager(
+        rover_model(), tactics, knowledge=Knowledge(db), actuator=RecordingActuator(), warmup=0.5
+    )
+    drive(m, ticks(0, 1.0))
+    drive(m, ticks(1.1, 1.2), category_at=lambda t: 1)  # hand-over awaiting its postcondition
+    assert m.planner.runtimes["hand-over"].state == "awaiting"
+    deadline = m.planner.runtimes["hand-over"].deadline
+    m.knowledge.close()  # as if the process died here (the DB is all that remains)
+    act2 = RecordingActuator()
+    m2 = AutonomicManager(
+        rover_model(), tactics, knowledge=Knowledge(db), actuator=act2, warmup=0.5
+    )
+    rt = m2.planner.runtimes["hand-over"]
+    assert rt.state == "awaiting" and rt.deadline == deadline
+    resumed = [d for d in m2.knowledge.decisions() if d.kind == "resumed"]
+    assert resumed[0].tactic == "hand-over" and resumed[0].data["deadline"] == deadline
+    drive(m2, ticks(1.3, 3.5), category_at=lambda t: 1)
+    assert act2.calls.count(("request", "/rover/set_mode", {"mode": "manual"})) == 0  # not rerun
+    assert any(
+        d.kind == "postcondition_failed" and d.t == pytest.approx(3.1)
+        for d in m2.knowledge.decisions()
+    )
+    m2.close()
+
+
+def test_config_builds_a_manager(tmp_path: Path) -> None:
+    cfg = parse_config(
+        "anunnaki: utu/1\nname: rover\ngoal_model: goals.yaml\nbinding: binding.yaml\n"
+        "tactics: tactics.xml\nknowledge: ':memory:'\nfailsafe: fail-safe\n"
+        "run_stop: {service: /rover/stop}\n",
+        base=ROVER,
+    )
+    m = AutonomicManager.from_config(cfg, clock=ManualClock())
+    try:
+        assert m.failsafe == "fail-safe"
+        assert set(m.knowledge.models_at()) == {"goal_model", "binding", "tactics"}
+        assert m.warmup == 2.0
+    finally:
+        m.close()
+
+
+def _sim_trace(seconds: float) -> list[Record]:
+    recs = []
+    for k in range(int(seconds * 10) + 1):
+        t = round(k * 0.1, 4)
+        recs.append(Record(t, "/rover/ultrasonic", {"range": 3.0}))
+        if k % 2 == 0:
+            recs.append(
+                Record(t, "/rover/status", {"mode": "autonomous", "buzzer": False, "bumper": False})
+            )
+            recs.append(Record(t, "/rover/camera/info", {"seq": k}))
+            recs.append(Record(t, "/utu/oracle/output", {"category": 0, "confidence": 0.9}))
+    return recs
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("use_sim_time", [True, False])
+def test_slow_simulation_on_sim_time_has_no_spurious_violations(use_sim_time: bool) -> None:
+    """At 0.3x real time, sim time keeps 10 Hz at 10 Hz; the wall clock would see 3 Hz."""
+    with open_bus("inproc") as bus:
+        system = ScriptedSystem(bus, _sim_trace(2.0), publish_clock=True)
+        clock = SimClock() if use_sim_time else WallClock()
+        manager = AutonomicManager(
+            rover_model(), load_tactics(ROVER / "tactics.xml"), bus=bus, clock=clock, warmup=0.5
+        )
+        if isinstance(clock, SimClock):
+            bus.subscribe("/clock", lambda s: clock.update(s.message.time), queue=4)
+        stop = threading.Event()
+        spinner = threading.Thread(target=manager.spin, args=(stop,), kwargs={"rate": 50})
+        spinner.start()
+        try:
+            system.run(speed=0.3)
+            deadline = time.monotonic() + 2
+            while time.monotonic() < deadline and manager._inputs:
+                time.sleep(0.01)
+        finally:
+            stop.set()
+            spinner.join(5)
+        g6 = [v.status for v in manager.knowledge.verdicts() if v.node == "G6"]
+        started = [d.tactic for d in manager.knowledge.decisions() if d.kind == "started"]
+        manager.close()
+        system.close()
+        assert isinstance(bus.stats().totals(), dict)
+    if use_sim_time:
+        assert "unsatisfied" not in g6
+        assert started == []
+    else:  # the control: the same run on the wall clock sees the sensor at 3 Hz
+        assert "unsatisfied" in g6
