@@ -109,8 +109,14 @@ class TacticRow:
     reason: str | None
 
 
+_encode = json.JSONEncoder(separators=(",", ":"), ensure_ascii=False).encode
+
+
 def _dumps(obj: Any) -> str:
-    return json.dumps(obj, separators=(",", ":"), sort_keys=True, default=str)
+    try:
+        return _encode(obj)
+    except (TypeError, ValueError):  # an odd value: keep the record, stringified
+        return json.dumps(obj, separators=(",", ":"), default=str)
 
 
 class Knowledge:

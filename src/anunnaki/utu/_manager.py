@@ -222,6 +222,16 @@ class AutonomicManager:
         self._queue_bound = queue
         if isinstance(self.actuator, BusActuator) and self.actuator.on_notified is None:
             self.actuator.on_notified = self._notified
+        self.knowledge.set_meta(
+            "settings",
+            {
+                "dwell": dwell,
+                "warmup": warmup,
+                "failsafe": failsafe,
+                "escalate_to_run_stop": escalate_to_run_stop,
+                "run_stop_service": run_stop_service,
+            },
+        )
         self._resume_after_restart()
         if bus is not None:
             self._connect(bus, queue)
@@ -323,15 +333,14 @@ class AutonomicManager:
     def _subscribe_topic(self, topic: str) -> None:
         # A pull subscriber holds the inputs (bounded: a flood on one topic cannot starve the
         # others, guideline S1) and ``step`` drains it, so a step sees exactly what arrived
-        # before it; a second, one-slot subscriber only rings the bell that wakes ``spin``.
+        # before it; its doorbell wakes ``spin`` the moment a message is queued.
         assert self.bus is not None
-        self._pull[topic] = self.bus.subscribe(topic, queue=self._queue_bound)
+        self._pull[topic] = self.bus.subscribe(
+            topic, queue=self._queue_bound, on_ready=self._wake.set
+        )
         self._declared.append(self._pull[topic])
-        self._declared.append(self.bus.subscribe(topic, self._ring, queue=1))
 
     # -- inputs -----------------------------------------------------------------------------
-    def _ring(self, sample: Any) -> None:
-        self._wake.set()
 
     def _drain(self) -> None:
         for topic, sub in self._pull.items():
@@ -377,7 +386,8 @@ class AutonomicManager:
         """Queue one input message (what the bus subscription does); processed by ``step``."""
         with self._lock:
             self._inputs.append((topic, dict(msg)))
-        self._wake.set()
+        if not self._wake.is_set():
+            self._wake.set()
 
     def _enqueue_op(self, op: dict[str, Any]) -> None:
         with self._lock:

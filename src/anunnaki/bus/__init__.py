@@ -1,0 +1,215 @@
+"""The message bus: topics, services and liveliness, in one process or across machines.
+
+Every Anunnaki node (oracles, the LEC, the model manager, Utu's MAPE-K services, the
+dashboard) talks through one small interface, modelled on zenoh: open a bus, declare
+everything else from it, close it (or use ``with``). Two implementations share the
+interface and one contract suite: ``"inproc"`` (in-process, for tests and single-process
+runs) and ``"zenoh"`` (eclipse-zenoh; ``pip install 'anunnaki[bus]'``)::
+
+    from anunnaki.bus import ModeRequest, ModeReply, open_bus
+
+    with open_bus("zenoh") as bus:                      # peer on tcp/127.0.0.1:<free port>
+        bus.subscribe("/utu/oracle/**", lambda s: print(s.topic, s.message))
+        bus.publish("/rover/sensors", {"mode": "autonomous", "buzzer": False})
+        bus.service("/rover/set_mode", lambda req: ModeReply(mode=req.mode, accepted=True))
+        reply = bus.request("/rover/set_mode", ModeRequest(mode="manual"), timeout=2.0)
+        with bus.liveliness_token("/utu_monitor"):
+            print(bus.alive_nodes())
+
+The interface
+    :func:`open_bus` -> :class:`Bus`; ``bus.publisher(topic)`` -> :class:`Publisher`
+    (``put``); ``bus.publish(topic, msg)``; ``bus.subscribe(pattern, callback=None,
+    queue=16, drop="oldest")`` -> :class:`Subscriber` (callback, or ``recv``/``try_recv``/
+    iteration); ``bus.service(name, handler)`` -> :class:`Service`; ``bus.request(name,
+    msg, timeout)``; ``bus.liveliness_token(node)``, ``bus.alive_nodes()``,
+    ``bus.watch_liveliness(callback)``; ``bus.stats()``; ``bus.close()``. Every declared
+    object is a context manager with ``close()``; closing the bus closes them all.
+
+Names and keys
+    ROS-style names map to keys by prefixing the namespace: ``/utu/oracle/output`` <->
+    ``anunnaki/utu/oracle/output``; services live under ``<namespace>/srv/``, liveliness
+    tokens under ``<namespace>/node/`` (:func:`ros_to_key`, :func:`key_to_ros`).
+
+Messages
+    Typed, versioned pydantic models (:class:`Generic`, :class:`Image`, :class:`Clock`,
+    :class:`ModeRequest`, :class:`ModeReply`, :class:`ServiceReply`, :class:`RunStop`; add
+    yours with :func:`register_message`) in an envelope ``{"v", "type", "t", "seq",
+    "sender", "body"}``: compact JSON, or a binary frame for images. Malformed messages are
+    dropped, counted (``stats().malformed``) and logged (logger ``anunnaki.bus``); they
+    never reach a node.
+
+Robustness (guidelines S1, S2, S4)
+    Subscribers have bounded queues (latest-value: the oldest, least urgent message goes
+    first, and is counted); callbacks run on one thread per subscriber, never on the network
+    thread. A QoS table (:data:`QOS_TABLE`) makes run-stop, tactic actions and assessments
+    reliable and urgent, camera frames best-effort and droppable.
+
+See ``docs/bus.md`` for the wire format, the QoS table, TLS/access-control deployment and
+measured latencies.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Any, Literal
+
+from pydantic import ValidationError
+
+from anunnaki.bus._api import (
+    Bus,
+    BusStats,
+    LivelinessToken,
+    LivelinessWatch,
+    Publisher,
+    Sample,
+    Service,
+    Subscriber,
+)
+from anunnaki.bus._config import AccessControl, AccessRule, BusConfig, TlsConfig
+from anunnaki.bus._errors import (
+    BusClosedError,
+    BusConfigError,
+    BusConnectError,
+    BusError,
+    BusTimeout,
+    MalformedMessage,
+    MessageError,
+    ServiceError,
+    TopicNameError,
+    UnknownMessageType,
+)
+from anunnaki.bus._inproc import InprocBus, InprocHub
+from anunnaki.bus._keys import (
+    DEFAULT_NAMESPACE,
+    key_matches,
+    key_to_ros,
+    node_key,
+    ros_to_key,
+    service_key,
+    validate_name,
+    validate_pattern,
+)
+from anunnaki.bus._messages import (
+    Clock,
+    Envelope,
+    Generic,
+    Image,
+    Message,
+    ModeReply,
+    ModeRequest,
+    RunStop,
+    ServiceReply,
+    decode_envelope,
+    encode_envelope,
+    message_type,
+    message_types,
+    register_message,
+)
+from anunnaki.bus._qos import PRIORITIES, QOS_TABLE, QoS, TopicClass, qos_for
+
+__all__ = [
+    "DEFAULT_NAMESPACE",
+    "PRIORITIES",
+    "QOS_TABLE",
+    "AccessControl",
+    "AccessRule",
+    "Bus",
+    "BusClosedError",
+    "BusConfig",
+    "BusConfigError",
+    "BusConnectError",
+    "BusError",
+    "BusStats",
+    "BusTimeout",
+    "Clock",
+    "Envelope",
+    "Generic",
+    "Image",
+    "InprocBus",
+    "InprocHub",
+    "LivelinessToken",
+    "LivelinessWatch",
+    "MalformedMessage",
+    "Message",
+    "MessageError",
+    "ModeReply",
+    "ModeRequest",
+    "Publisher",
+    "QoS",
+    "RunStop",
+    "Sample",
+    "Service",
+    "ServiceError",
+    "ServiceReply",
+    "Subscriber",
+    "TlsConfig",
+    "TopicClass",
+    "TopicNameError",
+    "UnknownMessageType",
+    "decode_envelope",
+    "encode_envelope",
+    "key_matches",
+    "key_to_ros",
+    "message_type",
+    "message_types",
+    "node_key",
+    "open_bus",
+    "qos_for",
+    "register_message",
+    "ros_to_key",
+    "service_key",
+    "validate_name",
+    "validate_pattern",
+]
+
+
+def open_bus(
+    kind: Literal["inproc", "zenoh"] | BusConfig = "inproc",
+    /,
+    *,
+    clock: Callable[[], float] | None = None,
+    hub: InprocHub | None = None,
+    **options: Any,
+) -> Bus:
+    """Open a bus.
+
+    Args:
+        kind: ``"inproc"``, ``"zenoh"``, or a whole :class:`BusConfig` (e.g. from
+            :meth:`BusConfig.from_file`).
+        clock: Returns the time written into envelopes (default ``time.time``).
+        hub: For ``"inproc"``: the :class:`InprocHub` to join (buses on one hub meet);
+            default a new private hub.
+        **options: :class:`BusConfig` fields (``mode``, ``listen``, ``connect``,
+            ``multicast_scouting``, ``tls``, ``access_control``, ``namespace``, ``name``,
+            ``zenoh``), overriding those of a given config.
+
+    Returns:
+        The open bus; close it, or use it as a context manager.
+
+    Raises:
+        BusConfigError: An invalid option, naming the field.
+        MissingExtraError: ``"zenoh"`` without eclipse-zenoh installed.
+        BusConnectError: The zenoh session could not be opened.
+
+    """
+    try:
+        if isinstance(kind, BusConfig):
+            base = kind.model_dump(exclude_unset=True)
+            config = BusConfig.model_validate({**base, **options})
+        elif kind in ("inproc", "zenoh"):
+            config = BusConfig.model_validate({**options, "kind": kind})
+        else:
+            raise BusConfigError(f"bus kind must be 'inproc' or 'zenoh', got {kind!r}")
+    except ValidationError as exc:
+        first = exc.errors(include_url=False)[0]
+        where = ".".join(str(p) for p in first["loc"]) or "config"
+        more = len(exc.errors()) - 1
+        extra = f" (and {more} more problem{'s' if more > 1 else ''})" if more else ""
+        raise BusConfigError(f"bus option {where}: {first['msg']}{extra}") from None
+    if config.kind == "inproc":
+        return InprocBus(hub=hub, namespace=config.namespace, name=config.name, clock=clock)
+    if hub is not None:
+        raise BusConfigError("hub only applies to the inproc bus")
+    from anunnaki.bus._zenoh import ZenohBus
+
+    return ZenohBus(config, clock=clock)

@@ -1,0 +1,444 @@
+"""Typed message schemas, their registry and the wire format.
+
+Every message is a frozen pydantic model that derives from :class:`Message`. On the wire a
+message travels inside an envelope::
+
+    {"v": 1, "type": "ModeRequest", "t": 1712.25, "seq": 7, "sender": "utu", "body": {...}}
+
+``v`` is the schema version of the body's type (``Message.VERSION``), ``type`` the registered
+type name, ``t`` the sender's clock in seconds (wall time or simulation time, whatever clock
+the sender's bus was given), ``seq`` the sender's per-topic counter and ``sender`` the name of
+the sending bus. The envelope is compact JSON (UTF-8), except for types that carry raw bytes
+(:class:`Image`): those travel as a small binary frame so that pixels are not base64-bloated::
+
+    +----------------------+-------------------------+----------------------+
+    | header length N      | header: the envelope as | raw bytes of the     |
+    | 4 bytes, big-endian  | JSON, without the bytes | binary field         |
+    +----------------------+-------------------------+----------------------+
+
+A JSON envelope starts with ``{`` (0x7B); a binary frame starts with a length below 16 MiB, so
+its first byte is 0x00: the first byte tells the two apart.
+
+Decoding is strict: undecodable bytes, unknown keys, an unknown type, another schema version
+or a body that fails validation raise :class:`MalformedMessage`. Subscribers turn that into a
+dropped, counted, logged message; it never reaches a node's code.
+
+Message fields must be JSON-native (str, int, float, bool, None, lists, dicts, ``Literal``,
+nested models): bodies are validated in pydantic's strict mode, which does not coerce
+``"1"`` into ``1``.
+"""
+
+from __future__ import annotations
+
+import json
+import struct
+from dataclasses import dataclass
+from typing import Any, ClassVar, Literal, Self, TypeVar
+
+from pydantic import BaseModel, ConfigDict, Field, JsonValue, ValidationError, model_validator
+
+from anunnaki.bus._errors import MalformedMessage, MessageError, UnknownMessageType
+
+__all__ = [
+    "Clock",
+    "Envelope",
+    "Generic",
+    "Image",
+    "Message",
+    "ModeReply",
+    "ModeRequest",
+    "RunStop",
+    "ServiceReply",
+    "decode_envelope",
+    "encode_envelope",
+    "message_type",
+    "message_types",
+    "register_message",
+]
+
+MAX_HEADER = 16 * 1024 * 1024
+_ENVELOPE_KEYS = frozenset({"v", "type", "t", "seq", "sender", "body"})
+
+
+class Message(BaseModel):
+    """Base class of every message on the bus.
+
+    Subclass it, give the fields, and register the class with :func:`register_message`::
+
+        @register_message
+        class Detection(Message):
+            VERSION = 1
+            label: str
+            score: float
+
+    Class attributes:
+        VERSION: Schema version written as ``v`` in the envelope; bump it on an incompatible
+            change. A receiver accepts only the version it knows.
+        TYPE_NAME: Name on the wire; the class name when not set. Must be unique.
+        BINARY_FIELD: Name of one ``bytes`` field sent raw after the JSON header, or ``None``.
+    """
+
+    model_config = ConfigDict(extra="forbid", frozen=True, strict=True, allow_inf_nan=False)
+
+    VERSION: ClassVar[int] = 1
+    TYPE_NAME: ClassVar[str | None] = None
+    BINARY_FIELD: ClassVar[str | None] = None
+
+    @classmethod
+    def type_name(cls) -> str:
+        """Return the name this type travels under (``TYPE_NAME`` or the class name)."""
+        return cls.TYPE_NAME or cls.__name__
+
+    def to_body(self) -> dict[str, Any]:
+        """Return the JSON body of the envelope (without the binary field, if any)."""
+        exclude = {self.BINARY_FIELD} if self.BINARY_FIELD else None
+        return self.model_dump(mode="json", exclude=exclude)
+
+    def binary(self) -> bytes | None:
+        """Return the raw bytes of the binary field, or ``None`` for a pure-JSON type."""
+        if self.BINARY_FIELD is None:
+            return None
+        value = getattr(self, self.BINARY_FIELD)
+        return bytes(value)
+
+    @classmethod
+    def from_body(cls, body: dict[str, Any], binary: bytes | None = None) -> Self:
+        """Validate a body (and the binary field's bytes) into a message.
+
+        Raises:
+            pydantic.ValidationError: The body does not fit the schema.
+
+        """
+        if cls.BINARY_FIELD is not None:
+            body = {**body, cls.BINARY_FIELD: binary if binary is not None else b""}
+        return cls.model_validate(body)
+
+
+_REGISTRY: dict[str, type[Message]] = {}
+
+M = TypeVar("M", bound=type[Message])
+
+
+def register_message(cls: M) -> M:
+    """Register a message type so that receivers can decode it (usable as a decorator).
+
+    Registering the same class twice is harmless; another class under a taken name is an error.
+
+    Raises:
+        MessageError: ``cls`` is not a Message subclass, or its name is taken.
+
+    """
+    if not (isinstance(cls, type) and issubclass(cls, Message)):
+        raise MessageError(f"{cls!r} is not a subclass of anunnaki.bus.Message")
+    name = cls.type_name()
+    known = _REGISTRY.get(name)
+    if known is not None and known is not cls:
+        raise MessageError(
+            f"message type name {name!r} is already registered by "
+            f"{known.__module__}.{known.__qualname__}; set TYPE_NAME to a unique name"
+        )
+    fields: dict[str, Any] = cls.__pydantic_fields__
+    if cls.BINARY_FIELD is not None and cls.BINARY_FIELD not in fields:
+        raise MessageError(f"{name}: BINARY_FIELD {cls.BINARY_FIELD!r} is not a field")
+    _REGISTRY[name] = cls
+    return cls
+
+
+def message_type(name: str) -> type[Message]:
+    """Return the registered message class called ``name``.
+
+    Raises:
+        UnknownMessageType: No such type; the message lists the registered names.
+
+    """
+    try:
+        return _REGISTRY[name]
+    except KeyError:
+        known = ", ".join(sorted(_REGISTRY))
+        raise UnknownMessageType(
+            f"unknown message type {name!r}; registered types: {known}"
+        ) from None
+
+
+def message_types() -> dict[str, type[Message]]:
+    """Return a copy of the registry: type name -> class."""
+    return dict(_REGISTRY)
+
+
+# --- the message types -------------------------------------------------------------------
+
+
+@register_message
+class Generic(Message):
+    """Any JSON object: what a robot's sensor topics publish.
+
+    The body on the wire *is* the object, e.g. ``{"mode": "autonomous", "buzzer": false}``;
+    read it as ``msg.data["mode"]`` or ``msg["mode"]``.
+    """
+
+    data: dict[str, JsonValue] = Field(default_factory=dict)
+
+    def to_body(self) -> dict[str, Any]:
+        """Return the object itself."""
+        return dict(self.data)
+
+    @classmethod
+    def from_body(cls, body: dict[str, Any], binary: bytes | None = None) -> Self:
+        """Wrap the object."""
+        return cls.model_validate({"data": body})
+
+    def __getitem__(self, key: str) -> JsonValue:
+        return self.data[key]
+
+
+_MAGIC: dict[str, tuple[bytes, ...]] = {
+    "jpeg": (b"\xff\xd8\xff",),
+    "png": (b"\x89PNG\r\n\x1a\n",),
+}
+
+
+@register_message
+class Image(Message):
+    """One compressed camera frame.
+
+    Frames travel as raw bytes after the JSON header (no base64) and are never persisted by
+    the framework (guideline P1: media is compressed and not stored); only what is derived
+    from them (assessments, detections) is kept.
+
+    Attributes:
+        encoding: ``"jpeg"`` or ``"png"``; ``data`` must start with that format's signature.
+        width: Width in pixels (> 0).
+        height: Height in pixels (> 0).
+        channels: 1 (grey), 3 (RGB) or 4 (RGBA).
+        data: The encoded image file's bytes.
+        frame_id: The camera's frame (ROS ``header.frame_id``).
+        seq: The camera's frame counter.
+
+    """
+
+    BINARY_FIELD: ClassVar[str | None] = "data"
+
+    encoding: Literal["jpeg", "png"]
+    width: int = Field(gt=0)
+    height: int = Field(gt=0)
+    channels: Literal[1, 3, 4] = 3
+    data: bytes = Field(min_length=1)
+    frame_id: str = ""
+    seq: int = Field(default=0, ge=0)
+
+    @model_validator(mode="after")
+    def _signature(self) -> Self:
+        if not self.data.startswith(_MAGIC[self.encoding]):
+            raise ValueError(f"data does not start with the {self.encoding} signature")
+        return self
+
+
+@register_message
+class Clock(Message):
+    """Simulation time (the ROS ``/clock`` topic).
+
+    Attributes:
+        time: Simulated time in seconds since the start of the simulation (>= 0).
+
+    """
+
+    time: float = Field(ge=0.0)
+
+
+@register_message
+class ModeRequest(Message):
+    """Ask a managed system to change its operating mode (e.g. the fail-safe tactic).
+
+    Attributes:
+        mode: The mode wanted, e.g. ``"manual"`` or ``"autonomous"``.
+        reason: Why, for logs and the dashboard.
+        caller: Who asks (node name).
+
+    """
+
+    mode: str = Field(min_length=1)
+    reason: str = ""
+    caller: str = ""
+
+
+@register_message
+class ModeReply(Message):
+    """The answer to a :class:`ModeRequest`.
+
+    Attributes:
+        mode: The mode in force after the request.
+        accepted: Whether the requested mode was taken.
+        reason: Why not, when refused.
+
+    """
+
+    mode: str
+    accepted: bool
+    reason: str = ""
+
+
+@register_message
+class ServiceReply(Message):
+    """A generic service reply, and the form every service error takes on the wire.
+
+    ``ok=False`` carries ``error`` (a requester sees :class:`~anunnaki.bus.ServiceError`);
+    ``ok=True`` may carry a JSON ``body``.
+    """
+
+    ok: bool
+    error: str | None = None
+    body: dict[str, JsonValue] = Field(default_factory=dict)
+
+    @model_validator(mode="after")
+    def _error_iff_not_ok(self) -> Self:
+        if self.ok and self.error is not None:
+            raise ValueError("an ok reply carries no error")
+        if not self.ok and not self.error:
+            raise ValueError("a failed reply must say what the error is")
+        return self
+
+
+@register_message
+class RunStop(Message):
+    """Stop the whole system now (guideline S4). Sent on ``/utu/run_stop`` at top priority.
+
+    Attributes:
+        reason: Why the system is stopped.
+        caller: Who stopped it.
+
+    """
+
+    reason: str = Field(min_length=1)
+    caller: str = Field(min_length=1)
+
+
+# --- envelope and codec ------------------------------------------------------------------
+
+
+@dataclass(frozen=True, slots=True)
+class Envelope:
+    """A message with the sender's metadata, as it travels on the bus.
+
+    Attributes:
+        message: The message.
+        t: The sender's clock when it was sent, in seconds.
+        seq: The sender's counter for this topic (starts at 0).
+        sender: The sending bus's name.
+
+    """
+
+    message: Message
+    t: float
+    seq: int
+    sender: str
+
+    @property
+    def type(self) -> str:
+        """The message's type name."""
+        return self.message.type_name()
+
+    @property
+    def v(self) -> int:
+        """The message's schema version."""
+        return self.message.VERSION
+
+
+def _dumps(obj: Any) -> bytes:
+    try:
+        return json.dumps(obj, separators=(",", ":"), ensure_ascii=False, allow_nan=False).encode()
+    except (TypeError, ValueError) as exc:
+        raise MessageError(f"message is not JSON-serialisable: {exc}") from None
+
+
+def encode_envelope(envelope: Envelope) -> bytes:
+    """Encode an envelope to wire bytes (compact JSON, or the binary frame for bytes types).
+
+    Raises:
+        MessageError: The message is not a :class:`Message` or cannot be serialised.
+
+    """
+    msg = envelope.message
+    if not isinstance(msg, Message):
+        raise MessageError(f"expected an anunnaki.bus.Message, got {type(msg).__name__}")
+    header = {
+        "v": msg.VERSION,
+        "type": msg.type_name(),
+        "t": float(envelope.t),
+        "seq": int(envelope.seq),
+        "sender": envelope.sender,
+        "body": msg.to_body(),
+    }
+    raw = _dumps(header)
+    blob = msg.binary()
+    if blob is None:
+        return raw
+    if len(raw) >= MAX_HEADER:
+        raise MessageError(f"{msg.type_name()}: header of {len(raw)} bytes is too large")
+    return struct.pack(">I", len(raw)) + raw + blob
+
+
+def _reject_constant(name: str) -> Any:
+    raise ValueError(f"{name} is not valid JSON")
+
+
+def decode_envelope(data: bytes | bytearray | memoryview) -> Envelope:
+    """Decode wire bytes into an envelope, strictly.
+
+    Raises:
+        MalformedMessage: Undecodable bytes, bad envelope, unknown type, wrong version or a
+            body that fails validation; the message says which.
+
+    """
+    data = bytes(data)
+    if not data:
+        raise MalformedMessage("empty payload")
+    blob: bytes | None = None
+    if data[:1] == b"{":
+        header_bytes = data
+    else:
+        if len(data) < 4:
+            raise MalformedMessage("payload too short for a binary frame")
+        (n,) = struct.unpack(">I", data[:4])
+        if n >= MAX_HEADER or 4 + n > len(data):
+            raise MalformedMessage(f"binary frame header length {n} is out of bounds")
+        header_bytes = data[4 : 4 + n]
+        blob = data[4 + n :]
+    try:
+        header = json.loads(header_bytes.decode("utf-8"), parse_constant=_reject_constant)
+    except (UnicodeDecodeError, ValueError) as exc:
+        raise MalformedMessage(f"not a JSON envelope: {exc}") from None
+    if not isinstance(header, dict):
+        raise MalformedMessage("envelope is not a JSON object")
+    keys = set(header)
+    if keys != _ENVELOPE_KEYS:
+        missing = sorted(_ENVELOPE_KEYS - keys)
+        extra = sorted(keys - _ENVELOPE_KEYS)
+        raise MalformedMessage(f"bad envelope keys (missing {missing}, unexpected {extra})")
+    v, name, t, seq, sender, body = (header[k] for k in ("v", "type", "t", "seq", "sender", "body"))
+    if not isinstance(v, int) or isinstance(v, bool):
+        raise MalformedMessage(f"envelope 'v' must be an integer, got {v!r}")
+    if not isinstance(name, str):
+        raise MalformedMessage(f"envelope 'type' must be a string, got {name!r}")
+    if not isinstance(t, int | float) or isinstance(t, bool):
+        raise MalformedMessage(f"envelope 't' must be a number, got {t!r}")
+    if not isinstance(seq, int) or isinstance(seq, bool) or seq < 0:
+        raise MalformedMessage(f"envelope 'seq' must be a non-negative integer, got {seq!r}")
+    if not isinstance(sender, str):
+        raise MalformedMessage(f"envelope 'sender' must be a string, got {sender!r}")
+    if not isinstance(body, dict):
+        raise MalformedMessage("envelope 'body' must be a JSON object")
+    cls = _REGISTRY.get(name)
+    if cls is None:
+        raise MalformedMessage(f"unknown message type {name!r}")
+    if v != cls.VERSION:
+        raise MalformedMessage(f"{name} version {v} is not the known version {cls.VERSION}")
+    if (blob is None) != (cls.BINARY_FIELD is None):
+        form = "binary frame" if blob is not None else "JSON envelope"
+        raise MalformedMessage(f"{name} cannot travel as a {form}")
+    try:
+        message = cls.from_body(body, blob)
+    except ValidationError as exc:
+        first = exc.errors(include_url=False)[0]
+        where = ".".join(str(p) for p in first["loc"]) or "body"
+        raise MalformedMessage(f"invalid {name} body: {where}: {first['msg']}") from None
+    return Envelope(message=message, t=float(t), seq=seq, sender=sender)
