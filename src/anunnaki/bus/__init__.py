@@ -90,7 +90,9 @@ from anunnaki.bus._keys import (
     validate_pattern,
 )
 from anunnaki.bus._messages import (
+    Assessment,
     Clock,
+    Detections,
     Envelope,
     Generic,
     Image,
@@ -112,6 +114,7 @@ __all__ = [
     "PRIORITIES",
     "QOS_TABLE",
     "AccessControl",
+    "Assessment",
     "AccessRule",
     "Bus",
     "BusClosedError",
@@ -122,6 +125,7 @@ __all__ = [
     "BusStats",
     "BusTimeout",
     "Clock",
+    "Detections",
     "Envelope",
     "Generic",
     "Image",
