@@ -257,6 +257,7 @@ class Assessment(Message):
         model_id: The id of the model whose behaviour is assessed.
         assessor: The assessor's name (an oracle, or ``ground_truth``).
         frame_seq: The camera frame the assessment is about, when there is one.
+
     """
 
     category: int = Field(ge=0, le=2)
@@ -281,6 +282,7 @@ class Detections(Message):
         labels: Class name per detection.
         scores: Confidence per detection, in [0, 1].
         latency_ms: Inference time, when measured.
+
     """
 
     frame_seq: int = Field(ge=0)
