@@ -165,7 +165,8 @@ def check_files(
             result.unreadable = True
             return result
         result.tactics = ts
-        result.findings.extend(check_tactics(model, ts, str(tactics)))
+        found = check_tactics(model, ts, str(tactics))
+        result.findings.extend(sorted(found, key=lambda f: f.line or 0))
         result.findings.extend(_unaddressed(model, ts))
     return result
 
@@ -278,7 +279,10 @@ def _payload_problems(spec: EndpointSpec, payload: dict[str, Any]) -> list[str]:
             not isinstance(value, types) or (fld.type != "boolean" and isinstance(value, bool))
         )
         if bad_type:
-            problems.append(f"field '{name}' of {spec.name} must be a {fld.type}, got {value!r}")
+            article = "an" if fld.type[0] in "aeiou" else "a"
+            problems.append(
+                f"field '{name}' of {spec.name} must be {article} {fld.type}, got {value!r}"
+            )
         elif fld.enum is not None and value not in fld.enum:
             choices = ", ".join(map(str, fld.enum))
             problems.append(

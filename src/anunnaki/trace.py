@@ -72,7 +72,7 @@ class Record:
             ValueError: the record holds a non-finite number (JSON has no NaN or infinity).
 
         """
-        return _dumps({"t": self.t, "topic": self.topic, "msg": self.msg}, self)
+        return _dumps({"t": float(self.t), "topic": self.topic, "msg": self.msg}, self)
 
 
 @dataclass(frozen=True)
@@ -86,7 +86,7 @@ class Phase:
 
     def to_json(self) -> str:
         """One JSONL line (without the newline)."""
-        out: dict[str, Any] = {"t": self.t, "phase": self.phase}
+        out: dict[str, Any] = {"t": float(self.t), "phase": self.phase}
         if self.note:
             out["note"] = self.note
         return _dumps(out, self)

@@ -19,7 +19,7 @@ __all__ = ["build_parser", "main"]
 
 def build_parser() -> argparse.ArgumentParser:
     """Build the argument parser with every sub-command."""
-    from anunnaki.cli import _check, _evaluate
+    from anunnaki.cli import _check, _evaluate, _log
 
     parser = argparse.ArgumentParser(
         prog="anunnaki",
@@ -30,6 +30,7 @@ def build_parser() -> argparse.ArgumentParser:
     sub.required = True
     _check.add_parser(sub)
     _evaluate.add_parser(sub)
+    _log.add_parser(sub)
     return parser
 
 

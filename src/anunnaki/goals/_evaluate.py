@@ -216,7 +216,7 @@ class Evaluator:
         self._reader_tuples = [tuple(sorted(set(r))) for r in self._slot_readers]
         self._deps_t = [tuple(sorted(set(d))) for d in self._deps]
         self._build_topics()
-        self.evaluate_all(self.now if self.now != float("-inf") else 0.0)
+        self.evaluate_all()
         self._changed.clear()
 
     # -- construction -------------------------------------------------------------------
@@ -371,6 +371,8 @@ class Evaluator:
         if op is None:
             u = truth(value)
         elif isinstance(op, TemporalOperator):
+            if not math.isfinite(self.now):
+                return None  # no time yet: nothing has been observed
             p_hist, e_hist, _ = self._hist[i]
             u = op.utility_at(p_hist, e_hist, self.now)
             if op.horizon < math.inf:
@@ -457,6 +459,8 @@ class Evaluator:
                     u = None
             elif u is not None:
                 u = min(u, 1.0 - ou)
+            elif ou >= 1.0:
+                u = 0.0  # Kleene: min(?, 0) = 0
             os_ = stat[o]
             if os_ is True:
                 s = False
@@ -723,7 +727,20 @@ class Evaluator:
         if k in (_LEAF, _OBSTACLE):
             leaves = self._leaf_inputs(i)
             expr = self.model.expressions.get((nid, "utility" if k == _LEAF else "condition"))
-            text = expr.text if expr is not None else "<no utility>"
+            alternatives = [
+                e.text
+                for (eid, role), e in sorted(self.model.expressions.items())
+                if eid == nid and role.startswith("alternative")
+            ]
+            if expr is not None:
+                text = expr.text
+            elif alternatives:
+                text = " MAY ... OR ".join(alternatives)
+            else:
+                text = "<no utility>"
+            event = self.model.expressions.get((nid, "event"))
+            if event is not None:
+                text += f" (event: {event.text})"
             inputs = ", ".join(f"{key} = {_fmt(v)}" for key, v in leaves.items())
             detail = f"{text}" + (f" with {inputs}" if inputs else "")
             op = self._relax[i]
@@ -737,12 +754,21 @@ class Evaluator:
             summary = f"{nid} {verdict} (utility {ustr}): {detail}"
         else:
             children = self._children[i]
+            obstructed = s is False and any(
+                self.stat[o] is True and not any(self.stat[r] is True for r in res)
+                for o, res in self._obstr[i]
+            )
             if k == _AND:
-                deciding = [c for c in children if self.stat[c] is not True] or list(children)
+                deciding = [c for c in children if self.stat[c] is not True]
                 rule = "AND: all children must be satisfied"
             else:
-                deciding = [c for c in children if self.stat[c] is True] or list(children)
+                deciding = [c for c in children if self.stat[c] is not False]
+                deciding = [c for c in deciding if self.stat[c] is True] or deciding
                 rule = "OR: one child must be satisfied"
+            if obstructed and (not deciding or k == _OR):
+                deciding = []  # the children are fine: the obstacle decided
+            elif not deciding or (k == _OR and s is False):
+                deciding = list(children)
             if s is None:
                 deciding = [c for c in children if self.stat[c] is None] or deciding
             because = [self._explain(c, depth + 1) for c in deciding]

@@ -100,7 +100,10 @@ def truth(value: Value) -> float | None:
         return 1.0
     if value is False:
         return 0.0
-    v = float(value)
+    try:
+        v = float(value)
+    except OverflowError:  # an integer too large for a float
+        return 1.0 if value > 0 else 0.0
     if math.isnan(v):
         return None
     return 0.0 if v < 0.0 else 1.0 if v > 1.0 else v
@@ -122,9 +125,26 @@ def _get_parser() -> Lark:
         return _parser
 
 
+def _is_num(v: Any) -> bool:
+    # Booleans are not numbers here: ``true + 1`` and ``true >= 1`` are type clashes.
+    t = type(v)
+    return t is int or t is float
+
+
+def _eq(x: Any, y: Any) -> bool:
+    """Equality that keeps booleans apart from numbers (``true == 1`` is false)."""
+    if (type(x) is bool) != (type(y) is bool):
+        return False
+    return bool(x == y)
+
+
+def _ne(x: Any, y: Any) -> bool:
+    return not _eq(x, y)
+
+
 _COMPARE: dict[str, Callable[[Any, Any], bool]] = {
-    "==": operator.eq,
-    "!=": operator.ne,
+    "==": _eq,
+    "!=": _ne,
     "<": operator.lt,
     "<=": operator.le,
     ">": operator.gt,
@@ -149,10 +169,6 @@ def _arith_fn(op: str) -> Callable[[Any, Any], Value]:
         return None if b == 0 else a % b
 
     return {"+": add, "-": sub, "*": mul, "/": div, "%": mod}[op]
-
-
-def _is_num(v: Any) -> bool:
-    return isinstance(v, int | float)
 
 
 class Expression:
@@ -257,7 +273,7 @@ class _Compiler:
                 return op(x, lit)
 
             return cmp_eq
-        numeric = type(lit) in _NUMERIC
+        numeric = _is_num(lit)
         lit_type = type(lit)
 
         def cmp_lit(s: Slots) -> Value:
@@ -265,7 +281,7 @@ class _Compiler:
             if x is None or x is absent:
                 return None
             tx = type(x)
-            if (numeric and tx in _NUMERIC) or tx is lit_type:
+            if (numeric and (tx is int or tx is float)) or tx is lit_type:
                 return op(x, lit)
             return None
 
@@ -357,7 +373,7 @@ class _Compiler:
                     return None
                 if equality or (_is_num(x) and _is_num(y)) or (type(x) is type(y)):
                     return op(x, y)
-                return None
+                return None  # a type clash: unknown
 
             return cmp
         if rule in ("in_", "not_in"):
@@ -371,7 +387,7 @@ class _Compiler:
                 v = f(s)
                 if v is None:
                     return None
-                return (v in items) == want_in
+                return any(_eq(v, item) for item in items) == want_in
 
             return member
         if rule == "arith":
@@ -395,9 +411,6 @@ class _Compiler:
             fs = [self.compile(k) for k in kids[1:]]
             return _call_fn(name, fs)
         raise AssertionError(f"unhandled rule {rule}")  # pragma: no cover
-
-
-_NUMERIC = (int, float, bool)
 
 
 def _and_fn(fs: Sequence[Fn]) -> Fn:
@@ -586,8 +599,11 @@ def compile_expression(
     except UnexpectedInput as exc:
         col = getattr(exc, "column", None)
         if isinstance(exc, UnexpectedToken):
-            got = "end of expression" if exc.token.type == "$END" else f"'{exc.token}'"
+            at_end = exc.token.type == "$END"
+            got = "end of expression" if at_end else f"'{exc.token}'"
             msg = f"unexpected {got}"
+            if at_end:
+                col = len(text.rstrip()) + 1
         elif isinstance(exc, UnexpectedCharacters):
             pos = exc.pos_in_stream if exc.pos_in_stream is not None else 0
             msg = f"unexpected character '{text[pos]}'"

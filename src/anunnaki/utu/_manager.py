@@ -206,6 +206,7 @@ class AutonomicManager:
         self.now = 0.0
         self.warmup = warmup
         self._started_at: float | None = None
+        self._stepped = False
         self._inputs: deque[tuple[str, dict[str, Any]]] = deque()
         self._ops: deque[dict[str, Any]] = deque()
         self._lock = threading.Lock()
@@ -457,8 +458,11 @@ class AutonomicManager:
             self._apply_op(op, t)
         decisions_before = self.knowledge.decisions_written
         self._plan_and_execute(t)
+        first = not self._stepped
+        self._stepped = True
         if (
-            inputs
+            first
+            or inputs
             or ticked
             or changed
             or ops

@@ -1,0 +1,473 @@
+"""``anunnaki log | explain | replay RUN.db``: read a Utu run's decision log back.
+
+* ``log`` — the decisions as a table (filters by time, tactic, kind; ``--verdicts`` mixes
+  in the verdict changes; ``--json`` one object per line), or ``--export-trace`` the
+  recorded inputs as a trace for ``anunnaki evaluate``;
+* ``explain`` — the goal model at an instant, rebuilt from the recorded inputs, with the
+  explanation of a goal and the decisions around that instant;
+* ``replay`` — run the recorded inputs through a fresh manager and compare its decisions
+  with the record: exit 0 identical, 1 diverged, 2 unreadable.
+
+See docs/decision-log.md.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sqlite3
+import sys
+from collections.abc import Callable, Iterator, Sequence
+from contextlib import contextmanager
+from pathlib import Path
+from typing import Any
+
+from rich import box
+from rich.console import Console
+from rich.table import Table
+from rich.text import Text
+
+from anunnaki.errors import AnunnakiError
+from anunnaki.utu._knowledge import Decision, Knowledge, VerdictRow
+from anunnaki.utu._replay import (
+    KINDS,
+    RunLogError,
+    export_trace,
+    format_data,
+    open_run,
+    reading,
+    rebuild_goal_state,
+    replay,
+    run_models,
+    run_span,
+)
+
+_STATUS = {"satisfied": "green", "unsatisfied": "bold red", "unknown": "grey50"}
+_KIND_STYLE = {
+    "postcondition_failed": "bold red",
+    "escalation_exhausted": "bold red",
+    "operator_refused": "red",
+    "reload_refused": "red",
+    "escalated": "bold yellow",
+    "run_stop": "bold white on red",
+    "liveliness_lost": "yellow",
+    "paused": "cyan",
+    "resumed_adaptation": "cyan",
+    "resumed": "cyan",
+    "postcondition_ok": "green",
+    "completed": "green",
+    "started": "bold",
+    "deferred": "dim",
+    "withdrawn": "dim",
+}
+
+
+def add_parser(sub: Any) -> None:
+    """Register the ``log``, ``explain`` and ``replay`` sub-commands."""
+    p: argparse.ArgumentParser = sub.add_parser(
+        "log",
+        help="show a run's decision log (or export its inputs as a trace)",
+        description=(
+            "Print the decisions a Utu run recorded in its knowledge database: time, kind, "
+            "tactic and details, failures and escalations in colour (plain text when piped). "
+            "With --export-trace, write the recorded inputs as a JSONL trace instead, which "
+            "'anunnaki evaluate' replays. Exit 0, or 2 when the file is unreadable."
+        ),
+    )
+    p.add_argument("db", metavar="RUN.db", help="the run's knowledge database")
+    p.add_argument("--since", type=_seconds, metavar="T", help="from time T (s) on")
+    p.add_argument("--until", type=_seconds, metavar="T", help="up to time T (s)")
+    p.add_argument("--tactic", metavar="NAME", help="only decisions about tactic NAME")
+    p.add_argument(
+        "--kind",
+        action="append",
+        metavar="K",
+        help="only decisions of kind K (repeat, or K1,K2); e.g. started,escalated,run_stop",
+    )
+    p.add_argument("--verdicts", action="store_true", help="interleave the verdict changes")
+    p.add_argument("--json", action="store_true", help="one JSON object per row on stdout")
+    p.add_argument(
+        "--export-trace",
+        metavar="OUT.jsonl",
+        help="write the recorded inputs (within --since/--until) as a trace and exit",
+    )
+    p.add_argument(
+        "--mark-ticks",
+        action="store_true",
+        help="with --export-trace: mark steps where only time passed as 'tick' phases",
+    )
+    p.set_defaults(run=run_log)
+
+    e: argparse.ArgumentParser = sub.add_parser(
+        "explain",
+        help="the goal model at time T, rebuilt from the recorded inputs, and why",
+        description=(
+            "Rebuild the goal model's state at time T from the inputs the run recorded (not "
+            "from its recorded verdicts), print the goal tree with utilities and statuses, "
+            "explain a goal (default the root) by the leaf values that decided it, and list "
+            "the decisions around T."
+        ),
+    )
+    e.add_argument("db", metavar="RUN.db", help="the run's knowledge database")
+    e.add_argument("--at", type=_seconds, required=True, metavar="T", help="the time (s)")
+    e.add_argument("--goal", "-g", metavar="G", help="goal or obstacle to explain (default root)")
+    e.add_argument(
+        "--window",
+        type=_nonnegative,
+        default=5.0,
+        metavar="S",
+        help="show the decisions within S seconds of T (default 5)",
+    )
+    e.add_argument("--json", action="store_true", help="print one JSON object")
+    e.set_defaults(run=run_explain)
+
+    r: argparse.ArgumentParser = sub.add_parser(
+        "replay",
+        help="re-run a recorded run and compare; exit 0 identical, 1 diverged, 2 unreadable",
+        description=(
+            "Build a fresh manager from the model texts and settings a run recorded, feed it "
+            "the recorded inputs and operator calls at the recorded instants (no bus, nothing "
+            "reaches a robot) and compare its decisions and verdicts with the record. Prints "
+            "'identical' or the first divergence. Exit 0 identical, 1 diverged, 2 unreadable."
+        ),
+    )
+    r.add_argument("db", metavar="RUN.db", help="the run's knowledge database")
+    r.add_argument("--json", action="store_true", help="print the report as one JSON object")
+    r.add_argument("--dwell", type=_nonnegative, metavar="S", help="what if: another dwell")
+    r.add_argument("--warmup", type=_nonnegative, metavar="S", help="what if: another warm-up")
+    r.add_argument("--failsafe", metavar="TACTIC", help="what if: another fail-safe tactic")
+    r.add_argument(
+        "--tolerance",
+        type=_nonnegative,
+        default=1e-6,
+        metavar="X",
+        help="absolute tolerance for floats (default 1e-6)",
+    )
+    r.set_defaults(run=run_replay)
+
+
+def _seconds(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a number of seconds: {text!r}") from None
+    if not math.isfinite(value):
+        raise argparse.ArgumentTypeError(f"must be a finite number of seconds, got {text}")
+    return value
+
+
+def _nonnegative(text: str) -> float:
+    value = _seconds(text)
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"must be 0 or more, got {text}")
+    return value
+
+
+def _console() -> Console:
+    console = Console(highlight=False)
+    if not console.is_terminal:
+        console = Console(highlight=False, width=200)
+    return console
+
+
+@contextmanager
+def _run(path: str) -> Iterator[Knowledge]:
+    """Open the log; turn a failure while reading it into an error naming the file."""
+    with open_run(path) as knowledge:
+        try:
+            yield knowledge
+        except (sqlite3.Error, json.JSONDecodeError) as exc:
+            raise reading(path, exc) from None
+
+
+def _show(console: Console, renderable: Any) -> None:
+    """Print; when piped, without the padding rich adds at the end of table lines."""
+    if console.is_terminal:
+        console.print(renderable)
+        return
+    with console.capture() as captured:
+        console.print(renderable)
+    sys.stdout.write("".join(line.rstrip() + "\n" for line in captured.get().splitlines()))
+
+
+def _fmt_u(u: float | None) -> str:
+    return "?" if u is None else f"{u:.3f}"
+
+
+def _decision_json(d: Decision) -> dict[str, Any]:
+    return {"type": "decision", "t": d.t, "kind": d.kind, "tactic": d.tactic, "data": d.data}
+
+
+def _verdict_json(v: VerdictRow) -> dict[str, Any]:
+    return {"type": "verdict", "t": v.t, "node": v.node, "utility": v.utility, "status": v.status}
+
+
+def _decision_style(d: Decision) -> str:
+    if d.kind in ("action", "notify_result") and d.data.get("ok") is False:
+        return "red"
+    return _KIND_STYLE.get(d.kind, "")
+
+
+def _table(console: Console, rows: Sequence[Decision | VerdictRow], mark: float | None) -> Table:
+    table = Table(box=box.SIMPLE_HEAD if console.is_terminal else None, pad_edge=False)
+    table.add_column("t (s)", justify="right", no_wrap=True)
+    table.add_column("kind", no_wrap=True)
+    table.add_column("tactic", no_wrap=True)
+    table.add_column("details", overflow="fold")
+    for row in rows:
+        t = f"{row.t:.3f}"
+        if mark is not None:
+            t = ("▶ " if math.isclose(row.t, mark) else "  ") + t
+        if isinstance(row, VerdictRow):
+            table.add_row(
+                Text(t, style="dim"),
+                Text("verdict", style="dim"),
+                Text(row.node, style="dim"),
+                Text.assemble(
+                    (f"{row.status:<11}", _STATUS.get(row.status, "")),
+                    f" utility {_fmt_u(row.utility)}",
+                ),
+            )
+            continue
+        style = _decision_style(row)
+        table.add_row(
+            t,
+            Text(row.kind, style=style),
+            row.tactic or "",
+            Text(format_data(row.data), style=style if style.endswith("red") else ""),
+        )
+    return table
+
+
+def _kinds(values: list[str] | None, present: set[str]) -> set[str] | None:
+    if not values:
+        return None
+    kinds = {k.strip() for v in values for k in v.split(",") if k.strip()}
+    unknown = sorted(k for k in kinds if k not in KINDS and k not in present)
+    if unknown:
+        raise AnunnakiError(
+            f"--kind {', '.join(unknown)}: no such kind of decision; kinds: {', '.join(KINDS)}"
+        )
+    return kinds
+
+
+def _merge(
+    decisions: Sequence[Decision], verdicts: Sequence[VerdictRow]
+) -> list[Decision | VerdictRow]:
+    # Within one step the verdicts are recorded before the decisions they lead to.
+    def key(row: Decision | VerdictRow) -> tuple[float, int, int]:
+        return (row.t, 1 if isinstance(row, Decision) else 0, row.id)
+
+    return sorted([*decisions, *verdicts], key=key)
+
+
+def _write_jsonl(rows: Sequence[Decision | VerdictRow]) -> None:
+    for row in rows:
+        obj = _verdict_json(row) if isinstance(row, VerdictRow) else _decision_json(row)
+        sys.stdout.write(json.dumps(obj, sort_keys=True) + "\n")
+
+
+def run_log(args: argparse.Namespace) -> int:
+    """Print the decision log, or export the recorded inputs as a trace."""
+    path: str = args.db
+    console = _console()
+    with _run(path) as knowledge:
+        counts = knowledge.counts()
+        span = run_span(path)
+        if args.export_trace is not None:
+            return _export(console, knowledge, path, args)
+        decisions = knowledge.decisions(args.since, args.until)
+        kinds = _kinds(args.kind, {d.kind for d in decisions})
+        shown = [
+            d
+            for d in decisions
+            if (kinds is None or d.kind in kinds)
+            and (args.tactic is None or args.tactic in (d.tactic, d.data.get("to")))
+        ]
+        verdicts = knowledge.verdicts(args.since, args.until) if args.verdicts else []
+    rows = _merge(shown, verdicts)
+    if args.json:
+        if counts["inputs"] == 0 and counts["decisions"] == 0:
+            print(f"{path}: empty run: nothing was recorded", file=sys.stderr)
+        _write_jsonl(rows)
+        return 0
+    if counts["inputs"] == 0 and counts["decisions"] == 0:
+        console.print(Text(f"{path}: empty run: nothing was recorded (no inputs, no decisions)"))
+        return 0
+    when = f" from t = {span[0]:.3f} to {span[1]:.3f} s" if span else ""
+    console.print(
+        Text(
+            f"{path}: {counts['inputs']} inputs, {counts['decisions']} decisions, "
+            f"{counts['verdicts']} verdict changes{when}",
+            style="bold",
+        ),
+        soft_wrap=True,
+    )
+    if not rows:
+        console.print(Text(f"no decisions match (of {counts['decisions']} in the log)"))
+        return 0
+    _show(console, _table(console, rows, None))
+    filtered = len(shown) != counts["decisions"]
+    if filtered:
+        console.print(Text(f"{len(shown)} of {counts['decisions']} decisions shown", style="dim"))
+    return 0
+
+
+def _export(console: Console, knowledge: Knowledge, path: str, args: argparse.Namespace) -> int:
+    out: str = args.export_trace
+    header = {
+        "name": Path(path).stem,
+        "description": f"inputs recorded in the decision log {path}",
+        "source": path,
+    }
+    try:
+        n = export_trace(
+            knowledge,
+            out,
+            since=args.since,
+            until=args.until,
+            header=header,
+            mark_ticks=args.mark_ticks,
+        )
+    except OSError as exc:
+        raise AnunnakiError(f"{out}: cannot write the trace: {exc.strerror}") from None
+    hint = ""
+    try:
+        models = run_models(path).initial
+        gm, bd = models.get("goal_model", (None, ""))[0], models.get("binding", (None, ""))[0]
+        if gm:
+            hint = f"; replay it: anunnaki evaluate {gm}" + (f" --binding {bd}" if bd else "")
+            hint += f" --trace {out}"
+    except RunLogError:
+        pass
+    what = "empty run: wrote no messages" if n == 0 else f"wrote {n} messages"
+    console.print(Text(f"{what} from {path} to {out}{hint}"), soft_wrap=True)
+    return 0
+
+
+def run_explain(args: argparse.Namespace) -> int:
+    """Print the goal model at ``--at`` rebuilt from the recorded inputs, and why."""
+    from anunnaki.cli._evaluate import render_tree
+
+    path: str = args.db
+    at: float = args.at
+    with _run(path) as knowledge:
+        state = rebuild_goal_state(knowledge, path, at)
+        around = knowledge.decisions(at - args.window, at + args.window)
+        span = run_span(path)
+    ev = state.evaluator
+    goal = args.goal or ev.model.root
+    if goal not in ev.index:
+        raise AnunnakiError(
+            f"--goal {goal}: the goal model has no goal or obstacle {goal!r} "
+            f"(it has: {', '.join(ev.ids)})"
+        )
+    explanation = ev.explain(goal)
+    differ = state.disagreements()
+    if args.json:
+        out = {
+            "path": path,
+            "at": at,
+            "as_of": state.as_of,
+            "inputs": state.inputs,
+            "nodes": {
+                n: {"utility": s.utility, "status": s.status_name} for n, s in ev.states().items()
+            },
+            "values": ev.values(),
+            "goal": goal,
+            "explanation": explanation.to_dict(),
+            "agrees_with_record": not differ,
+            "disagreements": differ,
+            "decisions": [_decision_json(d) for d in around],
+        }
+        sys.stdout.write(json.dumps(out, sort_keys=True) + "\n")
+        return 0
+    console = _console()
+    if span is None:
+        console.print(Text(f"{path}: empty run: nothing was recorded (no inputs)"))
+    if state.as_of is None:
+        first = f" (the first at t = {span[0]:.3f} s)" if span else ""
+        where = f"no step had run by t = {at:.3f} s{first}: every goal is unknown"
+    else:
+        where = (
+            f"as of the manager's step at t = {state.as_of:.3f} s, rebuilt from "
+            f"{state.inputs} recorded messages"
+        )
+    console.print(Text.assemble((f"{path} at t = {at:.3f} s", "bold"), f": {where}"))
+    _show(console, render_tree(ev))
+    console.print()
+    console.print(Text(f"why {goal} is {_word(explanation.kind, explanation.status)}:"))
+    console.print(Text(explanation.render("  ")))
+    if explanation.leaves:
+        console.print(Text("deciding values: " + format_data(explanation.leaves), style="dim"))
+    console.print()
+    if differ:
+        console.print(
+            Text(
+                f"{len(differ)} node(s) differ from the recorded verdicts (was the log "
+                "altered, or the evaluator changed?): " + "; ".join(differ),
+                style="yellow",
+            ),
+            soft_wrap=True,
+        )
+    elif state.recorded:
+        console.print(Text("the rebuilt state agrees with the recorded verdicts", style="dim"))
+    lo, hi = at - args.window, at + args.window
+    if around:
+        console.print(Text(f"decisions from t = {lo:.3f} to {hi:.3f} s:", style="bold"))
+        _show(console, _table(console, around, at))
+    else:
+        console.print(Text(f"no decisions from t = {lo:.3f} to {hi:.3f} s"))
+    return 0
+
+
+def _word(kind: str, status: bool | None) -> str:
+    if kind == "obstacle":
+        return {True: "present (it holds)", False: "absent", None: "unknown"}[status]
+    return {True: "satisfied", False: "unsatisfied", None: "unknown"}[status]
+
+
+def run_replay(args: argparse.Namespace) -> int:
+    """Replay the run; exit 0 identical, 1 diverged (2 unreadable, raised)."""
+    overrides: dict[str, Any] = {}
+    for key in ("dwell", "warmup", "failsafe"):
+        value = getattr(args, key)
+        if value is not None:
+            overrides[key] = value
+    report = replay(args.db, overrides=overrides, tolerance=args.tolerance)
+    if args.json:
+        sys.stdout.write(json.dumps(report.to_dict(), sort_keys=True) + "\n")
+        return report.exit_code
+    console = _console()
+    say: Callable[..., None] = console.print
+    if report.empty:
+        say(Text(f"{report.path}: empty run: nothing was recorded, nothing to replay"))
+        return 0
+    say(
+        Text(
+            f"replayed {report.path}: {report.steps} steps, {report.inputs} inputs; settings "
+            + format_data(report.settings)
+            + (f" (what if: {format_data(overrides)})" if overrides else ""),
+        ),
+        soft_wrap=True,
+    )
+    for note in report.notes:
+        say(Text(f"note: {note}", style="yellow"), soft_wrap=True)
+    if report.identical:
+        say(Text(report.summary(), style="bold green"))
+        return 0
+    say(Text(report.summary(), style="bold red"))
+    say(
+        Text(
+            f"recorded {report.decisions} decisions and {report.verdicts} verdict changes; "
+            f"the replay made {report.replayed_decisions} and {report.replayed_verdicts}"
+        )
+    )
+    for label, d in (
+        ("first decision divergence", report.divergence),
+        ("first verdict divergence", report.verdict_divergence),
+    ):
+        if d is not None:
+            say(Text(f"{label}: {d.render()}"), soft_wrap=True)
+    return report.exit_code
