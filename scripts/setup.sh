@@ -10,7 +10,7 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 
 PYTHON=${PYTHON:-python3}
-EXTRAS=${ANUNNAKI_EXTRAS:-dev,bus,phenomena}
+EXTRAS=${ANUNNAKI_EXTRAS:-dev,bus,vision}
 VENV=.venv
 
 if ! "$PYTHON" -c 'import sys; sys.exit(sys.version_info < (3, 11))'; then

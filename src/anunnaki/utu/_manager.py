@@ -545,6 +545,9 @@ class AutonomicManager:
                 for tb in agent.topics:
                     self.analyzer.evaluator.expire(tb.topic, t)
             self.analyzer.record_changes(t)
+            # A dead publisher is a known fact, not data still arriving: end the warm-up.
+            self._started_at = min(self._started_at or t, t - self.warmup)
+            self.analyzer.warming_up = False
             self.knowledge.record_decision(
                 t, "liveliness_lost", None, node=node, agents=[a.id for a in agents]
             )

@@ -1,0 +1,113 @@
+"""Simulated platforms in pybullet (headless): scenes, datasets, a rover and a UAV on the bus.
+
+Scenes and datasets (the API the detector's datasets are built on)::
+
+    from anunnaki.sim import ROVER_CLASSES, dataset_frames
+
+    for frame in dataset_frames("rover", layout=3, seed=0, n=100, width=128, height=128):
+        frame.image   # [H, W, 3] uint8 RGB
+        frame.boxes   # [N, 4] float32 x1, y1, x2, y2 in pixels (from the segmentation mask)
+        frame.labels  # [N] int64 indices into ROVER_CLASSES ("pedestrian", "deer")
+
+``layout`` seeds the scene (object placement), ``seed`` the camera poses, lighting, object
+poses and distractor colours; use disjoint layouts for train/validation/test.
+
+Platforms publish on the bus like the scripted stand-in (guideline H1), on simulated time::
+
+    from anunnaki.bus import open_bus
+    from anunnaki.sim import RoverSim
+
+    with open_bus("inproc") as bus, RoverSim(bus, "examples/rover/scenario.yaml") as rover:
+        rover.step(5.0)                 # deterministic: physics at 240 Hz, sensors at rate
+        print(rover.status())
+
+``RoverSim`` stops for obstacles from the detector's ``Detections`` and the ultrasonic only
+(:class:`StopRule`), never from ground truth; ``UavSim`` flies a package-delivery mission.
+Scenario files (:func:`load_scenario`) ramp phenomena and inject faults over time.
+:func:`run_pedestrian_encounter` tells whether a detector makes the rover stop in time.
+
+Every scene has its own pybullet client (``DIRECT``, tiny renderer, no shadows); several
+live side by side in one process or in process pools. See ``docs/simulation.md``.
+"""
+
+from anunnaki.sim._encounter import EncounterResult, run_pedestrian_encounter, to_detections
+from anunnaki.sim._platform import GROUND_TRUTH_TOPIC, PHENOMENA_TOPIC, SimPlatform
+from anunnaki.sim._rover import (
+    CAMERA_FOV,
+    CAMERA_HEIGHT,
+    DETECTIONS_TOPIC,
+    RoverMode,
+    RoverSim,
+    StopRule,
+)
+from anunnaki.sim._scenario import (
+    CameraConfig,
+    FaultEvent,
+    ObjectSpec,
+    PhenomenonEvent,
+    Scenario,
+    Timeline,
+    UavMission,
+    UltrasonicConfig,
+    load_scenario,
+    parse_scenario,
+)
+from anunnaki.sim._scene import (
+    MIN_BOX_SIZE,
+    MIN_IN_FRAME,
+    MIN_VISIBLE,
+    ROVER_CLASSES,
+    UAV_CLASSES,
+    Camera,
+    Frame,
+    Light,
+    Placement,
+    Platform,
+    Scene,
+    boxes_from_mask,
+    dataset_frames,
+    layout_placements,
+)
+from anunnaki.sim._uav import UAV_CAMERA_FOV, UavMode, UavSim
+
+__all__ = [
+    "CAMERA_FOV",
+    "CAMERA_HEIGHT",
+    "DETECTIONS_TOPIC",
+    "GROUND_TRUTH_TOPIC",
+    "MIN_BOX_SIZE",
+    "MIN_IN_FRAME",
+    "MIN_VISIBLE",
+    "PHENOMENA_TOPIC",
+    "ROVER_CLASSES",
+    "UAV_CAMERA_FOV",
+    "UAV_CLASSES",
+    "Camera",
+    "CameraConfig",
+    "EncounterResult",
+    "FaultEvent",
+    "Frame",
+    "Light",
+    "ObjectSpec",
+    "PhenomenonEvent",
+    "Placement",
+    "Platform",
+    "RoverMode",
+    "RoverSim",
+    "Scenario",
+    "Scene",
+    "SimPlatform",
+    "StopRule",
+    "Timeline",
+    "UavMission",
+    "UavMode",
+    "UavSim",
+    "UltrasonicConfig",
+    "boxes_from_mask",
+    "dataset_frames",
+    "layout_placements",
+    "load_scenario",
+    "parse_scenario",
+    "run_pedestrian_encounter",
+    "to_detections",
+]

@@ -1,0 +1,46 @@
+"""``anunnaki sim``: runs a scenario flat out and prints a line per simulated second."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from anunnaki.cli.main import main
+
+EXAMPLES = Path(__file__).parents[2] / "examples"
+
+
+def test_sim_rover_prints_a_line_per_second(capsys) -> None:
+    code = main(
+        [
+            "sim",
+            "rover",
+            "--scenario",
+            str(EXAMPLES / "rover" / "scenario.yaml"),
+            "--until",
+            "2",
+            "--speed",
+            "0",
+            "--width",
+            "32",
+            "--height",
+            "32",
+        ]
+    )
+    out = capsys.readouterr().out
+    assert code == 0
+    lines = [ln for ln in out.splitlines() if ln.startswith("t=")]
+    assert len(lines) == 2 and "autonomous" in lines[0] and "collisions 0" in lines[0]
+    assert "done at t=2.00s: 20 frames" in out
+
+
+def test_sim_uav_runs(capsys) -> None:
+    code = main(["sim", "uav", "--until", "1", "--speed", "0", "--width", "32", "--height", "32"])
+    assert code == 0 and "battery" in capsys.readouterr().out
+
+
+def test_sim_with_a_bad_scenario_exits_2(tmp_path, capsys) -> None:
+    bad = tmp_path / "s.yaml"
+    bad.write_text("platform: rover\ncamera: {rate: -1}\n")
+    assert main(["sim", "rover", "--scenario", str(bad)]) == 2
+    assert f"{bad}:2" in capsys.readouterr().err
+    assert main(["sim", "uav", "--scenario", str(EXAMPLES / "rover" / "scenario.yaml")]) == 2

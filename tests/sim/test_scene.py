@@ -1,0 +1,106 @@
+"""Scenes and dataset frames: shapes, ground truth from the mask, determinism."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from anunnaki.sim import (
+    ROVER_CLASSES,
+    UAV_CLASSES,
+    Frame,
+    Placement,
+    Scene,
+    dataset_frames,
+    layout_placements,
+)
+
+
+@pytest.mark.parametrize(("platform", "classes"), [("rover", ROVER_CLASSES), ("uav", UAV_CLASSES)])
+def test_frames_have_the_documented_shapes_and_dtypes(platform, classes) -> None:
+    frames = list(dataset_frames(platform, layout=1, seed=2, n=6, width=96, height=64))
+    assert len(frames) == 6
+    assert [f.seq for f in frames] == list(range(6))
+    assert sum(len(f.boxes) for f in frames) > 0  # the cameras find objects
+    for f in frames:
+        assert isinstance(f, Frame)
+        assert f.image.shape == (64, 96, 3) and f.image.dtype == np.uint8
+        assert f.boxes.dtype == np.float32 and f.boxes.shape == (len(f.labels), 4)
+        assert f.labels.dtype == np.int64
+        assert np.all((f.labels >= 0) & (f.labels < len(classes)))
+        if len(f.boxes):
+            x1, y1, x2, y2 = f.boxes.T
+            assert np.all(x1 >= 0) and np.all(y1 >= 0)
+            assert np.all(x2 <= 96) and np.all(y2 <= 64)
+            assert np.all(x2 - x1 >= 4) and np.all(y2 - y1 >= 4)
+
+
+def test_boxes_are_tight_around_the_objects_pixels_in_the_mask() -> None:
+    rng = np.random.default_rng(5)
+    with Scene("rover", 2, width=128, height=96) as scene:
+        objects = scene.objects
+        checked = 0
+        for _ in range(8):
+            camera = scene.random_camera(rng)
+            frame = scene.render(camera)
+            mask = scene.render_mask(camera)
+            for box, label in zip(frame.boxes, frame.labels, strict=True):
+                matches = []
+                for body, (_, body_label) in objects.items():
+                    ys, xs = np.nonzero(mask == body)
+                    if len(xs) == 0:
+                        continue
+                    tight = [xs.min(), ys.min(), xs.max() + 1, ys.max() + 1]
+                    if np.array_equal(np.asarray(tight, dtype=np.float32), box):
+                        matches.append(body_label)
+                assert label in matches
+                checked += 1
+        assert checked >= 3
+
+
+def test_frames_are_deterministic_for_layout_and_seed() -> None:
+    a = list(dataset_frames("rover", layout=3, seed=7, n=3))
+    b = list(dataset_frames("rover", layout=3, seed=7, n=3))
+    for fa, fb in zip(a, b, strict=True):
+        assert np.array_equal(fa.image, fb.image)
+        assert np.array_equal(fa.boxes, fb.boxes)
+        assert np.array_equal(fa.labels, fb.labels)
+    c = list(dataset_frames("rover", layout=3, seed=8, n=3))
+    assert not all(np.array_equal(x.image, y.image) for x, y in zip(a, c, strict=True))
+
+
+def test_different_layouts_are_different_scenes() -> None:
+    assert layout_placements("rover", 0) == layout_placements("rover", 0)
+    assert layout_placements("rover", 0) != layout_placements("rover", 1)
+    assert layout_placements("uav", 0) != layout_placements("uav", 1)
+    a = next(iter(dataset_frames("uav", layout=0, seed=0, n=1)))
+    b = next(iter(dataset_frames("uav", layout=1, seed=0, n=1)))
+    assert not np.array_equal(a.image, b.image)
+
+
+def test_occluded_and_cut_objects_get_no_box() -> None:
+    # A pedestrian hidden behind a big cube, and one mostly out of the frame.
+    from anunnaki.sim import Camera
+
+    people = [Placement("pedestrian", 5.0, 0.0, size=1.7), Placement("pedestrian", 5.0, 3.4)]
+    wall = Placement("cube", 3.0, 0.0, size=1.6)
+    camera = Camera((0.0, 0.0, 0.3), (10.0, 0.0, 0.3), fov=60.0)
+    with Scene("rover", 0, placements=people) as open_scene:
+        assert len(open_scene.render(camera).boxes) == 1  # the one at y=3.4 is cut
+    with Scene("rover", 0, placements=[*people, wall]) as hidden:
+        assert len(hidden.render(camera).boxes) == 0
+
+
+def test_scenes_live_side_by_side_in_one_process() -> None:
+    with Scene("rover", 0, width=32, height=32) as a, Scene("uav", 0, width=32, height=32) as b:
+        assert a.client != b.client
+        rng = np.random.default_rng(0)
+        a.render(a.random_camera(rng))
+        b.render(b.random_camera(rng))
+
+
+def test_bad_arguments_are_refused() -> None:
+    with pytest.raises(ValueError, match="platform"):
+        layout_placements("boat", 0)  # type: ignore[arg-type]
+    with pytest.raises(ValueError, match="kind"):
+        Scene("rover", 0, placements=[Placement("dragon", 1, 1)])
