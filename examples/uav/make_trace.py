@@ -76,7 +76,11 @@ def build() -> list[Record | Phase]:
             category, context = 2, "fog"
         else:
             category, context = 0, "clear"
-        at(t, "/utu/oracle/output", {"category": category, "confidence": 0.8, "context": context})
+        at(
+            t,
+            "/utu/oracle/output",
+            {"category": category, "confidence": 0.8, "context": {"phenomenon": context}},
+        )
     for k in range(int(END / 2)):  # A6 active model every 2 s
         t = k * 2.0
         domain = "fog" if t >= 33 else "default"

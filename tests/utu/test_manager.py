@@ -402,3 +402,20 @@ def test_slow_simulation_on_sim_time_has_no_spurious_violations(use_sim_time: bo
         assert started == []
     else:  # the control: the same run on the wall clock sees the sensor at 3 Hz
         assert "unsatisfied" in g6
+
+
+def test_bus_actuator_sees_refusals_in_generic_and_service_replies(bus) -> None:  # type: ignore[no-untyped-def]
+    from anunnaki.bus import ServiceReply
+    from anunnaki.utu import BusActuator
+
+    bus.service("/a/generic", lambda m: {"ok": False, "error": "unknown mode 'x'"})
+    bus.service("/a/accepts", lambda m: {"ok": True, "mode": "manual"})
+    bus.service("/a/typed", lambda m: ServiceReply(ok=True, body={"model": "fog-1"}))
+    act = BusActuator(bus)
+    refused = act.request("/a/generic", {"mode": "x"}, 2.0)
+    assert not refused.ok and refused.detail == "unknown mode 'x'"
+    assert act.request("/a/accepts", {}, 2.0).reply == {"ok": True, "mode": "manual"}
+    typed = act.request("/a/typed", {}, 2.0)
+    assert typed.ok and typed.reply == {"model": "fog-1"}
+    timeout = act.request("/a/nobody", {}, 0.2)
+    assert not timeout.ok

@@ -107,11 +107,13 @@ class BusActuator:
             reply = self.bus.request(service, dict(payload), timeout=timeout)
         except AnunnakiError as exc:
             return ActionOutcome(False, f"{type(exc).__name__}: {exc}")
-        body = reply.model_dump(mode="json") if hasattr(reply, "model_dump") else {}
-        body = body.get("body", body) if isinstance(body, dict) else {}
-        if isinstance(body, dict) and body.get("ok") is False:
-            return ActionOutcome(False, str(body.get("error", "refused")), body)
-        return ActionOutcome(True, f"{service} replied", body if isinstance(body, dict) else {})
+        body = _body(reply)  # a Generic's object, or a ServiceReply's {ok, error, body}
+        if body.get("ok") is False:
+            return ActionOutcome(False, str(body.get("error") or "refused"), body)
+        inner = body.get("body")
+        if isinstance(inner, dict) and "ok" in body:
+            body = inner
+        return ActionOutcome(True, f"{service} replied", body)
 
     def notify(self, action: NotifyAction, tactic: str, now: float) -> ActionOutcome:
         """Send through the notifier in the background (the loop never waits on SMTP)."""
