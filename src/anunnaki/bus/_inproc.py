@@ -66,14 +66,22 @@ class InprocHub:
     def __init__(self) -> None:
         self._lock = threading.Lock()
         self._receivers: tuple[_Receiver, ...] = ()
+        # key -> the receivers matching it, for the receivers of this snapshot (a new dict
+        # replaces it whenever receivers change, so readers never see a stale route).
+        self._routes: dict[str, tuple[_Receiver, ...]] = {}
         self._queryables: dict[str, list[QueryCallback]] = {}
         self._tokens: Counter[str] = Counter()
         self._watchers: tuple[_Receiver, ...] = ()
 
     def _deliver(self, key: str, payload: bytes, rank: int) -> None:
-        for r in self._receivers:  # an immutable snapshot: no lock on the hot path
-            if key_matches(r.key, key):
-                r.on_data(key, payload, rank)
+        routes = self._routes  # a snapshot: no lock on the hot path
+        matched = routes.get(key)
+        if matched is None:
+            matched = tuple(r for r in self._receivers if key_matches(r.key, key))
+            if routes is self._routes and len(routes) < 4096:
+                routes[key] = matched
+        for r in matched:
+            r.on_data(key, payload, rank)
 
     def _matching(self, key: str) -> bool:
         return any(key_matches(r.key, key) for r in self._receivers)
@@ -82,10 +90,12 @@ class InprocHub:
         receiver = _Receiver(key, on_data)
         with self._lock:
             self._receivers = (*self._receivers, receiver)
+            self._routes = {}
 
         def undo() -> None:
             with self._lock:
                 self._receivers = tuple(r for r in self._receivers if r is not receiver)
+                self._routes = {}
 
         return _Link(undo)
 

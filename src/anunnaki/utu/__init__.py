@@ -18,6 +18,14 @@ Five parts, composed by :class:`AutonomicManager`:
 
 from anunnaki.utu._config import RunStopConfig, UtuConfig, load_config, parse_config
 from anunnaki.utu._knowledge import Decision, InputRow, Knowledge, TacticRow, VerdictRow
+from anunnaki.utu._launch import (
+    Launch,
+    LaunchConfig,
+    RunResult,
+    load_launch,
+    parse_launch,
+    run_launch,
+)
 from anunnaki.utu._manager import (
     AutonomicManager,
     BusActuator,
@@ -33,26 +41,59 @@ from anunnaki.utu._mape import (
     Planner,
     TacticRuntime,
 )
+from anunnaki.utu._nodes import (
+    AnalyzeNode,
+    ComposedUtu,
+    ExecuteNode,
+    KnowledgeNode,
+    MonitorNode,
+    PlanNode,
+    UtuNode,
+    UtuParts,
+    build_node,
+    load_parts,
+    step_nodes,
+)
+from anunnaki.utu._replay import ReplayReport, replay
 
 __all__ = [
     "ActionOutcome",
     "Actuator",
+    "AnalyzeNode",
     "Analyzer",
     "AutonomicManager",
     "BusActuator",
+    "ComposedUtu",
     "Decision",
+    "ExecuteNode",
     "Executor",
     "InputRow",
     "Knowledge",
+    "KnowledgeNode",
+    "Launch",
+    "LaunchConfig",
     "Monitor",
+    "MonitorNode",
+    "PlanNode",
     "Planner",
     "RecordingActuator",
+    "ReplayReport",
+    "RunResult",
     "RunStopConfig",
     "TacticRow",
     "TacticRuntime",
     "UtuConfig",
+    "UtuNode",
+    "UtuParts",
     "VerdictRow",
+    "build_node",
     "load_config",
+    "load_launch",
+    "load_parts",
     "load_tactics_text",
     "parse_config",
+    "parse_launch",
+    "replay",
+    "run_launch",
+    "step_nodes",
 ]

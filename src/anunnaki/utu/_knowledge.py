@@ -143,11 +143,9 @@ class Knowledge:
         self.decisions_written = 0
         self._inputs: list[tuple[float, str, str]] = []
         self._verdicts: list[tuple[float, str, float | None, str]] = []
-        row = self._db.execute("SELECT value FROM meta WHERE key='schema'").fetchone()
-        if row is None:
-            self._db.execute(
-                "INSERT INTO meta (key, value) VALUES ('schema', ?)", (str(SCHEMA_VERSION),)
-            )
+        self._db.execute(
+            "INSERT OR IGNORE INTO meta (key, value) VALUES ('schema', ?)", (str(SCHEMA_VERSION),)
+        )
 
     # -- writing ------------------------------------------------------------------------
     def set_meta(self, key: str, value: Any) -> None:

@@ -209,7 +209,9 @@ class AutonomicManager:
         self.warmup = warmup
         self._started_at: float | None = None
         self._stepped = False
-        self._inputs: deque[tuple[str, dict[str, Any]]] = deque()
+        # (topic, message, arrival time or None for "now"): a step takes inputs at their own
+        # times, so a burst taken by one step keeps its spacing (rates, temporal goals).
+        self._inputs: deque[tuple[str, dict[str, Any], float | None]] = deque()
         self._ops: deque[dict[str, Any]] = deque()
         self._lock = threading.Lock()
         self._wake = threading.Event()
@@ -351,7 +353,10 @@ class AutonomicManager:
                 sample = sub.try_recv()
                 if sample is None:
                     break
-                self._inputs.append((topic, _body(sample.message)))
+                # The sender's stamp, on the wall clock only (a sim clock is another
+                # timebase); step() clamps it into (previous step, this step].
+                t_in = sample.sent_at if isinstance(self.clock, WallClock) else None
+                self._inputs.append((topic, _body(sample.message), t_in))
 
     def _on_run_stop_topic(self, sample: Any) -> None:
         body = _body(sample.message)
@@ -385,10 +390,14 @@ class AutonomicManager:
         if not alive:
             self._enqueue_op({"op": "node_lost", "node": node, "caller": "liveliness"})
 
-    def feed(self, topic: str, msg: Mapping[str, Any]) -> None:
-        """Queue one input message (what the bus subscription does); processed by ``step``."""
+    def feed(self, topic: str, msg: Mapping[str, Any], *, t: float | None = None) -> None:
+        """Queue one input message (what the bus subscription does); processed by ``step``.
+
+        ``t`` is when it arrived (default: the time of the step that takes it); a step takes
+        each input at its own time, clamped into the step's interval.
+        """
         with self._lock:
-            self._inputs.append((topic, dict(msg)))
+            self._inputs.append((topic, dict(msg), None if t is None else float(t)))
         if not self._wake.is_set():
             self._wake.set()
 
@@ -436,9 +445,6 @@ class AutonomicManager:
         is applied, the goal model re-evaluated (incrementally), the tactics selected,
         queued, started and checked.
         """
-        t = self.clock.now() if now is None else float(now)
-        t = max(t, self.now)
-        self.now = t
         with self._lock:
             self._drain()
             inputs = list(self._inputs)
@@ -446,13 +452,18 @@ class AutonomicManager:
             ops = list(self._ops)
             self._ops.clear()
         self._wake.clear()
+        # The clock is read after draining, so no input taken here arrived after ``t``.
+        t = self.clock.now() if now is None else float(now)
+        t = max(t, self.now)
+        previous, self.now = self.now, t
         a = self.analyzer
         if self._started_at is None:
             self._started_at = t
         a.warming_up = t - self._started_at < self.warmup
-        for topic, msg in inputs:
-            if self.monitor.take(topic, msg, t):
-                a.observe(topic, msg, t)
+        for topic, msg, t_in in inputs:
+            ti = t if t_in is None else min(max(t_in, previous), t)
+            if self.monitor.take(topic, msg, ti):
+                a.observe(topic, msg, ti)
         ticked = a.tick(t)
         changed = a.record_changes(t)
         for op in ops:
@@ -731,6 +742,14 @@ class AutonomicManager:
                 if isinstance(self.clock, SimClock) and self.clock.speed > 0:
                     wait = min(period / max(self.clock.speed, 0.05), 0.5)
                 self._wake.wait(wait)
+
+    def input_queues(self) -> list[Any]:
+        """The bounded queues of the monitored topics (pull subscribers)."""
+        return list(self._pull.values())
+
+    def wake(self) -> None:
+        """Wake ``spin()`` now."""
+        self._wake.set()
 
     def snapshot(self) -> dict[str, Any]:
         """What a display needs now: analysis, monitor, queue, flags."""

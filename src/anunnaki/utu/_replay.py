@@ -597,7 +597,7 @@ def _replay(
             if row.topic == OPERATOR:
                 _operator(manager, row.msg)
             else:
-                manager.feed(row.topic, row.msg)
+                manager.feed(row.topic, row.msg, t=row.t)
             fed += 1
             pending = row.t
         if pending is not None:

@@ -1,0 +1,185 @@
+"""``anunnaki run CONFIG`` and ``anunnaki node NAME --config CONFIG``: Utu as nodes.
+
+``run`` is the launch file of ROS: it brings up the configured Utu nodes (in this process,
+or with ``--processes`` one process per node), waits until each answers its readiness
+service, starts the managed system, prints one line per decision and stops everything on
+Ctrl-C/SIGTERM, at ``--until`` or when the scripted trace ends. ``node`` runs one node on
+its own, e.g. on another machine. See docs/running.md.
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import os
+import sys
+import threading
+from pathlib import Path
+from typing import Any
+
+from pydantic import ValidationError
+
+from anunnaki.bus import BusConfig, BusConfigError, open_bus
+from anunnaki.utu._launch import load_launch, run_launch, signals_to
+from anunnaki.utu._nodes import NODE_NAMES, build_node
+
+__all__ = ["add_parser", "run", "run_node"]
+
+
+def add_parser(sub: Any) -> None:
+    """Register the ``run`` and ``node`` sub-commands."""
+    p: argparse.ArgumentParser = sub.add_parser(
+        "run",
+        help="run Utu's nodes (and a scripted managed system) from a launch file",
+        description=(
+            "Start the Utu nodes a launch file (anunnaki: launch/1) or Utu configuration "
+            "(anunnaki: utu/1) names, in this process or one process per node, wait until "
+            "each answers /utu/<node>/ready, start the managed system, and print one line "
+            "per decision (time, kind, tactic, detail). Ctrl-C or SIGTERM stops everything "
+            "cleanly (exit 0). Configuration errors exit 2 with file:line."
+        ),
+    )
+    p.add_argument("config", help="launch file (launch/1) or Utu configuration (utu/1)")
+    p.add_argument(
+        "--processes",
+        action="store_true",
+        help="one process per node, over zenoh (default: all nodes in this process)",
+    )
+    p.add_argument(
+        "--until",
+        type=float,
+        metavar="SECONDS",
+        help="stop when the scripted trace reaches this time (without one: after SECONDS)",
+    )
+    p.add_argument("--speed", type=float, metavar="X", help="scripted replay speed (10: 10x)")
+    p.add_argument("--knowledge", metavar="FILE", help="knowledge base file (overrides)")
+    p.add_argument("--fresh", action="store_true", help="delete the knowledge base file first")
+    p.add_argument("-v", "--verbose", action="store_true", help="log what the nodes do")
+    p.set_defaults(run=run)
+
+    n: argparse.ArgumentParser = sub.add_parser(
+        "node",
+        help="run one Utu node (monitor, analyze, plan, execute, knowledge) on its own",
+        description=(
+            "Run one Utu node with the configuration of a launch file (or Utu configuration) "
+            "until Ctrl-C/SIGTERM. It joins the bus the file names (kind: zenoh), holds the "
+            "liveliness token /utu_<node> and answers /utu/<node>/ready once it is up."
+        ),
+    )
+    n.add_argument("name", choices=NODE_NAMES, help="the node to run")
+    n.add_argument("--config", "-c", required=True, help="launch file or Utu configuration")
+    n.add_argument("--knowledge", metavar="FILE", help="knowledge base file (overrides)")
+    n.add_argument("--rate", type=float, metavar="HZ", help="cycles per second (overrides)")
+    n.add_argument(
+        "--connect", action="append", metavar="ENDPOINT", help="zenoh endpoint to connect to"
+    )
+    n.add_argument(
+        "--listen", action="append", metavar="ENDPOINT", help="zenoh endpoint to listen on"
+    )
+    n.add_argument("--mode", choices=("peer", "client", "router"), help="zenoh mode")
+    n.add_argument("--bus-json", help=argparse.SUPPRESS)
+    n.add_argument("--exit-with-parent", action="store_true", help=argparse.SUPPRESS)
+    n.add_argument("-v", "--verbose", action="store_true", help="log what the node does")
+    n.set_defaults(run=run_node)
+
+
+def _logging(verbose: bool) -> None:
+    logging.basicConfig(
+        level=logging.INFO if verbose else logging.WARNING,
+        format="%(levelname)s %(name)s: %(message)s",
+        stream=sys.stderr,
+    )
+
+
+def run(args: argparse.Namespace) -> int:
+    """Run a launch file; returns the exit code."""
+    _logging(args.verbose)
+    launch = load_launch(args.config)
+    result = run_launch(
+        launch,
+        processes=args.processes,
+        speed=args.speed,
+        until=args.until,
+        knowledge=args.knowledge,
+        fresh=args.fresh,
+    )
+    return result.exit_code
+
+
+def _watch_parent(stop: threading.Event, wake: Any) -> None:
+    """Stop when standard input closes: the launching process is gone (no orphans)."""
+
+    def watch() -> None:
+        try:
+            while sys.stdin.buffer.read(4096):
+                pass
+        except (OSError, ValueError):
+            pass
+        stop.set()
+        wake()
+
+    threading.Thread(target=watch, name="anunnaki-parent-watch", daemon=True).start()
+
+
+def run_node(args: argparse.Namespace) -> int:
+    """Run one node until a signal; returns the exit code."""
+    _logging(args.verbose)
+    launch = load_launch(args.config, read_records=False)
+    utu = launch.utu
+    if args.knowledge:
+        utu = utu.model_copy(update={"knowledge": str(Path(args.knowledge).resolve())})
+    if args.bus_json:
+        bus_config = BusConfig.model_validate_json(args.bus_json)
+    else:
+        overrides: dict[str, Any] = {}
+        if args.connect:
+            overrides["connect"] = args.connect
+        if args.listen:
+            overrides["listen"] = args.listen
+        if args.mode:
+            overrides["mode"] = args.mode
+        if overrides:
+            overrides.setdefault("kind", "zenoh")
+        try:
+            bus_config = BusConfig.model_validate(
+                {**launch.bus.model_dump(exclude_unset=True), **overrides}
+            )
+        except ValidationError as exc:
+            first = exc.errors(include_url=False)[0]
+            where = ".".join(str(p) for p in first["loc"]) or "bus"
+            raise BusConfigError(f"bus option {where}: {first['msg']}") from None
+    if bus_config.kind == "inproc":
+        raise launch.error(
+            "a node on its own needs a bus other processes can reach, but the bus is inproc",
+            "bus",
+            hint="set bus: {kind: zenoh, ...} or give --connect ENDPOINT",
+        )
+    if args.name != "monitor" and utu.knowledge == ":memory:":
+        at = ("knowledge",) if launch.config.knowledge is not None else ("utu", "knowledge")
+        raise launch.error(
+            f"the {args.name} node shares the knowledge base with the other nodes, but it is "
+            "':memory:' (private to one process)",
+            *at,
+            hint="name a file: knowledge: run.db, or --knowledge run.db",
+        )
+    if args.name not in launch.nodes:
+        print(f"note: {args.name} is not among the launch file's nodes", file=sys.stderr)
+    rate = args.rate if args.rate is not None else launch.nodes.get(args.name, utu.rate)
+    parts = launch.parts
+    parts = type(parts)(utu, parts.sources, parts.model, parts.tactics, parts.warnings)
+    stop = threading.Event()
+    with signals_to(stop), open_bus(bus_config) as bus:
+        node = build_node(args.name, parts, bus=bus, rate=rate)
+        try:
+            if args.exit_with_parent:
+                _watch_parent(stop, node.wake)
+            where = ", ".join(bus.endpoints) or ", ".join(bus_config.connect)
+            print(
+                f"node {args.name} ready: pid {os.getpid()}, rate {rate:g} Hz, "
+                f"bus {bus.kind} {where}, knowledge {utu.knowledge}",
+                flush=True,
+            )
+            node.spin(stop)
+        finally:
+            node.close()
+    return 0
