@@ -11,7 +11,7 @@ setup:
 
 demo: setup
 	$(PY) -m anunnaki.cli.main check $(ROVER)/goals.yaml $(ROVER)/binding.yaml $(ROVER)/tactics.xml
-	$(PY) -m anunnaki.cli.main evaluate $(ROVER)/goals.yaml --binding $(ROVER)/binding.yaml --trace $(ROVER)/trace.jsonl
+	$(PY) -m anunnaki.cli.main run $(ROVER)/utu.yaml --speed 5
 
 test: setup
 	$(PY) -m ruff check src tests benchmarks examples
@@ -21,3 +21,4 @@ test: setup
 
 bench: setup
 	$(PY) benchmarks/goals.py
+	$(PY) benchmarks/reaction.py
