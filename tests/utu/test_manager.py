@@ -419,3 +419,36 @@ def test_bus_actuator_sees_refusals_in_generic_and_service_replies(bus) -> None:
     assert typed.ok and typed.reply == {"model": "fog-1"}
     timeout = act.request("/a/nobody", {}, 0.2)
     assert not timeout.ok
+
+
+def test_reload_service_swaps_tactics_while_spinning(bus, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
+    tactics = parse_tactics_yaml(TACTICS.format(cooldown=0, approval="false"))
+    m = AutonomicManager(rover_model(), tactics, bus=bus, actuator=RecordingActuator())
+    stop = threading.Event()
+    spinner = threading.Thread(target=m.spin, args=(stop,), kwargs={"rate": 100})
+    spinner.start()
+    try:
+        good = tmp_path / "good.yaml"
+        good.write_text(
+            TACTICS.format(cooldown=0, approval="false").replace("name: beep", "name: chirp")
+        )
+        bad = tmp_path / "bad.yaml"
+        bad.write_text("anunnaki: tactics/1\ntactics: [{name: x}]\n")
+        assert bus.request("/utu/reload", {"tactics": str(bad), "caller": "ops"}).to_body()["ok"]
+        assert bus.request("/utu/reload", {"tactics": str(good), "caller": "ops"}).to_body()["ok"]
+        assert bus.request("/utu/reload", {"caller": "ops"}).to_body()["ok"] is False
+        deadline = time.monotonic() + 10
+        while time.monotonic() < deadline and {t.name for t in m.tactics.tactics} != {
+            "hand-over",
+            "chirp",
+        }:
+            time.sleep(0.01)
+    finally:
+        stop.set()
+        spinner.join(5)
+    kinds_ = [d.kind for d in m.knowledge.decisions()]
+    assert kinds_.count("reload_requested") == 2
+    assert "reload_refused" in kinds_ and "reloaded" in kinds_
+    assert kinds_.index("reload_refused") < kinds_.index("reloaded")
+    assert {t.name for t in m.tactics.tactics} == {"hand-over", "chirp"}
+    m.close()

@@ -329,6 +329,7 @@ class AutonomicManager:
             "/utu/pause": lambda m: self._op_service("pause", m),
             "/utu/resume": lambda m: self._op_service("resume", m),
             "/utu/approve": lambda m: self._op_service("approve", m),
+            "/utu/reload": lambda m: self._op_service("reload", m),
             "/utu/ready": lambda m: {"ready": True, "node": self.name},
             "/utu/knowledge/query": self._query,
         }
@@ -418,6 +419,11 @@ class AutonomicManager:
             entry["approve"] = bool(body.get("approve", True))
         if op == "run_stop":
             entry["reason"] = str(body.get("reason", "operator"))
+        if op == "reload":
+            files = {k: body.get(k) for k in ("goal_model", "binding", "tactics")}
+            if not any(isinstance(v, str) for v in files.values()):
+                return {"ok": False, "error": "give goal_model, binding and/or tactics paths"}
+            entry.update({k: v for k, v in files.items() if isinstance(v, str)})
         self._enqueue_op(entry)
         return {"ok": True, "queued": op, "caller": caller}
 
@@ -432,6 +438,21 @@ class AutonomicManager:
     def approve(self, tactic: str, *, approve: bool = True, caller: str = "api") -> None:
         """Approve (or reject) a pending tactic (applied at the next step)."""
         self._enqueue_op({"op": "approve", "caller": caller, "tactic": tactic, "approve": approve})
+
+    def request_reload(
+        self,
+        *,
+        goal_model: str | None = None,
+        binding: str | None = None,
+        tactics: str | None = None,
+        caller: str = "api",
+    ) -> None:
+        """Ask for a hot reload at the next step (thread-safe, unlike :meth:`reload`)."""
+        op: dict[str, Any] = {"op": "reload", "caller": caller}
+        for key, value in (("goal_model", goal_model), ("binding", binding), ("tactics", tactics)):
+            if value is not None:
+                op[key] = value
+        self._enqueue_op(op)
 
     def run_stop(self, *, caller: str = "api", reason: str = "operator") -> None:
         """Halt adaptation and stop the managed system (applied at the next step)."""
@@ -551,6 +572,14 @@ class AutonomicManager:
                 self.knowledge.record_decision(
                     t, "operator_refused", str(op.get("tactic")), caller=caller, reason=result
                 )
+        elif kind == "reload":
+            self.knowledge.record_decision(t, "reload_requested", None, caller=caller)
+            self.reload(
+                goal_model=op.get("goal_model"),
+                binding=op.get("binding"),
+                tactics=op.get("tactics"),
+                now=t,
+            )
         elif kind == "node_lost":
             node = str(op.get("node"))
             agents = [a for a in self.model.agents.values() if a.node == node]

@@ -95,6 +95,7 @@ KINDS: tuple[str, ...] = (
     "resumed",
     "reloaded",
     "reload_refused",
+    "reload_requested",
     "notify_result",
 )
 """Every kind of decision the manager records (docs/decision-log.md describes each)."""
