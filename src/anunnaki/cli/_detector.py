@@ -1,0 +1,407 @@
+"""``anunnaki make-dataset | train-detector | evaluate-detector``: data and the default LEC.
+
+* ``make-dataset rover --out DIR`` — render a labelled dataset from the simulated scenes,
+  split by scene layout (COCO JSON per split, PNG images);
+* ``train-detector --data DIR --out MODEL.safetensors`` — train the CenterNet detector,
+  choose its score threshold on the validation split, report validation and test figures
+  and save weights + sidecar;
+* ``evaluate-detector MODEL --data DIR`` — precision/recall/F1 on a split, optionally under
+  a phenomenon, with the drop relative to clean data and the behaviour category.
+
+See docs/detector.md.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import time
+from pathlib import Path
+from typing import Any
+
+from rich.console import Console
+from rich.table import Table
+
+from anunnaki.errors import AnunnakiError
+
+_CATEGORY = {0: "unaffected", 1: "degraded", 2: "compromised"}
+
+
+def add_parser(sub: Any) -> None:
+    """Register the three sub-commands."""
+    _add_make(sub)
+    _add_train(sub)
+    _add_evaluate(sub)
+
+
+# -- argument types --------------------------------------------------------------------------
+
+
+def _layouts(text: str) -> list[int]:
+    """``0-39``, ``1,3,5`` or ``0-9,20-29`` → a list of layout numbers."""
+    out: list[int] = []
+    for raw in text.split(","):
+        part = raw.strip()
+        if not part:
+            continue
+        try:
+            if "-" in part:
+                lo, hi = (int(v) for v in part.split("-", 1))
+                if hi < lo:
+                    raise ValueError
+                out.extend(range(lo, hi + 1))
+            else:
+                out.append(int(part))
+        except ValueError:
+            raise argparse.ArgumentTypeError(
+                f"bad layout list {text!r}; write e.g. 0-39 or 1,3,5 or 0-9,20-29"
+            ) from None
+    if any(v < 0 for v in out):
+        raise argparse.ArgumentTypeError(f"layouts are numbers >= 0, got {text!r}")
+    return out
+
+
+def _positive(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not an integer: {text!r}") from None
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"must be at least 1, got {value}")
+    return value
+
+
+def _unit(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
+    if not (math.isfinite(value) and 0.0 <= value <= 1.0):
+        raise argparse.ArgumentTypeError(f"must be in [0, 1], got {text}")
+    return value
+
+
+def _size(text: str) -> tuple[int, int]:
+    try:
+        w, h = (int(v) for v in text.lower().split("x"))
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"expected WIDTHxHEIGHT, e.g. 320x240, got {text!r}"
+        ) from None
+    if w < 16 or h < 16:
+        raise argparse.ArgumentTypeError(f"size must be at least 16x16, got {text}")
+    return w, h
+
+
+def _params(text: str) -> dict[str, float]:
+    out: dict[str, float] = {}
+    for part in text.split(","):
+        name, sep, value = part.partition("=")
+        try:
+            if not sep or not name.strip():
+                raise ValueError
+            out[name.strip()] = float(value)
+        except ValueError:
+            raise argparse.ArgumentTypeError(
+                f"bad parameters {text!r}; write e.g. density=4,intensity=0.3"
+            ) from None
+    return out
+
+
+def _console() -> Console:
+    console = Console(highlight=False)
+    return console if console.is_terminal else Console(highlight=False, width=120)
+
+
+# -- make-dataset ----------------------------------------------------------------------------
+
+
+def _add_make(sub: Any) -> None:
+    p: argparse.ArgumentParser = sub.add_parser(
+        "make-dataset",
+        help="render a labelled dataset (COCO, split by scene layout) from a simulated scene",
+        description=(
+            "Render labelled frames of the simulated rover or UAV scenes into DIR/images/*.png "
+            "with one COCO JSON per split (train.json, val.json, test.json). Each scene "
+            "layout goes to exactly one split. Defaults: layouts 0-39 / 40-43 / 44-53 at 50 "
+            "frames each = 2000 / 200 / 500 images."
+        ),
+    )
+    p.add_argument("platform", choices=("rover", "uav"), help="which simulated scene")
+    p.add_argument("--out", "-o", required=True, help="output folder")
+    p.add_argument("--train-layouts", type=_layouts, default=list(range(0, 40)), metavar="L")
+    p.add_argument("--val-layouts", type=_layouts, default=list(range(40, 44)), metavar="L")
+    p.add_argument("--test-layouts", type=_layouts, default=list(range(44, 54)), metavar="L")
+    p.add_argument("--per-layout", type=_positive, default=50, help="frames per layout (50)")
+    p.add_argument("--width", type=_positive, default=128, help="image width (128)")
+    p.add_argument("--height", type=_positive, default=128, help="image height (128)")
+    p.add_argument("--seed", type=int, default=0, help="camera/light/pose seed (0)")
+    p.add_argument("--workers", type=_positive, default=2, help="rendering processes (2)")
+    p.add_argument("--overwrite", action="store_true", help="replace an existing dataset")
+    p.set_defaults(run=_run_make)
+
+
+def _run_make(args: argparse.Namespace) -> int:
+    from anunnaki.datasets import load_split, make_dataset
+
+    console = _console()
+    start = time.perf_counter()
+    paths = make_dataset(
+        args.platform,
+        args.out,
+        train_layouts=args.train_layouts,
+        val_layouts=args.val_layouts,
+        test_layouts=args.test_layouts,
+        per_layout=args.per_layout,
+        width=args.width,
+        height=args.height,
+        seed=args.seed,
+        workers=args.workers,
+        progress=console.is_terminal,
+        overwrite=args.overwrite,
+    )
+    seconds = time.perf_counter() - start
+    table = Table(title=f"{args.platform} dataset in {args.out} ({seconds:.0f} s)")
+    for col in ("split", "layouts", "images", "boxes", "per class"):
+        table.add_column(col, justify="right" if col in ("images", "boxes") else "left")
+    for split, path in paths.items():
+        ds = load_split(path.parent, split)
+        layouts = getattr(args, f"{split}_layouts")
+        counts = ", ".join(f"{k} {v}" for k, v in ds.class_counts().items())
+        table.add_row(split, _span(layouts), str(len(ds)), str(ds.num_boxes), counts)
+    console.print(table)
+    return 0
+
+
+def _span(layouts: list[int]) -> str:
+    if layouts and layouts == list(range(layouts[0], layouts[-1] + 1)):
+        return f"{layouts[0]}-{layouts[-1]}"
+    return ",".join(map(str, layouts))
+
+
+# -- train-detector --------------------------------------------------------------------------
+
+
+def _add_train(sub: Any) -> None:
+    p: argparse.ArgumentParser = sub.add_parser(
+        "train-detector",
+        help="train the CenterNet detector on a dataset folder and save it (safetensors)",
+        description=(
+            "Train the default LEC (a compact CenterNet-style detector) on DATA's train split, "
+            "choose the score threshold that maximises F1 on the val split, measure the test "
+            "split, and save OUT (.safetensors weights + .json sidecar with the metrics). "
+            "--augment trains a robust per-domain model by applying phenomena at random "
+            "strengths (see docs/detector.md)."
+        ),
+    )
+    p.add_argument("--data", "-d", required=True, help="dataset folder (train/val/test)")
+    p.add_argument("--out", "-o", required=True, help="model file NAME.safetensors")
+    p.add_argument("--epochs", type=_positive, default=20, help="passes over the data (20)")
+    p.add_argument("--seed", type=int, default=0, help="seed for weights/order/augment (0)")
+    p.add_argument("--threads", type=_positive, default=2, help="torch threads (2)")
+    p.add_argument("--domain", default="default", help="the model's domain (default)")
+    p.add_argument("--model-id", help="model id (default: OUT's file name without suffix)")
+    p.add_argument(
+        "--augment",
+        nargs="+",
+        default=[],
+        metavar="PHENOMENON",
+        help="phenomena applied at random strengths during training, e.g. fog raindrop",
+    )
+    p.add_argument(
+        "--augment-prob", type=_unit, default=0.8, help="share of images augmented (0.8)"
+    )
+    p.add_argument("--batch-size", type=_positive, default=32, help="images per step (32)")
+    p.add_argument("--lr", type=float, default=3e-3, help="peak learning rate (3e-3)")
+    p.add_argument("--width", type=_positive, default=16, help="network base width (16)")
+    p.add_argument("--input-size", type=_size, help="WIDTHxHEIGHT (default: the images')")
+    p.add_argument("--json", action="store_true", help="print the sidecar as JSON at the end")
+    p.set_defaults(run=_run_train)
+
+
+def _run_train(args: argparse.Namespace) -> int:
+    from rich.progress import (
+        BarColumn,
+        MofNCompleteColumn,
+        Progress,
+        TextColumn,
+        TimeElapsedColumn,
+        TimeRemainingColumn,
+    )
+
+    from anunnaki.datasets import load_split
+    from anunnaki.lec import TrainConfig, read_card, save_detector, train_detector
+    from anunnaki.phenomena import get_phenomenon
+
+    for name in args.augment:
+        get_phenomenon(name)  # unknown names fail now, listing the valid ones
+    out = Path(args.out)
+    if out.suffix != ".safetensors":
+        raise AnunnakiError(f"--out {out}: a model file ends in .safetensors")
+    console = _console()
+    train = load_split(args.data, "train", cache=True)
+    val = load_split(args.data, "val", cache=True)
+    try:
+        test = load_split(args.data, "test", cache=True)
+    except AnunnakiError:
+        test = None
+    config = TrainConfig(
+        epochs=args.epochs,
+        batch_size=args.batch_size,
+        lr=args.lr,
+        width=args.width,
+        seed=args.seed,
+        threads=args.threads,
+        input_size=args.input_size,
+        augment=tuple(args.augment),
+        augment_prob=args.augment_prob,
+        model_id=args.model_id or out.stem,
+        domain=args.domain,
+    )
+    console.print(
+        f"training on {len(train)} images ({train.num_boxes} boxes, classes "
+        f"{', '.join(train.classes)}); val {len(val)}, test {len(test) if test else 0}; "
+        f"{args.epochs} epochs, {args.threads} threads"
+        + (f", augment {' '.join(args.augment)}" if args.augment else "")
+    )
+    with Progress(
+        TextColumn("epoch {task.fields[epoch]}"),
+        BarColumn(),
+        MofNCompleteColumn(),
+        TextColumn("loss {task.fields[loss]:.3f}"),
+        TimeElapsedColumn(),
+        TimeRemainingColumn(),
+        console=console,
+        disable=not console.is_terminal,
+    ) as bar:
+        task = bar.add_task("train", total=None, epoch=0, loss=float("nan"))
+
+        def on_step(step: int, total: int, info: dict[str, float]) -> None:
+            bar.update(
+                task, completed=step, total=total, epoch=int(info["epoch"]), loss=info["loss"]
+            )
+
+        result = train_detector(train, val, config=config, test=test, on_step=on_step)
+    digest = save_detector(result.detector, out)
+    table = Table(title=f"{config.model_id} ({config.domain}), trained in {result.seconds:.0f} s")
+    for col in ("split", "precision", "recall", "F1", "tp", "fp", "fn"):
+        table.add_column(col, justify="left" if col == "split" else "right")
+    for split, m in (("val", result.val), ("test", result.test)):
+        if m is not None:
+            table.add_row(
+                split, f"{m.precision:.3f}", f"{m.recall:.3f}", f"{m.f1:.3f}",
+                str(m.tp), str(m.fp), str(m.fn),
+            )  # fmt: skip
+    console.print(table)
+    console.print(
+        f"score threshold {result.threshold:.3f} (chosen on val); saved {out} "
+        f"({out.stat().st_size / 1e6:.2f} MB, sha256 {digest[:16]}…) and {out.with_suffix('.json')}"
+    )
+    if args.json:
+        print(json.dumps(read_card(out).model_dump(mode="json"), indent=2))
+    return 0
+
+
+# -- evaluate-detector -----------------------------------------------------------------------
+
+
+def _add_evaluate(sub: Any) -> None:
+    p: argparse.ArgumentParser = sub.add_parser(
+        "evaluate-detector",
+        help="precision/recall/F1 of a model on a dataset split, optionally under a phenomenon",
+        description=(
+            "Measure MODEL on a split of DATA with the F1 rule of docs/detector.md (IoU >= 0.5, "
+            "class-aware greedy matching, the model's own score threshold). With --phenomenon, "
+            "every image is perturbed first (at --strength or --params) and the drop relative "
+            "to clean data is printed with its behaviour category (0 < 5 %, 1 > 5 %, 2 > 10 %)."
+        ),
+    )
+    p.add_argument("model", help="model file (NAME.safetensors or NAME.json)")
+    p.add_argument("--data", "-d", required=True, help="dataset folder or COCO JSON")
+    p.add_argument("--split", default="test", help="train, val or test (test)")
+    p.add_argument("--phenomenon", "-p", help="e.g. fog, raindrop, hsl, fog+raindrop")
+    group = p.add_mutually_exclusive_group()
+    group.add_argument("--strength", type=_unit, help="phenomenon strength in [0, 1] (1.0)")
+    group.add_argument(
+        "--params", type=_params, help="exact parameters, e.g. density=4,intensity=0.3"
+    )
+    p.add_argument("--seed", type=int, default=0, help="phenomenon seed (image i: seed + i)")
+    p.add_argument("--threshold", type=_unit, help="score threshold (default: the model's)")
+    p.add_argument("--threads", type=_positive, default=2, help="torch threads (2)")
+    p.add_argument("--json", action="store_true", help="print one JSON object")
+    p.set_defaults(run=_run_evaluate)
+
+
+def _run_evaluate(args: argparse.Namespace) -> int:
+    from anunnaki.datasets import load_split
+    from anunnaki.lec import evaluate_detector, load_detector  # before torch: OMP policy
+    from anunnaki.phenomena import get_phenomenon
+
+    if args.phenomenon is None and (args.strength is not None or args.params is not None):
+        raise AnunnakiError("--strength and --params need --phenomenon")
+    phen = get_phenomenon(args.phenomenon) if args.phenomenon else None
+    params = phen.validate(args.params) if phen is not None and args.params else None
+    import torch
+
+    torch.set_num_threads(args.threads)
+    det = load_detector(args.model)
+    data = load_split(args.data, args.split)
+    if tuple(data.classes) != tuple(det.classes):
+        raise AnunnakiError(
+            f"{args.model}: the model's classes {det.classes} differ from the data's {data.classes}"
+        )
+    threshold = args.threshold
+    clean = evaluate_detector(det, data, score_threshold=threshold)
+    report: dict[str, Any] = {
+        "model": str(args.model),
+        "model_id": det.model_id,
+        "domain": det.domain,
+        "data": str(args.data),
+        "split": args.split,
+        "images": len(data),
+        "score_threshold": threshold if threshold is not None else det.score_threshold,  # type: ignore[attr-defined]
+        "clean": clean.as_dict(),
+    }
+    rows = [("clean", clean)]
+    if phen is not None:
+        used = (
+            params
+            if params is not None
+            else phen.strength_params(1.0 if args.strength is None else args.strength)
+        )
+        perturbed = evaluate_detector(
+            det, data, phenomenon=phen, params=used, seed=args.seed, score_threshold=threshold
+        )
+        drop = clean.f1 - perturbed.f1
+        rel = drop / clean.f1 if clean.f1 > 0 else 0.0
+        category = 2 if rel > 0.10 else 1 if rel > 0.05 else 0
+        report["phenomenon"] = {"name": phen.name, "params": used, "seed": args.seed}
+        report["perturbed"] = perturbed.as_dict()
+        report["f1_drop"] = drop
+        report["f1_drop_relative"] = rel
+        report["category"] = category
+        rows.append((phen.name, perturbed))
+    if args.json:
+        print(json.dumps(report))
+        return 0
+    console = _console()
+    table = Table(
+        title=f"{det.model_id} ({det.domain}) on {args.split} of {args.data}: {len(data)} images"
+    )
+    for col in ("condition", "precision", "recall", "F1", "tp", "fp", "fn"):
+        table.add_column(col, justify="left" if col == "condition" else "right")
+    for name, m in rows:
+        table.add_row(
+            name, f"{m.precision:.3f}", f"{m.recall:.3f}", f"{m.f1:.3f}",
+            str(m.tp), str(m.fp), str(m.fn),
+        )  # fmt: skip
+    console.print(table)
+    if phen is not None:
+        params_text = ", ".join(f"{k}={v:g}" for k, v in report["phenomenon"]["params"].items())
+        console.print(
+            f"{phen.name} ({params_text}): F1 drop {report['f1_drop']:.3f} "
+            f"({100 * report['f1_drop_relative']:.1f} % of clean) → category "
+            f"{report['category']} ({_CATEGORY[report['category']]})"
+        )
+    return 0

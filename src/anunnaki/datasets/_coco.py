@@ -1,0 +1,274 @@
+"""COCO detection JSON: import with element-precise errors, and export.
+
+The subset of COCO we read and write: ``categories`` (``id``, ``name``), ``images``
+(``id``, ``file_name``, ``width``, ``height``, plus any extra fields, kept as metadata) and
+``annotations`` (``id``, ``image_id``, ``category_id``, ``bbox`` = ``[x, y, width, height]``
+in pixels, optional ``iscrowd``). Labels are the categories' positions in the ``categories``
+list; crowd annotations (``iscrowd: 1``) are skipped, as COCO evaluation ignores them. Boxes
+that stick out of the image are clipped to it.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import shutil
+from collections.abc import Mapping
+from dataclasses import replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from anunnaki.datasets._dataset import Dataset, DatasetError, Record, write_image
+
+__all__ = ["coco_dict", "read_coco", "write_coco"]
+
+_MAX_JSON_BYTES = 512 * 1024 * 1024
+_BBOX_HINT = "bbox is [x, y, width, height] in pixels with width and height above 0"
+
+
+def _is_int(v: object) -> bool:
+    return isinstance(v, int) and not isinstance(v, bool)
+
+
+def _is_num(v: object) -> bool:
+    return isinstance(v, int | float) and not isinstance(v, bool) and math.isfinite(v)
+
+
+def _load_json(path: Path) -> Any:
+    if not path.is_file():
+        raise DatasetError("annotation file not found", path=path, hint="check the path")
+    if path.stat().st_size > _MAX_JSON_BYTES:
+        raise DatasetError("annotation file is larger than 512 MiB", path=path)
+    try:
+        return json.loads(path.read_text(encoding="utf-8"))
+    except json.JSONDecodeError as exc:
+        raise DatasetError(
+            f"not valid JSON: {exc.msg} (column {exc.colno})",
+            path=path,
+            line=exc.lineno,
+            hint="a COCO file is one JSON object with images, annotations and categories",
+        ) from None
+    except UnicodeDecodeError:
+        raise DatasetError("not UTF-8 text", path=path, hint="save it as UTF-8 JSON") from None
+
+
+def read_coco(
+    path: str | Path, *, images_dir: str | Path | None = None, cache: bool = False
+) -> Dataset:
+    """Read a COCO detection file into a :class:`Dataset`.
+
+    Args:
+        path: The JSON file.
+        images_dir: Folder the ``file_name`` s are relative to; by default ``images/`` next to
+            the JSON file when it exists, else the JSON file's folder.
+        cache: Keep decoded images in memory.
+
+    Raises:
+        DatasetError: The file is not JSON, a required element is missing or of the wrong
+            type, an id is duplicated, an annotation refers to an unknown image or category,
+            a bbox is not four finite numbers with positive size, or an image file is
+            missing. The message names the file and the element (``annotations[id=17].bbox``).
+
+    """
+    p = Path(path)
+    data = _load_json(p)
+
+    def fail(element: str, message: str, hint: str) -> DatasetError:
+        return DatasetError(message, path=p, element=element, hint=hint)
+
+    if not isinstance(data, dict):
+        raise fail("<root>", "expected a JSON object", "see docs/detector.md for the format")
+    for key in ("images", "annotations", "categories"):
+        if not isinstance(data.get(key), list):
+            raise fail(key, f"missing or not a list: {key!r}", "a COCO file has all three lists")
+    if images_dir is None:
+        root = p.parent / "images" if (p.parent / "images").is_dir() else p.parent
+    else:
+        root = Path(images_dir)
+
+    cat_index: dict[int, int] = {}
+    classes: list[str] = []
+    for i, cat in enumerate(data["categories"]):
+        where = f"categories[{i}]"
+        if not isinstance(cat, dict) or not _is_int(cat.get("id")):
+            raise fail(where, "a category needs an integer 'id'", 'e.g. {"id": 1, "name": "deer"}')
+        where = f"categories[id={cat['id']}]"
+        if not isinstance(cat.get("name"), str) or not cat["name"]:
+            raise fail(where, "a category needs a non-empty 'name'", 'e.g. "name": "deer"')
+        if cat["id"] in cat_index:
+            raise fail(where, "duplicate category id", "give every category its own id")
+        if cat["name"] in classes:
+            raise fail(where, f"duplicate category name {cat['name']!r}", "merge the categories")
+        cat_index[cat["id"]] = len(classes)
+        classes.append(cat["name"])
+    if not classes:
+        raise fail("categories", "no categories", "list the classes under 'categories'")
+
+    images: dict[int, dict[str, Any]] = {}
+    for i, img in enumerate(data["images"]):
+        if not isinstance(img, dict) or not _is_int(img.get("id")):
+            raise fail(f"images[{i}]", "an image needs an integer 'id'", "number the images")
+        where = f"images[id={img['id']}]"
+        if img["id"] in images:
+            raise fail(where, "duplicate image id", "give every image its own id")
+        if not isinstance(img.get("file_name"), str) or not img["file_name"]:
+            raise fail(where, "missing 'file_name'", "file_name is relative to the image folder")
+        for key in ("width", "height"):
+            if not _is_int(img.get(key)) or img[key] <= 0:
+                raise fail(
+                    f"{where}.{key}",
+                    f"{key} must be a positive integer, got {img.get(key)!r}",
+                    "width and height are the image size in pixels",
+                )
+        images[img["id"]] = img
+
+    boxes: dict[int, list[list[float]]] = {k: [] for k in images}
+    labels: dict[int, list[int]] = {k: [] for k in images}
+    seen: set[int] = set()
+    for i, ann in enumerate(data["annotations"]):
+        if not isinstance(ann, dict) or not _is_int(ann.get("id")):
+            raise fail(f"annotations[{i}]", "an annotation needs an integer 'id'", "number them")
+        where = f"annotations[id={ann['id']}]"
+        if ann["id"] in seen:
+            raise fail(where, "duplicate annotation id", "give every annotation its own id")
+        seen.add(ann["id"])
+        if ann.get("image_id") not in images or not _is_int(ann.get("image_id")):
+            raise fail(
+                f"{where}.image_id",
+                f"refers to image {ann.get('image_id')!r}, which is not in 'images'",
+                "add the image or remove the annotation",
+            )
+        if ann.get("category_id") not in cat_index or not _is_int(ann.get("category_id")):
+            raise fail(
+                f"{where}.category_id",
+                f"unknown category {ann.get('category_id')!r}; known ids: {sorted(cat_index)}",
+                "add the category or fix the id",
+            )
+        if ann.get("iscrowd", 0) not in (0, 1, False, True):
+            raise fail(f"{where}.iscrowd", "iscrowd must be 0 or 1", "use 0 for single objects")
+        bbox = ann.get("bbox")
+        if not isinstance(bbox, list) or len(bbox) != 4 or not all(_is_num(v) for v in bbox):
+            raise fail(f"{where}.bbox", f"expected four finite numbers, got {bbox!r}", _BBOX_HINT)
+        x, y, w, h = (float(v) for v in bbox)
+        if w <= 0 or h <= 0:
+            raise fail(f"{where}.bbox", f"width and height must be > 0, got {w} x {h}", _BBOX_HINT)
+        if ann.get("iscrowd", 0):
+            continue
+        img = images[ann["image_id"]]
+        x1, y1 = max(0.0, x), max(0.0, y)
+        x2, y2 = min(float(img["width"]), x + w), min(float(img["height"]), y + h)
+        if x2 <= x1 or y2 <= y1:
+            raise fail(
+                f"{where}.bbox",
+                f"box {bbox} lies outside the {img['width']}x{img['height']} image",
+                "bbox is [x, y, width, height] in pixels from the top-left corner",
+            )
+        boxes[ann["image_id"]].append([x1, y1, x2, y2])
+        labels[ann["image_id"]].append(cat_index[ann["category_id"]])
+
+    records = []
+    for image_id, img in images.items():
+        file = root / img["file_name"]
+        if not file.is_file():
+            raise fail(
+                f"images[id={image_id}].file_name",
+                f"image file {file} not found",
+                "pass images_dir= (CLI: --images) pointing at the folder of the images",
+            )
+        meta = {k: v for k, v in img.items() if k not in ("id", "file_name", "width", "height")}
+        records.append(
+            Record(
+                file_name=img["file_name"],
+                width=img["width"],
+                height=img["height"],
+                boxes=np.asarray(boxes[image_id], np.float32).reshape(-1, 4),
+                labels=np.asarray(labels[image_id], np.int64),
+                image_id=image_id,
+                path=file,
+                meta=meta,
+            )
+        )
+    return Dataset(classes, records, name=str(p), cache=cache)
+
+
+def coco_dict(ds: Dataset, *, info: Mapping[str, Any] | None = None) -> dict[str, Any]:
+    """The COCO JSON object of *ds* (category ids are label + 1, annotation ids from 1)."""
+    images, annotations = [], []
+    ann_id = 1
+    for k, r in enumerate(ds.records):
+        image_id = r.image_id if r.image_id else k + 1
+        images.append(
+            {
+                **dict(r.meta),
+                "id": image_id,
+                "file_name": r.file_name,
+                "width": r.width,
+                "height": r.height,
+            }
+        )
+        for box, label in zip(r.boxes.tolist(), r.labels.tolist(), strict=True):
+            x1, y1, x2, y2 = box
+            w, h = x2 - x1, y2 - y1
+            annotations.append(
+                {
+                    "id": ann_id,
+                    "image_id": image_id,
+                    "category_id": int(label) + 1,
+                    "bbox": [round(x1, 3), round(y1, 3), round(w, 3), round(h, 3)],
+                    "area": round(w * h, 3),
+                    "iscrowd": 0,
+                }
+            )
+            ann_id += 1
+    categories = [{"id": i + 1, "name": n} for i, n in enumerate(ds.classes)]
+    out: dict[str, Any] = {"info": dict(info or {}), "categories": categories}
+    out["images"] = images
+    out["annotations"] = annotations
+    return out
+
+
+def write_coco(
+    ds: Dataset,
+    path: str | Path,
+    *,
+    images_dir: str | Path | None = None,
+    info: Mapping[str, Any] | None = None,
+) -> Path:
+    """Write *ds* as COCO JSON at *path*, with its images in *images_dir*.
+
+    Args:
+        ds: The dataset.
+        path: The JSON file to write.
+        images_dir: Where the images go (default ``images/`` next to *path*); an image
+            already there is not rewritten, an in-memory one is saved as PNG, a file
+            elsewhere is copied.
+        info: The COCO ``info`` block (free-form).
+
+    Returns:
+        *path*.
+
+    """
+    p = Path(path)
+    root = Path(images_dir) if images_dir is not None else p.parent / "images"
+    root.mkdir(parents=True, exist_ok=True)
+    ids = [r.image_id for r in ds.records]
+    if len(set(ids)) != len(ids) or 0 in ids:
+        ds = Dataset(
+            ds.classes,
+            [replace(r, image_id=k + 1) for k, r in enumerate(ds.records)],
+            name=ds.name,
+        )
+    for i, r in enumerate(ds.records):
+        target = root / r.file_name
+        if r.path is not None and target.exists() and target.resolve() == r.path.resolve():
+            continue
+        target.parent.mkdir(parents=True, exist_ok=True)
+        if r.array is None and r.path is not None:
+            shutil.copyfile(r.path, target)
+        else:
+            write_image(target, ds.image(i))
+    p.parent.mkdir(parents=True, exist_ok=True)
+    p.write_text(json.dumps(coco_dict(ds, info=info)) + "\n", encoding="utf-8")
+    return p

@@ -1,0 +1,317 @@
+"""The labelled-image dataset every part of Anunnaki trains and assesses on.
+
+Why one small class: a dataset generated from the simulator, a COCO export of a real
+robot's images and a YOLO folder all become the same thing — a list of images with boxes
+and class labels — so training, evaluation, Enlil and Enki never care where data came from.
+Images are read lazily from disk (``cv2``), or held in memory for datasets made in code.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator, Mapping, Sequence
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Any, NamedTuple, overload
+
+import numpy as np
+import numpy.typing as npt
+
+from anunnaki.errors import AnunnakiError, ModelFileError
+
+__all__ = ["Dataset", "DatasetError", "Record", "Sample", "read_image", "write_image"]
+
+
+class DatasetError(ModelFileError):
+    """A dataset file (COCO JSON, YOLO label file, classes list, image) is missing or invalid.
+
+    Renders as ``file:line: element: message (hint: …)``; COCO errors name the element by
+    id (``annotations[id=17].bbox``), YOLO errors by ``file:line``.
+    """
+
+
+class Sample(NamedTuple):
+    """One labelled image.
+
+    Attributes:
+        image: ``(H, W, 3)`` ``uint8`` RGB.
+        boxes: ``[N, 4]`` ``float32`` ``x1, y1, x2, y2`` in pixels.
+        labels: ``[N]`` ``int64`` indices into the dataset's ``classes``.
+
+    """
+
+    image: npt.NDArray[np.uint8]
+    boxes: npt.NDArray[np.float32]
+    labels: npt.NDArray[np.int64]
+
+
+@dataclass(frozen=True)
+class Record:
+    """One image of a dataset without its pixels.
+
+    Attributes:
+        file_name: Name of the image relative to the dataset's image folder (the COCO
+            ``file_name``).
+        width: Image width in pixels.
+        height: Image height in pixels.
+        boxes: ``[N, 4]`` ``float32`` xyxy pixels.
+        labels: ``[N]`` ``int64`` class indices.
+        image_id: The COCO image id (unique within a dataset).
+        path: Where the image is on disk, or ``None`` for an in-memory image.
+        array: The image itself when held in memory.
+        meta: Extra fields (``layout``, ``seed``, ``t`` … for generated data).
+
+    """
+
+    file_name: str
+    width: int
+    height: int
+    boxes: npt.NDArray[np.float32]
+    labels: npt.NDArray[np.int64]
+    image_id: int = 0
+    path: Path | None = None
+    array: npt.NDArray[np.uint8] | None = field(default=None, repr=False)
+    meta: Mapping[str, Any] = field(default_factory=dict)
+
+
+def read_image(path: str | Path) -> npt.NDArray[np.uint8]:
+    """Read an image file as ``(H, W, 3)`` ``uint8`` RGB.
+
+    Raises:
+        DatasetError: The file is missing or not an image OpenCV can decode.
+
+    """
+    import cv2
+
+    p = Path(path)
+    data = np.fromfile(p, dtype=np.uint8) if p.is_file() else None
+    if data is None:
+        raise DatasetError("image file not found", path=p, hint="check the image folder")
+    image = cv2.imdecode(data, cv2.IMREAD_COLOR) if data.size else None
+    if image is None:
+        raise DatasetError("not an image OpenCV can read", path=p, hint="use PNG or JPEG files")
+    out: npt.NDArray[np.uint8] = np.ascontiguousarray(image[:, :, ::-1])
+    return out
+
+
+def write_image(path: str | Path, image: npt.NDArray[np.uint8]) -> None:
+    """Write an ``(H, W, 3)`` ``uint8`` RGB image; the suffix picks the format (``.png``)."""
+    import cv2
+
+    p = Path(path)
+    ok, buf = cv2.imencode(p.suffix or ".png", np.ascontiguousarray(image[:, :, ::-1]))
+    if not ok:  # pragma: no cover - OpenCV refuses only unknown suffixes
+        raise AnunnakiError(f"{p}: OpenCV cannot encode {p.suffix!r} images")
+    p.write_bytes(buf.tobytes())
+
+
+class Dataset:
+    """Images with boxes and class labels; indexing gives a :class:`Sample`.
+
+    Build one with :meth:`from_coco`, :meth:`from_yolo`, :meth:`from_arrays`, or
+    :func:`anunnaki.datasets.load_split` for a generated folder. ``len(ds)``, ``ds[i]``
+    (``image, boxes, labels``), iteration, :attr:`classes`, :meth:`subset` and
+    :meth:`truths` (labels without reading images) are the whole interface.
+
+    Args:
+        classes: Class names; labels index into them.
+        records: The images (see :class:`Record`).
+        name: A label for messages (usually the annotation file).
+        cache: Keep decoded images in memory after the first read (training reads each
+            image many times).
+
+    """
+
+    def __init__(
+        self,
+        classes: Sequence[str],
+        records: Sequence[Record],
+        *,
+        name: str = "",
+        cache: bool = False,
+    ) -> None:
+        self.classes: tuple[str, ...] = tuple(classes)
+        if not self.classes:
+            raise AnunnakiError(f"{name or 'dataset'}: a dataset needs at least one class")
+        if len(set(self.classes)) != len(self.classes):
+            raise AnunnakiError(f"{name or 'dataset'}: duplicate class names in {self.classes}")
+        self.records: tuple[Record, ...] = tuple(records)
+        for r in self.records:
+            if len(r.labels) and (r.labels.min() < 0 or r.labels.max() >= len(self.classes)):
+                raise AnunnakiError(
+                    f"{name or 'dataset'}: image {r.file_name} has a label outside "
+                    f"0..{len(self.classes) - 1}"
+                )
+        self.name = name
+        self.cache = cache
+        self._cache: dict[int, npt.NDArray[np.uint8]] = {}
+
+    def __repr__(self) -> str:
+        return (
+            f"Dataset({self.name or 'in-memory'}: {len(self)} images, "
+            f"{self.num_boxes} boxes, classes={self.classes})"
+        )
+
+    def __len__(self) -> int:
+        return len(self.records)
+
+    @overload
+    def __getitem__(self, index: int) -> Sample: ...
+
+    @overload
+    def __getitem__(self, index: slice) -> Dataset: ...
+
+    def __getitem__(self, index: int | slice) -> Sample | Dataset:
+        """``ds[i]`` → :class:`Sample`; ``ds[a:b]`` → a :class:`Dataset` (like :meth:`subset`)."""
+        if isinstance(index, slice):
+            return self.subset(range(len(self))[index])
+        record = self.records[index]
+        return Sample(self.image(index), record.boxes, record.labels)
+
+    def __iter__(self) -> Iterator[Sample]:
+        for i in range(len(self)):
+            yield self[i]
+
+    @property
+    def num_boxes(self) -> int:
+        """Number of ground-truth boxes over all images."""
+        return sum(len(r.labels) for r in self.records)
+
+    def image(self, index: int) -> npt.NDArray[np.uint8]:
+        """The ``(H, W, 3)`` ``uint8`` RGB pixels of image *index*.
+
+        Raises:
+            DatasetError: The file is unreadable or its size differs from the annotation's.
+
+        """
+        i = range(len(self))[index]
+        if i in self._cache:
+            return self._cache[i]
+        record = self.records[i]
+        if record.array is not None:
+            return record.array
+        if record.path is None:  # pragma: no cover - constructors always set one
+            raise AnunnakiError(f"image {record.file_name} has neither pixels nor a path")
+        image = read_image(record.path)
+        if image.shape[:2] != (record.height, record.width):
+            raise DatasetError(
+                f"image is {image.shape[1]}x{image.shape[0]} but the annotations say "
+                f"{record.width}x{record.height}",
+                path=record.path,
+                element=f"images[id={record.image_id}]",
+                hint="fix width/height in the annotation file or use the original image",
+            )
+        if self.cache:
+            self._cache[i] = image
+        return image
+
+    def truths(self) -> list[tuple[npt.NDArray[np.float32], npt.NDArray[np.int64]]]:
+        """``(boxes, labels)`` of every image, without reading pixels (for the metrics)."""
+        return [(r.boxes, r.labels) for r in self.records]
+
+    def subset(self, indices: Sequence[int] | npt.NDArray[np.integer] | range) -> Dataset:
+        """A dataset of the images at *indices* (in that order), sharing the cache policy."""
+        picked = [self.records[int(i)] for i in indices]
+        return Dataset(self.classes, picked, name=self.name, cache=self.cache)
+
+    def class_counts(self) -> dict[str, int]:
+        """Number of boxes per class name."""
+        counts = np.zeros(len(self.classes), np.int64)
+        for r in self.records:
+            counts += np.bincount(r.labels, minlength=len(self.classes))
+        return {c: int(n) for c, n in zip(self.classes, counts, strict=True)}
+
+    def in_memory(self) -> Dataset:
+        """A copy with every image decoded and held in memory."""
+        records = [replace(r, array=self.image(i)) for i, r in enumerate(self.records)]
+        return Dataset(self.classes, records, name=self.name)
+
+    # -- constructors and writers (see _coco.py and _yolo.py) ------------------------------
+
+    @classmethod
+    def from_arrays(
+        cls,
+        images: Sequence[npt.NDArray[np.uint8]],
+        boxes: Sequence[npt.ArrayLike],
+        labels: Sequence[npt.ArrayLike],
+        classes: Sequence[str],
+        *,
+        name: str = "",
+        meta: Sequence[Mapping[str, Any]] | None = None,
+    ) -> Dataset:
+        """A dataset held in memory.
+
+        Args:
+            images: ``(H, W, 3)`` ``uint8`` RGB images.
+            boxes: ``[N_i, 4]`` xyxy pixel boxes per image.
+            labels: ``[N_i]`` class indices per image.
+            classes: Class names.
+            name: A label for messages.
+            meta: Extra fields per image (kept in COCO exports).
+
+        """
+        if not len(images) == len(boxes) == len(labels):
+            raise AnunnakiError(
+                f"{len(images)} images, {len(boxes)} box lists and {len(labels)} label lists; "
+                "give one of each per image"
+            )
+        records = []
+        for i, (raw, b, lab) in enumerate(zip(images, boxes, labels, strict=True)):
+            image = np.asarray(raw)
+            if image.ndim != 3 or image.shape[2] != 3 or image.dtype != np.uint8:
+                raise AnunnakiError(
+                    f"image {i}: expected (H, W, 3) uint8 RGB, got {image.shape} {image.dtype}"
+                )
+            bx = np.asarray(b, dtype=np.float32).reshape(-1, 4)
+            lb = np.asarray(lab, dtype=np.int64).reshape(-1)
+            if len(bx) != len(lb):
+                raise AnunnakiError(f"image {i}: {len(bx)} boxes but {len(lb)} labels")
+            records.append(
+                Record(
+                    file_name=f"{i:06d}.png",
+                    width=int(image.shape[1]),
+                    height=int(image.shape[0]),
+                    boxes=bx,
+                    labels=lb,
+                    image_id=i + 1,
+                    array=image,
+                    meta=dict(meta[i]) if meta is not None else {},
+                )
+            )
+        return cls(classes, records, name=name)
+
+    @classmethod
+    def from_coco(
+        cls, path: str | Path, *, images_dir: str | Path | None = None, cache: bool = False
+    ) -> Dataset:
+        """Read a COCO detection JSON (see :func:`anunnaki.datasets.read_coco`)."""
+        from anunnaki.datasets._coco import read_coco
+
+        return read_coco(path, images_dir=images_dir, cache=cache)
+
+    def to_coco(
+        self, path: str | Path, *, images_dir: str | Path | None = None, info: Any = None
+    ) -> Path:
+        """Write COCO JSON and the images (see :func:`anunnaki.datasets.write_coco`)."""
+        from anunnaki.datasets._coco import write_coco
+
+        return write_coco(self, path, images_dir=images_dir, info=info)
+
+    @classmethod
+    def from_yolo(
+        cls,
+        images_dir: str | Path,
+        *,
+        labels_dir: str | Path | None = None,
+        classes: Sequence[str] | str | Path | None = None,
+        cache: bool = False,
+    ) -> Dataset:
+        """Read a YOLO folder (see :func:`anunnaki.datasets.read_yolo`)."""
+        from anunnaki.datasets._yolo import read_yolo
+
+        return read_yolo(images_dir, labels_dir=labels_dir, classes=classes, cache=cache)
+
+    def to_yolo(self, out_dir: str | Path) -> Path:
+        """Write a YOLO folder (see :func:`anunnaki.datasets.write_yolo`)."""
+        from anunnaki.datasets._yolo import write_yolo
+
+        return write_yolo(self, out_dir)

@@ -1,0 +1,165 @@
+"""Learning-enabled components (LECs): the detector interface, the default detector, metrics.
+
+Any model becomes an LEC by implementing :class:`Detector` — ``model_id``, ``classes``,
+``domain`` and ``detect(images) -> list[DetectionResult]`` (``uint8`` ``(H, W, 3)`` RGB in,
+one result per image out: ``boxes [N, 4]`` ``float32`` xyxy pixels, ``labels [N]`` ``int64``,
+``scores [N]`` ``float32`` in [0, 1]). The LEC node, the model manager and the assessors use
+nothing else.
+
+The default LEC is :class:`CenterNetDetector`, a compact CenterNet-style heat-map detector
+in plain PyTorch (``anunnaki train-detector``). Model files are safe: safetensors weights plus
+a JSON sidecar with the architecture, classes, input size, score threshold, domain, metrics
+and the weights' sha256; :func:`load_detector` checks the hash before reading any tensor and
+never unpickles anything::
+
+    from anunnaki.lec import load_detector, f1_at_iou
+
+    det = load_detector("examples/models/rover-default.safetensors")
+    results = det.detect(frames)                      # list[DetectionResult]
+    m = f1_at_iou(results, truths, score_threshold=0.0)   # Metrics(precision, recall, f1, …)
+
+The F1 rule used everywhere (``docs/detector.md``): class-aware greedy matching in
+descending score order at IoU ≥ 0.5, each truth matched at most once, the score threshold
+chosen on the validation split (:func:`choose_threshold`) and F1 reported on the test split.
+
+Importing this package needs numpy and pydantic only; torch is imported when a CenterNet is
+built, loaded or trained (the ``vision`` extra). It sets ``OMP_WAIT_POLICY=PASSIVE`` unless
+set (see the comment in the source): inference shares the CPU with other nodes.
+"""
+
+from __future__ import annotations
+
+import os
+from typing import TYPE_CHECKING, Any
+
+# OpenMP threads that spin while they wait make a CPU shared with other processes (a robot's
+# other nodes, a test suite) several times slower: measured on the 2-core dev machine under
+# load 6, two spinning threads cost 5x the CPU of one and took 2x longer per training step
+# than one thread; with passive waiting two threads took a third of the one-thread time.
+# Set here, before any submodule imports torch; effective only if torch is not loaded yet,
+# and a value the user set wins.
+os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
+
+from anunnaki.lec._detector import (
+    SIDECAR_FORMAT,
+    DetectionResult,
+    Detector,
+    DetectorError,
+    DetectorLoadError,
+    ImageBatch,
+    ModelCard,
+    as_image_list,
+    load_detector,
+    read_card,
+    save_detector,
+    sha256_file,
+    sidecar_path,
+    weights_path,
+)
+from anunnaki.lec._metrics import Metrics, Truth, box_iou, choose_threshold, f1_at_iou
+from anunnaki.lec._node import (
+    ACTIVE_TOPIC,
+    NODE_NAME,
+    SWAP_SERVICE,
+    LecNode,
+    LecNodeStats,
+    SwapResult,
+    decode_image,
+    detections_topic,
+)
+from anunnaki.lec._registry import (
+    DEFAULT_DOMAIN,
+    REGISTRY_FORMAT,
+    DetectorLike,
+    ModelIntegrityError,
+    ModelLoadError,
+    ModelRegistry,
+    ModelRegistryError,
+    ModelSpec,
+    UnknownModelError,
+    load_registry,
+    parse_registry,
+)
+
+if TYPE_CHECKING:
+    from anunnaki.lec._centernet import CenterNet, CenterNetDetector
+    from anunnaki.lec._train import (
+        Augmenter,
+        TrainConfig,
+        TrainResult,
+        evaluate_detector,
+        predict,
+        train_detector,
+    )
+
+__all__ = [
+    "ACTIVE_TOPIC",
+    "DEFAULT_DOMAIN",
+    "NODE_NAME",
+    "REGISTRY_FORMAT",
+    "SIDECAR_FORMAT",
+    "SWAP_SERVICE",
+    "Augmenter",
+    "CenterNet",
+    "CenterNetDetector",
+    "DetectionResult",
+    "Detector",
+    "DetectorError",
+    "DetectorLike",
+    "DetectorLoadError",
+    "ImageBatch",
+    "LecNode",
+    "LecNodeStats",
+    "Metrics",
+    "ModelCard",
+    "ModelIntegrityError",
+    "ModelLoadError",
+    "ModelRegistry",
+    "ModelRegistryError",
+    "ModelSpec",
+    "SwapResult",
+    "TrainConfig",
+    "TrainResult",
+    "Truth",
+    "UnknownModelError",
+    "as_image_list",
+    "box_iou",
+    "choose_threshold",
+    "decode_image",
+    "detections_topic",
+    "evaluate_detector",
+    "f1_at_iou",
+    "load_detector",
+    "load_registry",
+    "parse_registry",
+    "predict",
+    "read_card",
+    "save_detector",
+    "sha256_file",
+    "sidecar_path",
+    "train_detector",
+    "weights_path",
+]
+
+_LAZY = {
+    "CenterNet": "anunnaki.lec._centernet",
+    "CenterNetDetector": "anunnaki.lec._centernet",
+    "Augmenter": "anunnaki.lec._train",
+    "TrainConfig": "anunnaki.lec._train",
+    "TrainResult": "anunnaki.lec._train",
+    "evaluate_detector": "anunnaki.lec._train",
+    "predict": "anunnaki.lec._train",
+    "train_detector": "anunnaki.lec._train",
+}
+
+
+def __getattr__(name: str) -> Any:
+    """Import the torch-based names on first use (``import anunnaki.lec`` stays light)."""
+    module = _LAZY.get(name)
+    if module is None:
+        raise AttributeError(f"module 'anunnaki.lec' has no attribute {name!r}")
+    import importlib
+
+    value = getattr(importlib.import_module(module), name)
+    globals()[name] = value
+    return value

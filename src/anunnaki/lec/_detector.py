@@ -1,0 +1,409 @@
+"""The detector interface every LEC implements, and safe model files.
+
+Why a ``Protocol`` and not a base class: any model — our CenterNet, a YOLO wrapper, an ONNX
+session — becomes an LEC by having four attributes and one method; nothing has to inherit
+from Anunnaki. The LEC node, the model manager and the assessors only ever see this face.
+
+Model files are two files side by side: ``NAME.safetensors`` (the weights; safetensors holds
+plain tensors and cannot run code when loaded) and ``NAME.json`` (the sidecar: architecture,
+classes, input size, score threshold, domain, metrics and the weights' sha256). Pickle is
+never used, so a model file from a stranger cannot execute anything; a changed or corrupt
+weights file is refused before any tensor is read.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import uuid
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Protocol, runtime_checkable
+
+import numpy as np
+import numpy.typing as npt
+from pydantic import BaseModel, ConfigDict, Field, ValidationError
+
+from anunnaki.errors import AnunnakiError, ModelFileError
+
+__all__ = [
+    "SIDECAR_FORMAT",
+    "DetectionResult",
+    "Detector",
+    "DetectorError",
+    "DetectorLoadError",
+    "ImageBatch",
+    "ModelCard",
+    "as_image_list",
+    "load_detector",
+    "read_card",
+    "save_detector",
+    "sha256_file",
+    "sidecar_path",
+    "weights_path",
+]
+
+#: Value of ``format`` in every sidecar this module writes.
+SIDECAR_FORMAT = "anunnaki-detector"
+_FORMAT_VERSION = 1
+_MAX_SIDECAR_BYTES = 1 << 20
+
+#: What :meth:`Detector.detect` accepts: one ``(H, W, 3)`` image, a ``(B, H, W, 3)`` batch,
+#: or a sequence of ``(H, W, 3)`` images (sizes may differ), all ``uint8`` RGB.
+ImageBatch = npt.NDArray[np.uint8] | Sequence[npt.NDArray[np.uint8]]
+
+
+class DetectorError(AnunnakiError, ValueError):
+    """A detector was used wrongly (bad images, bad arguments, an object that cannot be saved)."""
+
+
+class DetectorLoadError(ModelFileError):
+    """A model file (weights or sidecar) is missing, corrupt, changed or of an unknown kind.
+
+    Renders as ``file: element: message (hint: …)`` like every other user-file error.
+    """
+
+
+@dataclass(frozen=True)
+class DetectionResult:
+    """The detections in one image.
+
+    Attributes:
+        boxes: ``[N, 4]`` ``float32`` boxes ``x1, y1, x2, y2`` in pixels of the input image
+            (``x2 > x1``; ``x`` grows to the right, ``y`` downwards).
+        labels: ``[N]`` ``int64`` class indices into the detector's ``classes``.
+        scores: ``[N]`` ``float32`` confidences in ``[0, 1]``.
+
+    Arrays are converted to those dtypes on construction; mismatched lengths raise
+    :class:`DetectorError`.
+
+    """
+
+    boxes: npt.NDArray[np.float32]
+    labels: npt.NDArray[np.int64]
+    scores: npt.NDArray[np.float32]
+
+    def __post_init__(self) -> None:
+        boxes = np.asarray(self.boxes, dtype=np.float32).reshape(-1, 4)
+        labels = np.asarray(self.labels, dtype=np.int64).reshape(-1)
+        scores = np.asarray(self.scores, dtype=np.float32).reshape(-1)
+        if not len(boxes) == len(labels) == len(scores):
+            raise DetectorError(
+                f"DetectionResult: {len(boxes)} boxes, {len(labels)} labels and "
+                f"{len(scores)} scores; give one label and one score per box"
+            )
+        object.__setattr__(self, "boxes", boxes)
+        object.__setattr__(self, "labels", labels)
+        object.__setattr__(self, "scores", scores)
+
+    def __len__(self) -> int:
+        return len(self.labels)
+
+    @classmethod
+    def empty(cls) -> DetectionResult:
+        """A result with no detections."""
+        return cls(np.zeros((0, 4), np.float32), np.zeros(0, np.int64), np.zeros(0, np.float32))
+
+    def above(self, score_threshold: float) -> DetectionResult:
+        """The detections whose score is at least *score_threshold*."""
+        keep = self.scores >= score_threshold
+        return DetectionResult(self.boxes[keep], self.labels[keep], self.scores[keep])
+
+
+@runtime_checkable
+class Detector(Protocol):
+    """Anything that finds objects in camera frames; implement this to make a model an LEC.
+
+    Attributes:
+        model_id: A name unique within a model registry (e.g. ``rover-default``).
+        classes: Class names; ``DetectionResult.labels`` index into this tuple.
+        domain: The operating domain the model is meant for: ``default``, ``fog``,
+            ``low_light``, ``raindrop`` …; the model manager swaps models by domain.
+
+    """
+
+    model_id: str
+    classes: tuple[str, ...]
+    domain: str
+
+    def detect(self, images: ImageBatch) -> list[DetectionResult]:
+        """Detect objects in each image.
+
+        Args:
+            images: One ``(H, W, 3)`` ``uint8`` RGB image, a ``(B, H, W, 3)`` batch or a
+                sequence of ``(H, W, 3)`` images.
+
+        Returns:
+            One :class:`DetectionResult` per image, in order (a single image gives a list
+            of one). Boxes are in the pixels of the image given.
+
+        """
+        ...
+
+
+def as_image_list(images: ImageBatch) -> list[npt.NDArray[np.uint8]]:
+    """Normalise what :meth:`Detector.detect` accepts into a list of ``(H, W, 3)`` images.
+
+    Raises:
+        DetectorError: An image is not ``uint8`` with three channels; the message says how
+            to convert.
+
+    """
+    if isinstance(images, np.ndarray):
+        if images.ndim == 3:
+            items: Sequence[Any] = [images]
+        elif images.ndim == 4:
+            items = list(images)
+        else:
+            raise DetectorError(
+                f"expected an (H, W, 3) image or a (B, H, W, 3) batch, got shape {images.shape}"
+            )
+    else:
+        items = list(images)
+    out: list[npt.NDArray[np.uint8]] = []
+    for i, image in enumerate(items):
+        if not isinstance(image, np.ndarray):
+            raise DetectorError(f"image {i}: expected a numpy array, got {type(image).__name__}")
+        if image.ndim != 3 or image.shape[2] != 3 or image.shape[0] < 1 or image.shape[1] < 1:
+            raise DetectorError(
+                f"image {i}: expected shape (H, W, 3) RGB, got {image.shape}; convert grey "
+                "images with np.repeat(img[..., None], 3, axis=2) and drop an alpha channel"
+            )
+        if image.dtype != np.uint8:
+            raise DetectorError(
+                f"image {i}: expected dtype uint8, got {image.dtype}; convert float images "
+                "in [0, 1] with (img * 255).round().clip(0, 255).astype(np.uint8)"
+            )
+        out.append(image)
+    return out
+
+
+# -- model files -----------------------------------------------------------------------------
+
+
+class ModelCard(BaseModel):
+    """The JSON sidecar of a model file (``NAME.json`` next to ``NAME.safetensors``).
+
+    Attributes:
+        format: Always ``anunnaki-detector``.
+        format_version: Version of this schema (1).
+        model_id: See :class:`Detector`.
+        architecture: Which code builds the network (``centernet``).
+        arch: Architecture hyper-parameters (channel widths …), passed to the builder.
+        classes: Class names, in label order.
+        input_size: ``[width, height]`` the network runs at; other sizes are resized to it
+            and boxes scaled back.
+        score_threshold: Detections below it are dropped by ``detect`` (chosen on the
+            validation split to maximise F1).
+        domain: See :class:`Detector`.
+        metrics: Figures measured after training (``val``/``test`` precision, recall, F1 …).
+        training: How the model was made (data, epochs, seed, augmentation, seconds).
+        weights: File name of the weights, relative to the sidecar.
+        sha256: Hex sha256 of the weights file; checked on every load.
+
+    """
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+    format: str = SIDECAR_FORMAT
+    format_version: int = _FORMAT_VERSION
+    model_id: str = Field(min_length=1)
+    architecture: str = Field(min_length=1)
+    arch: dict[str, Any] = Field(default_factory=dict)
+    classes: tuple[str, ...] = Field(min_length=1)
+    input_size: tuple[int, int]
+    score_threshold: float = Field(ge=0.0, le=1.0)
+    domain: str = Field(default="default", min_length=1)
+    metrics: dict[str, Any] = Field(default_factory=dict)
+    training: dict[str, Any] = Field(default_factory=dict)
+    weights: str = Field(min_length=1)
+    sha256: str = Field(pattern=r"^[0-9a-f]{64}$")
+
+
+def weights_path(path: str | Path) -> Path:
+    """``NAME.safetensors`` for ``NAME.safetensors``, ``NAME.json`` or ``NAME``."""
+    p = Path(path)
+    return p if p.suffix == ".safetensors" else p.with_suffix(".safetensors")
+
+
+def sidecar_path(path: str | Path) -> Path:
+    """``NAME.json`` for ``NAME.safetensors``, ``NAME.json`` or ``NAME``."""
+    return weights_path(path).with_suffix(".json")
+
+
+def sha256_file(path: str | Path) -> str:
+    """Hex sha256 of a file's bytes."""
+    h = hashlib.sha256()
+    with open(path, "rb") as fh:
+        for block in iter(lambda: fh.read(1 << 20), b""):
+            h.update(block)
+    return h.hexdigest()
+
+
+def _atomic_write(path: Path, write: Callable[[Path], object]) -> None:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    # A model file gets the usual permissions (0666 less the umask), not the private 0600
+    # of mkstemp, which safetensors' writer also uses.
+    tmp = path.parent / f".{path.name}.{os.getpid()}.{uuid.uuid4().hex[:8]}.tmp"
+    try:
+        write(Path(tmp))
+        umask = os.umask(0)
+        os.umask(umask)
+        os.chmod(tmp, 0o666 & ~umask)
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+
+
+def _architectures() -> dict[str, Callable[[ModelCard, dict[str, Any], Path], Detector]]:
+    from anunnaki.lec._centernet import CenterNetDetector
+
+    return {"centernet": CenterNetDetector.from_card}
+
+
+def save_detector(det: Detector, path: str | Path) -> str:
+    """Write *det* as ``NAME.safetensors`` + ``NAME.json``; return the weights' sha256.
+
+    Both files are written atomically (a temporary file renamed into place), weights first,
+    so a reader never sees a sidecar whose hash does not match.
+
+    Args:
+        det: A detector that can export itself (our :class:`CenterNetDetector`).
+        path: ``NAME.safetensors`` (or ``NAME``/``NAME.json``; the suffixes are fixed).
+
+    Raises:
+        DetectorError: *det* cannot be saved (a third-party detector has its own format).
+
+    """
+    exporter = getattr(det, "export_state", None)
+    if not callable(exporter):
+        raise DetectorError(
+            f"{type(det).__name__} cannot be saved by anunnaki: it has no export_state(); "
+            "save it in its own format and wrap it with a Detector adapter"
+        )
+    card_fields, tensors = exporter()
+    from safetensors.numpy import save_file
+
+    wpath = weights_path(path)
+    _atomic_write(wpath, lambda tmp: save_file(tensors, str(tmp)))
+    digest = sha256_file(wpath)
+    card = ModelCard(**{**card_fields, "weights": wpath.name, "sha256": digest})
+    text = json.dumps(card.model_dump(mode="json"), indent=2, sort_keys=False) + "\n"
+    _atomic_write(sidecar_path(path), lambda tmp: tmp.write_text(text, encoding="utf-8"))
+    return digest
+
+
+def read_card(path: str | Path) -> ModelCard:
+    """Read and validate the sidecar of a model file (no weights are read).
+
+    Raises:
+        DetectorLoadError: The sidecar is missing, not JSON or not a valid model card.
+
+    """
+    spath = sidecar_path(path)
+    if not spath.is_file():
+        raise DetectorLoadError(
+            "model sidecar not found",
+            path=spath,
+            hint=f"a model is two files, {weights_path(path).name} and {spath.name}; "
+            "copy both, or re-save with anunnaki.lec.save_detector",
+        )
+    raw = spath.read_bytes()
+    if len(raw) > _MAX_SIDECAR_BYTES:
+        raise DetectorLoadError(
+            f"sidecar is {len(raw)} bytes, more than the {_MAX_SIDECAR_BYTES} allowed",
+            path=spath,
+            hint="a model sidecar is a small JSON file; this is not one",
+        )
+    try:
+        data = json.loads(raw.decode("utf-8"))
+    except (UnicodeDecodeError, json.JSONDecodeError) as exc:
+        line = getattr(exc, "lineno", None)
+        raise DetectorLoadError(
+            f"sidecar is not valid JSON: {exc}", path=spath, line=line, hint="re-save the model"
+        ) from None
+    if not isinstance(data, dict) or data.get("format") != SIDECAR_FORMAT:
+        raise DetectorLoadError(
+            f"not an anunnaki detector sidecar (format is not {SIDECAR_FORMAT!r})",
+            path=spath,
+            element="format",
+            hint="load third-party models through a Detector adapter",
+        )
+    if data.get("format_version") != _FORMAT_VERSION:
+        raise DetectorLoadError(
+            f"sidecar format_version {data.get('format_version')!r} is not supported "
+            f"(this anunnaki reads {_FORMAT_VERSION})",
+            path=spath,
+            element="format_version",
+            hint="upgrade anunnaki or re-save the model",
+        )
+    try:
+        return ModelCard.model_validate(data)
+    except ValidationError as exc:
+        err = exc.errors()[0]
+        where = ".".join(str(p) for p in err["loc"])
+        raise DetectorLoadError(
+            err["msg"], path=spath, element=where, hint="fix the field or re-save the model"
+        ) from None
+
+
+def load_detector(path: str | Path) -> Detector:
+    """Load a model file safely: sidecar checked, weights hash checked, then safetensors.
+
+    Args:
+        path: ``NAME.safetensors`` or ``NAME.json`` (the other file must sit next to it).
+
+    Returns:
+        A ready :class:`Detector` in inference mode (our :class:`CenterNetDetector` for the
+        ``centernet`` architecture).
+
+    Raises:
+        DetectorLoadError: A file is missing, the sidecar is invalid, the weights' sha256
+            differs from the sidecar's, the weights are not valid safetensors, or they do not
+            fit the architecture. The message names the file.
+
+    """
+    card = read_card(path)
+    spath = sidecar_path(path)
+    wpath = spath.parent / card.weights
+    if Path(card.weights).name != card.weights:
+        raise DetectorLoadError(
+            f"weights {card.weights!r} must be a bare file name next to the sidecar",
+            path=spath,
+            element="weights",
+            hint="models are self-contained folders; move the weights next to the sidecar",
+        )
+    if not wpath.is_file():
+        raise DetectorLoadError(
+            "model weights not found", path=wpath, hint=f"copy it next to {spath.name}"
+        )
+    digest = sha256_file(wpath)
+    if digest != card.sha256:
+        raise DetectorLoadError(
+            f"sha256 mismatch: the sidecar says {card.sha256[:12]}…, the file is {digest[:12]}…",
+            path=wpath,
+            element="sha256",
+            hint="the weights changed after the model was saved (corrupt copy or tampering); "
+            "copy the model again or re-save it",
+        )
+    builders = _architectures()
+    if card.architecture not in builders:
+        raise DetectorLoadError(
+            f"unknown architecture {card.architecture!r}; known: {', '.join(sorted(builders))}",
+            path=spath,
+            element="architecture",
+            hint="a third-party model needs its own Detector adapter",
+        )
+    from safetensors import SafetensorError
+    from safetensors.numpy import load_file
+
+    try:
+        tensors = load_file(str(wpath))
+    except (SafetensorError, OSError, ValueError) as exc:
+        raise DetectorLoadError(
+            f"not a valid safetensors file: {exc}", path=wpath, hint="copy the model again"
+        ) from None
+    return builders[card.architecture](card, tensors, wpath)

@@ -1,0 +1,469 @@
+"""The LEC node: runs the active model on every camera frame and hot-swaps it (``/lm_manager``).
+
+One node serves one learning-enabled component (the paper's object detector, lec name
+``detector``). It is the paper's learning model manager (§3.3, §4.1.4) and the LEC itself in
+one process, because a swap must be atomic with respect to the frames the model sees::
+
+    /rover/camera/image ──Image──▶ LecNode ──Detections──▶ /lec/detector/detections
+                                      │  ▲
+           /lm_manager/active ◀──{lec, model, domain}   /lm_manager/swap {lec, model | domain}
+
+Why the swap works the way it does
+    * **Preloaded off the frame path.** A swap request is served on the service's own thread:
+      the registry resolves the model, checks the file's sha256 and loads it there, while the
+      frame thread keeps running the old model. A slow load never stalls or drops frames.
+    * **Switched atomically between two frames.** The frame thread reads the active model
+      once per frame, just before inference; the swap replaces it under the same lock. A
+      frame is therefore entirely old-model or entirely new-model, frames are processed in
+      arrival order by one thread, and once the first new-model detection is out no
+      old-model one follows (the switch is monotone). A slow frame never blocks a swap.
+    * **Refused swaps change nothing.** An unknown model or domain, a missing file, a sha256
+      that differs from the registry's, or a file the loader refuses is answered with
+      ``ServiceReply(ok=False, error)`` and the old model keeps running.
+    * **Reply when switched.** ``ServiceReply(ok=True, body={model, domain, load_ms, …})``
+      is sent once the new model is the active one (the next frame uses it), so Utu's
+      ``swap_model`` action succeeds only for a swap that happened.
+
+The active model is announced on ``/lm_manager/active`` on every change and once a
+``active_period`` (1 s) otherwise, so Utu's agent for the model manager (A6 in the UAV model)
+never goes stale. Inactive models that were loaded stay in a small cache (``cache``), so
+swapping back to the default model is instant.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+import time
+from collections import OrderedDict
+from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import Any, NamedTuple
+
+import numpy as np
+import numpy.typing as npt
+
+from anunnaki.bus import Bus, Detections, Image, Publisher, Sample, ServiceReply
+from anunnaki.errors import AnunnakiError, MissingExtraError
+from anunnaki.lec._registry import DetectorLike, ModelRegistry, ModelRegistryError, ModelSpec
+
+__all__ = [
+    "ACTIVE_TOPIC",
+    "NODE_NAME",
+    "SWAP_SERVICE",
+    "LecNode",
+    "LecNodeStats",
+    "SwapResult",
+    "decode_image",
+    "detections_topic",
+]
+
+log = logging.getLogger("anunnaki.lec")
+
+#: Where the node announces its active model: ``{lec, model, domain}``.
+ACTIVE_TOPIC = "/lm_manager/active"
+#: The swap service: request ``{lec, model}`` or ``{lec, domain}``.
+SWAP_SERVICE = "/lm_manager/swap"
+#: The node's liveliness token (bind an agent to it with ``node: /lm_manager``).
+NODE_NAME = "/lm_manager"
+
+
+def detections_topic(lec: str) -> str:
+    """The topic an LEC's detections are published on: ``/lec/<lec>/detections``."""
+    return f"/lec/{lec}/detections"
+
+
+def decode_image(message: Image) -> npt.NDArray[np.uint8]:
+    """Decode an :class:`~anunnaki.bus.Image` (JPEG/PNG bytes) into ``(H, W, 3)`` RGB uint8.
+
+    Grey and RGBA frames become three-channel RGB.
+
+    Raises:
+        ValueError: The bytes do not decode.
+        MissingExtraError: OpenCV is not installed.
+
+    """
+    try:
+        import cv2
+    except ImportError as exc:  # pragma: no cover - OpenCV is part of the vision extra
+        raise MissingExtraError("opencv-python-headless", "vision") from exc
+    buffer = np.frombuffer(message.data, dtype=np.uint8)
+    bgr = cv2.imdecode(buffer, cv2.IMREAD_COLOR)
+    if bgr is None:
+        raise ValueError(f"frame {message.seq}: the {message.encoding} bytes do not decode")
+    rgb = cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB)
+    return np.ascontiguousarray(rgb, dtype=np.uint8)
+
+
+@dataclass(frozen=True)
+class SwapResult:
+    """The outcome of a swap.
+
+    Attributes:
+        ok: Whether the requested model is now the active one.
+        lec: The LEC's name.
+        model: The active model's id after the request (the old one if refused).
+        domain: The active model's domain after the request.
+        previous: The model that was active before.
+        load_ms: Time to resolve, verify and load the new model (0 when it was cached or
+            already active).
+        changed: Whether the active model changed.
+        error: Why the swap was refused.
+
+    """
+
+    ok: bool
+    lec: str
+    model: str
+    domain: str
+    previous: str
+    load_ms: float = 0.0
+    changed: bool = False
+    error: str | None = None
+
+    def reply(self) -> ServiceReply:
+        """The service reply.
+
+        ``ServiceReply(ok=True, body={lec, model, domain, previous, load_ms, changed})`` when
+        switched (or already active); ``ServiceReply(ok=False, error, body={lec, active})``
+        when refused, which a requester receives as a
+        :class:`~anunnaki.bus.ServiceError` and Utu's executor as a failed action.
+        """
+        if not self.ok:
+            return ServiceReply(
+                ok=False,
+                error=self.error or "refused",
+                body={"lec": self.lec, "active": self.model},
+            )
+        return ServiceReply(
+            ok=True,
+            body={
+                "lec": self.lec,
+                "model": self.model,
+                "domain": self.domain,
+                "previous": self.previous,
+                "load_ms": round(self.load_ms, 3),
+                "changed": self.changed,
+            },
+        )
+
+
+@dataclass(frozen=True)
+class LecNodeStats:
+    """Counters of a running :class:`LecNode`.
+
+    Attributes:
+        frames: Frames received.
+        detections: Detection messages published (one per frame that decoded and ran).
+        failed: Frames that did not decode or whose inference raised (logged, skipped).
+        swaps: Swaps that changed the active model.
+        refused: Swap requests refused.
+
+    """
+
+    frames: int
+    detections: int
+    failed: int
+    swaps: int
+    refused: int
+
+
+class _Active(NamedTuple):
+    spec: ModelSpec
+    detector: DetectorLike
+
+
+def _labels(detector: DetectorLike, labels: Any) -> list[str]:
+    classes = tuple(getattr(detector, "classes", ()) or ())
+    out = []
+    for raw in np.asarray(labels).reshape(-1).tolist():
+        index = int(raw)
+        out.append(classes[index] if 0 <= index < len(classes) else str(index))
+    return out
+
+
+class LecNode:
+    """Runs an LEC's active model on a camera topic and swaps models on request.
+
+    Args:
+        bus: The bus to work on.
+        registry: The LEC's models.
+        lec: The LEC's name (default: the registry's ``lec``, usually ``detector``).
+        camera: The camera topic (``Image`` frames), e.g. ``/uav/camera/image``.
+        detections: Where to publish detections (default ``/lec/<lec>/detections``).
+        active_topic: Where to announce the active model.
+        swap_service: The swap service's name.
+        node: The liveliness token held while the node runs.
+        initial: The model id to start with (default: the registry's default model).
+        active_period: Seconds between announcements of an unchanged active model
+            (``None``: only on changes and by :meth:`publish_active`).
+        frame_queue: Frames that may wait while one is processed; beyond it the oldest are
+            dropped and counted by the bus (``bus.stats().dropped``).
+        cache: How many inactive loaded models to keep in memory (0: none).
+
+    The initial model is loaded in the constructor; a bad one raises at once (guideline B5),
+    before anything is declared on the bus.
+
+    Raises:
+        ModelRegistryError: The initial model is unknown, its file corrupt or its hash wrong.
+
+    """
+
+    def __init__(
+        self,
+        bus: Bus,
+        registry: ModelRegistry,
+        *,
+        lec: str | None = None,
+        camera: str = "/rover/camera/image",
+        detections: str | None = None,
+        active_topic: str = ACTIVE_TOPIC,
+        swap_service: str = SWAP_SERVICE,
+        node: str = NODE_NAME,
+        initial: str | None = None,
+        active_period: float | None = 1.0,
+        frame_queue: int = 64,
+        cache: int = 2,
+    ) -> None:
+        if active_period is not None and not active_period > 0:
+            raise ValueError(f"active_period must be > 0 seconds or None, got {active_period}")
+        if cache < 0:
+            raise ValueError(f"cache must be >= 0, got {cache}")
+        self.bus = bus
+        self.registry = registry
+        self.lec = lec or registry.lec
+        self.camera = camera
+        self.detections_topic = detections or detections_topic(self.lec)
+        self.active_topic = active_topic
+        self.swap_service = swap_service
+        self.node = node
+        self._cache_size = cache
+        self._cache: OrderedDict[str, DetectorLike] = OrderedDict()
+        self._lock = threading.Lock()
+        self._swap_lock = threading.Lock()
+        self._stop = threading.Event()
+        self._closed = False
+        self._frames = self._published = self._failed = self._swaps = self._refused = 0
+        spec = registry.resolve(initial) if initial is not None else registry.default
+        self._active = _Active(spec, registry.load(spec))
+        self._declared: list[Any] = []
+        try:
+            self._detections: Publisher = self._declare(bus.publisher(self.detections_topic))
+            self._declare(bus.service(swap_service, self._on_swap))
+            self._declare(bus.subscribe(camera, self._on_frame, queue=frame_queue, expect=Image))
+            self._declare(bus.liveliness_token(node))
+            self.publish_active()
+        except BaseException:
+            self.close()
+            raise
+        self._heartbeat: threading.Thread | None = None
+        if active_period is not None:
+            self._heartbeat = threading.Thread(
+                target=self._beat, args=(active_period,), name=f"lec-active:{self.lec}",
+                daemon=True,
+            )  # fmt: skip
+            self._heartbeat.start()
+
+    def _declare(self, obj: Any) -> Any:
+        self._declared.append(obj)
+        return obj
+
+    def __repr__(self) -> str:
+        return f"LecNode(lec={self.lec!r}, active={self.active.id!r}, camera={self.camera!r})"
+
+    # -- state -------------------------------------------------------------------------------
+    @property
+    def active(self) -> ModelSpec:
+        """The active model's registry entry."""
+        with self._lock:
+            return self._active.spec
+
+    def stats(self) -> LecNodeStats:
+        """The node's counters."""
+        with self._lock:
+            return LecNodeStats(
+                self._frames, self._published, self._failed, self._swaps, self._refused
+            )
+
+    def active_message(self) -> dict[str, str]:
+        """The announcement: ``{lec, model, domain}``."""
+        spec = self.active
+        return {"lec": self.lec, "model": spec.id, "domain": spec.domain}
+
+    def publish_active(self) -> None:
+        """Announce the active model on the active topic now."""
+        try:
+            self.bus.publish(self.active_topic, self.active_message())
+        except AnunnakiError as exc:  # the bus closed under us: nothing to announce to
+            log.debug("lec %s: could not announce the active model: %s", self.lec, exc)
+
+    def _beat(self, period: float) -> None:
+        while not self._stop.wait(period):
+            self.publish_active()
+
+    # -- the frame path ----------------------------------------------------------------------
+    def _on_frame(self, sample: Sample) -> None:
+        message = sample.message
+        assert isinstance(message, Image)  # the subscriber expects Image
+        with self._lock:
+            self._frames += 1
+        try:
+            image = decode_image(message)
+        except (ValueError, MissingExtraError) as exc:
+            self._count_failure("%s (on %s)", exc, sample.topic)
+            return
+        with self._lock:  # the one read of the active model for this frame
+            active = self._active
+        start = time.perf_counter()
+        try:
+            results = active.detector.detect([image])
+            result = results[0]
+            latency_ms = (time.perf_counter() - start) * 1000.0
+            out = Detections(
+                frame_seq=message.seq,
+                model_id=active.spec.id,
+                domain=active.spec.domain,
+                width=int(image.shape[1]),
+                height=int(image.shape[0]),
+                boxes=np.asarray(result.boxes, dtype=np.float64).reshape(-1, 4).tolist(),
+                labels=_labels(active.detector, result.labels),
+                scores=np.asarray(result.scores, dtype=np.float64).reshape(-1).tolist(),
+                latency_ms=round(latency_ms, 3),
+            )
+        except Exception as exc:  # one bad frame or model output never kills the node
+            self._count_failure(
+                "frame %d: model %s raised %s: %s",
+                message.seq,
+                active.spec.id,
+                type(exc).__name__,
+                exc,
+            )
+            return
+        try:
+            self._detections.put(out)
+        except AnunnakiError as exc:
+            self._count_failure("frame %d: could not publish: %s", message.seq, exc)
+            return
+        with self._lock:
+            self._published += 1
+
+    def _count_failure(self, fmt: str, *args: Any) -> None:
+        with self._lock:
+            self._failed += 1
+        log.warning("lec %s: " + fmt, self.lec, *args)
+
+    # -- swapping ----------------------------------------------------------------------------
+    def swap(
+        self, model: str | None = None, *, domain: str | None = None, lec: str | None = None
+    ) -> SwapResult:
+        """Swap to a model (by id) or to a domain's model; returns once switched or refused.
+
+        Blocks the caller while the new model loads; the frame thread keeps running the old
+        model meanwhile. Swaps are serialised.
+        """
+        with self._swap_lock:
+            current = self.active
+            if lec is not None and lec != self.lec:
+                return self._refuse(
+                    current, f"this model manager serves lec {self.lec!r}, not {lec!r}"
+                )
+            if model is None and domain is None:
+                return self._refuse(current, "say what to swap to: 'model' or 'domain'")
+            try:
+                spec = self.registry.resolve(model, domain)
+            except ModelRegistryError as exc:
+                return self._refuse(current, str(exc))
+            if spec.id == current.id:
+                return SwapResult(True, self.lec, spec.id, spec.domain, current.id)
+            start = time.perf_counter()
+            detector = self._cache.pop(spec.id, None)
+            if detector is None:
+                try:
+                    detector = self.registry.load(spec)
+                except AnunnakiError as exc:
+                    return self._refuse(current, str(exc))
+                except Exception as exc:  # a loader bug must not take the node down
+                    return self._refuse(current, f"{type(exc).__name__}: {exc}")
+            load_ms = (time.perf_counter() - start) * 1000.0
+            with self._lock:
+                old = self._active
+                self._active = _Active(spec, detector)
+                self._swaps += 1
+            if self._cache_size:
+                self._cache[old.spec.id] = old.detector
+                while len(self._cache) > self._cache_size:
+                    self._cache.popitem(last=False)
+            log.info(
+                "lec %s: swapped %s -> %s (%s) in %.1f ms",
+                self.lec,
+                old.spec.id,
+                spec.id,
+                spec.domain,
+                load_ms,
+            )
+            self.publish_active()
+            return SwapResult(
+                True, self.lec, spec.id, spec.domain, old.spec.id, load_ms, changed=True
+            )
+
+    def _refuse(self, current: ModelSpec, error: str) -> SwapResult:
+        with self._lock:
+            self._refused += 1
+        log.warning("lec %s: swap refused, %s keeps running: %s", self.lec, current.id, error)
+        return SwapResult(False, self.lec, current.id, current.domain, current.id, error=error)
+
+    def _on_swap(self, request: Any) -> ServiceReply:
+        body = _body(request)
+        fields: dict[str, str | None] = {}
+        for key in ("lec", "model", "domain"):
+            value = body.get(key)
+            if value is not None and not isinstance(value, str):
+                return self._refuse(
+                    self.active, f"'{key}' must be a string, got {type(value).__name__}"
+                ).reply()
+            fields[key] = value
+        return self.swap(fields["model"], domain=fields["domain"], lec=fields["lec"]).reply()
+
+    # -- life --------------------------------------------------------------------------------
+    def spin(self, stop: threading.Event | None = None) -> None:
+        """Block until ``stop`` is set or the node is closed (the work runs on bus threads)."""
+        stop = stop or threading.Event()
+        while not stop.is_set() and not self._stop.is_set():
+            stop.wait(0.2)
+
+    def close(self) -> None:
+        """Stop announcing, release the camera, the service and the token (idempotent).
+
+        A frame in flight finishes first.
+        """
+        if self._closed:
+            return
+        self._closed = True
+        self._stop.set()
+        for obj in reversed(self._declared):
+            try:
+                obj.close()
+            except Exception as exc:  # pragma: no cover - best effort at shutdown
+                log.debug("closing %r: %r", obj, exc)
+        self._declared.clear()
+        heartbeat = getattr(self, "_heartbeat", None)
+        if heartbeat is not None and heartbeat is not threading.current_thread():
+            heartbeat.join(timeout=2.0)
+        self._cache.clear()
+
+    def __enter__(self) -> LecNode:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+def _body(message: Any) -> dict[str, Any]:
+    """The JSON body of a request (a Generic message or a plain mapping)."""
+    if isinstance(message, Mapping):
+        return dict(message)
+    to_body = getattr(message, "to_body", None)
+    if callable(to_body):
+        body = to_body()
+        return dict(body) if isinstance(body, Mapping) else {}
+    return {}

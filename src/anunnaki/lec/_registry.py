@@ -1,0 +1,604 @@
+"""The model registry: which models an LEC has, per operating domain, and how to trust them.
+
+The learning model manager (paper §3.3, ``/lm_manager``) swaps an LEC's model for one
+robustified to the perceived condition — fog, low light, raindrops on the lens — and back to
+the default model when the condition has passed. The registry is what it picks from: one
+entry per model with its id, its domain, its file, the file's sha256 and the figures measured
+after training (``metrics``; the clean F1 is what behavior assessments compare against).
+
+Why the registry states a hash of its own
+    The model file's sidecar already carries the weights' sha256, and ``load_detector``
+    refuses weights that do not match it. But the sidecar travels with the weights: whoever
+    can swap one can swap both. The registry is written by whoever deploys the system, so a
+    hash stated there pins *the* file that was validated; :meth:`ModelRegistry.load` checks it
+    before a single byte reaches the loader.
+
+A registry file (``anunnaki: models/1``)::
+
+    anunnaki: models/1
+    lec: detector
+    models:
+      - id: detector-default
+        domain: default
+        file: models/detector-default.safetensors   # relative to this file
+        sha256: 9f2c…                                # of that file; checked before loading
+      - id: detector-fog
+        domain: fog
+        file: models/detector-fog.safetensors
+        sha256: 41ab…
+        metrics: {f1: 0.91}                          # optional; merged over the sidecar's
+
+Build one in code with :class:`ModelRegistry` and :meth:`ModelRegistry.add`, or load a file
+with :func:`load_registry`. Errors about the file name the file and the line.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import re
+import threading
+from collections.abc import Callable, Iterable, Iterator, Mapping
+from pathlib import Path
+from typing import Annotated, Any, Literal, Protocol, runtime_checkable
+
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
+
+from anunnaki._safeyaml import LineMap, load_yaml, validation_error
+from anunnaki.errors import AnunnakiError, MissingExtraError, ModelFileError
+from anunnaki.lec._detector import read_card, sha256_file
+
+__all__ = [
+    "DEFAULT_DOMAIN",
+    "REGISTRY_FORMAT",
+    "DetectorLike",
+    "ModelIntegrityError",
+    "ModelLoadError",
+    "ModelRegistry",
+    "ModelRegistryError",
+    "ModelSpec",
+    "UnknownModelError",
+    "load_registry",
+    "parse_registry",
+]
+
+log = logging.getLogger("anunnaki.lec")
+
+#: The format tag of a registry file.
+REGISTRY_FORMAT = "models/1"
+#: The domain of the model that runs when no adverse condition is perceived.
+DEFAULT_DOMAIN = "default"
+
+_ID_RE = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.\-]{0,127}$")
+_DOMAIN_RE = re.compile(r"^[A-Za-z_][A-Za-z0-9_]{0,63}$")
+_SHA_RE = re.compile(r"^[0-9a-f]{64}$")
+
+
+class ModelRegistryError(AnunnakiError):
+    """A registry lookup or a registry built in code is wrong (unknown model, bad entry)."""
+
+
+class UnknownModelError(ModelRegistryError, LookupError):
+    """No model has that id, or no model serves that domain; the message lists what exists."""
+
+
+class ModelIntegrityError(ModelRegistryError):
+    """A model file is missing, unreadable, or its sha256 differs from the registry's."""
+
+
+class ModelLoadError(ModelRegistryError):
+    """The loader refused a model file (corrupt weights, a bad sidecar, a wrong shape)."""
+
+
+@runtime_checkable
+class DetectorLike(Protocol):
+    """What the model manager needs of a loaded model (``anunnaki.lec.Detector`` fits).
+
+    Attributes:
+        model_id: The model's own name for itself (the registry's id is what is published).
+        classes: Class names; a result's ``labels`` index into it.
+        domain: The domain the model was made for.
+
+    """
+
+    model_id: str
+    classes: tuple[str, ...]
+    domain: str
+
+    def detect(self, images: Any) -> list[Any]:
+        """Detect objects; one result (``boxes``, ``labels``, ``scores``) per image."""
+        ...
+
+
+#: Turns a model file into a loaded model (default: ``anunnaki.lec.load_detector``).
+Loader = Callable[[Path], DetectorLike]
+
+
+def _number(value: Any) -> float | None:
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        return None
+    f = float(value)
+    return f if math.isfinite(f) else None
+
+
+class ModelSpec(BaseModel):
+    """One model of the registry.
+
+    Attributes:
+        id: The model id tactics and messages use, e.g. ``detector-fog``.
+        domain: The operating domain it is robustified for (``default``, ``fog``,
+            ``low_light``, ``raindrop`` …).
+        file: The model file (``NAME.safetensors``, its sidecar next to it).
+        sha256: Hex sha256 of ``file``, checked before every load; ``None`` skips the check
+            (the loader still checks the sidecar's hash).
+        metrics: Figures measured after training (from the sidecar, overridden by the
+            registry); see :attr:`clean_f1`.
+        description: Free text.
+
+    """
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+    id: str
+    domain: str
+    file: Path
+    sha256: str | None = None
+    metrics: dict[str, Any] = Field(default_factory=dict)
+    description: str = ""
+
+    @field_validator("id")
+    @classmethod
+    def _check_id(cls, value: str) -> str:
+        if not _ID_RE.match(value):
+            raise ValueError(
+                f"model id {value!r} must start with a letter or digit and use letters, "
+                "digits, '_', '.' and '-' (at most 128 characters)"
+            )
+        return value
+
+    @field_validator("domain")
+    @classmethod
+    def _check_domain(cls, value: str) -> str:
+        if not _DOMAIN_RE.match(value):
+            raise ValueError(f"domain {value!r} must be an identifier such as 'fog' or 'low_light'")
+        return value
+
+    @field_validator("sha256")
+    @classmethod
+    def _check_sha(cls, value: str | None) -> str | None:
+        if value is None:
+            return None
+        digest = value.strip().lower()
+        if not _SHA_RE.match(digest):
+            raise ValueError("sha256 must be 64 hexadecimal digits")
+        return digest
+
+    @property
+    def clean_f1(self) -> float | None:
+        """The model's F1 on clean data, the reference of behavior categories.
+
+        Looked up in ``metrics`` in this order: ``f1``, ``clean.f1``, ``test.f1``,
+        ``val.f1``; ``None`` when none is a finite number.
+        """
+        direct = _number(self.metrics.get("f1"))
+        if direct is not None:
+            return direct
+        for split in ("clean", "test", "val"):
+            section = self.metrics.get(split)
+            if isinstance(section, Mapping):
+                value = _number(section.get("f1"))
+                if value is not None:
+                    return value
+        return None
+
+
+# -- the registry file -----------------------------------------------------------------------
+
+
+class _EntryFile(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+    id: str | None = None
+    domain: str | None = None
+    file: Annotated[str, Field(min_length=1)]
+    sha256: str | None = None
+    metrics: dict[str, Any] = Field(default_factory=dict)
+    description: str = ""
+
+
+class _RegistryFile(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+    anunnaki: Literal["models/1"]
+    lec: str = "detector"
+    description: str = ""
+    models: Annotated[list[_EntryFile], Field(min_length=1)]
+
+
+def _read_sidecar(file: Path) -> dict[str, Any] | None:
+    """The sidecar of an anunnaki model file as a dict, or ``None`` when there is none."""
+    candidates = [file.with_suffix(".json")] if file.suffix != ".json" else [file]
+    sidecar = next((c for c in candidates if c.is_file()), None)
+    if sidecar is None:
+        return None
+    card = read_card(file)
+    return card.model_dump(mode="json")
+
+
+class ModelRegistry:
+    """The models of one LEC, by id and by domain.
+
+    Args:
+        models: Initial entries (:class:`ModelSpec` or mappings of its fields).
+        lec: The name of the LEC these models serve (``detector``).
+        loader: Turns a file into a loaded model; default ``anunnaki.lec.load_detector``
+            (imported when first used). Tests and third-party models pass their own.
+        source: Where the registry came from, for messages.
+
+    Thread-safe: the model manager resolves and loads from its service thread while other
+    threads read metrics.
+
+    """
+
+    def __init__(
+        self,
+        models: Iterable[ModelSpec | Mapping[str, Any]] = (),
+        *,
+        lec: str = "detector",
+        loader: Loader | None = None,
+        source: str | None = None,
+    ) -> None:
+        self.lec = lec
+        self.source = source
+        self._loader = loader
+        self._models: dict[str, ModelSpec] = {}
+        self._lock = threading.RLock()
+        for spec in models:
+            self.add(spec)
+
+    def __repr__(self) -> str:
+        return f"ModelRegistry(lec={self.lec!r}, models={self.ids()})"
+
+    # -- contents --------------------------------------------------------------------------
+    def add(self, spec: ModelSpec | Mapping[str, Any] | None = None, **fields: Any) -> ModelSpec:
+        """Add one model: a :class:`ModelSpec`, a mapping, or its fields as keywords.
+
+        Raises:
+            ModelRegistryError: Invalid fields (naming the field), or the id is taken.
+
+        """
+        if spec is None:
+            spec = fields
+        elif fields:
+            raise ModelRegistryError("give a ModelSpec/mapping or keyword fields, not both")
+        if not isinstance(spec, ModelSpec):
+            try:
+                spec = ModelSpec.model_validate(dict(spec))
+            except ValidationError as exc:
+                first = exc.errors(include_url=False)[0]
+                where = ".".join(str(p) for p in first["loc"]) or "model"
+                raise ModelRegistryError(f"model entry {where}: {first['msg']}") from None
+        with self._lock:
+            if spec.id in self._models:
+                raise ModelRegistryError(
+                    f"model id {spec.id!r} is registered twice; give each model its own id"
+                )
+            self._models[spec.id] = spec
+        return spec
+
+    def __iter__(self) -> Iterator[ModelSpec]:
+        with self._lock:
+            return iter(tuple(self._models.values()))
+
+    def __len__(self) -> int:
+        return len(self._models)
+
+    def __contains__(self, model_id: object) -> bool:
+        return model_id in self._models
+
+    @property
+    def models(self) -> tuple[ModelSpec, ...]:
+        """Every model, in the order added."""
+        with self._lock:
+            return tuple(self._models.values())
+
+    def ids(self) -> list[str]:
+        """The model ids, in the order added."""
+        with self._lock:
+            return list(self._models)
+
+    def domains(self) -> list[str]:
+        """The domains that have a model, sorted."""
+        with self._lock:
+            return sorted({m.domain for m in self._models.values()})
+
+    def _catalogue(self) -> str:
+        with self._lock:
+            if not self._models:
+                return "the registry is empty"
+            return "registered models: " + ", ".join(
+                f"{m.id} ({m.domain})" for m in self._models.values()
+            )
+
+    def get(self, model_id: str) -> ModelSpec:
+        """Return the model with this id.
+
+        Raises:
+            UnknownModelError: No such id; the message lists the registered models.
+
+        """
+        with self._lock:
+            spec = self._models.get(model_id)
+        if spec is None:
+            raise UnknownModelError(
+                f"unknown model {model_id!r} for lec {self.lec!r}; {self._catalogue()}"
+            )
+        return spec
+
+    def for_domain(self, domain: str) -> ModelSpec:
+        """Return the model of a domain (the first one added, if several serve it).
+
+        Raises:
+            UnknownModelError: No model serves the domain; the message lists the domains.
+
+        """
+        with self._lock:
+            spec = next((m for m in self._models.values() if m.domain == domain), None)
+        if spec is None:
+            known = ", ".join(self.domains()) or "none"
+            raise UnknownModelError(
+                f"no model for domain {domain!r} in lec {self.lec!r}; domains with a model: {known}"
+            )
+        return spec
+
+    @property
+    def default(self) -> ModelSpec:
+        """The model of the ``default`` domain: what runs when nothing adverse is perceived."""
+        return self.for_domain(DEFAULT_DOMAIN)
+
+    def resolve(self, model_id: str | None = None, domain: str | None = None) -> ModelSpec:
+        """Return the model a swap request names: by id, by domain, or the default.
+
+        With both, the model must be of that domain. With neither, the default model.
+
+        Raises:
+            UnknownModelError: Unknown id or a domain without a model (listing what exists).
+            ModelRegistryError: The id's model is of another domain.
+
+        """
+        if model_id is not None:
+            spec = self.get(model_id)
+            if domain is not None and spec.domain != domain:
+                raise ModelRegistryError(
+                    f"model {model_id!r} is for domain {spec.domain!r}, not {domain!r}; "
+                    "give the model or the domain, or a matching pair"
+                )
+            return spec
+        return self.for_domain(domain if domain is not None else DEFAULT_DOMAIN)
+
+    def clean_f1(self, model_id: str) -> float | None:
+        """The clean F1 of a model (``None`` if unknown or not registered)."""
+        with self._lock:
+            spec = self._models.get(model_id)
+        return None if spec is None else spec.clean_f1
+
+    # -- trust and loading -----------------------------------------------------------------
+    def verify(self, model: str | ModelSpec) -> str:
+        """Check a model's file against the registry's sha256; return the file's digest.
+
+        Raises:
+            ModelIntegrityError: The file is missing or unreadable, or its hash differs.
+            UnknownModelError: An unknown id.
+
+        """
+        spec = model if isinstance(model, ModelSpec) else self.get(model)
+        try:
+            digest = sha256_file(spec.file)
+        except OSError as exc:
+            raise ModelIntegrityError(
+                f"model {spec.id!r}: cannot read {spec.file}: {exc.strerror or exc}"
+            ) from exc
+        if spec.sha256 is not None and digest != spec.sha256:
+            raise ModelIntegrityError(
+                f"model {spec.id!r}: sha256 mismatch for {spec.file}: the registry says "
+                f"{spec.sha256[:12]}…, the file is {digest[:12]}… (a corrupt copy or a "
+                "changed file; copy the model again, or update the registry if the change "
+                "is intended)"
+            )
+        return digest
+
+    def load(self, model: str | ModelSpec) -> DetectorLike:
+        """Verify a model's file, then load it with the registry's loader.
+
+        Raises:
+            ModelIntegrityError: Missing file or sha256 mismatch (nothing was loaded).
+            ModelLoadError: The loader refused the file (corrupt weights, bad sidecar …).
+            MissingExtraError: The default loader needs ``anunnaki[vision]``.
+
+        """
+        spec = model if isinstance(model, ModelSpec) else self.get(model)
+        self.verify(spec)
+        loader = self._loader or _default_loader
+        try:
+            detector = loader(spec.file)
+        except MissingExtraError:
+            raise
+        except Exception as exc:
+            raise ModelLoadError(
+                f"model {spec.id!r}: the loader refused {spec.file}: {type(exc).__name__}: {exc}"
+            ) from exc
+        if not callable(getattr(detector, "detect", None)):
+            raise ModelLoadError(
+                f"model {spec.id!r}: the loader returned {type(detector).__name__}, which has "
+                "no detect() method"
+            )
+        reported = getattr(detector, "model_id", None)
+        if reported is not None and reported != spec.id:
+            log.info(
+                "model %r: its file calls itself %r; the registry's id is what is published",
+                spec.id,
+                reported,
+            )
+        return detector
+
+    # -- files -----------------------------------------------------------------------------
+    @classmethod
+    def from_file(cls, path: str | Path, *, loader: Loader | None = None) -> ModelRegistry:
+        """Load a registry file; see :func:`load_registry`."""
+        return load_registry(path, loader=loader)
+
+
+def _default_loader(path: Path) -> DetectorLike:
+    try:
+        from anunnaki.lec._detector import load_detector
+    except ImportError as exc:  # pragma: no cover - numpy/pydantic are core dependencies
+        raise MissingExtraError("the detector", "vision") from exc
+    detector: DetectorLike = load_detector(path)
+    return detector
+
+
+def _entry_error(
+    message: str, *, lines: LineMap | None, path: str, index: int, field: str | None, hint: str
+) -> ModelFileError:
+    loc: tuple[str | int, ...] = ("models", index) + ((field,) if field else ())
+    element = f"models[{index}]" + (f".{field}" if field else "")
+    return ModelFileError(
+        message,
+        path=path,
+        line=lines.line(loc) if lines is not None else None,
+        element=element,
+        hint=hint,
+    )
+
+
+def _build(
+    data: Any, lines: LineMap | None, source: str, base: Path, loader: Loader | None
+) -> ModelRegistry:
+    if not isinstance(data, dict) or data.get("anunnaki") != REGISTRY_FORMAT:
+        raise ModelFileError(
+            "not a model registry",
+            path=source,
+            line=1,
+            hint=f"start the file with 'anunnaki: {REGISTRY_FORMAT}'",
+        )
+    try:
+        parsed = _RegistryFile.model_validate(data)
+    except ValidationError as exc:
+        raise validation_error(exc, data, lines, source) from None
+    registry = ModelRegistry(lec=parsed.lec, loader=loader, source=source)
+    seen: dict[str, int] = {}
+    for i, entry in enumerate(parsed.models):
+        file = Path(entry.file)
+        file = file if file.is_absolute() else (base / file)
+        if not file.is_file():
+            raise _entry_error(
+                f"model file {entry.file!r} not found (looked at {file})",
+                lines=lines,
+                path=source,
+                index=i,
+                field="file",
+                hint="paths are relative to the registry file; copy the model there",
+            )
+        try:
+            card = _read_sidecar(file)
+        except AnunnakiError as exc:
+            if loader is not None:  # a third-party model may keep its own kind of .json
+                log.debug("model file %s: no anunnaki sidecar (%s)", file, exc)
+                card = None
+            else:
+                raise _entry_error(
+                    f"the model's sidecar is unreadable: {exc}",
+                    lines=lines,
+                    path=source,
+                    index=i,
+                    field="file",
+                    hint="copy the model again, or re-save it",
+                ) from None
+        model_id = entry.id or (card or {}).get("model_id")
+        domain = entry.domain or (card or {}).get("domain")
+        if not model_id:
+            raise _entry_error(
+                "missing required field 'id'",
+                lines=lines,
+                path=source,
+                index=i,
+                field=None,
+                hint="e.g. id: detector-fog",
+            )
+        if not domain:
+            raise _entry_error(
+                "missing required field 'domain' (the model has no sidecar that names it)",
+                lines=lines,
+                path=source,
+                index=i,
+                field=None,
+                hint="e.g. domain: fog",
+            )
+        metrics = dict((card or {}).get("metrics") or {})
+        metrics.update(entry.metrics)
+        try:
+            spec = ModelSpec(
+                id=model_id,
+                domain=domain,
+                file=file,
+                sha256=entry.sha256,
+                metrics=metrics,
+                description=entry.description,
+            )
+        except ValidationError as exc:
+            first = exc.errors(include_url=False)[0]
+            field = str(first["loc"][0]) if first["loc"] else None
+            raise _entry_error(
+                str(first["msg"]).removeprefix("Value error, "),
+                lines=lines,
+                path=source,
+                index=i,
+                field=field,
+                hint="see the registry format in docs/model-manager.md",
+            ) from None
+        if spec.id in seen:
+            raise _entry_error(
+                f"model id {spec.id!r} is used twice, by models[{seen[spec.id]}] and models[{i}]",
+                lines=lines,
+                path=source,
+                index=i,
+                field="id",
+                hint="give each model its own id",
+            )
+        seen[spec.id] = i
+        registry.add(spec)
+    if DEFAULT_DOMAIN not in registry.domains():
+        raise ModelFileError(
+            f"no model for the domain {DEFAULT_DOMAIN!r}",
+            path=source,
+            line=lines.line(("models",)) if lines is not None else None,
+            element="models",
+            hint="the model manager starts with the default model and swaps back to it; "
+            "add one with 'domain: default'",
+        )
+    return registry
+
+
+def parse_registry(
+    text: str, *, source: str = "<registry>", base: Path | None = None, loader: Loader | None = None
+) -> ModelRegistry:
+    """Parse a registry from YAML text; model paths resolve against ``base`` (default cwd).
+
+    Raises:
+        ModelFileError: Bad YAML, an unknown field, a missing model file, a duplicate id or
+            no default model, naming the line.
+
+    """
+    data, lines = load_yaml(source, text=text)
+    return _build(data, lines, source, base or Path.cwd(), loader)
+
+
+def load_registry(path: str | Path, *, loader: Loader | None = None) -> ModelRegistry:
+    """Load a registry file (``anunnaki: models/1``); model paths are relative to it.
+
+    Raises:
+        ModelFileError: As :func:`parse_registry`, naming the file and the line.
+
+    """
+    data, lines = load_yaml(path)
+    return _build(data, lines, str(path), Path(path).resolve().parent, loader)

@@ -1,0 +1,270 @@
+"""The ``ground_truth`` assessor: the LEC's behavior measured against a simulator's truth.
+
+Before Enlil has built a behavior oracle, the simulator knows the answer: it publishes every
+object in every frame (``/sim/ground_truth``) and which phenomena are active
+(``/sim/phenomena``). This assessor matches the active model's published detections to that
+truth, frame by frame, and turns the F1 over a sliding window into the paper's behavior
+category (§4.1.2), relative to the model's F1 on clean data::
+
+    drop = (clean_f1 - window_f1) / clean_f1          (0 when the window does better)
+    category = 2 if drop > 10 %  else  1 if drop > 5 %  else  0        (thresholds configurable)
+    confidence = frames in the window / window size
+    context = the phenomena ground truth, e.g. {"phenomenon": "fog", "params": {...}}
+
+The rule of a match is the detector's own (``anunnaki.lec.f1_at_iou``): per frame,
+class-aware greedy matching in descending score order at IoU ≥ 0.5; counts are summed over
+the window before F1 is computed. Frames are matched by sequence number, whatever order the
+truth and the detections arrive in. The window holds one model's frames only: when
+detections of another model arrive (a swap), it starts afresh.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import threading
+from collections import OrderedDict, deque
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+from pydantic import JsonValue
+
+from anunnaki.bus import Assessment, Detections
+from anunnaki.lec._detector import DetectionResult
+from anunnaki.lec._metrics import match_image
+from anunnaki.oracles._base import Frame, OracleError
+
+__all__ = ["CleanF1", "GroundTruthAssessor", "WindowMetrics", "category_for_drop"]
+
+log = logging.getLogger("anunnaki.oracles")
+
+#: Where the clean F1 of a model comes from: one number for every model, a mapping from model
+#: id, or a function (e.g. ``ModelRegistry.clean_f1``) returning ``None`` when unknown.
+CleanF1 = float | Mapping[str, float] | Callable[[str], float | None]
+
+
+def category_for_drop(drop: float, thresholds: tuple[float, float] = (0.05, 0.10)) -> int:
+    """Map a relative F1 drop to a behavior category (paper §4.1.2).
+
+    ``drop <= thresholds[0]`` → 0 (no impact), ``> thresholds[0]`` → 1 (degraded),
+    ``> thresholds[1]`` → 2 (compromised).
+    """
+    degraded, compromised = thresholds
+    if drop > compromised:
+        return 2
+    if drop > degraded:
+        return 1
+    return 0
+
+
+@dataclass(frozen=True)
+class WindowMetrics:
+    """The sliding window's figures.
+
+    Attributes:
+        model_id: The model the window is about.
+        frames: Frames in the window.
+        tp: True positives summed over the window.
+        fp: False positives.
+        fn: False negatives.
+        f1: ``2 tp / (2 tp + fp + fn)`` (1.0 when there was nothing to find or predict).
+
+    """
+
+    model_id: str
+    frames: int
+    tp: int
+    fp: int
+    fn: int
+    f1: float
+
+
+class GroundTruthAssessor:
+    """Behavior categories from the simulator's ground truth (the ``ground_truth`` oracle).
+
+    Args:
+        clean_f1: The models' F1 on clean data (see :data:`CleanF1`); pass
+            ``registry.clean_f1`` to take it from the model registry's metrics. A model whose
+            clean F1 is unknown gets no assessment (logged once).
+        window: Frames in the sliding window (N).
+        min_frames: Frames needed before the first assessment (default ``window // 3``,
+            at least 1).
+        thresholds: Relative F1 drops above which a model is degraded (category 1) and
+            compromised (category 2).
+        iou: IoU a detection needs to match a truth.
+        score_threshold: Detections scoring lower are ignored (published detections are
+            already thresholded by their detector, hence 0).
+        buffer: Frames of unmatched truth or detections kept while waiting for the other
+            half (default ``4 * window``).
+
+    """
+
+    name: str = "ground_truth"
+
+    def __init__(
+        self,
+        *,
+        clean_f1: CleanF1 | None = None,
+        window: int = 30,
+        min_frames: int | None = None,
+        thresholds: tuple[float, float] = (0.05, 0.10),
+        iou: float = 0.5,
+        score_threshold: float = 0.0,
+        buffer: int | None = None,
+    ) -> None:
+        if not isinstance(window, int) or window < 1:
+            raise OracleError(f"window must be a whole number of frames >= 1, got {window!r}")
+        self.window = window
+        self.min_frames = max(1, window // 3) if min_frames is None else int(min_frames)
+        if not 1 <= self.min_frames <= window:
+            raise OracleError(f"min_frames must be in [1, window={window}], got {min_frames}")
+        low, high = (float(t) for t in thresholds)
+        if not (0.0 <= low <= high < 1.0):
+            raise OracleError(
+                f"thresholds must be two drops 0 <= degraded <= compromised < 1, got {thresholds}"
+            )
+        self.thresholds = (low, high)
+        if not 0.0 < iou <= 1.0:
+            raise OracleError(f"iou must be in (0, 1], got {iou}")
+        self.iou = float(iou)
+        self.score_threshold = float(score_threshold)
+        self.buffer = 4 * window if buffer is None else int(buffer)
+        self._clean = clean_f1
+        self._lock = threading.Lock()
+        self._truth: OrderedDict[int, tuple[npt.NDArray[np.float64], list[str] | None]] = (
+            OrderedDict()
+        )
+        self._dets: OrderedDict[int, Detections] = OrderedDict()
+        self._counts: deque[tuple[int, int, int]] = deque(maxlen=window)
+        self._model: str | None = None
+        self._context: dict[str, JsonValue] | None = None
+        self._warned: set[str] = set()
+
+    def __repr__(self) -> str:
+        return (
+            f"GroundTruthAssessor(window={self.window}, thresholds={self.thresholds}, "
+            f"iou={self.iou})"
+        )
+
+    # -- hooks -------------------------------------------------------------------------------
+    def observe_ground_truth(
+        self, seq: int, boxes: npt.ArrayLike, labels: Sequence[str] | None
+    ) -> None:
+        """Take the simulator's objects in frame ``seq`` (``[N, 4]`` xyxy px, class names)."""
+        array = np.asarray(boxes, dtype=np.float64).reshape(-1, 4)
+        names = None if labels is None else [str(x) for x in labels]
+        if names is not None and len(names) != len(array):
+            raise OracleError(
+                f"ground truth of frame {seq}: {len(array)} boxes but {len(names)} labels"
+            )
+        with self._lock:
+            dets = self._dets.pop(seq, None)
+            if dets is None:
+                self._truth[seq] = (array, names)
+                self._trim(self._truth)
+            else:
+                self._score(dets, array, names)
+
+    def observe_detections(self, detections: Detections) -> None:
+        """Take what the LEC published for one frame."""
+        with self._lock:
+            truth = self._truth.pop(detections.frame_seq, None)
+            if truth is None:
+                self._dets[detections.frame_seq] = detections
+                self._trim(self._dets)
+            else:
+                self._score(detections, *truth)
+
+    def observe_context(self, context: dict[str, JsonValue]) -> None:
+        """Take the phenomena ground truth (reported as the assessments' context)."""
+        with self._lock:
+            self._context = dict(context)
+
+    def _trim(self, buffer: OrderedDict[int, Any]) -> None:
+        while len(buffer) > self.buffer:
+            buffer.popitem(last=False)
+
+    def _score(
+        self, dets: Detections, boxes: npt.NDArray[np.float64], names: list[str] | None
+    ) -> None:
+        if dets.model_id != self._model:
+            self._model = dets.model_id
+            self._counts.clear()
+        vocab: dict[str, int] = {}
+        if names is None:  # the truth's classes are unknown: match class-agnostically
+            pred_labels = np.zeros(len(dets.labels), np.int64)
+            true_labels = np.zeros(len(boxes), np.int64)
+        else:
+            true_labels = np.array([vocab.setdefault(n, len(vocab)) for n in names], np.int64)
+            pred_labels = np.array([vocab.setdefault(n, len(vocab)) for n in dets.labels], np.int64)
+        pred = DetectionResult(
+            np.asarray(dets.boxes, np.float32).reshape(-1, 4),
+            pred_labels,
+            np.asarray(dets.scores, np.float32),
+        ).above(self.score_threshold)
+        _, is_tp, n_truth = match_image(pred, boxes, true_labels, iou=self.iou)
+        tp = int(is_tp.sum())
+        self._counts.append((tp, len(is_tp) - tp, n_truth - tp))
+
+    # -- assessing ---------------------------------------------------------------------------
+    def metrics(self) -> WindowMetrics | None:
+        """The window's figures now, or ``None`` before the first matched frame."""
+        with self._lock:
+            if self._model is None or not self._counts:
+                return None
+            tp = sum(c[0] for c in self._counts)
+            fp = sum(c[1] for c in self._counts)
+            fn = sum(c[2] for c in self._counts)
+            f1 = 2 * tp / (2 * tp + fp + fn) if tp + fp + fn else 1.0
+            return WindowMetrics(self._model, len(self._counts), tp, fp, fn, f1)
+
+    def clean_f1(self, model_id: str) -> float | None:
+        """The clean F1 this assessor compares ``model_id`` against (``None``: unknown)."""
+        source = self._clean
+        value: float | None = None
+        if isinstance(source, bool) or source is None:
+            value = None
+        elif isinstance(source, int | float):
+            value = float(source)
+        elif isinstance(source, Mapping):
+            raw = source.get(model_id)
+            value = None if raw is None else float(raw)
+        elif callable(source):
+            value = source(model_id)
+        if value is None or not math.isfinite(value) or value <= 0.0:
+            return None
+        return value
+
+    def assess(self, frame: Frame, *, seq: int, model_id: str) -> Assessment | None:
+        """Assess ``model_id`` from the window (the frame's pixels are not looked at).
+
+        Returns ``None`` until the window holds ``min_frames`` frames of ``model_id``, and
+        for a model whose clean F1 is unknown.
+        """
+        window = self.metrics()
+        if window is None or window.model_id != model_id or window.frames < self.min_frames:
+            return None
+        clean = self.clean_f1(model_id)
+        if clean is None:
+            if model_id not in self._warned:
+                self._warned.add(model_id)
+                log.warning(
+                    "ground_truth: no clean F1 for model %r (give clean_f1, or metrics "
+                    "{f1: …} in the model registry); it is not assessed",
+                    model_id,
+                )
+            return None
+        drop = max(0.0, (clean - window.f1) / clean)
+        with self._lock:
+            context: dict[str, JsonValue] = dict(self._context or {})
+        return Assessment(
+            category=category_for_drop(drop, self.thresholds),
+            confidence=min(1.0, window.frames / self.window),
+            context=context,
+            model_id=model_id,
+            assessor=self.name,
+            frame_seq=seq,
+        )

@@ -1,0 +1,319 @@
+"""The oracle node: one behavior oracle on the bus, publishing assessments for Utu.
+
+Paper §3.2 and §4.1.4: behavior oracles "run in parallel to the managed AI system and
+subscribe to the same sensor data received by managed LECs"; each is a node of its own
+(``/adv_detector`` in Fig. 13) that publishes behavior assessments — agent A4's
+``/utu/oracle/output``. The node feeds an oracle what it asks for, by the hooks it has::
+
+    /rover/camera/image ─Image─▶ decode ─▶ oracle.assess(frame, seq, model_id) ─▶ /utu/oracle/output
+    /lec/detector/detections ──▶ oracle.observe_detections      (if defined)
+    /sim/ground_truth ─────────▶ oracle.observe_ground_truth    (if defined)
+    /sim/phenomena ────────────▶ oracle.observe_context         (if defined)
+    /lm_manager/active ────────▶ the model id handed to assess
+
+It holds a liveliness token (``/oracle_<name>``), so a goal model can bind A4 to it with
+``node: /oracle_ground_truth`` and Utu treats the oracle's values as unknown the moment the
+node dies. Calls into the oracle are serialised (one lock), so an oracle need not be
+thread-safe. A bad message or an oracle that raises is logged and counted; the node lives on.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from anunnaki.bus import Assessment, Bus, Detections, Image, Publisher, Sample
+from anunnaki.errors import AnunnakiError
+from anunnaki.lec._node import ACTIVE_TOPIC, decode_image, detections_topic
+from anunnaki.oracles._base import Oracle, context_from_phenomena
+from anunnaki.oracles._registry import OracleRegistry, get_oracle
+
+__all__ = [
+    "GROUND_TRUTH_TOPIC",
+    "OUTPUT_TOPIC",
+    "PHENOMENA_TOPIC",
+    "OracleNode",
+    "OracleNodeStats",
+    "truth_from_message",
+]
+
+log = logging.getLogger("anunnaki.oracles")
+
+#: Where assessments go (agent A4 in the paper's goal models).
+OUTPUT_TOPIC = "/utu/oracle/output"
+#: The simulator's per-frame ground truth: ``{seq, boxes, labels}``.
+GROUND_TRUTH_TOPIC = "/sim/ground_truth"
+#: The simulator's active phenomena (see :func:`~anunnaki.oracles.context_from_phenomena`).
+PHENOMENA_TOPIC = "/sim/phenomena"
+
+
+@dataclass(frozen=True)
+class OracleNodeStats:
+    """Counters of a running :class:`OracleNode`.
+
+    Attributes:
+        frames: Frames received.
+        assessments: Assessments published.
+        withheld: Frames the oracle returned ``None`` for (not enough evidence yet).
+        errors: Bad messages, undecodable frames and oracle exceptions (logged, skipped).
+
+    """
+
+    frames: int
+    assessments: int
+    withheld: int
+    errors: int
+
+
+def truth_from_message(
+    body: dict[str, Any], classes: Sequence[str] | None = None
+) -> tuple[int, np.ndarray, list[str] | None]:
+    """Read a ground-truth message ``{seq, boxes, labels[, classes]}``.
+
+    Labels may be class names, or indices into ``classes`` (the message's own list first,
+    then the node's). Returns ``(seq, boxes [N, 4] float64, names or None)``: ``None`` when
+    indices cannot be named (the assessor then matches class-agnostically).
+
+    Raises:
+        ValueError: A missing or malformed field.
+
+    """
+    seq = body.get("seq")
+    if not isinstance(seq, int) or isinstance(seq, bool) or seq < 0:
+        raise ValueError(f"ground truth needs 'seq', a frame number >= 0, got {seq!r}")
+    boxes = np.asarray(body.get("boxes", []), dtype=np.float64)
+    if boxes.size == 0:
+        boxes = boxes.reshape(0, 4)
+    if boxes.ndim != 2 or boxes.shape[1] != 4:
+        raise ValueError(f"ground truth of frame {seq}: boxes must be [N, 4], got {boxes.shape}")
+    labels = body.get("labels", [])
+    if not isinstance(labels, list) or len(labels) != len(boxes):
+        raise ValueError(f"ground truth of frame {seq}: give one label per box")
+    if all(isinstance(x, str) for x in labels):
+        return seq, boxes, [str(x) for x in labels]
+    own = body.get("classes")
+    names = own if isinstance(own, list) and all(isinstance(c, str) for c in own) else classes
+    if all(isinstance(x, int) and not isinstance(x, bool) for x in labels):
+        if names is not None and all(0 <= x < len(names) for x in labels):
+            return seq, boxes, [str(names[x]) for x in labels]
+        return seq, boxes, None
+    raise ValueError(f"ground truth of frame {seq}: labels must be class names or indices")
+
+
+class OracleNode:
+    """Runs one behavior oracle on the bus.
+
+    Args:
+        bus: The bus.
+        oracle: An oracle instance, or a registered name (built with ``options``).
+        camera: The camera topic (``Image``).
+        lec: The assessed LEC's name (its detections and active-model announcements).
+        detections: Its detections topic (default ``/lec/<lec>/detections``).
+        ground_truth: The simulator's ground-truth topic.
+        phenomena: The simulator's phenomena topic.
+        active: The model manager's announcements (``{lec, model, domain}``).
+        output: Where assessments are published.
+        node: The liveliness token (default ``/oracle_<name>``).
+        classes: Class names for ground truth given as indices.
+        every: Assess every n-th frame (guideline C5: a configurable rate).
+        frame_queue: Frames that may wait; the oldest are dropped beyond it.
+        registry: Where a name is looked up (default: the process-wide registry).
+        **options: The oracle's options when it is given by name (e.g. ``window=30``).
+
+    """
+
+    def __init__(
+        self,
+        bus: Bus,
+        oracle: str | Oracle,
+        *,
+        camera: str = "/rover/camera/image",
+        lec: str = "detector",
+        detections: str | None = None,
+        ground_truth: str = GROUND_TRUTH_TOPIC,
+        phenomena: str = PHENOMENA_TOPIC,
+        active: str = ACTIVE_TOPIC,
+        output: str = OUTPUT_TOPIC,
+        node: str | None = None,
+        classes: Sequence[str] | None = None,
+        every: int = 1,
+        frame_queue: int = 16,
+        registry: OracleRegistry | None = None,
+        **options: Any,
+    ) -> None:
+        if not isinstance(every, int) or every < 1:
+            raise ValueError(f"every must be a whole number >= 1, got {every!r}")
+        self.oracle: Oracle = get_oracle(oracle, registry=registry, **options)
+        self.bus = bus
+        self.lec = lec
+        self.every = every
+        self.classes = tuple(classes) if classes is not None else None
+        self.node = node or f"/oracle_{self.oracle.name}"
+        self._oracle_lock = threading.Lock()
+        self._lock = threading.Lock()
+        self._closed = False
+        self._model_id: str | None = None
+        self._frames = self._published = self._withheld = self._errors = 0
+        self._agnostic_warned = False
+        self._declared: list[Any] = []
+        hooks = {
+            "observe_detections": callable(getattr(self.oracle, "observe_detections", None)),
+            "observe_ground_truth": callable(getattr(self.oracle, "observe_ground_truth", None)),
+            "observe_context": callable(getattr(self.oracle, "observe_context", None)),
+        }
+        self._hooks = hooks
+        try:
+            self._output: Publisher = self._declare(bus.publisher(output))
+            self._declare(bus.subscribe(active, self._on_active, queue=16))
+            self._declare(
+                bus.subscribe(
+                    detections or detections_topic(lec),
+                    self._on_detections,
+                    queue=256,
+                    expect=Detections,
+                )
+            )
+            if hooks["observe_ground_truth"]:
+                self._declare(bus.subscribe(ground_truth, self._on_truth, queue=256))
+            if hooks["observe_context"]:
+                self._declare(bus.subscribe(phenomena, self._on_phenomena, queue=16))
+            self._declare(bus.subscribe(camera, self._on_frame, queue=frame_queue, expect=Image))
+            self._declare(bus.liveliness_token(self.node))
+        except BaseException:
+            self.close()
+            raise
+
+    def _declare(self, obj: Any) -> Any:
+        self._declared.append(obj)
+        return obj
+
+    def __repr__(self) -> str:
+        return f"OracleNode({self.oracle.name!r}, node={self.node!r})"
+
+    @property
+    def model_id(self) -> str | None:
+        """The model the oracle assesses: the latest announced (or detected) one."""
+        with self._lock:
+            return self._model_id
+
+    def stats(self) -> OracleNodeStats:
+        """The node's counters."""
+        with self._lock:
+            return OracleNodeStats(self._frames, self._published, self._withheld, self._errors)
+
+    def _error(self, fmt: str, *args: Any) -> None:
+        with self._lock:
+            self._errors += 1
+        log.warning("oracle %s: " + fmt, self.oracle.name, *args)
+
+    # -- inputs ------------------------------------------------------------------------------
+    def _on_active(self, sample: Sample) -> None:
+        body = sample.message.to_body()
+        if body.get("lec", self.lec) != self.lec:
+            return
+        model = body.get("model")
+        if isinstance(model, str) and model:
+            with self._lock:
+                self._model_id = model
+
+    def _on_detections(self, sample: Sample) -> None:
+        dets = sample.message
+        assert isinstance(dets, Detections)
+        with self._lock:
+            if self._model_id is None:
+                self._model_id = dets.model_id
+        if self._hooks["observe_detections"]:
+            self._call("observe_detections", dets)
+
+    def _on_truth(self, sample: Sample) -> None:
+        try:
+            seq, boxes, names = truth_from_message(sample.message.to_body(), self.classes)
+        except ValueError as exc:
+            self._error("bad ground truth on %s: %s", sample.topic, exc)
+            return
+        if names is None and len(boxes) and not self._agnostic_warned:
+            self._agnostic_warned = True
+            log.warning(
+                "oracle %s: ground-truth labels are class indices and no class names are "
+                "known (give classes=… or a 'classes' list in the message); matching "
+                "class-agnostically",
+                self.oracle.name,
+            )
+        self._call("observe_ground_truth", seq, boxes, names)
+
+    def _on_phenomena(self, sample: Sample) -> None:
+        self._call("observe_context", context_from_phenomena(sample.message.to_body()))
+
+    def _call(self, hook: str, *args: Any) -> Any:
+        try:
+            with self._oracle_lock:
+                return getattr(self.oracle, hook)(*args)
+        except Exception as exc:  # an oracle's bug never kills the node
+            self._error("%s raised %s: %s", hook, type(exc).__name__, exc)
+            return None
+
+    def _on_frame(self, sample: Sample) -> None:
+        message = sample.message
+        assert isinstance(message, Image)
+        with self._lock:
+            self._frames += 1
+            due = (self._frames - 1) % self.every == 0
+            model_id = self._model_id or "unknown"
+        if not due:
+            return
+        try:
+            frame = decode_image(message)
+        except (ValueError, AnunnakiError) as exc:
+            self._error("frame %d: %s", message.seq, exc)
+            return
+        frame.flags.writeable = False  # an oracle must not modify what it is shown
+        try:
+            with self._oracle_lock:
+                result = self.oracle.assess(frame, seq=message.seq, model_id=model_id)
+        except Exception as exc:
+            self._error("assess raised %s: %s", type(exc).__name__, exc)
+            return
+        if result is None:
+            with self._lock:
+                self._withheld += 1
+            return
+        if not isinstance(result, Assessment):
+            self._error("assess returned %s, not an Assessment", type(result).__name__)
+            return
+        try:
+            self._output.put(result)
+        except AnunnakiError as exc:
+            self._error("could not publish: %s", exc)
+            return
+        with self._lock:
+            self._published += 1
+
+    # -- life --------------------------------------------------------------------------------
+    def spin(self, stop: threading.Event | None = None) -> None:
+        """Block until ``stop`` is set or the node is closed (the work runs on bus threads)."""
+        stop = stop or threading.Event()
+        while not stop.is_set() and not self._closed:
+            stop.wait(0.2)
+
+    def close(self) -> None:
+        """Release every subscription, the publisher and the token (idempotent)."""
+        if self._closed:
+            return
+        self._closed = True
+        for obj in reversed(self._declared):
+            try:
+                obj.close()
+            except Exception as exc:  # pragma: no cover - best effort at shutdown
+                log.debug("closing %r: %r", obj, exc)
+        self._declared.clear()
+
+    def __enter__(self) -> OracleNode:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()

@@ -1,0 +1,215 @@
+"""The oracle registry: built-ins, runtime registration and entry-point plugins.
+
+Every plugin slot in Anunnaki takes a name or an object: ``"ground_truth"`` or an oracle
+instance. Third-party packages add oracles through the ``anunnaki.oracles`` entry-point
+group (the entry point names a class); entry points are loaded lazily on the first lookup,
+and one that fails to import or is not an oracle class is logged and skipped, so a broken
+plugin never takes the others down. A plugin cannot shadow a built-in or an explicitly
+registered oracle.
+"""
+
+from __future__ import annotations
+
+import inspect
+import logging
+import re
+import threading
+from importlib.metadata import entry_points
+from typing import Any, TypeVar
+
+from anunnaki.oracles._base import Oracle, OracleError
+from anunnaki.oracles._ground_truth import GroundTruthAssessor
+
+__all__ = [
+    "BUILTIN_ORACLES",
+    "ENTRY_POINT_GROUP",
+    "OracleRegistry",
+    "available_oracles",
+    "default_registry",
+    "get_oracle",
+    "register_oracle",
+]
+
+logger = logging.getLogger("anunnaki.oracles")
+
+#: The entry-point group third-party oracles register under.
+ENTRY_POINT_GROUP = "anunnaki.oracles"
+
+#: The oracles that ship with Anunnaki.
+BUILTIN_ORACLES: tuple[type[Any], ...] = (GroundTruthAssessor,)
+
+_NAME_RE = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
+
+C = TypeVar("C", bound=type[Any])
+
+
+def _check_class(cls: object) -> type[Any]:
+    """Return *cls* if it is a usable oracle class, else raise :class:`OracleError`."""
+    if not isinstance(cls, type):
+        raise OracleError(f"{cls!r} is not a class; register an oracle class")
+    if inspect.isabstract(cls):
+        missing = ", ".join(sorted(getattr(cls, "__abstractmethods__", ())))
+        raise OracleError(f"{cls.__name__} is abstract; implement {missing}")
+    if not callable(getattr(cls, "assess", None)):
+        raise OracleError(
+            f"{cls.__name__} is not an oracle: it has no assess(frame, *, seq, model_id) method"
+        )
+    name = getattr(cls, "name", None)
+    if not isinstance(name, str) or not _NAME_RE.match(name):
+        raise OracleError(
+            f"{cls.__name__}.name must be an identifier such as 'ground_truth', got {name!r}"
+        )
+    return cls
+
+
+class OracleRegistry:
+    """Maps names to oracle classes.
+
+    Args:
+        builtins: Register :data:`BUILTIN_ORACLES` (default ``True``).
+        entry_point_group: Entry-point group to load plugins from on the first lookup;
+            ``None`` disables plugins.
+
+    """
+
+    def __init__(
+        self, *, builtins: bool = True, entry_point_group: str | None = ENTRY_POINT_GROUP
+    ) -> None:
+        self._classes: dict[str, type[Any]] = {}
+        self._group = entry_point_group
+        self._plugins_loaded = entry_point_group is None
+        self._lock = threading.RLock()
+        if builtins:
+            for cls in BUILTIN_ORACLES:
+                self.register(cls)
+
+    def register(self, cls: C, *, replace: bool = False) -> C:
+        """Register an oracle class under its ``name``; usable as a decorator.
+
+        Raises:
+            OracleError: *cls* has no valid ``name`` or ``assess``, or another class has the
+                name and *replace* is false.
+
+        """
+        checked = _check_class(cls)
+        name: str = checked.name
+        with self._lock:
+            current = self._classes.get(name)
+            if current is not None and current is not checked and not replace:
+                raise OracleError(
+                    f"a different oracle is already registered as {name!r} "
+                    f"({current.__module__}.{current.__qualname__}); pass replace=True "
+                    "to override it"
+                )
+            self._classes[name] = checked
+        return cls
+
+    def load_entry_points(self, *, force: bool = False) -> None:
+        """Load plugins from the entry-point group (once, unless *force*).
+
+        Each failure (import error, wrong type, name clash) is logged as a warning and the
+        entry point skipped.
+        """
+        with self._lock:
+            if self._group is None or (self._plugins_loaded and not force):
+                return
+            self._plugins_loaded = True
+            for ep in entry_points(group=self._group):
+                try:
+                    cls = _check_class(ep.load())
+                except Exception as exc:  # a broken plugin must not break the lookup
+                    logger.warning(
+                        "skipping oracle entry point %r (%s): %s: %s",
+                        ep.name,
+                        ep.value,
+                        type(exc).__name__,
+                        exc,
+                    )
+                    continue
+                current = self._classes.get(cls.name)
+                if current is not None and current is not cls:
+                    logger.warning(
+                        "skipping oracle entry point %r (%s): the name %r is already taken "
+                        "by %s.%s",
+                        ep.name,
+                        ep.value,
+                        cls.name,
+                        current.__module__,
+                        current.__qualname__,
+                    )
+                    continue
+                if ep.name != cls.name:
+                    logger.warning(
+                        "oracle entry point %r (%s) registers as %r, its class's name",
+                        ep.name,
+                        ep.value,
+                        cls.name,
+                    )
+                self._classes[cls.name] = cls
+
+    def names(self) -> list[str]:
+        """Return the sorted names of all registered oracles (plugins included)."""
+        self.load_entry_points()
+        with self._lock:
+            return sorted(self._classes)
+
+    def get(self, name_or_instance: str | Oracle, **options: Any) -> Oracle:
+        """Return an oracle for a name (built with ``options``); pass instances through.
+
+        Raises:
+            OracleError: Unknown name (the message lists the valid names), options given
+                with an instance, options the class does not take, or an argument that is
+                neither a name nor an oracle.
+
+        """
+        if not isinstance(name_or_instance, str):
+            if isinstance(name_or_instance, type) or not isinstance(name_or_instance, Oracle):
+                raise OracleError(
+                    "expected an oracle name or an oracle instance (with a name and "
+                    f"assess()), got {type(name_or_instance).__name__}"
+                )
+            if options:
+                raise OracleError(
+                    f"options {sorted(options)} apply when an oracle is built by name; "
+                    "configure the instance yourself"
+                )
+            return name_or_instance
+        name = name_or_instance.strip()
+        self.load_entry_points()
+        with self._lock:
+            cls = self._classes.get(name)
+            known = ", ".join(sorted(self._classes))
+        if cls is None:
+            raise OracleError(f"unknown oracle {name_or_instance!r}; valid names: {known}")
+        try:
+            oracle = cls(**options)
+        except TypeError as exc:
+            raise OracleError(f"oracle {name!r}: bad options {sorted(options)}: {exc}") from None
+        if not isinstance(oracle, Oracle):  # pragma: no cover - _check_class makes this hold
+            raise OracleError(f"oracle {name!r} built an object without name/assess")
+        return oracle
+
+
+_DEFAULT = OracleRegistry()
+
+
+def default_registry() -> OracleRegistry:
+    """Return the process-wide registry used by the module-level functions."""
+    return _DEFAULT
+
+
+def register_oracle(cls: C, *, replace: bool = False) -> C:
+    """Register *cls* in the default registry (also works as a class decorator)."""
+    return _DEFAULT.register(cls, replace=replace)
+
+
+def get_oracle(
+    name_or_instance: str | Oracle, *, registry: OracleRegistry | None = None, **options: Any
+) -> Oracle:
+    """Return an oracle for a name or an instance; see :meth:`OracleRegistry.get`."""
+    return (registry or _DEFAULT).get(name_or_instance, **options)
+
+
+def available_oracles(*, registry: OracleRegistry | None = None) -> list[str]:
+    """Return the sorted names of the registered oracles (built-ins and plugins)."""
+    return (registry or _DEFAULT).names()

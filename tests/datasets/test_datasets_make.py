@@ -1,0 +1,110 @@
+"""Dataset generation: splits by layout, determinism, the process pool, the real simulator."""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Iterator
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from anunnaki.datasets import load_split, make_dataset
+from anunnaki.errors import AnunnakiError
+
+
+@dataclass(frozen=True)
+class FakeFrame:
+    image: np.ndarray
+    boxes: np.ndarray
+    labels: np.ndarray
+    t: float
+    seq: int
+
+
+def fake_frames(
+    platform: str, *, layout: int, seed: int, n: int, width: int, height: int
+) -> Iterator[FakeFrame]:
+    """A frame source with the signature of anunnaki.sim.dataset_frames (picklable)."""
+    rng = np.random.default_rng([seed, layout])
+    for i in range(n):
+        image = np.full((height, width, 3), layout * 10 % 256, np.uint8)
+        x = float(rng.integers(0, width - 8))
+        yield FakeFrame(
+            image, np.array([[x, 2, x + 8, 10]], np.float32), np.array([i % 2]), i / 10, i
+        )
+
+
+def test_splits_by_layout(tmp_path: Path) -> None:
+    paths = make_dataset(
+        "rover",
+        tmp_path / "d",
+        train_layouts=[0, 1, 2],
+        val_layouts=[3],
+        test_layouts=[4, 5],
+        per_layout=3,
+        width=32,
+        height=24,
+        workers=1,
+        source=fake_frames,
+    )
+    assert set(paths) == {"train", "val", "test"}
+    sizes = {s: len(load_split(tmp_path / "d", s)) for s in paths}
+    assert sizes == {"train": 9, "val": 3, "test": 6}
+    layouts = {}
+    for split, path in paths.items():
+        data = json.loads(path.read_text())
+        layouts[split] = {img["layout"] for img in data["images"]}
+        assert data["info"]["split"] == split and data["info"]["platform"] == "rover"
+    assert layouts == {"train": {0, 1, 2}, "val": {3}, "test": {4, 5}}
+    test = load_split(tmp_path / "d", "test")
+    assert test.classes == ("pedestrian", "deer")
+    assert test[0].image.shape == (24, 32, 3) and int(test[0].image[0, 0, 0]) == 40
+    assert test.records[0].meta["seq"] == 0 and test.records[1].meta["t"] == 0.1
+
+
+def test_pool_gives_the_same_dataset(tmp_path: Path) -> None:
+    kwargs = dict(
+        train_layouts=[0, 1], val_layouts=[2], test_layouts=[3], per_layout=2, width=32,
+        height=24, seed=5, source=fake_frames,
+    )  # fmt: skip
+    make_dataset("rover", tmp_path / "a", workers=1, **kwargs)  # type: ignore[arg-type]
+    make_dataset("rover", tmp_path / "b", workers=2, **kwargs)  # type: ignore[arg-type]
+    for split in ("train", "val", "test"):
+        assert (tmp_path / "a" / f"{split}.json").read_text() == (
+            tmp_path / "b" / f"{split}.json"
+        ).read_text()
+    names = sorted(p.name for p in (tmp_path / "a" / "images").iterdir())
+    assert names == sorted(p.name for p in (tmp_path / "b" / "images").iterdir())
+    for name in names:
+        assert (tmp_path / "a" / "images" / name).read_bytes() == (
+            tmp_path / "b" / "images" / name
+        ).read_bytes()
+
+
+def test_refuses_shared_layouts_and_existing_output(tmp_path: Path) -> None:
+    with pytest.raises(AnunnakiError, match="layout 2 is in both the train and the test split"):
+        make_dataset("rover", tmp_path, train_layouts=[1, 2], val_layouts=[3], test_layouts=[2])
+    make_dataset(
+        "rover", tmp_path, train_layouts=[0], val_layouts=[1], test_layouts=[2], per_layout=1,
+        width=16, height=16, workers=1, source=fake_frames,
+    )  # fmt: skip
+    with pytest.raises(AnunnakiError, match=r"already holds a dataset.*overwrite"):
+        make_dataset("rover", tmp_path, train_layouts=[0], val_layouts=[1], test_layouts=[2])
+    with pytest.raises(AnunnakiError, match="unknown platform 'boat'"):
+        make_dataset("boat", tmp_path / "x", train_layouts=[0], val_layouts=[1], test_layouts=[2])
+
+
+def test_real_simulator_frames(tmp_path: Path) -> None:
+    pytest.importorskip("pybullet")
+    paths = make_dataset(
+        "uav", tmp_path, train_layouts=[0], val_layouts=[], test_layouts=[1], per_layout=2,
+        width=64, height=48, workers=1,
+    )  # fmt: skip
+    assert set(paths) == {"train", "test"}
+    ds = load_split(tmp_path, "train")
+    assert ds.classes == ("pedestrian", "vehicle") and len(ds) == 2
+    image, boxes, labels = ds[1]
+    assert image.shape == (48, 64, 3)
+    assert boxes.shape[1] == 4 and (labels >= 0).all() and (labels < 2).all()

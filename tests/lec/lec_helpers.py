@@ -1,0 +1,96 @@
+"""The session model of the LEC tests: settings, cache key and training (see conftest.py).
+
+A small rover detector, trained once and cached.
+
+The model is trained on a reduced simulated rover dataset (a few layouts, 128 × 128) and
+cached under pytest's cache directory (``.pytest_cache/d/anunnaki-lec/KEY``), keyed by a hash
+of the settings and of the source of ``anunnaki.lec``, ``anunnaki.datasets`` and
+``anunnaki.sim``: editing any of them retrains, otherwise later sessions load the cached
+files in well under a second. With ``-p no:cacheprovider`` it trains into a temporary folder.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import anunnaki
+
+#: Data and training settings of the session model (part of the cache key).
+SETTINGS: dict[str, Any] = {
+    "platform": "rover",
+    "width": 128,
+    "height": 128,
+    "train_layouts": list(range(0, 12)),
+    "val_layouts": [12, 13],
+    "test_layouts": [14, 15, 16],
+    "per_layout": 25,
+    "seed": 0,
+    "epochs": 12,
+    "batch_size": 16,
+    "net_width": 16,
+    "threads": 2,
+}
+
+
+@dataclass(frozen=True)
+class Trained:
+    """The session model and its data."""
+
+    model: Path
+    data: Path
+    metrics: dict[str, Any]
+    seconds: float
+    cached: bool
+
+
+def cache_key() -> str:
+    """Hash of the settings and of the code the model depends on."""
+    h = hashlib.sha256(json.dumps(SETTINGS, sort_keys=True).encode())
+    pkg = Path(anunnaki.__file__).parent
+    for part in ("lec", "datasets", "sim"):
+        for file in sorted((pkg / part).glob("*.py")):
+            h.update(file.name.encode())
+            h.update(file.read_bytes())
+    import torch
+
+    h.update(torch.__version__.encode())
+    return h.hexdigest()[:16]
+
+
+def train_session_model(root: Path) -> tuple[dict[str, Any], float]:
+    """Render the reduced dataset into ROOT/data, train, save ROOT/model.safetensors."""
+    from anunnaki.datasets import load_split, make_dataset
+    from anunnaki.lec import TrainConfig, save_detector, train_detector
+
+    s = SETTINGS
+    start = time.perf_counter()
+    make_dataset(
+        s["platform"],
+        root / "data",
+        train_layouts=s["train_layouts"],
+        val_layouts=s["val_layouts"],
+        test_layouts=s["test_layouts"],
+        per_layout=s["per_layout"],
+        width=s["width"],
+        height=s["height"],
+        seed=s["seed"],
+        workers=2,
+        overwrite=True,
+    )
+    splits = [load_split(root / "data", split, cache=True) for split in ("train", "val", "test")]
+    config = TrainConfig(
+        epochs=s["epochs"],
+        batch_size=s["batch_size"],
+        seed=s["seed"],
+        width=s["net_width"],
+        threads=s["threads"],
+        model_id="test-rover",
+    )
+    result = train_detector(splits[0], splits[1], config=config, test=splits[2])
+    save_detector(result.detector, root / "model.safetensors")
+    return result.detector.metrics, time.perf_counter() - start

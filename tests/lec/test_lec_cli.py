@@ -1,0 +1,96 @@
+"""``anunnaki make-dataset``, ``train-detector`` and ``evaluate-detector`` on a tiny dataset."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+from lec_helpers import Trained
+
+from anunnaki.cli.main import main
+
+
+@pytest.fixture(scope="module")
+def tiny(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    pytest.importorskip("pybullet")
+    out = tmp_path_factory.mktemp("cli") / "tiny"
+    code = main(
+        [
+            "make-dataset", "rover", "--out", str(out), "--train-layouts", "0-1",
+            "--val-layouts", "2", "--test-layouts", "3", "--per-layout", "3",
+            "--width", "64", "--height", "64", "--workers", "1",
+        ]
+    )  # fmt: skip
+    assert code == 0
+    return out
+
+
+def test_make_dataset(tiny: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    assert {p.name for p in tiny.iterdir()} == {"images", "train.json", "val.json", "test.json"}
+    assert len(list((tiny / "images").glob("*.png"))) == 12
+    code = main(["make-dataset", "rover", "--out", str(tiny), "--per-layout", "1"])
+    assert code == 2
+    assert "already holds a dataset" in capsys.readouterr().err
+
+
+def test_train_detector(tiny: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    capsys.readouterr()
+    out = tmp_path / "m.safetensors"
+    code = main(
+        [
+            "train-detector", "--data", str(tiny), "--out", str(out), "--epochs", "1",
+            "--seed", "1", "--width", "8", "--augment", "fog", "raindrop", "--domain", "fog",
+            "--json",
+        ]
+    )  # fmt: skip
+    assert code == 0
+    text = capsys.readouterr().out
+    assert "score threshold" in text and "chosen on val" in text and "test" in text
+    card = json.loads(text[text.index("{") :])
+    assert card["domain"] == "fog" and card["model_id"] == "m"
+    assert card["training"]["augment"] == ["fog", "raindrop"] and "test" in card["metrics"]
+    assert out.is_file() and out.with_suffix(".json").is_file()
+
+
+def test_train_detector_errors(
+    tiny: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    capsys.readouterr()
+    assert main(["train-detector", "--data", str(tiny), "--out", str(tmp_path / "m.pt")]) == 2
+    assert "ends in .safetensors" in capsys.readouterr().err
+    args = ["train-detector", "--data", str(tiny), "--out", str(tmp_path / "m.safetensors")]
+    assert main([*args, "--augment", "smog"]) == 2
+    assert "smog" in capsys.readouterr().err
+    assert main(["train-detector", "--data", str(tmp_path), "--out", "x.safetensors"]) == 2
+    assert "no 'train' split here" in capsys.readouterr().err
+
+
+def test_evaluate_detector(trained: Trained, capsys: pytest.CaptureFixture[str]) -> None:
+    capsys.readouterr()
+    base = ["evaluate-detector", str(trained.model), "--data", str(trained.data)]
+    assert main([*base, "--phenomenon", "fog", "--strength", "0.7", "--json"]) == 0
+    report = json.loads(capsys.readouterr().out)
+    assert report["clean"]["f1"] == pytest.approx(trained.metrics["test"]["f1"])
+    assert report["phenomenon"]["name"] == "fog" and report["category"] in (0, 1, 2)
+    assert report["f1_drop"] == pytest.approx(report["clean"]["f1"] - report["perturbed"]["f1"])
+    assert main([*base, "--split", "val", "--phenomenon", "raindrop", "--params",
+                 "x=0.5,y=0.6,radius=0.3"]) == 0  # fmt: skip
+    text = capsys.readouterr().out
+    assert "clean" in text and "raindrop" in text and "F1 drop" in text and "category" in text
+
+
+def test_evaluate_detector_errors(
+    trained: Trained, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    capsys.readouterr()
+    assert (
+        main(["evaluate-detector", str(tmp_path / "nope.safetensors"), "--data", str(trained.data)])
+        == 2
+    )
+    assert "nope.json: model sidecar not found" in capsys.readouterr().err
+    base = ["evaluate-detector", str(trained.model), "--data", str(trained.data)]
+    assert main([*base, "--strength", "0.5"]) == 2
+    assert "need --phenomenon" in capsys.readouterr().err
+    assert main([*base, "--phenomenon", "fog", "--params", "density=40"]) == 2
+    assert "density" in capsys.readouterr().err

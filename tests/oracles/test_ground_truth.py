@@ -1,0 +1,244 @@
+"""The ground-truth assessor's rule, and the simulator messages it reads."""
+
+from __future__ import annotations
+
+import logging
+import math
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+
+from anunnaki.bus import Detections
+from anunnaki.lec._registry import ModelRegistry
+from anunnaki.oracles import (
+    GroundTruthAssessor,
+    OracleError,
+    WindowMetrics,
+    category_for_drop,
+    context_from_phenomena,
+    truth_from_message,
+)
+
+BOX = [10.0, 10.0, 30.0, 30.0]
+FRAME = np.zeros((40, 40, 3), np.uint8)
+
+
+def dets(seq: int, boxes: list[list[float]], labels: list[str], model: str = "m") -> Detections:
+    return Detections(
+        frame_seq=seq, model_id=model, width=40, height=40, boxes=boxes, labels=labels,
+        scores=[0.9] * len(boxes),
+    )  # fmt: skip
+
+
+def feed(a: GroundTruthAssessor, seq: int, found: bool, model: str = "m") -> None:
+    a.observe_ground_truth(seq, np.array([BOX]), ["car"])
+    a.observe_detections(dets(seq, [BOX] if found else [], ["car"] if found else [], model))
+
+
+@pytest.mark.parametrize(
+    ("drop", "category"),
+    [(0.0, 0), (0.05, 0), (0.0501, 1), (0.10, 1), (0.1001, 2), (1.0, 2)],
+)
+def test_the_papers_thresholds(drop: float, category: int) -> None:
+    assert category_for_drop(drop) == category
+
+
+def test_thresholds_are_configuration() -> None:
+    assert category_for_drop(0.15, (0.2, 0.3)) == 0
+    assert category_for_drop(0.25, (0.2, 0.3)) == 1
+    assert category_for_drop(0.35, (0.2, 0.3)) == 2
+
+
+@pytest.mark.parametrize(("missed", "category"), [(0, 0), (1, 0), (2, 1), (3, 1), (4, 2)])
+def test_category_from_the_window_f1(missed: int, category: int) -> None:
+    """20 frames of one object each; F1 = 2 tp / (2 tp + fn); clean F1 = 1.0."""
+    a = GroundTruthAssessor(clean_f1=1.0, window=20)
+    for seq in range(20):
+        feed(a, seq, found=seq >= missed)
+    result = a.assess(FRAME, seq=20, model_id="m")
+    assert result is not None and result.category == category
+    f1 = 2 * (20 - missed) / (2 * (20 - missed) + missed)
+    assert a.metrics() == WindowMetrics("m", 20, 20 - missed, 0, missed, pytest.approx(f1))
+    assert result.confidence == 1.0 and result.assessor == "ground_truth"
+    assert (result.frame_seq, result.model_id, result.context) == (20, "m", {})
+
+
+def test_relative_to_the_models_clean_f1() -> None:
+    a = GroundTruthAssessor(clean_f1=0.9, window=10)
+    for seq in range(10):  # F1 = 2*9 / (2*9 + 1) = 0.947 > 0.9: better than clean
+        feed(a, seq, found=seq != 0)
+    result = a.assess(FRAME, seq=10, model_id="m")
+    assert result is not None and result.category == 0
+
+
+def test_false_positives_count_too() -> None:
+    a = GroundTruthAssessor(clean_f1=1.0, window=4, min_frames=1)
+    a.observe_ground_truth(0, np.zeros((0, 4)), [])
+    a.observe_detections(dets(0, [BOX], ["car"]))
+    assert a.metrics() == WindowMetrics("m", 1, 0, 1, 0, 0.0)
+    a.observe_ground_truth(1, np.zeros((0, 4)), [])
+    a.observe_detections(dets(1, [], []))  # nothing to find, nothing found: F1 1 for it
+    assert a.metrics() == WindowMetrics("m", 2, 0, 1, 0, 0.0)
+
+
+def test_window_slides_and_confidence_grows() -> None:
+    a = GroundTruthAssessor(clean_f1=1.0, window=10, min_frames=4)
+    confidences = []
+    for seq in range(30):
+        feed(a, seq, found=seq < 10 or seq >= 20)  # missed 10..19
+        result = a.assess(FRAME, seq=seq, model_id="m")
+        confidences.append(None if result is None else result.confidence)
+        if seq == 19:
+            assert result is not None and result.category == 2
+    assert (
+        confidences[:3] == [None] * 3 and confidences[3] == 0.4 and confidences[9:12] == [1.0] * 3
+    )
+    final = a.assess(FRAME, seq=30, model_id="m")
+    assert final is not None and final.category == 0  # the misses slid out
+
+
+def test_a_model_change_starts_a_fresh_window() -> None:
+    a = GroundTruthAssessor(clean_f1={"old": 1.0, "new": 1.0}, window=10, min_frames=3)
+    for seq in range(10):
+        feed(a, seq, found=False, model="old")
+    old = a.assess(FRAME, seq=9, model_id="old")
+    assert old is not None and old.category == 2
+    assert a.assess(FRAME, seq=9, model_id="new") is None  # the window is about "old"
+    for seq in range(10, 13):
+        feed(a, seq, found=True, model="new")
+    new = a.assess(FRAME, seq=12, model_id="new")
+    assert new is not None and new.category == 0 and new.confidence == pytest.approx(0.3)
+    assert a.assess(FRAME, seq=12, model_id="old") is None
+
+
+def test_matched_by_sequence_number_in_any_arrival_order() -> None:
+    a = GroundTruthAssessor(clean_f1=1.0, window=5, min_frames=1)
+    a.observe_detections(dets(2, [BOX], ["car"]))  # detections first
+    a.observe_ground_truth(1, np.array([BOX]), ["car"])
+    a.observe_ground_truth(2, np.array([BOX]), ["car"])
+    assert a.metrics() == WindowMetrics("m", 1, 1, 0, 0, 1.0)
+    a.observe_detections(dets(1, [], []))
+    assert a.metrics() == WindowMetrics("m", 2, 1, 0, 1, pytest.approx(2 / 3))
+
+
+def test_matching_is_class_aware_and_needs_iou() -> None:
+    a = GroundTruthAssessor(clean_f1=1.0, window=5, min_frames=1)
+    a.observe_ground_truth(0, np.array([BOX]), ["person"])
+    a.observe_detections(dets(0, [BOX], ["car"]))  # the right box, the wrong class
+    assert a.metrics() == WindowMetrics("m", 1, 0, 1, 1, 0.0)
+    b = GroundTruthAssessor(clean_f1=1.0, window=5, min_frames=1)
+    b.observe_ground_truth(0, np.array([BOX]), None)  # class names unknown: agnostic
+    b.observe_detections(dets(0, [BOX], ["car"]))
+    assert b.metrics() == WindowMetrics("m", 1, 1, 0, 0, 1.0)
+    c = GroundTruthAssessor(clean_f1=1.0, window=5, min_frames=1)
+    c.observe_ground_truth(0, np.array([BOX]), ["car"])
+    c.observe_detections(dets(0, [[20.0, 10.0, 40.0, 30.0]], ["car"]))  # IoU 1/3
+    assert c.metrics() == WindowMetrics("m", 1, 0, 1, 1, 0.0)
+    d = GroundTruthAssessor(clean_f1=1.0, window=5, min_frames=1, iou=0.3)
+    d.observe_ground_truth(0, np.array([BOX]), ["car"])
+    d.observe_detections(dets(0, [[20.0, 10.0, 40.0, 30.0]], ["car"]))
+    assert d.metrics() == WindowMetrics("m", 1, 1, 0, 0, 1.0)
+
+
+def test_score_threshold_drops_weak_detections() -> None:
+    a = GroundTruthAssessor(clean_f1=1.0, window=5, min_frames=1, score_threshold=0.95)
+    feed(a, 0, found=True)  # scored 0.9
+    assert a.metrics() == WindowMetrics("m", 1, 0, 0, 1, 0.0)
+
+
+def test_clean_f1_sources(tmp_path: Path, caplog: pytest.LogCaptureFixture) -> None:
+    registry = ModelRegistry(
+        [{"id": "m", "domain": "default", "file": tmp_path / "m", "metrics": {"f1": 0.8}}]
+    )
+    assert GroundTruthAssessor(clean_f1=registry.clean_f1).clean_f1("m") == 0.8
+    assert GroundTruthAssessor(clean_f1={"m": 0.7}).clean_f1("m") == 0.7
+    assert GroundTruthAssessor(clean_f1=0.6).clean_f1("x") == 0.6
+    for bad in (None, 0.0, math.nan, True, {"other": 0.5}, lambda m: None):
+        assert GroundTruthAssessor(clean_f1=bad).clean_f1("m") is None  # type: ignore[arg-type]
+    a = GroundTruthAssessor(window=3)
+    for seq in range(3):
+        feed(a, seq, found=True)
+    with caplog.at_level(logging.WARNING, logger="anunnaki.oracles"):
+        assert a.assess(FRAME, seq=3, model_id="m") is None
+        assert a.assess(FRAME, seq=4, model_id="m") is None
+    assert caplog.text.count("no clean F1 for model 'm'") == 1
+
+
+def test_context_is_the_phenomena_ground_truth() -> None:
+    a = GroundTruthAssessor(clean_f1=1.0, window=2, min_frames=1)
+    feed(a, 0, found=True)
+    a.observe_context(context_from_phenomena({"phenomenon": "fog", "params": {"density": 4}}))
+    result = a.assess(FRAME, seq=0, model_id="m")
+    assert result is not None
+    assert result.context == {"phenomenon": "fog", "params": {"density": 4}}
+
+
+@pytest.mark.parametrize(
+    ("options", "message"),
+    [
+        ({"window": 0}, "window must be"),
+        ({"window": 5, "min_frames": 6}, "min_frames must be"),
+        ({"thresholds": (0.1, 0.05)}, "thresholds must be"),
+        ({"iou": 0.0}, "iou must be"),
+    ],
+)
+def test_bad_options_are_refused(options: dict[str, Any], message: str) -> None:
+    with pytest.raises(OracleError, match=message):
+        GroundTruthAssessor(**options)
+
+
+def test_mismatched_truth_is_refused() -> None:
+    with pytest.raises(OracleError, match="2 boxes but 1 labels"):
+        GroundTruthAssessor().observe_ground_truth(0, np.array([BOX, BOX]), ["car"])
+
+
+# -- simulator messages -------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    ("message", "context"),
+    [
+        ({"phenomenon": "fog", "params": {"density": 4}},
+         {"phenomenon": "fog", "params": {"density": 4}}),
+        ({"name": "raindrop", "params": {"x": 0.5, "bad": [1]}},
+         {"phenomenon": "raindrop", "params": {"x": 0.5}}),
+        ({"phenomena": [{"name": "fog", "params": {"density": 2}}, "raindrop"]},
+         {"phenomenon": "fog+raindrop", "params": {"fog": {"density": 2}, "raindrop": {}}}),
+        ({"active": ["hsl"], "strength": 0.4},
+         {"phenomenon": "hsl", "params": {}, "strength": 0.4}),
+        ({"phenomenon": None}, {"phenomenon": "clear", "params": {}}),
+        ({"phenomena": []}, {"phenomenon": "clear", "params": {}}),
+        ({"phenomenon": "clear"}, {"phenomenon": "clear", "params": {}}),
+        ({"phenomena": ["none", ""]}, {"phenomenon": "clear", "params": {}}),
+        ({}, {"phenomenon": "clear", "params": {}}),
+    ],
+)  # fmt: skip
+def test_context_from_phenomena(message: dict[str, Any], context: dict[str, Any]) -> None:
+    assert context_from_phenomena(message) == context
+
+
+def test_truth_from_message() -> None:
+    seq, boxes, names = truth_from_message({"seq": 3, "boxes": [BOX], "labels": ["car"]})
+    assert seq == 3 and boxes.shape == (1, 4) and names == ["car"]
+    _, _, names = truth_from_message({"seq": 3, "boxes": [BOX, BOX], "labels": [1, 0]},
+                                     ("person", "car"))  # fmt: skip
+    assert names == ["car", "person"]
+    _, _, names = truth_from_message(
+        {"seq": 3, "boxes": [BOX], "labels": [0], "classes": ["deer"]}, ("person",)
+    )
+    assert names == ["deer"]  # the message's own classes first
+    assert truth_from_message({"seq": 3, "boxes": [BOX], "labels": [0]})[2] is None
+    assert truth_from_message({"seq": 3, "boxes": [BOX], "labels": [5]}, ("a",))[2] is None
+    _, empty, names = truth_from_message({"seq": 0, "boxes": [], "labels": []})
+    assert empty.shape == (0, 4) and names == []
+    for bad, message in [
+        ({"boxes": [], "labels": []}, "needs 'seq'"),
+        ({"seq": True, "boxes": [], "labels": []}, "needs 'seq'"),
+        ({"seq": 1, "boxes": [[1, 2, 3]], "labels": ["a"]}, r"\[N, 4\]"),
+        ({"seq": 1, "boxes": [BOX], "labels": []}, "one label per box"),
+        ({"seq": 1, "boxes": [BOX], "labels": [1.5]}, "names or indices"),
+    ]:
+        with pytest.raises(ValueError, match=message):
+            truth_from_message(bad)

@@ -1,0 +1,177 @@
+"""The oracle slot: by name or by object, runtime registration, entry-point plugins."""
+
+from __future__ import annotations
+
+import logging
+import sys
+import textwrap
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+
+from anunnaki.bus import Assessment
+from anunnaki.errors import AnunnakiError
+from anunnaki.oracles import (
+    ENTRY_POINT_GROUP,
+    GroundTruthAssessor,
+    Oracle,
+    OracleError,
+    OracleRegistry,
+    available_oracles,
+    default_registry,
+    get_oracle,
+    register_oracle,
+)
+
+
+class Constant:
+    """A minimal oracle: always the same category."""
+
+    name = "constant"
+
+    def __init__(self, category: int = 0) -> None:
+        self.category = category
+
+    def assess(self, frame: np.ndarray, *, seq: int, model_id: str) -> Assessment:
+        return Assessment(category=self.category, confidence=1.0, model_id=model_id,
+                          assessor=self.name, frame_seq=seq)  # fmt: skip
+
+
+def test_builtins_by_name_with_options() -> None:
+    assert "ground_truth" in available_oracles()
+    assert OracleRegistry(entry_point_group=None).names() == ["ground_truth"]
+    oracle = get_oracle("ground_truth", window=12, clean_f1=0.9)
+    assert isinstance(oracle, GroundTruthAssessor) and oracle.window == 12
+    assert isinstance(get_oracle(" ground_truth "), GroundTruthAssessor)
+
+
+def test_instances_pass_through() -> None:
+    mine = Constant(2)
+    assert get_oracle(mine) is mine
+    assert isinstance(mine, Oracle)
+    with pytest.raises(OracleError, match="apply when an oracle is built by name"):
+        get_oracle(mine, window=3)
+
+
+def test_unknown_names_list_the_valid_ones() -> None:
+    with pytest.raises(OracleError, match="unknown oracle 'enlil_fog'; valid names: ") as info:
+        get_oracle("enlil_fog")
+    assert "ground_truth" in str(info.value)
+    assert isinstance(info.value, AnunnakiError) and isinstance(info.value, ValueError)
+
+
+@pytest.mark.parametrize("bad", [None, 3, Constant, ["ground_truth"], object()])
+def test_other_arguments_are_refused(bad: Any) -> None:
+    with pytest.raises(OracleError, match="expected an oracle name or an oracle instance"):
+        get_oracle(bad)
+
+
+def test_bad_options_name_the_oracle() -> None:
+    with pytest.raises(OracleError, match="oracle 'ground_truth': bad options \\['colour'\\]"):
+        get_oracle("ground_truth", colour="red")
+
+
+def test_register_in_code(monkeypatch: pytest.MonkeyPatch) -> None:
+    registry = OracleRegistry(entry_point_group=None)
+    monkeypatch.setattr("anunnaki.oracles._registry._DEFAULT", registry)
+    assert register_oracle(Constant) is Constant
+    assert default_registry() is registry
+    oracle = get_oracle("constant", category=1)
+    assert isinstance(oracle, Constant) and oracle.category == 1
+    register_oracle(Constant)  # the same class again: harmless
+
+    class Other(Constant):
+        pass
+
+    with pytest.raises(OracleError, match="already registered as 'constant'"):
+        registry.register(Other)
+    registry.register(Other, replace=True)
+    assert type(get_oracle("constant")) is Other
+
+
+@pytest.mark.parametrize(
+    ("cls", "message"),
+    [
+        (Constant(), "is not a class"),
+        (type("NoAssess", (), {"name": "x"}), "has no assess"),
+        (type("NoName", (), {"assess": lambda self: None}), "must be an identifier"),
+        (type("BadName", (), {"name": "my oracle", "assess": lambda self: None}), "identifier"),
+    ],
+)
+def test_malformed_classes_are_refused(cls: Any, message: str) -> None:
+    with pytest.raises(OracleError, match=message):
+        OracleRegistry().register(cls)
+
+
+PLUGIN = '''
+"""A fake third-party oracle package."""
+from anunnaki.bus import Assessment
+
+
+class Haze:
+    name = "haze"
+
+    def __init__(self, level=1):
+        self.level = level
+
+    def assess(self, frame, *, seq, model_id):
+        return Assessment(category=self.level, confidence=0.5, model_id=model_id,
+                          assessor=self.name, frame_seq=seq)
+
+
+class FakeGroundTruth(Haze):
+    name = "ground_truth"
+
+
+class Renamed(Haze):
+    name = "renamed_haze"
+
+
+NOT_AN_ORACLE = 42
+'''
+
+
+def install_fake_plugin(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Install a fake distribution whose entry points name good and broken oracles."""
+    (tmp_path / "fake_oracle_plugin.py").write_text(PLUGIN)
+    dist = tmp_path / "fake_oracle_plugin-0.1.dist-info"
+    dist.mkdir()
+    (dist / "METADATA").write_text(
+        "Metadata-Version: 2.1\nName: fake-oracle-plugin\nVersion: 0.1\n"
+    )
+    (dist / "entry_points.txt").write_text(
+        textwrap.dedent(
+            f"""\
+            [{ENTRY_POINT_GROUP}]
+            haze = fake_oracle_plugin:Haze
+            broken = fake_no_such_oracle_module:Nope
+            answer = fake_oracle_plugin:NOT_AN_ORACLE
+            ground_truth = fake_oracle_plugin:FakeGroundTruth
+            other_name = fake_oracle_plugin:Renamed
+            """
+        )
+    )
+    monkeypatch.syspath_prepend(str(tmp_path))
+    monkeypatch.delitem(sys.modules, "fake_oracle_plugin", raising=False)
+
+
+def test_entry_point_plugins(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, caplog: pytest.LogCaptureFixture
+) -> None:
+    registry = OracleRegistry()  # created before the plugin is installed: lookups are lazy
+    install_fake_plugin(tmp_path, monkeypatch)
+    with caplog.at_level(logging.WARNING, logger="anunnaki.oracles"):
+        assert registry.names() == ["ground_truth", "haze", "renamed_haze"]
+    haze = registry.get("haze", level=2)
+    assert type(haze).__name__ == "Haze"
+    result = haze.assess(np.zeros((2, 2, 3), np.uint8), seq=4, model_id="m")
+    assert result is not None and result.category == 2 and result.assessor == "haze"
+    log = caplog.text
+    assert "'broken'" in log and "fake_no_such_oracle_module" in log
+    assert "'answer'" in log and "is not a class" in log
+    assert "'ground_truth'" in log and "already taken" in log
+    assert "'other_name'" in log and "registers as 'renamed_haze'" in log
+    assert isinstance(registry.get("ground_truth"), GroundTruthAssessor)  # no shadowing
+    assert "haze" not in OracleRegistry(entry_point_group=None).names()
