@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from anunnaki.datasets import Dataset, DatasetError, load_split, read_image
+from anunnaki.errors import AnunnakiError
 
 
 def toy(n: int = 4, size: tuple[int, int] = (40, 32)) -> Dataset:
@@ -45,7 +46,61 @@ def test_dataset_interface() -> None:
     sub = ds.subset([3, 0])
     assert len(sub) == 2 and np.array_equal(sub[1].image, ds[0].image)
     assert len(ds[1:3]) == 2 and len(list(ds)) == 4
-    assert [len(lab) for _, lab in ds.truths()] == [2, 0, 2, 2]
+    assert [len(lab) for _, lab, _ in ds.truths()] == [2, 0, 2, 2]
+    assert ds.num_ignore == 0 and all(ig.shape == (0, 4) for *_, ig in ds.truths())
+
+
+def with_ignore() -> Dataset:
+    """The toy dataset with ignore boxes on images 0 and 1 (the one without labels)."""
+    ds = toy()
+    return Dataset.from_arrays(
+        [ds.image(i) for i in range(len(ds))],
+        [r.boxes for r in ds.records],
+        [r.labels for r in ds.records],
+        ds.classes,
+        ignore=[[[30, 1, 34, 6]], [[2, 2, 6, 5], [10, 10, 12.5, 30]], [], []],
+        ignore_labels=[[1], [0, 1], [], []],
+    )
+
+
+def test_ignore_boxes_are_carried_and_checked() -> None:
+    ds = with_ignore()
+    assert ds.num_ignore == 3 and ds.num_boxes == 6
+    boxes, _, ignore = ds.truths()[1]
+    assert len(boxes) == 0 and ignore.dtype == np.float32
+    np.testing.assert_array_equal(ignore, [[2, 2, 6, 5], [10, 10, 12.5, 30]])
+    assert ds.records[1].ignore_labels.tolist() == [0, 1]
+    assert ds.subset([1]).num_ignore == 2 and ds.in_memory().num_ignore == 3
+    image = ds.image(0)
+    with pytest.raises(AnunnakiError, match="together"):
+        Dataset.from_arrays([image], [[]], [[]], ds.classes, ignore=[[[0, 0, 1, 1]]])
+    with pytest.raises(AnunnakiError, match="1 ignore boxes but 2 ignore labels"):
+        Dataset.from_arrays(
+            [image], [[]], [[]], ds.classes, ignore=[[[0, 0, 1, 1]]], ignore_labels=[[0, 1]]
+        )
+    with pytest.raises(AnunnakiError, match=r"label outside 0\.\.1"):
+        Dataset.from_arrays(
+            [image], [[]], [[]], ds.classes, ignore=[[[0, 0, 1, 1]]], ignore_labels=[[5]]
+        )
+
+
+def test_coco_round_trip_keeps_ignore_boxes_as_crowd(tmp_path: Path) -> None:
+    ds = with_ignore()
+    path = ds.to_coco(tmp_path / "test.json")
+    data = json.loads(path.read_text())
+    crowd = [a for a in data["annotations"] if a["iscrowd"] == 1]
+    assert len(crowd) == 3 and len(data["annotations"]) == 9
+    assert crowd[0] == {
+        "id": 3, "image_id": 1, "category_id": 2, "bbox": [30.0, 1.0, 4.0, 5.0],
+        "area": 20.0, "iscrowd": 1,
+    }  # fmt: skip
+    back = Dataset.from_coco(path)
+    assert_same(ds, back)
+    for a, b in zip(ds.records, back.records, strict=True):
+        np.testing.assert_allclose(a.ignore, b.ignore, atol=1e-3)
+        np.testing.assert_array_equal(a.ignore_labels, b.ignore_labels)
+    again = Dataset.from_coco(back.to_coco(tmp_path / "copy" / "test.json"))
+    assert again.num_ignore == 3 and again.num_boxes == 6
 
 
 def test_coco_round_trip(tmp_path: Path) -> None:
@@ -150,13 +205,15 @@ def test_coco_not_json(tmp_path: Path) -> None:
         Dataset.from_coco(path)
 
 
-def test_coco_crowd_skipped_and_boxes_clipped(tmp_path: Path) -> None:
+def test_coco_crowd_becomes_ignore_and_boxes_are_clipped(tmp_path: Path) -> None:
     def mutate(d: dict) -> None:
         d["annotations"][0]["iscrowd"] = 1
         d["annotations"][1]["bbox"] = [30, -5, 20, 10]
 
     ds = Dataset.from_coco(write_coco(tmp_path, mutate))
     np.testing.assert_allclose(ds[0].boxes, [[30, 0, 40, 5]])
+    np.testing.assert_allclose(ds.records[0].ignore, [[1.5, 2.25, 11.0, 20.5]])
+    assert ds.records[0].ignore_labels.tolist() == [0]
 
 
 # -- malformed YOLO ----------------------------------------------------------------------------

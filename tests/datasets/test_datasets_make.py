@@ -108,3 +108,18 @@ def test_real_simulator_frames(tmp_path: Path) -> None:
     image, boxes, labels = ds[1]
     assert image.shape == (48, 64, 3)
     assert boxes.shape[1] == 4 and (labels >= 0).all() and (labels < 2).all()
+
+
+def test_simulator_ignore_boxes_reach_the_coco_files(tmp_path: Path) -> None:
+    # Everything under the frame's height is unlabelled: every object seen becomes an ignore
+    # box, written as iscrowd 1 and read back as the records' ignore boxes.
+    pytest.importorskip("pybullet")
+    make_dataset(
+        "rover", tmp_path, train_layouts=[0], val_layouts=[], test_layouts=[], per_layout=3,
+        width=64, height=64, workers=1, min_label_height=1.0,
+    )  # fmt: skip
+    ds = load_split(tmp_path, "train")
+    assert ds.num_boxes == 0 and ds.num_ignore > 0
+    data = json.loads((tmp_path / "train.json").read_text())
+    assert {a["iscrowd"] for a in data["annotations"]} == {1}
+    assert data["info"]["min_label_height"] == 1.0

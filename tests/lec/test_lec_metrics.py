@@ -15,6 +15,7 @@ from anunnaki.lec import (
     choose_threshold,
     f1_at_iou,
 )
+from anunnaki.lec._metrics import box_ioa, match_image
 
 T = (np.array([[0, 0, 10, 10]], np.float32), np.array([0]))  # one truth of class 0
 
@@ -128,6 +129,71 @@ def test_choose_threshold_edge_cases() -> None:
     assert 0.8 < thr <= 0.9
 
 
+# -- ignore boxes (objects seen but not labelled) ----------------------------------------------
+
+IGN = np.array([[20, 20, 30, 40]], np.float32)  # an ignore box, 10 x 20 px
+TI = (*T, IGN)  # one truth of class 0 and one ignore box
+
+
+def test_a_detection_mostly_inside_an_ignore_box_counts_neither_way() -> None:
+    inside = det((0, 0, 10, 10, 0, 0.9), (21, 22, 29, 38, 1, 0.8))  # any class
+    assert f1_at_iou([inside], [TI], score_threshold=0.5) == Metrics(1.0, 1.0, 1.0, 1, 0, 0)
+    # The same detection without the ignore box is a false positive.
+    m = f1_at_iou([inside], [T], score_threshold=0.5)
+    assert (m.tp, m.fp, m.fn) == (1, 1, 0)
+
+
+def test_half_inside_is_ignored_just_under_half_is_a_false_positive() -> None:
+    half = det((25, 20, 35, 40, 0, 0.9))  # 5 x 20 of its 10 x 20 inside: IoA 0.5
+    under = det((25.01, 20, 35.01, 40, 0, 0.9))
+    assert box_ioa(half.boxes, IGN)[0, 0] == 0.5
+    assert (f1_at_iou([half], [TI], score_threshold=0.0).fp) == 0
+    assert (f1_at_iou([under], [TI], score_threshold=0.0).fp) == 1
+    # Intersection over the *prediction*: a huge box covering the ignore box is not ignored.
+    big = det((0, 0, 100, 100, 0, 0.9))
+    assert box_iou(big.boxes, IGN)[0, 0] < 0.5 and f1_at_iou([big], [TI], score_threshold=0).fp
+
+
+def test_truths_are_matched_before_ignore_boxes() -> None:
+    # A truth lying inside an ignore box is still found; a duplicate on it is then ignored
+    # (it is mostly inside the ignore box), a duplicate elsewhere is not.
+    truth = (np.array([[20, 20, 30, 40]], np.float32), np.array([0]), IGN)
+    preds = det((20, 20, 30, 40, 0, 0.9), (21, 21, 30, 40, 0, 0.8), (60, 60, 70, 70, 0, 0.7))
+    m = f1_at_iou([preds], [truth], score_threshold=0.0)
+    assert (m.tp, m.fp, m.fn) == (1, 1, 0)
+    scores, is_tp, n = match_image(preds, truth[0], truth[1], iou=0.5, ignore=IGN)
+    assert scores.tolist() == pytest.approx([0.9, 0.7]) and is_tp.tolist() == [True, False]
+    assert n == 1
+
+
+def test_ignored_objects_are_never_missed() -> None:
+    only_ignore = (np.zeros((0, 4)), np.zeros(0), IGN)
+    m = f1_at_iou([det()], [only_ignore], score_threshold=0.5)
+    assert (m.tp, m.fp, m.fn) == (0, 0, 0) and m.f1 == 1.0
+
+
+def test_a_truth_needs_two_or_three_parts() -> None:
+    with pytest.raises(DetectorError, match=r"\(boxes, labels\) or \(boxes, labels, ignore\)"):
+        f1_at_iou([det()], [(T[0],)], score_threshold=0.5)  # type: ignore[list-item]
+
+
+def test_choose_threshold_is_not_pulled_by_ignored_detections() -> None:
+    # Two confident detections on an unlabelled object between two true positives: counted
+    # as false positives they make the threshold drop the weaker true positive; ignored,
+    # it keeps both.
+    truths = (np.array([[0, 0, 10, 10], [40, 0, 50, 10]], np.float32), np.array([0, 0]))
+    preds = det(
+        (0, 0, 10, 10, 0, 0.9),
+        (21, 22, 29, 38, 0, 0.7),
+        (22, 21, 28, 39, 1, 0.6),
+        (40, 0, 50, 10, 0, 0.5),
+    )
+    assert choose_threshold([preds], [truths]) == pytest.approx(0.8)
+    thr = choose_threshold([preds], [(*truths, IGN)])
+    assert thr == pytest.approx(0.25)
+    assert f1_at_iou([preds], [(*truths, IGN)], score_threshold=thr).f1 == 1.0
+
+
 boxes_st = st.lists(
     st.tuples(
         st.floats(0, 50), st.floats(0, 50), st.floats(1, 30), st.floats(1, 30),
@@ -152,3 +218,24 @@ def test_counts_are_consistent(pred_rows: list, truth_rows: list, thr: float) ->
     best = choose_threshold([preds], [truth])
     best_f1 = f1_at_iou([preds], [truth], score_threshold=best).f1
     assert best_f1 >= m.f1 - 1e-12  # no threshold beats the chosen one
+
+
+@settings(max_examples=60, deadline=None)
+@given(pred_rows=boxes_st, truth_rows=boxes_st, ignore_rows=boxes_st, thr=st.floats(0, 1))
+def test_ignore_boxes_only_ever_remove_false_positives(
+    pred_rows: list, truth_rows: list, ignore_rows: list, thr: float
+) -> None:
+    preds = det(*[(x, y, x + w, y + h, c, s) for x, y, w, h, c, s in pred_rows])
+    boxes = np.array([(x, y, x + w, y + h) for x, y, w, h, _, _ in truth_rows], np.float32)
+    labels = np.array([c for *_, c, _ in truth_rows], np.int64)
+    ignore = np.array([(x, y, x + w, y + h) for x, y, w, h, _, _ in ignore_rows], np.float32)
+    plain = f1_at_iou([preds], [(boxes, labels)], score_threshold=thr)
+    with_ignore = f1_at_iou([preds], [(boxes, labels, ignore)], score_threshold=thr)
+    assert (with_ignore.tp, with_ignore.fn) == (plain.tp, plain.fn)
+    assert with_ignore.fp <= plain.fp
+    assert with_ignore.f1 >= plain.f1 - 1e-12
+    empty = f1_at_iou([preds], [(boxes, labels, np.zeros((0, 4)))], score_threshold=thr)
+    assert empty == plain
+    best = choose_threshold([preds], [(boxes, labels, ignore)])
+    best_f1 = f1_at_iou([preds], [(boxes, labels, ignore)], score_threshold=best).f1
+    assert best_f1 >= with_ignore.f1 - 1e-12

@@ -83,6 +83,20 @@ def test_false_positives_count_too() -> None:
     assert a.metrics() == WindowMetrics("m", 2, 0, 1, 0, 0.0)
 
 
+def test_detections_on_ignore_boxes_count_neither_way() -> None:
+    # Frame 0: a detection on an object the simulator saw but did not label (an ignore box)
+    # is no false positive; frame 1: the same detection without the ignore box is one. The
+    # detections may arrive first: the ignore boxes wait with the truth.
+    far = [32.0, 2.0, 36.0, 12.0]
+    a = GroundTruthAssessor(clean_f1=1.0, window=4, min_frames=1)
+    a.observe_detections(dets(0, [BOX, far], ["car", "car"]))
+    a.observe_ground_truth(0, np.array([BOX]), ["car"], ignore=np.array([far]))
+    assert a.metrics() == WindowMetrics("m", 1, 1, 0, 0, 1.0)
+    a.observe_ground_truth(1, np.array([BOX]), ["car"])
+    a.observe_detections(dets(1, [BOX, far], ["car", "car"]))
+    assert a.metrics() == WindowMetrics("m", 2, 2, 1, 0, 0.8)
+
+
 def test_window_slides_and_confidence_grows() -> None:
     a = GroundTruthAssessor(clean_f1=1.0, window=10, min_frames=4)
     confidences = []
@@ -97,6 +111,28 @@ def test_window_slides_and_confidence_grows() -> None:
     )
     final = a.assess(FRAME, seq=30, model_id="m")
     assert final is not None and final.category == 0  # the misses slid out
+
+
+def test_too_few_objects_show_no_drop() -> None:
+    """With min_objects, a window of a handful of objects is not believed (low confidence)."""
+    a = GroundTruthAssessor(clean_f1=1.0, window=10, min_frames=1, min_objects=8)
+    for seq in range(10):  # ten frames: objects in four, one of them missed, six empty
+        if seq < 4:
+            feed(a, seq, found=seq != 2)
+        else:
+            a.observe_ground_truth(seq, np.zeros((0, 4)), [])
+            a.observe_detections(dets(seq, [], []))
+    few = a.assess(FRAME, seq=9, model_id="m")
+    assert few is not None and few.category == 0 and few.confidence == pytest.approx(4 / 8)
+    plain = GroundTruthAssessor(clean_f1=1.0, window=10, min_frames=1)
+    for seq in range(4):
+        feed(plain, seq, found=seq != 2)
+    believed = plain.assess(FRAME, seq=3, model_id="m")
+    assert believed is not None and believed.category == 2  # F1 0.857: a 14 % drop
+    for seq in range(10, 20):  # enough objects: the misses count again
+        feed(a, seq, found=seq % 2 == 0)
+    many = a.assess(FRAME, seq=19, model_id="m")
+    assert many is not None and many.category == 2 and many.confidence == 1.0
 
 
 def test_a_model_change_starts_a_fresh_window() -> None:
@@ -182,6 +218,7 @@ def test_context_is_the_phenomena_ground_truth() -> None:
         ({"window": 5, "min_frames": 6}, "min_frames must be"),
         ({"thresholds": (0.1, 0.05)}, "thresholds must be"),
         ({"iou": 0.0}, "iou must be"),
+        ({"min_objects": -1}, "min_objects must be"),
     ],
 )
 def test_bad_options_are_refused(options: dict[str, Any], message: str) -> None:

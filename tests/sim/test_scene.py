@@ -33,6 +33,8 @@ def test_frames_have_the_documented_shapes_and_dtypes(platform, classes) -> None
             assert np.all(x1 >= 0) and np.all(y1 >= 0)
             assert np.all(x2 <= 96) and np.all(y2 <= 64)
             assert np.all(x2 - x1 >= 4) and np.all(y2 - y1 >= 4)
+        assert f.ignore.dtype == np.float32 and f.ignore.shape == (len(f.ignore_labels), 4)
+        assert np.all((f.ignore_labels >= 0) & (f.ignore_labels < len(classes)))
 
 
 def test_boxes_are_tight_around_the_objects_pixels_in_the_mask() -> None:
@@ -65,6 +67,7 @@ def test_frames_are_deterministic_for_layout_and_seed() -> None:
         assert np.array_equal(fa.image, fb.image)
         assert np.array_equal(fa.boxes, fb.boxes)
         assert np.array_equal(fa.labels, fb.labels)
+        assert np.array_equal(fa.ignore, fb.ignore)
     c = list(dataset_frames("rover", layout=3, seed=8, n=3))
     assert not all(np.array_equal(x.image, y.image) for x, y in zip(a, c, strict=True))
 
@@ -78,17 +81,50 @@ def test_different_layouts_are_different_scenes() -> None:
     assert not np.array_equal(a.image, b.image)
 
 
-def test_occluded_and_cut_objects_get_no_box() -> None:
+def test_occluded_and_cut_objects_get_an_ignore_box_not_a_label() -> None:
     # A pedestrian hidden behind a big cube, and one mostly out of the frame.
     from anunnaki.sim import Camera
 
-    people = [Placement("pedestrian", 5.0, 0.0, size=1.7), Placement("pedestrian", 5.0, 3.4)]
+    # The frame's left edge is 30° off axis, 2.89 m to the side at 5 m: the pedestrian at
+    # y = 3.0 (0.45 m wide) shows about a quarter of itself.
+    people = [Placement("pedestrian", 5.0, 0.0, size=1.7), Placement("pedestrian", 5.0, 3.0)]
     wall = Placement("cube", 3.0, 0.0, size=1.6)
     camera = Camera((0.0, 0.0, 0.3), (10.0, 0.0, 0.3), fov=60.0)
     with Scene("rover", 0, placements=people) as open_scene:
-        assert len(open_scene.render(camera).boxes) == 1  # the one at y=3.4 is cut
+        frame = open_scene.render(camera)
+        assert len(frame.boxes) == 1  # the one at y=3.0 is cut ...
+        assert len(frame.ignore) == 1 and frame.ignore_labels.tolist() == [0]  # ... ignored
+        assert frame.ignore[0, 0] == 0.0  # at the frame's left edge
     with Scene("rover", 0, placements=[*people, wall]) as hidden:
-        assert len(hidden.render(camera).boxes) == 0
+        frame = hidden.render(camera)
+        assert len(frame.boxes) == 0
+        assert len(frame.ignore) >= 1  # the cut one, and the hidden one if a limb shows
+
+
+def test_a_far_pedestrian_is_an_ignore_box_a_near_one_a_label() -> None:
+    # The rover's smallest labelled height is 0.134 of the image (a 0.93 m deer at 6 m,
+    # twice the stop distance): at 128 px, 17.2 px. A 1.7 m pedestrian 12 m ahead is about
+    # 0.866 * 128 * 1.7 / 12 = 15.7 px tall: seen, not labelled. At 5 m it is ~38 px.
+    from anunnaki.sim import MIN_LABEL_HEIGHT, Camera
+
+    assert MIN_LABEL_HEIGHT["rover"] * 128 == pytest.approx(17.2, abs=0.1)
+    camera = Camera((0.0, 0.0, 0.3), (10.0, 0.0, 0.3), fov=60.0)
+    far = Placement("pedestrian", 12.0, 0.0, size=1.7)
+    with Scene("rover", 0, placements=[far]) as scene:
+        frame = scene.render(camera)
+        assert len(frame.boxes) == 0 and frame.ignore_labels.tolist() == [0]
+        x1, y1, x2, y2 = frame.ignore[0]
+        assert 12 <= y2 - y1 < 17.2 and x2 - x1 >= 2
+        # The same frame labelled with no minimum height has it as a box.
+    with Scene("rover", 0, placements=[far], min_label_height=0.0) as scene:
+        frame = scene.render(camera)
+        assert len(frame.boxes) == 1 and len(frame.ignore) == 0
+    with Scene("rover", 0, placements=[Placement("pedestrian", 5.0, 0.0, size=1.7)]) as scene:
+        frame = scene.render(camera)
+        assert len(frame.boxes) == 1 and len(frame.ignore) == 0
+        assert frame.boxes[0, 3] - frame.boxes[0, 1] > 30
+    # The UAV labels every box of at least 4 px.
+    assert MIN_LABEL_HEIGHT["uav"] == 0.0
 
 
 def test_scenes_live_side_by_side_in_one_process() -> None:

@@ -139,6 +139,12 @@ def _add_make(sub: Any) -> None:
     p.add_argument("--seed", type=int, default=0, help="camera/light/pose seed (0)")
     p.add_argument("--workers", type=_positive, default=2, help="rendering processes (2)")
     p.add_argument("--overwrite", action="store_true", help="replace an existing dataset")
+    p.add_argument(
+        "--min-label-height",
+        type=_unit,
+        help="smallest labelled box height as a fraction of the image height; smaller "
+        "objects become ignore boxes (default: the platform's, rover 0.134, uav 0)",
+    )
     p.set_defaults(run=_run_make)
 
 
@@ -160,16 +166,19 @@ def _run_make(args: argparse.Namespace) -> int:
         workers=args.workers,
         progress=console.is_terminal,
         overwrite=args.overwrite,
+        min_label_height=args.min_label_height,
     )
     seconds = time.perf_counter() - start
     table = Table(title=f"{args.platform} dataset in {args.out} ({seconds:.0f} s)")
-    for col in ("split", "layouts", "images", "boxes", "per class"):
-        table.add_column(col, justify="right" if col in ("images", "boxes") else "left")
+    for col in ("split", "layouts", "images", "boxes", "ignore", "per class"):
+        table.add_column(col, justify="right" if col in ("images", "boxes", "ignore") else "left")
     for split, path in paths.items():
         ds = load_split(path.parent, split)
         layouts = getattr(args, f"{split}_layouts")
         counts = ", ".join(f"{k} {v}" for k, v in ds.class_counts().items())
-        table.add_row(split, _span(layouts), str(len(ds)), str(ds.num_boxes), counts)
+        table.add_row(
+            split, _span(layouts), str(len(ds)), str(ds.num_boxes), str(ds.num_ignore), counts
+        )
     console.print(table)
     return 0
 
@@ -216,6 +225,17 @@ def _add_train(sub: Any) -> None:
     p.add_argument("--lr", type=float, default=3e-3, help="peak learning rate (3e-3)")
     p.add_argument("--width", type=_positive, default=16, help="network base width (16)")
     p.add_argument("--input-size", type=_size, help="WIDTHxHEIGHT (default: the images')")
+    p.add_argument(
+        "--stride", type=int, choices=(2, 4), default=4, help="heat-map stride (4; 2 for tiny)"
+    )
+    p.add_argument(
+        "--init", metavar="MODEL", help="start from this model's weights (fine-tune a domain)"
+    )
+    p.add_argument(
+        "--no-ignore",
+        action="store_true",
+        help="treat the data's ignore boxes as background when training",
+    )
     p.add_argument("--json", action="store_true", help="print the sidecar as JSON at the end")
     p.set_defaults(run=_run_train)
 
@@ -258,12 +278,17 @@ def _run_train(args: argparse.Namespace) -> int:
         augment_prob=args.augment_prob,
         model_id=args.model_id or out.stem,
         domain=args.domain,
+        stride=args.stride,
+        init=args.init,
+        ignore=not args.no_ignore,
     )
     console.print(
-        f"training on {len(train)} images ({train.num_boxes} boxes, classes "
+        f"training on {len(train)} images ({train.num_boxes} boxes, {train.num_ignore} ignore "
+        f"boxes, classes "
         f"{', '.join(train.classes)}); val {len(val)}, test {len(test) if test else 0}; "
         f"{args.epochs} epochs, {args.threads} threads"
         + (f", augment {' '.join(args.augment)}" if args.augment else "")
+        + (f", from {args.init}" if args.init else "")
     )
     with Progress(
         TextColumn("epoch {task.fields[epoch]}"),
@@ -294,7 +319,9 @@ def _run_train(args: argparse.Namespace) -> int:
                 str(m.tp), str(m.fp), str(m.fn),
             )  # fmt: skip
     console.print(table)
+    images_per_s = result.detector.training.get("images_per_second", 0.0)
     console.print(
+        f"{images_per_s:.0f} images/s over {config.epochs} epochs; "
         f"score threshold {result.threshold:.3f} (chosen on val); saved {out} "
         f"({out.stat().st_size / 1e6:.2f} MB, sha256 {digest[:16]}…) and {out.with_suffix('.json')}"
     )
@@ -330,6 +357,12 @@ def _add_evaluate(sub: Any) -> None:
     p.add_argument("--threshold", type=_unit, help="score threshold (default: the model's)")
     p.add_argument("--threads", type=_positive, default=2, help="torch threads (2)")
     p.add_argument("--json", action="store_true", help="print one JSON object")
+    p.add_argument(
+        "--update-sidecar",
+        action="store_true",
+        help="re-measure the val and test splits of DATA at the model's threshold and write "
+        "them into the model's sidecar (weights unchanged; e.g. after the F1 rule changed)",
+    )
     p.set_defaults(run=_run_evaluate)
 
 
@@ -382,6 +415,8 @@ def _run_evaluate(args: argparse.Namespace) -> int:
         report["f1_drop_relative"] = rel
         report["category"] = category
         rows.append((phen.name, perturbed))
+    if args.update_sidecar:
+        report["sidecar"] = _update_sidecar(args.model, det, args.data, clean, args.split)
     if args.json:
         print(json.dumps(report))
         return 0
@@ -397,6 +432,8 @@ def _run_evaluate(args: argparse.Namespace) -> int:
             str(m.tp), str(m.fp), str(m.fn),
         )  # fmt: skip
     console.print(table)
+    if args.update_sidecar:
+        console.print(f"updated the metrics in {report['sidecar']}")
     if phen is not None:
         params_text = ", ".join(f"{k}={v:g}" for k, v in report["phenomenon"]["params"].items())
         console.print(
@@ -405,3 +442,29 @@ def _run_evaluate(args: argparse.Namespace) -> int:
             f"{report['category']} ({_CATEGORY[report['category']]})"
         )
     return 0
+
+
+def _update_sidecar(model: str, det: Any, data: str, measured: Any, split: str) -> str:
+    """Write val and test metrics of *det* on *data* into the model's sidecar."""
+    from anunnaki.datasets import load_split
+    from anunnaki.lec import evaluate_detector
+    from anunnaki.lec._detector import read_card, sidecar_path, update_metrics
+
+    threshold = float(det.score_threshold)
+    metrics: dict[str, Any] = {
+        **read_card(model).metrics,
+        "iou": 0.5,
+        "score_threshold": threshold,
+        "data": str(data),
+    }
+    for name in ("val", "test"):
+        if name == split:
+            metrics[name] = measured.as_dict()
+            continue
+        try:
+            ds = load_split(data, name)
+        except AnunnakiError:
+            continue
+        metrics[name] = evaluate_detector(det, ds, score_threshold=threshold).as_dict()
+    update_metrics(model, metrics)
+    return str(sidecar_path(model))

@@ -3,7 +3,8 @@
 Everything that trains or assesses a detector reads a :class:`Dataset`: ``len(ds)``,
 ``ds[i]`` → ``(image, boxes, labels)`` (``(H, W, 3)`` ``uint8`` RGB, ``[N, 4]`` ``float32``
 xyxy pixels, ``[N]`` ``int64`` class indices), iteration, ``ds.classes``, ``ds.subset(idx)``
-and ``ds.truths()`` (the labels without reading images).
+and ``ds.truths()`` (boxes, labels and ignore boxes — objects seen but not labelled —
+without reading images).
 
 Generating one from the simulator (``anunnaki make-dataset``), split by scene layout so no
 scene is in two splits::

@@ -4,8 +4,10 @@ The subset of COCO we read and write: ``categories`` (``id``, ``name``), ``image
 (``id``, ``file_name``, ``width``, ``height``, plus any extra fields, kept as metadata) and
 ``annotations`` (``id``, ``image_id``, ``category_id``, ``bbox`` = ``[x, y, width, height]``
 in pixels, optional ``iscrowd``). Labels are the categories' positions in the ``categories``
-list; crowd annotations (``iscrowd: 1``) are skipped, as COCO evaluation ignores them. Boxes
-that stick out of the image are clipped to it.
+list. Crowd annotations (``iscrowd: 1``) become the image's *ignore boxes*
+(``Record.ignore``): regions where a detection is neither right nor wrong, as in COCO's own
+evaluation; the simulator's unlabelled objects (too small, occluded, cut by the frame) are
+exported the same way. Boxes that stick out of the image are clipped to it.
 """
 
 from __future__ import annotations
@@ -126,6 +128,8 @@ def read_coco(
 
     boxes: dict[int, list[list[float]]] = {k: [] for k in images}
     labels: dict[int, list[int]] = {k: [] for k in images}
+    ignore: dict[int, list[list[float]]] = {k: [] for k in images}
+    ignore_labels: dict[int, list[int]] = {k: [] for k in images}
     seen: set[int] = set()
     for i, ann in enumerate(data["annotations"]):
         if not isinstance(ann, dict) or not _is_int(ann.get("id")):
@@ -154,8 +158,6 @@ def read_coco(
         x, y, w, h = (float(v) for v in bbox)
         if w <= 0 or h <= 0:
             raise fail(f"{where}.bbox", f"width and height must be > 0, got {w} x {h}", _BBOX_HINT)
-        if ann.get("iscrowd", 0):
-            continue
         img = images[ann["image_id"]]
         x1, y1 = max(0.0, x), max(0.0, y)
         x2, y2 = min(float(img["width"]), x + w), min(float(img["height"]), y + h)
@@ -165,8 +167,9 @@ def read_coco(
                 f"box {bbox} lies outside the {img['width']}x{img['height']} image",
                 "bbox is [x, y, width, height] in pixels from the top-left corner",
             )
-        boxes[ann["image_id"]].append([x1, y1, x2, y2])
-        labels[ann["image_id"]].append(cat_index[ann["category_id"]])
+        crowd = bool(ann.get("iscrowd", 0))
+        (ignore if crowd else boxes)[ann["image_id"]].append([x1, y1, x2, y2])
+        (ignore_labels if crowd else labels)[ann["image_id"]].append(cat_index[ann["category_id"]])
 
     records = []
     for image_id, img in images.items():
@@ -188,13 +191,19 @@ def read_coco(
                 image_id=image_id,
                 path=file,
                 meta=meta,
+                ignore=np.asarray(ignore[image_id], np.float32).reshape(-1, 4),
+                ignore_labels=np.asarray(ignore_labels[image_id], np.int64),
             )
         )
     return Dataset(classes, records, name=str(p), cache=cache)
 
 
 def coco_dict(ds: Dataset, *, info: Mapping[str, Any] | None = None) -> dict[str, Any]:
-    """The COCO JSON object of *ds* (category ids are label + 1, annotation ids from 1)."""
+    """The COCO JSON object of *ds* (category ids are label + 1, annotation ids from 1).
+
+    Each image's labelled boxes come first (``iscrowd: 0``), then its ignore boxes
+    (``iscrowd: 1``).
+    """
     images, annotations = [], []
     ann_id = 1
     for k, r in enumerate(ds.records):
@@ -208,7 +217,12 @@ def coco_dict(ds: Dataset, *, info: Mapping[str, Any] | None = None) -> dict[str
                 "height": r.height,
             }
         )
-        for box, label in zip(r.boxes.tolist(), r.labels.tolist(), strict=True):
+        pairs = [
+            (box, label, crowd)
+            for bxs, lbs, crowd in ((r.boxes, r.labels, 0), (r.ignore, r.ignore_labels, 1))
+            for box, label in zip(bxs.tolist(), lbs.tolist(), strict=True)
+        ]
+        for box, label, crowd in pairs:
             x1, y1, x2, y2 = box
             w, h = x2 - x1, y2 - y1
             annotations.append(
@@ -218,7 +232,7 @@ def coco_dict(ds: Dataset, *, info: Mapping[str, Any] | None = None) -> dict[str
                     "category_id": int(label) + 1,
                     "bbox": [round(x1, 3), round(y1, 3), round(w, 3), round(h, 3)],
                     "area": round(w * h, 3),
-                    "iscrowd": 0,
+                    "iscrowd": crowd,
                 }
             )
             ann_id += 1

@@ -59,6 +59,11 @@ class Record:
         path: Where the image is on disk, or ``None`` for an in-memory image.
         array: The image itself when held in memory.
         meta: Extra fields (``layout``, ``seed``, ``t`` … for generated data).
+        ignore: ``[K, 4]`` ``float32`` xyxy *ignore boxes*: objects in the image that are
+            not labelled (too small, mostly occluded or cut by the frame; COCO ``iscrowd``
+            regions). A prediction lying mostly inside one counts neither as right nor as
+            wrong, and training puts no background loss there. Empty by default.
+        ignore_labels: ``[K]`` ``int64`` class of each ignore box.
 
     """
 
@@ -71,6 +76,12 @@ class Record:
     path: Path | None = None
     array: npt.NDArray[np.uint8] | None = field(default=None, repr=False)
     meta: Mapping[str, Any] = field(default_factory=dict)
+    ignore: npt.NDArray[np.float32] = field(
+        default_factory=lambda: np.zeros((0, 4), np.float32), repr=False
+    )
+    ignore_labels: npt.NDArray[np.int64] = field(
+        default_factory=lambda: np.zeros(0, np.int64), repr=False
+    )
 
 
 def read_image(path: str | Path) -> npt.NDArray[np.uint8]:
@@ -136,10 +147,16 @@ class Dataset:
             raise AnunnakiError(f"{name or 'dataset'}: duplicate class names in {self.classes}")
         self.records: tuple[Record, ...] = tuple(records)
         for r in self.records:
-            if len(r.labels) and (r.labels.min() < 0 or r.labels.max() >= len(self.classes)):
+            for labels in (r.labels, r.ignore_labels):
+                if len(labels) and (labels.min() < 0 or labels.max() >= len(self.classes)):
+                    raise AnunnakiError(
+                        f"{name or 'dataset'}: image {r.file_name} has a label outside "
+                        f"0..{len(self.classes) - 1}"
+                    )
+            if len(r.ignore) != len(r.ignore_labels):
                 raise AnunnakiError(
-                    f"{name or 'dataset'}: image {r.file_name} has a label outside "
-                    f"0..{len(self.classes) - 1}"
+                    f"{name or 'dataset'}: image {r.file_name} has {len(r.ignore)} ignore "
+                    f"boxes but {len(r.ignore_labels)} ignore labels"
                 )
         self.name = name
         self.cache = cache
@@ -173,8 +190,13 @@ class Dataset:
 
     @property
     def num_boxes(self) -> int:
-        """Number of ground-truth boxes over all images."""
+        """Number of ground-truth (labelled) boxes over all images."""
         return sum(len(r.labels) for r in self.records)
+
+    @property
+    def num_ignore(self) -> int:
+        """Number of ignore boxes over all images."""
+        return sum(len(r.ignore) for r in self.records)
 
     def image(self, index: int) -> npt.NDArray[np.uint8]:
         """The ``(H, W, 3)`` ``uint8`` RGB pixels of image *index*.
@@ -204,9 +226,15 @@ class Dataset:
             self._cache[i] = image
         return image
 
-    def truths(self) -> list[tuple[npt.NDArray[np.float32], npt.NDArray[np.int64]]]:
-        """``(boxes, labels)`` of every image, without reading pixels (for the metrics)."""
-        return [(r.boxes, r.labels) for r in self.records]
+    def truths(
+        self,
+    ) -> list[tuple[npt.NDArray[np.float32], npt.NDArray[np.int64], npt.NDArray[np.float32]]]:
+        """``(boxes, labels, ignore)`` of every image, without reading pixels (for the metrics).
+
+        ``ignore`` is the image's ``[K, 4]`` ignore boxes (see :class:`Record`); the metrics
+        (``anunnaki.lec.f1_at_iou``) take these triples as they are.
+        """
+        return [(r.boxes, r.labels, r.ignore) for r in self.records]
 
     def subset(self, indices: Sequence[int] | npt.NDArray[np.integer] | range) -> Dataset:
         """A dataset of the images at *indices* (in that order), sharing the cache policy."""
@@ -237,6 +265,8 @@ class Dataset:
         *,
         name: str = "",
         meta: Sequence[Mapping[str, Any]] | None = None,
+        ignore: Sequence[npt.ArrayLike] | None = None,
+        ignore_labels: Sequence[npt.ArrayLike] | None = None,
     ) -> Dataset:
         """A dataset held in memory.
 
@@ -247,12 +277,25 @@ class Dataset:
             classes: Class names.
             name: A label for messages.
             meta: Extra fields per image (kept in COCO exports).
+            ignore: ``[K_i, 4]`` xyxy ignore boxes per image (see :class:`Record`).
+            ignore_labels: ``[K_i]`` their classes (required with *ignore*).
 
         """
         if not len(images) == len(boxes) == len(labels):
             raise AnunnakiError(
                 f"{len(images)} images, {len(boxes)} box lists and {len(labels)} label lists; "
                 "give one of each per image"
+            )
+        if (ignore is None) != (ignore_labels is None):
+            raise AnunnakiError("give ignore boxes and ignore_labels together")
+        if (
+            ignore is not None
+            and ignore_labels is not None
+            and not len(ignore) == len(ignore_labels) == len(images)
+        ):
+            raise AnunnakiError(
+                f"{len(images)} images, {len(ignore)} ignore box lists and "
+                f"{len(ignore_labels)} ignore label lists; give one of each per image"
             )
         records = []
         for i, (raw, b, lab) in enumerate(zip(images, boxes, labels, strict=True)):
@@ -265,6 +308,15 @@ class Dataset:
             lb = np.asarray(lab, dtype=np.int64).reshape(-1)
             if len(bx) != len(lb):
                 raise AnunnakiError(f"image {i}: {len(bx)} boxes but {len(lb)} labels")
+            ig = np.zeros((0, 4), np.float32)
+            il = np.zeros(0, np.int64)
+            if ignore is not None and ignore_labels is not None:
+                ig = np.asarray(ignore[i], dtype=np.float32).reshape(-1, 4)
+                il = np.asarray(ignore_labels[i], dtype=np.int64).reshape(-1)
+                if len(ig) != len(il):
+                    raise AnunnakiError(
+                        f"image {i}: {len(ig)} ignore boxes but {len(il)} ignore labels"
+                    )
             records.append(
                 Record(
                     file_name=f"{i:06d}.png",
@@ -275,6 +327,8 @@ class Dataset:
                     image_id=i + 1,
                     array=image,
                     meta=dict(meta[i]) if meta is not None else {},
+                    ignore=ig,
+                    ignore_labels=il,
                 )
             )
         return cls(classes, records, name=name)

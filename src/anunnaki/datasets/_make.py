@@ -66,6 +66,10 @@ class FrameLike(Protocol):
         """Frame number."""
 
 
+#: Optional on a frame: ``ignore`` (``[K, 4]`` xyxy ignore boxes) and ``ignore_labels``
+#: (``[K]``), read with ``getattr`` — objects seen but not labelled (``Record.ignore``).
+
+
 #: ``source(platform, *, layout, seed, n, width, height)`` → frames; the signature of
 #: :func:`anunnaki.sim.dataset_frames`. Must be picklable (a module-level function) when
 #: ``workers > 1``.
@@ -111,11 +115,12 @@ def _render_layout(
     width: int,
     height: int,
     images_dir: str,
+    **extra: Any,
 ) -> list[dict[str, Any]]:
     """Render one layout's frames, write their PNGs, return their annotations."""
     out = []
     for k, frame in enumerate(
-        source(platform, layout=layout, seed=seed, n=n, width=width, height=height)
+        source(platform, layout=layout, seed=seed, n=n, width=width, height=height, **extra)
     ):
         image = np.asarray(frame.image)
         if image.shape != (height, width, 3) or image.dtype != np.uint8:
@@ -130,6 +135,12 @@ def _render_layout(
                 "file_name": name,
                 "boxes": np.asarray(frame.boxes, np.float32).reshape(-1, 4).tolist(),
                 "labels": np.asarray(frame.labels, np.int64).reshape(-1).tolist(),
+                "ignore": np.asarray(getattr(frame, "ignore", ()), np.float32)
+                .reshape(-1, 4)
+                .tolist(),
+                "ignore_labels": np.asarray(getattr(frame, "ignore_labels", ()), np.int64)
+                .reshape(-1)
+                .tolist(),
                 "meta": {"layout": layout, "seed": seed, "t": float(frame.t), "seq": frame.seq},
             }
         )
@@ -152,6 +163,7 @@ def make_dataset(
     overwrite: bool = False,
     source: FrameSource | None = None,
     classes: Sequence[str] | None = None,
+    min_label_height: float | None = None,
 ) -> dict[str, Path]:
     """Render a labelled dataset with train/val/test splits by scene layout.
 
@@ -173,6 +185,10 @@ def make_dataset(
         source: A frame source with the signature of :func:`anunnaki.sim.dataset_frames`
             (the default); plug your own simulator in here.
         classes: Class names; by default the simulated platform's.
+        min_label_height: Passed to *source* when given: the smallest labelled box height
+            as a fraction of the image height (default: the platform's
+            ``anunnaki.sim.MIN_LABEL_HEIGHT``); objects seen but smaller become ignore
+            boxes (``iscrowd: 1`` in the COCO files).
 
     Returns:
         ``{"train": OUT/train.json, "val": …, "test": …}`` (splits with no layouts are
@@ -219,6 +235,8 @@ def make_dataset(
         "height": height,
         "images_dir": str(images_dir),
     }
+    if min_label_height is not None:
+        job["min_label_height"] = min_label_height
 
     from rich.progress import (
         BarColumn,
@@ -273,6 +291,8 @@ def make_dataset(
                         image_id=next_id,
                         path=images_dir / item["file_name"],
                         meta=item["meta"],
+                        ignore=np.asarray(item["ignore"], np.float32).reshape(-1, 4),
+                        ignore_labels=np.asarray(item["ignore_labels"], np.int64),
                     )
                 )
                 next_id += 1
@@ -286,6 +306,7 @@ def make_dataset(
             "seed": seed,
             "width": width,
             "height": height,
+            "min_label_height": min_label_height,
         }
         ds = Dataset(names, records, name=f"{platform} {split}")
         paths[split] = write_coco(ds, out / f"{split}.json", info=info)

@@ -188,6 +188,8 @@ def write_yolo(ds: Dataset, out_dir: str | Path) -> Path:
     """Write *ds* as ``out_dir/images``, ``out_dir/labels`` and ``out_dir/classes.txt``.
 
     Images are written as PNG under their ``file_name`` stem; coordinates get 6 decimals.
+    YOLO has no ignore regions: the records' ignore boxes are not written (use COCO, where
+    they are ``iscrowd: 1`` annotations, to keep them).
 
     Returns:
         *out_dir*.

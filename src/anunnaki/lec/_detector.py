@@ -17,7 +17,7 @@ import hashlib
 import json
 import os
 import uuid
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Protocol, runtime_checkable
@@ -42,6 +42,7 @@ __all__ = [
     "save_detector",
     "sha256_file",
     "sidecar_path",
+    "update_metrics",
     "weights_path",
 ]
 
@@ -294,6 +295,34 @@ def save_detector(det: Detector, path: str | Path) -> str:
     text = json.dumps(card.model_dump(mode="json"), indent=2, sort_keys=False) + "\n"
     _atomic_write(sidecar_path(path), lambda tmp: tmp.write_text(text, encoding="utf-8"))
     return digest
+
+
+def update_metrics(path: str | Path, metrics: Mapping[str, Any]) -> ModelCard:
+    """Replace the ``metrics`` of a model file's sidecar; the weights are not touched.
+
+    For re-measuring a model (new data, a changed F1 rule) without retraining it. The
+    weights' hash is checked first, so the figures are only ever written next to the
+    weights they were measured on.
+
+    Returns:
+        The new card.
+
+    Raises:
+        DetectorLoadError: The sidecar is invalid or the weights do not match its hash.
+
+    """
+    card = read_card(path)
+    wpath = sidecar_path(path).parent / card.weights
+    if not wpath.is_file() or sha256_file(wpath) != card.sha256:
+        raise DetectorLoadError(
+            "the weights are missing or do not match the sidecar's sha256; metrics not updated",
+            path=wpath,
+            hint="re-save the model with anunnaki.lec.save_detector",
+        )
+    new = card.model_copy(update={"metrics": dict(metrics)})
+    text = json.dumps(new.model_dump(mode="json"), indent=2, sort_keys=False) + "\n"
+    _atomic_write(sidecar_path(path), lambda tmp: tmp.write_text(text, encoding="utf-8"))
+    return new
 
 
 def read_card(path: str | Path) -> ModelCard:

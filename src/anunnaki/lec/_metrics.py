@@ -4,13 +4,18 @@ The rule (``docs/detector.md``): in each image, predictions with a score at or a
 threshold are taken in descending score order (ties keep their given order); each is matched
 to the not-yet-matched ground-truth box *of the same class* with which it has the highest
 IoU, and counts as a true positive when that IoU is at least ``iou`` (0.5), otherwise as a
-false positive. Every truth is matched at most once; truths left over are false negatives.
-Counts are summed over all images before precision, recall and F1 are computed.
+false positive — unless it lies mostly inside an *ignore box* (intersection over the
+prediction's own area at least ``ignore_ioa``, 0.5, as COCO treats crowd regions; any
+class), and then it counts neither way. Ignore boxes mark objects in the image that are not
+labelled (too small, mostly occluded, cut by the frame); they are never false negatives.
+Every truth is matched at most once; truths left over are false negatives. Counts are
+summed over all images before precision, recall and F1 are computed.
 
 Why greedy by score makes threshold search cheap: thresholding removes only the
 lowest-scoring predictions, and those are matched last, so one matching pass at threshold
 zero labels every prediction, and the counts at any threshold are cumulative sums
-(:func:`choose_threshold`).
+(:func:`choose_threshold`). Whether a prediction is ignored depends only on the
+predictions ranked above it, so that stays true with ignore boxes.
 """
 
 from __future__ import annotations
@@ -23,10 +28,24 @@ import numpy.typing as npt
 
 from anunnaki.lec._detector import DetectionResult, DetectorError
 
-__all__ = ["Metrics", "Truth", "box_iou", "choose_threshold", "f1_at_iou", "match_image"]
+__all__ = [
+    "IGNORE_IOA",
+    "Metrics",
+    "Truth",
+    "box_ioa",
+    "box_iou",
+    "choose_threshold",
+    "f1_at_iou",
+    "match_image",
+]
 
-#: Ground truth of one image: ``(boxes [N, 4] xyxy pixels, labels [N] int)``.
-Truth = tuple[npt.ArrayLike, npt.ArrayLike]
+#: Ground truth of one image: ``(boxes [N, 4] xyxy pixels, labels [N] int)``, optionally
+#: with a third item, the image's ignore boxes ``[K, 4]`` (what ``Dataset.truths()`` gives).
+Truth = tuple[npt.ArrayLike, npt.ArrayLike] | tuple[npt.ArrayLike, npt.ArrayLike, npt.ArrayLike]
+
+#: An unmatched prediction is ignored when at least this share of its area is inside one
+#: ignore box (COCO's rule for crowd regions).
+IGNORE_IOA = 0.5
 
 
 @dataclass(frozen=True)
@@ -89,14 +108,49 @@ def box_iou(a: npt.ArrayLike, b: npt.ArrayLike) -> npt.NDArray[np.float64]:
     return out
 
 
+def box_ioa(a: npt.ArrayLike, b: npt.ArrayLike) -> npt.NDArray[np.float64]:
+    """Pairwise intersection over the area of ``a``: ``[N, 4]`` and ``[M, 4]`` → ``[N, M]``.
+
+    A box of zero area has IoA 0 with everything.
+    """
+    a64 = np.asarray(a, dtype=np.float64).reshape(-1, 4)
+    b64 = np.asarray(b, dtype=np.float64).reshape(-1, 4)
+    lt = np.maximum(a64[:, None, :2], b64[None, :, :2])
+    rb = np.minimum(a64[:, None, 2:], b64[None, :, 2:])
+    wh = np.clip(rb - lt, 0.0, None)
+    inter = wh[..., 0] * wh[..., 1]
+    area_a = np.clip(a64[:, 2] - a64[:, 0], 0, None) * np.clip(a64[:, 3] - a64[:, 1], 0, None)
+    denom = np.broadcast_to(area_a[:, None], inter.shape)
+    out: npt.NDArray[np.float64] = np.divide(
+        inter, denom, out=np.zeros_like(inter), where=denom > 0
+    )
+    return out
+
+
 def match_image(
-    pred: DetectionResult, truth_boxes: npt.ArrayLike, truth_labels: npt.ArrayLike, *, iou: float
+    pred: DetectionResult,
+    truth_boxes: npt.ArrayLike,
+    truth_labels: npt.ArrayLike,
+    *,
+    iou: float,
+    ignore: npt.ArrayLike | None = None,
+    ignore_ioa: float = IGNORE_IOA,
 ) -> tuple[npt.NDArray[np.float32], npt.NDArray[np.bool_], int]:
     """Greedy class-aware matching in one image, all predictions (no threshold).
 
+    Args:
+        pred: The image's predictions.
+        truth_boxes: ``[N, 4]`` labelled boxes.
+        truth_labels: ``[N]`` their classes.
+        iou: A match needs IoU at least this.
+        ignore: ``[K, 4]`` ignore boxes (default none).
+        ignore_ioa: An unmatched prediction with at least this share of its area inside
+            one ignore box is ignored.
+
     Returns:
-        ``(scores, is_tp, n_truths)``: the prediction scores in descending order, whether
-        each is a true positive, and the number of ground-truth boxes.
+        ``(scores, is_tp, n_truths)``: the scores, in descending order, of the predictions
+        that count (ignored ones are left out), whether each is a true positive, and the
+        number of ground-truth boxes.
 
     """
     tboxes = np.asarray(truth_boxes, dtype=np.float64).reshape(-1, 4)
@@ -118,7 +172,22 @@ def match_image(
             if row[j] >= iou:
                 taken[j] = True
                 is_tp[i] = True
+    iboxes = np.zeros((0, 4)) if ignore is None else np.asarray(ignore, np.float64).reshape(-1, 4)
+    if len(order) and len(iboxes):
+        inside = (box_ioa(pred.boxes[order], iboxes) >= ignore_ioa).any(axis=1)
+        counted = is_tp | ~inside
+        scores, is_tp = scores[counted], is_tp[counted]
     return scores, is_tp, len(tboxes)
+
+
+def _unpack(truth: Truth) -> tuple[npt.ArrayLike, npt.ArrayLike, npt.ArrayLike | None]:
+    if len(truth) == 3:
+        return truth[0], truth[1], truth[2]
+    if len(truth) == 2:
+        return truth[0], truth[1], None
+    raise DetectorError(
+        f"a ground truth is (boxes, labels) or (boxes, labels, ignore), got {len(truth)} items"
+    )
 
 
 def _check_lengths(preds: Sequence[DetectionResult], truths: Sequence[Truth]) -> None:
@@ -144,7 +213,8 @@ def f1_at_iou(
 
     Args:
         preds: One :class:`DetectionResult` per image.
-        truths: One ``(boxes [N, 4] xyxy, labels [N])`` per image, in the same order.
+        truths: One ``(boxes [N, 4] xyxy, labels [N])`` or ``(boxes, labels, ignore
+            [K, 4])`` per image, in the same order (``Dataset.truths()``).
         iou: A match needs IoU at least this (inclusive).
         score_threshold: Predictions with a lower score are ignored.
 
@@ -155,8 +225,11 @@ def f1_at_iou(
     _check_lengths(preds, truths)
     _check_iou(iou)
     tp = fp = fn = 0
-    for pred, (tboxes, tlabels) in zip(preds, truths, strict=True):
-        scores, is_tp, n_truth = match_image(pred.above(score_threshold), tboxes, tlabels, iou=iou)
+    for pred, truth in zip(preds, truths, strict=True):
+        tboxes, tlabels, ignore = _unpack(truth)
+        scores, is_tp, n_truth = match_image(
+            pred.above(score_threshold), tboxes, tlabels, iou=iou, ignore=ignore
+        )
         del scores
         hits = int(is_tp.sum())
         tp += hits
@@ -186,8 +259,9 @@ def choose_threshold(
     all_scores: list[npt.NDArray[np.float32]] = []
     all_tp: list[npt.NDArray[np.bool_]] = []
     n_truth = 0
-    for pred, (tboxes, tlabels) in zip(preds, truths, strict=True):
-        scores, is_tp, n = match_image(pred, tboxes, tlabels, iou=iou)
+    for pred, truth in zip(preds, truths, strict=True):
+        tboxes, tlabels, ignore = _unpack(truth)
+        scores, is_tp, n = match_image(pred, tboxes, tlabels, iou=iou, ignore=ignore)
         all_scores.append(scores)
         all_tp.append(is_tp)
         n_truth += n

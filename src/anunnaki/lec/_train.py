@@ -17,6 +17,7 @@ import random
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -139,6 +140,11 @@ class TrainConfig:
             of its F1 when the frame is dimmed by 9 % (measured on the rover).
         model_id: The trained model's id.
         domain: The trained model's domain.
+        ignore: Honour the data's ignore boxes (no background loss inside them); off, an
+            unlabelled object is background like any other pixel.
+        init: Start from this model's weights (a model file or a detector) instead of
+            random ones — fine-tuning a domain model from the default one. Its classes,
+            width and stride must match; ``width``/``stride`` are then taken from it.
 
     """
 
@@ -158,6 +164,8 @@ class TrainConfig:
     photometric: float = 0.25
     model_id: str = "centernet"
     domain: str = "default"
+    ignore: bool = True
+    init: str | Path | CenterNetDetector | None = None
 
 
 @dataclass
@@ -188,8 +196,15 @@ ProgressHook = Callable[[int, int, dict[str, float]], None]
 
 
 def _zoom(
-    image: Image, boxes: Boxes, labels: Labels, rng: np.random.Generator, amount: float
-) -> tuple[Image, Boxes, Labels]:
+    image: Image,
+    boxes: Boxes,
+    labels: Labels,
+    rng: np.random.Generator,
+    amount: float,
+    *,
+    ignore: Boxes | None = None,
+) -> tuple[Image, Boxes, Labels, Boxes]:
+    """Scale and shift the image; boxes mostly pushed out become ignore boxes."""
     import cv2
 
     h, w = image.shape[:2]
@@ -203,15 +218,20 @@ def _zoom(
         cv2.warpAffine(image, m, (w, h), flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REFLECT),
         dtype=np.uint8,
     )
-    if len(boxes) == 0:
-        return out, boxes, labels
-    nb = boxes.astype(np.float64) * s + np.array([tx, ty, tx, ty])
+    shift = np.array([tx, ty, tx, ty])
+    ig = np.zeros((0, 4)) if ignore is None else ignore.astype(np.float64).reshape(-1, 4)
+    ig = ig * s + shift
+    nb = boxes.astype(np.float64).reshape(-1, 4) * s + shift
     area = (nb[:, 2] - nb[:, 0]) * (nb[:, 3] - nb[:, 1])
-    nb[:, 0::2] = nb[:, 0::2].clip(0, w)
-    nb[:, 1::2] = nb[:, 1::2].clip(0, h)
+    for b in (nb, ig):
+        b[:, 0::2] = b[:, 0::2].clip(0, w)
+        b[:, 1::2] = b[:, 1::2].clip(0, h)
     bw, bh = nb[:, 2] - nb[:, 0], nb[:, 3] - nb[:, 1]
     keep = (bw * bh >= 0.5 * area) & (bw >= 2) & (bh >= 2)
-    return out, nb[keep].astype(np.float32), labels[keep]
+    seen = (bw > 0) & (bh > 0)
+    ig = np.concatenate([ig, nb[seen & ~keep]])
+    ig = ig[(ig[:, 2] > ig[:, 0]) & (ig[:, 3] > ig[:, 1])]
+    return out, nb[keep].astype(np.float32), labels[keep], ig.astype(np.float32)
 
 
 def _photometric(image: Image, rng: np.random.Generator, amount: float) -> Image:
@@ -236,7 +256,7 @@ def _fit(image: Image, boxes: Boxes, size: tuple[int, int]) -> tuple[Image, Boxe
 
 
 def _batch_tensors(
-    samples: Sequence[tuple[Image, Boxes, Labels]],
+    samples: Sequence[tuple[Image, Boxes, Labels, Boxes]],
     size: tuple[int, int],
     num_classes: int,
     stride: int,
@@ -246,10 +266,10 @@ def _batch_tensors(
     out_hw = (ph // stride, pw // stride)
     images = np.zeros((len(samples), ph, pw, 3), np.uint8)
     heats, box_ts, weights = [], [], []
-    for i, (image, boxes, labels) in enumerate(samples):
+    for i, (image, boxes, labels, ignore) in enumerate(samples):
         images[i, :h, :w] = image
         heat, box_t, weight = encode_targets(
-            boxes, labels, num_classes=num_classes, out_hw=out_hw, stride=stride
+            boxes, labels, num_classes=num_classes, out_hw=out_hw, stride=stride, ignore=ignore
         )
         heats.append(heat)
         box_ts.append(box_t)
@@ -344,6 +364,26 @@ def evaluate_detector(
     return f1_at_iou(preds, data.truths(), iou=iou, score_threshold=thr)
 
 
+def _initial(
+    init: str | Path | CenterNetDetector | None, classes: tuple[str, ...]
+) -> CenterNetDetector | None:
+    """The detector to start from (``TrainConfig.init``), checked against the data."""
+    if init is None:
+        return None
+    from anunnaki.lec._detector import load_detector
+
+    det = init if isinstance(init, CenterNetDetector) else load_detector(init)
+    if not isinstance(det, CenterNetDetector):
+        raise DetectorError(
+            f"can only fine-tune a CenterNet model; {init} is a {type(det).__name__}"
+        )
+    if tuple(det.classes) != tuple(classes):
+        raise DetectorError(
+            f"the initial model's classes {det.classes} differ from the data's {classes}"
+        )
+    return det
+
+
 def train_detector(
     train: Dataset,
     val: Dataset,
@@ -388,23 +428,31 @@ def train_detector(
     first = train.image(0)
     size = cfg.input_size or (int(first.shape[1]), int(first.shape[0]))
     augmenter = Augmenter(cfg.augment, probability=cfg.augment_prob) if cfg.augment else None
+    start_from = _initial(cfg.init, train.classes)
     det = CenterNetDetector.create(
         train.classes,
         input_size=size,
-        width=cfg.width,
-        stride=cfg.stride,
+        width=cfg.width if start_from is None else start_from.network.width,
+        head=None if start_from is None else start_from.network.head_channels,
+        stride=cfg.stride if start_from is None else start_from.network.stride,
         seed=weight_seed,
         model_id=cfg.model_id,
         domain=cfg.domain,
     )
+    if start_from is not None:
+        det.network.load_state_dict(start_from.network.state_dict())
     net = det.network
     old_threads = torch.get_num_threads()
     if cfg.threads is not None:
         torch.set_num_threads(cfg.threads)
     try:
-        data = [
-            (*_fit(train.image(i), r.boxes, size), r.labels) for i, r in enumerate(train.records)
-        ]
+        data = []
+        no_ignore = np.zeros((0, 4), np.float32)
+        for i, r in enumerate(train.records):
+            raw = train.image(i)
+            image, boxes = _fit(raw, r.boxes, size)
+            ignore = _fit(raw, r.ignore, size)[1] if cfg.ignore else no_ignore
+            data.append((image, boxes, r.labels, ignore))
         steps_per_epoch = math.ceil(len(data) / cfg.batch_size)
         total = steps_per_epoch * cfg.epochs
         warmup = min(steps_per_epoch, total // 4 + 1)
@@ -427,18 +475,22 @@ def train_detector(
             for b in range(steps_per_epoch):
                 samples = []
                 for idx in perm[b * cfg.batch_size : (b + 1) * cfg.batch_size]:
-                    image, boxes, labels = data[int(idx)]
+                    image, boxes, labels, ignore = data[int(idx)]
                     if cfg.zoom > 0:
-                        image, boxes, labels = _zoom(image, boxes, labels, aug_rng, cfg.zoom)
+                        image, boxes, labels, ignore = _zoom(
+                            image, boxes, labels, aug_rng, cfg.zoom, ignore=ignore
+                        )
                     if cfg.flip and aug_rng.random() < 0.5:
                         image = np.ascontiguousarray(image[:, ::-1])
                         boxes = boxes.copy()
                         boxes[:, [0, 2]] = size[0] - boxes[:, [2, 0]]
+                        ignore = ignore.copy()
+                        ignore[:, [0, 2]] = size[0] - ignore[:, [2, 0]]
                     if cfg.photometric > 0:
                         image = _photometric(image, aug_rng, cfg.photometric)
                     if augmenter is not None:
                         image = augmenter(image, aug_rng)
-                    samples.append((image, boxes, labels))
+                    samples.append((image, boxes, labels, ignore))
                 x, heat_t, box_t, weight = _batch_tensors(
                     samples, size, len(train.classes), net.stride
                 )
@@ -485,11 +537,15 @@ def train_detector(
         "flip": cfg.flip,
         "zoom": cfg.zoom,
         "photometric": cfg.photometric,
+        "ignore": cfg.ignore,
+        "ignore_boxes": train.num_ignore if cfg.ignore else 0,
+        "init": None if start_from is None else start_from.model_id,
         "data": train.name,
         "train_images": len(train),
         "val_images": len(val),
         "test_images": len(test) if test is not None else 0,
         "seconds": round(seconds, 1),
+        "images_per_second": round(len(data) * cfg.epochs / max(seconds, 1e-9), 1),
         "final_loss": history[-1]["loss"] if history else None,
     }
     return TrainResult(det, threshold, val_m, test_m, seconds, history)

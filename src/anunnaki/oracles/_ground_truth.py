@@ -12,10 +12,14 @@ category (§4.1.2), relative to the model's F1 on clean data::
     context = the phenomena ground truth, e.g. {"phenomenon": "fog", "params": {...}}
 
 The rule of a match is the detector's own (``anunnaki.lec.f1_at_iou``): per frame,
-class-aware greedy matching in descending score order at IoU ≥ 0.5; counts are summed over
-the window before F1 is computed. Frames are matched by sequence number, whatever order the
-truth and the detections arrive in. The window holds one model's frames only: when
-detections of another model arrive (a swap), it starts afresh.
+class-aware greedy matching in descending score order at IoU ≥ 0.5, and a detection that
+matches nothing but lies mostly inside one of the frame's *ignore boxes* (objects seen but
+not labelled: too small, occluded, cut by the frame — given to ``observe_ground_truth`` as
+``ignore=``, e.g. from an ``"ignore"`` list in the ground-truth message) counts neither
+way; counts are summed over the window before F1 is computed. Frames are matched by
+sequence number, whatever order the truth and the detections arrive in. The window holds
+one model's frames only: when detections of another model arrive (a swap), it starts
+afresh.
 """
 
 from __future__ import annotations
@@ -99,6 +103,10 @@ class GroundTruthAssessor:
             already thresholded by their detector, hence 0).
         buffer: Frames of unmatched truth or detections kept while waiting for the other
             half (default ``4 * window``).
+        min_objects: Labelled objects the window needs before an F1 drop is believed: with
+            fewer, one or two misses swing the F1 by tens of percent, so the assessment is
+            category 0 (no drop shown) with its confidence scaled by ``objects /
+            min_objects``. 0 (the default) always believes the window.
 
     """
 
@@ -114,6 +122,7 @@ class GroundTruthAssessor:
         iou: float = 0.5,
         score_threshold: float = 0.0,
         buffer: int | None = None,
+        min_objects: int = 0,
     ) -> None:
         if not isinstance(window, int) or window < 1:
             raise OracleError(f"window must be a whole number of frames >= 1, got {window!r}")
@@ -132,11 +141,14 @@ class GroundTruthAssessor:
         self.iou = float(iou)
         self.score_threshold = float(score_threshold)
         self.buffer = 4 * window if buffer is None else int(buffer)
+        if not isinstance(min_objects, int) or min_objects < 0:
+            raise OracleError(f"min_objects must be a whole number >= 0, got {min_objects!r}")
+        self.min_objects = min_objects
         self._clean = clean_f1
         self._lock = threading.Lock()
-        self._truth: OrderedDict[int, tuple[npt.NDArray[np.float64], list[str] | None]] = (
-            OrderedDict()
-        )
+        self._truth: OrderedDict[
+            int, tuple[npt.NDArray[np.float64], list[str] | None, npt.NDArray[np.float64]]
+        ] = OrderedDict()
         self._dets: OrderedDict[int, Detections] = OrderedDict()
         self._counts: deque[tuple[int, int, int]] = deque(maxlen=window)
         self._model: str | None = None
@@ -151,10 +163,19 @@ class GroundTruthAssessor:
 
     # -- hooks -------------------------------------------------------------------------------
     def observe_ground_truth(
-        self, seq: int, boxes: npt.ArrayLike, labels: Sequence[str] | None
+        self,
+        seq: int,
+        boxes: npt.ArrayLike,
+        labels: Sequence[str] | None,
+        ignore: npt.ArrayLike | None = None,
     ) -> None:
-        """Take the simulator's objects in frame ``seq`` (``[N, 4]`` xyxy px, class names)."""
+        """Take the simulator's objects in frame ``seq`` (``[N, 4]`` xyxy px, class names).
+
+        ``ignore``: the frame's ``[K, 4]`` ignore boxes (``anunnaki.sim.Frame.ignore``),
+        where a detection that matches no object is not counted as a false positive.
+        """
         array = np.asarray(boxes, dtype=np.float64).reshape(-1, 4)
+        skip = np.asarray([] if ignore is None else ignore, dtype=np.float64).reshape(-1, 4)
         names = None if labels is None else [str(x) for x in labels]
         if names is not None and len(names) != len(array):
             raise OracleError(
@@ -163,10 +184,10 @@ class GroundTruthAssessor:
         with self._lock:
             dets = self._dets.pop(seq, None)
             if dets is None:
-                self._truth[seq] = (array, names)
+                self._truth[seq] = (array, names, skip)
                 self._trim(self._truth)
             else:
-                self._score(dets, array, names)
+                self._score(dets, array, names, skip)
 
     def observe_detections(self, detections: Detections) -> None:
         """Take what the LEC published for one frame."""
@@ -188,7 +209,11 @@ class GroundTruthAssessor:
             buffer.popitem(last=False)
 
     def _score(
-        self, dets: Detections, boxes: npt.NDArray[np.float64], names: list[str] | None
+        self,
+        dets: Detections,
+        boxes: npt.NDArray[np.float64],
+        names: list[str] | None,
+        ignore: npt.NDArray[np.float64],
     ) -> None:
         if dets.model_id != self._model:
             self._model = dets.model_id
@@ -205,7 +230,7 @@ class GroundTruthAssessor:
             pred_labels,
             np.asarray(dets.scores, np.float32),
         ).above(self.score_threshold)
-        _, is_tp, n_truth = match_image(pred, boxes, true_labels, iou=self.iou)
+        _, is_tp, n_truth = match_image(pred, boxes, true_labels, iou=self.iou, ignore=ignore)
         tp = int(is_tp.sum())
         self._counts.append((tp, len(is_tp) - tp, n_truth - tp))
 
@@ -258,11 +283,16 @@ class GroundTruthAssessor:
                 )
             return None
         drop = max(0.0, (clean - window.f1) / clean)
+        confidence = min(1.0, window.frames / self.window)
+        objects = window.tp + window.fn
+        if objects < self.min_objects:  # too little evidence to tell a drop
+            drop = 0.0
+            confidence *= objects / self.min_objects
         with self._lock:
             context: dict[str, JsonValue] = dict(self._context or {})
         return Assessment(
             category=category_for_drop(drop, self.thresholds),
-            confidence=min(1.0, window.frames / self.window),
+            confidence=confidence,
             context=context,
             model_id=model_id,
             assessor=self.name,

@@ -20,7 +20,7 @@ import tempfile
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Literal
+from typing import Literal, NamedTuple
 
 import numpy as np
 
@@ -29,15 +29,18 @@ from anunnaki.sim._world import Camera, Light, World, pybullet
 __all__ = [
     "MIN_BOX_SIZE",
     "MIN_IN_FRAME",
+    "MIN_LABEL_HEIGHT",
     "MIN_VISIBLE",
     "ROVER_CLASSES",
     "UAV_CLASSES",
+    "Annotation",
     "Camera",
     "Frame",
     "Light",
     "Placement",
     "Platform",
     "Scene",
+    "annotate_mask",
     "boxes_from_mask",
     "dataset_frames",
     "layout_placements",
@@ -56,6 +59,20 @@ MIN_VISIBLE = 0.25
 """A kept box covers at least this fraction of the object's projected, in-frame extent."""
 MIN_IN_FRAME = 0.5
 """At least this fraction of the object's projected extent lies inside the image."""
+MIN_LABEL_HEIGHT: dict[str, float] = {"rover": 0.134, "uav": 0.0}
+"""Per platform: a labelled box is at least this fraction of the image height tall.
+
+Objects seen but smaller become *ignore boxes* (see :func:`annotate_mask`). The rover's
+value follows from its stop rule (``anunnaki.sim.StopRule``): it acts on pedestrians and
+deer within ``stop_distance`` = 3 m, and its detector is asked to see them from twice that
+far, 6 m, so it has locked on before they are in range (at the 0.8 m/s cruise speed, 3.75 s
+or about 37 frames at 10 Hz). The smallest such object is the smallest deer, 0.93 m tall
+(a pedestrian is 1.59-1.95 m). With the camera's 60° vertical field of view the focal
+length is ``f = (H/2) / tan 30° = 0.866 H`` pixels, so a 0.93 m object at 6 m is
+``0.866 H · 0.93 / 6 = 0.134 H`` tall: 17.2 px at 128 × 128 (a pedestrian at 6 m: 29 px;
+the smallest deer at 3 m: 34 px). The UAV has no such rule: 0 keeps every box of at least
+:data:`MIN_BOX_SIZE`.
+"""
 
 _PLATFORM_CODE = {"rover": 1, "uav": 2}
 
@@ -81,6 +98,12 @@ class Frame:
         labels: ``[N]`` ``int64`` indices into the scene's classes.
         t: Simulation time (s).
         seq: Frame sequence number.
+        ignore: ``[K, 4]`` ``float32`` *ignore boxes*: objects of a class that are in the
+            image but not labelled (too small, mostly occluded or mostly cut by the frame),
+            tight around their visible pixels. A detection there is neither right nor wrong
+            (``anunnaki.lec.f1_at_iou``) and training puts no background loss there — the
+            KITTI "DontCare" / COCO ``iscrowd`` practice.
+        ignore_labels: ``[K]`` ``int64`` class of each ignore box.
 
     """
 
@@ -89,6 +112,8 @@ class Frame:
     labels: np.ndarray
     t: float
     seq: int
+    ignore: np.ndarray = field(default_factory=lambda: np.zeros((0, 4), np.float32))
+    ignore_labels: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
 
 
 @dataclass(frozen=True)
@@ -428,25 +453,48 @@ def _ground_texture(rng: np.random.Generator, platform: Platform, size: int = 12
 # --- box extraction ----------------------------------------------------------------------
 
 
-def boxes_from_mask(
+class Annotation(NamedTuple):
+    """Ground truth of one frame (:func:`annotate_mask`).
+
+    Attributes:
+        boxes: ``[N, 4]`` ``float32`` labelled boxes (xyxy pixels, ``x2``/``y2`` exclusive).
+        labels: ``[N]`` ``int64`` their classes.
+        ignore: ``[K, 4]`` ``float32`` ignore boxes: seen but not labelled.
+        ignore_labels: ``[K]`` ``int64`` their classes.
+
+    """
+
+    boxes: np.ndarray
+    labels: np.ndarray
+    ignore: np.ndarray
+    ignore_labels: np.ndarray
+
+
+def annotate_mask(
     mask: np.ndarray,
     instances: Mapping[int, tuple[int, Callable[[], tuple[np.ndarray, np.ndarray]]]],
     camera: Camera,
     *,
     min_size: float = MIN_BOX_SIZE,
+    min_height: float = 0.0,
     min_visible: float = MIN_VISIBLE,
     min_in_frame: float = MIN_IN_FRAME,
-) -> tuple[np.ndarray, np.ndarray]:
-    """Ground-truth boxes from a segmentation mask.
+) -> Annotation:
+    """Ground-truth and ignore boxes from a segmentation mask.
 
-    For each object of a class (``instances``: body id → (label, world AABB)), the box is
-    tight around its visible pixels (``x2``/``y2`` exclusive). It is kept when
+    For each object of a class (``instances``: body id → (label, world AABB)) with at least
+    one visible pixel, the box is tight around its visible pixels (``x2``/``y2``
+    exclusive). It is *labelled* when
 
-    * it is at least ``min_size`` pixels wide and high (default 4);
+    * it is at least ``min_size`` pixels wide and high (default 4), and at least
+      ``min_height`` pixels high (the platform's :data:`MIN_LABEL_HEIGHT`);
     * the object is not mostly cut by the frame: at least ``min_in_frame`` (0.5) of the
       area of its projected world bounding box lies inside the image;
     * it is not mostly occluded: the visible box covers at least ``min_visible`` (0.25) of
       that projected box's in-frame part.
+
+    Every other visible object becomes an *ignore box*: it is there, so a detector that
+    finds it is not wrong, but it is not required either.
 
     Args:
         mask: ``[H, W]`` pybullet segmentation (object and link index).
@@ -454,18 +502,19 @@ def boxes_from_mask(
             ``(low[3], high[3])``; called only for bodies seen in the mask).
         camera: The camera that rendered ``mask``.
         min_size: See above.
+        min_height: See above.
         min_visible: See above.
         min_in_frame: See above.
 
     Returns:
-        ``boxes [N, 4] float32`` and ``labels [N] int64``, ordered by body id.
+        An :class:`Annotation`; boxes ordered by body id.
 
     """
     h, w = mask.shape
     objects = np.where(mask >= 0, mask & 0xFFFFFF, -1)
     present = set(np.unique(objects).tolist())
-    boxes: list[list[float]] = []
-    labels: list[int] = []
+    kept: tuple[list[list[float]], list[int]] = ([], [])
+    ignored: tuple[list[list[float]], list[int]] = ([], [])
     for body in sorted(instances):
         if body not in present:
             continue
@@ -475,29 +524,56 @@ def boxes_from_mask(
         rows = np.flatnonzero(pix.any(axis=1))
         x1, x2 = float(cols[0]), float(cols[-1] + 1)
         y1, y2 = float(rows[0]), float(rows[-1] + 1)
-        if x2 - x1 < min_size or y2 - y1 < min_size:
-            continue
-        lo, hi = aabb()
-        corners = np.array(
-            [[a, b, c] for a in (lo[0], hi[0]) for b in (lo[1], hi[1]) for c in (lo[2], hi[2])]
-        )
-        uv = camera.project(corners, w, h)
-        px1, py1 = uv.min(axis=0)
-        px2, py2 = uv.max(axis=0)
-        full = max((px2 - px1) * (py2 - py1), 1e-9)
-        cx1, cy1 = max(px1, 0.0), max(py1, 0.0)
-        cx2, cy2 = min(px2, float(w)), min(py2, float(h))
-        inside = max(cx2 - cx1, 0.0) * max(cy2 - cy1, 0.0)
-        if inside / full < min_in_frame:
-            continue
-        if (x2 - x1) * (y2 - y1) / max(inside, 1e-9) < min_visible:
-            continue
-        boxes.append([x1, y1, x2, y2])
-        labels.append(label)
-    return (
-        np.asarray(boxes, dtype=np.float32).reshape(-1, 4),
-        np.asarray(labels, dtype=np.int64),
+        box = [x1, y1, x2, y2]
+        out = ignored
+        if x2 - x1 >= min_size and y2 - y1 >= max(min_size, min_height):
+            lo, hi = aabb()
+            corners = np.array(
+                [[a, b, c] for a in (lo[0], hi[0]) for b in (lo[1], hi[1]) for c in (lo[2], hi[2])]
+            )
+            uv = camera.project(corners, w, h)
+            px1, py1 = uv.min(axis=0)
+            px2, py2 = uv.max(axis=0)
+            full = max((px2 - px1) * (py2 - py1), 1e-9)
+            cx1, cy1 = max(px1, 0.0), max(py1, 0.0)
+            cx2, cy2 = min(px2, float(w)), min(py2, float(h))
+            inside = max(cx2 - cx1, 0.0) * max(cy2 - cy1, 0.0)
+            if (
+                inside / full >= min_in_frame
+                and (x2 - x1) * (y2 - y1) / max(inside, 1e-9) >= min_visible
+            ):
+                out = kept
+        out[0].append(box)
+        out[1].append(label)
+    return Annotation(
+        np.asarray(kept[0], dtype=np.float32).reshape(-1, 4),
+        np.asarray(kept[1], dtype=np.int64),
+        np.asarray(ignored[0], dtype=np.float32).reshape(-1, 4),
+        np.asarray(ignored[1], dtype=np.int64),
     )
+
+
+def boxes_from_mask(
+    mask: np.ndarray,
+    instances: Mapping[int, tuple[int, Callable[[], tuple[np.ndarray, np.ndarray]]]],
+    camera: Camera,
+    *,
+    min_size: float = MIN_BOX_SIZE,
+    min_height: float = 0.0,
+    min_visible: float = MIN_VISIBLE,
+    min_in_frame: float = MIN_IN_FRAME,
+) -> tuple[np.ndarray, np.ndarray]:
+    """The labelled boxes of :func:`annotate_mask` (``boxes [N, 4]``, ``labels [N]``)."""
+    ann = annotate_mask(
+        mask,
+        instances,
+        camera,
+        min_size=min_size,
+        min_height=min_height,
+        min_visible=min_visible,
+        min_in_frame=min_in_frame,
+    )
+    return ann.boxes, ann.labels
 
 
 # --- the scene ---------------------------------------------------------------------------
@@ -526,6 +602,9 @@ class Scene:
         placements: Objects to place instead of the layout's (the layout still seeds the
             ground texture); e.g. a pedestrian on the rover's route.
         extra: Additional objects placed on top of the layout's.
+        min_label_height: A labelled box is at least this fraction of the image height
+            tall; smaller objects become ignore boxes (default: the platform's
+            :data:`MIN_LABEL_HEIGHT`).
 
     """
 
@@ -538,6 +617,7 @@ class Scene:
         height: int = 128,
         placements: Sequence[Placement] | None = None,
         extra: Sequence[Placement] = (),
+        min_label_height: float | None = None,
     ) -> None:
         if platform not in _PLATFORM_CODE:
             raise ValueError(f"platform must be 'rover' or 'uav', got {platform!r}")
@@ -548,6 +628,9 @@ class Scene:
         self.width = width
         self.height = height
         self.classes = ROVER_CLASSES if platform == "rover" else UAV_CLASSES
+        self.min_label_height = (
+            MIN_LABEL_HEIGHT[platform] if min_label_height is None else (min_label_height)
+        )
         self.world = World()
         self._tmp = Path(tempfile.mkdtemp(prefix="anunnaki-sim-"))
         self._bodies: list[_Body] = []
@@ -810,15 +893,17 @@ class Scene:
 
         Rover: 0.3 m above ground on or near the route, looking ahead (yaw within about
         ±25°, pitch ±4°); seven times in ten it is aimed within ±20° of an object of a class
-        2-12 m away. UAV: 15-40 m up, looking down 35-80° below the horizon, aimed near an
-        object of a class eight times in ten.
+        1.5-12 m away, the distance log-uniform so that a third of those frames show it
+        within 3 m — the range in which the rover's stop rule acts on a detection. UAV:
+        15-40 m up, looking down 35-80° below the horizon, aimed near an object of a class
+        eight times in ten.
         """
         objs = [e.placement for e in self._bodies if e.label >= 0]
         if self.platform == "rover":
             z = 0.3 + float(rng.normal(0.0, 0.02))
             if objs and rng.random() < 0.7:
                 tgt = objs[int(rng.integers(len(objs)))]
-                dist = float(rng.uniform(2.0, 12.0))
+                dist = math.exp(float(rng.uniform(math.log(1.5), math.log(12.0))))
                 bearing = float(rng.normal(0.0, 0.35))
                 yaw = bearing + float(rng.uniform(-0.35, 0.35))
                 x = tgt.x - dist * math.cos(bearing)
@@ -865,7 +950,7 @@ class Scene:
     def render(
         self, camera: Camera, *, light: Light | None = None, t: float = 0.0, seq: int = 0
     ) -> Frame:
-        """Render one frame with its ground-truth boxes (see :func:`boxes_from_mask`)."""
+        """Render one frame with its labelled and ignore boxes (see :func:`annotate_mask`)."""
         image, mask = self.world.render(camera, self.width, self.height, light)
         sky = mask < 0
         if sky.any():
@@ -875,8 +960,16 @@ class Scene:
             for e in self._bodies
             if e.label >= 0
         }
-        boxes, labels = boxes_from_mask(mask, instances, camera)
-        return Frame(image=image, boxes=boxes, labels=labels, t=float(t), seq=int(seq))
+        ann = annotate_mask(mask, instances, camera, min_height=self.min_label_height * self.height)
+        return Frame(
+            image=image,
+            boxes=ann.boxes,
+            labels=ann.labels,
+            t=float(t),
+            seq=int(seq),
+            ignore=ann.ignore,
+            ignore_labels=ann.ignore_labels,
+        )
 
     def _sky(self, light: Light | None) -> np.ndarray:
         """Sky colour per image row ``[H, 3] uint8``: a blue gradient lit by ``light``."""
@@ -911,6 +1004,7 @@ def dataset_frames(
     n: int,
     width: int = 128,
     height: int = 128,
+    min_label_height: float | None = None,
 ) -> Iterator[Frame]:
     """Yield ``n`` labelled frames of scene ``layout`` from random camera poses.
 
@@ -923,6 +1017,9 @@ def dataset_frames(
         n: Number of frames.
         width: Image width (pixels).
         height: Image height (pixels).
+        min_label_height: Smallest labelled box height as a fraction of ``height``; objects
+            seen but smaller are the frames' ignore boxes (default: the platform's
+            :data:`MIN_LABEL_HEIGHT`, rover 0.134, UAV 0).
 
     Yields:
         :class:`Frame` s with ``t = seq / 10`` and ``seq = 0 … n-1``; deterministic for
@@ -933,7 +1030,9 @@ def dataset_frames(
     if n < 0:
         raise ValueError(f"n must be >= 0, got {n}")
     rng = np.random.default_rng(np.random.SeedSequence([seed, layout, _PLATFORM_CODE[platform]]))
-    with Scene(platform, layout, width=width, height=height) as scene:
+    with Scene(
+        platform, layout, width=width, height=height, min_label_height=min_label_height
+    ) as scene:
         for i in range(n):
             scene.vary(rng)
             camera = scene.random_camera(rng)
