@@ -44,3 +44,50 @@ def test_sim_with_a_bad_scenario_exits_2(tmp_path, capsys) -> None:
     assert main(["sim", "rover", "--scenario", str(bad)]) == 2
     assert f"{bad}:2" in capsys.readouterr().err
     assert main(["sim", "uav", "--scenario", str(EXAMPLES / "rover" / "scenario.yaml")]) == 2
+
+
+def test_sim_with_the_detector_in_the_loop_reports_per_phase(capsys) -> None:
+    code = main(
+        [
+            "sim",
+            "rover",
+            "--scenario",
+            str(EXAMPLES / "rover" / "demo-scenario.yaml"),
+            "--models",
+            str(EXAMPLES / "models" / "rover.yaml"),
+            "--until",
+            "9",
+            "--speed",
+            "0",
+            "--quiet",
+        ]
+    )
+    out = capsys.readouterr().out
+    assert code == 0, out
+    assert "detector rover-default (default) on /rover/camera/image; oracle ground_truth" in out
+    rows = [ln for ln in out.split("per phase:")[1].splitlines() if "–" in ln]
+    assert rows[0].split()[:3] == ["0.0–", "8.0", "s"] and "clear" in rows[0]
+    assert "fog" in rows[1] and "rover-default" in rows[1]
+    assert int(rows[0].split()[4]) == 80  # frames scored in the clear phase
+
+
+def test_sim_uav_with_the_detector(capsys) -> None:
+    code = main(
+        [
+            "sim",
+            "uav",
+            "--models",
+            str(EXAMPLES / "models" / "uav.yaml"),
+            "--oracle",
+            "none",
+            "--until",
+            "2",
+            "--speed",
+            "0",
+            "--quiet",
+        ]
+    )
+    out = capsys.readouterr().out
+    assert code == 0, out
+    assert "detector uav-default (default) on /uav/camera/image; oracle none" in out
+    assert "done at t=2.00s" in out and "per phase:" in out

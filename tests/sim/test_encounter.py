@@ -1,9 +1,9 @@
-"""The pedestrian encounter, with a detector double.
+"""The pedestrian encounter, with a detector double and with the trained default detector.
 
-The double stands in for the trained detector until it exists: it reports the frame's
-pedestrians (from the ground truth it is shown through ``observe_truth``) only when the
-frame's mean brightness reaches a threshold, as a detector trained on daylight frames
-fails in the dark (paper Fig. 11, 15). The rover sees nothing but its detections.
+The double reports the frame's pedestrians (from the ground truth it is shown through
+``observe_truth``) only when the frame's mean brightness reaches a threshold, as a detector
+trained on daylight frames fails in the dark (paper Fig. 11, 15); the real detector is the
+committed rover default model. The rover sees nothing but its detections.
 """
 
 from __future__ import annotations
@@ -56,3 +56,19 @@ def test_detector_results_become_detections() -> None:
     )
     det = to_detections(result, frame_seq=3, width=10, height=10)
     assert det.labels == ["deer"] and det.scores == [1.0] and det.boxes == [[1, 2, 3, 4]]
+
+
+def test_the_trained_detector_stops_the_rover_but_not_in_dense_fog() -> None:
+    """The real default LEC: it stops the rover on clean frames; a dense fog blinds it."""
+    from pathlib import Path
+
+    from anunnaki.lec import load_detector
+
+    model = Path(__file__).parents[2] / "examples" / "models" / "rover-default.safetensors"
+    detector = load_detector(model)
+    kw = {"distance": 6.0, "width": 128, "height": 128}
+    clean = run_pedestrian_encounter(detector, None, **kw)
+    assert clean.stopped and clean.collisions == 0 and clean.reason == "detector", clean
+    assert clean.min_distance > 0.5 and clean.detected_frames > 0
+    fog = run_pedestrian_encounter(detector, "fog", params={"density": 8, "intensity": 0.3}, **kw)
+    assert not fog.stopped and fog.collisions == 1 and fog.reason is None, fog

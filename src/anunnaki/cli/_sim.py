@@ -50,6 +50,25 @@ def add_parser(sub: Any) -> None:
     p.add_argument(
         "--connect", action="append", metavar="ENDPOINT", help="zenoh endpoint to connect to"
     )
+    p.add_argument(
+        "--models",
+        metavar="REGISTRY",
+        help="run the detector in the loop: the LEC node on this model registry "
+        "(e.g. examples/models/rover.yaml), scored per phase against the ground truth",
+    )
+    p.add_argument(
+        "--oracle",
+        default="ground_truth",
+        metavar="NAME",
+        help="the oracle node that assesses the detector (with --models; 'none' for none; "
+        "default ground_truth)",
+    )
+    p.add_argument(
+        "--no-lockstep",
+        action="store_true",
+        help="let the simulation run ahead of the detector (default: each frame waits for "
+        "its detections)",
+    )
     p.add_argument("--quiet", action="store_true", help="no per-second lines")
     p.set_defaults(run=run)
 
@@ -96,6 +115,51 @@ def _line(sim: Any) -> str:
     )
 
 
+def _done(sim: Any) -> str:
+    return f"done at t={sim.t:.2f}s: {sim.frames} frames, " + (
+        f"{sim.collisions} collisions"
+        if sim.platform == "rover"
+        else f"delivered={sim.delivered}, battery {sim.battery:.1f} %"
+    )
+
+
+def _run_loop(
+    args: argparse.Namespace,
+    bus: Any,
+    scenario: Any,
+    *,
+    stop: threading.Event,
+    until: float,
+    callback: Any,
+) -> int:
+    """The platform with its detector and oracle (``--models``); a per-phase report."""
+    import time
+
+    from anunnaki.sim import SimulatedSystem, format_phases
+
+    oracle = None if args.oracle == "none" else {"name": args.oracle}
+    with SimulatedSystem(
+        bus, scenario, models=args.models, oracle=oracle, lockstep=not args.no_lockstep
+    ) as system:
+        print(
+            f"detector {system.lec.active.id} ({system.lec.active.domain}) on "
+            f"{system.lec.camera}; oracle {args.oracle}",
+            flush=True,
+        )
+        t0 = time.monotonic()
+        system.run(stop, speed=args.speed, until=until, callback=callback)
+        wall = time.monotonic() - t0
+        sim = system.platform
+        print(_done(sim), flush=True)
+        print(
+            f"simulated {sim.t:.1f} s in {wall:.1f} s wall "
+            f"({sim.frames / max(wall, 1e-9):.1f} frames/s); per phase:",
+            flush=True,
+        )
+        print(format_phases(system.phases()), flush=True)
+    return 0
+
+
 def run(args: argparse.Namespace) -> int:
     """Run the simulation until ``--until``, the scenario's duration, or Ctrl-C."""
     from anunnaki.bus import open_bus
@@ -121,6 +185,9 @@ def run(args: argparse.Namespace) -> int:
             if args.bus == "zenoh":
                 endpoints = getattr(bus, "endpoints", ())
                 print(f"zenoh peer listening on {', '.join(endpoints) or '(none)'}", flush=True)
+            callback = None if args.quiet else (lambda s: print(_line(s), flush=True))
+            if args.models:
+                return _run_loop(args, bus, scenario, stop=stop, until=until, callback=callback)
             if args.platform == "rover":
                 from anunnaki.sim import RoverSim
 
@@ -130,17 +197,8 @@ def run(args: argparse.Namespace) -> int:
 
                 sim = UavSim(bus, scenario)
             with sim:
-                callback = None if args.quiet else (lambda s: print(_line(s), flush=True))
                 sim.run(stop, speed=args.speed, until=until, callback=callback)
-                print(
-                    f"done at t={sim.t:.2f}s: {sim.frames} frames, "
-                    + (
-                        f"{sim.collisions} collisions"
-                        if args.platform == "rover"
-                        else f"delivered={sim.delivered}, battery {sim.battery:.1f} %"
-                    ),
-                    flush=True,
-                )
+                print(_done(sim), flush=True)
     finally:
         if in_main:
             signal.signal(signal.SIGINT, previous)

@@ -105,6 +105,16 @@ def truth_from_message(
     raise ValueError(f"ground truth of frame {seq}: labels must be class names or indices")
 
 
+def _ignore_boxes(body: dict[str, Any]) -> np.ndarray:
+    """The ground-truth message's optional ``ignore`` boxes ``[K, 4]`` (seen, not labelled)."""
+    raw = body.get("ignore") or []
+    try:
+        boxes = np.asarray(raw, dtype=np.float64)
+    except (TypeError, ValueError):
+        return np.zeros((0, 4))
+    return boxes.reshape(-1, 4) if boxes.size and boxes.shape[-1] == 4 else np.zeros((0, 4))
+
+
 class OracleNode:
     """Runs one behavior oracle on the bus.
 
@@ -158,6 +168,7 @@ class OracleNode:
         self._lock = threading.Lock()
         self._closed = False
         self._model_id: str | None = None
+        self._ignore_ok: bool | None = None
         self._frames = self._published = self._withheld = self._errors = 0
         self._agnostic_warned = False
         self._declared: list[Any] = []
@@ -244,15 +255,34 @@ class OracleNode:
                 "class-agnostically",
                 self.oracle.name,
             )
-        self._call("observe_ground_truth", seq, boxes, names)
+        ignore = _ignore_boxes(sample.message.to_body())
+        if len(ignore) and self._takes_ignore():
+            self._call("observe_ground_truth", seq, boxes, names, ignore=ignore)
+        else:
+            self._call("observe_ground_truth", seq, boxes, names)
+
+    def _takes_ignore(self) -> bool:
+        """Whether the oracle's ``observe_ground_truth`` accepts ``ignore=`` (boxes)."""
+        if self._ignore_ok is None:
+            import inspect
+
+            hook = getattr(self.oracle, "observe_ground_truth", None)
+            try:
+                params = list(inspect.signature(hook).parameters.values()) if hook else []
+            except (TypeError, ValueError):
+                params = []
+            self._ignore_ok = any(
+                p.name == "ignore" or p.kind is inspect.Parameter.VAR_KEYWORD for p in params
+            )
+        return self._ignore_ok
 
     def _on_phenomena(self, sample: Sample) -> None:
         self._call("observe_context", context_from_phenomena(sample.message.to_body()))
 
-    def _call(self, hook: str, *args: Any) -> Any:
+    def _call(self, hook: str, *args: Any, **kwargs: Any) -> Any:
         try:
             with self._oracle_lock:
-                return getattr(self.oracle, hook)(*args)
+                return getattr(self.oracle, hook)(*args, **kwargs)
         except Exception as exc:  # an oracle's bug never kills the node
             self._error("%s raised %s: %s", hook, type(exc).__name__, exc)
             return None

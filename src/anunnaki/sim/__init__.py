@@ -25,12 +25,15 @@ Platforms publish on the bus like the scripted stand-in (guideline H1), on simul
 (:class:`StopRule`), never from ground truth; ``UavSim`` flies a package-delivery mission.
 Scenario files (:func:`load_scenario`) ramp phenomena and inject faults over time.
 :func:`run_pedestrian_encounter` tells whether a detector makes the rover stop in time.
+:class:`SimulatedSystem` is the whole loop's managed system — a platform with its detector
+(the model manager's LEC node) and ground-truth oracle — scored per scenario phase.
 
 Every scene has its own pybullet client (``DIRECT``, tiny renderer, no shadows); several
 live side by side in one process or in process pools. See ``docs/simulation.md``.
 """
 
 from anunnaki.sim._encounter import EncounterResult, run_pedestrian_encounter, to_detections
+from anunnaki.sim._managed import PhaseScore, SimulatedSystem, format_phases, scenario_phases
 from anunnaki.sim._platform import GROUND_TRUTH_TOPIC, PHENOMENA_TOPIC, SimPlatform
 from anunnaki.sim._rover import (
     CAMERA_FOV,
@@ -55,15 +58,18 @@ from anunnaki.sim._scenario import (
 from anunnaki.sim._scene import (
     MIN_BOX_SIZE,
     MIN_IN_FRAME,
+    MIN_LABEL_HEIGHT,
     MIN_VISIBLE,
     ROVER_CLASSES,
     UAV_CLASSES,
+    Annotation,
     Camera,
     Frame,
     Light,
     Placement,
     Platform,
     Scene,
+    annotate_mask,
     boxes_from_mask,
     dataset_frames,
     layout_placements,
@@ -77,11 +83,13 @@ __all__ = [
     "GROUND_TRUTH_TOPIC",
     "MIN_BOX_SIZE",
     "MIN_IN_FRAME",
+    "MIN_LABEL_HEIGHT",
     "MIN_VISIBLE",
     "PHENOMENA_TOPIC",
     "ROVER_CLASSES",
     "UAV_CAMERA_FOV",
     "UAV_CLASSES",
+    "Annotation",
     "Camera",
     "CameraConfig",
     "EncounterResult",
@@ -89,6 +97,7 @@ __all__ = [
     "Frame",
     "Light",
     "ObjectSpec",
+    "PhaseScore",
     "PhenomenonEvent",
     "Placement",
     "Platform",
@@ -97,17 +106,21 @@ __all__ = [
     "Scenario",
     "Scene",
     "SimPlatform",
+    "SimulatedSystem",
     "StopRule",
     "Timeline",
     "UavMission",
     "UavMode",
     "UavSim",
     "UltrasonicConfig",
+    "annotate_mask",
     "boxes_from_mask",
     "dataset_frames",
+    "format_phases",
     "layout_placements",
     "load_scenario",
     "parse_scenario",
     "run_pedestrian_encounter",
+    "scenario_phases",
     "to_detections",
 ]

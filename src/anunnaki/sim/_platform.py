@@ -281,6 +281,7 @@ class SimPlatform:
                         "height": cam.height,
                         "boxes": [[float(v) for v in b] for b in frame.boxes],
                         "labels": [self.scene.classes[int(i)] for i in frame.labels],
+                        "ignore": [[float(v) for v in b] for b in frame.ignore],
                     },
                 )
         if self.frame_hook is not None:

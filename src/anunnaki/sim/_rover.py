@@ -186,7 +186,7 @@ class RoverSim(SimPlatform):
         route = [(float(x), float(y)) for x, y in sc.route]
         background = (
             []
-            if clear_layout
+            if clear_layout or not sc.background
             else [
                 p
                 for p in layout_placements("rover", sc.layout)

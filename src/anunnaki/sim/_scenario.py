@@ -176,6 +176,7 @@ class Scenario(_Strict):
     name: str = ""
     description: str = ""
     layout: int = Field(0, ge=0)
+    background: bool = True
     seed: int = Field(0, ge=0)
     duration: float = Field(60.0, gt=0.0)
     camera: CameraConfig = CameraConfig()
@@ -206,6 +207,10 @@ class Scenario(_Strict):
                     f"the {self.platform} has no sensor {fault.sensor!r}; "
                     f"sensors: {', '.join(sorted(allowed))}"
                 )
+        if not self.background and self.platform != "rover":
+            raise ValueError(
+                "background: false is for the rover (the UAV's layout is its whole scene)"
+            )
         return self
 
 

@@ -49,7 +49,14 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import IO, Annotated, Any, Literal, TextIO
 
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
+from pydantic import (
+    BaseModel,
+    ConfigDict,
+    Field,
+    ValidationError,
+    field_validator,
+    model_validator,
+)
 
 from anunnaki._safeyaml import LineMap, describe_path, load_yaml, validation_error
 from anunnaki.bus import Bus, BusConfig, BusError, Clock, ServiceError, open_bus
@@ -136,10 +143,41 @@ class ScriptedConfig(_Strict):
     sync_timeout: Annotated[float, Field(gt=0)] = 1.0
 
 
+class SimConfig(_Strict):
+    """A simulated platform with its detector and oracle (:class:`~anunnaki.sim.SimulatedSystem`).
+
+    Attributes:
+        scenario: The scenario file (``anunnaki: scenario/1``); its ``platform`` says rover or
+            UAV.
+        models: The detector's model registry (``anunnaki: models/1``); without it no
+            detector runs.
+        oracle: The oracle node's options: ``name`` (default ``ground_truth``) and the
+            oracle's own (e.g. ``window``); ``null`` runs none.
+        speed: Simulated seconds per wall second (the detector can hold it back: lockstep).
+        lockstep: A frame is not followed by the next before its detections are out.
+        report: Print the per-phase table (detector F1, categories, models, tactics) at the end.
+
+    """
+
+    scenario: str
+    models: str | None = None
+    oracle: dict[str, Any] | None = Field(default_factory=lambda: {"name": "ground_truth"})
+    speed: Annotated[float, Field(gt=0, le=10_000)] = 1.0
+    lockstep: bool = True
+    report: bool = True
+
+
 class ManagedConfig(_Strict):
     """The managed system a launch runs against (none: the robot is real)."""
 
     scripted: ScriptedConfig | None = None
+    sim: SimConfig | None = None
+
+    @model_validator(mode="after")
+    def _one(self) -> ManagedConfig:
+        if self.scripted is not None and self.sim is not None:
+            raise ValueError("give one managed system: 'scripted' or 'sim', not both")
+        return self
 
 
 class NodeSettings(_Strict):
@@ -207,6 +245,7 @@ class Launch:
         scripted: The scripted managed system (trace path absolute), if any.
         records: The trace's records (empty when not read).
         lines: Where each element of the launch file starts.
+        sim: The simulated managed system (paths absolute), if any.
 
     """
 
@@ -219,6 +258,7 @@ class Launch:
     scripted: ScriptedConfig | None = None
     records: list[Record] = field(default_factory=list)
     lines: LineMap | None = None
+    sim: SimConfig | None = None
 
     @property
     def name(self) -> str:
@@ -367,7 +407,39 @@ def _resolve(data: Any, lines: LineMap, path: Path, *, read_records: bool) -> La
                     path=scripted.trace,
                     hint="record or write some messages",
                 )
-    return Launch(config, path, utu, parts, bus, nodes, scripted, records, lines)
+    sim = config.managed.sim
+    if sim is not None:
+        sim = sim.model_copy(
+            update={
+                "scenario": str(here(sim.scenario)),
+                "models": str(here(sim.models)) if sim.models is not None else None,
+            }
+        )
+        _check_sim(sim, lines, where)
+    return Launch(config, path, utu, parts, bus, nodes, scripted, records, lines, sim)
+
+
+def _check_sim(sim: SimConfig, lines: LineMap, where: str) -> None:
+    """Load the scenario and the registry now, so that errors come before bring-up (B5)."""
+    from anunnaki.sim import load_scenario
+
+    load_scenario(sim.scenario)
+    if sim.models is not None:
+        from anunnaki.lec import load_registry
+
+        load_registry(sim.models)
+    if sim.oracle is not None:
+        from anunnaki.oracles import available_oracles
+
+        name = sim.oracle.get("name", "ground_truth")
+        if name not in available_oracles():
+            raise ModelFileError(
+                f"unknown oracle {name!r}",
+                path=where,
+                line=lines.line(("managed", "sim", "oracle")),
+                element="managed.sim.oracle.name",
+                hint=f"known oracles: {', '.join(available_oracles())}",
+            )
 
 
 # -- printing ----------------------------------------------------------------------------------
@@ -701,6 +773,7 @@ def run_launch(
     out: TextIO | None = None,
     err: TextIO | None = None,
     handle_signals: bool = True,
+    on_bus: Callable[[Bus], object] | None = None,
 ) -> RunResult:
     """Run a launch: nodes (in this process or one process each), then the managed system.
 
@@ -716,6 +789,8 @@ def run_launch(
         out: Where to print (default stdout).
         err: Where the nodes' error output goes (default stderr).
         handle_signals: Turn SIGINT/SIGTERM into a clean stop (main thread only).
+        on_bus: Called with the launch's bus once it is open, before any node starts (e.g.
+            to attach a dashboard); what it declares on the bus closes with the bus.
 
     Raises:
         LaunchError: A node failed at bring-up or did not become ready in time.
@@ -735,6 +810,7 @@ def run_launch(
         stop=stop,
         out=out,
         err=err,
+        on_bus=on_bus,
     )
     if not handle_signals:
         return runner.run()
@@ -755,11 +831,18 @@ class _Runner:
         stop: threading.Event,
         out: TextIO,
         err: TextIO,
+        on_bus: Callable[[Bus], object] | None = None,
     ) -> None:
         self.launch = launch
+        self.on_bus = on_bus
         self.processes = processes
         self.scripted = launch.scripted
-        self.speed = speed if speed is not None else (self.scripted.speed if self.scripted else 1)
+        self.sim = launch.sim
+        default_speed = (
+            self.scripted.speed if self.scripted else self.sim.speed if self.sim else 1.0
+        )
+        self.speed = speed if speed is not None else default_speed
+        self.simulated: Any = None  # the SimulatedSystem, while it runs
         if not self.speed > 0:
             raise LaunchError(f"speed must be > 0, got {self.speed!r}")
         self.until = until
@@ -853,6 +936,8 @@ class _Runner:
         ``on_instant(t)`` runs before an instant's records go out; ``taken(n)`` tells
         whether Utu has taken ``n`` inputs so far (lockstep).
         """
+        if self.sim is not None:
+            return self._start_sim(bus, on_instant)
         sc = self.scripted
         if sc is None:
             return None
@@ -921,6 +1006,44 @@ class _Runner:
         thread.start()
         return system, thread
 
+    def _start_sim(
+        self, bus: Bus, on_time: Callable[[float], None] | None
+    ) -> tuple[Any, threading.Thread]:
+        """Start the simulated platform, its detector and its oracle; run it in a thread."""
+        from anunnaki.sim import SimulatedSystem
+
+        cfg = self.sim
+        assert cfg is not None
+        system = SimulatedSystem(
+            bus,
+            cfg.scenario,
+            models=cfg.models,
+            oracle=cfg.oracle,
+            lockstep=cfg.lockstep,
+            on_time=on_time,
+        )
+        self.simulated = system
+        sc = system.scenario
+        end = sc.duration if self.until is None else self.until
+        active = system.lec.active.id if system.lec is not None else "no detector"
+        oracle = system.oracle.oracle.name if system.oracle is not None else "no oracle"
+        self.say(
+            f"managed: simulated {sc.platform} '{sc.name}' from {cfg.scenario} "
+            f"(t 0–{end:g} s) at {self.speed:g}×"
+            + (", in lockstep with the detector" if cfg.lockstep and system.lec else "")
+            + f"; detector {active}; oracle {oracle}"
+        )
+
+        def drive() -> None:
+            try:
+                system.run(self.stop, speed=self.speed, until=end)
+            except Exception:  # a bug: say so; the run then ends as after the scenario
+                log.exception("the simulation failed")
+
+        thread = threading.Thread(target=drive, name="anunnaki-sim", daemon=True)
+        thread.start()
+        return system, thread
+
     def _watch(
         self,
         printer: _Printer,
@@ -942,7 +1065,11 @@ class _Runner:
                 if end_at is None:
                     end_at = now + self.launch.config.linger
                 elif now >= end_at:
-                    why = "trace ended" if self.until is None else f"reached t={self.until:g}"
+                    why = (
+                        ("scenario ended" if self.sim is not None else "trace ended")
+                        if self.until is None
+                        else f"reached t={self.until:g}"
+                    )
                     return 0, why
             if driver is None and self.until is not None and now - started >= self.until:
                 return 0, f"ran {self.until:g} s"
@@ -967,12 +1094,25 @@ class _Runner:
     def _finish(self, printer: _Printer, code: int, reason: str, ran: float) -> None:
         printer.poll()
         self.say(f"stopped ({reason}): {len(printer.decisions)} decisions in {ran:.2f} s")
+        system = self.simulated
+        if system is not None and self.sim is not None and self.sim.report:
+            from anunnaki.sim import format_phases
+
+            platform = system.platform
+            self.say(
+                f"\nsimulated {platform.t:.1f} s in {ran:.1f} s wall "
+                f"({platform.frames} frames, {platform.frames / max(ran, 1e-9):.1f} frames/s); "
+                "per phase:"
+            )
+            self.say(format_phases(system.phases(printer.decisions)))
 
     # -- one process
     def _run_here(self) -> RunResult:
         launch = self.launch
         clock_t0 = 0.0
         bus = open_bus(launch.bus, name=f"{launch.name}-launch")
+        if self.on_bus is not None:
+            self.on_bus(bus)
         nodes: list[UtuNode | ComposedUtu] = []
         threads: list[threading.Thread] = []
         halt = threading.Event()
@@ -1086,6 +1226,8 @@ class _Runner:
         if parent_config.kind == "inproc":
             parent_config = BusConfig(kind="zenoh", namespace=parent_config.namespace)
         bus = open_bus(parent_config, name=f"{launch.name}-launch")
+        if self.on_bus is not None:
+            self.on_bus(bus)
         children = _Children(self.out, self.err)
         managed = None
         kb: Knowledge | None = None

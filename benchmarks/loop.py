@@ -1,0 +1,123 @@
+"""The whole loop's throughput: simulator, phenomena, bus, detector, oracle and Utu.
+
+The rover demo (``examples/rover/sim.yaml``: 128 × 128 camera at 10 Hz, the fog-then-dusk
+scenario, the default/fog/low-light registry, the ground-truth oracle, Utu's five nodes in
+one process on the in-process bus) is run flat out — ``--speed`` far above what the machine
+can keep, with the simulator in lockstep with the detector — and timed in wall seconds.
+Four stages are run in the same process, each adding a part, so the ratios show what each
+part costs on this (shared, noisy) machine:
+
+* ``platform``: the rover alone (physics, rendering, phenomena, JPEG, publishing);
+* ``detector``: + the LEC node running the active model on every frame, in lockstep;
+* ``oracle``: + the ground-truth oracle node;
+* ``utu``: the whole launch, + Utu's monitor, analyzer, planner, executor and knowledge.
+
+The figure of merit is camera frames per wall second of the ``utu`` stage (the issue's aim:
+10 Hz or more on 2 cores): each frame is rendered, perturbed, published, detected, assessed
+and fed to Utu before the next. Writes ``benchmarks/results/loop.json``::
+
+    .venv/bin/python benchmarks/loop.py
+    .venv/bin/python benchmarks/loop.py --seconds 10 --repeats 1 --output /tmp/loop.json
+"""
+
+from __future__ import annotations
+
+import argparse
+import io
+import json
+import os
+import platform
+import statistics
+import threading
+import time
+from pathlib import Path
+from typing import Any
+
+import torch
+
+from anunnaki.bus import open_bus
+from anunnaki.sim import SimulatedSystem
+from anunnaki.utu._launch import load_launch, run_launch
+
+ROOT = Path(__file__).parents[1]
+LAUNCH = ROOT / "examples" / "rover" / "sim.yaml"
+RESULTS = Path(__file__).parent / "results" / "loop.json"
+FAST = 1000.0  # simulated seconds per wall second asked for: far beyond the machine
+
+
+def stage(name: str, seconds: float, launch_path: Path) -> dict[str, float]:
+    """Run one stage for ``seconds`` of simulated time; frames and wall time."""
+    launch = load_launch(launch_path)
+    sim = launch.sim
+    assert sim is not None
+    if name == "utu":
+        out = io.StringIO()
+        t0 = time.perf_counter()
+        result = run_launch(launch, speed=FAST, until=seconds, out=out, handle_signals=False)
+        wall = time.perf_counter() - t0
+        line = next(x for x in out.getvalue().splitlines() if x.startswith("simulated "))
+        frames = int(line.split("(")[1].split()[0])
+        return {
+            "frames": frames,
+            "wall_s": round(wall, 3),
+            "run_s": round(result.ran, 3),
+            "fps": round(frames / result.ran, 2),
+            "decisions": len(result.decisions),
+        }
+    with open_bus("inproc") as bus:
+        system = SimulatedSystem(
+            bus,
+            sim.scenario,
+            models=sim.models if name in ("detector", "oracle") else None,
+            oracle=sim.oracle if name == "oracle" else None,
+            lockstep=True,
+        )
+        with system:
+            t0 = time.perf_counter()
+            system.run(threading.Event(), speed=FAST, until=seconds)
+            wall = time.perf_counter() - t0
+            frames = system.platform.frames
+    return {"frames": frames, "wall_s": round(wall, 3), "fps": round(frames / wall, 2)}
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--seconds", type=float, default=30.0, help="simulated seconds per run")
+    ap.add_argument("--repeats", type=int, default=3, help="runs per stage (median kept)")
+    ap.add_argument("--output", type=Path, default=RESULTS)
+    ap.add_argument("--launch", type=Path, default=LAUNCH, help="the launch file to run")
+    args = ap.parse_args()
+    results: dict[str, Any] = {
+        "benchmark": "loop",
+        "date": time.strftime("%Y-%m-%d %H:%M:%S"),
+        "machine": {
+            "python": platform.python_version(),
+            "cpus": os.cpu_count(),
+            "torch_threads": torch.get_num_threads(),
+            "load_average_before": list(os.getloadavg()),
+        },
+        "launch": str(args.launch),
+        "simulated_seconds": args.seconds,
+        "repeats": args.repeats,
+        "stages": {},
+    }
+    for name in ("platform", "detector", "oracle", "utu"):
+        runs = [stage(name, args.seconds, args.launch) for _ in range(args.repeats)]
+        fps = statistics.median(r["fps"] for r in runs)
+        results["stages"][name] = {"fps_median": fps, "runs": runs}
+        print(f"{name:9s} {fps:6.1f} frames/s  ({', '.join(str(r['fps']) for r in runs)})")
+    base = results["stages"]["platform"]["fps_median"]
+    for entry in results["stages"].values():
+        entry["ratio_to_platform"] = round(entry["fps_median"] / base, 3)
+    whole = results["stages"]["utu"]["fps_median"]
+    results["whole_loop_hz"] = whole
+    results["aim_hz"] = 10.0
+    results["aim_met"] = whole >= 10.0
+    results["machine"]["load_average_after"] = list(os.getloadavg())
+    args.output.parent.mkdir(parents=True, exist_ok=True)
+    args.output.write_text(json.dumps(results, indent=1) + "\n")
+    print(f"whole loop {whole:.1f} Hz (aim 10 Hz); wrote {args.output}")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,429 @@
+"""The whole loop's managed system: a simulated platform, its detector and its oracle.
+
+What ``managed: sim`` in a launch file (``anunnaki run``) starts, on the launch's bus::
+
+    RoverSim/UavSim ─/rover/camera/image─▶ LecNode (the registry's active model)
+        ▲                                     │ /lec/detector/detections (seq, model id)
+        │ stop rule ◀─────────────────────────┤
+        │                                     ▼
+        │             /sim/ground_truth ─▶ OracleNode (ground_truth) ─/utu/oracle/output─▶ Utu
+        └── /rover/set_mode, /rover/stop ◀── Utu's tactics ──▶ /lm_manager/swap ─▶ LecNode
+
+:class:`SimulatedSystem` owns the three, runs the simulation in a thread (live at ``speed``
+× real time, in lockstep with the detector: a frame is not followed by the next before its
+detections are out), and scores what happened per phase of the scenario (:class:`PhaseScore`):
+the active model's F1 against the simulator's ground truth, the categories the oracle
+reported, the models that ran, the tactics Utu started and the collisions. The rover never
+sees the ground truth; only the scorer and the ground-truth oracle do.
+"""
+
+from __future__ import annotations
+
+import bisect
+import itertools
+import logging
+import threading
+import time
+from collections import Counter
+from collections.abc import Callable, Iterable, Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from anunnaki.bus import Assessment, Detections, Sample
+from anunnaki.sim._platform import GROUND_TRUTH_TOPIC, SimPlatform, body_of
+from anunnaki.sim._scenario import Scenario
+
+__all__ = ["PhaseScore", "SimulatedSystem", "format_phases", "scenario_phases"]
+
+log = logging.getLogger("anunnaki.sim")
+
+_OUTPUT_TOPIC = "/utu/oracle/output"
+
+
+@dataclass
+class PhaseScore:
+    """What happened in one phase of a scenario.
+
+    Attributes:
+        start: Phase start (simulated s).
+        end: Phase end (simulated s).
+        label: The phenomena in force (``clear``, ``fog``, ``brightness+fog`` …).
+        frames: Frames whose detections and ground truth were both seen.
+        tp: Matched detections (class-aware, IoU ≥ 0.5).
+        fp: Unmatched detections.
+        fn: Unmatched ground-truth objects.
+        categories: How many assessments of each category the oracle published.
+        models: The models that produced the phase's detections, in order of first use.
+        tactics: Tactics started in the phase, with their outcome when known.
+        collisions: Collisions counted in the phase.
+
+    """
+
+    start: float
+    end: float
+    label: str
+    frames: int = 0
+    tp: int = 0
+    fp: int = 0
+    fn: int = 0
+    categories: Counter[int] = field(default_factory=Counter)
+    models: list[str] = field(default_factory=list)
+    tactics: list[str] = field(default_factory=list)
+    collisions: int = 0
+
+    @property
+    def f1(self) -> float | None:
+        """The phase's detector F1 (``None`` when it saw neither objects nor detections)."""
+        denominator = 2 * self.tp + self.fp + self.fn
+        return None if denominator == 0 else 2 * self.tp / denominator
+
+    @property
+    def category(self) -> int | None:
+        """The category the oracle reported most often in the phase."""
+        return self.categories.most_common(1)[0][0] if self.categories else None
+
+    def as_dict(self) -> dict[str, Any]:
+        """JSON-ready form."""
+        return {
+            "start": self.start,
+            "end": self.end,
+            "label": self.label,
+            "frames": self.frames,
+            "f1": self.f1,
+            "tp": self.tp,
+            "fp": self.fp,
+            "fn": self.fn,
+            "categories": {str(k): v for k, v in sorted(self.categories.items())},
+            "models": list(self.models),
+            "tactics": list(self.tactics),
+            "collisions": self.collisions,
+        }
+
+
+def scenario_phases(scenario: Scenario, until: float | None = None) -> list[tuple[float, float]]:
+    """Split ``[0, until]`` at every phenomenon's start, end of ramp and ``until``."""
+    end = scenario.duration if until is None else until
+    cuts = {0.0, float(end)}
+    for event in scenario.phenomena:
+        for t in (event.at, event.at + event.ramp, event.until):
+            if t is not None and 0.0 < t < end:
+                cuts.add(float(t))
+    edges = sorted(cuts)
+    return [(a, b) for a, b in itertools.pairwise(edges) if b - a > 1e-6]
+
+
+def _label(phenomena: Sequence[tuple[str, Mapping[str, float]]]) -> str:
+    return "+".join(name for name, _ in phenomena) or "clear"
+
+
+def _match(
+    det: Detections, truth: tuple[float, np.ndarray, list[str], np.ndarray]
+) -> tuple[int, int, int]:
+    """The F1 rule (``anunnaki.lec.match_image``): class-aware, IoU ≥ 0.5, ignore boxes."""
+    from anunnaki.lec import DetectionResult
+    from anunnaki.lec._metrics import match_image
+
+    names = sorted(set(det.labels) | set(truth[2]))
+    index = {n: k for k, n in enumerate(names)}
+    pred = DetectionResult(
+        np.asarray(det.boxes, dtype=np.float32).reshape(-1, 4),
+        np.asarray([index[n] for n in det.labels], dtype=np.int64),
+        np.asarray(det.scores, dtype=np.float32),
+    )
+    labels = np.asarray([index[n] for n in truth[2]], dtype=np.int64)
+    _, is_tp, n_truth = match_image(pred, truth[1], labels, iou=0.5, ignore=truth[3])
+    tp = int(is_tp.sum())
+    return tp, len(is_tp) - tp, n_truth - tp
+
+
+class SimulatedSystem:
+    """A simulated platform with its LEC node and ground-truth oracle on one bus.
+
+    Args:
+        bus: The bus Utu's nodes are on.
+        scenario: The scenario (a :class:`Scenario`, a file or a mapping).
+        models: The detector's model registry (a file or a :class:`ModelRegistry`); ``None``
+            runs no detector (the platform then has only its other sensors).
+        oracle: The oracle's options (``name`` defaults to ``ground_truth``; the others go to
+            the oracle, e.g. ``window``); ``None`` runs no oracle.
+        lockstep: Hold each frame's successor until its detections are out (bounded by
+            ``lockstep_timeout`` seconds of wall time).
+        lockstep_timeout: The longest a frame waits for its detections.
+        on_time: Called with the simulation time before each physics chunk (Utu's clock).
+
+    """
+
+    def __init__(
+        self,
+        bus: Any,
+        scenario: Scenario | str | Path | Mapping[str, Any],
+        *,
+        models: Any = None,
+        oracle: Mapping[str, Any] | None = None,
+        lockstep: bool = True,
+        lockstep_timeout: float = 2.0,
+        on_time: Callable[[float], None] | None = None,
+    ) -> None:
+        self.bus = bus
+        self.lockstep = lockstep
+        self.lockstep_timeout = lockstep_timeout
+        self.on_time = on_time
+        self._lock = threading.Condition()
+        self._last_seq = -1
+        self._truth: dict[int, tuple[float, np.ndarray, list[str], np.ndarray]] = {}
+        self._frames: list[tuple[float, int, int, int, str]] = []  # t, tp, fp, fn, model
+        self._assessments: list[tuple[float, int]] = []
+        self._collisions: list[float] = []
+        self._closing: list[Any] = []
+        self._stopping = threading.Event()
+        if isinstance(scenario, Scenario):
+            sc = scenario
+        else:
+            from anunnaki.sim._scenario import load_scenario, parse_scenario
+
+            sc = (
+                load_scenario(scenario)
+                if isinstance(scenario, str | Path)
+                else parse_scenario(dict(scenario))
+            )
+        self.scenario = sc
+        self.platform: SimPlatform
+        if sc.platform == "rover":
+            from anunnaki.sim._rover import RoverSim
+
+            self.platform = RoverSim(bus, sc, frame_hook=self._frame_hook)
+        else:
+            from anunnaki.sim._uav import UavSim
+
+            self.platform = UavSim(bus, sc, frame_hook=self._frame_hook)
+        self._closing.append(self.platform)
+        try:
+            camera = f"{self.platform.prefix}/camera/image"
+            self.lec: Any = None
+            self.registry: Any = None
+            if models is not None:
+                from anunnaki.lec import LecNode, ModelRegistry, load_registry
+
+                self.registry = (
+                    models if isinstance(models, ModelRegistry) else load_registry(models)
+                )
+                self.lec = LecNode(bus, self.registry, camera=camera)
+                self._closing.append(self.lec)
+            self.detections_topic = (
+                self.lec.detections_topic if self.lec is not None else "/lec/detector/detections"
+            )
+            self.oracle: Any = None
+            if oracle is not None:
+                from anunnaki.oracles import OracleNode
+
+                options = dict(oracle)
+                name = options.pop("name", "ground_truth")
+                if name == "ground_truth" and self.registry is not None:
+                    options.setdefault("clean_f1", self.registry.clean_f1)
+                self.oracle = OracleNode(
+                    bus,
+                    name,
+                    camera=camera,
+                    detections=self.detections_topic,
+                    classes=self.platform.scene.classes,
+                    **options,
+                )
+                self._closing.append(self.oracle)
+            self._subs = [
+                bus.subscribe(GROUND_TRUTH_TOPIC, self._on_truth, queue=256),
+                bus.subscribe(self.detections_topic, self._on_detections, queue=256),
+                bus.subscribe(_OUTPUT_TOPIC, self._on_assessment, queue=256),
+            ]
+        except BaseException:
+            self.close()
+            raise
+
+    # -- what the scorer hears ---------------------------------------------------------------
+    def _on_truth(self, sample: Sample) -> None:
+        body = body_of(sample.message)
+        try:
+            seq = int(body["seq"])
+            boxes = np.asarray(body.get("boxes") or [], dtype=np.float64).reshape(-1, 4)
+            labels = [str(v) for v in body.get("labels") or []]
+            ignore = np.asarray(body.get("ignore") or [], dtype=np.float64).reshape(-1, 4)
+            t = float(body.get("t", 0.0))
+        except (KeyError, TypeError, ValueError):
+            log.warning("sim: a ground-truth message without seq/boxes/labels; skipped")
+            return
+        with self._lock:
+            self._truth[seq] = (t, boxes, labels, ignore)
+            while len(self._truth) > 512:
+                del self._truth[min(self._truth)]
+
+    def _on_detections(self, sample: Sample) -> None:
+        det = sample.message
+        if not isinstance(det, Detections):
+            return
+        with self._lock:
+            truth = self._truth.pop(det.frame_seq, None)
+            if truth is not None:
+                tp, fp, fn = _match(det, truth)
+                self._frames.append((truth[0], tp, fp, fn, det.model_id))
+            self._last_seq = max(self._last_seq, det.frame_seq)
+            self._lock.notify_all()
+
+    def _on_assessment(self, sample: Sample) -> None:
+        message = sample.message
+        if isinstance(message, Assessment):
+            with self._lock:
+                self._assessments.append((self.platform.t, message.category))
+
+    def _frame_hook(self, sim: SimPlatform, frame: Any, image: Any) -> None:
+        if not self.lockstep or self.lec is None:
+            return
+        deadline = time.monotonic() + self.lockstep_timeout
+        with self._lock:
+            while self._last_seq < frame.seq and not self._stopping.is_set():
+                left = deadline - time.monotonic()
+                if left <= 0:
+                    log.warning(
+                        "sim: frame %d got no detections within %.1f s",
+                        frame.seq,
+                        self.lockstep_timeout,
+                    )
+                    break
+                self._lock.wait(min(left, 0.05))
+
+    # -- running -------------------------------------------------------------------------------
+    def run(
+        self,
+        stop: threading.Event,
+        *,
+        speed: float = 1.0,
+        until: float | None = None,
+        every: float = 1.0,
+        callback: Callable[[SimPlatform], None] | None = None,
+    ) -> None:
+        """Run the simulation until ``stop``, ``until`` or the scenario's end.
+
+        Args:
+            stop: Set it to end the run.
+            speed: Simulated seconds per wall second (0: as fast as possible).
+            until: End at this simulated time (default: the scenario's duration).
+            every: Call ``callback`` every this many simulated seconds.
+            callback: ``callback(platform)``, e.g. to print progress.
+
+        """
+        self._stopping = stop
+        end = self.scenario.duration if until is None else until
+        collisions = 0
+        next_call = self.platform.t + every
+
+        def tick(sim: SimPlatform) -> None:
+            nonlocal collisions, next_call
+            if self.on_time is not None:
+                self.on_time(sim.t)
+            now = int(getattr(sim, "collisions", 0))
+            if now > collisions:
+                with self._lock:
+                    self._collisions.extend([sim.t] * (now - collisions))
+                collisions = now
+            if callback is not None and sim.t >= next_call - 1e-9:
+                next_call += every
+                callback(sim)
+
+        if self.on_time is not None:
+            self.on_time(self.platform.t)
+        self.platform.run(stop, speed=speed, until=end, every=1.0 / 40.0, callback=tick)
+
+    def close(self) -> None:
+        """Stop listening and close the oracle, the LEC node and the platform (idempotent)."""
+        self._stopping.set()
+        for sub in getattr(self, "_subs", []):
+            sub.close()
+        self._subs = []
+        while self._closing:
+            obj = self._closing.pop()
+            try:
+                obj.close()
+            except Exception:  # best effort at shutdown; the rest still close
+                log.exception("sim: closing %r failed", obj)
+
+    def __enter__(self) -> SimulatedSystem:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    # -- scoring ---------------------------------------------------------------------------------
+    def phases(
+        self, decisions: Iterable[Any] = (), *, until: float | None = None
+    ) -> list[PhaseScore]:
+        """Score the run per phase; ``decisions`` are Utu's (``t``, ``kind``, ``tactic``)."""
+        end = self.platform.t if until is None else until
+        spans = scenario_phases(self.scenario, max(end, 1e-3))
+        timeline = self.platform.timeline
+        out = [PhaseScore(a, b, _label(timeline.phenomena((a + b) / 2))) for a, b in spans]
+        starts = [p.start for p in out]
+
+        def phase_at(t: float) -> PhaseScore | None:
+            k = bisect.bisect_right(starts, t) - 1
+            return out[k] if 0 <= k < len(out) and t <= out[k].end + 1e-9 else None
+
+        with self._lock:
+            frames = list(self._frames)
+            assessments = list(self._assessments)
+            collisions = list(self._collisions)
+        for t, tp, fp, fn, model in frames:
+            p = phase_at(t)
+            if p is not None:
+                p.frames += 1
+                p.tp, p.fp, p.fn = p.tp + tp, p.fp + fp, p.fn + fn
+                if model not in p.models:
+                    p.models.append(model)
+        for t, category in assessments:
+            p = phase_at(t)
+            if p is not None:
+                p.categories[category] += 1
+        for t in collisions:
+            p = phase_at(t)
+            if p is not None:
+                p.collisions += 1
+        outcome = {
+            "postcondition_ok": "ok",
+            "postcondition_failed": "failed",
+            "completed": "done",
+        }
+        started: dict[str, list[tuple[PhaseScore, int]]] = {}
+        for d in decisions:
+            p = phase_at(float(d.t))
+            if d.kind == "started" and d.tactic and p is not None:
+                p.tactics.append(d.tactic)
+                started.setdefault(d.tactic, []).append((p, len(p.tactics) - 1))
+            elif d.kind in outcome and d.tactic and started.get(d.tactic):
+                q, k = started[d.tactic].pop()
+                q.tactics[k] = f"{d.tactic} ({outcome[d.kind]})"
+        return out
+
+
+def format_phases(phases: Sequence[PhaseScore]) -> str:
+    """A plain-text table of :meth:`SimulatedSystem.phases` (one row per phase)."""
+    header = ("phase", "conditions", "frames", "F1", "category", "models", "tactics", "coll.")
+    rows = [header]
+    for p in phases:
+        f1 = "-" if p.f1 is None else f"{p.f1:.2f}"
+        cats = ", ".join(f"{k}×{n}" for k, n in sorted(p.categories.items())) or "-"
+        rows.append(
+            (
+                f"{p.start:5.1f}–{p.end:5.1f} s",
+                p.label,
+                str(p.frames),
+                f1,
+                cats,
+                ", ".join(p.models) or "-",
+                ", ".join(p.tactics) or "-",
+                str(p.collisions),
+            )
+        )
+    widths = [max(len(r[i]) for r in rows) for i in range(len(header))]
+    lines = ["  ".join(c.ljust(w) for c, w in zip(r, widths, strict=True)).rstrip() for r in rows]
+    lines.insert(1, "  ".join("-" * w for w in widths))
+    return "\n".join(lines)

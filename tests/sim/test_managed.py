@@ -1,0 +1,199 @@
+"""The whole loop's managed system: simulated rover + real detector + ground-truth oracle.
+
+The detector is the committed rover default model (examples/models), so these tests run the
+real CenterNet on rendered frames. What they assert does not depend on how good the model is:
+lockstep (every frame gets its detections before the next), scoring against ground truth
+per scenario phase, a heavy fog lowering the F1, the launch file's ``managed: sim`` section,
+and the escalation from a swap that does not help to the fail-safe.
+"""
+
+from __future__ import annotations
+
+import io
+import threading
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from anunnaki.bus import Detections
+from anunnaki.errors import ModelFileError
+from anunnaki.lec import load_registry, sha256_file
+from anunnaki.sim import SimulatedSystem, format_phases, load_scenario, scenario_phases
+from anunnaki.utu._launch import load_launch, parse_launch, run_launch
+
+ROOT = Path(__file__).parents[2]
+ROVER = ROOT / "examples" / "rover"
+MODEL = ROOT / "examples" / "models" / "rover-default.safetensors"
+
+#: 16 s, no background clutter: a pedestrian crosses 4-5 m ahead and a deer stands in view;
+#: a dense fog from t = 5 s.
+SCENARIO: dict[str, Any] = {
+    "platform": "rover",
+    "name": "fog-test",
+    "layout": 3,
+    "background": False,
+    "seed": 0,
+    "duration": 16,
+    "camera": {"rate": 10, "width": 128, "height": 128},
+    "route": [[0, 0], [30, 0]],
+    "cruise_speed": 0.3,
+    "objects": [
+        {"kind": "pedestrian", "x": 5.0, "y": -1.5, "walk_to": [5.0, 1.5], "speed": 0.3},
+        {"kind": "deer", "x": 7.0, "y": 2.2, "yaw": 1.57},
+    ],
+    "phenomena": [{"at": 5, "phenomenon": "fog", "params": {"density": 8, "intensity": 0.3}}],
+}
+
+
+def test_phases_split_at_phenomena() -> None:
+    sc = load_scenario(ROVER / "demo-scenario.yaml")
+    assert scenario_phases(sc) == [(0, 8), (8, 10), (10, 20), (20, 30), (30, 32), (32, 42)]
+    assert scenario_phases(sc, 9.0) == [(0, 8), (8, 9)]
+
+
+def test_every_frame_is_detected_in_lockstep_and_fog_lowers_f1(bus: Any, tmp_path: Path) -> None:
+    seen: list[int] = []
+    bus.subscribe(
+        "/lec/detector/detections",
+        lambda s: seen.append(s.message.frame_seq) if isinstance(s.message, Detections) else None,
+        queue=512,
+    )
+    with SimulatedSystem(
+        bus,
+        SCENARIO,
+        models=load_registry(write_registry(tmp_path / "m.yaml")),
+        oracle={"window": 10},
+    ) as system:
+        system.run(threading.Event(), speed=1000.0)
+        frames = system.platform.frames
+        phases = system.phases()
+        assert system.oracle is not None and system.oracle.stats().assessments > 0
+    assert frames == 160
+    assert sorted(seen) == list(range(frames))  # exactly one detection message per frame
+    clear, fog = phases
+    assert (clear.label, fog.label) == ("clear", "fog")
+    assert clear.frames + fog.frames == frames  # every frame scored against its truth
+    assert clear.f1 is not None and fog.f1 is not None
+    assert clear.tp > 0 and fog.f1 < clear.f1
+    assert fog.categories[2] > 0 and clear.categories[2] == 0  # compromised: only in fog
+    assert clear.models == fog.models == ["rover-default"]
+    table = format_phases(phases)
+    assert "0.0–  5.0 s" in table and "fog" in table and f"{clear.f1:.2f}" in table
+
+
+LAUNCH = """
+anunnaki: launch/1
+name: sim-test
+utu:
+  goal_model: ROVER/goals-lm.yaml
+  binding: ROVER/binding-lm.yaml
+  tactics: ROVER/tactics-lm.yaml
+  knowledge: ":memory:"
+  clock: sim
+  warmup: 1.0
+  failsafe: fail-safe
+  run_stop: {service: /rover/stop}
+bus: {kind: inproc}
+managed:
+  sim:
+    scenario: SCENARIO
+    models: MODELS
+    oracle: {name: ground_truth, window: 20, min_frames: 10, min_objects: 10}
+    speed: 1000
+"""
+
+
+def write_registry(path: Path, *domains: str) -> Path:
+    """The default model, also registered under each domain: a 'robust' model no better."""
+    digest = sha256_file(MODEL)
+    lines = ["anunnaki: models/1", "lec: detector", "models:"]
+    for domain in ("default", *domains):
+        lines.append(
+            f"  - {{id: rover-{domain}, domain: {domain}, file: {MODEL}, sha256: {digest}}}"
+        )
+    path.write_text("\n".join(lines) + "\n")
+    return path
+
+
+def launch_text(tmp_path: Path, scenario: dict[str, Any], models: Path) -> str:
+    import yaml
+
+    sc = tmp_path / "scenario.yaml"
+    sc.write_text(yaml.safe_dump({"anunnaki": "scenario/1", **scenario}))
+    return (
+        LAUNCH.replace("ROVER", str(ROVER))
+        .replace("SCENARIO", str(sc))
+        .replace("MODELS", str(models))
+    )
+
+
+def test_a_swap_that_does_not_help_escalates_to_the_fail_safe(tmp_path: Path) -> None:
+    """Fog → swap to the 'fog' model (the same weights) → G9 still fails → fail-safe."""
+    text = launch_text(tmp_path, SCENARIO, write_registry(tmp_path / "models.yaml", "fog"))
+    out = io.StringIO()
+    result = run_launch(parse_launch(text), out=out, handle_signals=False)
+    log = out.getvalue()
+    assert result.exit_code == 0, log
+    kinds = [(d.kind, d.tactic) for d in result.decisions]
+    assert ("started", "swap-to-fog-model") in kinds, log
+    swap = next(
+        d for d in result.decisions if d.kind == "action" and d.tactic == "swap-to-fog-model"
+    )
+    assert swap.data["ok"] is True and swap.data["domain"] == "fog"
+    assert ("postcondition_failed", "swap-to-fog-model") in kinds
+    escalated = next(d for d in result.decisions if d.kind == "escalated")
+    assert escalated.data["to"] == "fail-safe"
+    # The report: one row per phase, the fog phase ran the fog model and shows the tactics.
+    assert "per phase:" in log
+    fog_row = next(line for line in log.splitlines() if line.strip().startswith("5.0–"))
+    assert "rover-fog" in fog_row and "swap-to-fog-model (failed)" in fog_row
+
+
+def test_sim_section_errors_name_the_file(tmp_path: Path) -> None:
+    models = write_registry(tmp_path / "models.yaml")
+    text = launch_text(tmp_path, SCENARIO, models)
+    with pytest.raises(ModelFileError, match="unknown oracle 'crystal_ball'") as info:
+        parse_launch(text.replace("name: ground_truth", "name: crystal_ball"))
+    assert info.value.line is not None and "ground_truth" in (info.value.hint or "")
+    with pytest.raises(ModelFileError, match="not both"):
+        parse_launch(
+            text.replace("  sim:", "  scripted: {trace: ROVER/trace.jsonl}\n  sim:").replace(
+                "ROVER", str(ROVER)
+            )
+        )
+    with pytest.raises(ModelFileError) as missing:
+        parse_launch(text.replace(str(tmp_path / "scenario.yaml"), str(tmp_path / "nope.yaml")))
+    assert "nope.yaml" in str(missing.value)
+    models.write_text(models.read_text().replace("sha256: ", "sha256: 0"))
+    with pytest.raises(ModelFileError) as bad:
+        parse_launch(text)
+    assert "models.yaml" in str(bad.value)
+
+
+def test_the_demo_swaps_in_the_fog_model_and_back_without_oscillation() -> None:
+    """The README's demo, the real models: fog → fog model → clear → default → dusk → low light.
+
+    Each swap happens once, in its phase (no oscillation), no fail-safe is needed, the
+    rover touches nobody, and the robust models restore the F1 their condition took away.
+    """
+    out = io.StringIO()
+    result = run_launch(load_launch(ROVER / "sim.yaml"), speed=1000, out=out, handle_signals=False)
+    log = out.getvalue()
+    assert result.exit_code == 0, log
+    swaps = [
+        (d.t, d.data["domain"])
+        for d in result.decisions
+        if d.kind == "action" and d.data.get("type") == "swap_model"
+    ]
+    assert [domain for _, domain in swaps] == ["fog", "default", "low_light"], log
+    fog_on, back, dusk = (t for t, _ in swaps)
+    assert 8.0 <= fog_on < 20.0 and 20.0 <= back < 30.0 and 30.0 <= dusk < 42.0, swaps
+    verified = [d.tactic for d in result.decisions if d.kind == "postcondition_ok"]
+    assert "swap-to-fog-model" in verified and "swap-to-low-light-model" in verified, log
+    assert ("started", "fail-safe") not in [(d.kind, d.tactic) for d in result.decisions], log
+    rows = {
+        line.split()[1]: line for line in log.split("per phase:")[1].splitlines() if "–" in line
+    }
+    assert all(row.split()[-1] == "0" for row in rows.values())  # no collisions in any phase
+    assert "rover-low_light" in rows["42.0"]
