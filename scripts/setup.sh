@@ -9,8 +9,11 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
+# Chromium for the dashboard's browser tests (apt, as root; otherwise it says what to do).
+scripts/setup-browser.sh
+
 PYTHON=${PYTHON:-python3}
-EXTRAS=${ANUNNAKI_EXTRAS:-dev,bus,vision}
+EXTRAS=${ANUNNAKI_EXTRAS:-dev,bus,vision,dashboard}
 VENV=.venv
 
 if ! "$PYTHON" -c 'import sys; sys.exit(sys.version_info < (3, 11))'; then

@@ -20,10 +20,30 @@ from typing import Any
 from pydantic import ValidationError
 
 from anunnaki.bus import BusConfig, BusConfigError, open_bus
+from anunnaki.cli import _dashboard
 from anunnaki.utu._launch import load_launch, run_launch, signals_to
 from anunnaki.utu._nodes import NODE_NAMES, build_node
 
-__all__ = ["add_parser", "run", "run_node"]
+__all__ = ["add_parser", "bus_with_overrides", "run", "run_node"]
+
+
+def bus_with_overrides(bus: BusConfig, args: argparse.Namespace) -> BusConfig:
+    """The launch's bus with ``--connect``/``--listen``/``--mode`` applied (zenoh if any)."""
+    overrides: dict[str, Any] = {}
+    if args.connect:
+        overrides["connect"] = args.connect
+    if args.listen:
+        overrides["listen"] = args.listen
+    if args.mode:
+        overrides["mode"] = args.mode
+    if overrides:
+        overrides.setdefault("kind", "zenoh")
+    try:
+        return BusConfig.model_validate({**bus.model_dump(exclude_unset=True), **overrides})
+    except ValidationError as exc:
+        first = exc.errors(include_url=False)[0]
+        where = ".".join(str(p) for p in first["loc"]) or "bus"
+        raise BusConfigError(f"bus option {where}: {first['msg']}") from None
 
 
 def add_parser(sub: Any) -> None:
@@ -55,6 +75,7 @@ def add_parser(sub: Any) -> None:
     p.add_argument("--knowledge", metavar="FILE", help="knowledge base file (overrides)")
     p.add_argument("--fresh", action="store_true", help="delete the knowledge base file first")
     p.add_argument("-v", "--verbose", action="store_true", help="log what the nodes do")
+    _dashboard.add_run_options(p)
     p.set_defaults(run=run)
 
     n: argparse.ArgumentParser = sub.add_parser(
@@ -95,14 +116,36 @@ def run(args: argparse.Namespace) -> int:
     """Run a launch file; returns the exit code."""
     _logging(args.verbose)
     launch = load_launch(args.config)
-    result = run_launch(
-        launch,
-        processes=args.processes,
-        speed=args.speed,
-        until=args.until,
-        knowledge=args.knowledge,
-        fresh=args.fresh,
-    )
+    dashboard = None
+    if getattr(args, "dashboard", False):
+        # Bound and serving before anything starts: a port in use fails here, at once.
+        token = _dashboard.token_from(args.dashboard_token)
+        dashboard = _dashboard.dashboard_for_launch(
+            launch, host=args.dashboard_host, port=args.dashboard_port, token=token
+        )
+        dashboard.start()
+        _dashboard.announce(dashboard, token)
+    try:
+        result = run_launch(
+            launch,
+            processes=args.processes,
+            speed=args.speed,
+            until=args.until,
+            knowledge=args.knowledge,
+            fresh=args.fresh,
+            on_bus=None if dashboard is None else dashboard.attach,
+        )
+        if dashboard is not None and result.reason != "stopped by a signal":
+            linger = args.dashboard_linger
+            print(
+                f"dashboard: the run has ended; {dashboard.url} keeps showing its last state "
+                + ("(Ctrl-C to quit)" if linger is None else f"for {linger:g} s (Ctrl-C: now)"),
+                flush=True,
+            )
+            _dashboard.wait_for_signal(timeout=linger)
+    finally:
+        if dashboard is not None:
+            dashboard.close()
     return result.exit_code
 
 
@@ -131,23 +174,7 @@ def run_node(args: argparse.Namespace) -> int:
     if args.bus_json:
         bus_config = BusConfig.model_validate_json(args.bus_json)
     else:
-        overrides: dict[str, Any] = {}
-        if args.connect:
-            overrides["connect"] = args.connect
-        if args.listen:
-            overrides["listen"] = args.listen
-        if args.mode:
-            overrides["mode"] = args.mode
-        if overrides:
-            overrides.setdefault("kind", "zenoh")
-        try:
-            bus_config = BusConfig.model_validate(
-                {**launch.bus.model_dump(exclude_unset=True), **overrides}
-            )
-        except ValidationError as exc:
-            first = exc.errors(include_url=False)[0]
-            where = ".".join(str(p) for p in first["loc"]) or "bus"
-            raise BusConfigError(f"bus option {where}: {first['msg']}") from None
+        bus_config = bus_with_overrides(launch.bus, args)
     if bus_config.kind == "inproc":
         raise launch.error(
             "a node on its own needs a bus other processes can reach, but the bus is inproc",

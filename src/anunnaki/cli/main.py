@@ -19,7 +19,7 @@ __all__ = ["build_parser", "main"]
 
 def build_parser() -> argparse.ArgumentParser:
     """Build the argument parser with every sub-command."""
-    from anunnaki.cli import _check, _detector, _evaluate, _log, _run, _sim
+    from anunnaki.cli import _check, _dashboard, _detector, _evaluate, _log, _run, _sim
 
     parser = argparse.ArgumentParser(
         prog="anunnaki",
@@ -29,6 +29,7 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     sub.required = True
     _check.add_parser(sub)
+    _dashboard.add_parser(sub)
     _detector.add_parser(sub)
     _evaluate.add_parser(sub)
     _log.add_parser(sub)

@@ -1,0 +1,210 @@
+"""``anunnaki dashboard CONFIG`` and ``anunnaki run CONFIG --dashboard``: the Utu GUI.
+
+``dashboard`` joins the bus a launch file (or Utu configuration) names — which must reach
+other processes (zenoh) — and serves the live page until Ctrl-C/SIGTERM. ``run
+--dashboard`` serves the same page from the launching process, on the launch's own bus, so
+it works with the in-process bus too; the URL is printed before the nodes start. Read-only
+unless a token is given (``--token``/``--dashboard-token`` or ``$ANUNNAKI_DASHBOARD_TOKEN``).
+See docs/dashboard.md.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import threading
+import time
+from typing import Any
+
+from anunnaki.bus import open_bus
+from anunnaki.utu._launch import Launch, load_launch, signals_to
+
+__all__ = [
+    "TOKEN_ENV",
+    "add_parser",
+    "add_run_options",
+    "announce",
+    "dashboard_for_launch",
+    "run",
+    "token_from",
+    "wait_for_signal",
+]
+
+#: The environment variable read when no token is given on the command line.
+TOKEN_ENV = "ANUNNAKI_DASHBOARD_TOKEN"
+DEFAULT_PORT = 8765
+
+
+def add_parser(sub: Any) -> None:
+    """Register the ``dashboard`` sub-command."""
+    p: argparse.ArgumentParser = sub.add_parser(
+        "dashboard",
+        help="serve the live dashboard (Utu's GUI) for a running system",
+        description=(
+            "Join the bus of a launch file (anunnaki: launch/1) or Utu configuration "
+            "(anunnaki: utu/1) and serve a live web page of Utu's knowledge, monitor, "
+            "analysis, plan, execution, oracle, goal model, camera feed, timeline and "
+            "decision log, until Ctrl-C/SIGTERM. The bus must reach other processes (zenoh); "
+            "with the in-process bus use 'anunnaki run CONFIG --dashboard'. Read-only unless "
+            f"a token is given (--token or ${TOKEN_ENV})."
+        ),
+    )
+    p.add_argument("config", help="launch file (launch/1) or Utu configuration (utu/1)")
+    p.add_argument(
+        "--host",
+        default="127.0.0.1",
+        help="address to serve on (default 127.0.0.1: this machine only)",
+    )
+    p.add_argument(
+        "--port", type=int, default=DEFAULT_PORT, help=f"TCP port (default {DEFAULT_PORT}; 0: any)"
+    )
+    p.add_argument(
+        "--token",
+        help=f"enable operator actions for requests carrying this token (or ${TOKEN_ENV})",
+    )
+    p.add_argument(
+        "--connect", action="append", metavar="ENDPOINT", help="zenoh endpoint to connect to"
+    )
+    p.add_argument(
+        "--listen", action="append", metavar="ENDPOINT", help="zenoh endpoint to listen on"
+    )
+    p.add_argument("--mode", choices=("peer", "client", "router"), help="zenoh mode")
+    p.add_argument(
+        "--camera", default="/*/camera/image", help="camera topic pattern (Image messages)"
+    )
+    p.add_argument("--detections", default="/lec/*/detections", help="detections topic pattern")
+    p.add_argument("--oracle", default="/utu/oracle/**", help="assessment topic pattern")
+    p.set_defaults(run=run)
+
+
+def add_run_options(p: argparse.ArgumentParser) -> None:
+    """Add ``--dashboard`` and its options to the ``run`` sub-command."""
+    p.add_argument(
+        "--dashboard",
+        action="store_true",
+        help="serve the live dashboard from this process (URL printed); after the run ends it "
+        "keeps showing the last state until Ctrl-C",
+    )
+    p.add_argument(
+        "--dashboard-port",
+        type=int,
+        default=DEFAULT_PORT,
+        metavar="N",
+        help=f"the dashboard's TCP port (default {DEFAULT_PORT}; 0: any free port)",
+    )
+    p.add_argument(
+        "--dashboard-host",
+        default="127.0.0.1",
+        metavar="ADDR",
+        help="the dashboard's address (default 127.0.0.1: this machine only)",
+    )
+    p.add_argument(
+        "--dashboard-token",
+        metavar="T",
+        help=f"enable operator actions with this token (or ${TOKEN_ENV})",
+    )
+    p.add_argument(
+        "--dashboard-linger",
+        type=float,
+        metavar="S",
+        help="after the run ends, keep the page up S seconds, then exit (default: until Ctrl-C)",
+    )
+
+
+def token_from(given: str | None) -> str | None:
+    """The token given on the command line, else the environment's, else ``None``."""
+    token = given if given is not None else os.environ.get(TOKEN_ENV)
+    return token or None
+
+
+def dashboard_for_launch(
+    launch: Launch,
+    *,
+    host: str = "127.0.0.1",
+    port: int = DEFAULT_PORT,
+    token: str | None = None,
+    topics: Any = None,
+) -> Any:
+    """Build (and bind, not yet start) the dashboard of a launch; attach a bus later.
+
+    Raises:
+        MissingExtraError: fastapi/uvicorn are not installed.
+        DashboardError: The port is in use or the address is bad.
+
+    """
+    from anunnaki.dashboard import Dashboard, ObserverConfig
+
+    if topics is None:
+        topics = ObserverConfig(clock=launch.utu.clock_topic)
+    return Dashboard(
+        launch.parts.model,
+        launch.parts.tactics,
+        name=launch.name,
+        clock=launch.utu.clock,
+        host=host,
+        port=port,
+        token=token,
+        topics=topics,
+    )
+
+
+def announce(dashboard: Any, token: str | None) -> None:
+    """Print where the dashboard is, and whether operator actions are on."""
+    print(f"dashboard: {dashboard.url}", flush=True)
+    if token is not None:
+        print(
+            "dashboard: operator actions enabled — enter the token on the page "
+            f"(or open {dashboard.url}#token=<token>)",
+            flush=True,
+        )
+
+
+def wait_for_signal(stop: threading.Event | None = None, timeout: float | None = None) -> None:
+    """Block until Ctrl-C or SIGTERM (or ``stop`` is set, or ``timeout`` seconds pass)."""
+    stop = stop or threading.Event()
+    deadline = None if timeout is None else time.monotonic() + timeout
+    with signals_to(stop):
+        while True:
+            left = 0.5 if deadline is None else min(0.5, deadline - time.monotonic())
+            if left <= 0 or stop.wait(left):
+                return
+
+
+def run(args: argparse.Namespace) -> int:
+    """Serve the dashboard of a launch's bus until a signal; returns the exit code."""
+    from anunnaki.dashboard import ObserverConfig
+
+    launch = load_launch(args.config, read_records=False)
+    from anunnaki.cli._run import bus_with_overrides
+
+    bus_config = bus_with_overrides(launch.bus, args)
+    if bus_config.kind == "inproc":
+        raise launch.error(
+            "the dashboard on its own needs a bus other processes can reach, but the bus is inproc",
+            "bus",
+            hint="run it with the nodes: anunnaki run CONFIG --dashboard; or set bus: "
+            "{kind: zenoh, ...} or give --connect ENDPOINT",
+        )
+    token = token_from(args.token)
+    topics = ObserverConfig(
+        camera=args.camera,
+        detections=args.detections,
+        oracle=args.oracle,
+        clock=launch.utu.clock_topic,
+    )
+    dashboard = dashboard_for_launch(
+        launch, host=args.host, port=args.port, token=token, topics=topics
+    )
+    try:
+        with open_bus(bus_config, name=f"{launch.name}-dashboard") as bus:
+            dashboard.attach(bus)
+            dashboard.start()
+            announce(dashboard, token)
+            where = ", ".join(bus.endpoints) or ", ".join(bus_config.connect) or bus.kind
+            print(f"dashboard: observing {launch.name} on bus {where}; Ctrl-C to stop", flush=True)
+            wait_for_signal()
+    finally:
+        dashboard.close()
+    print("dashboard: stopped", file=sys.stderr)
+    return 0

@@ -1,0 +1,401 @@
+"""The dashboard on the bus: a read-only observer, plus the operator's calls of Utu's services.
+
+:class:`BusObserver` subscribes the same topics Utu's nodes use and writes what arrives into
+a :class:`~anunnaki.dashboard.DashboardState`:
+
+=============================== ========================================================
+``/utu/analyze/state``          utilities and statuses, violations, eligible tactics,
+                                the queue and the pause/run-stop flags
+``/utu/plan/start``             the queue (per-node runs)
+``/utu/execute/status``         pause and run-stop flags (per-node runs)
+``/utu/knowledge/decisions``    the decision log, as it is written
+the agents' topics (binding)    the monitor pane and the dashboard's own evaluation
+``/utu/oracle/**``              assessments (category, confidence, context)
+``/*/camera/image``             camera frames (``Image``)
+``/lec/*/detections``           detection boxes (``Detections``)
+``/lm_manager/active``          the active model and its domain
+``/clock``                      simulation time, when Utu runs on ``clock: sim``
+=============================== ========================================================
+
+Each has its own bounded queue, so a flood of camera frames cannot delay the analysis
+(guideline S1). At start it asks ``/utu/knowledge/query`` for the state and the decisions
+so far, so a dashboard started after Utu still shows the whole log.
+
+It never writes to the bus, except for the operator's actions (:meth:`BusObserver.operate`),
+which are requests to Utu's services ``/utu/pause``, ``/utu/resume``, ``/utu/approve`` and
+``/utu/run_stop`` carrying the caller: Utu records each in its decision log.
+"""
+
+from __future__ import annotations
+
+import bisect
+import itertools
+import logging
+import threading
+import time
+from collections import deque
+from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import Any, Literal
+
+from anunnaki.bus import (
+    Assessment,
+    Bus,
+    BusError,
+    Clock,
+    Detections,
+    Generic,
+    Image,
+    Sample,
+    ServiceError,
+)
+from anunnaki.dashboard._state import DashboardState, Frame
+from anunnaki.errors import AnunnakiError
+
+__all__ = ["OPERATIONS", "BusObserver", "ObserverConfig", "OperatorError", "SimTime"]
+
+log = logging.getLogger("anunnaki.dashboard")
+
+Operation = Literal["pause", "resume", "approve", "reject", "run_stop"]
+#: The operator's actions and the Utu service each calls.
+OPERATIONS: dict[str, str] = {
+    "pause": "/utu/pause",
+    "resume": "/utu/resume",
+    "approve": "/utu/approve",
+    "reject": "/utu/approve",
+    "run_stop": "/utu/run_stop",
+}
+
+
+class OperatorError(AnunnakiError):
+    """An operator action was not accepted (bad request, or Utu did not answer)."""
+
+
+@dataclass(frozen=True)
+class ObserverConfig:
+    """Where the observer listens (ROS-style names and patterns).
+
+    Attributes:
+        state: Utu's analysis topic.
+        plan: The plan node's start topic (its queue).
+        status: The execute node's status topic (pause and run-stop flags).
+        decisions: Utu's decision topic.
+        query: Utu's knowledge query service (asked once at start).
+        oracle: Pattern of the assessment topics.
+        camera: Pattern of the camera topics (``Image``).
+        detections: Pattern of the detection topics (``Detections``).
+        active_model: The model manager's announcement topic.
+        clock: The simulation clock topic (read when the observer is given a sim clock).
+        query_timeout: Seconds to wait for Utu's answer at start.
+
+    """
+
+    state: str = "/utu/analyze/state"
+    plan: str = "/utu/plan/start"
+    status: str = "/utu/execute/status"
+    decisions: str = "/utu/knowledge/decisions"
+    query: str = "/utu/knowledge/query"
+    oracle: str = "/utu/oracle/**"
+    camera: str = "/*/camera/image"
+    detections: str = "/lec/*/detections"
+    active_model: str = "/lm_manager/active"
+    clock: str = "/clock"
+    query_timeout: float = 3.0
+
+
+def _body(message: Any) -> dict[str, Any]:
+    if isinstance(message, Generic):
+        return dict(message.data)
+    to_body = getattr(message, "to_body", None)
+    if callable(to_body):
+        body = to_body()
+        return dict(body) if isinstance(body, Mapping) else {}
+    return {}
+
+
+class SimTime:
+    """Simulation time for the dashboard, and the simulation time of each input.
+
+    Utu on ``clock: sim`` takes each input at the simulated instant it was published in.
+    The dashboard's subscribers run on separate threads, so "the latest ``/clock`` when the
+    input is handled" can be an instant off, enough to misjudge a 4.8 Hz sensor. Instead an
+    input is stamped with the simulated time of the last ``/clock`` its *sender* published
+    before it (both envelopes carry the sender's wall clock), which is exactly its instant.
+    An input waits (briefly) until that is known: a later clock from the same sender has
+    arrived, or ``patience`` seconds have passed. Senders that publish no clock (a node in
+    another process) get the latest simulation time.
+
+    :meth:`now` is a watermark: it never runs ahead of an input still waiting, so the
+    dashboard's evaluation never judges staleness or rates before the inputs are in.
+    """
+
+    def __init__(self, *, patience: float = 0.2, history: int = 512) -> None:
+        self.patience = patience
+        self._lock = threading.Lock()
+        self._latest = 0.0
+        self._mark = 0.0
+        self._clocks: dict[str, deque[tuple[float, float]]] = {}
+        self._history = history
+        self._pending: list[tuple[float, int, float, str, str, dict[str, Any]]] = []
+        self._order = itertools.count()
+
+    def now(self) -> float:
+        """The time up to which every input has been handled (seconds)."""
+        return self._mark
+
+    def clock(self, sender: str, sent_at: float, t: float) -> None:
+        """A ``/clock`` message: ``t`` simulated seconds, published at ``sent_at`` (wall)."""
+        with self._lock:
+            hist = self._clocks.setdefault(sender, deque(maxlen=self._history))
+            if not hist or sent_at >= hist[-1][0]:
+                hist.append((sent_at, t))
+            self._latest = max(self._latest, t)
+
+    def add(self, sender: str, sent_at: float, topic: str, body: dict[str, Any]) -> None:
+        """An input to stamp; collect it with :meth:`ready`."""
+        with self._lock:
+            self._pending.append(
+                (sent_at, next(self._order), time.monotonic(), sender, topic, body)
+            )
+
+    def ready(self) -> list[tuple[float, str, dict[str, Any]]]:
+        """The inputs whose time is known, in publication order: ``(t, topic, body)``."""
+        out: list[tuple[float, int, float, str, dict[str, Any]]] = []
+        with self._lock:
+            keep = []
+            now = time.monotonic()
+            for item in self._pending:
+                sent_at, order, arrived, sender, topic, body = item
+                hist = self._clocks.get(sender)
+                if hist is None:
+                    out.append((sent_at, order, self._latest, topic, body))
+                    continue
+                if hist[-1][0] < sent_at and now - arrived < self.patience:
+                    keep.append(item)
+                    continue
+                i = bisect.bisect_right(hist, (sent_at, float("inf"))) - 1
+                t = hist[i][1] if i >= 0 else hist[0][1]
+                out.append((sent_at, order, t, topic, body))
+            self._pending = keep
+            out.sort(key=lambda x: (x[0], x[1]))
+            self._mark = max([self._mark, *(x[2] for x in out)])
+            if not keep:
+                self._mark = max(self._mark, self._latest)
+        return [(max(t, 0.0), topic, body) for _s, _o, t, topic, body in out]
+
+
+class BusObserver:
+    """Subscribes a bus for a :class:`DashboardState`; closes what it declared.
+
+    Args:
+        bus: The bus (shared with Utu in one process, or a session of its own).
+        state: Where to write.
+        config: Topic names and patterns.
+        sim: On ``clock: sim``: the simulation time the state reads (its ``now``), moved on
+            by the ``/clock`` topic; inputs are stamped with their instant. ``None``: wall
+            clock, inputs stamped with their sender's time as Utu does.
+        seed: Ask Utu's knowledge service for the state and decisions so far (in the
+            background; nothing waits for it).
+
+    """
+
+    def __init__(
+        self,
+        bus: Bus,
+        state: DashboardState,
+        config: ObserverConfig | None = None,
+        *,
+        sim: SimTime | None = None,
+        seed: bool = True,
+    ) -> None:
+        self.bus = bus
+        self.state = state
+        self.config = config or ObserverConfig()
+        self.sim = sim
+        self._declared: list[Any] = []
+        self._closed = threading.Event()
+        self._seeded = threading.Event()
+        self._inputs_lock = threading.Lock()
+        c = self.config
+        try:
+            if sim is not None:
+                self._sub(c.clock, self._on_clock, 8, Clock)
+            self._sub(c.state, self._on_state, 8)
+            self._sub(c.plan, self._on_plan, 8)
+            self._sub(c.status, self._on_status, 8)
+            self._sub(c.decisions, self._on_decisions, 1024)
+            for topic in state.model.topic_routes():
+                self._sub(topic, self._on_input, 256)
+            self._sub(c.oracle, self._on_assessment, 64)
+            self._sub(c.camera, self._on_frame, 4, Image)
+            self._sub(c.detections, self._on_detections, 16, Detections)
+            self._sub(c.active_model, self._on_active, 8)
+        except BaseException:
+            self.close()
+            raise
+        self._ticker = threading.Thread(
+            target=self._tick, name="anunnaki-dashboard-tick", daemon=True
+        )
+        self._ticker.start()
+        if seed:
+            threading.Thread(target=self._seed, name="anunnaki-dashboard-seed", daemon=True).start()
+        else:
+            self._seeded.set()
+
+    def _sub(self, pattern: str, callback: Any, queue: int, expect: Any = None) -> None:
+        self._declared.append(self.bus.subscribe(pattern, callback, queue=queue, expect=expect))
+
+    def now(self) -> float:
+        """The observer's time: the simulation's on a sim clock, else the wall clock."""
+        return self.state.clock()
+
+    # -- callbacks (one thread per subscriber) ---------------------------------------------
+    def _on_clock(self, sample: Sample) -> None:
+        t = getattr(sample.message, "time", None)
+        if self.sim is not None and isinstance(t, float | int):
+            self.sim.clock(sample.sender, sample.sent_at, float(t))
+            self._take_ready()
+
+    def _on_state(self, sample: Sample) -> None:
+        self.state.take_analysis(_body(sample.message))
+
+    def _on_plan(self, sample: Sample) -> None:
+        self.state.take_queue(_body(sample.message).get("queue"))
+
+    def _on_status(self, sample: Sample) -> None:
+        body = _body(sample.message)
+        self.state.take_flags(
+            paused=bool(body.get("paused")), run_stopped=bool(body.get("run_stopped"))
+        )
+
+    def _on_decisions(self, sample: Sample) -> None:
+        rows = _body(sample.message).get("decisions")
+        if isinstance(rows, list):
+            self.state.take_decisions(rows)
+
+    def _on_input(self, sample: Sample) -> None:
+        if self.sim is None:
+            # On the wall clock Utu takes an input at its sender's stamp: so does this.
+            self.state.take_input(sample.topic, _body(sample.message), sample.sent_at)
+            return
+        self.sim.add(sample.sender, sample.sent_at, sample.topic, _body(sample.message))
+        self._take_ready()
+
+    def _take_ready(self) -> None:
+        assert self.sim is not None
+        with self._inputs_lock:  # one writer at a time keeps publication order
+            for t, topic, body in self.sim.ready():
+                self.state.take_input(topic, body, t)
+
+    def _on_assessment(self, sample: Sample) -> None:
+        message = sample.message
+        if isinstance(message, Assessment | Generic):
+            self.state.take_assessment(sample.topic, _body(message), self.now())
+
+    def _on_frame(self, sample: Sample) -> None:
+        m = sample.message
+        assert isinstance(m, Image)
+        self.state.take_frame(
+            Frame(sample.topic, m.seq, m.encoding, m.width, m.height, m.data, self.now())
+        )
+
+    def _on_detections(self, sample: Sample) -> None:
+        self.state.take_detections(_body(sample.message))
+
+    def _on_active(self, sample: Sample) -> None:
+        self.state.take_active_model(_body(sample.message))
+
+    def _tick(self) -> None:
+        while not self._closed.wait(0.1):
+            try:
+                if self.sim is not None:
+                    self._take_ready()
+                self.state.tick()
+            except Exception:  # the ticker never dies of one bad evaluation
+                log.exception("dashboard: evaluation tick failed")
+
+    def _seed(self) -> None:
+        c = self.config
+        try:
+            reply = _body(
+                self.bus.request(
+                    c.query, {"what": "decisions", "limit": 2000}, timeout=c.query_timeout
+                )
+            )
+            rows = reply.get("decisions")
+            if isinstance(rows, list):
+                self.state.take_decisions(rows)
+            state = _body(self.bus.request(c.query, {"what": "state"}, timeout=c.query_timeout))
+            if state.get("ok") is not False and state.get("nodes") and not self.state.has_analysis:
+                self.state.take_analysis(state)
+        except (BusError, AnunnakiError) as exc:
+            if not self._closed.is_set():
+                log.info("dashboard: no answer from %s (%s); showing live data only", c.query, exc)
+        finally:
+            self._seeded.set()
+
+    def wait_seeded(self, timeout: float | None = None) -> bool:
+        """Wait until the start-up query is answered (or given up); returns whether it ended."""
+        return self._seeded.wait(timeout)
+
+    # -- the operator ------------------------------------------------------------------------
+    def operate(
+        self,
+        op: str,
+        *,
+        caller: str,
+        tactic: str | None = None,
+        reason: str | None = None,
+        timeout: float = 3.0,
+    ) -> dict[str, Any]:
+        """Call Utu's service for an operator action; Utu records it with ``caller``.
+
+        Args:
+            op: ``pause``, ``resume``, ``approve``, ``reject`` or ``run_stop``.
+            caller: Who acts (recorded in the decision log).
+            tactic: The pending tactic, for ``approve``/``reject``.
+            reason: Why, for ``run_stop``.
+            timeout: Seconds to wait for Utu's answer.
+
+        Returns:
+            Utu's reply (``{ok, queued, caller}``).
+
+        Raises:
+            OperatorError: An unknown action, a missing tactic, or no (or a refusing) answer.
+
+        """
+        service = OPERATIONS.get(op)
+        if service is None:
+            raise OperatorError(f"unknown action {op!r}; the actions are {', '.join(OPERATIONS)}")
+        payload: dict[str, Any] = {"caller": caller}
+        if op in ("approve", "reject"):
+            if not tactic:
+                raise OperatorError(f"{op} needs the name of a pending tactic")
+            payload.update(tactic=tactic, approve=op == "approve")
+        if op == "run_stop":
+            payload["reason"] = reason or "operator run-stop from the dashboard"
+        try:
+            reply = _body(self.bus.request(service, payload, timeout=timeout))
+        except ServiceError as exc:
+            raise OperatorError(f"{service} refused: {exc}") from None
+        except BusError as exc:
+            raise OperatorError(f"{service} did not answer: {exc}") from None
+        if reply.get("ok") is False:
+            raise OperatorError(f"{service} refused: {reply.get('error') or 'no reason given'}")
+        return reply
+
+    def close(self) -> None:
+        """Withdraw the subscriptions and stop the ticker. Idempotent."""
+        self._closed.set()
+        for obj in reversed(self._declared):
+            try:
+                obj.close()
+            except Exception as exc:  # best effort: the bus may be closing too
+                log.debug("closing %r: %r", obj, exc)
+        self._declared.clear()
+
+    def __enter__(self) -> BusObserver:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()

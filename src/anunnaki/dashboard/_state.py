@@ -1,0 +1,674 @@
+"""What the dashboard knows: one thread-safe, versioned store that every pane is drawn from.
+
+Bus callbacks write into :class:`DashboardState` (``take_*`` methods, any thread); the web
+server reads it. Every write bumps a version counter and stamps what it changed with that
+version, so a client that has seen version ``v`` asks :meth:`DashboardState.delta` for what
+changed since and gets only that: the goals whose utility or status moved, the decisions
+and timeline points after its cursor, a camera frame's metadata (never its pixels, which are
+fetched separately by sequence number). That is how 300 goals at 10 Hz stay cheap: the
+server coalesces whatever happened between two sends into one patch.
+
+The store never calls into Utu. It holds what Utu published (``/utu/analyze/state``,
+``/utu/knowledge/decisions``, the plan's queue) and what the managed system published (the
+agents' topics, assessments, camera frames, detections), plus its own evaluator of the
+goal model fed with the same agent topics, which answers *why* a node has its status
+(:meth:`DashboardState.explain`) without touching the manager.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import threading
+import time
+from collections import deque
+from collections.abc import Callable, Iterable, Mapping
+from dataclasses import dataclass, field
+from typing import Any, Literal
+
+from anunnaki.goals import Evaluator, GoalModel
+from anunnaki.tactics import TacticSet
+
+__all__ = ["DashboardState", "Frame"]
+
+#: Decision kinds drawn as markers on the timeline.
+TIMELINE_KINDS = frozenset(
+    {
+        "started",
+        "postcondition_ok",
+        "postcondition_failed",
+        "completed",
+        "escalated",
+        "run_stop",
+        "paused",
+        "resumed_adaptation",
+        "approved",
+        "rejected",
+        "pending_approval",
+    }
+)
+_RESULT_KINDS = frozenset({"postcondition_ok", "postcondition_failed", "completed"})
+_STATUSES = ("satisfied", "unsatisfied", "unknown")
+
+
+@dataclass(frozen=True)
+class Frame:
+    """One camera frame as the dashboard keeps it (the encoded bytes, never decoded).
+
+    Attributes:
+        topic: The camera topic.
+        seq: The camera's frame counter.
+        encoding: ``"jpeg"`` or ``"png"``.
+        width: Width in pixels.
+        height: Height in pixels.
+        data: The encoded image file.
+        t: When it arrived, on the dashboard's clock (seconds).
+
+    """
+
+    topic: str
+    seq: int
+    encoding: str
+    width: int
+    height: int
+    data: bytes
+    t: float
+
+    @property
+    def media_type(self) -> str:
+        """The HTTP content type of :attr:`data`."""
+        return "image/png" if self.encoding == "png" else "image/jpeg"
+
+
+@dataclass
+class _Topic:
+    agents: list[str]
+    staleness: float
+    last: Any = None
+    last_t: float | None = None
+    count: int = 0
+    arrivals: deque[float] = field(default_factory=lambda: deque(maxlen=20))
+    version: int = 0
+
+    def rate(self, now: float) -> float | None:
+        """Messages per second over the recent arrivals; decays through a silence."""
+        if len(self.arrivals) < 2:
+            return None
+        span = self.arrivals[-1] - self.arrivals[0]
+        if span <= 0:
+            return None
+        rate = (len(self.arrivals) - 1) / span
+        silent = now - self.arrivals[-1]
+        if silent > 1.0 / rate:
+            rate = min(rate, 1.0 / silent)
+        return rate
+
+
+def _num(value: Any) -> float | None:
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        return None
+    return float(value) if math.isfinite(value) else None
+
+
+def _decision_key(d: Mapping[str, Any]) -> str:
+    return json.dumps(
+        [d.get("t"), d.get("kind"), d.get("tactic"), d.get("data")], sort_keys=True, default=str
+    )
+
+
+class DashboardState:
+    """The dashboard's picture of a run, fed from the bus and read by the web server.
+
+    Args:
+        model: The goal model (with its binding): the tree, the agents and their topics.
+        tactics: The tactics, for the plan and execute panes.
+        name: The run's name, shown in the page title.
+        clock: The dashboard's time in seconds (arrival stamps, staleness, rates): a
+            simulation's time when Utu runs on ``clock: sim``, wall time otherwise.
+        clock_kind: ``"sim"`` or ``"wall"``; on the wall clock the page shows times relative
+            to the dashboard's start.
+        operator: Whether operator actions are offered (the server was given a token).
+        decisions: How many decisions to keep in memory (the knowledge base has them all).
+        timeline: How many root-utility changes to keep for the timeline.
+
+    """
+
+    def __init__(
+        self,
+        model: GoalModel,
+        tactics: TacticSet,
+        *,
+        name: str | None = None,
+        clock: Callable[[], float] | None = None,
+        clock_kind: Literal["sim", "wall"] = "wall",
+        operator: bool = False,
+        decisions: int = 2000,
+        timeline: int = 5000,
+    ) -> None:
+        self.model = model
+        self.tactics = tactics
+        self.name = name or model.name
+        self.clock: Callable[[], float] = clock or time.time
+        self.clock_kind = clock_kind
+        self.operator = operator
+        self.t0 = 0.0 if clock_kind == "sim" else time.time()
+        self._lock = threading.RLock()
+        self._version = 0
+        self._listeners: list[Callable[[], None]] = []
+        self._evaluator = Evaluator(model)
+        self._ids = list(self._evaluator.ids)
+        # Goals: what Utu published (or, until it does, the dashboard's own evaluation).
+        self._goals: dict[str, tuple[float | None, str, int]] = {}
+        self._goal_source: Literal["utu", "dashboard"] = "dashboard"
+        self._analysis: dict[str, Any] = {
+            "t": None,
+            "violated": [],
+            "eligible": [],
+            "postconditions": {},
+            "queue": [],
+            "paused": False,
+            "run_stopped": False,
+            "warming_up": False,
+        }
+        self._analysis_v = 0
+        self._utu_t: float | None = None
+        staleness = model.spec.staleness
+        self._topics: dict[str, _Topic] = {}
+        for agent in model.agents.values():
+            for tb in agent.topics:
+                entry = self._topics.get(tb.topic)
+                if entry is None:
+                    entry = self._topics[tb.topic] = _Topic([], agent.staleness or staleness)
+                entry.agents.append(agent.id)
+                entry.staleness = min(entry.staleness, agent.staleness or staleness)
+        self._oracle: dict[str, dict[str, Any]] = {}
+        self._oracle_v = 0
+        self._frames: deque[Frame] = deque(maxlen=8)
+        self._detections: dict[int, dict[str, Any]] = {}
+        self._active_model: dict[str, Any] | None = None
+        self._camera_v = 0
+        self._camera_count = 0
+        self._decisions: deque[dict[str, Any]] = deque(maxlen=decisions)
+        self._decision_keys: set[str] = set()
+        self._decision_n = 0
+        self._executions: deque[dict[str, Any]] = deque(maxlen=200)
+        self._executions_v = 0
+        self._timeline: deque[dict[str, Any]] = deque(maxlen=timeline)
+        self._timeline_n = 0
+        self._evaluate_own(self.clock())
+
+    # -- change notification --------------------------------------------------------------
+    def _bump(self) -> int:
+        self._version += 1
+        return self._version
+
+    def _changed(self) -> None:
+        for listener in list(self._listeners):
+            listener()
+
+    def add_listener(self, callback: Callable[[], None]) -> Callable[[], None]:
+        """Call ``callback()`` after every change (from the writing thread; keep it short).
+
+        Returns:
+            A function that removes the listener.
+
+        """
+        with self._lock:
+            self._listeners.append(callback)
+
+        def remove() -> None:
+            with self._lock:
+                if callback in self._listeners:
+                    self._listeners.remove(callback)
+
+        return remove
+
+    @property
+    def has_analysis(self) -> bool:
+        """Whether an analysis from Utu has arrived."""
+        return self._analysis["t"] is not None
+
+    @property
+    def version(self) -> int:
+        """The number of changes so far."""
+        return self._version
+
+    # -- writers (bus threads) -------------------------------------------------------------
+    def take_input(self, topic: str, message: Mapping[str, Any], t: float | None = None) -> None:
+        """An agent's message: the monitor pane's row and the dashboard's own evaluation."""
+        now = self.clock() if t is None else t
+        with self._lock:
+            entry = self._topics.get(topic)
+            if entry is None:
+                return
+            entry.last = dict(message)
+            entry.last_t = now
+            entry.count += 1
+            entry.arrivals.append(now)
+            entry.version = self._bump()
+            self._evaluator.observe(topic, message, now)
+            self._evaluate_own(now)
+        self._changed()
+
+    def tick(self) -> None:
+        """Let time pass for the dashboard's own evaluation (staleness, rates)."""
+        with self._lock:
+            if self._evaluator.tick(self.clock()):
+                self._evaluate_own(self.clock())
+                self._bump()
+            else:
+                return
+        self._changed()
+
+    def _evaluate_own(self, now: float) -> None:
+        if self._goal_source != "dashboard":
+            return
+        ev = self._evaluator
+        ev.tick(now)
+        for nid in self._ids:
+            st = ev.state(nid)
+            self._set_goal(nid, st.utility, st.status_name)
+
+    def _set_goal(self, nid: str, utility: float | None, status: str) -> None:
+        old = self._goals.get(nid)
+        if old is not None and old[0] == utility and old[1] == status:
+            return
+        self._goals[nid] = (utility, status, self._bump())
+
+    def take_analysis(self, body: Mapping[str, Any]) -> None:
+        """A ``/utu/analyze/state`` message: utilities, statuses, violations, eligible tactics."""
+        nodes = body.get("nodes")
+        with self._lock:
+            if isinstance(nodes, Mapping):
+                if self._goal_source != "utu":
+                    self._goal_source = "utu"
+                    self._goals.clear()
+                for nid, value in nodes.items():
+                    if not isinstance(value, list | tuple) or len(value) != 2:
+                        continue
+                    status = value[1] if value[1] in _STATUSES else "unknown"
+                    self._set_goal(str(nid), _num(value[0]), status)
+            t = _num(body.get("t"))
+            a = dict(self._analysis)
+            if t is not None:
+                a["t"] = t
+                self._utu_t = t if self._utu_t is None else max(self._utu_t, t)
+            for key in ("violated", "postconditions", "queue", "paused", "run_stopped"):
+                if key in body:
+                    a[key] = body[key]
+            if "eligible" in body or "tactics" in body:
+                a["eligible"] = body.get("eligible", body.get("tactics"))
+            if "warming_up" in body:
+                a["warming_up"] = bool(body["warming_up"])
+            if a != self._analysis:
+                self._analysis = a
+                self._analysis_v = self._bump()
+            root = self._goals.get(self.model.root)
+            if root is not None and t is not None:
+                last = self._timeline[-1] if self._timeline else None
+                if last is None or (last["u"], last["s"]) != (root[0], root[1]):
+                    self._timeline_n += 1
+                    point = {"n": self._timeline_n, "t": t, "u": root[0], "s": root[1]}
+                    self._timeline.append(point)
+                    self._bump()
+        self._changed()
+
+    def take_queue(self, queue: Any) -> None:
+        """The plan's priority-sorted queue (``/utu/plan/start`` in per-node runs)."""
+        if not isinstance(queue, list):
+            return
+        self.take_flags(queue=queue)
+
+    def take_flags(self, **flags: Any) -> None:
+        """Update analysis fields (``paused``, ``run_stopped``, ``queue``) from other topics."""
+        with self._lock:
+            a = {**self._analysis, **flags}
+            if a == self._analysis:
+                return
+            self._analysis = a
+            self._analysis_v = self._bump()
+        self._changed()
+
+    def take_decisions(self, decisions: Iterable[Mapping[str, Any]]) -> None:
+        """New decisions of the decision log (``/utu/knowledge/decisions`` or a query)."""
+        changed = False
+        with self._lock:
+            for d in decisions:
+                if not isinstance(d, Mapping) or not isinstance(d.get("kind"), str):
+                    continue
+                key = _decision_key(d)
+                if key in self._decision_keys:
+                    continue
+                if len(self._decision_keys) > 4 * (self._decisions.maxlen or 1000):
+                    self._decision_keys = {_decision_key(x) for x in self._decisions}
+                self._decision_keys.add(key)
+                self._decision_n += 1
+                data = d.get("data") if isinstance(d.get("data"), Mapping) else {}
+                row = {
+                    "n": self._decision_n,
+                    "t": _num(d.get("t")),
+                    "kind": d["kind"],
+                    "tactic": d.get("tactic") if isinstance(d.get("tactic"), str) else None,
+                    "data": dict(data or {}),
+                }
+                self._decisions.append(row)
+                self._execution(row)
+                self._bump()
+                changed = True
+        if changed:
+            self._changed()
+
+    def _execution(self, d: dict[str, Any]) -> None:
+        kind, tactic = d["kind"], d["tactic"]
+        if tactic is None:
+            return
+        if kind == "started":
+            self._executions.append(
+                {
+                    "tactic": tactic,
+                    "started": d["t"],
+                    "reason": d["data"].get("reason"),
+                    "deadline": d["data"].get("deadline"),
+                    "actions": [],
+                    "result": "awaiting",
+                    "result_t": None,
+                    "note": None,
+                }
+            )
+            self._executions_v = self._bump()
+            return
+        run = next((e for e in reversed(self._executions) if e["tactic"] == tactic), None)
+        if run is None:
+            return
+        if kind == "action":
+            data = d["data"]
+            run["actions"].append(
+                {
+                    "type": data.get("type"),
+                    "ok": data.get("ok"),
+                    "detail": data.get("detail"),
+                }
+            )
+        elif kind in _RESULT_KINDS and run["result"] == "awaiting":
+            run["result"] = kind
+            run["result_t"] = d["t"]
+            run["note"] = d["data"].get("note")
+        else:
+            return
+        self._executions_v = self._bump()
+
+    def take_assessment(self, topic: str, body: Mapping[str, Any], t: float | None = None) -> None:
+        """A behavior assessment (``Assessment``, or any message with a ``category``)."""
+        category = body.get("category")
+        if isinstance(category, bool) or not isinstance(category, int):
+            return
+        assessor = body.get("assessor")
+        key = assessor if isinstance(assessor, str) and assessor else topic
+        context = body.get("context")
+        row = {
+            "assessor": key,
+            "topic": topic,
+            "category": category,
+            "confidence": _num(body.get("confidence")),
+            "context": dict(context) if isinstance(context, Mapping) else {},
+            "model_id": body.get("model_id"),
+            "frame_seq": body.get("frame_seq"),
+            "t": self.clock() if t is None else t,
+        }
+        with self._lock:
+            self._oracle[key] = row
+            self._oracle_v = self._bump()
+        self._changed()
+
+    def take_frame(self, frame: Frame) -> None:
+        """A camera frame."""
+        with self._lock:
+            self._frames.append(frame)
+            self._camera_count += 1
+            self._camera_v = self._bump()
+        self._changed()
+
+    def take_detections(self, body: Mapping[str, Any]) -> None:
+        """An LEC's detections for one frame (``Detections``)."""
+        seq = body.get("frame_seq")
+        if isinstance(seq, bool) or not isinstance(seq, int):
+            return
+        row = {
+            k: body.get(k)
+            for k in ("frame_seq", "model_id", "domain", "width", "height", "boxes", "labels")
+        }
+        row["scores"] = body.get("scores")
+        with self._lock:
+            self._detections[seq] = row
+            while len(self._detections) > 32:
+                del self._detections[min(self._detections)]
+            if self._active_model is None or self._active_model.get("source") == "detections":
+                self._active_model = {
+                    "model": row["model_id"],
+                    "domain": row["domain"],
+                    "source": "detections",
+                }
+            self._camera_v = self._bump()
+        self._changed()
+
+    def take_active_model(self, body: Mapping[str, Any]) -> None:
+        """The model manager's announcement ``{lec, model, domain}``."""
+        with self._lock:
+            self._active_model = {
+                "lec": body.get("lec"),
+                "model": body.get("model"),
+                "domain": body.get("domain"),
+                "source": "lm_manager",
+            }
+            self._camera_v = self._bump()
+        self._changed()
+
+    # -- readers (web server) ---------------------------------------------------------------
+    def frame(self, seq: int | None = None) -> Frame | None:
+        """The latest camera frame, or the one with sequence number ``seq`` if still kept."""
+        with self._lock:
+            if not self._frames:
+                return None
+            if seq is None:
+                return self._frames[-1]
+            return next((f for f in reversed(self._frames) if f.seq == seq), None)
+
+    def explain(self, node: str) -> dict[str, Any] | None:
+        """Why ``node`` has its status: Utu's verdict and the evaluator's explanation.
+
+        Returns:
+            ``None`` for an unknown node; else ``{node, utu: {utility, status}, explanation,
+            text}`` where ``explanation`` is the tree of
+            :meth:`anunnaki.goals.Explanation.to_dict` and ``text`` its rendering.
+
+        """
+        with self._lock:
+            if node not in self._evaluator.index:
+                return None
+            self._evaluator.tick(self.clock())
+            ex = self._evaluator.explain(node)
+            verdict = self._goals.get(node)
+            return {
+                "node": node,
+                "source": self._goal_source,
+                "utu": None if verdict is None else {"utility": verdict[0], "status": verdict[1]},
+                "explanation": ex.to_dict(),
+                "text": ex.render(),
+            }
+
+    def structure(self) -> dict[str, Any]:
+        """The goal model and tactics as the page draws them (does not change during a run)."""
+        m = self.model
+        goals = [
+            {
+                "id": g.id,
+                "description": g.description,
+                "refinement": g.refinement,
+                "children": list(g.children),
+                "utility": g.utility,
+                "relax": None if g.relax is None else g.relax.operator,
+                "agents": list(g.agents),
+                "objective": g.objective,
+            }
+            for g in m.goals.values()
+        ]
+        obstacles = [
+            {
+                "id": o.id,
+                "description": o.description,
+                "obstructs": list(o.obstructs),
+                "condition": o.condition,
+                "resolutions": list(o.resolutions),
+            }
+            for o in m.obstacles.values()
+        ]
+        agents = [
+            {
+                "id": a.id,
+                "description": a.description,
+                "topics": [
+                    {"topic": tb.topic, "attributes": list(tb.attributes)} for tb in a.topics
+                ],
+                "goals": [g.id for g in m.goals.values() if a.id in g.agents],
+            }
+            for a in m.agents.values()
+        ]
+        tactics = [
+            {
+                "name": t.name,
+                "description": t.description,
+                "priority": t.priority,
+                "requires_approval": t.requires_approval,
+                "deadline": t.deadline,
+                "preconditions": [_describe_condition(c) for c in t.preconditions],
+                "postconditions": [_describe_condition(c) for c in t.postconditions],
+            }
+            for t in self.tactics.tactics
+        ]
+        return {
+            "name": self.name,
+            "root": m.root,
+            "goals": goals,
+            "obstacles": obstacles,
+            "agents": agents,
+            "tactics": tactics,
+        }
+
+    def _monitor_rows(self, now: float, since: int) -> list[dict[str, Any]]:
+        rows = []
+        for topic, e in self._topics.items():
+            if e.version <= since and since > 0:
+                continue
+            rows.append(
+                {
+                    "topic": topic,
+                    "agents": e.agents,
+                    "last": e.last,
+                    "last_t": e.last_t,
+                    "count": e.count,
+                    "rate": e.rate(now),
+                    "staleness": e.staleness,
+                }
+            )
+        return rows
+
+    def _values(self) -> dict[str, Any]:
+        out: dict[str, Any] = {}
+        for key, value in self._evaluator.values().items():
+            if isinstance(value, str | int | float | bool) or value is None:
+                out[key] = value
+            else:
+                out[key] = str(value)
+        return out
+
+    def snapshot(self) -> dict[str, Any]:
+        """Everything a page needs to draw itself from scratch, with the version it shows."""
+        with self._lock:
+            now = self.clock()
+            frame = self._frames[-1] if self._frames else None
+            return {
+                "version": self._version,
+                "now": now,
+                "clock": self.clock_kind,
+                "t0": self.t0,
+                "operator": self.operator,
+                "structure": self.structure(),
+                "goal_source": self._goal_source,
+                "goals": {k: [u, s] for k, (u, s, _v) in self._goals.items()},
+                "analysis": dict(self._analysis),
+                "monitor": self._monitor_rows(now, 0),
+                "values": self._values(),
+                "oracle": list(self._oracle.values()),
+                "camera": self._camera(frame),
+                "executions": list(self._executions),
+                "decisions": list(self._decisions),
+                "timeline": list(self._timeline),
+                "utu_t": self._utu_t,
+            }
+
+    def _camera(self, frame: Frame | None) -> dict[str, Any]:
+        out: dict[str, Any] = {"active": self._active_model, "frames": self._camera_count}
+        if frame is not None:
+            out["frame"] = {
+                "topic": frame.topic,
+                "seq": frame.seq,
+                "width": frame.width,
+                "height": frame.height,
+                "t": frame.t,
+            }
+            out["detections"] = self._detections.get(frame.seq) or (
+                self._detections[max(self._detections)] if self._detections else None
+            )
+        elif self._detections:
+            out["detections"] = self._detections[max(self._detections)]
+        return out
+
+    def delta(self, since: int, *, decisions_after: int, timeline_after: int) -> dict[str, Any]:
+        """What changed after version ``since``, for a page that has seen it.
+
+        Args:
+            since: The version the page shows.
+            decisions_after: The ``n`` of the last decision the page has.
+            timeline_after: The ``n`` of the last timeline point the page has.
+
+        Returns:
+            ``{version, now, ...}`` with only the sections that changed (goals: only the
+            changed nodes; decisions and timeline: only the new rows).
+
+        """
+        with self._lock:
+            now = self.clock()
+            out: dict[str, Any] = {"version": self._version, "now": now, "utu_t": self._utu_t}
+            if self._version <= since:
+                return out
+            goals = {k: [u, s] for k, (u, s, v) in self._goals.items() if v > since}
+            if goals:
+                out["goals"] = goals
+                out["goal_source"] = self._goal_source
+            if self._analysis_v > since:
+                out["analysis"] = dict(self._analysis)
+            rows = self._monitor_rows(now, since)
+            if rows:
+                out["monitor"] = rows
+                out["values"] = self._values()
+            if self._oracle_v > since:
+                out["oracle"] = list(self._oracle.values())
+            if self._camera_v > since:
+                out["camera"] = self._camera(self._frames[-1] if self._frames else None)
+            if self._executions_v > since:
+                out["executions"] = list(self._executions)
+            new = [d for d in self._decisions if d["n"] > decisions_after]
+            if new:
+                out["decisions"] = new
+            points = [p for p in self._timeline if p["n"] > timeline_after]
+            if points:
+                out["timeline"] = points
+            return out
+
+
+def _describe_condition(cond: Any) -> str:
+    goal = getattr(cond, "goal", None)
+    if goal is not None:
+        return f"{goal} {getattr(cond, 'state', '')}".strip()
+    expression = getattr(cond, "expression", None)
+    return str(expression) if expression is not None else str(cond)
