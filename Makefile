@@ -9,9 +9,12 @@ ROVER := examples/rover
 setup:
 	@scripts/setup.sh
 
+# The simulated rover with its detector, the ground-truth oracle and Utu, through the
+# fog-then-dusk scenario (about 45 s), with the live dashboard (URL printed; it stays up 60 s
+# after the run); a per-phase table (detector F1, categories, models, tactics) at the end.
 demo: setup
-	$(PY) -m anunnaki.cli.main check $(ROVER)/goals.yaml $(ROVER)/binding.yaml $(ROVER)/tactics.xml
-	$(PY) -m anunnaki.cli.main run $(ROVER)/utu.yaml --speed 5
+	$(PY) -m anunnaki.cli.main check $(ROVER)/goals-lm.yaml $(ROVER)/binding-lm.yaml $(ROVER)/tactics-lm.yaml
+	$(PY) -m anunnaki.cli.main run $(ROVER)/sim.yaml --dashboard --dashboard-linger 60
 
 test: setup
 	$(PY) -m ruff check src tests benchmarks examples
@@ -22,3 +25,9 @@ test: setup
 bench: setup
 	$(PY) benchmarks/goals.py
 	$(PY) benchmarks/reaction.py
+	$(PY) benchmarks/phenomena.py
+	$(PY) benchmarks/sim.py
+	$(PY) benchmarks/lec.py
+	$(PY) benchmarks/swap.py
+	$(PY) benchmarks/loop.py
+	$(PY) benchmarks/dashboard.py
