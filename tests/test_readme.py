@@ -44,6 +44,6 @@ def test_readme_commands_exist() -> None:
     from anunnaki.cli.main import build_parser
 
     text = README.read_text(encoding="utf-8")
-    commands = set(re.findall(r"^anunnaki (\w+)", text, re.M))
+    commands = set(re.findall(r"^anunnaki ([\w-]+)", text, re.M))
     sub = build_parser()._subparsers._group_actions[0].choices  # type: ignore[union-attr]
     assert commands <= set(sub), commands - set(sub)
