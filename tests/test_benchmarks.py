@@ -1,0 +1,106 @@
+"""The benchmarks of the simulator, the LEC, model swaps, the whole loop and the dashboard run.
+
+Each script runs with tiny parameters into a temporary file and must write the figures the docs
+quote (``docs/results.md``), with the structure they are read in. The figures themselves are
+not judged here: they are measured by hand on a quiet machine (no timed assertions in tests).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+BENCH = ROOT / "benchmarks"
+
+
+def run(script: str, *args: str, timeout: float = 240) -> None:
+    result = subprocess.run(
+        [sys.executable, str(BENCH / script), *args],
+        capture_output=True,
+        text=True,
+        timeout=timeout,
+        check=False,
+        cwd=ROOT,
+    )
+    assert result.returncode == 0, result.stdout[-2000:] + result.stderr[-4000:]
+
+
+def load(path: Path) -> Any:
+    return json.loads(path.read_text(encoding="utf-8"))
+
+
+@pytest.mark.slow
+def test_sim_benchmark(tmp_path: Path) -> None:
+    out = tmp_path / "sim.json"
+    run("sim.py", "--frames", "4", "--repeats", "1", "--output", str(out))
+    doc = load(out)
+    assert doc["benchmark"] == "sim"
+    assert set(doc["platforms"]) == {"rover", "uav"}
+    for entry in doc["platforms"].values():
+        assert entry["build_s"] > 0
+        for size in ("128x128", "320x240"):
+            assert entry[size]["render_fps"] > 0
+            assert entry[size]["platform_fps"] > 0
+
+
+@pytest.mark.slow
+def test_lec_benchmark(tmp_path: Path) -> None:
+    out = tmp_path / "lec.json"
+    run("lec.py", "--runs", "2", "--warmup", "1", "--train-images", "8", "--output", str(out))
+    doc = load(out)["detector"]
+    for size in ("128x128", "320x240"):
+        for batch in ("batch1", "batch8"):
+            figures = doc["results"][size][batch]
+            assert 0 < figures["min_ms_per_frame"] <= figures["median_ms_per_frame"]
+    assert doc["training"]["images_per_second"] > 0
+
+
+@pytest.mark.slow
+def test_swap_benchmark(tmp_path: Path) -> None:
+    out = tmp_path / "swap.json"
+    run("swap.py", "--rounds", "2", "--output", str(out))
+    doc = load(out)
+    for mode in ("cold", "cached"):
+        result = doc["results"][mode]
+        assert result["swaps"] == 2
+        assert result["frames"] == result["detections"] > 0
+        assert result["every_frame_once_in_order"] is True
+        assert result["monotone_switches"] is True
+        assert result["first_detection_ms"]["n"] == 2
+
+
+@pytest.mark.slow
+def test_loop_benchmark(tmp_path: Path) -> None:
+    out = tmp_path / "loop.json"
+    run("loop.py", "--seconds", "1.5", "--repeats", "1", "--output", str(out))
+    doc = load(out)
+    stages = doc["stages"]
+    assert list(stages) == ["platform", "detector", "oracle", "utu"]
+    for entry in stages.values():
+        assert entry["runs"][0]["frames"] == 15  # 10 Hz camera over 1.5 simulated seconds
+        assert entry["fps_median"] > 0
+    assert stages["platform"]["ratio_to_platform"] == 1.0
+    assert doc["whole_loop_hz"] == stages["utu"]["fps_median"]
+    assert doc["aim_met"] is (doc["whole_loop_hz"] >= doc["aim_hz"])
+
+
+@pytest.mark.slow
+def test_dashboard_benchmark(tmp_path: Path) -> None:
+    chromium = os.environ.get("ANUNNAKI_CHROMIUM", "/usr/bin/chromium")
+    if not Path(chromium).exists() and os.environ.get("ANUNNAKI_REQUIRE_BROWSER") != "1":
+        pytest.skip(f"no Chromium at {chromium}: run scripts/setup-browser.sh")
+    out = tmp_path / "dashboard.json"
+    run("dashboard.py", "--seconds", "3", "--out", str(out))
+    doc = load(out)
+    assert doc["setup"]["goals"] == 300
+    raf = doc["raf_interval_ms"]
+    assert raf["n"] > 10 and 0 < raf["p50"] <= raf["p95"] <= raf["max"]
+    assert doc["violation_to_red_ms"]["n"] >= 1
+    assert doc["camera_frames_drawn_per_s"] > 0
