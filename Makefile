@@ -11,10 +11,12 @@ setup:
 
 # The simulated rover with its detector, the ground-truth oracle and Utu, through the
 # fog-then-dusk scenario (about 45 s), with the live dashboard (URL printed; it stays up 60 s
-# after the run); a per-phase table (detector F1, categories, models, tactics) at the end.
+# after the run); a per-phase table (detector F1, categories, models, tactics) at the end, the
+# run as data and drawn in runs/demo.json and runs/demo.png.
 demo: setup
 	$(PY) -m anunnaki.cli.main check $(ROVER)/goals-lm.yaml $(ROVER)/binding-lm.yaml $(ROVER)/tactics-lm.yaml
-	$(PY) -m anunnaki.cli.main run $(ROVER)/sim.yaml --dashboard --dashboard-linger 60
+	$(PY) -m anunnaki.cli.main run $(ROVER)/sim.yaml --dashboard --dashboard-linger 60 \
+		--report runs/demo.json --plot runs/demo.png
 
 test: setup
 	$(PY) -m ruff check src tests benchmarks examples

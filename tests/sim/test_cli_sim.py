@@ -5,6 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from anunnaki.cli.main import main
+from anunnaki.sim import load_report
 
 EXAMPLES = Path(__file__).parents[2] / "examples"
 
@@ -46,7 +47,8 @@ def test_sim_with_a_bad_scenario_exits_2(tmp_path, capsys) -> None:
     assert main(["sim", "uav", "--scenario", str(EXAMPLES / "rover" / "scenario.yaml")]) == 2
 
 
-def test_sim_with_the_detector_in_the_loop_reports_per_phase(capsys) -> None:
+def test_sim_with_the_detector_in_the_loop_reports_per_phase(capsys, tmp_path) -> None:
+    report, plot = tmp_path / "run.json", tmp_path / "run.png"
     code = main(
         [
             "sim",
@@ -60,6 +62,10 @@ def test_sim_with_the_detector_in_the_loop_reports_per_phase(capsys) -> None:
             "--speed",
             "0",
             "--quiet",
+            "--report",
+            str(report),
+            "--plot",
+            str(plot),
         ]
     )
     out = capsys.readouterr().out
@@ -69,6 +75,15 @@ def test_sim_with_the_detector_in_the_loop_reports_per_phase(capsys) -> None:
     assert rows[0].split()[:3] == ["0.0–", "8.0", "s"] and "clear" in rows[0]
     assert "fog" in rows[1] and "rover-default" in rows[1]
     assert int(rows[0].split()[4]) == 80  # frames scored in the clear phase
+    # The same run as data, and drawn.
+    assert f"report: {report}" in out and f"plot: {plot}" in out
+    run = load_report(report)
+    assert (run.platform, run.name, run.duration) == ("rover", "fog-then-dusk", 9.0)
+    assert [p["label"] for p in run.phases] == ["clear", "fog"]
+    assert len(run.frames) == 90 and {f.model for f in run.frames} == {"rover-default"}
+    assert sum(f.tp for f in run.frames if f.t < 8.0) == run.phases[0]["tp"] > 0
+    assert run.assessments and {c for _, c in run.assessments} <= {0, 1, 2}
+    assert plot.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 
 
 def test_sim_uav_with_the_detector(capsys) -> None:

@@ -9,6 +9,7 @@ and the escalation from a swap that does not help to the fail-safe.
 
 from __future__ import annotations
 
+import dataclasses
 import io
 import threading
 from pathlib import Path
@@ -19,7 +20,13 @@ import pytest
 from anunnaki.bus import Detections
 from anunnaki.errors import ModelFileError
 from anunnaki.lec import load_registry, sha256_file
-from anunnaki.sim import SimulatedSystem, format_phases, load_scenario, scenario_phases
+from anunnaki.sim import (
+    SimulatedSystem,
+    format_phases,
+    load_report,
+    load_scenario,
+    scenario_phases,
+)
 from anunnaki.utu._launch import load_launch, parse_launch, run_launch
 
 ROOT = Path(__file__).parents[2]
@@ -171,14 +178,20 @@ def test_sim_section_errors_name_the_file(tmp_path: Path) -> None:
     assert "models.yaml" in str(bad.value)
 
 
-def test_the_demo_swaps_in_the_fog_model_and_back_without_oscillation() -> None:
+def test_the_demo_swaps_in_the_fog_model_and_back_without_oscillation(tmp_path: Path) -> None:
     """The README's demo, the real models: fog → fog model → clear → default → dusk → low light.
 
     Each swap happens once, in its phase (no oscillation), no fail-safe is needed, the
     rover touches nobody, and the robust models restore the F1 their condition took away.
     """
     out = io.StringIO()
-    result = run_launch(load_launch(ROVER / "sim.yaml"), speed=1000, out=out, handle_signals=False)
+    launch = load_launch(ROVER / "sim.yaml")
+    assert launch.sim is not None
+    report = tmp_path / "demo.json"
+    launch = dataclasses.replace(
+        launch, sim=launch.sim.model_copy(update={"report_file": str(report)})
+    )
+    result = run_launch(launch, speed=1000, out=out, handle_signals=False)
     log = out.getvalue()
     assert result.exit_code == 0, log
     swaps = [
@@ -197,3 +210,16 @@ def test_the_demo_swaps_in_the_fog_model_and_back_without_oscillation() -> None:
     }
     assert all(row.split()[-1] == "0" for row in rows.values())  # no collisions in any phase
     assert "rover-low_light" in rows["42.0"]
+    # The report file holds the same run: each swap once, verified, models in that order.
+    run = load_report(report)
+    assert f"report: {report}" in log
+    assert len(run.frames) == 420 and run.duration == pytest.approx(42.0)
+    swap_events = [e for e in run.tactics if e.tactic.startswith(("swap", "default-model"))]
+    assert [(e.tactic, e.outcome) for e in swap_events] == [
+        ("swap-to-fog-model", "ok"),
+        ("default-model-in-clear-weather", "ok"),
+        ("swap-to-low-light-model", "ok"),
+    ]
+    models = [f.model for f in run.frames]
+    runs = [m for k, m in enumerate(models) if k == 0 or m != models[k - 1]]
+    assert runs == ["rover-default", "rover-fog", "rover-default", "rover-low_light"]

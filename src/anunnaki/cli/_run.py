@@ -10,6 +10,7 @@ its own, e.g. on another machine. See docs/running.md.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import logging
 import os
 import sys
@@ -21,6 +22,7 @@ from pydantic import ValidationError
 
 from anunnaki.bus import BusConfig, BusConfigError, open_bus
 from anunnaki.cli import _dashboard
+from anunnaki.cli._sim import check_plot_extra
 from anunnaki.utu._launch import load_launch, run_launch, signals_to
 from anunnaki.utu._nodes import NODE_NAMES, build_node
 
@@ -75,6 +77,18 @@ def add_parser(sub: Any) -> None:
     p.add_argument("--knowledge", metavar="FILE", help="knowledge base file (overrides)")
     p.add_argument("--fresh", action="store_true", help="delete the knowledge base file first")
     p.add_argument("-v", "--verbose", action="store_true", help="log what the nodes do")
+    p.add_argument(
+        "--report",
+        metavar="FILE.json",
+        help="with a simulated managed system: write the run as data (frames, assessments, "
+        "tactics; overrides managed.sim.report_file)",
+    )
+    p.add_argument(
+        "--plot",
+        metavar="FILE.png",
+        help="with a simulated managed system: draw the run (windowed F1 per model, oracle "
+        "category, tactics; overrides managed.sim.plot_file)",
+    )
     _dashboard.add_run_options(p)
     p.set_defaults(run=run)
 
@@ -116,6 +130,21 @@ def run(args: argparse.Namespace) -> int:
     """Run a launch file; returns the exit code."""
     _logging(args.verbose)
     launch = load_launch(args.config)
+    if getattr(args, "report", None) or getattr(args, "plot", None):
+        if launch.sim is None:
+            print(
+                "error: --report and --plot need a simulated managed system "
+                f"('managed: sim' in {args.config})",
+                file=sys.stderr,
+            )
+            return 2
+        check_plot_extra(args.plot)
+        update = {
+            key: str(Path(value).resolve())
+            for key, value in (("report_file", args.report), ("plot_file", args.plot))
+            if value
+        }
+        launch = dataclasses.replace(launch, sim=launch.sim.model_copy(update=update))
     dashboard = None
     if getattr(args, "dashboard", False):
         # Bound and serving before anything starts: a port in use fails here, at once.

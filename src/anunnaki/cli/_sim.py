@@ -69,6 +69,16 @@ def add_parser(sub: Any) -> None:
         help="let the simulation run ahead of the detector (default: each frame waits for "
         "its detections)",
     )
+    p.add_argument(
+        "--report",
+        metavar="FILE.json",
+        help="with --models: write the run as data (every scored frame, assessment and tactic)",
+    )
+    p.add_argument(
+        "--plot",
+        metavar="FILE.png",
+        help="with --models: draw the run (windowed F1 per model, oracle category, tactics)",
+    )
     p.add_argument("--quiet", action="store_true", help="no per-second lines")
     p.set_defaults(run=run)
 
@@ -157,7 +167,29 @@ def _run_loop(
             flush=True,
         )
         print(format_phases(system.phases()), flush=True)
+        save_report(system.report(), report=args.report, plot=args.plot)
     return 0
+
+
+def check_plot_extra(plot: str | None) -> None:
+    """Fail before a run, not after it, when ``--plot`` cannot be drawn."""
+    if plot:
+        import importlib.util
+
+        from anunnaki.errors import MissingExtraError
+
+        if importlib.util.find_spec("matplotlib") is None:
+            raise MissingExtraError("matplotlib", "plot")
+
+
+def save_report(run: Any, *, report: str | None, plot: str | None) -> None:
+    """Write ``--report`` and ``--plot`` of a simulated run (a ``RunReport``), saying where."""
+    if report:
+        print(f"report: {run.write(report)}", flush=True)
+    if plot:
+        from anunnaki.sim import plot_report
+
+        print(f"plot: {plot_report(run, plot)}", flush=True)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -167,6 +199,10 @@ def run(args: argparse.Namespace) -> int:
     if args.speed < 0:
         print("error: --speed must be >= 0", file=sys.stderr)
         return 2
+    if (args.report or args.plot) and not args.models:
+        print("error: --report and --plot score the detector: give --models too", file=sys.stderr)
+        return 2
+    check_plot_extra(args.plot)
     scenario = _scenario(args)
     options: dict[str, Any] = {"name": f"sim-{args.platform}"}
     if args.bus == "zenoh":

@@ -26,7 +26,9 @@ Platforms publish on the bus like the scripted stand-in (guideline H1), on simul
 Scenario files (:func:`load_scenario`) ramp phenomena and inject faults over time.
 :func:`run_pedestrian_encounter` tells whether a detector makes the rover stop in time.
 :class:`SimulatedSystem` is the whole loop's managed system — a platform with its detector
-(the model manager's LEC node) and ground-truth oracle — scored per scenario phase.
+(the model manager's LEC node) and ground-truth oracle — scored per scenario phase;
+:meth:`SimulatedSystem.report` keeps the run as data (:class:`RunReport`, JSON) and
+:func:`plot_report` draws it (windowed F1 by model, the oracle's category, the tactics).
 
 Every scene has its own pybullet client (``DIRECT``, tiny renderer, no shadows); several
 live side by side in one process or in process pools. See ``docs/simulation.md``.
@@ -35,6 +37,14 @@ live side by side in one process or in process pools. See ``docs/simulation.md``
 from anunnaki.sim._encounter import EncounterResult, run_pedestrian_encounter, to_detections
 from anunnaki.sim._managed import PhaseScore, SimulatedSystem, format_phases, scenario_phases
 from anunnaki.sim._platform import GROUND_TRUTH_TOPIC, PHENOMENA_TOPIC, SimPlatform
+from anunnaki.sim._report import (
+    FrameScore,
+    RunReport,
+    TacticEvent,
+    load_report,
+    plot_report,
+    rolling_f1,
+)
 from anunnaki.sim._rover import (
     CAMERA_FOV,
     CAMERA_HEIGHT,
@@ -95,6 +105,7 @@ __all__ = [
     "EncounterResult",
     "FaultEvent",
     "Frame",
+    "FrameScore",
     "Light",
     "ObjectSpec",
     "PhaseScore",
@@ -103,11 +114,13 @@ __all__ = [
     "Platform",
     "RoverMode",
     "RoverSim",
+    "RunReport",
     "Scenario",
     "Scene",
     "SimPlatform",
     "SimulatedSystem",
     "StopRule",
+    "TacticEvent",
     "Timeline",
     "UavMission",
     "UavMode",
@@ -118,8 +131,11 @@ __all__ = [
     "dataset_frames",
     "format_phases",
     "layout_placements",
+    "load_report",
     "load_scenario",
     "parse_scenario",
+    "plot_report",
+    "rolling_f1",
     "run_pedestrian_encounter",
     "scenario_phases",
     "to_detections",

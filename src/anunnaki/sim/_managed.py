@@ -34,6 +34,7 @@ import numpy as np
 
 from anunnaki.bus import Assessment, Detections, Sample
 from anunnaki.sim._platform import GROUND_TRUTH_TOPIC, SimPlatform, body_of
+from anunnaki.sim._report import FrameScore, RunReport, tactic_events
 from anunnaki.sim._scenario import Scenario
 
 __all__ = ["PhaseScore", "SimulatedSystem", "format_phases", "scenario_phases"]
@@ -387,21 +388,37 @@ class SimulatedSystem:
             p = phase_at(t)
             if p is not None:
                 p.collisions += 1
-        outcome = {
-            "postcondition_ok": "ok",
-            "postcondition_failed": "failed",
-            "completed": "done",
-        }
-        started: dict[str, list[tuple[PhaseScore, int]]] = {}
-        for d in decisions:
-            p = phase_at(float(d.t))
-            if d.kind == "started" and d.tactic and p is not None:
-                p.tactics.append(d.tactic)
-                started.setdefault(d.tactic, []).append((p, len(p.tactics) - 1))
-            elif d.kind in outcome and d.tactic and started.get(d.tactic):
-                q, k = started[d.tactic].pop()
-                q.tactics[k] = f"{d.tactic} ({outcome[d.kind]})"
+        for event in tactic_events(list(decisions)):
+            p = phase_at(event.t)
+            if p is not None:
+                p.tactics.append(
+                    event.tactic if event.outcome is None else f"{event.tactic} ({event.outcome})"
+                )
         return out
+
+    def report(self, decisions: Iterable[Any] = (), *, until: float | None = None) -> RunReport:
+        """The run as data: every scored frame, assessment, tactic and the phase table.
+
+        Write it with :meth:`RunReport.write` (``--report``), draw it with
+        :func:`~anunnaki.sim.plot_report` (``--plot``).
+        """
+        decisions = list(decisions)
+        end = self.platform.t if until is None else until
+        phases = self.phases(decisions, until=until)
+        with self._lock:
+            frames = sorted(self._frames, key=lambda f: f[0])
+            assessments = list(self._assessments)
+            collisions = list(self._collisions)
+        return RunReport(
+            name=self.scenario.name,
+            platform=self.scenario.platform,
+            duration=float(end),
+            frames=[FrameScore(float(t), tp, fp, fn, model) for t, tp, fp, fn, model in frames],
+            assessments=[(float(t), int(c)) for t, c in assessments],
+            tactics=tactic_events(decisions),
+            collisions=collisions,
+            phases=[p.as_dict() for p in phases],
+        )
 
 
 def format_phases(phases: Sequence[PhaseScore]) -> str:

@@ -156,6 +156,11 @@ class SimConfig(_Strict):
         speed: Simulated seconds per wall second (the detector can hold it back: lockstep).
         lockstep: A frame is not followed by the next before its detections are out.
         report: Print the per-phase table (detector F1, categories, models, tactics) at the end.
+        report_file: Also write the run as data (``sim-report/1`` JSON: every scored frame,
+            assessment and tactic); relative to the launch file.
+        plot_file: Also draw the run (windowed F1 per model, the oracle's category, the
+            tactics; PNG, or any format matplotlib knows by the suffix); relative to the
+            launch file.
 
     """
 
@@ -165,6 +170,8 @@ class SimConfig(_Strict):
     speed: Annotated[float, Field(gt=0, le=10_000)] = 1.0
     lockstep: bool = True
     report: bool = True
+    report_file: str | None = None
+    plot_file: str | None = None
 
 
 class ManagedConfig(_Strict):
@@ -413,6 +420,8 @@ def _resolve(data: Any, lines: LineMap, path: Path, *, read_records: bool) -> La
             update={
                 "scenario": str(here(sim.scenario)),
                 "models": str(here(sim.models)) if sim.models is not None else None,
+                "report_file": None if sim.report_file is None else str(here(sim.report_file)),
+                "plot_file": None if sim.plot_file is None else str(here(sim.plot_file)),
             }
         )
         _check_sim(sim, lines, where)
@@ -424,6 +433,10 @@ def _check_sim(sim: SimConfig, lines: LineMap, where: str) -> None:
     from anunnaki.sim import load_scenario
 
     load_scenario(sim.scenario)
+    if sim.plot_file is not None:
+        from anunnaki.cli._sim import check_plot_extra
+
+        check_plot_extra(sim.plot_file)
     if sim.models is not None:
         from anunnaki.lec import load_registry
 
@@ -1105,6 +1118,21 @@ class _Runner:
                 "per phase:"
             )
             self.say(format_phases(system.phases(printer.decisions)))
+        if system is not None and self.sim is not None:
+            self._save_report(system.report(printer.decisions))
+
+    def _save_report(self, run: Any) -> None:
+        """Write ``report_file`` and ``plot_file``; a failure is said, never fatal."""
+        assert self.sim is not None
+        try:
+            if self.sim.report_file:
+                self.say(f"report: {run.write(self.sim.report_file)}")
+            if self.sim.plot_file:
+                from anunnaki.sim import plot_report
+
+                self.say(f"plot: {plot_report(run, self.sim.plot_file)}")
+        except (OSError, AnunnakiError) as exc:
+            self.say(f"report: not written: {exc}")
 
     # -- one process
     def _run_here(self) -> RunResult:

@@ -1,0 +1,283 @@
+"""A simulated run as data and as a picture: what the detector scored, what the oracle said.
+
+:meth:`SimulatedSystem.report <anunnaki.sim.SimulatedSystem.report>` gathers a run into a
+:class:`RunReport`: every scored frame (simulated time, true/false positives, misses, the
+model that ran), every assessment (time, category), the tactics Utu started and how they
+ended, collisions and the per-phase table. It is written as JSON (``--report FILE.json``)
+and drawn by :func:`plot_report` (``--plot FILE.png``) as three panels over simulated time:
+
+1. the detector's F1 over a sliding window of frames, coloured by the model that ran, with
+   the scenario's phases shaded and labelled with their conditions;
+2. the oracle's category (0 nominal, 1 degraded, 2 compromised);
+3. the tactics Utu started, one row each, marked with their outcome.
+
+Why a sliding window: one frame holds a handful of objects, so a per-frame F1 jumps between
+0 and 1; the window (``window`` seconds, default 1 s = 10 frames at the default camera rate)
+pools true positives, false positives and misses the way the phase table does, over a span
+short enough to show a swap taking effect. matplotlib is imported only by :func:`plot_report`
+(``pip install 'anunnaki[plot]'``).
+"""
+
+from __future__ import annotations
+
+import bisect
+import json
+import math
+from collections.abc import Sequence
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+from anunnaki.errors import AnunnakiError, MissingExtraError
+
+__all__ = ["FrameScore", "RunReport", "TacticEvent", "load_report", "plot_report", "rolling_f1"]
+
+FORMAT = "sim-report/1"
+CATEGORY_NAMES = {0: "nominal", 1: "degraded", 2: "compromised"}
+_OUTCOMES = {"postcondition_ok": "ok", "postcondition_failed": "failed", "completed": "done"}
+
+
+@dataclass(frozen=True)
+class FrameScore:
+    """One frame's detections matched against its ground truth (the F1 rule)."""
+
+    t: float
+    tp: int
+    fp: int
+    fn: int
+    model: str
+
+
+@dataclass
+class TacticEvent:
+    """A tactic Utu started: when, and how it ended (``None`` while it ran past the end)."""
+
+    t: float
+    tactic: str
+    outcome: str | None = None
+    ended: float | None = None
+
+
+@dataclass
+class RunReport:
+    """A simulated run, JSON-ready (``anunnaki: sim-report/1``).
+
+    Attributes:
+        name: The scenario's name.
+        platform: ``rover`` or ``uav``.
+        duration: Simulated seconds run.
+        frames: Every scored frame, in time order.
+        assessments: ``(t, category)`` per assessment the oracle published.
+        tactics: The tactics Utu started, in time order.
+        collisions: Simulated times of collisions.
+        phases: The per-phase table (:meth:`PhaseScore.as_dict` rows).
+
+    """
+
+    name: str
+    platform: str
+    duration: float
+    frames: list[FrameScore] = field(default_factory=list)
+    assessments: list[tuple[float, int]] = field(default_factory=list)
+    tactics: list[TacticEvent] = field(default_factory=list)
+    collisions: list[float] = field(default_factory=list)
+    phases: list[dict[str, Any]] = field(default_factory=list)
+
+    def as_dict(self) -> dict[str, Any]:
+        """JSON-ready form (the file format)."""
+        return {
+            "anunnaki": FORMAT,
+            "name": self.name,
+            "platform": self.platform,
+            "duration": self.duration,
+            "phases": self.phases,
+            "frames": [asdict(f) for f in self.frames],
+            "assessments": [[t, c] for t, c in self.assessments],
+            "tactics": [asdict(e) for e in self.tactics],
+            "collisions": list(self.collisions),
+        }
+
+    def write(self, path: str | Path) -> Path:
+        """Write the report as JSON; returns the path."""
+        out = Path(path)
+        out.parent.mkdir(parents=True, exist_ok=True)
+        out.write_text(json.dumps(self.as_dict(), indent=1) + "\n", encoding="utf-8")
+        return out
+
+    @classmethod
+    def from_dict(cls, doc: dict[str, Any], *, source: str = "<report>") -> RunReport:
+        """Read the file format back (what :meth:`as_dict` wrote)."""
+        if doc.get("anunnaki") != FORMAT:
+            raise AnunnakiError(
+                f"{source}: not a simulation report (expected 'anunnaki: {FORMAT}', "
+                f"got {doc.get('anunnaki')!r}); write one with --report FILE.json"
+            )
+        try:
+            return cls(
+                name=str(doc["name"]),
+                platform=str(doc["platform"]),
+                duration=float(doc["duration"]),
+                frames=[FrameScore(**f) for f in doc["frames"]],
+                assessments=[(float(t), int(c)) for t, c in doc["assessments"]],
+                tactics=[TacticEvent(**e) for e in doc["tactics"]],
+                collisions=[float(t) for t in doc["collisions"]],
+                phases=list(doc["phases"]),
+            )
+        except (KeyError, TypeError, ValueError) as exc:
+            raise AnunnakiError(f"{source}: malformed simulation report: {exc!r}") from None
+
+
+def load_report(path: str | Path) -> RunReport:
+    """Load a report written by :meth:`RunReport.write`."""
+    p = Path(path)
+    try:
+        doc = json.loads(p.read_text(encoding="utf-8"))
+    except (OSError, json.JSONDecodeError) as exc:
+        raise AnunnakiError(f"{p}: cannot read the simulation report: {exc}") from None
+    if not isinstance(doc, dict):
+        raise AnunnakiError(f"{p}: a simulation report is a JSON object")
+    return RunReport.from_dict(doc, source=str(p))
+
+
+def tactic_events(decisions: Sequence[Any]) -> list[TacticEvent]:
+    """Utu's decisions (``t``, ``kind``, ``tactic``) → the tactics started and their outcome."""
+    events: list[TacticEvent] = []
+    running: dict[str, list[TacticEvent]] = {}
+    for d in decisions:
+        if not getattr(d, "tactic", None):
+            continue
+        if d.kind == "started":
+            event = TacticEvent(float(d.t), str(d.tactic))
+            events.append(event)
+            running.setdefault(d.tactic, []).append(event)
+        elif d.kind in _OUTCOMES and running.get(d.tactic):
+            event = running[d.tactic].pop()
+            event.outcome, event.ended = _OUTCOMES[d.kind], float(d.t)
+    return events
+
+
+def rolling_f1(frames: Sequence[FrameScore], window: float = 1.0) -> list[float | None]:
+    """F1 over the frames in ``(t - window, t]`` for each frame (``None``: nothing to score).
+
+    True positives, false positives and misses are pooled over the window (2·TP / (2·TP +
+    FP + FN)), as in the phase table; frames must be in time order.
+    """
+    if window <= 0:
+        raise ValueError(f"window must be > 0 s, got {window}")
+    times = [f.t for f in frames]
+    tp = [0]
+    bad = [0]
+    for f in frames:
+        tp.append(tp[-1] + f.tp)
+        bad.append(bad[-1] + f.fp + f.fn)
+    out: list[float | None] = []
+    for k, f in enumerate(frames):
+        first = bisect.bisect_right(times, f.t - window, 0, k + 1)
+        t_sum = tp[k + 1] - tp[first]
+        denominator = 2 * t_sum + bad[k + 1] - bad[first]
+        out.append(None if denominator == 0 else 2 * t_sum / denominator)
+    return out
+
+
+def plot_report(
+    report: RunReport, path: str | Path, *, window: float = 1.0, title: str | None = None
+) -> Path:
+    """Draw ``report`` as a PNG (or any format matplotlib knows by the suffix); returns the path.
+
+    Raises:
+        MissingExtraError: matplotlib is not installed.
+
+    """
+    try:
+        import matplotlib
+
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+        from matplotlib.lines import Line2D
+    except ImportError:
+        raise MissingExtraError("matplotlib", "plot") from None
+
+    fig, (ax_f1, ax_cat, ax_tac) = plt.subplots(
+        3,
+        1,
+        figsize=(11, 6.4),
+        sharex=True,
+        gridspec_kw={"height_ratios": [3.2, 1.2, max(1.0, 0.45 * len(report.tactics) + 0.4)]},
+    )
+    end = max(report.duration, 1e-3)
+    shades = ("#f4f4f4", "#ffffff")
+    for k, phase in enumerate(report.phases):
+        for ax in (ax_f1, ax_cat, ax_tac):
+            ax.axvspan(phase["start"], phase["end"], color=shades[k % 2], zorder=0, lw=0)
+        ax_f1.text(
+            (phase["start"] + phase["end"]) / 2,
+            1.01,
+            phase["label"],
+            ha="center",
+            va="bottom",
+            fontsize=8,
+            color="#555555",
+            transform=ax_f1.get_xaxis_transform(),
+        )
+
+    # 1: windowed F1, one colour per model.
+    colours = plt.get_cmap("tab10")
+    models = list(dict.fromkeys(f.model for f in report.frames))
+    colour = {m: colours(i % 10) for i, m in enumerate(models)}
+    f1 = rolling_f1(report.frames, window)
+    for model in models:
+        xs = [f.t for f in report.frames]
+        ys = [
+            (v if v is not None and f.model == model else math.nan)
+            for f, v in zip(report.frames, f1, strict=True)
+        ]
+        ax_f1.plot(xs, ys, color=colour[model], lw=1.8, label=model)
+    for t in report.collisions:
+        ax_f1.axvline(t, color="black", lw=1.0, ls=":")
+    ax_f1.set_ylim(-0.03, 1.05)
+    ax_f1.set_ylabel(f"detector F1\n({window:g} s window)")
+    handles = [Line2D([], [], color=colour[m], lw=2, label=m) for m in models]
+    if report.collisions:
+        handles.append(Line2D([], [], color="black", ls=":", label="collision"))
+    if handles:
+        ax_f1.legend(handles=handles, loc="lower left", fontsize=8, framealpha=0.9)
+    ax_f1.grid(axis="y", color="#dddddd", lw=0.6)
+
+    # 2: the oracle's category, as the step function it is.
+    if report.assessments:
+        ts = [t for t, _ in report.assessments] + [end]
+        cs = [c for _, c in report.assessments]
+        ax_cat.step(ts, [*cs, cs[-1]], where="post", color="#b03a2e", lw=1.5)
+    ax_cat.set_ylim(-0.4, 2.4)
+    ax_cat.set_yticks([0, 1, 2], [f"{k} {v}" for k, v in CATEGORY_NAMES.items()], fontsize=8)
+    ax_cat.set_ylabel("oracle")
+
+    # 3: tactics, one row each, from start to outcome.
+    marks = {"ok": ("#1e8449", "o"), "done": ("#1e8449", "o"), "failed": ("#b03a2e", "X")}
+    for row, event in enumerate(report.tactics):
+        stop = event.ended if event.ended is not None else end
+        ax_tac.plot([event.t, stop], [row, row], color="#2e4053", lw=3, solid_capstyle="butt")
+        ax_tac.plot([event.t], [row], marker="|", color="#2e4053", ms=12)
+        if event.outcome is not None:
+            c, m = marks.get(event.outcome, ("#7f8c8d", "s"))
+            ax_tac.plot([stop], [row], marker=m, color=c, ms=6)
+        ax_tac.text(
+            event.t,
+            row + 0.28,
+            f"{event.tactic}" + (f" ({event.outcome})" if event.outcome else ""),
+            fontsize=7.5,
+            va="bottom",
+            clip_on=True,
+        )
+    ax_tac.set_ylim(-0.6, max(len(report.tactics), 1) - 0.1)
+    ax_tac.set_yticks([])
+    ax_tac.set_ylabel("tactics")
+    ax_tac.set_xlim(0, end)
+    ax_tac.set_xlabel("simulated time (s)")
+    fig.suptitle(title or f"{report.platform} — {report.name}", fontsize=11)
+    fig.tight_layout()
+    out = Path(path)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(out, dpi=110)
+    plt.close(fig)
+    return out

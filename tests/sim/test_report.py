@@ -1,0 +1,124 @@
+"""A simulated run as data and as a picture: windowed F1, tactic events, JSON, the plot."""
+
+from __future__ import annotations
+
+import builtins
+import json
+import struct
+from pathlib import Path
+from types import SimpleNamespace
+from typing import Any
+
+import pytest
+
+from anunnaki.cli.main import main
+from anunnaki.errors import AnunnakiError, MissingExtraError
+from anunnaki.sim import FrameScore, RunReport, TacticEvent, load_report, plot_report, rolling_f1
+from anunnaki.sim._report import tactic_events
+
+EXAMPLES = Path(__file__).parents[2] / "examples"
+
+
+def frames(*rows: tuple[float, int, int, int]) -> list[FrameScore]:
+    return [FrameScore(t, tp, fp, fn, "m") for t, tp, fp, fn in rows]
+
+
+def test_rolling_f1_pools_the_window() -> None:
+    fs = frames((0.0, 2, 0, 0), (0.5, 0, 0, 2), (1.0, 0, 0, 0), (1.6, 1, 1, 0), (5.0, 0, 0, 0))
+    f1 = rolling_f1(fs, window=1.0)
+    assert f1[0] == 1.0  # 2·2 / (2·2)
+    assert f1[1] == pytest.approx(4 / 6)  # tp 2, fn 2
+    assert f1[2] == pytest.approx(0.0)  # (0.0, 1.0]: the frame at 0.5 only → tp 0, fn 2
+    assert f1[3] == pytest.approx(2 / 3)  # (0.6, 1.6]: tp 1, fp 1
+    assert f1[4] is None  # nothing to score in (4.0, 5.0]
+    assert rolling_f1(fs, window=100.0)[-1] == pytest.approx(6 / 9)  # tp 3, fp 1, fn 2
+    with pytest.raises(ValueError, match="window"):
+        rolling_f1(fs, window=0)
+
+
+def test_tactic_events_pair_starts_with_outcomes() -> None:
+    d = [
+        SimpleNamespace(t=1.0, kind="selected", tactic="a"),
+        SimpleNamespace(t=1.0, kind="started", tactic="a"),
+        SimpleNamespace(t=2.0, kind="started", tactic="b"),
+        SimpleNamespace(t=3.0, kind="postcondition_failed", tactic="a"),
+        SimpleNamespace(t=4.0, kind="started", tactic="a"),
+        SimpleNamespace(t=5.0, kind="postcondition_ok", tactic="a"),
+        SimpleNamespace(t=5.0, kind="paused", tactic=None),
+    ]
+    assert tactic_events(d) == [
+        TacticEvent(1.0, "a", "failed", 3.0),
+        TacticEvent(2.0, "b", None, None),
+        TacticEvent(4.0, "a", "ok", 5.0),
+    ]
+
+
+def sample_report() -> RunReport:
+    return RunReport(
+        name="t",
+        platform="rover",
+        duration=4.0,
+        frames=[FrameScore(0.1 * k, 1, 0, k % 2, "rover-default") for k in range(40)],
+        assessments=[(1.0, 0), (2.0, 2), (3.0, 0)],
+        tactics=[TacticEvent(2.0, "swap-to-fog-model", "ok", 2.5)],
+        collisions=[3.5],
+        phases=[
+            {"start": 0.0, "end": 2.0, "label": "clear"},
+            {"start": 2.0, "end": 4.0, "label": "fog"},
+        ],
+    )
+
+
+def png_size(path: Path) -> tuple[int, int]:
+    head = path.read_bytes()[:24]
+    assert head[:8] == b"\x89PNG\r\n\x1a\n"
+    width, height = struct.unpack(">II", head[16:24])
+    return width, height
+
+
+def test_report_round_trip_and_plot(tmp_path: Path) -> None:
+    report = sample_report()
+    path = report.write(tmp_path / "sub" / "run.json")
+    assert load_report(path) == report
+    out = plot_report(load_report(path), tmp_path / "run.png")
+    width, height = png_size(out)
+    assert width > 800 and height > 500
+
+
+def test_bad_report_files_are_named(tmp_path: Path) -> None:
+    wrong = tmp_path / "wrong.json"
+    wrong.write_text(json.dumps({"anunnaki": "trace/1"}))
+    with pytest.raises(AnunnakiError, match=r"wrong\.json: not a simulation report"):
+        load_report(wrong)
+    broken = tmp_path / "broken.json"
+    doc = sample_report().as_dict()
+    del doc["frames"]
+    broken.write_text(json.dumps(doc))
+    with pytest.raises(AnunnakiError, match=r"broken\.json: malformed simulation report"):
+        load_report(broken)
+    (tmp_path / "text.json").write_text("{")
+    with pytest.raises(AnunnakiError, match=r"text\.json: cannot read"):
+        load_report(tmp_path / "text.json")
+
+
+def test_plot_without_matplotlib_names_the_extra(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    real_import = builtins.__import__
+
+    def no_matplotlib(name: str, *args: Any, **kwargs: Any) -> Any:
+        if name.startswith("matplotlib"):
+            raise ImportError(name)
+        return real_import(name, *args, **kwargs)
+
+    monkeypatch.setattr(builtins, "__import__", no_matplotlib)
+    with pytest.raises(MissingExtraError, match=r"anunnaki\[plot\]"):
+        plot_report(sample_report(), tmp_path / "x.png")
+    assert not (tmp_path / "x.png").exists()
+
+
+def test_report_and_plot_need_the_detector(capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["sim", "rover", "--until", "1", "--report", "r.json"]) == 2
+    assert "give --models too" in capsys.readouterr().err
+    assert main(["run", str(EXAMPLES / "rover" / "utu.yaml"), "--plot", "p.png"]) == 2
+    assert "need a simulated managed system" in capsys.readouterr().err
