@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+import cv2
 import numpy as np
 import pytest
 
@@ -123,6 +124,43 @@ def test_yolo_round_trip(tmp_path: Path) -> None:
     back = Dataset.from_yolo(tmp_path / "y" / "images")
     assert_same(ds, back, atol=1e-3)
     assert (tmp_path / "y" / "labels" / "000001.txt").read_text() == ""
+
+
+def test_yolo_import_of_a_hand_written_folder(tmp_path: Path) -> None:
+    """Known label lines give known pixel boxes: cx, cy, w, h scale by the image's size."""
+    images, labels = tmp_path / "images", tmp_path / "labels"
+    images.mkdir()
+    labels.mkdir()
+    # 80 x 40 images (width != height, so swapped axes show); names sort a, b, c.
+    for name in ("a.png", "b.jpg", "c.png"):
+        cv2.imwrite(str(images / name), np.full((40, 80, 3), 100, np.uint8))
+    (tmp_path / "obj.names").write_text("car\npedestrian\nbike\n")
+    (labels / "a.txt").write_text(
+        "# class cx cy w h\n"
+        "1 0.5 0.5 0.25 0.5\n"  # 20 x 20 px centred on (40, 20)
+        "\n"
+        "0 0.125 0.25 0.25 0.5\n"  # the top-left corner: (0, 0) - (20, 20)
+        "2 0.9375 0.875 0.125 0.25\n"  # the bottom-right corner: (70, 30) - (80, 40)
+    )
+    (labels / "b.txt").write_text("2 0.1 0.3 0.05 0.3\n")  # (6, 6) - (10, 18)
+    # c.png has no label file: an image without objects.
+    ds = Dataset.from_yolo(images)
+    assert ds.classes == ("car", "pedestrian", "bike")
+    assert [r.file_name for r in ds.records] == ["a.png", "b.jpg", "c.png"]
+    assert [(r.width, r.height) for r in ds.records] == [(80, 40)] * 3
+    np.testing.assert_array_equal(ds[0].boxes, [[30, 10, 50, 30], [0, 0, 20, 20], [70, 30, 80, 40]])
+    assert ds[0].labels.tolist() == [1, 0, 2] and ds[0].boxes.dtype == np.float32
+    np.testing.assert_allclose(ds[1].boxes, [[6, 6, 10, 18]], atol=1e-4)
+    assert ds[1].labels.tolist() == [2]
+    assert ds[2].boxes.shape == (0, 4) and ds[2].labels.tolist() == []
+    assert ds.class_counts() == {"car": 1, "pedestrian": 1, "bike": 2}
+    assert ds[0].image.shape == (40, 80, 3) and ds.num_ignore == 0
+    # A malformed line in a hand-written file: the error names the file and the line.
+    (labels / "b.txt").write_text("2 0.1 0.3 0.05 0.3\n\n0 0.5 0.5 0.2\n")
+    with pytest.raises(DatasetError) as info:
+        Dataset.from_yolo(images)
+    assert info.value.path == str(labels / "b.txt") and info.value.line == 3
+    assert str(info.value).startswith(f"{labels / 'b.txt'}:3: expected 5 fields, got 4")
 
 
 def test_yolo_split_layout_and_data_yaml(tmp_path: Path) -> None:

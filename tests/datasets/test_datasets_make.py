@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from anunnaki.datasets import load_split, make_dataset
+from anunnaki.datasets import DEFAULT_LAYOUTS, load_split, make_dataset
 from anunnaki.errors import AnunnakiError
 
 
@@ -123,3 +123,49 @@ def test_simulator_ignore_boxes_reach_the_coco_files(tmp_path: Path) -> None:
     data = json.loads((tmp_path / "train.json").read_text())
     assert {a["iscrowd"] for a in data["annotations"]} == {1}
     assert data["info"]["min_label_height"] == 1.0
+
+
+class Requests:
+    """A frame source that renders nothing and records what it was asked for."""
+
+    def __init__(self) -> None:
+        self.asked: list[tuple[int, int, int, int]] = []  # (layout, n, width, height)
+
+    def __call__(
+        self, platform: str, *, layout: int, seed: int, n: int, width: int, height: int
+    ) -> Iterator[FakeFrame]:
+        self.asked.append((layout, n, width, height))
+        return iter(())
+
+
+def test_default_splits_are_2000_200_500_images(tmp_path: Path) -> None:
+    """The defaults give a test split of 500 images (the issue asks for at least 500)."""
+    requests = Requests()
+    make_dataset("rover", tmp_path / "d", workers=1, source=requests)
+    asked = {layout: n for layout, n, *_ in requests.asked}
+    assert len(asked) == len(requests.asked)  # each layout rendered once
+    assert {split: list(layouts) for split, layouts in DEFAULT_LAYOUTS.items()} == {
+        "train": list(range(0, 40)), "val": list(range(40, 44)), "test": list(range(44, 54))
+    }  # fmt: skip
+    images = {s: sum(asked[k] for k in DEFAULT_LAYOUTS[s]) for s in DEFAULT_LAYOUTS}
+    assert images == {"train": 2000, "val": 200, "test": 500}
+    assert images["test"] >= 500
+    assert {(w, h) for *_, w, h in requests.asked} == {(128, 128)}
+    info = json.loads((tmp_path / "d" / "test.json").read_text())["info"]
+    assert info["layouts"] == list(range(44, 54)) and info["per_layout"] == 50
+
+
+def test_the_cli_defaults_are_the_same(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    from anunnaki.cli.main import main
+    from anunnaki.datasets import _make
+
+    requests = Requests()
+    monkeypatch.setattr(_make, "_sim_source", requests)
+    assert main(["make-dataset", "rover", "--out", str(tmp_path / "d"), "--workers", "1"]) == 0
+    by_split = {
+        split: sorted(layout for layout, *_ in requests.asked if layout in layouts)
+        for split, layouts in DEFAULT_LAYOUTS.items()
+    }
+    assert by_split == {split: list(layouts) for split, layouts in DEFAULT_LAYOUTS.items()}
+    assert {(n, w, h) for _, n, w, h in requests.asked} == {(50, 128, 128)}
+    assert len(requests.asked) == 54

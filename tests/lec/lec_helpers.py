@@ -2,11 +2,14 @@
 
 A small rover detector, trained once and cached.
 
-The model is trained on a reduced simulated rover dataset (a few layouts, 128 × 128) and
-cached under pytest's cache directory (``.pytest_cache/d/anunnaki-lec/KEY``), keyed by a hash
-of the settings and of the source of ``anunnaki.lec``, ``anunnaki.datasets`` and
-``anunnaki.sim``: editing any of them retrains, otherwise later sessions load the cached
-files in well under a second. With ``-p no:cacheprovider`` it trains into a temporary folder.
+The model is trained on a reduced simulated rover dataset (12 + 2 + 3 layouts of 25 frames
+at 96 × 96, 10 epochs) in about 25 s from scratch on the 2-core VM — inside the issue's 60 s
+even when the machine is shared; 96 rather than 128 px and 10 rather than 12 epochs halved
+the time (see ``test_lec_train.F1_FLOOR``). It is cached under pytest's cache directory
+(``.pytest_cache/d/anunnaki-lec/KEY``), keyed by a hash of the settings and of the source of
+``anunnaki.lec``, ``anunnaki.datasets`` and ``anunnaki.sim``: editing any of them retrains,
+otherwise later sessions load the cached files in well under a second. With
+``-p no:cacheprovider`` it trains into a temporary folder.
 """
 
 from __future__ import annotations
@@ -23,14 +26,14 @@ import anunnaki
 #: Data and training settings of the session model (part of the cache key).
 SETTINGS: dict[str, Any] = {
     "platform": "rover",
-    "width": 128,
-    "height": 128,
+    "width": 96,
+    "height": 96,
     "train_layouts": list(range(0, 12)),
     "val_layouts": [12, 13],
     "test_layouts": [14, 15, 16],
     "per_layout": 25,
     "seed": 0,
-    "epochs": 12,
+    "epochs": 10,
     "batch_size": 16,
     "net_width": 16,
     "threads": 2,

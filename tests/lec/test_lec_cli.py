@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import re
 from pathlib import Path
 
 import pytest
@@ -51,6 +52,38 @@ def test_train_detector(tiny: Path, tmp_path: Path, capsys: pytest.CaptureFixtur
     assert card["domain"] == "fog" and card["model_id"] == "m"
     assert card["training"]["augment"] == ["fog", "raindrop"] and "test" in card["metrics"]
     assert out.is_file() and out.with_suffix(".json").is_file()
+
+
+def test_train_detector_progress_bar(
+    tiny: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """On a terminal, the bar counts the optimiser steps up to the total, epoch by epoch."""
+    from io import StringIO
+
+    from rich.console import Console
+
+    from anunnaki.cli import _detector
+
+    screen = StringIO()
+    console = Console(file=screen, force_terminal=True, width=120, highlight=False)
+    monkeypatch.setattr(_detector, "_console", lambda: console)
+    out = tmp_path / "m.safetensors"
+    args = ["train-detector", "--data", str(tiny), "--out", str(out), "--epochs", "3",
+            "--batch-size", "4", "--width", "8"]  # fmt: skip
+    assert main(args) == 0
+    text = re.sub(r"\x1b\[[0-9;?]*[A-Za-z]", "", screen.getvalue())  # without ANSI codes
+    # 6 training images in batches of 4: 2 steps an epoch, 6 in all; the last frame drawn
+    # shows them all done, in epoch 3.
+    assert "3 epochs" in text
+    assert re.search(r"epoch 3 .*\b6/6\b", text), text
+    assert not re.search(r"\b[7-9]/6\b", text)  # never beyond the total
+
+
+def test_train_detector_default_epochs() -> None:
+    from anunnaki.cli.main import build_parser
+
+    args = build_parser().parse_args(["train-detector", "--data", "d", "--out", "m"])
+    assert args.epochs == 14  # within the 5-minute budget (docs/detector.md)
 
 
 def test_train_detector_errors(

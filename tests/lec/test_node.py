@@ -6,8 +6,7 @@ import hashlib
 import json
 import re
 import threading
-import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
@@ -27,7 +26,7 @@ from anunnaki.bus import (
 )
 from anunnaki.goals import parse_binding, parse_goal_model
 from anunnaki.lec._detector import DetectionResult
-from anunnaki.lec._node import LecNode, SwapResult, decode_image, detections_topic
+from anunnaki.lec._node import LecNode, LecNodeStats, SwapResult, decode_image, detections_topic
 from anunnaki.lec._registry import ModelRegistry, ModelRegistryError, parse_registry
 from anunnaki.tactics import parse_tactics_yaml
 from anunnaki.utu import AutonomicManager, Knowledge
@@ -36,6 +35,9 @@ ROOT = Path(__file__).parents[2]
 DOC = (ROOT / "docs" / "model-manager.md").read_text(encoding="utf-8")
 CAMERA = "/uav/camera/image"
 DETS = detections_topic("detector")
+#: How long a test waits for something that should happen at once: a deadline against a
+#: hung test on a loaded machine, never a measurement.
+DEADLINE = 30.0
 
 
 # -- doubles ----------------------------------------------------------------------------------
@@ -51,6 +53,7 @@ class FakeDetector:
         self.gate: threading.Event | None = None
         self.entered = threading.Event()
         self.fail_next = 0
+        self.frames = 0
 
     def detect(self, images: Any) -> list[DetectionResult]:
         if self.fail_next:
@@ -58,30 +61,49 @@ class FakeDetector:
             raise RuntimeError("boom")
         if self.gate is not None:
             self.entered.set()
-            self.gate.wait(5.0)
+            self.gate.wait(DEADLINE)
             self.gate = None
+        self.frames += len(images)
         return [DetectionResult([[1, 2, 11, 12]], [1], [0.9]) for _ in images]
 
 
 class Loader:
-    """Loads a model file (JSON); sleeps ``load_delay`` s as the file says; records calls."""
+    """Loads a model file (JSON) and records the calls; a model's load can be held.
+
+    ``hold(model_id)`` makes that model's next load block until the test releases it: the
+    deliberately slow-loading model of the swap test, slow for exactly as long as the test
+    wants, without a sleep.
+    """
 
     def __init__(self) -> None:
         self.calls: list[str] = []
         self.loaded: dict[str, FakeDetector] = {}
+        self._held: dict[str, tuple[threading.Event, threading.Event]] = {}
+
+    def hold(self, model_id: str) -> tuple[threading.Event, threading.Event]:
+        """Hold MODEL_ID's next load: returns (set once the load started, set to release)."""
+        entered, release = threading.Event(), threading.Event()
+        self._held[model_id] = (entered, release)
+        return entered, release
 
     def __call__(self, path: Path) -> FakeDetector:
         data = json.loads(path.read_text(encoding="utf-8"))  # a corrupt file raises here
-        self.calls.append(data["model_id"])
-        time.sleep(data.get("load_delay", 0.0))  # the slow model of the test: a double's load
-        det = FakeDetector(data["model_id"], data["domain"])
-        self.loaded[data["model_id"]] = det
+        model_id = data["model_id"]
+        self.calls.append(model_id)
+        held = self._held.pop(model_id, None)
+        if held is not None:
+            entered, release = held
+            entered.set()
+            if not release.wait(DEADLINE):  # a guard against a hung test, not a timing
+                raise RuntimeError(f"the test never released the load of {model_id}")
+        det = FakeDetector(model_id, data["domain"])
+        self.loaded[model_id] = det
         return det
 
 
-def model_file(folder: Path, model_id: str, domain: str, delay: float = 0.0) -> dict[str, Any]:
+def model_file(folder: Path, model_id: str, domain: str) -> dict[str, Any]:
     path = folder / f"{model_id}.model"
-    path.write_text(json.dumps({"model_id": model_id, "domain": domain, "load_delay": delay}))
+    path.write_text(json.dumps({"model_id": model_id, "domain": domain}))
     digest = hashlib.sha256(path.read_bytes()).hexdigest()
     return {"id": model_id, "domain": domain, "file": path, "sha256": digest}
 
@@ -96,7 +118,7 @@ def registry(tmp_path: Path, loader: Loader) -> ModelRegistry:
     return ModelRegistry(
         [
             model_file(tmp_path, "det-default", "default"),
-            model_file(tmp_path, "det-fog", "fog", delay=0.5),
+            model_file(tmp_path, "det-fog", "fog"),
             model_file(tmp_path, "det-dark", "low_light"),
         ],
         loader=loader,
@@ -129,10 +151,17 @@ class Collector:
             self.items.append(sample.message)
             self._cond.notify_all()
 
-    def wait(self, n: int, timeout: float = 10.0) -> list[Any]:
+    def wait(self, n: int, timeout: float = DEADLINE) -> list[Any]:
+        """Block until N messages arrived; return them all."""
+        return self.wait_until(lambda items: len(items) >= n, f"{n} messages", timeout)
+
+    def wait_until(
+        self, done: Callable[[list[Any]], bool], what: str, timeout: float = DEADLINE
+    ) -> list[Any]:
+        """Block until ``done(messages)``; return them all."""
         with self._cond:
-            assert self._cond.wait_for(lambda: len(self.items) >= n, timeout), (
-                f"{len(self.items)} of {n} messages within {timeout} s"
+            assert self._cond.wait_for(lambda: done(self.items), timeout), (
+                f"no {what} within {timeout} s ({len(self.items)} messages)"
             )
             return list(self.items)
 
@@ -158,8 +187,8 @@ def test_every_frame_gets_one_detection_message(bus: Bus, registry: ModelRegistr
             "det-default", "default", 32, 24)  # fmt: skip
         assert first.boxes == [[1.0, 2.0, 11.0, 12.0]] and first.labels == ["car"]
         assert first.scores == [pytest.approx(0.9)] and first.latency_ms is not None
-        assert node.stats().frames == 5 and node.stats().detections == 5
     assert "/lm_manager" not in bus.alive_nodes()
+    assert node.stats().frames == 5 and node.stats().detections == 5  # after close: all in
 
 
 def test_decode_image_gives_rgb() -> None:
@@ -210,50 +239,76 @@ def test_a_bad_initial_model_fails_at_bring_up(
 def test_swap_during_30hz_frames_with_a_slow_load(
     bus: Bus, registry: ModelRegistry, loader: Loader
 ) -> None:
-    """The fog model's load sleeps 0.5 s while frames arrive at 30 Hz."""
-    n = 60
+    """Frames at 30 Hz; the fog model's load is held by the test while frames keep coming.
+
+    Everything is synchronised on counts: the camera runs until the test has seen what it
+    needs, so a slow machine makes the test longer, never wrong.
+    """
+    entered, release = loader.hold("det-fog")
     dets = Collector(bus, DETS)
     replies: list[Any] = []
-    with LecNode(bus, registry, camera=CAMERA, active_period=None) as node:
-        published = threading.Event()
-        asked_at: list[int] = []
+    sent: list[int] = []
+    stop = threading.Event()
 
-        def camera() -> None:
-            pace = threading.Event()
-            for seq in range(n):
-                bus.publish(CAMERA, frame(seq))
-                if seq == 10:
-                    published.set()
-                pace.wait(1 / 30)  # the camera's rate, not synchronisation
+    def camera() -> None:
+        pace = threading.Event()
+        while not stop.is_set() and len(sent) < 3000:  # 3000: a bound, should all else fail
+            bus.publish(CAMERA, frame(len(sent)))
+            sent.append(len(sent))
+            pace.wait(1 / 30)  # the camera's 30 Hz rate, not synchronisation
 
+    def ask() -> None:
+        payload = {"lec": "detector", "domain": "fog"}
+        replies.append(bus.request("/lm_manager/swap", payload, DEADLINE))
+
+    # A queue deep enough that a starved frame thread on a busy machine drops nothing.
+    with LecNode(bus, registry, camera=CAMERA, active_period=None, frame_queue=1024) as node:
         cam = threading.Thread(target=camera)
         cam.start()
-        assert published.wait(5.0)
-        asked_at.append(len(dets.items))
-        start = time.perf_counter()
-        replies.append(bus.request("/lm_manager/swap", {"lec": "detector", "domain": "fog"}, 5.0))
-        took = time.perf_counter() - start
-        done_at = len(dets.items)
-        cam.join()
+        try:
+            dets.wait(10)  # the default model runs
+            swapper = threading.Thread(target=ask)
+            swapper.start()
+            assert entered.wait(DEADLINE), "the fog model's load never started"
+            at_hold = len(dets.items)
+            # The load is held: frames keep flowing, on the old model, and no reply yet.
+            dets.wait(at_hold + 15)
+            assert replies == [] and swapper.is_alive() and node.active.id == "det-default"
+            at_release = len(dets.items)
+            release.set()
+            swapper.join(DEADLINE)
+            assert not swapper.is_alive() and len(replies) == 1
+            # The new model serves the frames that follow.
+            dets.wait_until(
+                lambda items: sum(d.model_id == "det-fog" for d in items) >= 10,
+                "10 detections of the fog model",
+            )
+        finally:
+            release.set()  # (already set, unless an assertion above failed)
+            stop.set()
+            cam.join()
+        n = len(sent)
         got = dets.wait(n)
-        stats = node.stats()
+    stats = node.stats()  # after close: the last frame's counters are in
     assert replies[0].ok is True
     reply = replies[0].body
     assert reply["model"] == "det-fog" and reply["domain"] == "fog"
     assert reply["previous"] == "det-default" and reply["changed"] is True
-    assert reply["load_ms"] >= 500 and took >= 0.5
     # Every frame exactly once, in order, each tagged with the old or the new model ...
-    assert [d.frame_seq for d in got] == list(range(n))
+    assert len(got) == n and [d.frame_seq for d in got] == list(range(n))
+    assert stats == LecNodeStats(frames=n, detections=n, failed=0, swaps=1, refused=0)
     models = [d.model_id for d in got]
     assert set(models) == {"det-default", "det-fog"}
     # ... and the switch is monotone: no old-model detection after the first new-model one.
     first_new = models.index("det-fog")
     assert models == ["det-default"] * first_new + ["det-fog"] * (n - first_new)
     assert all(d.domain == ("fog" if d.model_id == "det-fog" else "default") for d in got)
-    # The frames that arrived while the new model loaded were served by the old one.
-    assert done_at - asked_at[0] >= 10
-    assert first_new >= asked_at[0] + 10
-    assert stats.swaps == 1 and stats.detections == n and loader.calls == ["det-default", "det-fog"]
+    # Frames kept flowing while the load was held, and the old model served all of them.
+    assert at_release >= at_hold + 15 and first_new >= at_release
+    # Each model ran exactly the frames tagged with it; each was loaded once.
+    assert loader.loaded["det-default"].frames == first_new
+    assert loader.loaded["det-fog"].frames == n - first_new
+    assert loader.calls == ["det-default", "det-fog"]
 
 
 def test_a_slow_frame_does_not_block_a_swap(
@@ -313,14 +368,22 @@ def test_swap_to_the_active_model_and_back_from_cache(
     bus: Bus, registry: ModelRegistry, loader: Loader
 ) -> None:
     active = Collector(bus, "/lm_manager/active")
+    dets = Collector(bus, DETS)
     with LecNode(bus, registry, camera=CAMERA, active_period=None) as node:
         same = node.swap(domain="default")
         assert same == SwapResult(True, "detector", "det-default", "default", "det-default")
         assert same.reply().body["changed"] is False
         assert node.swap("det-dark").changed
+        bus.publish(CAMERA, frame(0))
+        assert dets.wait(1)[0].model_id == "det-dark"
         back = node.swap(domain="default")
-        assert back.ok and back.load_ms < 50  # cached: no reload
+        assert back.ok and back.changed and back.previous == "det-dark"
+        # Cached: the loader is not called again, the very same instance serves the frames.
         assert loader.calls == ["det-default", "det-dark"]
+        bus.publish(CAMERA, frame(1))
+        assert [(d.frame_seq, d.model_id) for d in dets.wait(2)] == [
+            (0, "det-dark"), (1, "det-default")]  # fmt: skip
+        assert loader.loaded["det-default"].frames == 1 and loader.loaded["det-dark"].frames == 1
         got = active.wait(3)
         assert [m["model"] for m in got] == ["det-default", "det-dark", "det-default"]
         assert node.stats().swaps == 2

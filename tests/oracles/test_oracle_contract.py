@@ -8,7 +8,8 @@ from __future__ import annotations
 import json
 import re
 import threading
-from collections.abc import Callable
+from collections import deque
+from collections.abc import Callable, Sized
 from pathlib import Path
 from typing import Any
 
@@ -188,10 +189,18 @@ def test_never_modifies_the_frame(make: Callable[[], Oracle]) -> None:
 
 @pytest.mark.parametrize("shape", [(1, 1, 3), (480, 640, 3), (37, 91, 3)])
 def test_any_frame_size(make: Callable[[], Oracle], shape: tuple[int, int, int]) -> None:
+    """Fed the scenario's hooks, an oracle assesses frames of any size, not only 64 x 64."""
     oracle = make()
-    frame = np.random.default_rng(0).integers(0, 256, shape, dtype=np.uint8)
-    result = oracle.assess(frame, seq=3, model_id="m")
-    assert result is None or (result.frame_seq == 3 and result.assessor == oracle.name)
+    rng = np.random.default_rng(0)
+    frames = [dict(f, image=rng.integers(0, 256, shape, dtype=np.uint8)) for f in SCENARIO[:12]]
+    results = run(oracle, frames)
+    # 12 frames warm up every oracle of the suite (the ground truth's window of 8 needs 2):
+    # the last frame is assessed, whatever its size.
+    assert results[-1] is not None, f"no assessment of a {shape} frame after 12 frames"
+    for f, r in zip(frames, results, strict=True):
+        if r is not None:
+            assert r.frame_seq == f["seq"] and r.assessor == oracle.name
+            assert r.model_id == "m-default" and r.category in (0, 1, 2)
 
 
 #: The cases whose oracle takes ground truth (the optional ``observe_ground_truth`` hook).
@@ -204,13 +213,39 @@ def test_the_ground_truth_hook_is_covered() -> None:
     assert "ground_truth" in TRUTH_CASES and not any("darkness" in n for n in TRUTH_CASES)
 
 
+def container_sizes(oracle: Any) -> dict[str, int]:
+    """The length of every container the oracle holds: dicts, lists, sets, deques, ..."""
+    return {
+        name: len(value)
+        for name, value in vars(oracle).items()
+        if isinstance(value, Sized) and not isinstance(value, str | bytes | np.ndarray)
+    }
+
+
 @pytest.mark.parametrize("name", TRUTH_CASES)
 def test_unmatched_hook_input_is_bounded(name: str) -> None:
     oracle: Any = CASES[name]()
+    detected = getattr(oracle, "observe_detections", lambda _: None)
+
+    def detections(seq: int) -> Detections:
+        return SCENARIO[0]["detections"].model_copy(update={"frame_seq": seq})
+
     for seq in range(5000):  # truth for frames the LEC never reports
         oracle.observe_ground_truth(seq, np.array([BOX]), ["car"])
-    sizes = [len(v) for v in vars(oracle).values() if isinstance(v, dict | list)]
-    assert max(sizes, default=0) < 1000
+    for seq in range(5000, 10_000):  # detections for frames the simulator never reports
+        detected(detections(seq))
+    unassessed = 0
+    for seq in range(10_000, 12_000):  # matched frames, assessed: the sliding window
+        oracle.observe_ground_truth(seq, np.array([BOX]), ["car"])
+        detected(detections(seq))
+        unassessed += oracle.assess(SCENARIO[0]["image"], seq=seq, model_id="m-default") is None
+    assert unassessed < 100, "the window never filled: the bound below would say little"
+    sizes = container_sizes(oracle)
+    assert sizes, "no container found to measure"
+    assert max(sizes.values()) < 1000, sizes
+    if name == "ground_truth":  # the buffers reach their bound (4 x window), the window its own
+        assert max(sizes.values()) == 4 * OPTIONS[name]["window"]
+        assert [len(v) for v in vars(oracle).values() if isinstance(v, deque)] == [8]
 
 
 def test_the_documented_assessment_is_an_assessment() -> None:

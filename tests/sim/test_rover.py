@@ -79,6 +79,50 @@ def test_modes_stop_buzzer_and_teleop(bus) -> None:
         assert rover.status()["stopped"] is True
 
 
+def test_lights_command(bus) -> None:
+    """``/rover/lights {on}`` switches the lights, shown in ``/rover/status``; nothing else."""
+    with RoverSim(bus, rover_scenario(), mode="manual", clear_layout=True) as rover:
+        status = bus.subscribe("/rover/status", queue=256)
+        seen = 0
+
+        def statuses(step: float) -> list[dict]:
+            """Step the rover; return the status messages it published meanwhile."""
+            nonlocal seen
+            rover.step(step)
+            out = []
+            while seen < rover.published["/rover/status"]:
+                out.append(status.recv(timeout=5.0).message)
+                seen += 1
+            assert out, "no status published"
+            return out
+
+        assert {m["lights"] for m in statuses(0.3)} == {False} and not rover.lights
+        bus.publish("/rover/lights", {"on": True})
+        assert rover.wait_for(lambda: rover.lights)
+        assert rover.commands[-1][1:] == ("lights", {"on": True})
+        got = statuses(0.3)
+        assert {m["lights"] for m in got} == {True}
+        # The lights alone: no buzzer, no warning, the mode and the (halted) rover unchanged.
+        assert not any(m["buzzer"] or m["warning"] for m in got)
+        assert {m["mode"] for m in got} == {"manual"} and abs(rover.speed) < 0.05
+        bus.publish("/rover/lights", {"on": False})
+        assert rover.wait_for(lambda: not rover.lights)
+        assert {m["lights"] for m in statuses(0.3)} == {False}
+        bus.publish("/rover/lights", {"on": True})
+        assert rover.wait_for(lambda: rover.lights)
+        bus.publish("/rover/lights", {})  # no "on": off
+        assert rover.wait_for(lambda: not rover.lights)
+        assert {m["lights"] for m in statuses(0.2)} == {False}
+        assert [c[2] for c in rover.commands if c[1] == "lights"] == [
+            {"on": True}, {"on": False}, {"on": True}, {}]  # fmt: skip
+        # Not a boolean: counted and ignored ("false" is truthy; it must not switch them on).
+        bus.publish("/rover/lights", {"on": "false"})
+        bus.publish("/rover/buzzer", {"on": 1})
+        assert rover.wait_for(lambda: rover.malformed == 2)
+        assert not rover.lights and not rover.buzzer_cmd
+        assert len([c for c in rover.commands if c[1] in ("lights", "buzzer")]) == 4
+
+
 def test_stops_and_warns_for_a_close_pedestrian_detection(bus) -> None:
     sc = rover_scenario(faults=NO_ULTRASONIC)
     with RoverSim(bus, sc, clear_layout=True) as rover:

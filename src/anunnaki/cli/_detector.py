@@ -27,6 +27,12 @@ from anunnaki.errors import AnunnakiError
 
 _CATEGORY = {0: "unaffected", 1: "degraded", 2: "compromised"}
 
+#: ``train-detector --epochs`` default, the same as ``TrainConfig.epochs`` (a test checks it;
+#: not imported from there, which would load torch to build the parser): 14 epochs train the
+#: rover default model (2000 images, 128 x 128) in 247 s on 2 threads, inside the 5-minute
+#: budget; 18 took about 320 s (docs/detector.md, Results).
+DEFAULT_EPOCHS = 14
+
 
 def add_parser(sub: Any) -> None:
     """Register the three sub-commands."""
@@ -206,7 +212,13 @@ def _add_train(sub: Any) -> None:
     )
     p.add_argument("--data", "-d", required=True, help="dataset folder (train/val/test)")
     p.add_argument("--out", "-o", required=True, help="model file NAME.safetensors")
-    p.add_argument("--epochs", type=_positive, default=20, help="passes over the data (20)")
+    p.add_argument(
+        "--epochs",
+        type=_positive,
+        default=DEFAULT_EPOCHS,
+        help=f"passes over the data ({DEFAULT_EPOCHS}: the rover default model's, about 4 "
+        "minutes for 2000 images at 128x128 on 2 threads)",
+    )
     p.add_argument("--seed", type=int, default=0, help="seed for weights/order/augment (0)")
     p.add_argument("--threads", type=_positive, default=2, help="torch threads (2)")
     p.add_argument("--domain", default="default", help="the model's domain (default)")

@@ -120,7 +120,8 @@ class TrainConfig:
     """How to train (all options keyword-only at the call sites; defaults suit 128 × 128).
 
     Attributes:
-        epochs: Passes over the training split.
+        epochs: Passes over the training split (14: the rover default model's, 247 s for
+            2000 images at 128 × 128 on 2 threads — inside the 5-minute budget).
         batch_size: Images per step.
         lr: Peak learning rate (AdamW, one warm-up epoch, then cosine decay to 2 %).
         weight_decay: AdamW weight decay.
@@ -148,7 +149,7 @@ class TrainConfig:
 
     """
 
-    epochs: int = 20
+    epochs: int = 14
     batch_size: int = 32
     lr: float = 3e-3
     weight_decay: float = 1e-4

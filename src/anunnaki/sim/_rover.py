@@ -315,18 +315,32 @@ class RoverSim(SimPlatform):
     def _on_run_stop(self, sample: Any) -> None:
         self.run_stop(str(body_of(sample.message).get("reason", "run_stop")))
 
-    def _on_buzzer(self, sample: Any) -> None:
+    def _switch(self, what: str, sample: Any) -> tuple[bool, dict[str, Any]] | None:
+        """``{"on": true|false}`` (no ``on``: off); anything else is counted and ignored."""
         body = body_of(sample.message)
+        on = body.get("on", False)
+        if not isinstance(on, bool):
+            with self._lock:
+                self.malformed += 1
+            self._notify()
+            log.warning("rover: ignoring a %s command whose 'on' is not true/false: %r", what, on)
+            return None
+        return on, body
+
+    def _on_buzzer(self, sample: Any) -> None:
+        if (switch := self._switch("buzzer", sample)) is None:
+            return
         with self._lock:
-            self.buzzer_cmd = bool(body.get("on", False))
-            self.commands.append((self.t, "buzzer", body))
+            self.buzzer_cmd = switch[0]
+            self.commands.append((self.t, "buzzer", switch[1]))
         self._notify()
 
     def _on_lights(self, sample: Any) -> None:
-        body = body_of(sample.message)
+        if (switch := self._switch("lights", sample)) is None:
+            return
         with self._lock:
-            self.lights_cmd = bool(body.get("on", False))
-            self.commands.append((self.t, "lights", body))
+            self.lights_cmd = switch[0]
+            self.commands.append((self.t, "lights", switch[1]))
         self._notify()
 
     def _on_teleop(self, sample: Any) -> None:
@@ -355,7 +369,9 @@ class RoverSim(SimPlatform):
     def _on_detections(self, sample: Any) -> None:
         det = self.detections_of(sample.message)
         if det is None:
-            self.malformed += 1
+            with self._lock:
+                self.malformed += 1
+            self._notify()
             log.warning("rover: ignoring a detections message that is not Detections")
             return
         self.observe_detections(det)
