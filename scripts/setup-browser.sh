@@ -27,6 +27,7 @@ cat >&2 <<MSG
 note: the dashboard's browser tests need Chromium at $CHROMIUM, and it is not installed.
   On Debian/Ubuntu, as root:   apt-get update && apt-get install -y chromium
   (or: sudo scripts/setup-browser.sh). Elsewhere, point ANUNNAKI_CHROMIUM at a Chromium
-  or Chrome binary. Until then those tests are skipped; everything else works.
+  or Chrome binary. Until then those tests are skipped (with ANUNNAKI_REQUIRE_BROWSER=1,
+  as CI sets it, they fail); everything else works.
 MSG
 exit 0

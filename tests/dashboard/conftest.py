@@ -1,7 +1,8 @@
 """Fixtures of the dashboard tests.
 
 One Chromium (Debian's, through Playwright's ``executable_path``; Playwright's own browser
-download is never used) serves every browser test of the session.
+download is never used) serves every browser test of the session. Without it the browser tests
+are skipped, or fail when ``ANUNNAKI_REQUIRE_BROWSER=1`` (as CI sets it).
 """
 
 from __future__ import annotations
@@ -9,11 +10,10 @@ from __future__ import annotations
 import shutil
 import tempfile
 from collections.abc import Iterator
-from pathlib import Path
 from typing import Any
 
 import pytest
-from dashboard_helpers import CHROMIUM, HERE, RoverRun
+from dashboard_helpers import CHROMIUM, HERE, RoverRun, need_browser
 
 
 @pytest.fixture
@@ -27,10 +27,14 @@ def rover_run() -> Iterator[RoverRun]:
 
 @pytest.fixture(scope="session")
 def chromium() -> Iterator[Any]:
-    """A persistent headless Chromium context (Debian's binary), shared by the session."""
-    if not Path(CHROMIUM).exists():
-        pytest.skip(f"Chromium is not installed at {CHROMIUM}: run scripts/setup-browser.sh")
-    sync_api = pytest.importorskip("playwright.sync_api")
+    """A persistent headless Chromium context (Debian's binary), shared by the session.
+
+    Without Chromium or Playwright the browser tests are skipped, saying how to install
+    them; with ``ANUNNAKI_REQUIRE_BROWSER=1`` (CI) they fail instead.
+    """
+    need_browser()
+    from playwright import sync_api
+
     profile = tempfile.mkdtemp(prefix="anunnaki-chromium-")
     pw = sync_api.sync_playwright().start()
     try:

@@ -10,16 +10,21 @@ they would on zenoh.
 from __future__ import annotations
 
 import contextlib
+import importlib.util
 import json
 import os
+import socket
 import struct
+import time
 import urllib.error
 import urllib.request
 import zlib
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, ClassVar
+
+import pytest
 
 from anunnaki.bus import InprocHub, open_bus
 from anunnaki.managed import ScriptedSystem
@@ -32,6 +37,50 @@ ROVER = ROOT / "examples" / "rover"
 ARTIFACTS = HERE / "artifacts"
 CHROMIUM = os.environ.get("ANUNNAKI_CHROMIUM", "/usr/bin/chromium")
 TOKEN = "s3cret-operator-token"
+#: Set to 1 (CI does) to make a missing browser a failure instead of a skip.
+REQUIRE_BROWSER = "ANUNNAKI_REQUIRE_BROWSER"
+
+
+def browser_missing() -> str | None:
+    """Why the browser tests cannot run here, and how to fix it (``None``: they can)."""
+    if not Path(CHROMIUM).exists():
+        return (
+            f"Chromium is not installed at {CHROMIUM}: install it with "
+            "scripts/setup-browser.sh (as root; scripts/setup.sh runs it)"
+        )
+    if importlib.util.find_spec("playwright") is None:
+        return "Playwright is not installed: pip install -e '.[dev]' (scripts/setup.sh does)"
+    return None
+
+
+def need_browser() -> None:
+    """Skip the calling test without a browser, or fail it when the browser is required."""
+    missing = browser_missing()
+    if missing is None:
+        return
+    if os.environ.get(REQUIRE_BROWSER) == "1":
+        pytest.fail(f"{REQUIRE_BROWSER}=1 requires the browser tests. {missing}", pytrace=False)
+    pytest.skip(f"{missing} (with {REQUIRE_BROWSER}=1 this is a failure)")
+
+
+def wait_for(predicate: Callable[[], Any], timeout: float = 30.0, what: str = "condition") -> Any:
+    """Re-check ``predicate`` until it returns something true (returned) or the deadline."""
+    deadline = time.monotonic() + timeout
+    while True:
+        value = predicate()
+        if value:
+            return value
+        if time.monotonic() > deadline:
+            raise AssertionError(f"timed out waiting for {what}")
+        time.sleep(0.02)
+
+
+def free_port() -> int:
+    """A TCP port free on loopback now."""
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
+        s.bind(("127.0.0.1", 0))
+        port: int = s.getsockname()[1]
+        return port
 
 
 def png(width: int, height: int, rgb: tuple[int, int, int]) -> bytes:

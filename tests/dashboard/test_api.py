@@ -3,17 +3,35 @@
 from __future__ import annotations
 
 import argparse
+import http.client
 import json
 import os
+import queue
 import signal
 import socket
 import subprocess
 import sys
+import threading
 import time
+import urllib.parse
 from pathlib import Path
+from typing import Any
 
+import dashboard_helpers
 import pytest
-from dashboard_helpers import HERE, ROOT, ROVER, TOKEN, RoverRun, Web, png
+from dashboard_helpers import (
+    HERE,
+    REQUIRE_BROWSER,
+    ROOT,
+    ROVER,
+    TOKEN,
+    RoverRun,
+    Web,
+    free_port,
+    need_browser,
+    png,
+    wait_for,
+)
 
 from anunnaki.bus import Detections, Image, open_bus
 from anunnaki.cli import _dashboard
@@ -23,20 +41,12 @@ from anunnaki.dashboard import (
     DashboardState,
     create_app,
 )
+from anunnaki.dashboard._server import is_loopback, loopback_names
 from anunnaki.errors import MissingExtraError, ModelFileError
 from anunnaki.goals import load_goal_model
 from anunnaki.tactics import load_tactics
-
-
-def wait_for(predicate, timeout: float = 30.0, what: str = "condition"):
-    deadline = time.monotonic() + timeout
-    while True:
-        value = predicate()
-        if value:
-            return value
-        if time.monotonic() > deadline:
-            raise AssertionError(f"timed out waiting for {what}")
-        time.sleep(0.02)
+from anunnaki.utu._launch import load_launch
+from anunnaki.utu._nodes import DECISIONS_TOPIC
 
 
 @pytest.fixture
@@ -85,6 +95,25 @@ def test_state_derives_executions_and_dedupes_decisions(state: DashboardState) -
         "postcondition_ok",
         25.5,
     )
+
+
+def test_state_flags_follow_the_newest_of_analysis_and_operator_decisions(
+    state: DashboardState,
+) -> None:
+    """Utu publishes its analysis only when a goal changes: a pause shows from the log."""
+    state.take_analysis({"t": 4.0, "paused": False, "run_stopped": False})
+    state.take_decisions([{"t": 5.0, "kind": "paused", "data": {"caller": "x"}}])
+    assert state.snapshot()["analysis"]["paused"] is True
+    state.take_analysis({"t": 4.5, "paused": False})  # late, and older than the pause
+    assert state.snapshot()["analysis"]["paused"] is True
+    state.take_decisions([{"t": 5.5, "kind": "run_stop", "data": {"caller": "x"}}])
+    assert state.snapshot()["analysis"]["run_stopped"] is True
+    state.take_decisions([{"t": 6.0, "kind": "resumed_adaptation", "data": {"caller": "x"}}])
+    analysis = state.snapshot()["analysis"]
+    assert (analysis["paused"], analysis["run_stopped"]) == (False, False)
+    state.take_analysis({"t": 7.0, "paused": True, "run_stopped": False})  # newer: it holds
+    state.take_decisions([{"t": 3.0, "kind": "resumed_adaptation"}])  # older: history only
+    assert state.snapshot()["analysis"]["paused"] is True
 
 
 def test_state_evaluates_on_its_own_until_utu_speaks(state: DashboardState) -> None:
@@ -153,6 +182,67 @@ def test_operator_with_token_is_logged_by_utu_with_its_caller(rover_run: RoverRu
         assert paused.data["caller"] == "dashboard:alice@127.0.0.1"
     finally:
         dash.close()
+
+
+def test_operator_reject_resume_and_run_stop_are_applied_and_logged(
+    rover_run: RoverRun,
+) -> None:
+    """Each action reaches Utu, changes its state at its next step, and is recorded by Utu and
+    shown in the dashboard's decision log with the caller the dashboard named."""
+    rover_run.run_to(25.2)  # fail-safe and report-degradation pending approval
+    auth = {"Authorization": f"Bearer {TOKEN}"}
+    caller = "dashboard:bob@127.0.0.1"
+    manager = rover_run.manager
+    with Dashboard(
+        rover_run.model, rover_run.tactics, bus=rover_run.bus, clock="sim", port=0, token=TOKEN
+    ) as dash:
+        client = Web(dash.url)
+
+        def act(action: str, t: float, **body: str) -> None:
+            r = client.post(
+                f"/api/operator/{action}", json={"operator": "bob", **body}, headers=auth
+            )
+            assert r.status_code == 200, r.text
+            assert r.json()["caller"] == caller
+            rover_run.step(t)  # Utu applies the call at its next step
+
+        def logged(kind: str) -> dict:
+            rows = [d for d in dash.state.snapshot()["decisions"] if d["kind"] == kind]
+            return rows[-1] if rows else {}
+
+        act("reject", 25.3, tactic="report-degradation")
+        (rejected,) = rover_run.decisions("rejected")
+        assert (rejected.tactic, rejected.data["caller"]) == ("report-degradation", caller)
+        queue = {row["tactic"]: row["state"] for row in manager.planner.queue()}
+        assert queue == {"fail-safe": "pending", "report-degradation": "rejected"}
+        row = wait_for(lambda: logged("rejected"), what="the rejection in the decision log")
+        assert (row["tactic"], row["data"]["caller"]) == ("report-degradation", caller)
+
+        act("pause", 25.4)
+        assert manager.paused
+        wait_for(lambda: dash.state.snapshot()["analysis"]["paused"], what="paused flag")
+        act("resume", 25.5)
+        assert not manager.paused
+        (resumed,) = rover_run.decisions("resumed_adaptation")
+        assert resumed.data["caller"] == caller
+        assert wait_for(lambda: logged("resumed_adaptation"))["data"]["caller"] == caller
+        assert dash.state.snapshot()["analysis"]["paused"] is False
+
+        act("run_stop", 25.6, reason="cliff ahead")
+        assert manager.run_stopped
+        (stop,) = rover_run.decisions("run_stop")
+        assert (stop.data["caller"], stop.data["reason"]) == (caller, "cliff ahead")
+        assert stop.data["service"] == "/rover/stop"
+        assert rover_run.rover.overrides.get("stopped") is True  # Utu called /rover/stop
+        row = wait_for(lambda: logged("run_stop"), what="the run-stop in the decision log")
+        assert (row["data"]["caller"], row["data"]["reason"]) == (caller, "cliff ahead")
+        analysis = dash.state.snapshot()["analysis"]
+        assert (analysis["run_stopped"], analysis["paused"]) == (True, True)
+
+        assert client.post("/api/operator/reboot", json={}, headers=auth).status_code == 404
+        no_tactic = client.post("/api/operator/reject", json={}, headers=auth)
+        assert no_tactic.status_code == 502
+        assert "reject needs the name of a pending tactic" in no_tactic.json()["detail"]
 
 
 # -- the server and its event stream --------------------------------------------------------
@@ -229,7 +319,9 @@ def test_port_in_use_is_a_clear_error(state: DashboardState) -> None:
         taken.bind(("127.0.0.1", 0))
         taken.listen(1)
         port = taken.getsockname()[1]
-        with pytest.raises(DashboardError, match=f"port {port} on 127.0.0.1 is in use"):
+        with pytest.raises(
+            DashboardError, match=f"port {port} on 127.0.0.1 is in use.*--dashboard-port N"
+        ):
             Dashboard(state.model, state.tactics, port=port)
 
 
@@ -329,8 +421,7 @@ def test_run_with_dashboard_serves_the_rover_run(tmp_path: Path) -> None:
 
 
 def test_setup_browser_script_is_idempotent() -> None:
-    if not Path("/usr/bin/chromium").exists():
-        pytest.skip("Chromium is not installed")
+    need_browser()
     out = subprocess.run(
         ["bash", str(ROOT / "scripts" / "setup-browser.sh")],
         capture_output=True,
@@ -348,3 +439,230 @@ def test_example_files_stay_in_sync() -> None:
         t.name: t.priority for t in load_tactics(HERE / "data" / "tactics-approval.yaml").tactics
     }
     assert {k: variant[k] for k in example} == example
+
+
+# -- the test set-up: the browser tests cannot pass unnoticed --------------------------------
+def test_missing_browser_skips_saying_how_to_install(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setattr(dashboard_helpers, "CHROMIUM", "/nonexistent/chromium")
+    monkeypatch.delenv(REQUIRE_BROWSER, raising=False)
+    with pytest.raises(pytest.skip.Exception) as skipped:
+        need_browser()
+    assert "Chromium is not installed at /nonexistent/chromium" in str(skipped.value)
+    assert "scripts/setup-browser.sh" in str(skipped.value)
+
+
+def test_missing_browser_fails_when_required(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setattr(dashboard_helpers, "CHROMIUM", "/nonexistent/chromium")
+    monkeypatch.setenv(REQUIRE_BROWSER, "1")
+    with pytest.raises(pytest.fail.Exception) as failed:
+        need_browser()
+    assert f"{REQUIRE_BROWSER}=1 requires the browser tests" in str(failed.value)
+    assert "scripts/setup-browser.sh" in str(failed.value)
+
+
+def test_required_browser_turns_the_browser_tests_red(tmp_path: Path) -> None:
+    """End to end: CI's setting makes a browser test an error, not a skip (exit code 1)."""
+    env = {**os.environ, "ANUNNAKI_CHROMIUM": str(tmp_path / "no-chromium")}
+    env[REQUIRE_BROWSER] = "1"
+    out = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "pytest",
+            "-q",
+            "-p",
+            "no:cacheprovider",
+            "-k",
+            "screenshot",
+            str(HERE / "test_browser.py"),
+        ],
+        capture_output=True,
+        text=True,
+        env=env,
+        cwd=ROOT,
+        timeout=120,
+        check=False,
+    )
+    assert out.returncode == 1, out.stdout + out.stderr
+    assert "1 error" in out.stdout
+    assert "skipped" not in out.stdout
+    assert f"{REQUIRE_BROWSER}=1 requires the browser tests" in out.stdout
+
+
+# -- security -------------------------------------------------------------------------------
+def _get_with_host(url: str, host: str | None, path: str = "/api/health") -> tuple[int, bytes]:
+    """GET ``path`` from the server at ``url`` with this ``Host`` header (``None``: none)."""
+    parts = urllib.parse.urlsplit(url)
+    conn = http.client.HTTPConnection(parts.hostname or "", parts.port, timeout=30)
+    try:
+        conn.putrequest("GET", path, skip_host=True)
+        if host is not None:
+            conn.putheader("Host", host)
+        conn.endheaders()
+        r = conn.getresponse()
+        return r.status, r.read()
+    finally:
+        conn.close()
+
+
+def test_loopback_server_refuses_foreign_host_headers(state: DashboardState) -> None:
+    """DNS rebinding: a page of evil.example whose name resolves to 127.0.0.1 gets 400."""
+    client = Web.serve(create_app(state))
+    port = urllib.parse.urlsplit(client.url).port
+    for host in ("evil.example", f"evil.example:{port}", f"127.0.0.1.evil.example:{port}", ""):
+        status, body = _get_with_host(client.url, host)
+        assert status == 400, host
+        assert b"invalid host header" in body.lower()
+    for path in ("/", "/api/snapshot", "/api/events", "/static/dashboard.js"):
+        assert _get_with_host(client.url, f"evil.example:{port}", path)[0] == 400, path
+    assert _get_with_host(client.url, None)[0] == 400
+    for host in (f"127.0.0.1:{port}", f"localhost:{port}", "LOCALHOST", f"[::1]:{port}"):
+        status, body = _get_with_host(client.url, host)
+        assert status == 200, host
+        assert json.loads(body)["ok"] is True
+
+
+def test_server_on_all_interfaces_accepts_any_host_and_the_cli_warns(
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    launch = load_launch(ROVER / "utu.yaml", read_records=False)
+    quiet = _dashboard.dashboard_for_launch(launch, port=0)
+    try:
+        assert quiet.server.loopback
+        assert capsys.readouterr().err == ""
+    finally:
+        quiet.close()
+    exposed = _dashboard.dashboard_for_launch(launch, host="0.0.0.0", port=0)
+    try:
+        err = capsys.readouterr().err
+        assert "dashboard: warning: serving on 0.0.0.0, not only on this machine" in err
+        assert f"anyone who can reach port {exposed.server.port} can watch the run" in err
+        assert "give it a --token" in err
+        exposed.start()
+        local = f"http://127.0.0.1:{exposed.server.port}/"
+        assert _get_with_host(local, "dashboard.example.org")[0] == 200  # no name to check
+    finally:
+        exposed.close()
+    assert not is_loopback("0.0.0.0")
+    assert not is_loopback("10.1.2.3")
+    assert not is_loopback("rover.local")
+    assert is_loopback("127.0.0.1")
+    assert is_loopback("127.0.0.2")
+    assert is_loopback("::1")
+    assert is_loopback("localhost")
+    assert loopback_names("127.0.0.2") == ["127.0.0.1", "127.0.0.2", "[::1]", "localhost"]
+    assert loopback_names("::1") == ["127.0.0.1", "[::1]", "localhost"]
+
+
+def test_cli_serves_on_loopback_by_default() -> None:
+    assert _dashboard_args(str(ROVER / "utu.yaml")).host == "127.0.0.1"
+    parser = argparse.ArgumentParser()
+    _dashboard.add_run_options(parser)
+    assert parser.parse_args([]).dashboard_host == "127.0.0.1"
+
+
+# -- anunnaki dashboard on zenoh --------------------------------------------------------------
+def _lines(stream: Any) -> queue.Queue[str | None]:
+    """The lines of a subprocess's output as they come (``None`` at the end)."""
+    out: queue.Queue[str | None] = queue.Queue()
+
+    def pump() -> None:
+        for line in stream:
+            out.put(line)
+        out.put(None)
+
+    threading.Thread(target=pump, daemon=True).start()
+    return out
+
+
+def _next_line(lines: queue.Queue[str | None], prefix: str, seen: list[str]) -> str:
+    deadline = time.monotonic() + 60
+    while (left := deadline - time.monotonic()) > 0:
+        try:
+            line = lines.get(timeout=left)
+        except queue.Empty:
+            break
+        if line is None:
+            break
+        seen.append(line)
+        if line.startswith(prefix):
+            return line
+    raise AssertionError(f"no line starting {prefix!r} in:\n{''.join(seen)}")
+
+
+@pytest.mark.slow
+def test_cli_dashboard_serves_what_a_zenoh_bus_carries() -> None:
+    """``anunnaki dashboard`` in its own process joins a zenoh bus (loopback TCP, no
+    multicast scouting) on which a stand-in for Utu publishes; its page's snapshot shows it."""
+    pytest.importorskip("zenoh")
+    port = free_port()
+    model = load_goal_model(ROVER / "goals.yaml", ROVER / "binding.yaml")
+    nodes = {n: [1.0, "satisfied"] for n in [*model.goals, *model.obstacles]}
+    for n in ("G1", "G2", "G3", "G4"):
+        nodes[n] = [0.0, "unsatisfied"]
+    analysis = {
+        "t": 25.2,
+        "root": "G1",
+        "nodes": nodes,
+        "violated": ["G1", "G2", "G3", "G4"],
+        "tactics": ["fail-safe"],
+        "queue": [{"tactic": "fail-safe", "priority": 100, "state": "pending", "deadline": None}],
+        "paused": False,
+        "run_stopped": False,
+    }
+    decision = {"id": 7, "t": 25.2, "kind": "pending_approval", "tactic": "fail-safe", "data": {}}
+    with open_bus(
+        "zenoh", listen=[f"tcp/127.0.0.1:{port}"], multicast_scouting=False, name="utu"
+    ) as utu:
+        proc = subprocess.Popen(
+            [
+                sys.executable,
+                "-m",
+                "anunnaki.cli.main",
+                "dashboard",
+                str(ROVER / "utu.yaml"),
+                "--connect",
+                f"tcp/127.0.0.1:{port}",
+                "--port",
+                "0",
+            ],
+            stdout=subprocess.PIPE,
+            stderr=subprocess.STDOUT,
+            text=True,
+            env={**os.environ, "PYTHONUNBUFFERED": "1"},
+        )
+        seen: list[str] = []
+        assert proc.stdout is not None
+        lines = _lines(proc.stdout)
+        try:
+            url = _next_line(lines, "dashboard: http", seen).split()[1]
+            assert url.startswith("http://127.0.0.1:")  # the default host
+            _next_line(lines, "dashboard: observing rover on bus", seen)
+            client = Web(url)
+
+            def shown() -> dict | None:
+                utu.publish("/utu/analyze/state", analysis)  # until the link is up
+                utu.publish(DECISIONS_TOPIC, {"decisions": [decision]})
+                snap = client.get("/api/snapshot").json()
+                ok = snap["goal_source"] == "utu" and snap["decisions"]
+                return snap if ok and snap["goals"]["G1"] == [0.0, "unsatisfied"] else None
+
+            snap = wait_for(shown, timeout=60, what="the bus's analysis on the page")
+            assert snap["analysis"]["violated"] == ["G1", "G2", "G3", "G4"]
+            assert snap["analysis"]["eligible"] == ["fail-safe"]
+            assert snap["analysis"]["queue"][0]["tactic"] == "fail-safe"
+            assert snap["analysis"]["t"] == 25.2
+            assert snap["goals"]["O1"] == [1.0, "satisfied"]
+            # Published again and again, the decision is shown once.
+            assert [d["kind"] for d in snap["decisions"]] == ["pending_approval"]
+            assert client.get("/api/health").json()["operator"] is False  # no token: read-only
+            proc.send_signal(signal.SIGINT)
+            assert proc.wait(timeout=30) == 0
+        finally:
+            if proc.poll() is None:
+                proc.kill()
+                proc.wait()
+            while (line := lines.get(timeout=30)) is not None:  # the output to its end
+                seen.append(line)
+            proc.stdout.close()
+        assert "dashboard: stopped\n" in seen, "".join(seen)

@@ -29,6 +29,7 @@ __all__ = [
     "run",
     "token_from",
     "wait_for_signal",
+    "warn_exposed",
 ]
 
 #: The environment variable read when no token is given on the command line.
@@ -128,6 +129,8 @@ def dashboard_for_launch(
 ) -> Any:
     """Build (and bind, not yet start) the dashboard of a launch; attach a bus later.
 
+    A host other than loopback is served as asked, with a warning on stderr.
+
     Raises:
         MissingExtraError: fastapi/uvicorn are not installed.
         DashboardError: The port is in use or the address is bad.
@@ -137,7 +140,7 @@ def dashboard_for_launch(
 
     if topics is None:
         topics = ObserverConfig(clock=launch.utu.clock_topic)
-    return Dashboard(
+    dashboard = Dashboard(
         launch.parts.model,
         launch.parts.tactics,
         name=launch.name,
@@ -146,6 +149,21 @@ def dashboard_for_launch(
         port=port,
         token=token,
         topics=topics,
+    )
+    if not dashboard.server.loopback:
+        warn_exposed(host, dashboard.server.port, token)
+    return dashboard
+
+
+def warn_exposed(host: str, port: int, token: str | None) -> None:
+    """Warn on stderr that the dashboard is served beyond this machine."""
+    act = "" if token is None else ", and anyone with the token can act on it"
+    advice = "put it behind TLS (a reverse proxy)" + (" and give it a --token" if not token else "")
+    print(
+        f"dashboard: warning: serving on {host}, not only on this machine: anyone who can "
+        f"reach port {port} can watch the run{act}; {advice}",
+        file=sys.stderr,
+        flush=True,
     )
 
 

@@ -18,8 +18,8 @@ the agents' topics (binding)    the monitor pane and the dashboard's own evaluat
 =============================== ========================================================
 
 Each has its own bounded queue, so a flood of camera frames cannot delay the analysis
-(guideline S1). At start it asks ``/utu/knowledge/query`` for the state and the decisions
-so far, so a dashboard started after Utu still shows the whole log.
+(guideline S1). At start it asks ``/utu/knowledge/query`` for the decisions, the state and
+the plan's queue so far, so a dashboard started after Utu still shows the whole log.
 
 It never writes to the bus, except for the operator's actions (:meth:`BusObserver.operate`),
 which are requests to Utu's services ``/utu/pause``, ``/utu/resume``, ``/utu/approve`` and
@@ -29,6 +29,7 @@ which are requests to Utu's services ``/utu/pause``, ``/utu/resume``, ``/utu/app
 from __future__ import annotations
 
 import bisect
+import contextlib
 import itertools
 import logging
 import threading
@@ -129,6 +130,9 @@ class SimTime:
     dashboard's evaluation never judges staleness or rates before the inputs are in.
     """
 
+    #: Most senders of ``/clock`` remembered at once.
+    MAX_SENDERS = 64
+
     def __init__(self, *, patience: float = 0.2, history: int = 512) -> None:
         self.patience = patience
         self._lock = threading.Lock()
@@ -146,6 +150,9 @@ class SimTime:
     def clock(self, sender: str, sent_at: float, t: float) -> None:
         """A ``/clock`` message: ``t`` simulated seconds, published at ``sent_at`` (wall)."""
         with self._lock:
+            if sender not in self._clocks and len(self._clocks) >= self.MAX_SENDERS:
+                # Bounded: forget the sender whose clock was heard from longest ago.
+                del self._clocks[min(self._clocks, key=lambda k: self._clocks[k][-1][0])]
             hist = self._clocks.setdefault(sender, deque(maxlen=self._history))
             if not hist or sent_at >= hist[-1][0]:
                 hist.append((sent_at, t))
@@ -263,10 +270,8 @@ class BusObserver:
         self.state.take_queue(_body(sample.message).get("queue"))
 
     def _on_status(self, sample: Sample) -> None:
-        body = _body(sample.message)
-        self.state.take_flags(
-            paused=bool(body.get("paused")), run_stopped=bool(body.get("run_stopped"))
-        )
+        body = _body(sample.message)  # flags that are not bools are ignored
+        self.state.take_flags(paused=body.get("paused"), run_stopped=body.get("run_stopped"))
 
     def _on_decisions(self, sample: Sample) -> None:
         rows = _body(sample.message).get("decisions")
@@ -326,8 +331,16 @@ class BusObserver:
             if isinstance(rows, list):
                 self.state.take_decisions(rows)
             state = _body(self.bus.request(c.query, {"what": "state"}, timeout=c.query_timeout))
-            if state.get("ok") is not False and state.get("nodes") and not self.state.has_analysis:
-                self.state.take_analysis(state)
+            if state.get("ok") is not False and state.get("nodes"):
+                # Utu's state answer has no queue: ask for it too, and apply both at once.
+                with contextlib.suppress(BusError, AnunnakiError):  # then without the queue
+                    queue = _body(
+                        self.bus.request(c.query, {"what": "queue"}, timeout=c.query_timeout)
+                    )
+                    if queue.get("ok") is not False and isinstance(queue.get("queue"), list):
+                        state["queue"] = queue["queue"]
+                if not self.state.has_analysis:  # a live analysis is newer
+                    self.state.take_analysis(state)
         except (BusError, AnunnakiError) as exc:
             if not self._closed.is_set():
                 log.info("dashboard: no answer from %s (%s); showing live data only", c.query, exc)

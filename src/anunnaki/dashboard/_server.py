@@ -25,7 +25,14 @@ from anunnaki.errors import AnunnakiError, MissingExtraError
 from anunnaki.goals import GoalModel
 from anunnaki.tactics import TacticSet
 
-__all__ = ["Dashboard", "DashboardError", "DashboardServer", "create_app"]
+__all__ = [
+    "Dashboard",
+    "DashboardError",
+    "DashboardServer",
+    "create_app",
+    "is_loopback",
+    "loopback_names",
+]
 
 log = logging.getLogger("anunnaki.dashboard")
 
@@ -57,6 +64,24 @@ def create_app(state: DashboardState, operator: Operator | None = None, **kwargs
     return build(state, operator, **kwargs)
 
 
+def is_loopback(host: str) -> bool:
+    """Whether ``host`` (an address or ``localhost``) is reachable from this machine only."""
+    if host.lower() == "localhost":
+        return True
+    try:
+        return ipaddress.ip_address(host.strip("[]")).is_loopback
+    except ValueError:
+        return False
+
+
+def loopback_names(host: str) -> list[str]:
+    """The ``Host`` names a server bound to loopback ``host`` answers to (DNS rebinding)."""
+    bound = host.strip("[]").lower()
+    names = {"127.0.0.1", "localhost", "[::1]"}
+    names.add(f"[{bound}]" if ":" in bound else bound)
+    return sorted(names)
+
+
 def _bind(host: str, port: int) -> socket.socket:
     try:
         family = socket.AF_INET6 if ipaddress.ip_address(host).version == 6 else socket.AF_INET
@@ -71,8 +96,8 @@ def _bind(host: str, port: int) -> socket.socket:
         sock.close()
         if exc.errno == errno.EADDRINUSE:
             raise DashboardError(
-                f"port {port} on {host} is in use; give another with --port N "
-                "(or --port 0 for any free port)"
+                f"port {port} on {host} is in use; give another (anunnaki dashboard --port N, "
+                "anunnaki run --dashboard-port N; 0 for any free port)"
             ) from None
         raise DashboardError(f"cannot listen on {host}:{port}: {exc.strerror or exc}") from None
     sock.setblocking(False)
@@ -81,6 +106,11 @@ def _bind(host: str, port: int) -> socket.socket:
 
 class DashboardServer:
     """Runs an ASGI app with uvicorn in a daemon thread.
+
+    Bound to a loopback address, it answers only requests whose ``Host`` header names
+    loopback (``127.0.0.1``, ``localhost``, ``::1`` or the bound address): others get 400,
+    which defeats DNS rebinding. Bound elsewhere, it accepts any ``Host`` (the command
+    line warns about such an address).
 
     Args:
         app: The application.
@@ -104,6 +134,7 @@ class DashboardServer:
         self.stopping = stopping or threading.Event()
         self._sock = _bind(host, port)
         self.port: int = self._sock.getsockname()[1]
+        self.loopback = is_loopback(host)
         self._server: Any = None
         self._thread: threading.Thread | None = None
         self._error: BaseException | None = None
@@ -125,8 +156,15 @@ class DashboardServer:
         """
         import uvicorn
 
+        app = self.app
+        if self.loopback:
+            from starlette.middleware.trustedhost import TrustedHostMiddleware
+
+            app = TrustedHostMiddleware(
+                app, allowed_hosts=loopback_names(self.host), www_redirect=False
+            )
         config = uvicorn.Config(
-            self.app,
+            app,
             log_level="warning",
             lifespan="off",
             access_log=False,

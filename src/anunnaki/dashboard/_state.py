@@ -18,6 +18,7 @@ goal model fed with the same agent topics, which answers *why* a node has its st
 from __future__ import annotations
 
 import json
+import logging
 import math
 import threading
 import time
@@ -30,6 +31,8 @@ from anunnaki.goals import Evaluator, GoalModel
 from anunnaki.tactics import TacticSet
 
 __all__ = ["DashboardState", "Frame"]
+
+log = logging.getLogger("anunnaki.dashboard")
 
 #: Decision kinds drawn as markers on the timeline.
 TIMELINE_KINDS = frozenset(
@@ -48,7 +51,20 @@ TIMELINE_KINDS = frozenset(
     }
 )
 _RESULT_KINDS = frozenset({"postcondition_ok", "postcondition_failed", "completed"})
+#: Decisions that change Utu's pause and run-stop flags (Utu publishes its analysis only
+#: when a goal changes, so the header learns of an operator's call from the decision log).
+_FLAG_KINDS: dict[str, dict[str, bool]] = {
+    "paused": {"paused": True},
+    "resumed_adaptation": {"paused": False, "run_stopped": False},
+    "run_stop": {"paused": True, "run_stopped": True},
+}
 _STATUSES = ("satisfied", "unsatisfied", "unknown")
+#: Bounds on what a message can make the dashboard keep (whatever arrives on the bus).
+MAX_ASSESSORS = 32
+MAX_NAME = 200
+MAX_LIST = 500
+MAX_ACTIONS = 100
+_SAFE_INT = 2**53
 
 
 @dataclass(frozen=True)
@@ -105,15 +121,65 @@ class _Topic:
 
 
 def _num(value: Any) -> float | None:
+    """A finite number as a float, else ``None`` (bools, strings, NaN, ints beyond float)."""
     if isinstance(value, bool) or not isinstance(value, int | float):
         return None
-    return float(value) if math.isfinite(value) else None
+    try:
+        f = float(value)
+    except OverflowError:  # an int too large for a float, e.g. 10**400
+        return None
+    return f if math.isfinite(f) else None
 
 
-def _decision_key(d: Mapping[str, Any]) -> str:
-    return json.dumps(
-        [d.get("t"), d.get("kind"), d.get("tactic"), d.get("data")], sort_keys=True, default=str
-    )
+def _number(value: Any) -> int | float | None:
+    """Like :func:`_num`, but an int that a page can hold exactly stays an int."""
+    if isinstance(value, int) and not isinstance(value, bool) and -_SAFE_INT < value < _SAFE_INT:
+        return value
+    return _num(value)
+
+
+def _name(value: Any) -> str | None:
+    """A non-empty string of at most :data:`MAX_NAME` characters, else ``None``."""
+    return value if isinstance(value, str) and 0 < len(value) <= MAX_NAME else None
+
+
+def _names(value: Any) -> list[str] | None:
+    """A list of names (others dropped, at most :data:`MAX_LIST`); ``None`` if not a list."""
+    if not isinstance(value, list | tuple):
+        return None
+    return [v for v in (_name(x) for x in value[:MAX_LIST]) if v is not None]
+
+
+def _flag(value: Any) -> bool | None:
+    return value if isinstance(value, bool) else None
+
+
+def _plain(value: Mapping[Any, Any], limit: int = MAX_LIST) -> dict[str, Any]:
+    """A mapping with string keys (at most ``limit`` of them), as JSON can carry it."""
+    return {str(k): v for k, v in list(value.items())[:limit]}
+
+
+def _queue_rows(value: Any) -> list[dict[str, Any]] | None:
+    """The plan's queue, each row ``{tactic, priority, state, deadline}``; ``None`` if no list."""
+    if not isinstance(value, list | tuple):
+        return None
+    rows = []
+    for row in value[:MAX_LIST]:
+        if not isinstance(row, Mapping):
+            continue
+        tactic = _name(row.get("tactic"))
+        if tactic is None:
+            continue
+        state = _name(row.get("state"))
+        rows.append(
+            {
+                "tactic": tactic,
+                "priority": _number(row.get("priority")),
+                "state": state or "unknown",
+                "deadline": _number(row.get("deadline")),
+            }
+        )
+    return rows
 
 
 class DashboardState:
@@ -172,6 +238,7 @@ class DashboardState:
         }
         self._analysis_v = 0
         self._utu_t: float | None = None
+        self._flags_t: float | None = None  # Utu's time of the last pause/resume/run-stop
         staleness = model.spec.staleness
         self._topics: dict[str, _Topic] = {}
         for agent in model.agents.values():
@@ -182,6 +249,8 @@ class DashboardState:
                 entry.agents.append(agent.id)
                 entry.staleness = min(entry.staleness, agent.staleness or staleness)
         self._oracle: dict[str, dict[str, Any]] = {}
+        self._oracle_when: dict[str, int] = {}
+        self._oracle_heard = 0
         self._oracle_v = 0
         self._frames: deque[Frame] = deque(maxlen=8)
         self._detections: dict[int, dict[str, Any]] = {}
@@ -236,18 +305,23 @@ class DashboardState:
     # -- writers (bus threads) -------------------------------------------------------------
     def take_input(self, topic: str, message: Mapping[str, Any], t: float | None = None) -> None:
         """An agent's message: the monitor pane's row and the dashboard's own evaluation."""
+        if not isinstance(message, Mapping):
+            return
         now = self.clock() if t is None else t
         with self._lock:
             entry = self._topics.get(topic)
             if entry is None:
                 return
-            entry.last = dict(message)
+            entry.last = _plain(message)
             entry.last_t = now
             entry.count += 1
             entry.arrivals.append(now)
             entry.version = self._bump()
-            self._evaluator.observe(topic, message, now)
-            self._evaluate_own(now)
+            try:
+                self._evaluator.observe(topic, message, now)
+                self._evaluate_own(now)
+            except Exception:  # one odd message must not stop the monitor pane
+                log.warning("dashboard: could not evaluate a message of %s", topic, exc_info=True)
         self._changed()
 
     def tick(self) -> None:
@@ -275,31 +349,73 @@ class DashboardState:
             return
         self._goals[nid] = (utility, status, self._bump())
 
+    def _parse_analysis(self, body: Mapping[str, Any]) -> dict[str, Any]:
+        """What an analysis message says, checked field by field; no side effects.
+
+        Returns:
+            ``{"nodes": {id: (utility, status)} | None, "t": float | None, "fields": {...}}``
+            with only the goal model's nodes, and only the fields that are well typed; an
+            ill-typed field is left out, so the pane keeps showing its previous value.
+
+        """
+        nodes: dict[str, tuple[float | None, str]] | None = None
+        raw = body.get("nodes")
+        if isinstance(raw, Mapping):
+            nodes = {}
+            for nid, value in raw.items():
+                if nid not in self._evaluator.index:
+                    continue  # a node this goal model does not have: never kept
+                if not isinstance(value, list | tuple) or len(value) != 2:
+                    continue
+                status = value[1] if value[1] in _STATUSES else "unknown"
+                nodes[str(nid)] = (_num(value[0]), status)
+        fields: dict[str, Any] = {}
+        violated = _names(body.get("violated"))
+        if violated is not None:
+            fields["violated"] = violated
+        eligible = _names(body["eligible"] if "eligible" in body else body.get("tactics"))
+        if eligible is not None:
+            fields["eligible"] = eligible
+        queue = _queue_rows(body.get("queue"))
+        if queue is not None:
+            fields["queue"] = queue
+        post = body.get("postconditions")
+        if isinstance(post, Mapping):
+            fields["postconditions"] = _plain(post)
+        for key in ("paused", "run_stopped", "warming_up"):
+            flag = _flag(body.get(key))
+            if flag is not None:
+                fields[key] = flag
+        return {"nodes": nodes, "t": _num(body.get("t")), "fields": fields}
+
     def take_analysis(self, body: Mapping[str, Any]) -> None:
-        """A ``/utu/analyze/state`` message: utilities, statuses, violations, eligible tactics."""
-        nodes = body.get("nodes")
+        """A ``/utu/analyze/state`` message: utilities, statuses, violations, eligible tactics.
+
+        The message is checked first and applied as a whole: ill-typed fields are ignored,
+        nodes the goal model does not have are dropped, and nothing is half-applied.
+        """
+        if not isinstance(body, Mapping):
+            return
+        parsed = self._parse_analysis(body)
+        nodes: dict[str, tuple[float | None, str]] | None = parsed["nodes"]
+        t: float | None = parsed["t"]
+        fields: dict[str, Any] = parsed["fields"]
         with self._lock:
-            if isinstance(nodes, Mapping):
+            if t is not None and self._flags_t is not None and t < self._flags_t:
+                # Older than the operator's last call the decision log showed: not its flags.
+                fields = {k: v for k, v in fields.items() if k not in ("paused", "run_stopped")}
+            if nodes:
                 if self._goal_source != "utu":
                     self._goal_source = "utu"
-                    self._goals.clear()
-                for nid, value in nodes.items():
-                    if not isinstance(value, list | tuple) or len(value) != 2:
-                        continue
-                    status = value[1] if value[1] in _STATUSES else "unknown"
-                    self._set_goal(str(nid), _num(value[0]), status)
-            t = _num(body.get("t"))
-            a = dict(self._analysis)
+                    for nid in self._ids:  # what Utu does not say is unknown, not the guess
+                        if nid not in nodes:
+                            self._set_goal(nid, None, "unknown")
+                for nid, (utility, status) in nodes.items():
+                    self._set_goal(nid, utility, status)
+            a = {**self._analysis, **fields}
             if t is not None:
                 a["t"] = t
                 self._utu_t = t if self._utu_t is None else max(self._utu_t, t)
-            for key in ("violated", "postconditions", "queue", "paused", "run_stopped"):
-                if key in body:
-                    a[key] = body[key]
-            if "eligible" in body or "tactics" in body:
-                a["eligible"] = body.get("eligible", body.get("tactics"))
-            if "warming_up" in body:
-                a["warming_up"] = bool(body["warming_up"])
             if a != self._analysis:
                 self._analysis = a
                 self._analysis_v = self._bump()
@@ -315,60 +431,105 @@ class DashboardState:
 
     def take_queue(self, queue: Any) -> None:
         """The plan's priority-sorted queue (``/utu/plan/start`` in per-node runs)."""
-        if not isinstance(queue, list):
-            return
-        self.take_flags(queue=queue)
+        rows = _queue_rows(queue)
+        if rows is not None:
+            self.take_flags(queue=rows)
 
     def take_flags(self, **flags: Any) -> None:
-        """Update analysis fields (``paused``, ``run_stopped``, ``queue``) from other topics."""
+        """Update analysis fields (``paused``, ``run_stopped``, ``queue``) from other topics.
+
+        ``paused`` and ``run_stopped`` must be bools and ``queue`` a list; others are ignored.
+        """
+        clean: dict[str, Any] = {}
+        for key, value in flags.items():
+            if key == "queue":
+                rows = _queue_rows(value)
+                if rows is not None:
+                    clean[key] = rows
+            elif key in ("paused", "run_stopped", "warming_up") and isinstance(value, bool):
+                clean[key] = value
         with self._lock:
-            a = {**self._analysis, **flags}
+            a = {**self._analysis, **clean}
             if a == self._analysis:
                 return
             self._analysis = a
             self._analysis_v = self._bump()
         self._changed()
 
+    @staticmethod
+    def _decision_row(d: Any) -> tuple[str, dict[str, Any]] | None:
+        """A decision's de-duplication key and its row (without ``n``), or ``None`` if bad."""
+        if not isinstance(d, Mapping):
+            return None
+        kind = _name(d.get("kind"))
+        if kind is None:
+            return None
+        raw = d.get("data")
+        data = _plain(raw) if isinstance(raw, Mapping) else {}
+        row = {"t": _num(d.get("t")), "kind": kind, "tactic": _name(d.get("tactic")), "data": data}
+        key = json.dumps(
+            [row["t"], kind, row["tactic"], data], sort_keys=True, default=str, allow_nan=True
+        )
+        return key, row
+
     def take_decisions(self, decisions: Iterable[Mapping[str, Any]]) -> None:
-        """New decisions of the decision log (``/utu/knowledge/decisions`` or a query)."""
+        """New decisions of the decision log (``/utu/knowledge/decisions`` or a query).
+
+        Each decision is checked before its key is remembered, so a malformed one is skipped
+        without hiding a later, well-formed copy; the others of the batch are kept.
+        """
         changed = False
         with self._lock:
             for d in decisions:
-                if not isinstance(d, Mapping) or not isinstance(d.get("kind"), str):
+                try:
+                    parsed = self._decision_row(d)
+                except (TypeError, ValueError, RecursionError):  # data JSON cannot hold
+                    parsed = None
+                if parsed is None:
                     continue
-                key = _decision_key(d)
+                key, row = parsed
                 if key in self._decision_keys:
                     continue
-                if len(self._decision_keys) > 4 * (self._decisions.maxlen or 1000):
-                    self._decision_keys = {_decision_key(x) for x in self._decisions}
+                if len(self._decision_keys) >= 4 * (self._decisions.maxlen or 1000):
+                    kept = (self._decision_row(x) for x in self._decisions)
+                    self._decision_keys = {k[0] for k in kept if k is not None}
                 self._decision_keys.add(key)
                 self._decision_n += 1
-                data = d.get("data") if isinstance(d.get("data"), Mapping) else {}
-                row = {
-                    "n": self._decision_n,
-                    "t": _num(d.get("t")),
-                    "kind": d["kind"],
-                    "tactic": d.get("tactic") if isinstance(d.get("tactic"), str) else None,
-                    "data": dict(data or {}),
-                }
+                row["n"] = self._decision_n
                 self._decisions.append(row)
                 self._execution(row)
+                self._decision_flags(row)
                 self._bump()
                 changed = True
         if changed:
             self._changed()
 
+    def _decision_flags(self, d: dict[str, Any]) -> None:
+        flags = _FLAG_KINDS.get(d["kind"])
+        if flags is None:
+            return
+        analysed = self._analysis.get("t")
+        if d["t"] is not None and analysed is not None and d["t"] < analysed:
+            return  # the analysis since then says what holds
+        if d["t"] is not None:
+            self._flags_t = d["t"] if self._flags_t is None else max(self._flags_t, d["t"])
+        a = {**self._analysis, **flags}
+        if a != self._analysis:
+            self._analysis = a
+            self._analysis_v = self._bump()
+
     def _execution(self, d: dict[str, Any]) -> None:
         kind, tactic = d["kind"], d["tactic"]
         if tactic is None:
             return
+        data = d["data"]
         if kind == "started":
             self._executions.append(
                 {
                     "tactic": tactic,
                     "started": d["t"],
-                    "reason": d["data"].get("reason"),
-                    "deadline": d["data"].get("deadline"),
+                    "reason": data.get("reason"),
+                    "deadline": _number(data.get("deadline")),
                     "actions": [],
                     "result": "awaiting",
                     "result_t": None,
@@ -381,7 +542,8 @@ class DashboardState:
         if run is None:
             return
         if kind == "action":
-            data = d["data"]
+            if len(run["actions"]) >= MAX_ACTIONS:
+                return
             run["actions"].append(
                 {
                     "type": data.get("type"),
@@ -392,31 +554,43 @@ class DashboardState:
         elif kind in _RESULT_KINDS and run["result"] == "awaiting":
             run["result"] = kind
             run["result_t"] = d["t"]
-            run["note"] = d["data"].get("note")
+            run["note"] = data.get("note")
         else:
             return
         self._executions_v = self._bump()
 
     def take_assessment(self, topic: str, body: Mapping[str, Any], t: float | None = None) -> None:
-        """A behavior assessment (``Assessment``, or any message with a ``category``)."""
-        category = body.get("category")
-        if isinstance(category, bool) or not isinstance(category, int):
+        """A behavior assessment (``Assessment``, or any message with a ``category``).
+
+        The category must be 0, 1 or 2 (the paper's categories); other messages are ignored.
+        At most :data:`MAX_ASSESSORS` assessors are kept: a new one replaces the one heard
+        from longest ago.
+        """
+        if not isinstance(body, Mapping):
             return
-        assessor = body.get("assessor")
-        key = assessor if isinstance(assessor, str) and assessor else topic
+        category = body.get("category")
+        if isinstance(category, bool) or not isinstance(category, int) or not 0 <= category <= 2:
+            return
+        key = _name(body.get("assessor")) or topic
         context = body.get("context")
+        seq = body.get("frame_seq")
         row = {
             "assessor": key,
             "topic": topic,
             "category": category,
             "confidence": _num(body.get("confidence")),
-            "context": dict(context) if isinstance(context, Mapping) else {},
-            "model_id": body.get("model_id"),
-            "frame_seq": body.get("frame_seq"),
+            "context": _plain(context, 50) if isinstance(context, Mapping) else {},
+            "model_id": _name(body.get("model_id")),
+            "frame_seq": _number(seq) if isinstance(seq, int) else None,
             "t": self.clock() if t is None else t,
         }
         with self._lock:
+            self._oracle_heard += 1
             self._oracle[key] = row
+            self._oracle_when[key] = self._oracle_heard
+            while len(self._oracle) > MAX_ASSESSORS:
+                oldest = min(self._oracle_when, key=self._oracle_when.__getitem__)
+                del self._oracle[oldest], self._oracle_when[oldest]
             self._oracle_v = self._bump()
         self._changed()
 
@@ -430,14 +604,30 @@ class DashboardState:
 
     def take_detections(self, body: Mapping[str, Any]) -> None:
         """An LEC's detections for one frame (``Detections``)."""
-        seq = body.get("frame_seq")
-        if isinstance(seq, bool) or not isinstance(seq, int):
+        if not isinstance(body, Mapping):
             return
+        seq = body.get("frame_seq")
+        if isinstance(seq, bool) or not isinstance(seq, int) or not 0 <= seq < _SAFE_INT:
+            return
+        boxes = body.get("boxes")
+        labels = body.get("labels")
+        scores = body.get("scores")
         row = {
-            k: body.get(k)
-            for k in ("frame_seq", "model_id", "domain", "width", "height", "boxes", "labels")
+            "frame_seq": seq,
+            "model_id": _name(body.get("model_id")),
+            "domain": _name(body.get("domain")),
+            "width": _number(body.get("width")),
+            "height": _number(body.get("height")),
+            "boxes": [
+                [_num(v) or 0.0 for v in b]
+                for b in (boxes[:MAX_LIST] if isinstance(boxes, list) else [])
+                if isinstance(b, list | tuple) and len(b) == 4
+            ],
+            "labels": [str(x)[:MAX_NAME] for x in labels[:MAX_LIST]]
+            if isinstance(labels, list)
+            else [],
+            "scores": [_num(x) for x in scores[:MAX_LIST]] if isinstance(scores, list) else [],
         }
-        row["scores"] = body.get("scores")
         with self._lock:
             self._detections[seq] = row
             while len(self._detections) > 32:
@@ -453,11 +643,13 @@ class DashboardState:
 
     def take_active_model(self, body: Mapping[str, Any]) -> None:
         """The model manager's announcement ``{lec, model, domain}``."""
+        if not isinstance(body, Mapping):
+            return
         with self._lock:
             self._active_model = {
-                "lec": body.get("lec"),
-                "model": body.get("model"),
-                "domain": body.get("domain"),
+                "lec": _name(body.get("lec")),
+                "model": _name(body.get("model")),
+                "domain": _name(body.get("domain")),
                 "source": "lm_manager",
             }
             self._camera_v = self._bump()

@@ -266,7 +266,9 @@
         el("td", {}, r.topic), el("td", {}, r.agents.join(", ")),
         el("td", { class: "value", title: JSON.stringify(r.last) }, r.last ? JSON.stringify(r.last) : "–"),
         el("td", { class: "num" }, r.rate === null ? "–" : r.rate.toFixed(1) + " Hz"),
-        el("td", { class: "num" + (stale ? " stale" : "") }, age === null ? "never" : age.toFixed(1) + " s"));
+        el("td", { class: "num age" + (stale ? " stale" : ""), title: `stale after ${r.staleness} s` },
+          age === null ? "never" : age.toFixed(1) + " s"),
+        el("td", { class: "num limit" }, Number(r.staleness).toFixed(1) + " s"));
     });
     body.replaceChildren(...rows);
   }
