@@ -165,7 +165,8 @@ class AutonomicManager:
         failsafe: Tactic to escalate to when a postcondition fails and no other tactic applies.
         escalate_to_run_stop: After the fail-safe itself fails, run-stop.
         run_stop_service: Service the run-stop requests on the managed system.
-        publish_state: Publish the analysis on ``/utu/analyze/state`` after each change.
+        publish_state: Publish the analysis on ``/utu/analyze/state`` after each step that
+            changed a goal, decided something or applied an operator call.
 
     """
 
@@ -494,17 +495,12 @@ class AutonomicManager:
         self._plan_and_execute(t)
         first = not self._stepped
         self._stepped = True
-        if (
-            first
-            or inputs
-            or ticked
-            or changed
-            or ops
-            or (self.knowledge.decisions_written != decisions_before)
-        ):
+        decided = self.knowledge.decisions_written != decisions_before
+        if first or inputs or ticked or changed or ops or decided:
             # Mark the end of this step, so a replay steps at the same instants.
             self.knowledge.record_input(t, TICK, {})
-        if changed and self.publish_state:
+        # Goals, the queue (a decision) or the flags (an operator call) changed: tell displays.
+        if (changed or ops or decided) and self.publish_state:
             self._publish_state(t)
 
     def _plan_and_execute(self, t: float) -> None:
@@ -657,6 +653,7 @@ class AutonomicManager:
             return {
                 "ok": True,
                 **self.analyzer.state_message(self.now, self._eligible),
+                "queue": self.planner.queue(),
                 "paused": self.paused,
                 "run_stopped": self.run_stopped,
             }
