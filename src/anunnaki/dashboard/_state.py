@@ -51,8 +51,9 @@ TIMELINE_KINDS = frozenset(
     }
 )
 _RESULT_KINDS = frozenset({"postcondition_ok", "postcondition_failed", "completed"})
-#: Decisions that change Utu's pause and run-stop flags (Utu publishes its analysis only
-#: when a goal changes, so the header learns of an operator's call from the decision log).
+#: Decisions that change Utu's pause and run-stop flags: the header follows the decision log
+#: as well as the analysis, so it shows an operator's call from whichever arrives first (and
+#: from a knowledge base recorded by an Utu that published its analysis on goal changes only).
 _FLAG_KINDS: dict[str, dict[str, bool]] = {
     "paused": {"paused": True},
     "resumed_adaptation": {"paused": False, "run_stopped": False},
