@@ -219,6 +219,8 @@ def test_requires_approval_waits_for_an_operator() -> None:
         "state": "pending",
         "deadline": None,
     }
+    # The state query carries the queue: a display that starts now sees the pending approval.
+    assert m._query({"what": "state"})["queue"] == m.planner.queue()
     m.approve("hand-over", caller="operator-ana")
     drive(m, ticks(1.6, 1.6), category_at=lambda t: 1)
     approved = next(d for d in m.knowledge.decisions() if d.kind == "approved")

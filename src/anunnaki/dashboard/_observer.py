@@ -18,8 +18,9 @@ the agents' topics (binding)    the monitor pane and the dashboard's own evaluat
 =============================== ========================================================
 
 Each has its own bounded queue, so a flood of camera frames cannot delay the analysis
-(guideline S1). At start it asks ``/utu/knowledge/query`` for the decisions, the state and
-the plan's queue so far, so a dashboard started after Utu still shows the whole log.
+(guideline S1). At start it asks ``/utu/knowledge/query`` for the decisions and the state
+(the plan's queue included) so far, so a dashboard started after Utu still shows the whole
+log and any pending approval.
 
 It never writes to the bus, except for the operator's actions (:meth:`BusObserver.operate`),
 which are requests to Utu's services ``/utu/pause``, ``/utu/resume``, ``/utu/approve`` and
@@ -29,7 +30,6 @@ which are requests to Utu's services ``/utu/pause``, ``/utu/resume``, ``/utu/app
 from __future__ import annotations
 
 import bisect
-import contextlib
 import itertools
 import logging
 import threading
@@ -331,16 +331,9 @@ class BusObserver:
             if isinstance(rows, list):
                 self.state.take_decisions(rows)
             state = _body(self.bus.request(c.query, {"what": "state"}, timeout=c.query_timeout))
-            if state.get("ok") is not False and state.get("nodes"):
-                # Utu's state answer has no queue: ask for it too, and apply both at once.
-                with contextlib.suppress(BusError, AnunnakiError):  # then without the queue
-                    queue = _body(
-                        self.bus.request(c.query, {"what": "queue"}, timeout=c.query_timeout)
-                    )
-                    if queue.get("ok") is not False and isinstance(queue.get("queue"), list):
-                        state["queue"] = queue["queue"]
-                if not self.state.has_analysis:  # a live analysis is newer
-                    self.state.take_analysis(state)
+            # The state answer carries the plan's queue: a late dashboard sees pending approvals.
+            if state.get("ok") is not False and state.get("nodes") and not self.state.has_analysis:
+                self.state.take_analysis(state)  # (a live analysis, when there is one, is newer)
         except (BusError, AnunnakiError) as exc:
             if not self._closed.is_set():
                 log.info("dashboard: no answer from %s (%s); showing live data only", c.query, exc)

@@ -1373,7 +1373,7 @@ class KnowledgeNode(UtuNode):
                     "violated": [],
                     "tactics": [],
                 }
-                return {"ok": True, **state, **self._flags}
+                return {"ok": True, **state, "queue": list(self._queue), **self._flags}
         return {"ok": False, "error": f"unknown query {what!r}; ask decisions, queue or state"}
 
     def step(self) -> bool:
