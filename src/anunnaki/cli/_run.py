@@ -22,7 +22,6 @@ from pydantic import ValidationError
 
 from anunnaki.bus import BusConfig, BusConfigError, open_bus
 from anunnaki.cli import _dashboard
-from anunnaki.cli._sim import check_plot_extra
 from anunnaki.utu._launch import load_launch, run_launch, signals_to
 from anunnaki.utu._nodes import NODE_NAMES, build_node
 
@@ -138,7 +137,10 @@ def run(args: argparse.Namespace) -> int:
                 file=sys.stderr,
             )
             return 2
-        check_plot_extra(args.plot)
+        if args.plot:
+            from anunnaki.sim import require_plot_extra
+
+            require_plot_extra()  # before the run, not after it
         update = {
             key: str(Path(value).resolve())
             for key, value in (("report_file", args.report), ("plot_file", args.plot))

@@ -145,7 +145,7 @@ def _run_loop(
     """The platform with its detector and oracle (``--models``); a per-phase report."""
     import time
 
-    from anunnaki.sim import SimulatedSystem, format_phases
+    from anunnaki.sim import SimulatedSystem, format_phases, save_run
 
     oracle = None if args.oracle == "none" else {"name": args.oracle}
     with SimulatedSystem(
@@ -167,29 +167,10 @@ def _run_loop(
             flush=True,
         )
         print(format_phases(system.phases()), flush=True)
-        save_report(system.report(), report=args.report, plot=args.plot)
+        save_run(
+            system.report(), report=args.report, plot=args.plot, say=lambda m: print(m, flush=True)
+        )
     return 0
-
-
-def check_plot_extra(plot: str | None) -> None:
-    """Fail before a run, not after it, when ``--plot`` cannot be drawn."""
-    if plot:
-        import importlib.util
-
-        from anunnaki.errors import MissingExtraError
-
-        if importlib.util.find_spec("matplotlib") is None:
-            raise MissingExtraError("matplotlib", "plot")
-
-
-def save_report(run: Any, *, report: str | None, plot: str | None) -> None:
-    """Write ``--report`` and ``--plot`` of a simulated run (a ``RunReport``), saying where."""
-    if report:
-        print(f"report: {run.write(report)}", flush=True)
-    if plot:
-        from anunnaki.sim import plot_report
-
-        print(f"plot: {plot_report(run, plot)}", flush=True)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -202,7 +183,10 @@ def run(args: argparse.Namespace) -> int:
     if (args.report or args.plot) and not args.models:
         print("error: --report and --plot score the detector: give --models too", file=sys.stderr)
         return 2
-    check_plot_extra(args.plot)
+    if args.plot:
+        from anunnaki.sim import require_plot_extra
+
+        require_plot_extra()  # before the run, not after it
     scenario = _scenario(args)
     options: dict[str, Any] = {"name": f"sim-{args.platform}"}
     if args.bus == "zenoh":

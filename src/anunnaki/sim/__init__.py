@@ -43,7 +43,9 @@ from anunnaki.sim._report import (
     TacticEvent,
     load_report,
     plot_report,
+    require_plot_extra,
     rolling_f1,
+    save_run,
 )
 from anunnaki.sim._rover import (
     CAMERA_FOV,
@@ -135,8 +137,10 @@ __all__ = [
     "load_scenario",
     "parse_scenario",
     "plot_report",
+    "require_plot_extra",
     "rolling_f1",
     "run_pedestrian_encounter",
+    "save_run",
     "scenario_phases",
     "to_detections",
 ]

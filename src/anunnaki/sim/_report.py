@@ -21,16 +21,26 @@ short enough to show a swap taking effect. matplotlib is imported only by :func:
 from __future__ import annotations
 
 import bisect
+import importlib.util
 import json
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
 from anunnaki.errors import AnunnakiError, MissingExtraError
 
-__all__ = ["FrameScore", "RunReport", "TacticEvent", "load_report", "plot_report", "rolling_f1"]
+__all__ = [
+    "FrameScore",
+    "RunReport",
+    "TacticEvent",
+    "load_report",
+    "plot_report",
+    "require_plot_extra",
+    "rolling_f1",
+    "save_run",
+]
 
 FORMAT = "sim-report/1"
 CATEGORY_NAMES = {0: "nominal", 1: "degraded", 2: "compromised"}
@@ -177,6 +187,40 @@ def rolling_f1(frames: Sequence[FrameScore], window: float = 1.0) -> list[float 
         denominator = 2 * t_sum + bad[k + 1] - bad[first]
         out.append(None if denominator == 0 else 2 * t_sum / denominator)
     return out
+
+
+def require_plot_extra() -> None:
+    """Raise now, before a run, when :func:`plot_report` could not draw it afterwards.
+
+    Raises:
+        MissingExtraError: matplotlib is not installed.
+
+    """
+    if importlib.util.find_spec("matplotlib") is None:
+        raise MissingExtraError("matplotlib", "plot")
+
+
+def save_run(
+    run: RunReport,
+    *,
+    report: str | Path | None = None,
+    plot: str | Path | None = None,
+    say: Callable[[str], object] = print,
+) -> None:
+    """Write ``run`` as JSON to ``report`` and draw it to ``plot`` (each when given).
+
+    ``say`` is told where each went (``report: PATH``, ``plot: PATH``) as soon as it is
+    written, so a plot that fails still leaves the report said.
+
+    Raises:
+        OSError: A file could not be written.
+        MissingExtraError: ``plot`` without matplotlib.
+
+    """
+    if report:
+        say(f"report: {run.write(report)}")
+    if plot:
+        say(f"plot: {plot_report(run, plot)}")
 
 
 def plot_report(

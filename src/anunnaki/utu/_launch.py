@@ -430,13 +430,11 @@ def _resolve(data: Any, lines: LineMap, path: Path, *, read_records: bool) -> La
 
 def _check_sim(sim: SimConfig, lines: LineMap, where: str) -> None:
     """Load the scenario and the registry now, so that errors come before bring-up (B5)."""
-    from anunnaki.sim import load_scenario
+    from anunnaki.sim import load_scenario, require_plot_extra
 
     load_scenario(sim.scenario)
     if sim.plot_file is not None:
-        from anunnaki.cli._sim import check_plot_extra
-
-        check_plot_extra(sim.plot_file)
+        require_plot_extra()
     if sim.models is not None:
         from anunnaki.lec import load_registry
 
@@ -1118,21 +1116,22 @@ class _Runner:
                 "per phase:"
             )
             self.say(format_phases(system.phases(printer.decisions)))
-        if system is not None and self.sim is not None:
-            self._save_report(system.report(printer.decisions))
+        if (
+            system is not None
+            and self.sim is not None
+            and (self.sim.report_file or self.sim.plot_file)
+        ):
+            from anunnaki.sim import save_run
 
-    def _save_report(self, run: Any) -> None:
-        """Write ``report_file`` and ``plot_file``; a failure is said, never fatal."""
-        assert self.sim is not None
-        try:
-            if self.sim.report_file:
-                self.say(f"report: {run.write(self.sim.report_file)}")
-            if self.sim.plot_file:
-                from anunnaki.sim import plot_report
-
-                self.say(f"plot: {plot_report(run, self.sim.plot_file)}")
-        except (OSError, AnunnakiError) as exc:
-            self.say(f"report: not written: {exc}")
+            try:  # a file that cannot be written is said, never fatal: the run is over
+                save_run(
+                    system.report(printer.decisions),
+                    report=self.sim.report_file,
+                    plot=self.sim.plot_file,
+                    say=self.say,
+                )
+            except (OSError, AnunnakiError) as exc:
+                self.say(f"report: not written: {exc}")
 
     # -- one process
     def _run_here(self) -> RunResult:
