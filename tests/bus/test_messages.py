@@ -216,3 +216,34 @@ def test_a_new_registered_type_travels_and_versions_are_checked() -> None:
     old = raw.replace(b'"v":2', b'"v":1')
     with pytest.raises(MalformedMessage, match="version 1 is not the known version 2"):
         decode_envelope(old)
+
+
+def test_body_of_reads_messages_and_mappings_alike() -> None:
+    from anunnaki.bus import Generic, RunStop, body_of
+
+    assert body_of(Generic(data={"mode": "manual"})) == {"mode": "manual"}
+    assert body_of({"a": 1}) == {"a": 1}
+    assert body_of(RunStop(reason="r", caller="c"))["caller"] == "c"
+    assert body_of(None) == {} and body_of("text") == {}
+
+
+@pytest.mark.parametrize("encoding", ["png", "jpeg"])
+def test_image_from_array_round_trips(encoding: str) -> None:
+    np = pytest.importorskip("numpy")
+    from anunnaki.bus import Image
+
+    rgb = np.zeros((24, 32, 3), dtype=np.uint8)
+    rgb[:, :16] = (200, 30, 10)
+    img = Image.from_array(rgb, encoding=encoding, quality=95, seq=7)  # type: ignore[arg-type]
+    assert (img.width, img.height, img.channels, img.seq) == (32, 24, 3, 7)
+    back = img.to_array()
+    assert back.shape == (24, 32, 3) and back.dtype == np.uint8
+    err = np.abs(back.astype(int) - rgb.astype(int))
+    if encoding == "png":
+        assert err.max() == 0
+    else:  # lossy, and chroma is subsampled across the colour edge: compare away from it
+        assert err[:, :12].max() <= 6 and err[:, 20:].max() <= 6
+    grey = Image.from_array(np.full((8, 8), 77, dtype=np.uint8), encoding="png")
+    assert grey.channels == 1 and grey.to_array().shape == (8, 8, 3)
+    with pytest.raises(ValueError, match=r"\(H, W\) or \(H, W, 3\) uint8"):
+        Image.from_array(np.zeros((4, 4, 3), dtype=np.float32))

@@ -32,6 +32,7 @@ from __future__ import annotations
 
 import json
 import struct
+from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any, ClassVar, Literal, Self, TypeVar
 
@@ -49,6 +50,7 @@ __all__ = [
     "ModeRequest",
     "RunStop",
     "ServiceReply",
+    "body_of",
     "decode_envelope",
     "encode_envelope",
     "message_type",
@@ -112,6 +114,19 @@ class Message(BaseModel):
         if cls.BINARY_FIELD is not None:
             body = {**body, cls.BINARY_FIELD: binary if binary is not None else b""}
         return cls.model_validate(body)
+
+
+def body_of(message: object) -> dict[str, Any]:
+    """The JSON object of a bus message, or of a plain mapping (``{}`` for anything else).
+
+    Handlers that accept both a typed :class:`Message` and a dict (tests, in-process
+    callers) read their input through this one function.
+    """
+    if isinstance(message, Message):
+        return message.to_body()  # a copy; a Generic's is its object
+    if isinstance(message, Mapping):
+        return dict(message)
+    return {}
 
 
 _REGISTRY: dict[str, type[Message]] = {}
@@ -231,6 +246,74 @@ class Image(Message):
         if not self.data.startswith(_MAGIC[self.encoding]):
             raise ValueError(f"data does not start with the {self.encoding} signature")
         return self
+
+    @classmethod
+    def from_array(
+        cls,
+        rgb: Any,
+        *,
+        encoding: Literal["jpeg", "png"] = "jpeg",
+        quality: int = 90,
+        frame_id: str = "",
+        seq: int = 0,
+    ) -> Image:
+        """Encode an ``(H, W, 3)`` RGB ``uint8`` array (or ``(H, W)`` grey) as a frame.
+
+        ``quality`` is the JPEG quality (1–100); PNG uses fast compression (level 1).
+
+        Raises:
+            ValueError: The array is not an ``(H, W)``/``(H, W, 3)`` ``uint8`` image.
+            MissingExtraError: OpenCV is not installed (``anunnaki[phenomena]``).
+
+        """
+        cv2, np = _cv2()
+        arr = np.asarray(rgb)
+        if arr.dtype != np.uint8 or arr.ndim not in (2, 3) or (arr.ndim == 3 and arr.shape[2] != 3):
+            raise ValueError(
+                f"an image must be (H, W) or (H, W, 3) uint8, got {arr.shape} {arr.dtype}"
+            )
+        pixels = arr if arr.ndim == 2 else np.ascontiguousarray(arr[:, :, ::-1])
+        if encoding == "jpeg":
+            ok, buf = cv2.imencode(".jpg", pixels, [cv2.IMWRITE_JPEG_QUALITY, int(quality)])
+        else:
+            ok, buf = cv2.imencode(".png", pixels, [cv2.IMWRITE_PNG_COMPRESSION, 1])
+        if not ok:  # pragma: no cover - OpenCV encodes any uint8 image
+            raise ValueError("image encoding failed")
+        return cls(
+            encoding=encoding,
+            width=int(arr.shape[1]),
+            height=int(arr.shape[0]),
+            channels=1 if arr.ndim == 2 else 3,
+            data=bytes(buf.tobytes()),
+            frame_id=frame_id,
+            seq=seq,
+        )
+
+    def to_array(self) -> Any:
+        """Decode the frame into an ``(H, W, 3)`` RGB ``uint8`` array (grey/RGBA become RGB).
+
+        Raises:
+            ValueError: The bytes do not decode.
+            MissingExtraError: OpenCV is not installed (``anunnaki[phenomena]``).
+
+        """
+        cv2, np = _cv2()
+        bgr = cv2.imdecode(np.frombuffer(self.data, dtype=np.uint8), cv2.IMREAD_COLOR)
+        if bgr is None:
+            raise ValueError(f"frame {self.seq}: the {self.encoding} bytes do not decode")
+        return np.ascontiguousarray(cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB), dtype=np.uint8)
+
+
+def _cv2() -> tuple[Any, Any]:
+    """OpenCV and NumPy, imported on first use (the bus itself needs neither)."""
+    try:
+        import cv2
+        import numpy
+    except ImportError as exc:  # pragma: no cover - part of the phenomena/vision extras
+        from anunnaki.errors import MissingExtraError
+
+        raise MissingExtraError("opencv-python-headless", "phenomena") from exc
+    return cv2, numpy
 
 
 @register_message

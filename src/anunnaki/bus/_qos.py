@@ -27,6 +27,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Literal
 
+from anunnaki import topics
 from anunnaki.bus._errors import BusConfigError
 from anunnaki.bus._keys import key_matches
 
@@ -89,7 +90,7 @@ class TopicClass:
 
 
 QOS_TABLE: tuple[TopicClass, ...] = (
-    TopicClass("run_stop", ("/utu/run_stop",), ("RunStop",), QoS("critical", True, "run_stop")),
+    TopicClass("run_stop", (topics.RUN_STOP,), ("RunStop",), QoS("critical", True, "run_stop")),
     TopicClass("tactic", ("/utu/execute/**",), ("ModeRequest",), QoS("high", True, "tactic")),
     TopicClass("assessment", ("/utu/oracle/**",), (), QoS("high", True, "assessment")),
     TopicClass("camera", ("/**/camera/**",), ("Image",), QoS("low", False, "camera")),

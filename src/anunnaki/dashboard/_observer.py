@@ -35,10 +35,10 @@ import logging
 import threading
 import time
 from collections import deque
-from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any, Literal
 
+from anunnaki import topics
 from anunnaki.bus import (
     Assessment,
     Bus,
@@ -49,6 +49,7 @@ from anunnaki.bus import (
     Image,
     Sample,
     ServiceError,
+    body_of,
 )
 from anunnaki.dashboard._state import DashboardState, Frame
 from anunnaki.errors import AnunnakiError
@@ -60,11 +61,11 @@ log = logging.getLogger("anunnaki.dashboard")
 Operation = Literal["pause", "resume", "approve", "reject", "run_stop"]
 #: The operator's actions and the Utu service each calls.
 OPERATIONS: dict[str, str] = {
-    "pause": "/utu/pause",
-    "resume": "/utu/resume",
-    "approve": "/utu/approve",
-    "reject": "/utu/approve",
-    "run_stop": "/utu/run_stop",
+    "pause": topics.PAUSE,
+    "resume": topics.RESUME,
+    "approve": topics.APPROVE,
+    "reject": topics.APPROVE,
+    "run_stop": topics.RUN_STOP,
 }
 
 
@@ -91,27 +92,17 @@ class ObserverConfig:
 
     """
 
-    state: str = "/utu/analyze/state"
-    plan: str = "/utu/plan/start"
-    status: str = "/utu/execute/status"
-    decisions: str = "/utu/knowledge/decisions"
-    query: str = "/utu/knowledge/query"
+    state: str = topics.ANALYSIS
+    plan: str = topics.PLAN_START
+    status: str = topics.EXECUTE_STATUS
+    decisions: str = topics.DECISIONS
+    query: str = topics.QUERY
     oracle: str = "/utu/oracle/**"
     camera: str = "/*/camera/image"
     detections: str = "/lec/*/detections"
-    active_model: str = "/lm_manager/active"
-    clock: str = "/clock"
+    active_model: str = topics.ACTIVE_MODEL
+    clock: str = topics.CLOCK
     query_timeout: float = 3.0
-
-
-def _body(message: Any) -> dict[str, Any]:
-    if isinstance(message, Generic):
-        return dict(message.data)
-    to_body = getattr(message, "to_body", None)
-    if callable(to_body):
-        body = to_body()
-        return dict(body) if isinstance(body, Mapping) else {}
-    return {}
 
 
 class SimTime:
@@ -264,26 +255,26 @@ class BusObserver:
             self._take_ready()
 
     def _on_state(self, sample: Sample) -> None:
-        self.state.take_analysis(_body(sample.message))
+        self.state.take_analysis(body_of(sample.message))
 
     def _on_plan(self, sample: Sample) -> None:
-        self.state.take_queue(_body(sample.message).get("queue"))
+        self.state.take_queue(body_of(sample.message).get("queue"))
 
     def _on_status(self, sample: Sample) -> None:
-        body = _body(sample.message)  # flags that are not bools are ignored
+        body = body_of(sample.message)  # flags that are not bools are ignored
         self.state.take_flags(paused=body.get("paused"), run_stopped=body.get("run_stopped"))
 
     def _on_decisions(self, sample: Sample) -> None:
-        rows = _body(sample.message).get("decisions")
+        rows = body_of(sample.message).get("decisions")
         if isinstance(rows, list):
             self.state.take_decisions(rows)
 
     def _on_input(self, sample: Sample) -> None:
         if self.sim is None:
             # On the wall clock Utu takes an input at its sender's stamp: so does this.
-            self.state.take_input(sample.topic, _body(sample.message), sample.sent_at)
+            self.state.take_input(sample.topic, body_of(sample.message), sample.sent_at)
             return
-        self.sim.add(sample.sender, sample.sent_at, sample.topic, _body(sample.message))
+        self.sim.add(sample.sender, sample.sent_at, sample.topic, body_of(sample.message))
         self._take_ready()
 
     def _take_ready(self) -> None:
@@ -295,7 +286,7 @@ class BusObserver:
     def _on_assessment(self, sample: Sample) -> None:
         message = sample.message
         if isinstance(message, Assessment | Generic):
-            self.state.take_assessment(sample.topic, _body(message), self.now())
+            self.state.take_assessment(sample.topic, body_of(message), self.now())
 
     def _on_frame(self, sample: Sample) -> None:
         m = sample.message
@@ -305,10 +296,10 @@ class BusObserver:
         )
 
     def _on_detections(self, sample: Sample) -> None:
-        self.state.take_detections(_body(sample.message))
+        self.state.take_detections(body_of(sample.message))
 
     def _on_active(self, sample: Sample) -> None:
-        self.state.take_active_model(_body(sample.message))
+        self.state.take_active_model(body_of(sample.message))
 
     def _tick(self) -> None:
         while not self._closed.wait(0.1):
@@ -322,7 +313,7 @@ class BusObserver:
     def _seed(self) -> None:
         c = self.config
         try:
-            reply = _body(
+            reply = body_of(
                 self.bus.request(
                     c.query, {"what": "decisions", "limit": 2000}, timeout=c.query_timeout
                 )
@@ -330,7 +321,7 @@ class BusObserver:
             rows = reply.get("decisions")
             if isinstance(rows, list):
                 self.state.take_decisions(rows)
-            state = _body(self.bus.request(c.query, {"what": "state"}, timeout=c.query_timeout))
+            state = body_of(self.bus.request(c.query, {"what": "state"}, timeout=c.query_timeout))
             # The state answer carries the plan's queue: a late dashboard sees pending approvals.
             if state.get("ok") is not False and state.get("nodes") and not self.state.has_analysis:
                 self.state.take_analysis(state)  # (a live analysis, when there is one, is newer)
@@ -381,7 +372,7 @@ class BusObserver:
         if op == "run_stop":
             payload["reason"] = reason or "operator run-stop from the dashboard"
         try:
-            reply = _body(self.bus.request(service, payload, timeout=timeout))
+            reply = body_of(self.bus.request(service, payload, timeout=timeout))
         except ServiceError as exc:
             raise OperatorError(f"{service} refused: {exc}") from None
         except BusError as exc:

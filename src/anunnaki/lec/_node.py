@@ -36,14 +36,14 @@ import logging
 import threading
 import time
 from collections import OrderedDict
-from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Any, NamedTuple
+from typing import Any, NamedTuple, cast
 
 import numpy as np
 import numpy.typing as npt
 
-from anunnaki.bus import Bus, Detections, Image, Publisher, Sample, ServiceReply
+from anunnaki import topics
+from anunnaki.bus import Bus, Detections, Image, Publisher, Sample, ServiceReply, body_of
 from anunnaki.errors import AnunnakiError, MissingExtraError
 from anunnaki.lec._registry import DetectorLike, ModelRegistry, ModelRegistryError, ModelSpec
 
@@ -61,11 +61,11 @@ __all__ = [
 log = logging.getLogger("anunnaki.lec")
 
 #: Where the node announces its active model: ``{lec, model, domain}``.
-ACTIVE_TOPIC = "/lm_manager/active"
+ACTIVE_TOPIC = topics.ACTIVE_MODEL
 #: The swap service: request ``{lec, model}`` or ``{lec, domain}``.
-SWAP_SERVICE = "/lm_manager/swap"
+SWAP_SERVICE = topics.SWAP
 #: The node's liveliness token (bind an agent to it with ``node: /lm_manager``).
-NODE_NAME = "/lm_manager"
+NODE_NAME = topics.LM_MANAGER
 
 
 def detections_topic(lec: str) -> str:
@@ -74,25 +74,14 @@ def detections_topic(lec: str) -> str:
 
 
 def decode_image(message: Image) -> npt.NDArray[np.uint8]:
-    """Decode an :class:`~anunnaki.bus.Image` (JPEG/PNG bytes) into ``(H, W, 3)`` RGB uint8.
-
-    Grey and RGBA frames become three-channel RGB.
+    """Decode an :class:`~anunnaki.bus.Image` into ``(H, W, 3)`` RGB uint8 (:meth:`Image.to_array`).
 
     Raises:
         ValueError: The bytes do not decode.
         MissingExtraError: OpenCV is not installed.
 
     """
-    try:
-        import cv2
-    except ImportError as exc:  # pragma: no cover - OpenCV is part of the vision extra
-        raise MissingExtraError("opencv-python-headless", "vision") from exc
-    buffer = np.frombuffer(message.data, dtype=np.uint8)
-    bgr = cv2.imdecode(buffer, cv2.IMREAD_COLOR)
-    if bgr is None:
-        raise ValueError(f"frame {message.seq}: the {message.encoding} bytes do not decode")
-    rgb = cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB)
-    return np.ascontiguousarray(rgb, dtype=np.uint8)
+    return cast("npt.NDArray[np.uint8]", message.to_array())
 
 
 @dataclass(frozen=True)
@@ -413,7 +402,7 @@ class LecNode:
         return SwapResult(False, self.lec, current.id, current.domain, current.id, error=error)
 
     def _on_swap(self, request: Any) -> ServiceReply:
-        body = _body(request)
+        body = body_of(request)
         fields: dict[str, str | None] = {}
         for key in ("lec", "model", "domain"):
             value = body.get(key)
@@ -456,14 +445,3 @@ class LecNode:
 
     def __exit__(self, *exc: object) -> None:
         self.close()
-
-
-def _body(message: Any) -> dict[str, Any]:
-    """The JSON body of a request (a Generic message or a plain mapping)."""
-    if isinstance(message, Mapping):
-        return dict(message)
-    to_body = getattr(message, "to_body", None)
-    if callable(to_body):
-        body = to_body()
-        return dict(body) if isinstance(body, Mapping) else {}
-    return {}

@@ -24,7 +24,8 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
-from anunnaki.bus import Clock
+from anunnaki import topics
+from anunnaki.bus import Clock, body_of
 from anunnaki.trace import Record, read_trace
 
 __all__ = ["ScriptedSystem"]
@@ -79,7 +80,7 @@ class ScriptedSystem:
 
     # -- commands ---------------------------------------------------------------------------
     def _set_mode(self, message: Any) -> dict[str, Any]:
-        body = _body(message)
+        body = body_of(message)
         mode = body.get("mode")
         if mode not in self.modes:
             return {"ok": False, "error": f"unknown mode {mode!r}; modes: {list(self.modes)}"}
@@ -92,7 +93,7 @@ class ScriptedSystem:
         return {"ok": True, "mode": mode}
 
     def _stop(self, message: Any) -> dict[str, Any]:
-        body = _body(message)
+        body = body_of(message)
         with self._lock:
             self.overrides["stopped"] = True
             self.overrides["mode"] = "stopped"
@@ -101,7 +102,7 @@ class ScriptedSystem:
         return {"ok": True, "stopped": True}
 
     def _buzzer(self, sample: Any) -> None:
-        body = _body(sample.message)
+        body = body_of(sample.message)
         with self._lock:
             self.overrides["buzzer"] = bool(body.get("on", False))
             self.commands.append((self.t, "buzzer", body))
@@ -128,7 +129,7 @@ class ScriptedSystem:
             if rec.t != self.t:
                 self.t = rec.t
                 if self.publish_clock:
-                    self.bus.publish("/clock", Clock(time=max(rec.t, 0.0)))
+                    self.bus.publish(topics.CLOCK, Clock(time=max(rec.t, 0.0)))
             self.bus.publish(rec.topic, self.message(rec))
             self._next += 1
             n += 1
@@ -187,14 +188,3 @@ class ScriptedSystem:
 
     def __exit__(self, *exc: object) -> None:
         self.close()
-
-
-def _body(message: Any) -> dict[str, Any]:
-    """The JSON body of a bus message (or a plain mapping)."""
-    if isinstance(message, Mapping):
-        return dict(message)
-    to_body = getattr(message, "to_body", None)
-    if callable(to_body):
-        body = to_body()
-        return dict(body) if isinstance(body, Mapping) else {}
-    return {}

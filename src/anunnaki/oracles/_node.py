@@ -27,6 +27,7 @@ from typing import Any
 
 import numpy as np
 
+from anunnaki import topics
 from anunnaki.bus import Assessment, Bus, Detections, Image, Publisher, Sample
 from anunnaki.errors import AnunnakiError
 from anunnaki.lec._node import ACTIVE_TOPIC, decode_image, detections_topic
@@ -45,11 +46,11 @@ __all__ = [
 log = logging.getLogger("anunnaki.oracles")
 
 #: Where assessments go (agent A4 in the paper's goal models).
-OUTPUT_TOPIC = "/utu/oracle/output"
+OUTPUT_TOPIC = topics.ORACLE_OUTPUT
 #: The simulator's per-frame ground truth: ``{seq, boxes, labels}``.
-GROUND_TRUTH_TOPIC = "/sim/ground_truth"
+GROUND_TRUTH_TOPIC = topics.GROUND_TRUTH
 #: The simulator's active phenomena (see :func:`~anunnaki.oracles.context_from_phenomena`).
-PHENOMENA_TOPIC = "/sim/phenomena"
+PHENOMENA_TOPIC = topics.PHENOMENA
 
 
 @dataclass(frozen=True)

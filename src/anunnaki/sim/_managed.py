@@ -32,6 +32,7 @@ from typing import Any
 
 import numpy as np
 
+from anunnaki import topics
 from anunnaki.bus import Assessment, Detections, Sample
 from anunnaki.sim._platform import GROUND_TRUTH_TOPIC, SimPlatform, body_of
 from anunnaki.sim._report import FrameScore, RunReport, tactic_events
@@ -41,7 +42,7 @@ __all__ = ["PhaseScore", "SimulatedSystem", "format_phases", "scenario_phases"]
 
 log = logging.getLogger("anunnaki.sim")
 
-_OUTPUT_TOPIC = "/utu/oracle/output"
+_OUTPUT_TOPIC = topics.ORACLE_OUTPUT
 
 
 @dataclass
@@ -214,7 +215,7 @@ class SimulatedSystem:
                 self.lec = LecNode(bus, self.registry, camera=camera)
                 self._closing.append(self.lec)
             self.detections_topic = (
-                self.lec.detections_topic if self.lec is not None else "/lec/detector/detections"
+                self.lec.detections_topic if self.lec is not None else topics.DETECTIONS
             )
             self.oracle: Any = None
             if oracle is not None:

@@ -28,6 +28,7 @@ from typing import Any
 
 import numpy as np
 
+from anunnaki import topics
 from anunnaki.bus import Clock, Detections, Image
 from anunnaki.sim._scenario import Scenario, Timeline, load_scenario
 from anunnaki.sim._scene import Camera, Frame, Light, Scene
@@ -36,9 +37,9 @@ __all__ = ["GROUND_TRUTH_TOPIC", "PHENOMENA_TOPIC", "FrameHook", "SimPlatform", 
 
 log = logging.getLogger("anunnaki.sim")
 
-GROUND_TRUTH_TOPIC = "/sim/ground_truth"
+GROUND_TRUTH_TOPIC = topics.GROUND_TRUTH
 """Ground truth of each frame: ``{seq, t, width, height, boxes, labels}`` (scoring only)."""
-PHENOMENA_TOPIC = "/sim/phenomena"
+PHENOMENA_TOPIC = topics.PHENOMENA
 """What the scenario applied to each frame: ``{t, seq, phenomena: [{name, params}], faults}``."""
 
 FrameHook = Callable[["SimPlatform", Frame, np.ndarray], None]
@@ -225,7 +226,7 @@ class SimPlatform:
     def _publish_due(self) -> None:
         t = self.t
         if self._due("clock", self.clock_rate):
-            self._publish("/clock", Clock(time=t))
+            self._publish(topics.CLOCK, Clock(time=t))
         cam = self.scenario.camera
         if self._due("camera", self.timeline.rate("camera", cam.rate, t)):
             self._camera_frame()
@@ -258,11 +259,10 @@ class SimPlatform:
         if not self.timeline.silent("camera", t):
             self._publish(
                 f"{self.prefix}/camera/image",
-                Image(
+                Image.from_array(
+                    image,
                     encoding=cam.encoding,
-                    width=cam.width,
-                    height=cam.height,
-                    data=self._encode(image),
+                    quality=cam.quality,
                     frame_id=f"{self.platform}_camera",
                     seq=seq,
                 ),
@@ -286,19 +286,6 @@ class SimPlatform:
                 )
         if self.frame_hook is not None:
             self.frame_hook(self, frame, image)
-
-    def _encode(self, image: np.ndarray) -> bytes:
-        import cv2
-
-        cam = self.scenario.camera
-        bgr = np.ascontiguousarray(image[:, :, ::-1])
-        if cam.encoding == "jpeg":
-            ok, buf = cv2.imencode(".jpg", bgr, [cv2.IMWRITE_JPEG_QUALITY, cam.quality])
-        else:
-            ok, buf = cv2.imencode(".png", bgr, [cv2.IMWRITE_PNG_COMPRESSION, 1])
-        if not ok:  # pragma: no cover - OpenCV encodes any uint8 image
-            raise RuntimeError("image encoding failed")
-        return bytes(buf.tobytes())
 
     # -- hooks for subclasses -------------------------------------------------------------
     def _tick(self, h: float) -> None:

@@ -32,6 +32,7 @@ from typing import Any, Literal
 
 import numpy as np
 
+from anunnaki import topics
 from anunnaki.bus import Detections
 from anunnaki.sim._platform import SimPlatform, as_scenario, body_of
 from anunnaki.sim._scenario import ObjectSpec, Scenario
@@ -50,7 +51,7 @@ __all__ = ["CAMERA_FOV", "CAMERA_HEIGHT", "DETECTIONS_TOPIC", "RoverMode", "Rove
 log = logging.getLogger("anunnaki.sim")
 
 RoverMode = Literal["autonomous", "manual", "stopped"]
-DETECTIONS_TOPIC = "/lec/detector/detections"
+DETECTIONS_TOPIC = topics.DETECTIONS
 """Where the rover listens for the detector's output."""
 CAMERA_HEIGHT = 0.3
 """Height of the rover's camera above ground (m)."""
@@ -253,7 +254,7 @@ class RoverSim(SimPlatform):
                 bus.subscribe(f"{self.prefix}/buzzer", self._on_buzzer, queue=16),
                 bus.subscribe(f"{self.prefix}/lights", self._on_lights, queue=16),
                 bus.subscribe(f"{self.prefix}/teleop", self._on_teleop, queue=64),
-                bus.subscribe("/utu/run_stop", self._on_run_stop, queue=4),
+                bus.subscribe(topics.RUN_STOP, self._on_run_stop, queue=4),
                 bus.subscribe(detections_topic, self._on_detections, queue=8),
             ]
         except BaseException:

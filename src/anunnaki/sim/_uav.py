@@ -23,6 +23,7 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any, Literal
 
+from anunnaki import topics
 from anunnaki.sim._platform import SimPlatform, as_scenario, body_of
 from anunnaki.sim._rover import _placement
 from anunnaki.sim._scenario import Scenario
@@ -117,7 +118,7 @@ class UavSim(SimPlatform):
             self._declared = [
                 bus.service(f"{self.prefix}/set_mode", self._srv_set_mode),
                 bus.service(f"{self.prefix}/stop", self._srv_stop),
-                bus.subscribe("/utu/run_stop", self._on_run_stop, queue=4),
+                bus.subscribe(topics.RUN_STOP, self._on_run_stop, queue=4),
             ]
         except BaseException:
             scene.close()

@@ -34,6 +34,7 @@ from pydantic import (
 )
 from pydantic_core import PydanticCustomError
 
+from anunnaki import topics
 from anunnaki._safeyaml import LineMap, element_path
 from anunnaki.errors import ModelFileError
 
@@ -438,7 +439,7 @@ class SwapModelAction(_Model):
     lec: Token = "detector"
     model: Token | None = None
     domain: Token | None = None
-    service: RosName = "/lm_manager/swap"
+    service: RosName = topics.SWAP
 
     @model_validator(mode="after")
     def _one_target(self) -> SwapModelAction:

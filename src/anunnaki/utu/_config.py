@@ -25,6 +25,7 @@ from typing import Annotated, Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
+from anunnaki import topics
 from anunnaki._safeyaml import LineMap, load_yaml, validation_error
 from anunnaki.errors import ModelFileError
 
@@ -54,7 +55,7 @@ class UtuConfig(_Strict):
     tactics: str | None = None
     knowledge: str = ":memory:"
     clock: Literal["wall", "sim"] = "wall"
-    clock_topic: str = "/clock"
+    clock_topic: str = topics.CLOCK
     bus: dict[str, Any] = Field(default_factory=lambda: {"kind": "inproc"})
     rate: Annotated[float, Field(gt=0, le=10_000)] = 20.0
     dwell: Annotated[float, Field(ge=0)] = 0.0

@@ -27,6 +27,8 @@ from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any
 
+from anunnaki import topics
+from anunnaki.bus import body_of
 from anunnaki.clock import Clock, SimClock, WallClock
 from anunnaki.errors import AnunnakiError, ModelFileError
 from anunnaki.goals import GoalModel, parse_binding, parse_goal_model
@@ -107,7 +109,7 @@ class BusActuator:
             reply = self.bus.request(service, dict(payload), timeout=timeout)
         except AnunnakiError as exc:
             return ActionOutcome(False, f"{type(exc).__name__}: {exc}")
-        body = _body(reply)  # a Generic's object, or a ServiceReply's {ok, error, body}
+        body = body_of(reply)  # a Generic's object, or a ServiceReply's {ok, error, body}
         if body.get("ok") is False:
             return ActionOutcome(False, str(body.get("error") or "refused"), body)
         inner = body.get("body")
@@ -322,17 +324,17 @@ class AutonomicManager:
         self._queue_bound = queue
         for topic in self.monitor.topics:
             self._subscribe_topic(topic)
-        self._declared.append(bus.subscribe("/utu/run_stop", self._on_run_stop_topic, queue=16))
+        self._declared.append(bus.subscribe(topics.RUN_STOP, self._on_run_stop_topic, queue=16))
         if any(a.node for a in self.model.agents.values()):
             self._declared.append(bus.watch_liveliness(self._on_liveliness))
         services: dict[str, Callable[[Any], Any]] = {
-            "/utu/run_stop": lambda m: self._op_service("run_stop", m),
-            "/utu/pause": lambda m: self._op_service("pause", m),
-            "/utu/resume": lambda m: self._op_service("resume", m),
-            "/utu/approve": lambda m: self._op_service("approve", m),
-            "/utu/reload": lambda m: self._op_service("reload", m),
-            "/utu/ready": lambda m: {"ready": True, "node": self.name},
-            "/utu/knowledge/query": self._query,
+            topics.RUN_STOP: lambda m: self._op_service("run_stop", m),
+            topics.PAUSE: lambda m: self._op_service("pause", m),
+            topics.RESUME: lambda m: self._op_service("resume", m),
+            topics.APPROVE: lambda m: self._op_service("approve", m),
+            topics.RELOAD: lambda m: self._op_service("reload", m),
+            topics.READY: lambda m: {"ready": True, "node": self.name},
+            topics.QUERY: self._query,
         }
         for name, handler in services.items():
             self._declared.append(bus.service(name, handler))
@@ -358,10 +360,10 @@ class AutonomicManager:
                 # The sender's stamp, on the wall clock only (a sim clock is another
                 # timebase); step() clamps it into (previous step, this step].
                 t_in = sample.sent_at if isinstance(self.clock, WallClock) else None
-                self._inputs.append((topic, _body(sample.message), t_in))
+                self._inputs.append((topic, body_of(sample.message), t_in))
 
     def _on_run_stop_topic(self, sample: Any) -> None:
-        body = _body(sample.message)
+        body = body_of(sample.message)
         caller = str(body.get("caller") or sample.sender)
         if caller.startswith(f"utu:{self.name}"):
             return  # our own announcement
@@ -409,7 +411,7 @@ class AutonomicManager:
         self._wake.set()
 
     def _op_service(self, op: str, message: Any) -> dict[str, Any]:
-        body = _body(message)
+        body = body_of(message)
         caller = str(body.get("caller") or "unknown")
         entry: dict[str, Any] = {"op": op, "caller": caller}
         if op == "approve":
@@ -616,7 +618,7 @@ class AutonomicManager:
                 from anunnaki.bus import RunStop
 
                 self.bus.publish(
-                    "/utu/run_stop",
+                    topics.RUN_STOP,
                     RunStop(reason=f"{reason} (asked by {caller})", caller=f"utu:{self.name}"),
                 )
             except AnunnakiError as exc:  # pragma: no cover - closed bus at shutdown
@@ -628,13 +630,13 @@ class AutonomicManager:
             msg["queue"] = self.planner.queue()
             msg["paused"] = self.paused
             msg["run_stopped"] = self.run_stopped
-            self.bus.publish("/utu/analyze/state", msg)  # type: ignore[union-attr]
+            self.bus.publish(topics.ANALYSIS, msg)  # type: ignore[union-attr]
         except AnunnakiError as exc:  # pragma: no cover - closed bus at shutdown
             log.warning("could not publish the analysis: %s", exc)
 
     # -- queries ------------------------------------------------------------------------------
     def _query(self, message: Any) -> dict[str, Any]:
-        body = _body(message)
+        body = body_of(message)
         what = body.get("what", "state")
         limit = body.get("limit", 100)
         if not isinstance(limit, int) or limit < 1:
@@ -807,17 +809,6 @@ class AutonomicManager:
 
     def __exit__(self, *exc: object) -> None:
         self.close()
-
-
-def _body(message: Any) -> dict[str, Any]:
-    """The JSON body of a bus message (or a plain mapping)."""
-    if isinstance(message, Mapping):
-        return dict(message)
-    to_body = getattr(message, "to_body", None)
-    if callable(to_body):
-        body = to_body()
-        return dict(body) if isinstance(body, Mapping) else {}
-    return {}
 
 
 def _read_sources(

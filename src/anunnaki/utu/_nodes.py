@@ -58,8 +58,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, ClassVar, Literal, Protocol, cast
 
+from anunnaki import topics
 from anunnaki._findings import Finding
-from anunnaki.bus import Bus, RunStop, Sample, Subscriber
+from anunnaki.bus import Bus, RunStop, Sample, Subscriber, body_of
 from anunnaki.check import check_tactics
 from anunnaki.clock import Clock, SimClock, WallClock
 from anunnaki.errors import AnunnakiError, ModelFileError
@@ -104,14 +105,14 @@ NodeName = Literal["monitor", "analyze", "plan", "execute", "knowledge"]
 #: The five Utu nodes, in the order a cycle visits them (knowledge last).
 NODE_NAMES: tuple[NodeName, ...] = ("monitor", "analyze", "plan", "execute", "knowledge")
 
-INPUT_TOPIC = "/utu/monitor/input"
-STATE_TOPIC = "/utu/analyze/state"
-STATUS_TOPIC = "/utu/execute/status"
-START_TOPIC = "/utu/plan/start"
-DONE_TOPIC = "/utu/execute/done"
-DECISIONS_TOPIC = "/utu/knowledge/decisions"
-RUN_STOP_TOPIC = "/utu/run_stop"
-QUERY_SERVICE = "/utu/knowledge/query"
+INPUT_TOPIC = topics.MONITOR_INPUT
+STATE_TOPIC = topics.ANALYSIS
+STATUS_TOPIC = topics.EXECUTE_STATUS
+START_TOPIC = topics.PLAN_START
+DONE_TOPIC = topics.CYCLE_DONE
+DECISIONS_TOPIC = topics.DECISIONS
+RUN_STOP_TOPIC = topics.RUN_STOP
+QUERY_SERVICE = topics.QUERY
 OPERATOR_SERVICES = ("run_stop", "pause", "resume", "approve")
 
 # What the manager writes into the inputs table (kept identical so a replay cannot tell).
@@ -218,17 +219,6 @@ def open_knowledge(path: str) -> Knowledge:
             f"cannot open the knowledge base {path}: {exc} (check that its folder exists "
             "and is writable)"
         ) from exc
-
-
-def _body(message: Any) -> dict[str, Any]:
-    """The JSON body of a bus message (or a plain mapping)."""
-    if isinstance(message, Mapping):
-        return dict(message)
-    to_body = getattr(message, "to_body", None)
-    if callable(to_body):
-        body = to_body()
-        return dict(body) if isinstance(body, Mapping) else {}
-    return {}
 
 
 # -- the node base ---------------------------------------------------------------------------
@@ -354,7 +344,7 @@ class UtuNode:
                 self.clock.update(float(t))
 
     def _on_run_stop_sample(self, sample: Sample) -> None:
-        body = _body(sample.message)
+        body = body_of(sample.message)
         caller = str(body.get("caller") or sample.sender)
         if caller.startswith(f"utu:{self.config.name}"):
             return  # Utu's own announcement of a run-stop it already performs
@@ -526,7 +516,7 @@ class MonitorNode(UtuNode):
         return lambda message: self._op_service(op, message)
 
     def _op_service(self, op: str, message: Any) -> dict[str, Any]:
-        body = _body(message)
+        body = body_of(message)
         caller = str(body.get("caller") or "unknown")
         entry: dict[str, Any] = {"op": op, "caller": caller}
         if op == "approve":
@@ -568,7 +558,7 @@ class MonitorNode(UtuNode):
             self._fed.clear()
             for topic, sub in self._subs.items():
                 while (sample := sub.try_recv()) is not None:
-                    inputs.append({"topic": topic, "msg": _body(sample.message)})
+                    inputs.append({"topic": topic, "msg": body_of(sample.message)})
             ops, self._ops = self._ops, []
         if now is None:
             self._take_clock()
@@ -663,7 +653,7 @@ class AnalyzeNode(UtuNode):
         """Take the execute node's reports; finish the cycle it reports done."""
         finished = False
         while (sample := self._done.try_recv()) is not None:
-            body = _body(sample.message)
+            body = body_of(sample.message)
             if body.get("origin") != self.origin:
                 continue
             seq = body.get("seq")
@@ -713,7 +703,7 @@ class AnalyzeNode(UtuNode):
             self._finish(None)
         batches = []
         while (sample := self._batches.try_recv()) is not None:
-            batches.append(_body(sample.message))
+            batches.append(body_of(sample.message))
         if now is not None:
             t = float(now)
         elif self._presence.alive("monitor"):
@@ -850,7 +840,7 @@ class PlanNode(UtuNode):
         """Plan every cycle the execute node reported; returns whether there was one."""
         worked = False
         while (sample := self._statuses.try_recv()) is not None:
-            self._plan(_body(sample.message))
+            self._plan(body_of(sample.message))
             worked = True
         return worked
 
@@ -1085,7 +1075,7 @@ class ExecuteNode(UtuNode):
             sample = self._states.try_recv()
             if sample is None:
                 return worked
-            self._begin(_body(sample.message))
+            self._begin(body_of(sample.message))
             if gated:
                 self._mark_cycle()
             worked = True
@@ -1094,7 +1084,7 @@ class ExecuteNode(UtuNode):
         assert self._pending is not None
         found = None
         while (sample := self._starts.try_recv()) is not None:
-            body = _body(sample.message)
+            body = body_of(sample.message)
             if body.get("origin") == self._pending.origin and body.get("seq") == self._pending.seq:
                 found = body
                 break
@@ -1329,18 +1319,18 @@ class KnowledgeNode(UtuNode):
         self._declare(self.bus.service(QUERY_SERVICE, self._query))
 
     def _on_state(self, sample: Sample) -> None:
-        body = _body(sample.message)
+        body = body_of(sample.message)
         with self._lock:
             self._state = {k: body.get(k) for k in ("t", "root", "nodes", "violated", "tactics")}
 
     def _on_start(self, sample: Sample) -> None:
-        queue = _body(sample.message).get("queue")
+        queue = body_of(sample.message).get("queue")
         if isinstance(queue, list):
             with self._lock:
                 self._queue = queue
 
     def _on_status(self, sample: Sample) -> None:
-        body = _body(sample.message)
+        body = body_of(sample.message)
         with self._lock:
             self._flags = {
                 "paused": bool(body.get("paused")),
@@ -1349,7 +1339,7 @@ class KnowledgeNode(UtuNode):
         self.run_stopped = self._flags["run_stopped"]  # as the execute node has it
 
     def _query(self, message: Any) -> dict[str, Any]:
-        body = _body(message)
+        body = body_of(message)
         what = body.get("what", "state")
         limit = body.get("limit", 100)
         if not isinstance(limit, int) or limit < 1:

@@ -1,0 +1,271 @@
+"""One plugin mechanism for every slot: phenomena, oracles, detectors, managed systems and more.
+
+Every plugin slot in Anunnaki takes a *name* or an *object* (``"fog"`` or ``Fog()``), the
+way pyribs' rankers do. A :class:`Registry` maps names to *factories* (a class, or any
+callable that builds the plugin) for one slot; it is generic in what the slot holds, so
+the same code serves every slot and one contract holds everywhere:
+
+* **built-ins** are registered by the package that owns the slot, either as objects or
+  lazily as ``"module:attribute"`` strings, so a slot whose plugins need a heavy extra
+  (``sim`` needs pybullet, a detector needs torch) costs nothing until one is asked for;
+* **third parties** add plugins through an ``importlib.metadata`` entry-point group
+  (``anunnaki.phenomena``, ``anunnaki.oracles``, ``anunnaki.detectors``,
+  ``anunnaki.managed``, …), loaded lazily on the first lookup; one that fails to import or
+  fails the slot's check is logged and skipped, so a broken plugin never takes the others
+  down, and none can shadow a built-in or an explicitly registered name;
+* **an unknown name** raises the slot's error type with the valid names listed.
+
+A slot's *check* validates a factory when it is registered (for a class: abstract
+methods, a ``name`` that is an identifier, required hooks); optional hooks are typed
+:class:`~typing.Protocol` classes that the caller tests with ``isinstance``, never found by
+signature inspection.
+
+Example::
+
+    SEARCHES: Registry[Search] = Registry("search strategy", group="anunnaki.searches")
+    SEARCHES.register(RandomSearch)                       # under RandomSearch.name
+    SEARCHES.register_lazy("enlil", "anunnaki.enlil._search:EnlilSearch")
+    search = SEARCHES.create("random", budget=100)        # or pass an instance through
+"""
+
+from __future__ import annotations
+
+import importlib
+import inspect
+import logging
+import re
+import threading
+from collections.abc import Callable
+from importlib.metadata import entry_points
+from typing import Any, Generic, TypeVar, cast
+
+from anunnaki.errors import AnunnakiError
+
+__all__ = ["PluginError", "Registry", "check_name"]
+
+log = logging.getLogger("anunnaki.plugins")
+
+T = TypeVar("T")
+F = TypeVar("F", bound=Callable[..., Any])
+
+_NAME_RE = re.compile(r"^[A-Za-z_][A-Za-z0-9_.-]*$")
+
+
+class PluginError(AnunnakiError):
+    """A plugin is unknown, malformed, or cannot be loaded."""
+
+
+def check_name(name: object, *, what: str, error: type[AnunnakiError] = PluginError) -> str:
+    """Return ``name`` if it can name a plugin (an identifier, ``.``/``-`` allowed inside)."""
+    if not isinstance(name, str) or not _NAME_RE.match(name):
+        raise error(f"a {what} name must be an identifier such as 'fog', got {name!r}")
+    return name
+
+
+def _load_ref(ref: str) -> Any:
+    """Import ``"package.module:attribute"``."""
+    module, _, attr = ref.partition(":")
+    obj: Any = importlib.import_module(module)
+    for part in attr.split(".") if attr else []:
+        obj = getattr(obj, part)
+    return obj
+
+
+class Registry(Generic[T]):
+    """Names → factories of one plugin slot.
+
+    Args:
+        what: The slot's name in messages, e.g. ``"phenomenon"``, ``"managed system"``.
+        group: Entry-point group third parties register under; ``None`` disables plugins.
+        kind: The plugin type; ``create`` passes instances of it through unchanged
+            (``None``: nothing passes through, every argument must be a name).
+        check: Validates a factory at registration, raising ``error`` with what to fix;
+            returns the factory (possibly normalised).
+        error: The exception type raised (a subclass of :class:`AnunnakiError`).
+        hint: Appended to the unknown-name message (e.g. how to combine names).
+
+    """
+
+    def __init__(
+        self,
+        what: str,
+        *,
+        group: str | None = None,
+        kind: type[T] | tuple[type, ...] | None = None,
+        check: Callable[[Any], Any] | None = None,
+        error: type[AnunnakiError] = PluginError,
+        hint: str | None = None,
+    ) -> None:
+        self.what = what
+        self.group = group
+        self.kind = kind
+        self.error = error
+        self.hint = hint
+        self._check = check
+        self._factories: dict[str, Callable[..., T]] = {}
+        self._lazy: dict[str, str] = {}
+        self._plugins_loaded = group is None
+        self._lock = threading.RLock()
+
+    # -- registration -----------------------------------------------------------------------
+    def _name_of(self, factory: Any, name: str | None) -> str:
+        if name is None:
+            name = getattr(factory, "name", None)
+            if not isinstance(name, str) and not inspect.isclass(factory):
+                name = getattr(factory, "__name__", None)
+        return check_name(name, what=self.what, error=self.error)
+
+    def _validate(self, factory: Any) -> Callable[..., T]:
+        if not callable(factory):
+            raise self.error(f"a {self.what} must be a class or a factory, got {factory!r}")
+        if inspect.isclass(factory) and inspect.isabstract(factory):
+            missing = ", ".join(sorted(getattr(factory, "__abstractmethods__", ())))
+            raise self.error(f"{factory.__name__} is abstract; implement {missing}")
+        if self._check is not None:
+            factory = self._check(factory)
+        return cast(Callable[..., T], factory)
+
+    def register(self, factory: F, *, name: str | None = None, replace: bool = False) -> F:
+        """Register a class or factory under ``name`` (default: its ``name`` attribute).
+
+        Usable as a class decorator. Raises the slot's error when the factory fails the
+        slot's check, or when another factory has the name and ``replace`` is false.
+        """
+        checked = self._validate(factory)
+        key = self._name_of(checked, name)
+        with self._lock:
+            current = self._factories.get(key)
+            if current is not None and current is not checked and not replace:
+                raise self.error(
+                    f"a different {self.what} is already registered as {key!r} "
+                    f"({_describe(current)}); pass replace=True to override it"
+                )
+            if key in self._lazy and not replace:
+                raise self.error(
+                    f"{key!r} is already registered as a {self.what} ({self._lazy[key]}); "
+                    "pass replace=True to override it"
+                )
+            self._lazy.pop(key, None)
+            self._factories[key] = checked
+        return factory
+
+    def register_lazy(self, name: str, ref: str) -> None:
+        """Register ``"module:attribute"`` under ``name``, imported on first use."""
+        key = check_name(name, what=self.what, error=self.error)
+        with self._lock:
+            if key in self._factories or key in self._lazy:
+                raise self.error(f"{key!r} is already registered as a {self.what}")
+            self._lazy[key] = ref
+
+    def unregister(self, name: str) -> None:
+        """Forget ``name`` (tests, or a plugin withdrawn at run time)."""
+        with self._lock:
+            self._factories.pop(name, None)
+            self._lazy.pop(name, None)
+
+    def load_entry_points(self, *, force: bool = False) -> None:
+        """Load the entry-point group's plugins (once, unless ``force``); skip broken ones."""
+        with self._lock:
+            if self.group is None or (self._plugins_loaded and not force):
+                return
+            self._plugins_loaded = True
+            for ep in entry_points(group=self.group):
+                try:
+                    factory = self._validate(ep.load())
+                    key = self._name_of(factory, None if inspect.isclass(factory) else ep.name)
+                except Exception as exc:  # a broken plugin must not break the lookup
+                    log.warning(
+                        "skipping %s entry point %r (%s): %s: %s",
+                        self.what,
+                        ep.name,
+                        ep.value,
+                        type(exc).__name__,
+                        exc,
+                    )
+                    continue
+                current = self._factories.get(key)
+                if (current is not None and current is not factory) or key in self._lazy:
+                    log.warning(
+                        "skipping %s entry point %r (%s): the name %r is already taken",
+                        self.what,
+                        ep.name,
+                        ep.value,
+                        key,
+                    )
+                    continue
+                if ep.name != key:
+                    log.warning(
+                        "%s entry point %r (%s) registers as %r, its own name",
+                        self.what,
+                        ep.name,
+                        ep.value,
+                        key,
+                    )
+                self._factories[key] = factory
+
+    # -- lookup -----------------------------------------------------------------------------
+    def names(self) -> list[str]:
+        """The sorted names of every registered plugin (entry points included)."""
+        self.load_entry_points()
+        with self._lock:
+            return sorted({*self._factories, *self._lazy})
+
+    def __contains__(self, name: object) -> bool:
+        return isinstance(name, str) and name in self.names()
+
+    def unknown(self, name: object) -> AnunnakiError:
+        """The error for an unknown name: it lists the valid ones."""
+        valid = ", ".join(self.names()) or "none registered"
+        text = f"unknown {self.what} {name!r}; valid names: {valid}"
+        if self.hint:
+            text += f" ({self.hint})"
+        return self.error(text)
+
+    def factory(self, name: str) -> Callable[..., T]:
+        """The class or factory registered as ``name``.
+
+        Raises the slot's error for an unknown name (listing the valid ones) or a lazy
+        built-in that cannot be imported (naming the extra to install when the import
+        error says so).
+        """
+        if not isinstance(name, str):
+            raise self.error(f"expected a {self.what} name, got {type(name).__name__}")
+        key = name.strip()
+        self.load_entry_points()
+        with self._lock:
+            found = self._factories.get(key)
+            ref = self._lazy.get(key)
+        if found is not None:
+            return found
+        if ref is None:
+            raise self.unknown(name)
+        try:
+            loaded = self._validate(_load_ref(ref))
+        except AnunnakiError:
+            raise
+        except ImportError as exc:
+            raise self.error(f"the {self.what} {key!r} cannot be loaded: {exc}") from exc
+        with self._lock:
+            self._lazy.pop(key, None)
+            self._factories[key] = loaded
+        return loaded
+
+    def create(self, spec: str | T, /, **kwargs: Any) -> T:
+        """An instance for a name (built with ``kwargs``), or the instance itself.
+
+        Raises the slot's error for an unknown name, or for an argument that is neither a
+        name nor an instance of the slot's kind.
+        """
+        if isinstance(spec, str):
+            return self.factory(spec)(**kwargs)
+        if self.kind is not None and isinstance(spec, self.kind):
+            return spec
+        raise self.error(
+            f"expected a {self.what} name or instance, got {type(spec).__name__}; "
+            f"valid names: {', '.join(self.names())}"
+        )
+
+
+def _describe(obj: Any) -> str:
+    module = getattr(obj, "__module__", "?")
+    return f"{module}.{getattr(obj, '__qualname__', repr(obj))}"

@@ -1,0 +1,144 @@
+"""The generic plugin registry: names or objects, lazy built-ins, entry points, errors."""
+
+from __future__ import annotations
+
+import abc
+import logging
+from importlib.metadata import EntryPoint
+from typing import Any
+
+import pytest
+
+from anunnaki import plugins
+from anunnaki.errors import AnunnakiError
+from anunnaki.plugins import PluginError, Registry
+
+
+class Widget:
+    name = "widget"
+
+    def __init__(self, size: int = 1) -> None:
+        self.size = size
+
+
+class Gadget(Widget):
+    name = "gadget"
+
+
+class Abstract(abc.ABC):
+    name = "abstract"
+
+    @abc.abstractmethod
+    def go(self) -> None: ...
+
+
+class SlotError(AnunnakiError):
+    pass
+
+
+def test_register_and_create_by_name_or_instance() -> None:
+    reg: Registry[Widget] = Registry("widget", kind=Widget)
+    reg.register(Widget)
+    reg.register(Gadget)
+    made = reg.create("widget", size=3)
+    assert isinstance(made, Widget) and made.size == 3
+    g = Gadget()
+    assert reg.create(g) is g
+    assert reg.names() == ["gadget", "widget"]
+    assert "gadget" in reg and "nope" not in reg
+
+
+def test_unknown_name_lists_the_valid_ones_in_the_slot_error() -> None:
+    reg: Registry[Widget] = Registry("widget", kind=Widget, error=SlotError, hint="try 'widget'")
+    reg.register(Widget)
+    with pytest.raises(SlotError, match=r"unknown widget 'wodget'; valid names: widget \(try"):
+        reg.create("wodget")
+    with pytest.raises(SlotError, match="expected a widget name or instance, got int"):
+        reg.create(3)  # type: ignore[arg-type]
+
+
+def test_checks_at_registration() -> None:
+    def must_be_gadget(cls: Any) -> Any:
+        if cls is not Gadget:
+            raise SlotError(f"{cls.__name__} is not a gadget")
+        return cls
+
+    reg: Registry[Widget] = Registry("widget", check=must_be_gadget, error=SlotError)
+    with pytest.raises(SlotError, match="Widget is not a gadget"):
+        reg.register(Widget)
+    with pytest.raises(SlotError, match="Abstract is abstract; implement go"):
+        reg.register(Abstract)
+    with pytest.raises(SlotError, match="must be a class or a factory"):
+        reg.register(42)  # type: ignore[arg-type]
+    with pytest.raises(SlotError, match="name must be an identifier"):
+        reg.register(Gadget, name="two words")
+
+
+def test_a_name_is_taken_once_unless_replaced() -> None:
+    reg: Registry[Widget] = Registry("widget")
+    reg.register(Widget)
+    reg.register(Widget)  # the same class again is harmless
+
+    class Other(Widget):
+        name = "widget"
+
+    with pytest.raises(PluginError, match="already registered as 'widget'"):
+        reg.register(Other)
+    reg.register(Other, replace=True)
+    assert reg.factory("widget") is Other
+
+
+def test_factories_register_under_their_function_name() -> None:
+    reg: Registry[Widget] = Registry("widget")
+
+    def big_widget() -> Widget:
+        return Widget(size=10)
+
+    reg.register(big_widget)
+    reg.register(lambda: Widget(2), name="small")
+    assert reg.create("big_widget").size == 10
+    assert reg.create("small").size == 2
+
+
+def test_lazy_builtins_import_on_first_use() -> None:
+    reg: Registry[Any] = Registry("thing")
+    reg.register_lazy("ordered", "collections:OrderedDict")
+    reg.register_lazy("broken", "anunnaki_no_such_module:Thing")
+    assert reg.names() == ["broken", "ordered"]
+    assert reg.create("ordered") == {}
+    with pytest.raises(PluginError, match="the thing 'broken' cannot be loaded: No module"):
+        reg.factory("broken")
+    with pytest.raises(PluginError, match="already registered"):
+        reg.register_lazy("ordered", "collections:OrderedDict")
+
+
+def test_entry_points_load_lazily_and_broken_ones_are_skipped(
+    monkeypatch: pytest.MonkeyPatch, caplog: pytest.LogCaptureFixture
+) -> None:
+    eps = [
+        EntryPoint("gadget", f"{__name__}:Gadget", "anunnaki.test"),
+        EntryPoint("missing", "anunnaki_no_such_module:Thing", "anunnaki.test"),
+        EntryPoint("clash", f"{__name__}:Widget", "anunnaki.test"),
+    ]
+    calls: list[str] = []
+
+    def fake_entry_points(*, group: str) -> list[EntryPoint]:
+        calls.append(group)
+        return [ep for ep in eps if ep.group == group]
+
+    monkeypatch.setattr(plugins, "entry_points", fake_entry_points)
+
+    class Builtin(Widget):
+        name = "widget"
+
+    reg: Registry[Widget] = Registry("widget", group="anunnaki.test", kind=Widget)
+    reg.register(Builtin)
+    assert calls == []  # nothing loaded before the first lookup
+    with caplog.at_level(logging.WARNING, logger="anunnaki.plugins"):
+        assert reg.names() == ["gadget", "widget"]
+    assert calls == ["anunnaki.test"]
+    assert reg.factory("widget") is Builtin  # a plugin cannot shadow a built-in
+    assert "skipping widget entry point 'missing'" in caplog.text
+    assert "skipping widget entry point 'clash'" in caplog.text
+    reg.names()
+    assert calls == ["anunnaki.test"]  # once
