@@ -425,7 +425,7 @@ class InprocSetup:
 
     def close(self) -> None:
         self._stop.set()
-        self.manager._wake.set()  # end spin's wait now
+        self.manager.wake()  # end spin's wait now
         self._thread.join(timeout=5.0)
         self.rover.close()
         self.manager.close()
@@ -641,7 +641,7 @@ def serve_manager(config_path: str) -> int:
     def watch_stdin() -> None:
         sys.stdin.read()
         stop.set()
-        manager._wake.set()
+        manager.wake()
 
     threading.Thread(target=watch_stdin, daemon=True).start()
     try:
@@ -795,15 +795,15 @@ class _StampedActuator(BusActuator):
 class _StampedManager(AutonomicManager):
     """The manager, stamping the start of each step."""
 
-    def __init__(self, *args: Any, **kwargs: Any) -> None:
+    def _init(self, *args: Any, **kwargs: Any) -> None:
         self.armed = False
         self.step_started = 0
         self.stamps: list[tuple[int, int]] = []
-        super().__init__(*args, **kwargs)
+        super()._init(*args, **kwargs)
 
-    def step(self, now: float | None = None) -> None:
+    def _step(self, now: float | None, *, react: bool) -> None:
         self.step_started = time.perf_counter_ns()
-        super().step(now)
+        super()._step(now, react=react)
 
 
 def run_breakdown(trials: int, tmp: Path, tactics: Path, seed: int) -> dict[str, Any]:
@@ -1068,7 +1068,7 @@ def throughput_bus(
     stats = bus.stats().totals()
     nsteps = steps - steps0
     stop.set()
-    manager._wake.set()
+    manager.wake()
     thread.join(timeout=5.0)
     manager.close()
     bus.close()

@@ -28,8 +28,8 @@ import pytest
 
 from anunnaki.bus import InprocHub, open_bus
 from anunnaki.managed import ScriptedSystem
-from anunnaki.utu import AutonomicManager, load_config
-from anunnaki.utu._nodes import DECISIONS_TOPIC, DecisionTail
+from anunnaki.topics import DECISIONS as DECISIONS_TOPIC
+from anunnaki.utu import AutonomicManager, DecisionTail, load_config
 
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent.parent

@@ -45,8 +45,8 @@ from anunnaki.dashboard._server import is_loopback, loopback_names
 from anunnaki.errors import MissingExtraError, ModelFileError
 from anunnaki.goals import load_goal_model
 from anunnaki.tactics import load_tactics
+from anunnaki.topics import DECISIONS as DECISIONS_TOPIC
 from anunnaki.utu._launch import load_launch
-from anunnaki.utu._nodes import DECISIONS_TOPIC
 
 
 @pytest.fixture

@@ -22,7 +22,7 @@ from anunnaki.dashboard._app import dumps
 from anunnaki.dashboard._state import MAX_ACTIONS, MAX_ASSESSORS, _num
 from anunnaki.goals import load_goal_model
 from anunnaki.tactics import load_tactics
-from anunnaki.utu._nodes import DECISIONS_TOPIC
+from anunnaki.topics import DECISIONS as DECISIONS_TOPIC
 
 HUGE = 10**400  # an int no float can hold: float(HUGE) raises OverflowError
 

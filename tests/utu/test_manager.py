@@ -436,8 +436,11 @@ def test_reload_service_swaps_tactics_while_spinning(bus, tmp_path: Path) -> Non
         )
         bad = tmp_path / "bad.yaml"
         bad.write_text("anunnaki: tactics/1\ntactics: [{name: x}]\n")
-        assert bus.request("/utu/reload", {"tactics": str(bad), "caller": "ops"}).to_body()["ok"]
-        assert bus.request("/utu/reload", {"tactics": str(good), "caller": "ops"}).to_body()["ok"]
+        refused = bus.request("/utu/reload", {"tactics": str(bad), "caller": "ops"}).to_body()
+        assert refused["ok"] is False and refused["status"] == "refused"
+        assert str(bad) in refused["error"]  # the reply names the file and what is wrong
+        accepted = bus.request("/utu/reload", {"tactics": str(good), "caller": "ops"}).to_body()
+        assert accepted["ok"] is True and accepted["status"] == "accepted"
         assert bus.request("/utu/reload", {"caller": "ops"}).to_body()["ok"] is False
         deadline = time.monotonic() + 10
         while time.monotonic() < deadline and {t.name for t in m.tactics.tactics} != {

@@ -1,12 +1,14 @@
-"""Utu as five nodes: the same decisions as the composed manager, readiness, run-stop, B5.
+"""One suite for every deployment of the MAPE-K cycle (composed, five nodes); node bring-up.
 
 The nodes are driven by ``step_nodes`` on an in-process bus (delivery is synchronous), the
-manager by ``step``: both see the same trace at the same instants, so everything they
-record must be identical — decisions, inputs, verdicts and tactic state.
+manager by ``step``: both see the same trace at the same instants, so each test states
+what any deployment must decide, and everything they record must be identical —
+decisions, inputs, verdicts and tactic state.
 """
 
 from __future__ import annotations
 
+import json
 import threading
 import time
 from collections.abc import Callable, Iterator
@@ -19,19 +21,20 @@ from anunnaki.bus import InprocHub, RunStop, open_bus
 from anunnaki.clock import ManualClock
 from anunnaki.errors import ModelFileError
 from anunnaki.managed import ScriptedSystem
-from anunnaki.utu import AutonomicManager, Knowledge, parse_config
-from anunnaki.utu._nodes import (
-    DECISIONS_TOPIC,
+from anunnaki.topics import DECISIONS as DECISIONS_TOPIC
+from anunnaki.topics import node_token, ready_service
+from anunnaki.utu import (
     NODE_NAMES,
     AnalyzeNode,
+    AutonomicManager,
     ExecuteNode,
+    Knowledge,
     NodeConfigError,
     PlanNode,
     UtuNode,
     build_node,
     load_parts,
-    node_token,
-    ready_service,
+    parse_config,
     step_nodes,
 )
 
@@ -70,100 +73,130 @@ def wait_for(predicate: Callable[[], bool], timeout: float = 5.0) -> bool:
     return True
 
 
-class Twin:
-    """The rover scenario run twice in lock step: composed manager (A) and five nodes (B)."""
+class Deployment:
+    """The rover scenario on one deployment of Utu: the composed manager, or five nodes.
 
-    def __init__(self, cfg: Any, *, modes: tuple[str, ...] = ("autonomous", "manual")) -> None:
+    Both are driven deterministically at the trace's instants (``step`` / ``step_nodes`` on
+    an in-process bus, whose delivery is synchronous), so one suite states what every
+    deployment must do, and :func:`logs` compares what they recorded.
+    """
+
+    def __init__(self, kind: str, cfg: Any, *, modes: tuple[str, ...]) -> None:
+        self.kind = kind
         parts = load_parts(cfg)
-        self.bus_a = open_bus("inproc")
-        self.bus_b = open_bus("inproc")
-        self.kb_a, self.kb_b = Knowledge(), Knowledge()
-        self.manager = AutonomicManager.from_config(
-            cfg, bus=self.bus_a, clock=ManualClock(), knowledge=self.kb_a
-        )
-        self.rover_a = ScriptedSystem(self.bus_a, ROVER / "trace.jsonl", modes=modes)
+        self.bus = open_bus("inproc")
+        self.kb = Knowledge()
+        self.manager: AutonomicManager | None = None
         self.nodes: dict[str, UtuNode] = {}
-        for name in NODE_NAMES:
-            kw: dict[str, Any] = {}
-            if name == "analyze":
-                kw["pace"] = True
-            if name == "execute":
-                kw["expect_plan"] = True
-            self.nodes[name] = build_node(
-                name, parts, bus=self.bus_b, knowledge=self.kb_b, clock=ManualClock(), **kw
+        if kind == "composed":
+            self.manager = AutonomicManager.from_config(
+                parts, bus=self.bus, clock=ManualClock(), knowledge=self.kb
             )
-        self.rover_b = ScriptedSystem(self.bus_b, ROVER / "trace.jsonl", modes=modes)
+        else:
+            for name in NODE_NAMES:
+                kw: dict[str, Any] = {}
+                if name == "analyze":
+                    kw["pace"] = True
+                if name == "execute":
+                    kw["expect_plan"] = True
+                self.nodes[name] = build_node(
+                    name, parts, bus=self.bus, knowledge=self.kb, clock=ManualClock(), **kw
+                )
+        self.rover = ScriptedSystem(self.bus, ROVER / "trace.jsonl", modes=modes)
 
     def step(self, t: float) -> None:
-        self.rover_a.step(t)
-        self.manager.step(t)
-        self.rover_b.step(t)
-        step_nodes(self.nodes, t)
-        # The rovers hear buzzer commands on a subscriber thread: let them catch up before
-        # the next status goes out (both the same way).
-        for rover, kb in ((self.rover_a, self.kb_a), (self.rover_b, self.kb_b)):
-            sent = sum(
-                1
-                for d in kb.decisions()
-                if d.kind == "action" and d.data.get("topic") == "/rover/buzzer"
-            )
-            assert wait_for(lambda r=rover, n=sent: self._heard(r) == n)
-
-    @staticmethod
-    def _heard(rover: ScriptedSystem) -> int:
-        return sum(1 for c in rover.commands if c[1] == "buzzer")
+        self.rover.step(t)
+        if self.manager is not None:
+            self.manager.step(t)
+        else:
+            step_nodes(self.nodes, t)
+        # The rover hears buzzer commands on a subscriber thread: let it catch up before
+        # the next status goes out.
+        sent = sum(
+            1
+            for d in self.kb.decisions()
+            if d.kind == "action" and d.data.get("topic") == "/rover/buzzer"
+        )
+        assert wait_for(lambda: sum(1 for c in self.rover.commands if c[1] == "buzzer") == sent)
 
     def instants(self, until: float = 53.0) -> list[float]:
         extra = [50.0 + 0.25 * i for i in range(int((until - 50.0) / 0.25) + 1)]
-        return sorted({*self.rover_a.instants(), *extra})
+        return sorted({*self.rover.instants(), *extra})
 
-    def assert_identical(self) -> None:
-        a, b = self.kb_a, self.kb_b
-        assert [(d.t, d.kind, d.tactic, d.data) for d in a.decisions()] == [
-            (d.t, d.kind, d.tactic, d.data) for d in b.decisions()
-        ]
-        assert [(r.t, r.topic, r.msg) for r in a.inputs()] == [
-            (r.t, r.topic, r.msg) for r in b.inputs()
-        ]
-        assert [(v.t, v.node, v.utility, v.status) for v in a.verdicts()] == [
-            (v.t, v.node, v.utility, v.status) for v in b.verdicts()
-        ]
-        assert a.tactics() == b.tactics()
-        assert a.models_at() == b.models_at()
+    def queued_ops(self) -> int:
+        """Operator calls waiting for the next step."""
+        if self.manager is not None:
+            return len(self.manager._ops)
+        return len(self.nodes["monitor"]._ops)  # type: ignore[attr-defined]
+
+    def halted(self) -> bool:
+        if self.manager is not None:
+            return self.manager.paused
+        execute = self.nodes["execute"]
+        assert isinstance(execute, ExecuteNode)
+        return execute.halted
 
     def close(self) -> None:
-        self.manager.close()
+        if self.manager is not None:
+            self.manager.close()
         for node in self.nodes.values():
             node.close()
-        for x in (self.rover_a, self.rover_b, self.bus_a, self.bus_b, self.kb_b):
+        for x in (self.rover, self.bus):
             x.close()
+        if self.manager is None:
+            self.kb.close()
 
 
-def queued_ops(twin: Twin) -> tuple[int, int]:
-    """Operator calls waiting for the next step: (manager, monitor node)."""
-    return len(twin.manager._ops), len(twin.nodes["monitor"]._ops)  # type: ignore[attr-defined]
+def logs(kb: Knowledge) -> dict[str, Any]:
+    """Everything a run records: decisions, inputs, verdicts, tactic state, model texts."""
+    return {
+        "decisions": [(d.t, d.kind, d.tactic, d.data) for d in kb.decisions()],
+        "inputs": [(r.t, r.topic, r.msg) for r in kb.inputs()],
+        "verdicts": [(v.t, v.node, v.utility, v.status) for v in kb.verdicts()],
+        "tactics": kb.tactics(),
+        "models": kb.models_at(),
+    }
 
 
-@pytest.fixture
-def twin_factory() -> Iterator[Callable[..., Twin]]:
-    made: list[Twin] = []
+DEPLOYMENTS = ("composed", "nodes")
 
-    def make(*args: Any, **kw: Any) -> Twin:
-        made.append(Twin(*args, **kw))
+
+@pytest.fixture(params=DEPLOYMENTS)
+def deploy(request: pytest.FixtureRequest) -> Iterator[Callable[..., Deployment]]:
+    made: list[Deployment] = []
+
+    def make(cfg: Any, *, modes: tuple[str, ...] = ("autonomous", "manual")) -> Deployment:
+        made.append(Deployment(request.param, cfg, modes=modes))
         return made[-1]
 
     yield make
-    for t in made:
-        t.close()
+    for d in made:
+        d.close()
 
 
-# -- the same decisions ------------------------------------------------------------------------
-def test_nodes_decide_exactly_as_the_composed_manager(twin_factory) -> None:  # type: ignore[no-untyped-def]
-    twin = twin_factory(config())
-    for t in twin.instants():
-        twin.step(t)
-    twin.assert_identical()
-    got = [(d.t, d.kind, d.tactic) for d in twin.kb_b.decisions() if d.t < 50]
+_REFERENCE: dict[str, dict[str, Any]] = {}
+
+
+def same_as_composed(name: str, d: Deployment, tmp: Path | None = None) -> None:
+    """Every deployment records what the composed manager records (run first, as reference).
+
+    Each run has its own temporary folder (``tmp``): its path is masked.
+    """
+    got = logs(d.kb)
+    if tmp is not None:
+        got = json.loads(json.dumps(got, default=repr).replace(str(tmp), "<tmp>"))
+    if d.kind == "composed":
+        _REFERENCE[name] = got
+    elif name in _REFERENCE:
+        assert got == _REFERENCE[name]
+
+
+# -- what every deployment decides -------------------------------------------------------------
+def test_the_fail_safe_hands_over_to_manual(deploy) -> None:  # type: ignore[no-untyped-def]
+    d = deploy(config())
+    for t in d.instants():
+        d.step(t)
+    got = [(x.t, x.kind, x.tactic) for x in d.kb.decisions() if x.t < 50]
     assert got[:5] == [
         (25.0, "selected", "fail-safe"),
         (25.0, "started", "fail-safe"),
@@ -171,73 +204,105 @@ def test_nodes_decide_exactly_as_the_composed_manager(twin_factory) -> None:  # 
         (25.0, "action", "fail-safe"),
         (25.5, "postcondition_ok", "fail-safe"),
     ]
-    assert [c[2] for c in twin.rover_b.commands if c[1] == "set_mode"] == [{"mode": "manual"}]
+    assert [c[2] for c in d.rover.commands if c[1] == "set_mode"] == [{"mode": "manual"}]
+    same_as_composed("hand-over", d)
 
 
-def test_a_failed_postcondition_escalates_to_run_stop_the_same_way(twin_factory) -> None:  # type: ignore[no-untyped-def]
+def test_a_failed_postcondition_escalates_to_run_stop(deploy) -> None:  # type: ignore[no-untyped-def]
     # A rover that refuses manual mode: the fail-safe's postcondition fails at its deadline.
-    twin = twin_factory(config(), modes=("autonomous",))
-    for t in twin.instants(until=50.0):
-        twin.step(t)
-    twin.assert_identical()
-    kinds = [(d.t, d.kind) for d in twin.kb_b.decisions()]
+    d = deploy(config(), modes=("autonomous",))
+    for t in d.instants(until=50.0):
+        d.step(t)
+    kinds = [(x.t, x.kind) for x in d.kb.decisions()]
     assert (30.0, "postcondition_failed") in kinds
     assert (30.0, "run_stop") in kinds
-    assert twin.rover_b.state().get("stopped") is True
-    execute = twin.nodes["execute"]
-    assert isinstance(execute, ExecuteNode) and execute.halted
+    assert d.rover.state().get("stopped") is True
+    assert d.halted()
+    same_as_composed("escalation", d)
 
 
-def test_operator_calls_enter_the_cycle_like_the_managers(twin_factory, tmp_path) -> None:  # type: ignore[no-untyped-def]
+def test_operator_calls_enter_the_cycle(deploy, tmp_path) -> None:  # type: ignore[no-untyped-def]
     tactics = tmp_path / "tactics.yaml"
     text = (ROVER / "tactics.yaml").read_text()
     tactics.write_text(
         text.replace("    priority: 100\n", "    priority: 100\n    requires_approval: true\n", 1)
     )
-    twin = twin_factory(config(tactics))
+    d = deploy(config(tactics))
     calls = {
         12.0: ("/utu/pause", {"caller": "op"}),
         14.0: ("/utu/resume", {"caller": "op"}),
         27.0: ("/utu/approve", {"caller": "op", "tactic": "fail-safe", "approve": True}),
         28.0: ("/utu/approve", {"caller": "op", "tactic": "nope"}),
     }
-    for t in twin.instants(until=50.0):
+    for t in d.instants(until=50.0):
         for at, (service, body) in calls.items():
             if at == t:
-                for bus in (twin.bus_a, twin.bus_b):
-                    assert bus.request(service, body, timeout=2.0).to_body()["ok"] is True
+                assert d.bus.request(service, body, timeout=2.0).to_body()["ok"] is True
         if t == 40.0:  # a dashboard stops everything, then the operator resumes
-            for bus in (twin.bus_a, twin.bus_b):
-                bus.publish("/utu/run_stop", RunStop(reason="test", caller="dashboard"))
-            # Heard on subscriber threads: both must have queued it before this step.
-            assert wait_for(lambda: queued_ops(twin) == (1, 1))
+            d.bus.publish("/utu/run_stop", RunStop(reason="test", caller="dashboard"))
+            # Heard on a subscriber thread: it must be queued before this step.
+            assert wait_for(lambda: d.queued_ops() == 1)
         if t == 42.0:
-            for bus in (twin.bus_a, twin.bus_b):
-                bus.request("/utu/resume", {"caller": "op"}, timeout=2.0)
-        twin.step(t)
-    twin.assert_identical()
-    kinds = [d.kind for d in twin.kb_b.decisions()]
+            d.bus.request("/utu/resume", {"caller": "op"}, timeout=2.0)
+        d.step(t)
+    kinds = [x.kind for x in d.kb.decisions()]
     for kind in ("paused", "pending_approval", "approved", "operator_refused", "run_stop"):
         assert kind in kinds
     assert kinds.index("pending_approval") < kinds.index("approved") < kinds.index("started")
+    refused = d.bus.request(
+        "/utu/approve", {"caller": "op", "tactic": "fail-safe", "approve": "false"}, timeout=2.0
+    )
+    assert refused.to_body()["ok"] is False  # not a boolean: refused, never read as true
+    same_as_composed("operator", d, tmp_path)
 
 
-def test_a_vanished_agent_node_is_handled_like_the_manager(twin_factory) -> None:  # type: ignore[no-untyped-def]
+def test_a_vanished_agent_node_makes_its_agent_unknown(deploy) -> None:  # type: ignore[no-untyped-def]
     # The oracle (agent A4) is vouched for by the liveliness of its node /oracle.
     binding = Path(__file__).parents[1] / "data" / "utu" / "binding-liveliness.yaml"
-    twin = twin_factory(config(binding=binding))
-    tokens = []
-    for t in twin.instants(until=50.0):
+    d = deploy(config(binding=binding))
+    token = None
+    for t in d.instants(until=50.0):
         if t == 1.0:
-            tokens = [bus.liveliness_token("/oracle") for bus in (twin.bus_a, twin.bus_b)]
+            token = d.bus.liveliness_token("/oracle")
         if t == 10.0:  # the oracle's process dies
-            for token in tokens:
-                token.close()
-            assert wait_for(lambda: queued_ops(twin) == (1, 1))
-        twin.step(t)
-    twin.assert_identical()
-    lost = [d for d in twin.kb_b.decisions() if d.kind == "liveliness_lost"]
-    assert [(d.t, d.data["agents"]) for d in lost] == [(10.0, ["A4"])]
+            assert token is not None
+            token.close()
+            assert wait_for(lambda: d.queued_ops() == 1)
+        d.step(t)
+    lost = [x for x in d.kb.decisions() if x.kind == "liveliness_lost"]
+    assert [(x.t, x.data["agents"]) for x in lost] == [(10.0, ["A4"])]
+    same_as_composed("liveliness", d)
+
+
+def test_a_hot_reload_applies_in_the_cycle(deploy, tmp_path) -> None:  # type: ignore[no-untyped-def]
+    d = deploy(config())
+    bad = tmp_path / "bad.yaml"
+    bad.write_text((ROVER / "tactics.yaml").read_text().replace("goal: G3", "goal: G33", 1))
+    renamed = tmp_path / "renamed.yaml"
+    renamed.write_text((ROVER / "tactics.yaml").read_text().replace("fail-safe", "hand-over"))
+    good = tmp_path / "good.yaml"
+    good.write_text((ROVER / "tactics.yaml").read_text().replace("priority: 100", "priority: 90"))
+    for t in d.instants(until=30.0):
+        if t == 5.0:
+            reply = d.bus.request("/utu/reload", {"tactics": str(bad), "caller": "op"}).to_body()
+            assert reply["ok"] is False and reply["status"] == "refused"
+            assert f"{bad}:" in reply["error"] and "G33" in reply["error"]
+        if t == 6.0:
+            # The configuration names the fail-safe: a tactics file without it is refused.
+            body = {"tactics": str(renamed), "caller": "op"}
+            reply = d.bus.request("/utu/reload", body).to_body()
+            assert reply["ok"] is False and "fail-safe tactic 'fail-safe'" in reply["error"]
+        if t == 7.0:
+            reply = d.bus.request("/utu/reload", {"tactics": str(good), "caller": "op"}).to_body()
+            assert reply == {"ok": True, "queued": "reload", "caller": "op", "status": "accepted"}
+        d.step(t)
+    kinds = [(x.t, x.kind) for x in d.kb.decisions()]
+    assert (5.0, "reload_refused") in kinds and (6.0, "reload_refused") in kinds
+    assert (7.0, "reloaded") in kinds
+    assert d.kb.models_at()["tactics"][0] == str(good)
+    started = [x for x in d.kb.decisions() if x.kind == "started"]
+    assert started and started[0].data["priority"] == 90  # the reloaded tactic ran
+    same_as_composed("reload", d, tmp_path)
 
 
 # -- readiness, liveliness, bring-up -----------------------------------------------------------

@@ -66,6 +66,14 @@ from anunnaki.bus._api import (
     Subscriber,
 )
 from anunnaki.bus._config import AccessControl, AccessRule, BusConfig, TlsConfig
+from anunnaki.bus._cycle import (
+    AnalysisState,
+    CycleDone,
+    ExecuteStatus,
+    MonitorBatch,
+    MonitorInput,
+    PlanStart,
+)
 from anunnaki.bus._errors import (
     BusClosedError,
     BusConfigError,
@@ -108,6 +116,7 @@ from anunnaki.bus._messages import (
     message_types,
     register_message,
 )
+from anunnaki.bus._node import Node
 from anunnaki.bus._qos import PRIORITIES, QOS_TABLE, QoS, TopicClass, qos_for
 
 __all__ = [
@@ -116,6 +125,7 @@ __all__ = [
     "QOS_TABLE",
     "AccessControl",
     "AccessRule",
+    "AnalysisState",
     "Assessment",
     "Bus",
     "BusClosedError",
@@ -126,8 +136,10 @@ __all__ = [
     "BusStats",
     "BusTimeout",
     "Clock",
+    "CycleDone",
     "Detections",
     "Envelope",
+    "ExecuteStatus",
     "Generic",
     "Image",
     "InprocBus",
@@ -139,6 +151,10 @@ __all__ = [
     "MessageError",
     "ModeReply",
     "ModeRequest",
+    "MonitorBatch",
+    "MonitorInput",
+    "Node",
+    "PlanStart",
     "Publisher",
     "QoS",
     "RunStop",

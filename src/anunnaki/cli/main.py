@@ -19,7 +19,16 @@ __all__ = ["build_parser", "main"]
 
 def build_parser() -> argparse.ArgumentParser:
     """Build the argument parser with every sub-command."""
-    from anunnaki.cli import _check, _dashboard, _detector, _evaluate, _log, _run, _sim
+    from anunnaki.cli import (
+        _check,
+        _dashboard,
+        _detector,
+        _evaluate,
+        _log,
+        _reload,
+        _run,
+        _sim,
+    )
 
     parser = argparse.ArgumentParser(
         prog="anunnaki",
@@ -33,6 +42,7 @@ def build_parser() -> argparse.ArgumentParser:
     _detector.add_parser(sub)
     _evaluate.add_parser(sub)
     _log.add_parser(sub)
+    _reload.add_parser(sub)
     _run.add_parser(sub)
     _sim.add_parser(sub)
     return parser

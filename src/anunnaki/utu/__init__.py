@@ -16,6 +16,7 @@ Five parts, composed by :class:`AutonomicManager`:
 ``manager.spin()`` runs live. See docs/utu.md.
 """
 
+from anunnaki.utu._actuators import BusActuator, RecordingActuator
 from anunnaki.utu._config import RunStopConfig, UtuConfig, load_config, parse_config
 from anunnaki.utu._knowledge import Decision, InputRow, Knowledge, TacticRow, VerdictRow
 from anunnaki.utu._launch import (
@@ -26,12 +27,7 @@ from anunnaki.utu._launch import (
     parse_launch,
     run_launch,
 )
-from anunnaki.utu._manager import (
-    AutonomicManager,
-    BusActuator,
-    RecordingActuator,
-    load_tactics_text,
-)
+from anunnaki.utu._manager import AutonomicManager
 from anunnaki.utu._mape import (
     ActionOutcome,
     Actuator,
@@ -42,39 +38,63 @@ from anunnaki.utu._mape import (
     TacticRuntime,
 )
 from anunnaki.utu._nodes import (
+    NODE_NAMES,
     AnalyzeNode,
     ComposedUtu,
     ExecuteNode,
     KnowledgeNode,
     MonitorNode,
+    NodeName,
     PlanNode,
     UtuNode,
-    UtuParts,
     build_node,
-    load_parts,
     step_nodes,
 )
+from anunnaki.utu._parts import (
+    NodeConfigError,
+    UtuParts,
+    load_parts,
+    load_tactics_text,
+    open_knowledge,
+)
 from anunnaki.utu._replay import ReplayReport, replay
+from anunnaki.utu._stages import (
+    AnalyzeStage,
+    DecisionTail,
+    ExecuteStage,
+    KnowledgeStage,
+    MonitorStage,
+    PlanStage,
+)
 
 __all__ = [
+    "NODE_NAMES",
     "ActionOutcome",
     "Actuator",
     "AnalyzeNode",
+    "AnalyzeStage",
     "Analyzer",
     "AutonomicManager",
     "BusActuator",
     "ComposedUtu",
     "Decision",
+    "DecisionTail",
     "ExecuteNode",
+    "ExecuteStage",
     "Executor",
     "InputRow",
     "Knowledge",
     "KnowledgeNode",
+    "KnowledgeStage",
     "Launch",
     "LaunchConfig",
     "Monitor",
     "MonitorNode",
+    "MonitorStage",
+    "NodeConfigError",
+    "NodeName",
     "PlanNode",
+    "PlanStage",
     "Planner",
     "RecordingActuator",
     "ReplayReport",
@@ -91,6 +111,7 @@ __all__ = [
     "load_launch",
     "load_parts",
     "load_tactics_text",
+    "open_knowledge",
     "parse_config",
     "parse_launch",
     "replay",

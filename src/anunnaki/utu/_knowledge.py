@@ -18,9 +18,12 @@ One database file per run holds
   cooldowns survive.
 
 The database runs in WAL mode with ``synchronous=NORMAL``: a committed transaction survives
-the process being killed (the promise here), though not necessarily a power cut. Inputs
-and verdicts are batched (flushed every ``batch`` rows or when a decision is written);
-decisions and tactic state are committed at once.
+the process being killed (the promise here), though not necessarily a power cut. Writes are
+buffered and committed together, in one transaction, by :meth:`Knowledge.flush`: the
+Executor flushes before every action it dispatches (write-ahead: the tactic's state and the
+decisions that led to it are on disk before the managed system is touched), the manager at
+the end of every step that decided something, and any read flushes first. Inputs and
+verdicts are also flushed every ``batch`` rows.
 """
 
 from __future__ import annotations
@@ -143,6 +146,8 @@ class Knowledge:
         self.decisions_written = 0
         self._inputs: list[tuple[float, str, str]] = []
         self._verdicts: list[tuple[float, str, float | None, str]] = []
+        self._decisions: list[tuple[float, str, str | None, str]] = []
+        self._tactics: dict[str, TacticRow] = {}
         self._db.execute(
             "INSERT OR IGNORE INTO meta (key, value) VALUES ('schema', ?)", (str(SCHEMA_VERSION),)
         )
@@ -200,58 +205,69 @@ class Knowledge:
                 self._flush()
 
     def record_decision(self, t: float, kind: str, tactic: str | None = None, **data: Any) -> int:
-        """Write one decision at once (after flushing what it may depend on)."""
+        """Buffer one decision (committed by the next :meth:`flush`); returns how many so far.
+
+        Decisions get their ids when they are committed: several processes may write one
+        knowledge base (one process per Utu node).
+        """
         with self._lock:
-            self._flush()
-            cur = self._db.execute(
-                "INSERT INTO decisions (t, kind, tactic, data) VALUES (?, ?, ?, ?)",
-                (t, kind, tactic, _dumps(data)),
-            )
+            self._decisions.append((t, kind, tactic, _dumps(data)))
             self.decisions_written += 1
-            return int(cur.lastrowid or 0)
+            return self.decisions_written
 
     def save_tactic(self, row: TacticRow) -> None:
-        """Persist a tactic's state at once."""
+        """Buffer a tactic's state (committed by the next :meth:`flush`)."""
         with self._lock:
-            self._db.execute(
-                "INSERT INTO tactics (name, state, started, deadline, next_action, "
-                "cooldown_until, attempt, reason) VALUES (?, ?, ?, ?, ?, ?, ?, ?) "
-                "ON CONFLICT(name) DO UPDATE SET state=excluded.state, "
-                "started=excluded.started, deadline=excluded.deadline, "
-                "next_action=excluded.next_action, cooldown_until=excluded.cooldown_until, "
-                "attempt=excluded.attempt, reason=excluded.reason",
-                (
-                    row.name,
-                    row.state,
-                    row.started,
-                    row.deadline,
-                    row.next_action,
-                    row.cooldown_until,
-                    row.attempt,
-                    row.reason,
-                ),
-            )
+            self._tactics[row.name] = row
 
     def _flush(self) -> None:
-        if not self._inputs and not self._verdicts:
+        if not (self._inputs or self._verdicts or self._decisions or self._tactics):
             return
-        self._db.execute("BEGIN")
+        db = self._db
+        db.execute("BEGIN")
         try:
             if self._inputs:
-                self._db.executemany(
-                    "INSERT INTO inputs (t, topic, msg) VALUES (?, ?, ?)", self._inputs
-                )
+                db.executemany("INSERT INTO inputs (t, topic, msg) VALUES (?, ?, ?)", self._inputs)
             if self._verdicts:
-                self._db.executemany(
+                db.executemany(
                     "INSERT INTO verdicts (t, node, utility, status) VALUES (?, ?, ?, ?)",
                     self._verdicts,
                 )
-            self._db.execute("COMMIT")
+            if self._decisions:
+                db.executemany(
+                    "INSERT INTO decisions (t, kind, tactic, data) VALUES (?, ?, ?, ?)",
+                    self._decisions,
+                )
+            if self._tactics:
+                db.executemany(
+                    "INSERT INTO tactics (name, state, started, deadline, next_action, "
+                    "cooldown_until, attempt, reason) VALUES (?, ?, ?, ?, ?, ?, ?, ?) "
+                    "ON CONFLICT(name) DO UPDATE SET state=excluded.state, "
+                    "started=excluded.started, deadline=excluded.deadline, "
+                    "next_action=excluded.next_action, cooldown_until=excluded.cooldown_until, "
+                    "attempt=excluded.attempt, reason=excluded.reason",
+                    [
+                        (
+                            r.name,
+                            r.state,
+                            r.started,
+                            r.deadline,
+                            r.next_action,
+                            r.cooldown_until,
+                            r.attempt,
+                            r.reason,
+                        )
+                        for r in self._tactics.values()
+                    ],
+                )
+            db.execute("COMMIT")
         except BaseException:
-            self._db.execute("ROLLBACK")
+            db.execute("ROLLBACK")
             raise
         self._inputs.clear()
         self._verdicts.clear()
+        self._decisions.clear()
+        self._tactics.clear()
 
     def flush(self) -> None:
         """Write buffered inputs and verdicts now."""
@@ -275,6 +291,7 @@ class Knowledge:
     # -- reading ------------------------------------------------------------------------
     def tactics(self) -> dict[str, TacticRow]:
         """The persisted state of every tactic."""
+        self.flush()
         with self._lock:
             rows = self._db.execute(
                 "SELECT name, state, started, deadline, next_action, cooldown_until, attempt, "
@@ -300,11 +317,19 @@ class Knowledge:
         return [VerdictRow(*r) for r in rows]
 
     def decisions(
-        self, since: float | None = None, until: float | None = None, limit: int | None = None
+        self,
+        since: float | None = None,
+        until: float | None = None,
+        limit: int | None = None,
+        *,
+        after_id: int | None = None,
     ) -> list[Decision]:
-        """Recorded decisions in order (the last ``limit`` if given)."""
+        """Recorded decisions in order (the last ``limit`` if given; ids above ``after_id``)."""
         self.flush()
         q, args = _range("SELECT id, t, kind, tactic, data FROM decisions", since, until)
+        if after_id is not None:
+            q += (" AND" if args else " WHERE") + " id > ?"
+            args = (*args, after_id)
         with self._lock:
             if limit is not None:
                 rows = self._db.execute(

@@ -58,6 +58,7 @@ from pydantic import (
     model_validator,
 )
 
+from anunnaki import topics
 from anunnaki._safeyaml import LineMap, describe_path, load_yaml, validation_error
 from anunnaki.bus import Bus, BusConfig, BusError, Clock, ServiceError, open_bus
 from anunnaki.clock import SimClock
@@ -66,10 +67,7 @@ from anunnaki.trace import Record, read_trace
 from anunnaki.utu._config import UtuConfig, load_config
 from anunnaki.utu._knowledge import Decision, Knowledge
 from anunnaki.utu._nodes import (
-    DONE_TOPIC,
-    INPUT_TOPIC,
     NODE_NAMES,
-    STATE_TOPIC,
     ComposedUtu,
     DecisionTail,
     MonitorNode,
@@ -555,7 +553,7 @@ class _InputCounter:
     def __init__(self, bus: Bus) -> None:
         self.seen = 0
         self._lock = threading.Lock()
-        self.sub = bus.subscribe(INPUT_TOPIC, self._on_batch, queue=1024)
+        self.sub = bus.subscribe(topics.MONITOR_INPUT, self._on_batch, queue=1024)
 
     def _on_batch(self, sample: Any) -> None:
         inputs = sample.message.to_body().get("inputs", [])
@@ -579,9 +577,9 @@ class _CycleCounter:
         self._cycles: list[tuple[int, int]] = []  # (seq, taken) of recent cycles
         self._done = -1
         self._wait_done = wait_done
-        self._declared = [bus.subscribe(STATE_TOPIC, self._on_state, queue=1024)]
+        self._declared = [bus.subscribe(topics.ANALYSIS, self._on_state, queue=1024)]
         if wait_done:
-            self._declared.append(bus.subscribe(DONE_TOPIC, self._on_done, queue=1024))
+            self._declared.append(bus.subscribe(topics.CYCLE_DONE, self._on_done, queue=1024))
 
     def _on_state(self, sample: Any) -> None:
         body = sample.message.to_body()

@@ -1,9 +1,19 @@
 """The autonomic manager: Monitor → Analyze → Plan → Execute over Knowledge (paper Fig. 8).
 
-:class:`AutonomicManager` composes the parts and owns the step. ``step(now)`` runs one
-deterministic cycle — tests, simulation and replay drive it — and ``spin()`` runs it live:
-event-driven (a message is processed as soon as it arrives) with time-driven checks
-(staleness, deadlines, dwell) at least ``rate`` times a second.
+:class:`AutonomicManager` is Utu in one process: the five stages of
+:mod:`anunnaki.utu._stages` called one after the other — the same code the per-node
+deployment runs, here with direct calls instead of bus hops. ``step(now)`` runs one
+deterministic cycle — tests, simulation and replay drive it — and ``spin()`` runs it live.
+
+Why reaction is event-driven and rates bound only time
+    In ``spin()`` a message on a monitored topic is analysed the moment it arrives: on the
+    in-process bus in the very thread that delivers it (no thread hop that the GIL's
+    switch interval could stretch), on another bus on the spinning thread, woken by the
+    subscriber's doorbell. When the message changes a goal, an applicable tactic or comes
+    with an operator call, the whole cycle runs at once — plan, execute, the first action.
+    When it changes nothing, it is only recorded: the rest of the cycle waits for the next
+    time-driven step. ``rate`` paces those (staleness, deadlines, dwell, temporal windows)
+    and bounds the load; it never delays a reaction.
 
 Operators and other nodes reach the manager through services on the bus (all recorded in
 the decision log with their caller):
@@ -14,6 +24,8 @@ the decision log with their caller):
   run-stop);
 * ``/utu/approve`` — ``{tactic, approve: true|false, caller}`` for tactics marked
   ``requires_approval``;
+* ``/utu/reload`` — ``{goal_model, binding, tactics}`` paths: checked at once (a broken file
+  is refused with its error in the reply), applied at the next cycle;
 * ``/utu/ready`` — readiness (guideline C9), and ``/utu/knowledge/query`` — read the
   knowledge base (decisions, verdicts, state, queue).
 """
@@ -24,133 +36,45 @@ import logging
 import threading
 from collections import deque
 from collections.abc import Callable, Mapping
-from pathlib import Path
 from typing import Any
 
 from anunnaki import topics
-from anunnaki.bus import body_of
+from anunnaki.bus import AnalysisState, InprocBus, RunStop, body_of
 from anunnaki.clock import Clock, SimClock, WallClock
-from anunnaki.errors import AnunnakiError, ModelFileError
-from anunnaki.goals import GoalModel, parse_binding, parse_goal_model
-from anunnaki.tactics import NotifyAction, TacticSet, parse_tactics_xml, parse_tactics_yaml
-from anunnaki.utu._config import UtuConfig
+from anunnaki.errors import AnunnakiError
+from anunnaki.goals import GoalModel
+from anunnaki.tactics import TacticSet
+from anunnaki.utu._actuators import BusActuator, RecordingActuator
+from anunnaki.utu._config import RunStopConfig, UtuConfig
 from anunnaki.utu._knowledge import Knowledge
-from anunnaki.utu._mape import (
-    ActionOutcome,
-    Actuator,
-    Analyzer,
-    Executor,
-    Monitor,
-    Planner,
-    TacticRuntime,
+from anunnaki.utu._mape import Actuator, Analyzer, Executor, Monitor, Planner
+from anunnaki.utu._parts import UtuParts, load_parts, load_tactics_text
+from anunnaki.utu._stages import (
+    OPERATOR,
+    TICK,
+    AnalyzeStage,
+    ExecuteStage,
+    KnowledgeStage,
+    MonitorStage,
+    PlanStage,
+    operator_entry,
+    reloaded_parts,
 )
 
-__all__ = ["AutonomicManager", "BusActuator", "RecordingActuator", "load_tactics_text"]
+__all__ = [
+    "OPERATOR",
+    "TICK",
+    "AutonomicManager",
+    "BusActuator",
+    "RecordingActuator",
+    "load_tactics_text",
+]
 
 log = logging.getLogger("anunnaki.utu")
 
-TICK = "__tick__"
-OPERATOR = "__operator__"
-
-
-def load_tactics_text(text: str, path: str | None) -> TacticSet:
-    """Parse a tactics file's text, XML or YAML by its look."""
-    source = path or "<tactics>"
-    if text.lstrip("\ufeff \t\r\n").startswith("<"):
-        return parse_tactics_xml(text, source=source)
-    return parse_tactics_yaml(text, source=source)
-
-
-class RecordingActuator:
-    """An actuator that performs nothing and records what it was asked (tests, replay)."""
-
-    def __init__(self, replies: Mapping[str, Mapping[str, Any]] | None = None) -> None:
-        self.calls: list[tuple[str, str, dict[str, Any]]] = []
-        self.replies = dict(replies or {})
-
-    def publish(self, topic: str, payload: Mapping[str, Any]) -> ActionOutcome:
-        """Record a publication."""
-        self.calls.append(("publish", topic, dict(payload)))
-        return ActionOutcome(True, "published")
-
-    def request(self, service: str, payload: Mapping[str, Any], timeout: float) -> ActionOutcome:
-        """Record a request; reply with the configured reply or ``{}``."""
-        self.calls.append(("request", service, dict(payload)))
-        return ActionOutcome(True, "replied", dict(self.replies.get(service, {})))
-
-    def notify(self, action: NotifyAction, tactic: str, now: float) -> ActionOutcome:
-        """Record a notification."""
-        self.calls.append(("notify", action.channel, {"to": action.to, "subject": action.subject}))
-        return ActionOutcome(True, "recorded")
-
-
-class BusActuator:
-    """Actions over the bus: publish on topics, request services, notify through a Notifier."""
-
-    def __init__(
-        self,
-        bus: Any,
-        notifier: Any | None = None,
-        *,
-        on_notified: Callable[[str, Any], None] | None = None,
-    ) -> None:
-        self.bus = bus
-        self.notifier = notifier
-        self.on_notified = on_notified
-
-    def publish(self, topic: str, payload: Mapping[str, Any]) -> ActionOutcome:
-        """Publish ``payload`` as a Generic message on ``topic``."""
-        self.bus.publish(topic, dict(payload))
-        return ActionOutcome(True, f"published on {topic}")
-
-    def request(self, service: str, payload: Mapping[str, Any], timeout: float) -> ActionOutcome:
-        """Request ``service``; a timeout or an error reply is a failed action."""
-        try:
-            reply = self.bus.request(service, dict(payload), timeout=timeout)
-        except AnunnakiError as exc:
-            return ActionOutcome(False, f"{type(exc).__name__}: {exc}")
-        body = body_of(reply)  # a Generic's object, or a ServiceReply's {ok, error, body}
-        if body.get("ok") is False:
-            return ActionOutcome(False, str(body.get("error") or "refused"), body)
-        inner = body.get("body")
-        if isinstance(inner, dict) and "ok" in body:
-            body = inner
-        return ActionOutcome(True, f"{service} replied", body)
-
-    def notify(self, action: NotifyAction, tactic: str, now: float) -> ActionOutcome:
-        """Send through the notifier in the background (the loop never waits on SMTP)."""
-        if self.notifier is None:
-            log.info(
-                "notify (%s to %s): %s — %s",
-                action.channel,
-                action.to,
-                action.subject,
-                action.message,
-            )
-            return ActionOutcome(True, "logged (no notifier configured)")
-        from anunnaki.utu._notify import Notification
-
-        note = Notification(
-            channel=action.channel,
-            to=action.to or "",
-            subject=action.subject,
-            message=action.message,
-            tactic=tactic,
-            t=now,
-            details={},
-        )
-        callback = self.on_notified
-
-        def done(result: Any) -> None:
-            if callback is not None:
-                callback(tactic, result)
-
-        self.notifier.send_in_background(note, done)
-        return ActionOutcome(True, f"{action.channel} notification queued")
-
 
 class AutonomicManager:
-    """Utu: the MAPE-K loop over a goal model and tactics.
+    """Utu: the MAPE-K loop over a goal model and tactics, in one process.
 
     Args:
         model: The goal model (with its binding applied).
@@ -169,6 +93,11 @@ class AutonomicManager:
         run_stop_service: Service the run-stop requests on the managed system.
         publish_state: Publish the analysis on ``/utu/analyze/state`` after each step that
             changed a goal, decided something or applied an operator call.
+        queue: Bound of each monitored topic's input queue (guideline S1).
+        sources: ``goal_model``/``binding``/``tactics`` → (path, text) of the files, recorded
+            in Knowledge (what ``replay`` and ``reload`` start from).
+        name: The manager's name (its run-stop announcements say ``utu:<name>``).
+        clock_topic: Where a :class:`~anunnaki.clock.SimClock` takes its time from.
 
     """
 
@@ -191,176 +120,229 @@ class AutonomicManager:
         queue: int = 1024,
         sources: Mapping[str, tuple[str | None, str]] | None = None,
         name: str = "utu",
+        clock_topic: str = topics.CLOCK,
+        rate: float = 20.0,
     ) -> None:
-        self.name = name
-        self.model = model
-        self.tactics = tactics
+        srcs = dict(sources or {})
+        config = UtuConfig(
+            anunnaki="utu/1",
+            name=name,
+            goal_model=(srcs.get("goal_model") or ("<goal-model>", ""))[0] or "<goal-model>",
+            dwell=dwell,
+            warmup=warmup,
+            failsafe=failsafe,
+            escalate_to_run_stop=escalate_to_run_stop,
+            run_stop=RunStopConfig(
+                service=run_stop_service, payload=dict(run_stop_payload or {"reason": "run-stop"})
+            ),
+            publish_state=publish_state,
+            queue=queue,
+            clock_topic=clock_topic,
+            rate=rate,
+        )
+        self._init(UtuParts(config, srcs, model, tactics), knowledge, bus, actuator, clock)
+
+    def _init(
+        self,
+        parts: UtuParts,
+        knowledge: Knowledge | None,
+        bus: Any | None,
+        actuator: Actuator | None,
+        clock: Clock | None,
+    ) -> None:
+        config = parts.config
+        self.parts = parts
+        self.name = config.name
         self.knowledge = knowledge or Knowledge()
         self.bus = bus
         self.clock: Clock = clock or WallClock()
         self.actuator: Actuator = actuator or (
             BusActuator(bus) if bus is not None else RecordingActuator()
         )
-        self.failsafe = failsafe
-        self.escalate_to_run_stop = escalate_to_run_stop
-        self.run_stop_service = run_stop_service
-        self.run_stop_payload = dict(run_stop_payload or {"reason": "run-stop"})
-        self.publish_state = publish_state and bus is not None
-        self.paused = False
-        self.run_stopped = False
-        self.now = 0.0
-        self.warmup = warmup
-        self._started_at: float | None = None
-        self._stepped = False
+        self.publish_state = config.publish_state and bus is not None
+        self.rate = config.rate
+        self._closed = False
+        self._live = False
         # (topic, message, arrival time or None for "now"): a step takes inputs at their own
         # times, so a burst taken by one step keeps its spacing (rates, temporal goals).
         self._inputs: deque[tuple[str, dict[str, Any], float | None]] = deque()
         self._ops: deque[dict[str, Any]] = deque()
-        self._lock = threading.Lock()
+        self._lock = threading.Lock()  # guards the two queues above
+        self._step_lock = threading.Lock()  # one step at a time (spin, inline reactions)
         self._wake = threading.Event()
-        self._closed = False
-        self._eligible: list[str] = []
-        self.monitor = Monitor(model, self.knowledge)
-        self.analyzer = Analyzer(model, tactics, self.knowledge)
-        self.planner = Planner(tactics, self.knowledge, dwell=dwell)
-        self.executor = Executor(self.actuator, self.knowledge, on_failure=self._escalate)
-        self._sources = dict(sources or {})
         self._declared: list[Any] = []
         self._pull: dict[str, Any] = {}
-        self._queue_bound = queue
+        self._clock_sub: Any = None
+        self._stepped = False
+        self._started_at: float | None = None
+        self._last_eligible: list[str] = []
+        self._state_cache: AnalysisState | None = None
         if isinstance(self.actuator, BusActuator) and self.actuator.on_notified is None:
             self.actuator.on_notified = self._notified
         self.knowledge.set_meta(
             "settings",
             {
-                "dwell": dwell,
-                "warmup": warmup,
-                "failsafe": failsafe,
-                "escalate_to_run_stop": escalate_to_run_stop,
-                "run_stop_service": run_stop_service,
+                "dwell": config.dwell,
+                "warmup": config.warmup,
+                "failsafe": config.failsafe,
+                "escalate_to_run_stop": config.escalate_to_run_stop,
+                "run_stop_service": config.run_stop.service,
             },
         )
-        self._resume_after_restart()
+        if not self.knowledge.models_at() and parts.sources:
+            for kind, (path, text) in parts.sources.items():
+                self.knowledge.record_model(0.0, kind, path, text)
+        self.monitor_stage = MonitorStage(parts)
+        self.analyze_stage = AnalyzeStage(parts, self.knowledge)
+        self.plan_stage = PlanStage(parts, self.knowledge)
+        self.execute_stage = ExecuteStage(
+            parts, self.knowledge, self.actuator, on_run_stop=self._announce_run_stop
+        )
+        self.knowledge_stage = KnowledgeStage(parts, self.knowledge)
+        self.now = self.analyze_stage.now
+        self.monitor_stage.last_t = self.now if self.now > 0 else -float("inf")
         if bus is not None:
-            self._connect(bus, queue)
+            self._connect(bus)
 
     # -- construction ---------------------------------------------------------------------
     @classmethod
     def from_config(
         cls,
-        config: UtuConfig,
+        config: UtuConfig | UtuParts,
         *,
         bus: Any | None = None,
         actuator: Actuator | None = None,
         clock: Clock | None = None,
         knowledge: Knowledge | None = None,
     ) -> AutonomicManager:
-        """Build a manager from a :class:`UtuConfig` (files loaded and checked)."""
-        sources = _read_sources(config.goal_model, config.binding, config.tactics)
-        model = _model_from_sources(sources)
-        tactics = _tactics_from_sources(sources)
+        """Build a manager from a :class:`UtuConfig` (files loaded and checked) or its parts."""
+        parts = config if isinstance(config, UtuParts) else load_parts(config)
+        cfg = parts.config
         if clock is None:
-            clock = SimClock() if config.clock == "sim" else WallClock()
+            clock = SimClock() if cfg.clock == "sim" else WallClock()
         if actuator is None and bus is not None:
             notifier = None
-            if config.notify:
+            if cfg.notify:
                 from anunnaki.utu._notify import Notifier, NotifyConfig
 
-                notifier = Notifier(NotifyConfig.model_validate(config.notify))
+                notifier = Notifier(NotifyConfig.model_validate(cfg.notify))
             actuator = BusActuator(bus, notifier)
-        manager = cls(
-            model,
-            tactics,
-            knowledge=knowledge or Knowledge(config.knowledge),
-            bus=bus,
-            actuator=actuator,
-            clock=clock,
-            dwell=config.dwell,
-            warmup=config.warmup,
-            failsafe=config.failsafe,
-            escalate_to_run_stop=config.escalate_to_run_stop,
-            run_stop_service=config.run_stop.service,
-            run_stop_payload=config.run_stop.payload,
-            publish_state=config.publish_state,
-            queue=config.queue,
-            sources=sources,
-            name=config.name,
-        )
-        if isinstance(clock, SimClock) and bus is not None:
-
-            def on_clock(sample: Any) -> None:
-                t = getattr(sample.message, "time", None)
-                if isinstance(t, int | float):
-                    clock.update(float(t))
-                    manager._wake.set()
-
-            manager._declared.append(bus.subscribe(config.clock_topic, on_clock, queue=4))
+        manager = cls.__new__(cls)
+        manager._init(parts, knowledge or Knowledge(cfg.knowledge), bus, actuator, clock)
         return manager
 
-    def _resume_after_restart(self) -> None:
-        if not self._sources:
-            self._sources = {}
-        known = self.knowledge.models_at()
-        if not known and self._sources:
-            for kind, (path, text) in self._sources.items():
-                self.knowledge.record_model(self.now, kind, path, text)
-        rows = self.knowledge.tactics()
-        if rows:
-            resumed = self.planner.restore(rows)
-            last = self.knowledge.decisions(limit=1)
-            if last:
-                self.now = last[-1].t
-            for rt in resumed:
-                self.knowledge.record_decision(
-                    self.now,
-                    "resumed",
-                    rt.name,
-                    state=rt.state,
-                    deadline=rt.deadline,
-                    next_action=rt.next_action,
-                )
-
-    def _connect(self, bus: Any, queue: int) -> None:
-        self._queue_bound = queue
-        for topic in self.monitor.topics:
+    def _connect(self, bus: Any) -> None:
+        for topic in self.monitor_stage.topics:
             self._subscribe_topic(topic)
+        if isinstance(self.clock, SimClock):
+            # Pulled at the start of each step, after the inputs: a message published
+            # after its instant's /clock is never stamped with an earlier time.
+            self._clock_sub = bus.subscribe(self.parts.config.clock_topic, queue=64)
+            self._declared.append(self._clock_sub)
         self._declared.append(bus.subscribe(topics.RUN_STOP, self._on_run_stop_topic, queue=16))
-        if any(a.node for a in self.model.agents.values()):
+        if any(a.node for a in self.parts.model.agents.values()):
             self._declared.append(bus.watch_liveliness(self._on_liveliness))
         services: dict[str, Callable[[Any], Any]] = {
-            topics.RUN_STOP: lambda m: self._op_service("run_stop", m),
-            topics.PAUSE: lambda m: self._op_service("pause", m),
-            topics.RESUME: lambda m: self._op_service("resume", m),
-            topics.APPROVE: lambda m: self._op_service("approve", m),
-            topics.RELOAD: lambda m: self._op_service("reload", m),
-            topics.READY: lambda m: {"ready": True, "node": self.name},
-            topics.QUERY: self._query,
+            service: self._op_handler(op) for op, service in topics.OPERATOR_SERVICES.items()
         }
+        services[topics.READY] = lambda m: {"ready": not self._closed, "node": self.name}
+        services[topics.QUERY] = self._query
         for name, handler in services.items():
             self._declared.append(bus.service(name, handler))
 
     def _subscribe_topic(self, topic: str) -> None:
-        # A pull subscriber holds the inputs (bounded: a flood on one topic cannot starve the
-        # others, guideline S1) and ``step`` drains it, so a step sees exactly what arrived
-        # before it; its doorbell wakes ``spin`` the moment a message is queued.
+        # A pull subscriber holds the inputs (bounded: a flood on one topic cannot starve
+        # the others, guideline S1) and ``step`` drains it, so a step sees exactly what
+        # arrived before it; its doorbell reacts the moment a message is queued.
         assert self.bus is not None
         self._pull[topic] = self.bus.subscribe(
-            topic, queue=self._queue_bound, on_ready=self._wake.set
+            topic, queue=self.parts.config.queue, on_ready=self._arrived
         )
         self._declared.append(self._pull[topic])
 
+    # -- the parts, as the tests and tools know them ----------------------------------------
+    @property
+    def model(self) -> GoalModel:
+        """The goal model in force."""
+        return self.analyze_stage.parts.model
+
+    @property
+    def tactics(self) -> TacticSet:
+        """The tactics in force."""
+        return self.execute_stage.parts.tactics
+
+    @property
+    def monitor(self) -> Monitor:
+        """What is known of each monitored topic."""
+        return self.analyze_stage.monitor
+
+    @property
+    def analyzer(self) -> Analyzer:
+        """The goal model's evaluation."""
+        return self.analyze_stage.analyzer
+
+    @property
+    def planner(self) -> Planner:
+        """Every tactic's runtime: selection state and what is in flight."""
+        return self.execute_stage.planner
+
+    @property
+    def executor(self) -> Executor:
+        """The executor of tactic actions."""
+        return self.execute_stage.executor
+
+    @property
+    def failsafe(self) -> str | None:
+        """The tactic a failed postcondition escalates to when no other applies."""
+        return self.parts.config.failsafe
+
+    @property
+    def warmup(self) -> float:
+        """Seconds at start during which an unknown goal triggers nothing."""
+        return self.parts.config.warmup
+
+    @property
+    def run_stop_service(self) -> str | None:
+        """The service a run-stop requests on the managed system."""
+        return self.parts.config.run_stop.service
+
+    @property
+    def paused(self) -> bool:
+        """Whether adaptation is paused (also during a run-stop)."""
+        return self.execute_stage.paused
+
+    @property
+    def run_stopped(self) -> bool:
+        """Whether a run-stop is in force."""
+        return self.execute_stage.run_stopped
+
     # -- inputs -----------------------------------------------------------------------------
+    def _arrived(self) -> None:
+        """A monitored message was queued (called in the delivering thread)."""
+        if self._live and self._inline and self._step_lock.acquire(blocking=False):
+            try:
+                self._step(None, react=True)
+            except Exception:  # a reaction must never take the publisher down
+                log.exception("utu: a reaction step failed; going on")
+            finally:
+                self._step_lock.release()
+            return
+        if not self._wake.is_set():
+            self._wake.set()
 
     def _drain(self) -> None:
+        wall = isinstance(self.clock, WallClock)
         for topic, sub in self._pull.items():
-            while True:
-                sample = sub.try_recv()
-                if sample is None:
-                    break
+            while (sample := sub.try_recv()) is not None:
                 # The sender's stamp, on the wall clock only (a sim clock is another
-                # timebase); step() clamps it into (previous step, this step].
-                t_in = sample.sent_at if isinstance(self.clock, WallClock) else None
+                # timebase); the monitor clamps it into (previous step, this step].
+                t_in = sample.sent_at if wall else None
                 self._inputs.append((topic, body_of(sample.message), t_in))
+        if self._clock_sub is not None and isinstance(self.clock, SimClock):
+            while (sample := self._clock_sub.try_recv()) is not None:
+                t = getattr(sample.message, "time", None)
+                if isinstance(t, int | float):
+                    self.clock.update(float(t))
 
     def _on_run_stop_topic(self, sample: Any) -> None:
         body = body_of(sample.message)
@@ -375,20 +357,22 @@ class AutonomicManager:
             }
         )
 
+    def _announce_run_stop(self, caller: str, reason: str) -> None:
+        if self.bus is None:
+            return
+        try:
+            self.bus.publish(
+                topics.RUN_STOP,
+                RunStop(reason=f"{reason} (asked by {caller})", caller=f"utu:{self.name}"),
+            )
+        except AnunnakiError as exc:  # pragma: no cover - closed bus at shutdown
+            log.warning("could not announce run-stop: %s", exc)
+
     def _notified(self, tactic: str, result: Any) -> None:
         # Called from the notifier's worker thread; Knowledge is thread-safe. Delivery
         # results arrive asynchronously, so replay does not compare them.
-        if self._closed:
-            return
-        self.knowledge.record_decision(
-            self.now,
-            "notify_result",
-            tactic,
-            ok=bool(getattr(result, "ok", False)),
-            channel=getattr(result, "channel", None),
-            to=getattr(result, "to", None),
-            error=getattr(result, "error", None),
-        )
+        if not self._closed:
+            self.execute_stage.notified(tactic, result)
 
     def _on_liveliness(self, node: str, alive: bool) -> None:
         if not alive:
@@ -410,25 +394,25 @@ class AutonomicManager:
             self._ops.append(op)
         self._wake.set()
 
+    def _op_handler(self, op: str) -> Callable[[Any], dict[str, Any]]:
+        return lambda message: self._op_service(op, message)
+
     def _op_service(self, op: str, message: Any) -> dict[str, Any]:
-        body = body_of(message)
-        caller = str(body.get("caller") or "unknown")
-        entry: dict[str, Any] = {"op": op, "caller": caller}
-        if op == "approve":
-            tactic = body.get("tactic")
-            if not isinstance(tactic, str):
-                return {"ok": False, "error": "give 'tactic': the name of a pending tactic"}
-            entry["tactic"] = tactic
-            entry["approve"] = bool(body.get("approve", True))
-        if op == "run_stop":
-            entry["reason"] = str(body.get("reason", "operator"))
+        entry = operator_entry(op, message)
+        if "error" in entry:
+            return {"ok": False, "error": entry["error"]}
+        reply: dict[str, Any] = {"ok": True, "queued": op, "caller": entry["caller"]}
         if op == "reload":
-            files = {k: body.get(k) for k in ("goal_model", "binding", "tactics")}
-            if not any(isinstance(v, str) for v in files.values()):
-                return {"ok": False, "error": "give goal_model, binding and/or tactics paths"}
-            entry.update({k: v for k, v in files.items() if isinstance(v, str)})
+            try:  # checked now, so the caller hears of a broken file at once
+                parts = reloaded_parts(self.analyze_stage.parts, entry)
+            except (AnunnakiError, OSError) as exc:
+                # Refused now, and through the cycle too, so the log says it (and replays it).
+                self._enqueue_op({**entry, "refused": str(exc)})
+                return {"ok": False, "status": "refused", "error": str(exc)}
+            entry["sources"] = {k: [p, text] for k, (p, text) in parts.sources.items()}
+            reply["status"] = "accepted"
         self._enqueue_op(entry)
-        return {"ok": True, "queued": op, "caller": caller}
+        return reply
 
     def pause(self, caller: str = "api") -> None:
         """Suspend adaptation (applied at the next step)."""
@@ -469,6 +453,10 @@ class AutonomicManager:
         is applied, the goal model re-evaluated (incrementally), the tactics selected,
         queued, started and checked.
         """
+        with self._step_lock:
+            self._step(now, react=False)
+
+    def _step(self, now: float | None, *, react: bool) -> None:
         with self._lock:
             self._drain()
             inputs = list(self._inputs)
@@ -478,188 +466,63 @@ class AutonomicManager:
         self._wake.clear()
         # The clock is read after draining, so no input taken here arrived after ``t``.
         t = self.clock.now() if now is None else float(now)
-        t = max(t, self.now)
-        previous, self.now = self.now, t
-        a = self.analyzer
-        if self._started_at is None:
-            self._started_at = t
-        a.warming_up = t - self._started_at < self.warmup
-        for topic, msg, t_in in inputs:
-            ti = t if t_in is None else min(max(t_in, previous), t)
-            if self.monitor.take(topic, msg, ti):
-                a.observe(topic, msg, ti)
-        ticked = a.tick(t)
-        changed = a.record_changes(t)
-        for op in ops:
-            self.knowledge.record_input(t, OPERATOR, op)
-            self._apply_op(op, t)
-        decisions_before = self.knowledge.decisions_written
-        self._plan_and_execute(t)
-        first = not self._stepped
+        batch = self.monitor_stage.batch(max(t, self.now), inputs, ops)
+        self.now = batch.t
+        a = self.analyze_stage
+        state = a.analyze(batch, full=False)
+        if (
+            react
+            and not state.changed
+            and not ops
+            and state.eligible == self._last_eligible
+            and not any(rt.state == "running" for rt in self.planner.runtimes.values())
+        ):
+            a.discard(state.seq)  # nothing to decide now: the next timed step goes on
+            return
+        self._last_eligible = list(state.eligible or [])
+        kb = self.knowledge
+        before = kb.decisions_written
+        status = self.execute_stage.begin(state)
+        start = self.plan_stage.plan(status)
+        done = self.execute_stage.complete(start)
+        a.finish(done)
+        self.knowledge_stage.queue = self.planner.queue()
+        self.knowledge_stage.flags = {"paused": self.paused, "run_stopped": self.run_stopped}
+        self._state_cache = None
+        decided = kb.decisions_written != before
+        if decided or not react:
+            kb.flush()
         self._stepped = True
-        decided = self.knowledge.decisions_written != decisions_before
-        if first or inputs or ticked or changed or ops or decided:
-            # Mark the end of this step, so a replay steps at the same instants.
-            self.knowledge.record_input(t, TICK, {})
-        # Goals, the queue (a decision) or the flags (an operator call) changed: tell displays.
-        if (changed or ops or decided) and self.publish_state:
-            self._publish_state(t)
+        if self.publish_state and (state.changed or ops or decided):
+            self._publish_state()
 
-    def _plan_and_execute(self, t: float) -> None:
-        a = self.analyzer
-        for rt in list(self.planner.runtimes.values()):
-            if rt.state == "running":  # resumed mid-action after a restart
-                self.executor.run_actions(rt, t)
-        for rt in list(self.planner.runtimes.values()):
-            if rt.state == "awaiting":
-                self.executor.check(rt, a, t)
-        if self.paused or self.run_stopped:
-            return
-        eligible = a.eligible()
-        self._eligible = eligible
-        for rt in self.planner.update(eligible, t):
-            if self.paused or self.run_stopped:
-                break
-            self.executor.start(rt, t)
-
-    def _escalate(self, failed: TacticRuntime, now: float) -> None:
-        if self.paused or self.run_stopped:
-            return
-        eligible = [
-            self.planner.runtimes[n]
-            for n in self.analyzer.eligible()
-            if n != failed.name and n in self.planner.runtimes
-        ]
-        eligible.sort(key=lambda rt: -rt.tactic.priority)
-        for rt in eligible:
-            if rt.state == "idle" and not any(
-                o.in_flight and self.planner.conflicts(rt.name, o.name)
-                for o in self.planner.runtimes.values()
-            ):
-                self.knowledge.record_decision(now, "escalated", failed.name, to=rt.name)
-                self.executor.start(rt, now, reason=f"escalation from {failed.name}")
-                return
-        fs = self.planner.runtimes.get(self.failsafe or "")
-        if fs is not None and fs.name != failed.name and not fs.in_flight:
-            self.knowledge.record_decision(now, "escalated", failed.name, to=fs.name)
-            self.executor.start(fs, now, reason=f"escalation from {failed.name} (fail-safe)")
-            return
-        if self.escalate_to_run_stop:
-            self.knowledge.record_decision(now, "escalated", failed.name, to="run-stop")
-            self._do_run_stop(
-                now, caller=f"escalation:{failed.name}", reason="postcondition failed"
+    def _display_state(self) -> AnalysisState:
+        if self._state_cache is None or self._state_cache.t != self.now:
+            a = self.analyze_stage
+            self._state_cache = a.state(
+                self.now,
+                a.eligible,
+                queue=self.planner.queue(),
+                paused=self.paused,
+                run_stopped=self.run_stopped,
             )
-        else:
-            self.knowledge.record_decision(now, "escalation_exhausted", failed.name)
+        return self._state_cache
 
-    def _apply_op(self, op: Mapping[str, Any], t: float) -> None:
-        kind = op.get("op")
-        caller = str(op.get("caller", "unknown"))
-        if kind == "pause":
-            self.paused = True
-            self.knowledge.record_decision(t, "paused", None, caller=caller)
-        elif kind == "resume":
-            self.paused = False
-            self.run_stopped = False
-            self.knowledge.record_decision(t, "resumed_adaptation", None, caller=caller)
-        elif kind == "approve":
-            result = self.planner.approve(
-                str(op.get("tactic")), bool(op.get("approve", True)), caller, t
-            )
-            if result not in ("approved", "rejected"):
-                self.knowledge.record_decision(
-                    t, "operator_refused", str(op.get("tactic")), caller=caller, reason=result
-                )
-        elif kind == "reload":
-            self.knowledge.record_decision(t, "reload_requested", None, caller=caller)
-            self.reload(
-                goal_model=op.get("goal_model"),
-                binding=op.get("binding"),
-                tactics=op.get("tactics"),
-                now=t,
-            )
-        elif kind == "node_lost":
-            node = str(op.get("node"))
-            agents = [a for a in self.model.agents.values() if a.node == node]
-            for agent in agents:
-                for tb in agent.topics:
-                    self.analyzer.evaluator.expire(tb.topic, t)
-            self.analyzer.record_changes(t)
-            # A dead publisher is a known fact, not data still arriving: end the warm-up.
-            self._started_at = min(self._started_at or t, t - self.warmup)
-            self.analyzer.warming_up = False
-            self.knowledge.record_decision(
-                t, "liveliness_lost", None, node=node, agents=[a.id for a in agents]
-            )
-        elif kind == "run_stop":
-            self._do_run_stop(t, caller=caller, reason=str(op.get("reason", "operator")))
-        else:
-            self.knowledge.record_decision(
-                t, "operator_refused", None, caller=caller, reason=f"unknown operation {kind!r}"
-            )
-
-    def _do_run_stop(self, t: float, *, caller: str, reason: str) -> None:
-        self.run_stopped = True
-        self.paused = True
-        outcome = None
-        if self.run_stop_service is not None:
-            outcome = self.actuator.request(self.run_stop_service, self.run_stop_payload, 2.0)
-        self.knowledge.record_decision(
-            t,
-            "run_stop",
-            None,
-            caller=caller,
-            reason=reason,
-            service=self.run_stop_service,
-            ok=None if outcome is None else outcome.ok,
-        )
-        if self.bus is not None:
-            try:
-                from anunnaki.bus import RunStop
-
-                self.bus.publish(
-                    topics.RUN_STOP,
-                    RunStop(reason=f"{reason} (asked by {caller})", caller=f"utu:{self.name}"),
-                )
-            except AnunnakiError as exc:  # pragma: no cover - closed bus at shutdown
-                log.warning("could not announce run-stop: %s", exc)
-
-    def _publish_state(self, t: float) -> None:
+    def _publish_state(self) -> None:
         try:
-            msg = self.analyzer.state_message(t, self._eligible)
-            msg["queue"] = self.planner.queue()
-            msg["paused"] = self.paused
-            msg["run_stopped"] = self.run_stopped
-            self.bus.publish(topics.ANALYSIS, msg)  # type: ignore[union-attr]
+            self._state_cache = None
+            self.bus.publish(topics.ANALYSIS, self._display_state())  # type: ignore[union-attr]
         except AnunnakiError as exc:  # pragma: no cover - closed bus at shutdown
             log.warning("could not publish the analysis: %s", exc)
 
     # -- queries ------------------------------------------------------------------------------
     def _query(self, message: Any) -> dict[str, Any]:
-        body = body_of(message)
-        what = body.get("what", "state")
-        limit = body.get("limit", 100)
-        if not isinstance(limit, int) or limit < 1:
-            limit = 100
-        if what == "decisions":
-            return {
-                "ok": True,
-                "decisions": [
-                    {"t": d.t, "kind": d.kind, "tactic": d.tactic, "data": d.data}
-                    for d in self.knowledge.decisions(limit=min(limit, 10_000))
-                ],
-            }
-        if what == "queue":
-            return {"ok": True, "queue": self.planner.queue()}
-        if what == "state":
-            return {
-                "ok": True,
-                **self.analyzer.state_message(self.now, self._eligible),
-                "queue": self.planner.queue(),
-                "paused": self.paused,
-                "run_stopped": self.run_stopped,
-            }
-        return {"ok": False, "error": f"unknown query {what!r}; ask decisions, queue or state"}
+        ks = self.knowledge_stage
+        if body_of(message).get("what", "state") == "state":
+            with self._step_lock:
+                self._state_cache = None
+                ks.state = self._display_state().to_body()
+        return ks.query(message)
 
     # -- reload -------------------------------------------------------------------------------
     def reload(
@@ -670,71 +533,31 @@ class AutonomicManager:
         tactics: str | None = None,
         now: float | None = None,
     ) -> list[str]:
-        """Swap in new files without stopping; returns the problems (empty = swapped).
+        """Swap in new files now, in a cycle of their own; returns the problems (empty = swapped).
 
         The new set is checked as ``anunnaki check`` does; an invalid one is refused with
         its errors (recorded) and the old one stays active. Tactic state (in flight,
         cooldowns) carries over for tactics that keep their name; the attribute values and
-        rates carry over by re-feeding the recent inputs.
+        rates carry over by re-feeding the recent inputs. Not thread-safe with a spinning
+        manager: use :meth:`request_reload` or ``/utu/reload`` there.
         """
+        files = {"goal_model": goal_model, "binding": binding, "tactics": tactics}
         t = self.now if now is None else now
-        sources = dict(self._sources)
+        entry: dict[str, Any] = {"op": "reload", "caller": "api"}
+        entry.update({k: v for k, v in files.items() if v})
         try:
-            for kind, path in (
-                ("goal_model", goal_model),
-                ("binding", binding),
-                ("tactics", tactics),
-            ):
-                if path is not None:
-                    sources[kind] = (path, Path(path).read_text(encoding="utf-8"))
-            if goal_model is None and binding is None:
-                model = self.model
-            elif "goal_model" not in sources:
-                raise ModelFileError(
-                    "this manager was built without its goal-model file; give goal_model too"
-                )
-            else:
-                model = _model_from_sources(sources)
-            ts = _tactics_from_sources(sources) if "tactics" in sources else self.tactics
-            from anunnaki.check import check_tactics
-
-            problems = [f.render() for f in model.findings if f.severity == "error"]
-            problems += [
-                f.render()
-                for f in check_tactics(model, ts, sources.get("tactics", (None,))[0])
-                if f.severity == "error"
-            ]
-            if problems:
-                raise ModelFileError(problems[0])
-            analyzer = Analyzer(model, ts, self.knowledge)
+            parts = reloaded_parts(self.analyze_stage.parts, entry)
         except (AnunnakiError, OSError) as exc:
-            msg = str(exc)
-            self.knowledge.record_decision(t, "reload_refused", None, error=msg)
-            log.warning("reload refused, the old model stays active: %s", msg)
-            return [msg]
-        recent = sorted(
-            (
-                (arrived, topic, body)
-                for topic, stats in self.monitor.topics.items()
-                for arrived, body in stats.recent
-            ),
-            key=lambda x: x[0],
-        )
-        for arrived, topic, body in recent:
-            analyzer.observe(topic, body, arrived)
-        analyzer.tick(t)
-        analyzer.record_changes(t)
-        self.model, self.tactics, self.analyzer = model, ts, analyzer
-        self.monitor.set_model(model)
-        self.planner.set_tactics(ts)
-        self._sources = sources
-        for kind, (path, text) in sources.items():
-            self.knowledge.record_model(t, kind, path, text)
-        self.knowledge.record_decision(
-            t, "reloaded", None, files=[p for p in (goal_model, binding, tactics) if p is not None]
-        )
+            self.knowledge.record_decision(t, "reload_requested", None, caller="api")
+            self.knowledge.record_decision(t, "reload_refused", None, error=str(exc))
+            self.knowledge.flush()
+            log.warning("reload refused, the old model stays active: %s", exc)
+            return [str(exc)]
+        entry["sources"] = {k: [p, text] for k, (p, text) in parts.sources.items()}
+        self._enqueue_op(entry)
+        self.step(t)
         if self.bus is not None:
-            for topic in self.monitor.topics:
+            for topic in self.analyze_stage.monitor.topics:
                 if topic not in self._pull:
                     self._subscribe_topic(topic)
         return []
@@ -744,32 +567,38 @@ class AutonomicManager:
         self,
         stop: threading.Event | None = None,
         *,
-        rate: float = 20.0,
+        rate: float | None = None,
         until: float | None = None,
         on_step: Callable[[AutonomicManager], None] | None = None,
     ) -> None:
         """Run live until ``stop`` is set (or the clock passes ``until``).
 
-        Inputs are processed as they arrive; with none, time-driven checks run ``rate``
-        times a second.
+        Inputs are reacted to as they arrive (see the module docstring); time-driven
+        checks run ``rate`` times a second (default: the configuration's).
         """
         stop = stop or threading.Event()
-        period = 1.0 / rate
-        while not stop.is_set() and not self._closed:
-            self.step()
-            if on_step is not None:
-                on_step(self)
-            if until is not None and self.clock.now() >= until:
-                break
-            if (
-                not self._inputs
-                and not self._ops
-                and not any(sub.pending for sub in self._pull.values())
-            ):
-                wait = period
-                if isinstance(self.clock, SimClock) and self.clock.speed > 0:
-                    wait = min(period / max(self.clock.speed, 0.05), 0.5)
-                self._wake.wait(wait)
+        period = 1.0 / (rate or self.rate)
+        self._inline = isinstance(self.bus, InprocBus)
+        self._live = True
+        try:
+            while not stop.is_set() and not self._closed:
+                self.step()
+                if on_step is not None:
+                    on_step(self)
+                if until is not None and self.clock.now() >= until:
+                    break
+                if not self._inputs and not self._ops and not self._pending():
+                    wait = period
+                    if isinstance(self.clock, SimClock) and self.clock.speed > 0:
+                        wait = min(period / max(self.clock.speed, 0.05), 0.5)
+                    self._wake.wait(wait)
+        finally:
+            self._live = False
+
+    _inline = False
+
+    def _pending(self) -> bool:
+        return any(sub.pending for sub in self._pull.values())
 
     def input_queues(self) -> list[Any]:
         """The bounded queues of the monitored topics (pull subscribers)."""
@@ -781,11 +610,8 @@ class AutonomicManager:
 
     def snapshot(self) -> dict[str, Any]:
         """What a display needs now: analysis, monitor, queue, flags."""
-        state = self.analyzer.state_message(self.now, self._eligible)
+        state = self._display_state().to_body()
         state["monitor"] = self.monitor.snapshot(self.now)
-        state["queue"] = self.planner.queue()
-        state["paused"] = self.paused
-        state["run_stopped"] = self.run_stopped
         return state
 
     def close(self) -> None:
@@ -802,37 +628,11 @@ class AutonomicManager:
         notifier = getattr(self.actuator, "notifier", None)
         if notifier is not None:
             notifier.close()
-        self.knowledge.close()
+        with self._step_lock:
+            self.knowledge.close()
 
     def __enter__(self) -> AutonomicManager:
         return self
 
     def __exit__(self, *exc: object) -> None:
         self.close()
-
-
-def _read_sources(
-    goal_model: str, binding: str | None, tactics: str | None
-) -> dict[str, tuple[str | None, str]]:
-    out: dict[str, tuple[str | None, str]] = {}
-    for kind, path in (("goal_model", goal_model), ("binding", binding), ("tactics", tactics)):
-        if path is not None:
-            try:
-                out[kind] = (path, Path(path).read_text(encoding="utf-8"))
-            except OSError as exc:
-                raise ModelFileError(f"cannot read {kind}: {exc.strerror}", path=path) from exc
-    return out
-
-
-def _model_from_sources(sources: Mapping[str, tuple[str | None, str]]) -> GoalModel:
-    b = sources.get("binding")
-    binding = parse_binding(b[1], source=b[0] or "<binding>") if b else None
-    path, text = sources["goal_model"]
-    return parse_goal_model(text, source=path or "<goal-model>", binding=binding)
-
-
-def _tactics_from_sources(sources: Mapping[str, tuple[str | None, str]]) -> TacticSet:
-    t = sources.get("tactics")
-    if t is None:
-        return TacticSet(tactics=[])
-    return load_tactics_text(t[1], t[0])

@@ -490,6 +490,7 @@ class Executor:
             action = actions[i]
             rt.next_action = i + 1
             self.knowledge.save_tactic(rt.row())  # write-ahead: action i is dispatched
+            self.knowledge.flush()  # ... and on disk, with what led to it, before it runs
             outcome = self._perform(action, rt.name, now)
             self.knowledge.record_decision(
                 now,

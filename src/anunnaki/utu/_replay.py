@@ -41,15 +41,10 @@ from anunnaki.errors import AnunnakiError, ModelFileError
 from anunnaki.goals import Evaluator, GoalModel
 from anunnaki.tactics import TacticSet
 from anunnaki.trace import Phase, Record, TraceWriter
+from anunnaki.utu._actuators import RecordingActuator
 from anunnaki.utu._knowledge import SCHEMA_VERSION, Decision, Knowledge, VerdictRow
-from anunnaki.utu._manager import (
-    OPERATOR,
-    TICK,
-    AutonomicManager,
-    RecordingActuator,
-    _model_from_sources,
-    _tactics_from_sources,
-)
+from anunnaki.utu._manager import AutonomicManager
+from anunnaki.utu._stages import OPERATOR, TICK, model_from_sources, tactics_from_sources
 
 __all__ = [
     "ASYNC_KINDS",
@@ -205,11 +200,11 @@ class RunModels:
 
     def model(self, sources: Mapping[str, tuple[str | None, str]] | None = None) -> GoalModel:
         """Parse the goal model (with its binding) of ``sources`` (default: the initial)."""
-        return _model_from_sources(self.initial if sources is None else sources)
+        return model_from_sources(self.initial if sources is None else sources)
 
     def tactics(self) -> TacticSet:
         """Parse the initial tactics."""
-        return _tactics_from_sources(self.initial)
+        return tactics_from_sources(self.initial)
 
 
 def run_models(path: str | Path) -> RunModels:

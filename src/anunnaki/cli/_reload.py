@@ -1,0 +1,110 @@
+"""``anunnaki reload``: swap a running Utu's goal model, binding or tactics, and say what happened.
+
+The files are checked by the running Utu as ``anunnaki check`` does: a broken one is refused
+at once (the reply carries the error, exit 1); a good one is accepted and applied at the
+next cycle, which this command waits for in the decision log (``reloaded``), in either
+deployment (one process, or one process per node).
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import threading
+import time
+from pathlib import Path
+from typing import Any
+
+from anunnaki import topics
+from anunnaki.bus import BusConfig, BusError, open_bus
+
+__all__ = ["add_parser", "run"]
+
+
+def add_parser(sub: Any) -> None:
+    """Add ``anunnaki reload``."""
+    p: argparse.ArgumentParser = sub.add_parser(
+        "reload",
+        help="swap a running Utu's goal model, binding or tactics (applied or refused)",
+        description=__doc__,
+    )
+    p.add_argument("--goal-model", type=Path, metavar="FILE", help="the new goal model")
+    p.add_argument("--binding", type=Path, metavar="FILE", help="the new platform binding")
+    p.add_argument("--tactics", type=Path, metavar="FILE", help="the new tactics (XML or YAML)")
+    p.add_argument(
+        "--connect",
+        action="append",
+        metavar="ENDPOINT",
+        default=None,
+        help="zenoh endpoint of the running Utu's bus (default tcp/127.0.0.1:7447)",
+    )
+    p.add_argument("--namespace", default="anunnaki", help="the bus namespace (default anunnaki)")
+    p.add_argument("--caller", default="cli", help="who asks (recorded in the decision log)")
+    p.add_argument(
+        "--timeout", type=float, default=5.0, help="seconds to wait for each answer (default 5)"
+    )
+    p.set_defaults(run=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    """Ask ``/utu/reload``; wait until the decision log says applied or refused."""
+    files = {
+        "goal_model": args.goal_model,
+        "binding": args.binding,
+        "tactics": args.tactics,
+    }
+    request: dict[str, Any] = {
+        k: str(v.resolve()) for k, v in files.items() if v is not None
+    }  # the running Utu resolves paths against its own folder: send absolute ones
+    if not request:
+        print("error: give --goal-model, --binding and/or --tactics", file=sys.stderr)
+        return 2
+    request["caller"] = args.caller
+    config = BusConfig.model_validate(
+        {
+            "kind": "zenoh",
+            "mode": "client",
+            "connect": args.connect or ["tcp/127.0.0.1:7447"],
+            "listen": [],
+            "namespace": args.namespace,
+        }
+    )
+    with open_bus(config) as bus:
+        try:
+            last = bus.request(
+                topics.QUERY, {"what": "decisions", "limit": 1}, timeout=args.timeout
+            )
+            rows = last.to_body().get("decisions", [])
+            after = int(rows[-1]["id"]) if rows else 0
+            reply = bus.request(topics.RELOAD, request, timeout=args.timeout).to_body()
+            if not reply.get("ok"):
+                print(f"refused: {reply.get('error', 'no reason given')}")
+                return 1
+            outcome = _wait_outcome(bus, after, args.timeout)
+        except BusError as exc:
+            print(f"error: no running Utu answered on {config.connect}: {exc}", file=sys.stderr)
+            return 2
+    if outcome is None:
+        print(f"accepted, but not applied within {args.timeout:g} s (is Utu paused or stuck?)")
+        return 1
+    kind, data = outcome
+    if kind == "reloaded":
+        print(f"applied: {', '.join(str(f) for f in data.get('files', [])) or 'files reloaded'}")
+        return 0
+    print(f"refused: {data.get('error', 'no reason given')}")
+    return 1
+
+
+def _wait_outcome(bus: Any, after: int, timeout: float) -> tuple[str, dict[str, Any]] | None:
+    """The first ``reloaded``/``reload_refused`` decision with an id above ``after``."""
+    deadline = time.monotonic() + timeout
+    pause = threading.Event()
+    while True:
+        query = {"what": "decisions", "after": after, "limit": 10_000}
+        for d in bus.request(topics.QUERY, query, timeout=timeout).to_body().get("decisions", []):
+            after = max(after, int(d.get("id", after)))
+            if d.get("kind") in ("reloaded", "reload_refused"):
+                return str(d["kind"]), dict(d.get("data") or {})
+        if time.monotonic() >= deadline:
+            return None
+        pause.wait(0.05)

@@ -1,0 +1,104 @@
+"""How tactic actions reach the managed system: over the bus, or recorded (tests, replay)."""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Callable, Mapping
+from typing import Any
+
+from anunnaki.bus import body_of
+from anunnaki.errors import AnunnakiError
+from anunnaki.tactics import NotifyAction
+from anunnaki.utu._mape import ActionOutcome
+
+__all__ = ["BusActuator", "RecordingActuator"]
+
+log = logging.getLogger("anunnaki.utu")
+
+
+class RecordingActuator:
+    """An actuator that performs nothing and records what it was asked (tests, replay)."""
+
+    def __init__(self, replies: Mapping[str, Mapping[str, Any]] | None = None) -> None:
+        self.calls: list[tuple[str, str, dict[str, Any]]] = []
+        self.replies = dict(replies or {})
+
+    def publish(self, topic: str, payload: Mapping[str, Any]) -> ActionOutcome:
+        """Record a publication."""
+        self.calls.append(("publish", topic, dict(payload)))
+        return ActionOutcome(True, "published")
+
+    def request(self, service: str, payload: Mapping[str, Any], timeout: float) -> ActionOutcome:
+        """Record a request; reply with the configured reply or ``{}``."""
+        self.calls.append(("request", service, dict(payload)))
+        return ActionOutcome(True, "replied", dict(self.replies.get(service, {})))
+
+    def notify(self, action: NotifyAction, tactic: str, now: float) -> ActionOutcome:
+        """Record a notification."""
+        self.calls.append(("notify", action.channel, {"to": action.to, "subject": action.subject}))
+        return ActionOutcome(True, "recorded")
+
+
+class BusActuator:
+    """Actions over the bus: publish on topics, request services, notify through a Notifier."""
+
+    def __init__(
+        self,
+        bus: Any,
+        notifier: Any | None = None,
+        *,
+        on_notified: Callable[[str, Any], None] | None = None,
+    ) -> None:
+        self.bus = bus
+        self.notifier = notifier
+        self.on_notified = on_notified
+
+    def publish(self, topic: str, payload: Mapping[str, Any]) -> ActionOutcome:
+        """Publish ``payload`` as a Generic message on ``topic``."""
+        self.bus.publish(topic, dict(payload))
+        return ActionOutcome(True, f"published on {topic}")
+
+    def request(self, service: str, payload: Mapping[str, Any], timeout: float) -> ActionOutcome:
+        """Request ``service``; a timeout or an error reply is a failed action."""
+        try:
+            reply = self.bus.request(service, dict(payload), timeout=timeout)
+        except AnunnakiError as exc:
+            return ActionOutcome(False, f"{type(exc).__name__}: {exc}")
+        body = body_of(reply)  # a Generic's object, or a ServiceReply's {ok, error, body}
+        if body.get("ok") is False:
+            return ActionOutcome(False, str(body.get("error") or "refused"), body)
+        inner = body.get("body")
+        if isinstance(inner, dict) and "ok" in body:
+            body = inner
+        return ActionOutcome(True, f"{service} replied", body)
+
+    def notify(self, action: NotifyAction, tactic: str, now: float) -> ActionOutcome:
+        """Send through the notifier in the background (the loop never waits on SMTP)."""
+        if self.notifier is None:
+            log.info(
+                "notify (%s to %s): %s — %s",
+                action.channel,
+                action.to,
+                action.subject,
+                action.message,
+            )
+            return ActionOutcome(True, "logged (no notifier configured)")
+        from anunnaki.utu._notify import Notification
+
+        note = Notification(
+            channel=action.channel,
+            to=action.to or "",
+            subject=action.subject,
+            message=action.message,
+            tactic=tactic,
+            t=now,
+            details={},
+        )
+        callback = self.on_notified
+
+        def done(result: Any) -> None:
+            if callback is not None:
+                callback(tactic, result)
+
+        self.notifier.send_in_background(note, done)
+        return ActionOutcome(True, f"{action.channel} notification queued")
