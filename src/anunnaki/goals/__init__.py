@@ -21,6 +21,7 @@ Formats: docs/goal-models.md; RELAX operators: docs/relax.md.
 
 from anunnaki.goals._evaluate import Evaluator, Explanation, NodeState, Status, status_name
 from anunnaki.goals._expr import ABSENT, AttrRef, Expression, compile_expression, truth
+from anunnaki.goals._freshness import RateEstimator, TopicFreshness, is_stale
 from anunnaki.goals._model import (
     Agent,
     Binding,
@@ -62,12 +63,15 @@ __all__ = [
     "NodeState",
     "ObstacleSpec",
     "PayloadField",
+    "RateEstimator",
     "RelaxOperator",
     "RelaxSpec",
     "Status",
     "TopicBinding",
+    "TopicFreshness",
     "build_operator",
     "compile_expression",
+    "is_stale",
     "load_binding",
     "load_goal_model",
     "parse_binding",

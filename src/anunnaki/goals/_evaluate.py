@@ -29,13 +29,13 @@ from __future__ import annotations
 
 import heapq
 import math
-from collections import deque
 from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, field
 from typing import Any, Final, Literal
 
 from anunnaki.errors import ModelFileError
 from anunnaki.goals._expr import ABSENT, AttrRef, Expression, truth
+from anunnaki.goals._freshness import RateEstimator, is_stale
 from anunnaki.goals._model import GoalModel
 from anunnaki.goals._relax import (
     AtemporalOperator,
@@ -111,42 +111,6 @@ class Explanation:
 
 def _jsonable(v: Any) -> Any:
     return None if v is ABSENT else v
-
-
-class _RateEstimator:
-    """Message frequency from inter-arrival times of the last ``window`` intervals.
-
-    ``rate = n / span`` over the last ``n`` intervals; while the topic is silent for longer
-    than the mean interval the open gap counts too, so the rate decays continuously toward 0
-    instead of jumping (a per-second count would hide a 4.5–5.0 Hz ramp).
-    """
-
-    __slots__ = ("arrivals",)
-
-    def __init__(self, window: int) -> None:
-        self.arrivals: deque[float] = deque(maxlen=window + 1)
-
-    def arrive(self, t: float) -> None:
-        self.arrivals.append(t)
-
-    def rate(self, now: float) -> float | None:
-        a = self.arrivals
-        n = len(a) - 1
-        if n < 1:
-            return None
-        span = a[-1] - a[0]
-        if span <= 0.0:
-            return None
-        gap = now - a[-1]
-        mean = span / n
-        if gap > mean:
-            span += gap - mean
-        return n / span
-
-    def in_gap(self, now: float) -> bool:
-        a = self.arrivals
-        n = len(a) - 1
-        return n >= 1 and now - a[-1] > (a[-1] - a[0]) / n
 
 
 @dataclass
@@ -339,7 +303,7 @@ class Evaluator:
 
     def _build_topics(self) -> None:
         self._topics: dict[str, _Topic] = {}
-        self._rates: list[_RateEstimator] = []
+        self._rates: list[RateEstimator] = []
         self._rate_agents: list[str] = []
         for agent in self.model.agents.values():
             for tb in agent.topics:
@@ -352,7 +316,7 @@ class Evaluator:
                     if ref in self._slot_of_ref:
                         topic.fields.append((self._slot_of_ref[ref], tuple(fpath.split("."))))
             if agent.id in self._rate_slot and agent.primary_topic is not None:
-                self._rates.append(_RateEstimator(self.model.spec.rate_window))
+                self._rates.append(RateEstimator(self.model.spec.rate_window))
                 self._rate_agents.append(agent.id)
                 self._topics[agent.primary_topic].rated.append(len(self._rates) - 1)
         self._next_stale = float("inf")
@@ -591,7 +555,7 @@ class Evaluator:
             if tp.last is None or tp.stale:
                 continue
             deadline = tp.last + tp.staleness
-            if now > deadline:
+            if is_stale(tp.last, now, tp.staleness):
                 tp.stale = True
                 for slot, _ in tp.fields:
                     if slots[slot] is not None:

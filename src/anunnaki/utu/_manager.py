@@ -200,7 +200,7 @@ class AutonomicManager:
         )
         self.knowledge_stage = KnowledgeStage(parts, self.knowledge)
         self.now = self.analyze_stage.now
-        self.monitor_stage.last_t = self.now if self.now > 0 else -float("inf")
+        self.monitor_stage.last_t = self.now
         if bus is not None:
             self._connect(bus)
 

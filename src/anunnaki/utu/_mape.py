@@ -10,10 +10,17 @@ from __future__ import annotations
 import logging
 from collections import deque
 from collections.abc import Callable, Iterable, Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any, Literal, Protocol
 
-from anunnaki.goals import Evaluator, Expression, GoalModel, compile_expression, status_name
+from anunnaki.goals import (
+    Evaluator,
+    Expression,
+    GoalModel,
+    TopicFreshness,
+    compile_expression,
+    status_name,
+)
 from anunnaki.tactics import (
     ChangeModeAction,
     ExpressionCondition,
@@ -43,28 +50,52 @@ TacticState = Literal["idle", "pending", "queued", "running", "awaiting", "rejec
 
 
 # -- Monitor -------------------------------------------------------------------------------
-@dataclass
 class TopicStats:
-    """What the Monitor knows of one topic: last value, arrivals, rate."""
+    """What the Monitor knows of one topic: its freshness, last value and recent messages.
 
-    topic: str
-    agents: list[str]
-    staleness: float
-    last_t: float | None = None
-    last_msg: dict[str, Any] | None = None
-    count: int = 0
-    recent: deque[tuple[float, dict[str, Any]]] = field(default_factory=lambda: deque(maxlen=64))
+    Freshness (last arrival, count, rate, staleness) is :class:`~anunnaki.goals.TopicFreshness`,
+    the same definition the goal model's ``rate(A)`` and staleness use.
+    """
 
-    def rate(self) -> float | None:
-        """Mean message rate (Hz) over the recent arrivals."""
-        if len(self.recent) < 2:
-            return None
-        span = self.recent[-1][0] - self.recent[0][0]
-        return (len(self.recent) - 1) / span if span > 0 else None
+    def __init__(self, topic: str, agents: list[str], staleness: float, window: int) -> None:
+        self.topic = topic
+        self.agents = agents
+        self.freshness = TopicFreshness(staleness, window=window)
+        self.last_msg: dict[str, Any] | None = None
+        self.recent: deque[tuple[float, dict[str, Any]]] = deque(maxlen=64)
+
+    @property
+    def staleness(self) -> float:
+        """Seconds of silence after which the topic is stale."""
+        return self.freshness.staleness
+
+    @staleness.setter
+    def staleness(self, value: float) -> None:
+        self.freshness.staleness = value
+
+    @property
+    def last_t(self) -> float | None:
+        """When the topic last spoke (``None``: never)."""
+        return self.freshness.last
+
+    @property
+    def count(self) -> int:
+        """Messages taken."""
+        return self.freshness.count
+
+    def take(self, t: float, body: dict[str, Any]) -> None:
+        """Record one message arriving at ``t``."""
+        self.freshness.arrive(t)
+        self.last_msg = body
+        self.recent.append((t, body))
+
+    def rate(self, now: float) -> float | None:
+        """Message rate (Hz) at ``now``."""
+        return self.freshness.rate(now)
 
     def stale(self, now: float) -> bool:
         """Whether the topic has been silent past its deadline (or never spoke)."""
-        return self.last_t is None or now - self.last_t > self.staleness
+        return self.freshness.stale(now)
 
 
 class Monitor:
@@ -88,7 +119,7 @@ class Monitor:
                 ts = (
                     self.topics.get(tb.topic)
                     or old.get(tb.topic)
-                    or TopicStats(tb.topic, [], agent.staleness)
+                    or TopicStats(tb.topic, [], agent.staleness, model.spec.rate_window)
                 )
                 ts.agents = (
                     sorted({*ts.agents, agent.id}) if tb.topic in self.topics else [agent.id]
@@ -103,10 +134,7 @@ class Monitor:
             return False
         body = dict(msg)
         self.knowledge.record_input(now, topic, body)
-        ts.last_t = now
-        ts.last_msg = body
-        ts.count += 1
-        ts.recent.append((now, body))
+        ts.take(now, body)
         return True
 
     def snapshot(self, now: float) -> dict[str, dict[str, Any]]:
@@ -117,7 +145,7 @@ class Monitor:
                 "last": ts.last_msg,
                 "last_t": ts.last_t,
                 "count": ts.count,
-                "rate": ts.rate(),
+                "rate": ts.rate(now),
                 "stale": ts.stale(now),
             }
             for name, ts in self.topics.items()

@@ -187,7 +187,7 @@ class MonitorStage:
     def __init__(self, parts: UtuParts, *, origin: str = "") -> None:
         self.origin = origin
         self.seq = 0
-        self.last_t = -float("inf")
+        self.last_t = 0.0  # inputs are never stamped before the start of time
         self.set_parts(parts)
 
     def set_parts(self, parts: UtuParts) -> None:
@@ -208,8 +208,7 @@ class MonitorStage:
     ) -> MonitorBatch:
         """One batch at time ``t`` (never earlier than the last) of ``(topic, msg, t_in)``."""
         t = max(float(t), self.last_t)
-        previous = self.last_t if self.last_t > -float("inf") else t
-        self.last_t = t
+        previous, self.last_t = self.last_t, t
         self.seq += 1
         taken = [
             _build(
