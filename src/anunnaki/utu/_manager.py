@@ -469,16 +469,10 @@ class AutonomicManager:
         batch = self.monitor_stage.batch(max(t, self.now), inputs, ops)
         self.now = batch.t
         a = self.analyze_stage
-        state = a.analyze(batch, full=False)
-        if (
-            react
-            and not state.changed
-            and not ops
-            and state.eligible == self._last_eligible
-            and not any(rt.state == "running" for rt in self.planner.runtimes.values())
-        ):
-            a.discard(state.seq)  # nothing to decide now: the next timed step goes on
-            return
+        idle = react and not any(rt.state == "running" for rt in self.planner.runtimes.values())
+        state = a.analyze(batch, full=False, unless_idle=self._last_eligible if idle else None)
+        if state is None:
+            return  # nothing to decide now: the next time-driven step goes on from here
         self._last_eligible = list(state.eligible or [])
         kb = self.knowledge
         before = kb.decisions_written

@@ -493,6 +493,7 @@ class AnalyzeNode(UtuNode):
             ops=[op for b in batches for op in b.ops],
         )
         state = self.stage.analyze(batch, full=True)
+        assert state is not None  # a cycle is always analysed in full here
         self._flush()
         self.bus.publish(topics.ANALYSIS, state)
         if self._paced():

@@ -261,11 +261,22 @@ class AnalyzeStage:
             if last:
                 self.now = last[-1].t
 
-    def analyze(self, batch: MonitorBatch, *, full: bool = True) -> AnalysisState:
+    def analyze(
+        self,
+        batch: MonitorBatch,
+        *,
+        full: bool = True,
+        unless_idle: Sequence[str] | None = None,
+    ) -> AnalysisState | None:
         """Take one batch; return the analysis execute acts on.
 
         ``full`` fills in ``nodes`` (every goal's utility and status, what displays show);
         a cycle in one process leaves it out and builds it only to publish.
+
+        ``unless_idle`` (the applicable tactics of the last cycle) makes this a reaction:
+        when the batch changed no goal, brought no operator call and left the applicable
+        tactics as they were, its inputs are recorded and ``None`` is returned — there is
+        nothing to decide now, and the next cycle marks the end of the step.
         """
         a, kb = self.analyzer, self.knowledge
         t = max(float(batch.t), self.now)
@@ -286,6 +297,8 @@ class AnalyzeStage:
             kb.record_input(t, OPERATOR, op)
             out_ops.append(self._apply_op(dict(op), t, changed))
         eligible = a.eligible()
+        if unless_idle is not None and not changed and not out_ops and eligible == unless_idle:
+            return None
         self.eligible = eligible
         self.seq += 1
         self._marked[self.seq] = (
@@ -397,14 +410,6 @@ class AnalyzeStage:
         for old in [s for s in self._marked if s < key]:
             self._mark(old, 0)
         self._mark(key, done.decisions if done is not None else 0)
-
-    def discard(self, seq: int | None) -> None:
-        """Forget a cycle that goes no further: a reaction that found nothing to decide.
-
-        Its inputs are recorded; the next cycle marks the end of the step.
-        """
-        if seq is not None:
-            self._marked.pop(seq, None)
 
     def _mark(self, seq: int, decisions: int) -> None:
         t, marked = self._marked.pop(seq)
