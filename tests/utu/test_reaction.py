@@ -204,3 +204,25 @@ def test_forged_and_malformed_cycle_messages_are_dropped_at_the_boundary(tmp_pat
             execute.close()
             analyze.close()
             kb.close()
+
+
+def test_a_service_handler_that_publishes_does_not_react_inline(live) -> None:  # type: ignore[no-untyped-def]
+    """A handler publishing a monitored topic hands the step to the spinning thread.
+
+    (A step in the handler's thread could request that very service and wait on itself.)
+    """
+    bus, m, actuator = live
+    nominal(bus)
+    assert wait_for(lambda: m.analyzer.evaluator.state("G1").status is True)
+
+    handler_threads: list[int] = []
+
+    def handler(request: Any) -> dict[str, Any]:
+        handler_threads.append(threading.get_ident())
+        bus.publish("/utu/oracle/output", {"category": 1, "confidence": 0.97})
+        return {"ok": True}
+
+    bus.service("/test/trigger", handler)
+    assert bus.request("/test/trigger", {}, timeout=2.0).to_body()["ok"] is True
+    assert wait_for(lambda: bool(actuator.threads))
+    assert actuator.threads[0] not in (handler_threads[0], threading.get_ident())

@@ -892,7 +892,10 @@ class Bus(ABC):
             expect: Message type(s) accepted; others are counted as malformed.
             on_ready: For pull subscribers: called (on the transport's thread) each time a
                 message is queued, e.g. ``event.set`` to wake a loop that drains several
-                subscribers. It must return at once and never block.
+                subscribers. On zenoh it must return at once and never block. On the
+                in-process bus it runs in the publisher's thread, which may do work there
+                (Utu reacts to a violation in it, with no thread hop) but must never wait
+                for a reply that needs that thread.
 
         """
         self._check_open()

@@ -72,6 +72,9 @@ __all__ = [
 
 log = logging.getLogger("anunnaki.utu")
 
+#: The bus's own threads (service handlers, subscriber callbacks): never react inline there.
+_BUS_THREADS = ("anunnaki-bus-",)
+
 
 class AutonomicManager:
     """Utu: the MAPE-K loop over a goal model and tactics, in one process.
@@ -318,8 +321,20 @@ class AutonomicManager:
 
     # -- inputs -----------------------------------------------------------------------------
     def _arrived(self) -> None:
-        """A monitored message was queued (called in the delivering thread)."""
-        if self._live and self._inline and self._step_lock.acquire(blocking=False):
+        """A monitored message was queued (called in the delivering thread).
+
+        Live on the in-process bus, the step runs right here, in the publisher's thread —
+        unless that thread is one of the bus's own (a service handler or a subscriber
+        callback publishing): a step there could request that very service and wait on
+        itself, so the spinning thread takes over. A step already running (in any thread)
+        takes the message in its next round.
+        """
+        if (
+            self._live
+            and self._inline
+            and not threading.current_thread().name.startswith(_BUS_THREADS)
+            and self._step_lock.acquire(blocking=False)
+        ):
             try:
                 self._step(None, react=True)
             except Exception:  # a reaction must never take the publisher down
