@@ -519,8 +519,22 @@ def encode_envelope(envelope: Envelope) -> bytes:
     return struct.pack(">I", len(raw)) + raw + blob
 
 
+def _generic(body: dict[str, Any]) -> Generic:
+    """A :class:`Generic` around a decoded JSON object, without pydantic's construct overhead."""
+    msg = Generic.__new__(Generic)
+    object.__setattr__(msg, "__dict__", {"data": body})
+    object.__setattr__(msg, "__pydantic_fields_set__", {"data"})
+    object.__setattr__(msg, "__pydantic_extra__", None)
+    object.__setattr__(msg, "__pydantic_private__", None)
+    return msg
+
+
 def _reject_constant(name: str) -> Any:
     raise ValueError(f"{name} is not valid JSON")
+
+
+#: One decoder for every envelope (``json.loads`` with a hook builds a new one per call).
+_DECODER = json.JSONDecoder(parse_constant=_reject_constant)
 
 
 def decode_envelope(data: bytes | bytearray | memoryview) -> Envelope:
@@ -546,7 +560,7 @@ def decode_envelope(data: bytes | bytearray | memoryview) -> Envelope:
         header_bytes = data[4 : 4 + n]
         blob = data[4 + n :]
     try:
-        header = json.loads(header_bytes.decode("utf-8"), parse_constant=_reject_constant)
+        header = _DECODER.decode(header_bytes.decode("utf-8"))
     except (UnicodeDecodeError, ValueError) as exc:
         raise MalformedMessage(f"not a JSON envelope: {exc}") from None
     if not isinstance(header, dict):
@@ -556,7 +570,14 @@ def decode_envelope(data: bytes | bytearray | memoryview) -> Envelope:
         missing = sorted(_ENVELOPE_KEYS - keys)
         extra = sorted(keys - _ENVELOPE_KEYS)
         raise MalformedMessage(f"bad envelope keys (missing {missing}, unexpected {extra})")
-    v, name, t, seq, sender, body = (header[k] for k in ("v", "type", "t", "seq", "sender", "body"))
+    v, name, t, seq, sender, body = (
+        header["v"],
+        header["type"],
+        header["t"],
+        header["seq"],
+        header["sender"],
+        header["body"],
+    )
     if not isinstance(v, int) or isinstance(v, bool):
         raise MalformedMessage(f"envelope 'v' must be an integer, got {v!r}")
     if not isinstance(name, str):
@@ -580,7 +601,7 @@ def decode_envelope(data: bytes | bytearray | memoryview) -> Envelope:
     try:
         if cls is Generic:
             # json.loads (NaN/Infinity rejected) only yields JSON values: nothing to check.
-            message: Message = Generic.model_construct(data=body)
+            message: Message = _generic(body)
         else:
             message = cls.from_body(body, blob)
     except ValidationError as exc:
