@@ -2,7 +2,13 @@
 
 from __future__ import annotations
 
+import os
+import signal
+import socket
+import subprocess
+import sys
 import threading
+import time
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
@@ -14,6 +20,7 @@ from anunnaki.cli.main import main
 from anunnaki.utu import AutonomicManager, RecordingActuator, parse_config
 
 ROVER = Path(__file__).parents[2] / "examples" / "rover"
+ANUNNAKI = [sys.executable, "-m", "anunnaki.cli.main"]
 
 
 @pytest.fixture
@@ -62,3 +69,78 @@ def test_reload_says_when_no_utu_answers(capsys: pytest.CaptureFixture[str]) -> 
         )
     assert code == 2
     assert "no running Utu answered" in capsys.readouterr().err
+
+
+@pytest.mark.slow
+def test_reload_reaches_every_node_of_a_launch_split_into_processes(tmp_path: Path) -> None:
+    """``anunnaki run --processes`` + ``anunnaki reload``: applied by all five node processes."""
+    pytest.importorskip("zenoh")
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    text = (ROVER / "utu-processes.yaml").read_text()
+    text = text.replace("tcp/127.0.0.1:7447", f"tcp/127.0.0.1:{port}")
+    for name in ("goals.yaml", "binding.yaml", "tactics.yaml", "trace.jsonl"):
+        text = text.replace(f": {name}", f": {ROVER}/{name}")
+    launch = tmp_path / "launch.yaml"
+    launch.write_text(text.replace("    sync: true", "    sync: true\n    loop: true"))
+    db = tmp_path / "run.db"
+    proc = subprocess.Popen(
+        [*ANUNNAKI, "run", str(launch), "--processes", "--speed", "5", "--knowledge", str(db)],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+        env={**os.environ, "PYTHONUNBUFFERED": "1"},
+    )
+    lines: list[str] = []
+    ready = threading.Event()
+
+    def read() -> None:
+        assert proc.stdout is not None
+        for line in proc.stdout:
+            lines.append(line)
+            if line.startswith("ready: "):
+                ready.set()
+
+    reader = threading.Thread(target=read, daemon=True)
+    reader.start()
+    try:
+        deadline = time.monotonic() + 90
+        while not ready.wait(0.1) and proc.poll() is None and time.monotonic() < deadline:
+            pass
+        assert ready.is_set(), "".join(lines)
+        endpoint = f"tcp/127.0.0.1:{port}"
+        good = tmp_path / "good.yaml"
+        good.write_text(
+            (ROVER / "tactics.yaml").read_text().replace("priority: 100", "priority: 90")
+        )
+        reload = [*ANUNNAKI, "reload", "--connect", endpoint]
+        applied = subprocess.run(
+            [*reload, "--tactics", str(good), "--timeout", "20"],
+            capture_output=True,
+            text=True,
+            timeout=60,
+            check=False,
+        )
+        assert applied.returncode == 0, applied.stdout + applied.stderr + "".join(lines)
+        assert applied.stdout.strip() == f"applied: {good}"
+        bad = tmp_path / "bad.yaml"
+        bad.write_text((ROVER / "tactics.yaml").read_text().replace("goal: G3", "goal: G33", 1))
+        refused = subprocess.run(
+            [*reload, "--tactics", str(bad), "--timeout", "20"],
+            capture_output=True,
+            text=True,
+            timeout=60,
+            check=False,
+        )
+        assert refused.returncode == 1 and "G33" in refused.stdout, refused.stdout
+    finally:
+        proc.send_signal(signal.SIGTERM)
+        try:
+            proc.wait(timeout=20)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait()
+        reader.join(5.0)
+        assert proc.stdout is not None
+        proc.stdout.close()
