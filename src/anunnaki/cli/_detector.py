@@ -155,7 +155,8 @@ def _add_make(sub: Any) -> None:
 
 
 def _run_make(args: argparse.Namespace) -> int:
-    from anunnaki.datasets import load_split, make_dataset
+    from anunnaki.datasets import load_split
+    from anunnaki.sim import make_dataset
 
     console = _console()
     start = time.perf_counter()

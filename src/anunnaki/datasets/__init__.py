@@ -6,13 +6,18 @@ xyxy pixels, ``[N]`` ``int64`` class indices), iteration, ``ds.classes``, ``ds.s
 and ``ds.truths()`` (boxes, labels and ignore boxes — objects seen but not labelled —
 without reading images).
 
-Generating one from the simulator (``anunnaki make-dataset``), split by scene layout so no
-scene is in two splits::
+Generating one from the simulator (``anunnaki make-dataset``, or
+:func:`anunnaki.sim.make_dataset`, which passes the scenes to :func:`make_dataset` here), split
+by scene layout so no scene is in two splits::
 
-    from anunnaki.datasets import make_dataset, load_split
+    from anunnaki.datasets import load_split
+    from anunnaki.sim import make_dataset
 
     make_dataset("rover", "data/rover", per_layout=50, progress=True)   # 2000/200/500 images
     test = load_split("data/rover", "test")
+
+:func:`make_dataset` here writes any frame source's frames (``source=``, ``classes=``): plug
+another simulator in. Nothing in this package imports the simulator.
 
 Bringing your own data: :meth:`Dataset.from_coco` (``bbox`` = ``[x, y, w, h]`` pixels) and
 :meth:`Dataset.from_yolo` (``class cx cy w h`` normalised, one ``.txt`` per image and a
@@ -39,7 +44,6 @@ from anunnaki.datasets._make import (
     FrameSource,
     load_split,
     make_dataset,
-    platform_classes,
 )
 from anunnaki.datasets._yolo import IMAGE_SUFFIXES, read_yolo, write_yolo
 
@@ -56,7 +60,6 @@ __all__ = [
     "coco_dict",
     "load_split",
     "make_dataset",
-    "platform_classes",
     "read_coco",
     "read_image",
     "read_yolo",

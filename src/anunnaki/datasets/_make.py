@@ -30,7 +30,6 @@ __all__ = [
     "FrameSource",
     "load_split",
     "make_dataset",
-    "platform_classes",
 ]
 
 SPLITS = ("train", "val", "test")
@@ -74,23 +73,6 @@ class FrameLike(Protocol):
 #: :func:`anunnaki.sim.dataset_frames`. Must be picklable (a module-level function) when
 #: ``workers > 1``.
 FrameSource = Callable[..., Iterable[FrameLike]]
-
-
-def platform_classes(platform: str) -> tuple[str, ...]:
-    """Class names of a simulated platform (``rover``: pedestrian, deer; ``uav``: …)."""
-    from anunnaki.sim import ROVER_CLASSES, UAV_CLASSES
-
-    known = {"rover": ROVER_CLASSES, "uav": UAV_CLASSES}
-    if platform not in known:
-        raise AnunnakiError(f"unknown platform {platform!r}; choose one of: rover, uav")
-    return tuple(known[platform])
-
-
-def _sim_source(platform: str, **kwargs: Any) -> Iterable[FrameLike]:
-    from anunnaki.sim import dataset_frames
-
-    frames: Iterable[FrameLike] = dataset_frames(platform, **kwargs)  # type: ignore[arg-type]
-    return frames
 
 
 def _pool_context() -> multiprocessing.context.BaseContext:
@@ -183,8 +165,9 @@ def make_dataset(
         progress: Show a rich progress bar.
         overwrite: Replace an existing dataset in *out_dir*.
         source: A frame source with the signature of :func:`anunnaki.sim.dataset_frames`
-            (the default); plug your own simulator in here.
-        classes: Class names; by default the simulated platform's.
+            (:func:`anunnaki.sim.make_dataset` passes the simulated scenes); plug your own
+            simulator in here.
+        classes: The class names of the frames' labels.
         min_label_height: Passed to *source* when given: the smallest labelled box height
             as a fraction of the image height (default: the platform's
             ``anunnaki.sim.MIN_LABEL_HEIGHT``); objects seen but smaller become ignore
@@ -215,7 +198,12 @@ def make_dataset(
         raise AnunnakiError(f"per_layout must be at least 1, got {per_layout}")
     if width < 16 or height < 16:
         raise AnunnakiError(f"images must be at least 16x16 px, got {width}x{height}")
-    names = tuple(classes) if classes is not None else platform_classes(platform)
+    if source is None or classes is None:
+        raise AnunnakiError(
+            "give the frame source and the class names (source=, classes=); the simulated "
+            "scenes are anunnaki.sim.make_dataset (CLI: anunnaki make-dataset)"
+        )
+    names = tuple(classes)
     out = Path(out_dir)
     if not overwrite and any((out / f"{s}.json").exists() for s in SPLITS):
         raise AnunnakiError(
@@ -224,7 +212,7 @@ def make_dataset(
         )
     images_dir = out / "images"
     images_dir.mkdir(parents=True, exist_ok=True)
-    src: FrameSource = source if source is not None else _sim_source
+    src: FrameSource = source
     tasks = [(split, layout) for split, layouts in splits.items() for layout in layouts]
     results: dict[tuple[str, int], list[dict[str, Any]]] = {}
     job: dict[str, Any] = {

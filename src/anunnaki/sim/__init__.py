@@ -34,6 +34,7 @@ Every scene has its own pybullet client (``DIRECT``, tiny renderer, no shadows);
 live side by side in one process or in process pools. See ``docs/simulation.md``.
 """
 
+from anunnaki.sim._dataset import make_dataset, platform_classes, scene_frames
 from anunnaki.sim._encounter import EncounterResult, run_pedestrian_encounter, to_detections
 from anunnaki.sim._managed import PhaseScore, SimulatedSystem, format_phases, scenario_phases
 from anunnaki.sim._platform import GROUND_TRUTH_TOPIC, PHENOMENA_TOPIC, SimPlatform
@@ -135,12 +136,15 @@ __all__ = [
     "layout_placements",
     "load_report",
     "load_scenario",
+    "make_dataset",
     "parse_scenario",
+    "platform_classes",
     "plot_report",
     "require_plot_extra",
     "rolling_f1",
     "run_pedestrian_encounter",
     "save_run",
     "scenario_phases",
+    "scene_frames",
     "to_detections",
 ]

@@ -1,4 +1,4 @@
-"""Dataset generation: splits by layout, determinism, the process pool, the real simulator."""
+"""Datasets from the simulated scenes: splits by layout, determinism, the process pool."""
 
 from __future__ import annotations
 
@@ -10,8 +10,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from anunnaki.datasets import DEFAULT_LAYOUTS, load_split, make_dataset
+from anunnaki import datasets
+from anunnaki.datasets import DEFAULT_LAYOUTS, load_split
 from anunnaki.errors import AnunnakiError
+from anunnaki.sim import make_dataset
 
 
 @dataclass(frozen=True)
@@ -157,10 +159,10 @@ def test_default_splits_are_2000_200_500_images(tmp_path: Path) -> None:
 
 def test_the_cli_defaults_are_the_same(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     from anunnaki.cli.main import main
-    from anunnaki.datasets import _make
+    from anunnaki.sim import _dataset
 
     requests = Requests()
-    monkeypatch.setattr(_make, "_sim_source", requests)
+    monkeypatch.setattr(_dataset, "scene_frames", requests)
     assert main(["make-dataset", "rover", "--out", str(tmp_path / "d"), "--workers", "1"]) == 0
     by_split = {
         split: sorted(layout for layout, *_ in requests.asked if layout in layouts)
@@ -169,3 +171,20 @@ def test_the_cli_defaults_are_the_same(tmp_path: Path, monkeypatch: pytest.Monke
     assert by_split == {split: list(layouts) for split, layouts in DEFAULT_LAYOUTS.items()}
     assert {(n, w, h) for _, n, w, h in requests.asked} == {(50, 128, 128)}
     assert len(requests.asked) == 54
+
+
+def test_the_generic_maker_needs_a_source_and_classes(tmp_path: Path) -> None:
+    with pytest.raises(AnunnakiError, match=r"anunnaki\.sim\.make_dataset"):
+        datasets.make_dataset("rover", tmp_path)
+    paths = datasets.make_dataset(
+        "rover",
+        tmp_path / "d",
+        source=fake_frames,
+        classes=("pedestrian", "deer"),
+        train_layouts=[0],
+        val_layouts=[1],
+        test_layouts=[2],
+        per_layout=2,
+        workers=1,
+    )
+    assert len(load_split(tmp_path / "d", "test")) == 2 and set(paths) == {"train", "val", "test"}

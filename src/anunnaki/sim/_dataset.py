@@ -1,0 +1,44 @@
+"""Labelled datasets rendered from the simulated scenes (``anunnaki make-dataset``).
+
+:func:`anunnaki.datasets.make_dataset` writes any frame source's frames as a dataset split by
+layout; this module is its source for the pybullet scenes, next to the scenes themselves, so
+``anunnaki.datasets`` needs nothing from the simulator.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable
+from pathlib import Path
+from typing import Any
+
+from anunnaki.datasets import make_dataset as _make_dataset
+from anunnaki.errors import AnunnakiError
+from anunnaki.sim._scene import ROVER_CLASSES, UAV_CLASSES, dataset_frames
+
+__all__ = ["make_dataset", "platform_classes", "scene_frames"]
+
+
+def platform_classes(platform: str) -> tuple[str, ...]:
+    """Class names of a simulated platform (``rover``: pedestrian, deer; ``uav``: …)."""
+    known = {"rover": ROVER_CLASSES, "uav": UAV_CLASSES}
+    if platform not in known:
+        raise AnunnakiError(f"unknown platform {platform!r}; choose one of: rover, uav")
+    return tuple(known[platform])
+
+
+def scene_frames(platform: str, **kwargs: Any) -> Iterable[Any]:
+    """The frames of one scene layout (a picklable frame source for worker processes)."""
+    frames: Iterable[Any] = dataset_frames(platform, **kwargs)  # type: ignore[arg-type]
+    return frames
+
+
+def make_dataset(platform: str, out_dir: str | Path, **kwargs: Any) -> dict[str, Path]:
+    """Render a labelled dataset of a simulated platform's scenes, split by layout.
+
+    ``platform`` is ``"rover"`` or ``"uav"``; every other argument is
+    :func:`anunnaki.datasets.make_dataset`'s (``per_layout``, ``width``, ``height``, ``seed``,
+    ``workers``, ``progress``, ``overwrite``, the layouts of each split, ``min_label_height``).
+    """
+    kwargs.setdefault("source", scene_frames)
+    kwargs.setdefault("classes", platform_classes(platform))
+    return _make_dataset(platform, out_dir, **kwargs)
