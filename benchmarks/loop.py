@@ -36,7 +36,7 @@ from typing import Any
 import torch
 
 from anunnaki.bus import open_bus
-from anunnaki.sim import SimulatedSystem
+from anunnaki.managed import SimulatedSystem
 from anunnaki.utu._launch import load_launch, run_launch
 
 ROOT = Path(__file__).parents[1]

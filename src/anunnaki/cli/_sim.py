@@ -145,7 +145,8 @@ def _run_loop(
     """The platform with its detector and oracle (``--models``); a per-phase report."""
     import time
 
-    from anunnaki.sim import SimulatedSystem, format_phases, save_run
+    from anunnaki.managed import SimulatedSystem, format_phases
+    from anunnaki.sim import save_run
 
     oracle = None if args.oracle == "none" else {"name": args.oracle}
     with SimulatedSystem(

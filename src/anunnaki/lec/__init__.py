@@ -56,7 +56,14 @@ from anunnaki.lec._detector import (
     sidecar_path,
     weights_path,
 )
-from anunnaki.lec._metrics import Metrics, Truth, box_iou, choose_threshold, f1_at_iou
+from anunnaki.lec._metrics import (
+    Metrics,
+    Truth,
+    box_iou,
+    choose_threshold,
+    f1_at_iou,
+    match_image,
+)
 from anunnaki.lec._node import (
     ACTIVE_TOPIC,
     NODE_NAME,
@@ -131,6 +138,7 @@ __all__ = [
     "f1_at_iou",
     "load_detector",
     "load_registry",
+    "match_image",
     "parse_registry",
     "predict",
     "read_card",

@@ -25,10 +25,12 @@ Platforms publish on the bus like the scripted stand-in (guideline H1), on simul
 (:class:`StopRule`), never from ground truth; ``UavSim`` flies a package-delivery mission.
 Scenario files (:func:`load_scenario`) ramp phenomena and inject faults over time.
 :func:`run_pedestrian_encounter` tells whether a detector makes the rover stop in time.
-:class:`SimulatedSystem` is the whole loop's managed system — a platform with its detector
-(the model manager's LEC node) and ground-truth oracle — scored per scenario phase;
-:meth:`SimulatedSystem.report` keeps the run as data (:class:`RunReport`, JSON) and
-:func:`plot_report` draws it (windowed F1 by model, the oracle's category, the tactics).
+:class:`anunnaki.managed.SimulatedSystem` is the whole loop's managed system — a platform
+with its detector (the model manager's LEC node) and ground-truth oracle — scored per
+scenario phase (it lives in ``anunnaki.managed``: the scenes here know nothing of detectors);
+its runs are kept as data here (:class:`RunReport`, JSON) and :func:`plot_report` draws them
+(windowed F1 by model, the oracle's category, the tactics). :func:`make_dataset` renders
+labelled datasets from the scenes.
 
 Every scene has its own pybullet client (``DIRECT``, tiny renderer, no shadows); several
 live side by side in one process or in process pools. See ``docs/simulation.md``.
@@ -36,7 +38,6 @@ live side by side in one process or in process pools. See ``docs/simulation.md``
 
 from anunnaki.sim._dataset import make_dataset, platform_classes, scene_frames
 from anunnaki.sim._encounter import EncounterResult, run_pedestrian_encounter, to_detections
-from anunnaki.sim._managed import PhaseScore, SimulatedSystem, format_phases, scenario_phases
 from anunnaki.sim._platform import GROUND_TRUTH_TOPIC, PHENOMENA_TOPIC, SimPlatform
 from anunnaki.sim._report import (
     FrameScore,
@@ -47,6 +48,7 @@ from anunnaki.sim._report import (
     require_plot_extra,
     rolling_f1,
     save_run,
+    tactic_events,
 )
 from anunnaki.sim._rover import (
     CAMERA_FOV,
@@ -111,7 +113,6 @@ __all__ = [
     "FrameScore",
     "Light",
     "ObjectSpec",
-    "PhaseScore",
     "PhenomenonEvent",
     "Placement",
     "Platform",
@@ -121,7 +122,6 @@ __all__ = [
     "Scenario",
     "Scene",
     "SimPlatform",
-    "SimulatedSystem",
     "StopRule",
     "TacticEvent",
     "Timeline",
@@ -132,7 +132,6 @@ __all__ = [
     "annotate_mask",
     "boxes_from_mask",
     "dataset_frames",
-    "format_phases",
     "layout_placements",
     "load_report",
     "load_scenario",
@@ -144,7 +143,7 @@ __all__ = [
     "rolling_f1",
     "run_pedestrian_encounter",
     "save_run",
-    "scenario_phases",
     "scene_frames",
+    "tactic_events",
     "to_detections",
 ]

@@ -1,6 +1,6 @@
 """A simulated run as data and as a picture: what the detector scored, what the oracle said.
 
-:meth:`SimulatedSystem.report <anunnaki.sim.SimulatedSystem.report>` gathers a run into a
+:meth:`SimulatedSystem.report <anunnaki.managed.SimulatedSystem.report>` gathers a run into a
 :class:`RunReport`: every scored frame (simulated time, true/false positives, misses, the
 model that ran), every assessment (time, category), the tactics Utu started and how they
 ended, collisions and the per-phase table. It is written as JSON (``--report FILE.json``)

@@ -950,7 +950,7 @@ class _Runner:
         sc = self.scripted
         if sc is None:
             return None
-        from anunnaki.managed.scripted import ScriptedSystem
+        from anunnaki.managed import ScriptedSystem
 
         system = ScriptedSystem(
             bus,
@@ -1019,7 +1019,7 @@ class _Runner:
         self, bus: Bus, on_time: Callable[[float], None] | None
     ) -> tuple[Any, threading.Thread]:
         """Start the simulated platform, its detector and its oracle; run it in a thread."""
-        from anunnaki.sim import SimulatedSystem
+        from anunnaki.managed import SimulatedSystem
 
         cfg = self.sim
         assert cfg is not None
@@ -1105,7 +1105,7 @@ class _Runner:
         self.say(f"stopped ({reason}): {len(printer.decisions)} decisions in {ran:.2f} s")
         system = self.simulated
         if system is not None and self.sim is not None and self.sim.report:
-            from anunnaki.sim import format_phases
+            from anunnaki.managed import format_phases
 
             platform = system.platform
             self.say(

@@ -33,14 +33,14 @@ from typing import Any
 import numpy as np
 
 from anunnaki import topics
-from anunnaki.bus import Assessment, Detections, Sample
-from anunnaki.sim._platform import GROUND_TRUTH_TOPIC, SimPlatform, body_of
-from anunnaki.sim._report import FrameScore, RunReport, tactic_events
-from anunnaki.sim._scenario import Scenario
+from anunnaki.bus import Assessment, Detections, Sample, body_of
+from anunnaki.sim import FrameScore, RunReport, Scenario, SimPlatform, tactic_events
+
+GROUND_TRUTH_TOPIC = topics.GROUND_TRUTH
 
 __all__ = ["PhaseScore", "SimulatedSystem", "format_phases", "scenario_phases"]
 
-log = logging.getLogger("anunnaki.sim")
+log = logging.getLogger("anunnaki.managed")
 
 _OUTPUT_TOPIC = topics.ORACLE_OUTPUT
 
@@ -125,8 +125,7 @@ def _match(
     det: Detections, truth: tuple[float, np.ndarray, list[str], np.ndarray]
 ) -> tuple[int, int, int]:
     """The F1 rule (``anunnaki.lec.match_image``): class-aware, IoU ≥ 0.5, ignore boxes."""
-    from anunnaki.lec import DetectionResult
-    from anunnaki.lec._metrics import match_image
+    from anunnaki.lec import DetectionResult, match_image
 
     names = sorted(set(det.labels) | set(truth[2]))
     index = {n: k for k, n in enumerate(names)}

@@ -20,13 +20,8 @@ import pytest
 from anunnaki.bus import Detections
 from anunnaki.errors import ModelFileError
 from anunnaki.lec import load_registry, sha256_file
-from anunnaki.sim import (
-    SimulatedSystem,
-    format_phases,
-    load_report,
-    load_scenario,
-    scenario_phases,
-)
+from anunnaki.managed import SimulatedSystem, format_phases, scenario_phases
+from anunnaki.sim import load_report, load_scenario
 from anunnaki.utu._launch import load_launch, parse_launch, run_launch
 
 ROOT = Path(__file__).parents[2]
