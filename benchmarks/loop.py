@@ -36,8 +36,8 @@ from typing import Any
 import torch
 
 from anunnaki.bus import open_bus
+from anunnaki.launch import SimKind, load_launch, run_launch
 from anunnaki.managed import SimulatedSystem
-from anunnaki.utu._launch import load_launch, run_launch
 
 ROOT = Path(__file__).parents[1]
 LAUNCH = ROOT / "examples" / "rover" / "sim.yaml"
@@ -48,8 +48,8 @@ FAST = 1000.0  # simulated seconds per wall second asked for: far beyond the mac
 def stage(name: str, seconds: float, launch_path: Path) -> dict[str, float]:
     """Run one stage for ``seconds`` of simulated time; frames and wall time."""
     launch = load_launch(launch_path)
-    sim = launch.sim
-    assert sim is not None
+    assert isinstance(launch.managed, SimKind)
+    sim = launch.managed.options
     if name == "utu":
         out = io.StringIO()
         t0 = time.perf_counter()

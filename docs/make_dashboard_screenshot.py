@@ -24,7 +24,7 @@ from pathlib import Path
 from playwright.sync_api import sync_playwright
 
 from anunnaki.cli._dashboard import dashboard_for_launch
-from anunnaki.utu import load_launch, run_launch
+from anunnaki.launch import load_launch, run_launch
 
 ROOT = Path(__file__).resolve().parent.parent
 CHROMIUM = os.environ.get("ANUNNAKI_CHROMIUM", "/usr/bin/chromium")

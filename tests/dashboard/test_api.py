@@ -44,9 +44,9 @@ from anunnaki.dashboard import (
 from anunnaki.dashboard._server import is_loopback, loopback_names
 from anunnaki.errors import MissingExtraError, ModelFileError
 from anunnaki.goals import load_goal_model
+from anunnaki.launch import load_launch
 from anunnaki.tactics import load_tactics
 from anunnaki.topics import DECISIONS as DECISIONS_TOPIC
-from anunnaki.utu._launch import load_launch
 
 
 @pytest.fixture

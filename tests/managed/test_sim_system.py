@@ -9,7 +9,6 @@ and the escalation from a swap that does not help to the fail-safe.
 
 from __future__ import annotations
 
-import dataclasses
 import io
 import threading
 from pathlib import Path
@@ -19,10 +18,10 @@ import pytest
 
 from anunnaki.bus import Detections
 from anunnaki.errors import ModelFileError
+from anunnaki.launch import SimKind, load_launch, parse_launch, run_launch
 from anunnaki.lec import load_registry, sha256_file
 from anunnaki.managed import SimulatedSystem, format_phases, scenario_phases
 from anunnaki.sim import load_report, load_scenario
-from anunnaki.utu._launch import load_launch, parse_launch, run_launch
 
 ROOT = Path(__file__).parents[2]
 ROVER = ROOT / "examples" / "rover"
@@ -158,7 +157,7 @@ def test_sim_section_errors_name_the_file(tmp_path: Path) -> None:
     with pytest.raises(ModelFileError, match="unknown oracle 'crystal_ball'") as info:
         parse_launch(text.replace("name: ground_truth", "name: crystal_ball"))
     assert info.value.line is not None and "ground_truth" in (info.value.hint or "")
-    with pytest.raises(ModelFileError, match="not both"):
+    with pytest.raises(ModelFileError, match="give one managed system: .*got the keys scripted, sim"):
         parse_launch(
             text.replace("  sim:", "  scripted: {trace: ROVER/trace.jsonl}\n  sim:").replace(
                 "ROVER", str(ROVER)
@@ -181,11 +180,9 @@ def test_the_demo_swaps_in_the_fog_model_and_back_without_oscillation(tmp_path: 
     """
     out = io.StringIO()
     launch = load_launch(ROVER / "sim.yaml")
-    assert launch.sim is not None
+    assert isinstance(launch.managed, SimKind)
     report = tmp_path / "demo.json"
-    launch = dataclasses.replace(
-        launch, sim=launch.sim.model_copy(update={"report_file": str(report)})
-    )
+    launch.managed.with_reports(report=str(report), plot=None)
     result = run_launch(launch, speed=1000, out=out, handle_signals=False)
     log = out.getvalue()
     assert result.exit_code == 0, log

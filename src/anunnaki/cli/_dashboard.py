@@ -18,7 +18,7 @@ import time
 from typing import Any
 
 from anunnaki.bus import open_bus
-from anunnaki.utu._launch import Launch, load_launch, signals_to
+from anunnaki.launch import Launch, load_launch, signals_to
 
 __all__ = [
     "TOKEN_ENV",

@@ -10,7 +10,6 @@ its own, e.g. on another machine. See docs/running.md.
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import logging
 import os
 import sys
@@ -22,7 +21,7 @@ from pydantic import ValidationError
 
 from anunnaki.bus import BusConfig, BusConfigError, open_bus
 from anunnaki.cli import _dashboard
-from anunnaki.utu._launch import load_launch, run_launch, signals_to
+from anunnaki.launch import WritesReports, load_launch, run_launch, signals_to
 from anunnaki.utu._nodes import NODE_NAMES, build_node
 
 __all__ = ["add_parser", "bus_with_overrides", "run", "run_node"]
@@ -72,7 +71,12 @@ def add_parser(sub: Any) -> None:
         metavar="SECONDS",
         help="stop when the scripted trace reaches this time (without one: after SECONDS)",
     )
-    p.add_argument("--speed", type=float, metavar="X", help="scripted replay speed (10: 10x)")
+    p.add_argument(
+        "--speed",
+        type=float,
+        metavar="X",
+        help="managed system speed: 10 = 10x real time, 0 = as fast as possible",
+    )
     p.add_argument("--knowledge", metavar="FILE", help="knowledge base file (overrides)")
     p.add_argument("--fresh", action="store_true", help="delete the knowledge base file first")
     p.add_argument("-v", "--verbose", action="store_true", help="log what the nodes do")
@@ -130,23 +134,17 @@ def run(args: argparse.Namespace) -> int:
     _logging(args.verbose)
     launch = load_launch(args.config)
     if getattr(args, "report", None) or getattr(args, "plot", None):
-        if launch.sim is None:
+        if not isinstance(launch.managed, WritesReports):
             print(
-                "error: --report and --plot need a simulated managed system "
-                f"('managed: sim' in {args.config})",
+                "error: --report and --plot need a managed system that keeps its run as data "
+                f"('managed: {{kind: sim, …}}' in {args.config})",
                 file=sys.stderr,
             )
             return 2
-        if args.plot:
-            from anunnaki.sim import require_plot_extra
-
-            require_plot_extra()  # before the run, not after it
-        update = {
-            key: str(Path(value).resolve())
-            for key, value in (("report_file", args.report), ("plot_file", args.plot))
-            if value
-        }
-        launch = dataclasses.replace(launch, sim=launch.sim.model_copy(update=update))
+        launch.managed.with_reports(
+            report=str(Path(args.report).resolve()) if args.report else None,
+            plot=str(Path(args.plot).resolve()) if args.plot else None,
+        )
     dashboard = None
     if getattr(args, "dashboard", False):
         # Bound and serving before anything starts: a port in use fails here, at once.

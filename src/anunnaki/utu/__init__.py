@@ -19,14 +19,6 @@ Five parts, composed by :class:`AutonomicManager`:
 from anunnaki.utu._actuators import BusActuator, RecordingActuator
 from anunnaki.utu._config import RunStopConfig, UtuConfig, load_config, parse_config
 from anunnaki.utu._knowledge import Decision, InputRow, Knowledge, TacticRow, VerdictRow
-from anunnaki.utu._launch import (
-    Launch,
-    LaunchConfig,
-    RunResult,
-    load_launch,
-    parse_launch,
-    run_launch,
-)
 from anunnaki.utu._manager import AutonomicManager
 from anunnaki.utu._mape import (
     ActionOutcome,
@@ -86,8 +78,6 @@ __all__ = [
     "Knowledge",
     "KnowledgeNode",
     "KnowledgeStage",
-    "Launch",
-    "LaunchConfig",
     "Monitor",
     "MonitorNode",
     "MonitorStage",
@@ -98,7 +88,6 @@ __all__ = [
     "Planner",
     "RecordingActuator",
     "ReplayReport",
-    "RunResult",
     "RunStopConfig",
     "TacticRow",
     "TacticRuntime",
@@ -108,13 +97,10 @@ __all__ = [
     "VerdictRow",
     "build_node",
     "load_config",
-    "load_launch",
     "load_parts",
     "load_tactics_text",
     "open_knowledge",
     "parse_config",
-    "parse_launch",
     "replay",
-    "run_launch",
     "step_nodes",
 ]

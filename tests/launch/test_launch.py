@@ -23,8 +23,16 @@ import pytest
 from anunnaki.bus import open_bus
 from anunnaki.cli.main import main
 from anunnaki.errors import ModelFileError
-from anunnaki.utu._launch import RunResult, load_launch, parse_launch, run_launch
-from anunnaki.utu._nodes import NODE_NAMES, node_token, ready_service
+from anunnaki.launch import (
+    LaunchError,
+    RunResult,
+    ScriptedKind,
+    load_launch,
+    parse_launch,
+    run_launch,
+)
+from anunnaki.topics import node_token, ready_service
+from anunnaki.utu import NODE_NAMES
 
 ROVER = Path(__file__).parents[2] / "examples" / "rover"
 EXAMPLE = ROVER / "utu.yaml"
@@ -89,11 +97,13 @@ def test_the_rover_launch_file_loads() -> None:
     assert list(launch.nodes) == list(NODE_NAMES)
     assert launch.nodes["monitor"] == 50 and launch.nodes["knowledge"] == 10
     assert launch.bus.kind == "inproc" and launch.utu.clock == "sim"
-    assert launch.scripted is not None and launch.scripted.sync
-    assert Path(launch.scripted.trace) == ROVER / "trace.jsonl" and launch.records
+    scripted = launch.managed
+    assert isinstance(scripted, ScriptedKind) and scripted.options.sync
+    assert Path(scripted.options.trace) == ROVER / "trace.jsonl" and scripted.records
     assert Path(launch.utu.goal_model) == ROVER / "goals.yaml"
     processes = load_launch(ROVER / "utu-processes.yaml", read_records=False)
-    assert processes.bus.kind == "zenoh" and not processes.records
+    assert processes.bus.kind == "zenoh"
+    assert isinstance(processes.managed, ScriptedKind) and not processes.managed.records
 
 
 def test_a_utu_configuration_runs_with_every_node(tmp_path: Path) -> None:
@@ -104,7 +114,7 @@ def test_a_utu_configuration_runs_with_every_node(tmp_path: Path) -> None:
         "utu.yaml",
     )
     launch = load_launch(p)
-    assert launch.nodes == dict.fromkeys(NODE_NAMES, 7.0) and launch.scripted is None
+    assert launch.nodes == dict.fromkeys(NODE_NAMES, 7.0) and launch.managed is None
 
 
 @pytest.mark.parametrize(
@@ -361,7 +371,9 @@ def test_a_node_alone_answers_readiness_and_stops_on_sigterm(tmp_path: Path) -> 
 
 
 def test_a_node_process_failing_at_bring_up_stops_the_launch() -> None:
-    from anunnaki.utu._launch import LaunchError, _Children, _wait_ready
+    from anunnaki.launch import Children as _Children
+    from anunnaki.launch import LaunchError
+    from anunnaki.launch import wait_ready as _wait_ready
 
     out, err = io.StringIO(), io.StringIO()
     children = _Children(out, err)
@@ -384,3 +396,11 @@ def test_docs_show_the_example_launch_file_as_it_is() -> None:
     example = EXAMPLE.read_text(encoding="utf-8")
     assert blocks and blocks[0] == example[example.index("anunnaki: launch/1") :]
     assert load_launch(EXAMPLE).config == parse_launch(blocks[0], base=ROVER).config
+
+
+def test_speed_0_means_as_fast_as_possible_as_for_anunnaki_sim() -> None:
+    result, out = run(EXAMPLE, speed=0)
+    assert_the_rover_story(result, out)
+    assert "at 1e+04×" in out or "at 10000×" in out
+    with pytest.raises(LaunchError, match="speed must be >= 0"):
+        run(EXAMPLE, speed=-1)

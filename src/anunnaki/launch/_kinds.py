@@ -1,0 +1,413 @@
+"""The built-in managed-system kinds: ``scripted`` (a trace) and ``sim`` (a simulated platform).
+
+Each is a plugin of :data:`anunnaki.launch.MANAGED` (see :mod:`anunnaki.launch._managed`),
+imported only when a launch file names it: ``sim`` needs the ``vision`` extra.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+import time
+from collections.abc import Callable, Sequence
+from pathlib import Path
+from typing import Annotated, Any, ClassVar
+
+from pydantic import BaseModel, ConfigDict, Field
+
+from anunnaki.bus import Clock
+from anunnaki.errors import AnunnakiError, ModelFileError
+from anunnaki.launch._managed import ManagedContext
+from anunnaki.trace import Record, read_trace
+from anunnaki.utu import Decision, UtuConfig
+
+__all__ = ["ScriptedConfig", "ScriptedKind", "SimConfig", "SimKind"]
+
+log = logging.getLogger("anunnaki.launch")
+
+
+class _Strict(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+
+def _here(base: Path, p: str) -> str:
+    q = Path(p).expanduser()
+    return str(q if q.is_absolute() else base / q)
+
+
+# -- scripted ----------------------------------------------------------------------------------
+class ScriptedConfig(_Strict):
+    """A scripted managed system (:class:`~anunnaki.managed.ScriptedSystem`).
+
+    Attributes:
+        trace: The trace to replay (JSONL, ``anunnaki: trace/1``).
+        prefix: The platform's name prefix: services ``<prefix>/set_mode``, ``<prefix>/stop``.
+        status_topic: The topic whose ``mode``/``buzzer`` fields follow commands.
+        modes: The modes ``set_mode`` accepts.
+        speed: Replay speed: 1.0 real time, 10 ten times faster.
+        loop: Start over at the end (trace time keeps increasing), until stopped.
+        publish_clock: Publish the trace time on ``/clock`` (for ``clock: sim``).
+        sync: Lockstep with Utu: after each instant, wait (at most ``sync_timeout`` s)
+            until Utu has taken that instant's messages before moving time on, as a
+            simulator waits for its controller. With ``clock: sim`` every input is then
+            stamped with exactly its instant, at any ``speed``.
+        sync_timeout: The longest wait per instant, in wall seconds.
+
+    """
+
+    trace: str
+    prefix: str = "/rover"
+    status_topic: str | None = None
+    modes: list[str] = Field(default_factory=lambda: ["autonomous", "manual"], min_length=1)
+    speed: Annotated[float, Field(gt=0, le=10_000)] = 1.0
+    loop: bool = False
+    publish_clock: bool = False
+    sync: bool = False
+    sync_timeout: Annotated[float, Field(gt=0)] = 1.0
+
+
+def drive(
+    system: Any,
+    stop: threading.Event,
+    *,
+    speed: float,
+    loop: bool,
+    until: float | None,
+    on_instant: Callable[[float], None] | None = None,
+    after_instant: Callable[[int], None] | None = None,
+    watched: frozenset[str] = frozenset(),
+) -> None:
+    """Publish the scripted system's trace live: record time / ``speed`` after the start.
+
+    ``on_instant(t)`` is called before the records of instant ``t`` go out (it moves an
+    in-process simulation clock, so no record is taken before its time has come), and
+    ``after_instant(n)`` after them, with ``n`` the number of records on ``watched``
+    topics (it waits until Utu has taken them: lockstep).
+    """
+    base = list(system.records)
+    instants = system.instants()
+    if not instants:
+        return
+    first = instants[0]
+    gap = instants[1] - instants[0] if len(instants) > 1 else 1.0
+    span = instants[-1] - first + gap
+    wall0 = time.monotonic()
+    offset = 0.0
+    cursor = 0  # the first record not yet counted for after_instant
+    while True:
+        for instant in instants:
+            t = instant + offset
+            if until is not None and t > until:
+                return
+            delay = wall0 + (t - first) / speed - time.monotonic()
+            if (delay > 0 and stop.wait(delay)) or stop.is_set():
+                return
+            if on_instant is not None:
+                on_instant(t)
+            system.step(t)
+            if after_instant is not None:
+                n = 0
+                records = system.records
+                while cursor < len(records) and records[cursor].t <= t:
+                    n += records[cursor].topic in watched
+                    cursor += 1
+                after_instant(n)
+        if not loop:
+            return
+        offset += span
+        system.records.extend(Record(r.t + offset, r.topic, r.msg) for r in base)
+
+
+class _Running:
+    """A started managed system: its thread, why it ends, its close and finish."""
+
+    def __init__(
+        self,
+        system: Any,
+        thread: threading.Thread,
+        ended: str,
+        finish: Callable[[Sequence[Decision], float], None] | None = None,
+    ) -> None:
+        self.system = system
+        self.thread = thread
+        self.ended = ended
+        self._finish = finish
+
+    def finish(self, decisions: Sequence[Decision], ran: float) -> None:
+        if self._finish is not None:
+            self._finish(decisions, ran)
+
+    def close(self) -> None:
+        self.system.close()
+
+
+class ScriptedKind:
+    """``kind: scripted``: a trace replayed onto the bus, obeying mode changes and stops."""
+
+    name: ClassVar[str] = "scripted"
+    Options: ClassVar[type[BaseModel]] = ScriptedConfig
+
+    def __init__(self, options: BaseModel, *, base: Path) -> None:
+        assert isinstance(options, ScriptedConfig)
+        self.options = options.model_copy(update={"trace": _here(base, options.trace)})
+        self.speed = self.options.speed
+        self.relay_clock = self.options.publish_clock
+        self.records: list[Record] = []
+
+    def check(self, utu: UtuConfig) -> None:
+        """Read the trace now (B5)."""
+        self.records = read_trace(self.options.trace).records
+        if not self.records:
+            raise ModelFileError(
+                "the trace has no records", path=self.options.trace, hint="record or write some"
+            )
+
+    def notes(self, utu: UtuConfig, speed: float) -> list[str]:
+        """Clock and speed combinations that do not do what one may think."""
+        out = []
+        if utu.clock == "wall" and speed != 1:
+            out.append(
+                f"note: speed {speed:g}× on the wall clock: rates and staleness are measured "
+                "in real time; use clock: sim and publish_clock: true"
+            )
+        if utu.clock == "sim" and not self.options.publish_clock:
+            out.append(
+                "note: clock: sim but the scripted system does not publish /clock "
+                "(publish_clock: true); Utu's time will not advance unless a simulator "
+                "publishes it"
+            )
+        return out
+
+    def start(self, ctx: ManagedContext) -> _Running:
+        """Replay the trace in a thread (in lockstep with Utu when ``sync``)."""
+        from anunnaki.managed import ScriptedSystem
+
+        sc = self.options
+        if not self.records:
+            self.check(UtuConfig(anunnaki="utu/1", goal_model="-"))
+        system = ScriptedSystem(
+            ctx.bus,
+            list(self.records),
+            prefix=sc.prefix,
+            status_topic=sc.status_topic,
+            modes=tuple(sc.modes),
+            publish_clock=sc.publish_clock,
+        )
+        recs = self.records
+        ctx.say(
+            f"managed: scripted {sc.prefix} from {sc.trace} ({len(recs)} records, "
+            f"t {recs[0].t:g}–{recs[-1].t:g} s) at {ctx.speed:g}× "
+            + ("looping" if sc.loop else "once")
+            + (", in lockstep with Utu" if sc.sync else "")
+        )
+        total = 0
+        late = 0
+        taken = ctx.taken
+
+        def after(n: int) -> None:
+            nonlocal total, late
+            total += n
+            if taken is None or not n:
+                return
+            deadline = time.monotonic() + sc.sync_timeout
+            while not taken(total) and not ctx.stop.is_set():
+                if time.monotonic() > deadline:
+                    late += 1
+                    if late == 1:
+                        log.warning(
+                            "sync: Utu did not take the messages of an instant within "
+                            "%.1f s; the replay goes on without waiting for it",
+                            sc.sync_timeout,
+                        )
+                    return
+                ctx.stop.wait(0.0005)
+
+        def run() -> None:
+            try:
+                drive(
+                    system,
+                    ctx.stop,
+                    speed=ctx.speed,
+                    loop=sc.loop,
+                    until=ctx.until,
+                    on_instant=ctx.on_instant,
+                    after_instant=after if sc.sync else None,
+                    watched=ctx.watched,
+                )
+            except AnunnakiError as exc:
+                if not ctx.stop.is_set():
+                    log.warning("scripted system stopped: %s", exc)
+            except Exception:  # a bug: say so; the run then ends as after the trace
+                log.exception("the scripted system failed")
+
+        thread = threading.Thread(target=run, name="anunnaki-scripted", daemon=True)
+        thread.start()
+        return _Running(system, thread, "trace ended")
+
+
+# -- sim ---------------------------------------------------------------------------------------
+class SimConfig(_Strict):
+    """A simulated platform, its detector and oracle (:class:`~anunnaki.managed.SimulatedSystem`).
+
+    Attributes:
+        scenario: The scenario file (``anunnaki: scenario/1``); its ``platform`` says rover or
+            UAV.
+        models: The detector's model registry (``anunnaki: models/1``); without it no
+            detector runs.
+        oracle: The oracle node's options: ``name`` (default ``ground_truth``) and the
+            oracle's own (e.g. ``window``); ``null`` runs none.
+        speed: Simulated seconds per wall second (the detector can hold it back: lockstep).
+        lockstep: A frame is not followed by the next before its detections are out.
+        report: Print the per-phase table (detector F1, categories, models, tactics) at the end.
+        report_file: Also write the run as data (``sim-report/1`` JSON: every scored frame,
+            assessment and tactic); relative to the launch file.
+        plot_file: Also draw the run (windowed F1 per model, the oracle's category, the
+            tactics; PNG, or any format matplotlib knows by the suffix); relative to the
+            launch file.
+
+    """
+
+    scenario: str
+    models: str | None = None
+    oracle: dict[str, Any] | None = Field(default_factory=lambda: {"name": "ground_truth"})
+    speed: Annotated[float, Field(gt=0, le=10_000)] = 1.0
+    lockstep: bool = True
+    report: bool = True
+    report_file: str | None = None
+    plot_file: str | None = None
+
+
+class SimKind:
+    """``kind: sim``: a simulated rover or UAV, its detector (LEC node) and its oracle."""
+
+    name: ClassVar[str] = "sim"
+    Options: ClassVar[type[BaseModel]] = SimConfig
+    relay_clock = False  # the platform publishes /clock itself
+
+    def __init__(self, options: BaseModel, *, base: Path) -> None:
+        assert isinstance(options, SimConfig)
+        o = options
+        self.options = o.model_copy(
+            update={
+                "scenario": _here(base, o.scenario),
+                "models": _here(base, o.models) if o.models is not None else None,
+                "report_file": None if o.report_file is None else _here(base, o.report_file),
+                "plot_file": None if o.plot_file is None else _here(base, o.plot_file),
+            }
+        )
+        self.speed = self.options.speed
+
+    def with_reports(self, *, report: str | None, plot: str | None) -> None:
+        """Keep the run as data (``report``, JSON) and draw it (``plot``) at the end."""
+        update = {k: v for k, v in (("report_file", report), ("plot_file", plot)) if v}
+        self.options = self.options.model_copy(update=update)
+        if plot:
+            from anunnaki.sim import require_plot_extra
+
+            require_plot_extra()  # before the run, not after it
+
+    def check(self, utu: UtuConfig) -> None:
+        """Load the scenario and the registry now, so that errors come before bring-up (B5)."""
+        from anunnaki.sim import load_scenario, require_plot_extra
+
+        sim = self.options
+        load_scenario(sim.scenario)
+        if sim.plot_file is not None:
+            require_plot_extra()
+        if sim.models is not None:
+            from anunnaki.lec import load_registry
+
+            load_registry(sim.models)
+        if sim.oracle is not None:
+            from anunnaki.oracles import available_oracles
+
+            name = sim.oracle.get("name", "ground_truth")
+            if name not in available_oracles():
+                raise ModelFileError(
+                    f"unknown oracle {name!r}",
+                    element="managed.sim.oracle.name",
+                    hint=f"known oracles: {', '.join(available_oracles())}",
+                )
+
+    def notes(self, utu: UtuConfig, speed: float) -> list[str]:
+        """Nothing to warn about."""
+        return []
+
+    def start(self, ctx: ManagedContext) -> _Running:
+        """Start the simulated platform, its detector and its oracle; run it in a thread."""
+        from anunnaki.managed import SimulatedSystem
+
+        cfg = self.options
+        system = SimulatedSystem(
+            ctx.bus,
+            cfg.scenario,
+            models=cfg.models,
+            oracle=cfg.oracle,
+            lockstep=cfg.lockstep,
+            on_time=ctx.on_instant,
+        )
+        sc = system.scenario
+        end = sc.duration if ctx.until is None else ctx.until
+        active = system.lec.active.id if system.lec is not None else "no detector"
+        oracle = system.oracle.oracle.name if system.oracle is not None else "no oracle"
+        ctx.say(
+            f"managed: simulated {sc.platform} '{sc.name}' from {cfg.scenario} "
+            f"(t 0–{end:g} s) at {ctx.speed:g}×"
+            + (", in lockstep with the detector" if cfg.lockstep and system.lec else "")
+            + f"; detector {active}; oracle {oracle}"
+        )
+
+        def run() -> None:
+            try:
+                system.run(ctx.stop, speed=ctx.speed, until=end)
+            except Exception:  # a bug: say so; the run then ends as after the scenario
+                log.exception("the simulation failed")
+
+        def finish(decisions: Sequence[Decision], ran: float) -> None:
+            self._finish(system, decisions, ran, ctx.say)
+
+        thread = threading.Thread(target=run, name="anunnaki-sim", daemon=True)
+        thread.start()
+        return _Running(system, thread, "scenario ended", finish)
+
+    def _finish(
+        self, system: Any, decisions: Sequence[Decision], ran: float, say: Callable[[str], None]
+    ) -> None:
+        cfg = self.options
+        if cfg.report:
+            from anunnaki.managed import format_phases
+
+            platform = system.platform
+            say(
+                f"\nsimulated {platform.t:.1f} s in {ran:.1f} s wall "
+                f"({platform.frames} frames, {platform.frames / max(ran, 1e-9):.1f} frames/s); "
+                "per phase:"
+            )
+            say(format_phases(system.phases(list(decisions))))
+        if cfg.report_file or cfg.plot_file:
+            from anunnaki.sim import save_run
+
+            try:  # a file that cannot be written is said, never fatal: the run is over
+                save_run(
+                    system.report(list(decisions)),
+                    report=cfg.report_file,
+                    plot=cfg.plot_file,
+                    say=say,
+                )
+            except (OSError, AnunnakiError) as exc:
+                say(f"report: not written: {exc}")
+
+
+def clock_publisher(bus: Any, topic: str) -> Callable[[float], None]:
+    """Publish the simulation time before each instant, ahead of the instant's records.
+
+    The scripted system publishes ``/clock`` at normal priority; assessments travel at
+    high priority and could overtake it. Published here at high priority first, the
+    time of an instant always reaches a node before the instant's messages.
+    """
+    pub = bus.publisher(topic, priority="high")
+
+    def publish(t: float) -> None:
+        pub.put(Clock(time=max(t, 0.0)))
+
+    return publish

@@ -1,0 +1,583 @@
+"""The runner: a launch's nodes (here or one process each), then its managed system.
+
+One :class:`_Runner` per run: it opens the launch's bus, starts the nodes (the composed
+:class:`~anunnaki.utu.AutonomicManager` when all five run in this process), waits until all
+are ready, starts the managed system (a plugin, :mod:`anunnaki.launch._managed`), prints one
+line per decision and stops everything on a signal, at ``until`` or when the system ends.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import logging
+import os
+import shutil
+import signal
+import sqlite3
+import sys
+import tempfile
+import threading
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, TextIO
+
+from anunnaki import topics
+from anunnaki.bus import Bus, BusConfig, open_bus
+from anunnaki.clock import SimClock
+from anunnaki.launch._kinds import clock_publisher
+from anunnaki.launch._managed import ManagedContext, ManagedRun
+from anunnaki.launch._schema import Launch, LaunchError, _StoppedDuringBringUp
+from anunnaki.launch._supervisor import (
+    Children,
+    child_bus_config,
+    remove_db,
+    signals_to,
+    wait_ready,
+)
+from anunnaki.utu import (
+    NODE_NAMES,
+    ComposedUtu,
+    Decision,
+    DecisionTail,
+    Knowledge,
+    MonitorNode,
+    UtuNode,
+    UtuParts,
+    build_node,
+    open_knowledge,
+)
+
+__all__ = ["RunResult", "format_decision", "run_launch"]
+
+log = logging.getLogger("anunnaki.launch")
+
+#: ``--speed 0``: as fast as possible (the managed system's own lockstep holds it back).
+_AS_FAST_AS_POSSIBLE = 10_000.0
+
+
+# -- printing ----------------------------------------------------------------------------------
+def _short(value: Any, width: int = 40) -> str:
+    text = value if isinstance(value, str) else json.dumps(value, separators=(",", ":"))
+    return text if len(text) <= width else text[: width - 1] + "…"
+
+
+def format_decision(d: Decision, *, t0: float = 0.0) -> str:
+    """One line for a decision: time, kind, tactic, detail."""
+    detail = " ".join(f"{k}={_short(v)}" for k, v in d.data.items() if v is not None)
+    return f"{d.t - t0:9.3f}  {d.kind:<20} {d.tactic or '-':<18} {detail}".rstrip()
+
+
+class _Printer:
+    def __init__(self, out: TextIO, tail: DecisionTail, t0: float) -> None:
+        self.out = out
+        self.tail = tail
+        self.t0 = t0
+        self.decisions: list[Decision] = []
+
+    def say(self, text: str) -> None:
+        with contextlib.suppress(ValueError, OSError):  # a closed or broken pipe
+            self.out.write(text + "\n")
+            self.out.flush()
+
+    def poll(self) -> None:
+        rows = self.tail.read()
+        self.decisions += rows
+        for d in rows:
+            self.say(format_decision(d, t0=self.t0))
+
+
+# -- lockstep ----------------------------------------------------------------------------------
+def _taken_here(nodes: Sequence[UtuNode | ComposedUtu]) -> Callable[[int], bool] | None:
+    """In one process: Utu has taken its inputs when its input queues are empty."""
+    subs: list[Any] = []
+    for node in nodes:
+        if isinstance(node, ComposedUtu | MonitorNode):
+            subs += node.input_queues()
+    if not subs:
+        return None
+    return lambda n: all(s.pending == 0 for s in subs)
+
+
+class _InputCounter:
+    """Across processes: count the inputs the monitor node has republished."""
+
+    def __init__(self, bus: Bus) -> None:
+        self.seen = 0
+        self._lock = threading.Lock()
+        self.sub = bus.subscribe(topics.MONITOR_INPUT, self._on_batch, queue=1024)
+
+    def _on_batch(self, sample: Any) -> None:
+        inputs = sample.message.to_body().get("inputs", [])
+        with self._lock:
+            self.seen += len(inputs) if isinstance(inputs, list) else 0
+
+    def __call__(self, n: int) -> bool:
+        with self._lock:
+            return self.seen >= n
+
+
+class _CycleCounter:
+    """Across processes: whether Utu has taken ``n`` inputs and acted on them.
+
+    The analyze node reports the inputs taken so far (``taken`` in its state); with an
+    execute node, the cycle that took them must be done too (its actions are out).
+    """
+
+    def __init__(self, bus: Bus, *, wait_done: bool) -> None:
+        self._lock = threading.Lock()
+        self._cycles: list[tuple[int, int]] = []  # (seq, taken) of recent cycles
+        self._done = -1
+        self._wait_done = wait_done
+        self._declared = [bus.subscribe(topics.ANALYSIS, self._on_state, queue=1024)]
+        if wait_done:
+            self._declared.append(bus.subscribe(topics.CYCLE_DONE, self._on_done, queue=1024))
+
+    def _on_state(self, sample: Any) -> None:
+        body = sample.message.to_body()
+        seq, taken = body.get("seq"), body.get("taken")
+        if isinstance(seq, int) and isinstance(taken, int):
+            with self._lock:
+                self._cycles.append((seq, taken))
+                del self._cycles[:-256]
+
+    def _on_done(self, sample: Any) -> None:
+        seq = sample.message.to_body().get("seq")
+        if isinstance(seq, int):
+            with self._lock:
+                self._done = max(self._done, seq)
+
+    def __call__(self, n: int) -> bool:
+        with self._lock:
+            seq = next((s for s, taken in self._cycles if taken >= n), None)
+            return seq is not None and (not self._wait_done or self._done >= seq)
+
+
+@dataclass
+class RunResult:
+    """What a run did.
+
+    Attributes:
+        exit_code: 0 after a clean stop (signal, trace end, ``until``); 1 if a node died.
+        reason: Why the run stopped.
+        decisions: Every decision written during the run, in order.
+        ready_after: Seconds from the start until every node answered its readiness service.
+        ran: Seconds from the managed system's start to the stop.
+        pids: Node -> process id (one process: all the same).
+
+    """
+
+    exit_code: int
+    reason: str
+    decisions: list[Decision]
+    ready_after: float
+    ran: float
+    pids: dict[str, int]
+
+
+def run_launch(
+    launch: Launch,
+    *,
+    processes: bool = False,
+    speed: float | None = None,
+    until: float | None = None,
+    knowledge: str | None = None,
+    fresh: bool = False,
+    stop: threading.Event | None = None,
+    out: TextIO | None = None,
+    err: TextIO | None = None,
+    handle_signals: bool = True,
+    on_bus: Callable[[Bus], object] | None = None,
+) -> RunResult:
+    """Run a launch: nodes (in this process or one process each), then the managed system.
+
+    Args:
+        launch: The loaded launch.
+        processes: One process per node (``python -m anunnaki.cli.main node NAME``).
+        speed: Override the managed system's speed (0: as fast as possible).
+        until: Stop when the managed system's clock reaches this time (its seconds), or,
+            without a managed system, after this many seconds.
+        knowledge: Override the knowledge base file.
+        fresh: Delete the knowledge base file first (otherwise an existing one is resumed).
+        stop: Set it to stop the run (signals set it too).
+        out: Where to print (default stdout).
+        err: Where the nodes' error output goes (default stderr).
+        handle_signals: Turn SIGINT/SIGTERM into a clean stop (main thread only).
+        on_bus: Called with the launch's bus once it is open, before any node starts (e.g.
+            to attach a dashboard); what it declares on the bus closes with the bus.
+
+    Raises:
+        LaunchError: A node failed at bring-up or did not become ready in time.
+        ModelFileError, BusError: Configuration problems found while starting.
+
+    """
+    out = out or sys.stdout
+    err = err or sys.stderr
+    stop = stop or threading.Event()
+    runner = _Runner(
+        launch,
+        processes=processes,
+        speed=speed,
+        until=until,
+        knowledge=knowledge,
+        fresh=fresh,
+        stop=stop,
+        out=out,
+        err=err,
+        on_bus=on_bus,
+    )
+    if not handle_signals:
+        return runner.run()
+    with signals_to(stop):
+        return runner.run()
+
+
+class _Runner:
+    def __init__(
+        self,
+        launch: Launch,
+        *,
+        processes: bool,
+        speed: float | None,
+        until: float | None,
+        knowledge: str | None,
+        fresh: bool,
+        stop: threading.Event,
+        out: TextIO,
+        err: TextIO,
+        on_bus: Callable[[Bus], object] | None = None,
+    ) -> None:
+        self.launch = launch
+        self.on_bus = on_bus
+        self.processes = processes
+        self.managed = launch.managed
+        default_speed = self.managed.speed if self.managed is not None else 1.0
+        self.speed = speed if speed is not None else default_speed
+        if self.speed == 0:
+            self.speed = _AS_FAST_AS_POSSIBLE
+        self.running: ManagedRun | None = None
+        if not self.speed > 0:
+            raise LaunchError(f"speed must be >= 0 (0: as fast as possible), got {self.speed!r}")
+        self.until = until
+        self.stop = stop
+        self.out = out
+        self.err = err
+        self.tmpdir: str | None = None
+        kb = knowledge if knowledge is not None else launch.utu.knowledge
+        if kb != ":memory:":
+            kb = str(Path(kb).resolve())
+        elif processes:  # the nodes must share one file: a temporary one
+            self.tmpdir = tempfile.mkdtemp(prefix="anunnaki-run-")
+            kb = str(Path(self.tmpdir) / "knowledge.db")
+        self.kb_path = kb
+        if fresh and kb != ":memory:":
+            remove_db(kb)
+        self.utu = launch.utu.model_copy(update={"knowledge": kb})
+        self.parts = UtuParts(
+            self.utu,
+            launch.parts.sources,
+            launch.parts.model,
+            launch.parts.tactics,
+            launch.parts.warnings,
+        )
+        self.t_start = time.monotonic()
+
+    def say(self, text: str) -> None:
+        with contextlib.suppress(ValueError, OSError):
+            self.out.write(text + "\n")
+            self.out.flush()
+
+    def run(self) -> RunResult:
+        try:
+            if self.processes:
+                return self._run_processes()
+            return self._run_here()
+        except _StoppedDuringBringUp as exc:
+            self.say(f"stopped ({exc})")
+            return RunResult(0, str(exc), [], time.monotonic() - self.t_start, 0.0, {})
+        finally:
+            if self.tmpdir is not None:
+                shutil.rmtree(self.tmpdir, ignore_errors=True)
+
+    # -- what both modes share
+    def _header(self, mode: str, bus: Bus) -> None:
+        launch, utu = self.launch, self.utu
+        where = f"{bus.kind}" + (f" {', '.join(bus.endpoints)}" if bus.endpoints else "")
+        self.say(
+            f"anunnaki run: {launch.name} — {mode}; bus {where}; clock {utu.clock}; "
+            f"nodes {', '.join(f'{n} {r:g} Hz' for n, r in launch.nodes.items())}"
+        )
+        if self.tmpdir is not None:
+            self.say(
+                f"knowledge: {self.kb_path} (temporary, removed at the end; "
+                "--knowledge FILE keeps it)"
+            )
+        else:
+            self.say(f"knowledge: {self.kb_path}")
+        for w in launch.parts.warnings:
+            self.say(f"warning: {w.render()}")
+        if self.managed is not None:
+            for note in self.managed.notes(utu, self.speed):
+                self.say(note)
+
+    def _resuming(self, kb: Knowledge) -> None:
+        last = kb.decisions(limit=1)
+        if last:
+            self.say(
+                f"knowledge: resuming a run with {kb.counts()['decisions']} decisions, the last "
+                f"at t={last[-1].t:g} (tactic state and time go on from there; --fresh starts "
+                "over)"
+            )
+
+    def _start_managed(
+        self,
+        bus: Bus,
+        on_instant: Callable[[float], None] | None = None,
+        taken: Callable[[int], bool] | None = None,
+    ) -> ManagedRun | None:
+        """Start the managed system (a plugin) in its own thread.
+
+        ``on_instant(t)`` runs before an instant's messages go out; ``taken(n)`` tells
+        whether Utu has taken ``n`` inputs so far (lockstep).
+        """
+        if self.managed is None:
+            return None
+        watched = frozenset(
+            tb.topic for agent in self.parts.model.agents.values() for tb in agent.topics
+        )
+        ctx = ManagedContext(
+            bus=bus,
+            stop=self.stop,
+            speed=self.speed,
+            until=self.until,
+            say=self.say,
+            on_instant=on_instant,
+            taken=taken,
+            watched=watched,
+        )
+        self.running = self.managed.start(ctx)
+        return self.running
+
+    def _watch(
+        self,
+        printer: _Printer,
+        driver: threading.Thread | None,
+        failed: Any,
+    ) -> tuple[int, str]:
+        """Print decisions until a reason to stop; return (exit code, reason)."""
+        started = time.monotonic()
+        end_at: float | None = None
+        while True:
+            printer.poll()
+            if self.stop.is_set():
+                return 0, "stopped by a signal"
+            problem = failed()
+            if problem:
+                return 1, problem
+            now = time.monotonic()
+            if driver is not None and not driver.is_alive():
+                if end_at is None:
+                    end_at = now + self.launch.config.linger
+                elif now >= end_at:
+                    ended = self.running.ended if self.running is not None else "ended"
+                    why = ended if self.until is None else f"reached t={self.until:g}"
+                    return 0, why
+            if driver is None and self.until is not None and now - started >= self.until:
+                return 0, f"ran {self.until:g} s"
+            self.stop.wait(0.05)
+
+    def _clock_publisher(self, bus: Bus) -> Callable[[float], None] | None:
+        """The launch's relay of the managed system's time, ahead of each instant."""
+        if self.managed is None or not self.managed.relay_clock:
+            return None
+        return clock_publisher(bus, self.utu.clock_topic)
+
+    def _finish(self, printer: _Printer, code: int, reason: str, ran: float) -> None:
+        printer.poll()
+        self.say(f"stopped ({reason}): {len(printer.decisions)} decisions in {ran:.2f} s")
+        if self.running is not None:
+            self.running.finish(printer.decisions, ran)
+
+    # -- one process
+    def _run_here(self) -> RunResult:
+        launch = self.launch
+        clock_t0 = 0.0
+        bus = open_bus(launch.bus, name=f"{launch.name}-launch")
+        if self.on_bus is not None:
+            self.on_bus(bus)
+        nodes: list[UtuNode | ComposedUtu] = []
+        threads: list[threading.Thread] = []
+        halt = threading.Event()
+        crashed: list[str] = []
+        managed = None
+        kb: Knowledge | None = None
+        try:
+            all_five = set(launch.nodes) == set(NODE_NAMES)
+            mode = (
+                "5 nodes in one process (the composed manager)"
+                if all_five
+                else f"{len(launch.nodes)} nodes in one process"
+            )
+            self._header(mode, bus)
+            kb = open_knowledge(self.kb_path)
+            self._resuming(kb)
+            tail = DecisionTail(kb)
+            # On sim time the scripted system moves the clock itself, in order with its
+            # records (a clock fed from the bus arrives on another thread: racy).
+            sim = SimClock() if self.utu.clock == "sim" else None
+            if all_five:
+                nodes.append(
+                    ComposedUtu(self.parts, bus=bus, knowledge=kb, clock=sim, rates=launch.nodes)
+                )
+            else:
+                for name, rate in launch.nodes.items():
+                    nodes.append(
+                        build_node(name, self.parts, bus=bus, knowledge=kb, clock=sim, rate=rate)
+                    )
+            for node in nodes:
+
+                def spin(node: UtuNode | ComposedUtu = node) -> None:
+                    try:
+                        node.spin(halt)
+                    except Exception as exc:
+                        log.exception("a node failed")
+                        crashed.append(f"a node failed: {type(exc).__name__}: {exc}")
+
+                t = threading.Thread(target=spin, name="anunnaki-node", daemon=True)
+                t.start()
+                threads.append(t)
+            wait_ready(bus, list(launch.nodes), timeout=launch.config.ready_timeout, stop=self.stop)
+            ready_after = time.monotonic() - self.t_start
+            self.say(f"ready: {', '.join(launch.nodes)} after {ready_after:.2f} s")
+            if self.utu.clock == "wall":
+                clock_t0 = time.time()
+            printer = _Printer(self.out, tail, clock_t0)
+            t_run = time.monotonic()
+            managed = self._start_managed(
+                bus, sim.update if sim is not None else None, _taken_here(nodes)
+            )
+            code, reason = self._watch(
+                printer, managed.thread if managed else None, lambda: crashed[0] if crashed else ""
+            )
+            self.stop.set()
+            if managed is not None:
+                managed.thread.join(timeout=5.0)
+            halt.set()
+            for node in nodes:
+                node.wake()
+            for t in threads:
+                t.join(timeout=5.0)
+            ran = time.monotonic() - t_run
+            self._finish(printer, code, reason, ran)
+            pid = os.getpid()
+            return RunResult(
+                code, reason, printer.decisions, ready_after, ran, dict.fromkeys(launch.nodes, pid)
+            )
+        finally:
+            self.stop.set()
+            halt.set()
+            for node in nodes:
+                node.wake()
+            for t in threads:
+                t.join(timeout=5.0)
+            if managed is not None:
+                managed.close()
+            for node in reversed(nodes):
+                node.close()
+            if kb is not None:
+                with contextlib.suppress(sqlite3.Error):  # the manager may have closed it
+                    kb.close()
+            bus.close()
+
+    # -- one process per node
+    def _node_argv(self, name: str, bus_config: BusConfig) -> list[str]:
+        if self.launch.path is None:
+            raise LaunchError("--processes needs a launch file (the nodes read it)")
+        return [
+            sys.executable,
+            "-m",
+            "anunnaki.cli.main",
+            "node",
+            name,
+            "--config",
+            str(self.launch.path),
+            "--knowledge",
+            self.kb_path,
+            "--rate",
+            repr(self.launch.nodes[name]),
+            "--bus-json",
+            bus_config.model_dump_json(exclude_none=True),
+            "--exit-with-parent",
+        ]
+
+    def _run_processes(self) -> RunResult:
+        launch = self.launch
+        parent_config = launch.bus
+        if parent_config.kind == "inproc":
+            parent_config = BusConfig(kind="zenoh", namespace=parent_config.namespace)
+        bus = open_bus(parent_config, name=f"{launch.name}-launch")
+        if self.on_bus is not None:
+            self.on_bus(bus)
+        children = Children(self.out, self.err)
+        managed = None
+        kb: Knowledge | None = None
+        try:
+            self._header(f"{len(launch.nodes)} nodes, one process each", bus)
+            if launch.bus.kind == "inproc":
+                self.say("note: bus kind inproc cannot cross processes; using zenoh on loopback")
+            # Create the knowledge base before the nodes open it together.
+            kb = open_knowledge(self.kb_path)
+            self._resuming(kb)
+            tail = DecisionTail(kb)
+            taken: Callable[[int], bool] | None = None
+            if "analyze" in launch.nodes:
+                taken = _CycleCounter(bus, wait_done="execute" in launch.nodes)
+            elif "monitor" in launch.nodes:
+                taken = _InputCounter(bus)
+            for name in launch.nodes:
+                config = child_bus_config(parent_config, bus.endpoints, f"{launch.name}-{name}")
+                proc = children.start(name, self._node_argv(name, config))
+                self.say(f"node {name}: pid {proc.pid}")
+            wait_ready(
+                bus,
+                list(launch.nodes),
+                timeout=launch.config.ready_timeout,
+                stop=self.stop,
+                procs=children.procs,
+            )
+            ready_after = time.monotonic() - self.t_start
+            self.say(f"ready: {', '.join(launch.nodes)} after {ready_after:.2f} s")
+            clock_t0 = time.time() if self.utu.clock == "wall" else 0.0
+            printer = _Printer(self.out, tail, clock_t0)
+            t_run = time.monotonic()
+            managed = self._start_managed(bus, self._clock_publisher(bus), taken)
+
+            def failed() -> str:
+                dead = children.died()
+                return (
+                    ", ".join(f"node {n} exited with code {rc}" for n, rc in dead) if dead else ""
+                )
+
+            code, reason = self._watch(printer, managed.thread if managed else None, failed)
+            self.stop.set()
+            if managed is not None:
+                managed.thread.join(timeout=5.0)
+            children.stop(launch.config.stop_timeout)
+            ran = time.monotonic() - t_run
+            bad = [(n, rc) for n, rc in children.died() if rc not in (0, -signal.SIGTERM)]
+            if bad and code == 0:
+                code = 1
+                reason += "; " + ", ".join(f"node {n} exited with code {rc}" for n, rc in bad)
+            self._finish(printer, code, reason, ran)
+            pids = {n: p.pid for n, p in children.procs.items()}
+            return RunResult(code, reason, printer.decisions, ready_after, ran, pids)
+        finally:
+            self.stop.set()
+            children.stop(launch.config.stop_timeout)
+            if managed is not None:
+                managed.close()
+            if kb is not None:
+                kb.close()
+            bus.close()

@@ -1,0 +1,316 @@
+"""Launch files (``anunnaki: launch/1``): run Utu's nodes and a managed system, like ROS launch.
+
+A launch file says which Utu configuration to run, which of its five nodes, on which bus,
+at which rates, and optionally a scripted managed system to run them against::
+
+    anunnaki: launch/1
+    name: rover
+    utu: utu-config.yaml          # a Utu configuration file, or the same fields inline
+    knowledge: run.db             # overrides the Utu configuration's knowledge base
+    bus: {kind: zenoh}            # BusConfig fields (see docs/bus.md); overrides utu's bus
+    nodes:                        # a list of names, or name -> {rate: Hz}
+      monitor: {rate: 50}
+      analyze: {rate: 20}
+      plan: {rate: 20}
+      execute: {rate: 20}
+      knowledge: {rate: 10}
+    managed:                      # the system Utu adapts: a plugin named by kind
+      kind: scripted              # scripted | sim | a third party's (entry points)
+      trace: trace.jsonl
+      speed: 1.0
+
+Paths are relative to the launch file. :func:`load_launch` validates everything a node
+needs at bring-up (guideline B5): the launch file itself, the Utu configuration, the goal
+model, binding and tactics, the trace; every error names file and line.
+
+:func:`~anunnaki.launch.run_launch` starts the nodes in this process (the composed
+:class:`~anunnaki.utu.AutonomicManager` when all five run) or one process per node
+(``python -m anunnaki.cli.main node NAME``), waits until every node answers its readiness
+service (C9), then starts the managed system, prints one line per decision, and shuts
+everything down on a signal, at ``until`` or when the trace ends. See docs/running.md.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Annotated, Any, Literal
+
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
+
+from anunnaki._safeyaml import LineMap, describe_path, load_yaml, validation_error
+from anunnaki.bus import BusConfig
+from anunnaki.errors import AnunnakiError, ModelFileError
+from anunnaki.launch._managed import MANAGED, ManagedKind, resolve_kind, split_managed
+from anunnaki.utu import NODE_NAMES, NodeName, UtuConfig, UtuParts, load_config, load_parts
+
+__all__ = ["Launch", "LaunchConfig", "LaunchError", "NodeSettings", "load_launch", "parse_launch"]
+
+
+class LaunchError(AnunnakiError):
+    """A launch could not be brought up (a node failed to start or to become ready)."""
+
+
+class _StoppedDuringBringUp(LaunchError):
+    """A signal arrived before every node was ready."""
+
+
+class _Strict(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+
+class NodeSettings(_Strict):
+    """Settings of one node.
+
+    Attributes:
+        rate: At most this many cycles per second (C5, B2); default the Utu ``rate``.
+
+    """
+
+    rate: Annotated[float, Field(gt=0, le=10_000)] | None = None
+
+
+class LaunchConfig(_Strict):
+    """A launch file (``anunnaki: launch/1``); see the module docstring."""
+
+    anunnaki: Literal["launch/1"]
+    name: str | None = None
+    utu: str | dict[str, Any]
+    knowledge: str | None = None
+    bus: BusConfig | None = None
+    nodes: dict[NodeName, NodeSettings | None] = Field(
+        default_factory=lambda: dict.fromkeys(NODE_NAMES)
+    )
+    managed: dict[str, Any] | None = None
+    ready_timeout: Annotated[float, Field(gt=0)] = 30.0
+    stop_timeout: Annotated[float, Field(gt=0)] = 10.0
+    linger: Annotated[float, Field(ge=0)] = 0.5
+
+    @field_validator("nodes", mode="before")
+    @classmethod
+    def _node_list(cls, nodes: Any) -> Any:
+        """Take ``[monitor, analyze]`` as ``{monitor: null, analyze: null}``."""
+        if isinstance(nodes, list):
+            names = [n for n in nodes if isinstance(n, str)]
+            repeated = sorted({n for n in names if names.count(n) > 1})
+            if repeated:
+                raise ValueError(f"nodes named twice: {', '.join(repeated)}")
+            if len(names) != len(nodes):
+                raise ValueError(f"give node names ({', '.join(NODE_NAMES)})")
+            return dict.fromkeys(names)
+        return nodes
+
+    @field_validator("nodes")
+    @classmethod
+    def _some_nodes(
+        cls, nodes: dict[NodeName, NodeSettings | None]
+    ) -> dict[NodeName, NodeSettings | None]:
+        if not nodes:
+            raise ValueError(f"name at least one node ({', '.join(NODE_NAMES)})")
+        return nodes
+
+
+@dataclass(frozen=True)
+class Launch:
+    """A launch file loaded, resolved and checked.
+
+    Attributes:
+        config: The file's content.
+        path: The launch file (``None`` for text given in memory).
+        utu: The Utu configuration (paths absolute, knowledge override applied).
+        parts: Its goal model, binding and tactics, loaded and checked.
+        bus: The bus configuration.
+        nodes: The nodes to run -> rate (Hz).
+        managed: The managed system (a plugin of :data:`MANAGED`, paths resolved and
+            checked), or ``None`` when the robot is real.
+        lines: Where each element of the launch file starts.
+
+    """
+
+    config: LaunchConfig
+    path: Path | None
+    utu: UtuConfig
+    parts: UtuParts
+    bus: BusConfig
+    nodes: dict[str, float]
+    managed: ManagedKind | None = None
+    lines: LineMap | None = None
+
+    @property
+    def name(self) -> str:
+        """The launch's name (default: the Utu configuration's)."""
+        return self.config.name or self.utu.name
+
+    def line_of(self, *path: str | int) -> int | None:
+        """The line where the element at ``path`` starts in the launch file."""
+        return self.lines.line(path) if self.lines is not None else None
+
+    def error(self, message: str, *path: str | int, hint: str | None = None) -> ModelFileError:
+        """A :class:`ModelFileError` located at an element of the launch file."""
+        return ModelFileError(
+            message,
+            path=self.path,
+            line=self.line_of(*path),
+            element=".".join(str(p) for p in path) or None,
+            hint=hint,
+        )
+
+
+class _Prefixed:
+    """A pydantic ValidationError seen from an enclosing document (``loc`` prefixed)."""
+
+    def __init__(self, exc: ValidationError, prefix: tuple[str | int, ...]) -> None:
+        self._exc = exc
+        self._prefix = prefix
+
+    def errors(self, include_url: bool = False) -> list[Any]:
+        return [
+            {**e, "loc": (*self._prefix, *(p for p in e["loc"] if p != "[key]"))}
+            for e in self._exc.errors(include_url=include_url)
+        ]
+
+
+def load_launch(path: str | Path, *, read_records: bool = True) -> Launch:
+    """Load a launch file (or a plain Utu configuration, run with every node).
+
+    Args:
+        path: The file (``anunnaki: launch/1`` or ``anunnaki: utu/1``).
+        read_records: Check the managed system too (read its trace, load its scenario and
+            models); node processes, which do not run it, skip this.
+
+    Raises:
+        ModelFileError: Any file is unreadable or invalid; names file and line.
+
+    """
+    data, lines = load_yaml(path)
+    return _resolve(data, lines, Path(path), read_records=read_records)
+
+
+def parse_launch(
+    text: str, *, source: str = "<launch>", base: Path | None = None, read_records: bool = True
+) -> Launch:
+    """Parse a launch file from text; paths resolve against ``base`` (default: cwd)."""
+    data, lines = load_yaml(source, text=text)
+    launch = _resolve(data, lines, (base or Path.cwd()) / "<launch>", read_records=read_records)
+    return dataclasses.replace(launch, path=None)
+
+
+def _resolve(data: Any, lines: LineMap, path: Path, *, read_records: bool) -> Launch:
+    where = str(path)
+    tag = data.get("anunnaki") if isinstance(data, dict) else None
+    if tag == "utu/1":
+        data = {"anunnaki": "launch/1", "utu": str(path.resolve())}
+        lines = LineMap()
+    elif tag != "launch/1":
+        raise ModelFileError(
+            "not a launch file",
+            path=where,
+            line=1,
+            hint="start it with 'anunnaki: launch/1' (or give a Utu configuration, utu/1)",
+        )
+    try:
+        config = LaunchConfig.model_validate(data)
+    except ValidationError as exc:
+        raise validation_error(_Prefixed(exc, ()), data, lines, where) from None
+    base = path.resolve().parent
+
+    def here(p: str) -> Path:
+        q = Path(p).expanduser()
+        return q if q.is_absolute() else base / q
+
+    # The Utu configuration: a file, or inline.
+    utu_data: Any
+    utu_lines: LineMap | None
+    utu_where: str
+    utu_prefix: tuple[str | int, ...]
+    if isinstance(config.utu, str):
+        utu_path = here(config.utu)
+        utu = load_config(utu_path)
+        utu_data, utu_lines = load_yaml(utu_path)
+        utu_where, utu_prefix = str(utu_path), ()
+    else:
+        inline = {**config.utu, "anunnaki": "utu/1"}
+        try:
+            utu = UtuConfig.model_validate(inline).resolve(base)
+        except ValidationError as exc:
+            raise validation_error(_Prefixed(exc, ("utu",)), data, lines, where) from None
+        utu_data, utu_lines, utu_where, utu_prefix = data, lines, where, ("utu",)
+    if config.knowledge is not None:
+        kb = config.knowledge
+        utu = utu.model_copy(update={"knowledge": kb if kb == ":memory:" else str(here(kb))})
+
+    # The bus: the launch file's, else the Utu configuration's.
+    if config.bus is not None:
+        bus = config.bus
+    else:
+        try:
+            bus = BusConfig.model_validate(utu.bus)
+        except ValidationError as exc:
+            raise validation_error(
+                _Prefixed(exc, (*utu_prefix, "bus")), utu_data, utu_lines, utu_where
+            ) from None
+
+    # Nodes and rates.
+    rates: dict[str, float] = {
+        n: (s.rate if s is not None and s.rate is not None else utu.rate)
+        for n, s in config.nodes.items()
+    }
+    nodes: dict[str, float] = {n: rates[n] for n in NODE_NAMES if n in rates}  # cycle order
+
+    # The goal model, binding and tactics (B5: fail here, with file and line).
+    try:
+        parts = load_parts(utu)
+    except ModelFileError as exc:
+        if exc.element != "failsafe":
+            raise
+        real, element = describe_path(utu_data, (*utu_prefix, "failsafe"))
+        raise ModelFileError(
+            exc.message,
+            path=utu_where,
+            line=utu_lines.line(real) if utu_lines is not None else None,
+            element=element,
+            hint=exc.hint,
+        ) from None
+
+    managed = _managed(config.managed, data, lines, where, base)
+    if managed is not None and read_records:
+        try:
+            managed.check(utu)
+        except ModelFileError as exc:
+            if exc.path is not None:
+                raise
+            # The plugin's problem is with an element of the launch file: say where it is.
+            element = exc.element or "managed"
+            real, _ = describe_path(data, tuple(element.split(".")))
+            raise ModelFileError(
+                exc.message, path=where, line=lines.line(real), element=element, hint=exc.hint
+            ) from None
+    return Launch(config, path, utu, parts, bus, nodes, managed, lines)
+
+
+def _managed(
+    raw: dict[str, Any] | None, data: Any, lines: LineMap, where: str, base: Path
+) -> ManagedKind | None:
+    """The ``managed:`` section as a plugin, its options validated with file and line."""
+    try:
+        name, options, prefix = split_managed(raw)
+    except ValueError as exc:
+        raise ModelFileError(
+            str(exc), path=where, line=lines.line(("managed",)), element="managed"
+        ) from None
+    if name is None:
+        return None
+    if name not in MANAGED:
+        raise ModelFileError(
+            str(MANAGED.unknown(name)).split(": ", 1)[-1],
+            path=where,
+            line=lines.line(("managed", "kind")) or lines.line(prefix),
+            element=".".join(prefix) if prefix != ("managed",) else "managed.kind",
+        )
+    cls = MANAGED.factory(name)
+    try:
+        validated = cls.Options.model_validate(options)  # type: ignore[attr-defined]
+    except ValidationError as exc:
+        raise validation_error(_Prefixed(exc, prefix), data, lines, where) from None
+    return resolve_kind(name, validated, base)
