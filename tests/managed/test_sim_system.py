@@ -157,7 +157,7 @@ def test_sim_section_errors_name_the_file(tmp_path: Path) -> None:
     with pytest.raises(ModelFileError, match="unknown oracle 'crystal_ball'") as info:
         parse_launch(text.replace("name: ground_truth", "name: crystal_ball"))
     assert info.value.line is not None and "ground_truth" in (info.value.hint or "")
-    with pytest.raises(ModelFileError, match="give one managed system: .*got the keys scripted, sim"):
+    with pytest.raises(ModelFileError, match=r"give one managed system: .*keys scripted, sim"):
         parse_launch(
             text.replace("  sim:", "  scripted: {trace: ROVER/trace.jsonl}\n  sim:").replace(
                 "ROVER", str(ROVER)
