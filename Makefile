@@ -22,6 +22,7 @@ test: setup
 	$(PY) -m ruff check src tests benchmarks examples
 	$(PY) -m ruff format --check src tests benchmarks examples
 	$(PY) -m mypy
+	.venv/bin/lint-imports
 	$(PY) -m pytest -q
 
 bench: setup

@@ -176,7 +176,7 @@ def check_tactics(model: GoalModel, ts: TacticSet, path: str | None) -> list[Fin
     out: list[Finding] = []
     for goal, refs in ts.referenced_goals().items():
         if goal not in model.goals:
-            from anunnaki.goals._model import _did_you_mean
+            from anunnaki.goals import did_you_mean as _did_you_mean
 
             for ref in refs:
                 out.append(

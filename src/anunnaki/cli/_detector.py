@@ -460,8 +460,7 @@ def _run_evaluate(args: argparse.Namespace) -> int:
 def _update_sidecar(model: str, det: Any, data: str, measured: Any, split: str) -> str:
     """Write val and test metrics of *det* on *data* into the model's sidecar."""
     from anunnaki.datasets import load_split
-    from anunnaki.lec import evaluate_detector
-    from anunnaki.lec._detector import read_card, sidecar_path, update_metrics
+    from anunnaki.lec import evaluate_detector, read_card, sidecar_path, update_metrics
 
     threshold = float(det.score_threshold)
     metrics: dict[str, Any] = {

@@ -29,10 +29,12 @@ from rich.table import Table
 from rich.text import Text
 
 from anunnaki.errors import AnunnakiError
-from anunnaki.utu._knowledge import Decision, Knowledge, VerdictRow
-from anunnaki.utu._replay import (
+from anunnaki.utu import (
     KINDS,
+    Decision,
+    Knowledge,
     RunLogError,
+    VerdictRow,
     export_trace,
     format_data,
     open_run,

@@ -22,7 +22,7 @@ from pydantic import ValidationError
 from anunnaki.bus import BusConfig, BusConfigError, open_bus
 from anunnaki.cli import _dashboard
 from anunnaki.launch import WritesReports, load_launch, run_launch, signals_to
-from anunnaki.utu._nodes import NODE_NAMES, build_node
+from anunnaki.utu import NODE_NAMES, build_node
 
 __all__ = ["add_parser", "bus_with_overrides", "run", "run_node"]
 

@@ -31,6 +31,7 @@ from anunnaki.goals._model import (
     parse_binding,
     parse_goal_model,
 )
+from anunnaki.goals._model import _did_you_mean as did_you_mean
 from anunnaki.goals._relax import History, RelaxOperator, RelaxSpec, build_operator
 from anunnaki.goals._schema import (
     AgentSpec,
@@ -71,6 +72,7 @@ __all__ = [
     "TopicFreshness",
     "build_operator",
     "compile_expression",
+    "did_you_mean",
     "is_stale",
     "load_binding",
     "load_goal_model",

@@ -54,6 +54,7 @@ from anunnaki.lec._detector import (
     save_detector,
     sha256_file,
     sidecar_path,
+    update_metrics,
     weights_path,
 )
 from anunnaki.lec._metrics import (
@@ -146,6 +147,7 @@ __all__ = [
     "sha256_file",
     "sidecar_path",
     "train_detector",
+    "update_metrics",
     "weights_path",
 ]
 

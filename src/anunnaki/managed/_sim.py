@@ -183,7 +183,7 @@ class SimulatedSystem:
         if isinstance(scenario, Scenario):
             sc = scenario
         else:
-            from anunnaki.sim._scenario import load_scenario, parse_scenario
+            from anunnaki.sim import load_scenario, parse_scenario
 
             sc = (
                 load_scenario(scenario)
@@ -193,11 +193,11 @@ class SimulatedSystem:
         self.scenario = sc
         self.platform: SimPlatform
         if sc.platform == "rover":
-            from anunnaki.sim._rover import RoverSim
+            from anunnaki.sim import RoverSim
 
             self.platform = RoverSim(bus, sc, frame_hook=self._frame_hook)
         else:
-            from anunnaki.sim._uav import UavSim
+            from anunnaki.sim import UavSim
 
             self.platform = UavSim(bus, sc, frame_hook=self._frame_hook)
         self._closing.append(self.platform)

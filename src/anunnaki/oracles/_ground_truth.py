@@ -37,8 +37,7 @@ import numpy.typing as npt
 from pydantic import JsonValue
 
 from anunnaki.bus import Assessment, Detections
-from anunnaki.lec._detector import DetectionResult
-from anunnaki.lec._metrics import match_image
+from anunnaki.lec import DetectionResult, match_image
 from anunnaki.oracles._base import Frame, OracleError
 
 __all__ = ["CleanF1", "GroundTruthAssessor", "WindowMetrics", "category_for_drop"]

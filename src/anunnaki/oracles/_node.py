@@ -30,7 +30,7 @@ import numpy as np
 from anunnaki import topics
 from anunnaki.bus import Assessment, Bus, Detections, Image, Publisher, Sample
 from anunnaki.errors import AnunnakiError
-from anunnaki.lec._node import ACTIVE_TOPIC, decode_image, detections_topic
+from anunnaki.lec import ACTIVE_TOPIC, decode_image, detections_topic
 from anunnaki.oracles._base import Oracle, context_from_phenomena
 from anunnaki.oracles._registry import OracleRegistry, get_oracle
 

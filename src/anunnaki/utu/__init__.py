@@ -49,7 +49,19 @@ from anunnaki.utu._parts import (
     load_tactics_text,
     open_knowledge,
 )
-from anunnaki.utu._replay import ReplayReport, replay
+from anunnaki.utu._replay import (
+    KINDS,
+    ReplayReport,
+    RunLogError,
+    export_trace,
+    format_data,
+    open_run,
+    reading,
+    rebuild_goal_state,
+    replay,
+    run_models,
+    run_span,
+)
 from anunnaki.utu._stages import (
     AnalyzeStage,
     DecisionTail,
@@ -60,6 +72,7 @@ from anunnaki.utu._stages import (
 )
 
 __all__ = [
+    "KINDS",
     "NODE_NAMES",
     "ActionOutcome",
     "Actuator",
@@ -88,6 +101,7 @@ __all__ = [
     "Planner",
     "RecordingActuator",
     "ReplayReport",
+    "RunLogError",
     "RunStopConfig",
     "TacticRow",
     "TacticRuntime",
@@ -96,11 +110,18 @@ __all__ = [
     "UtuParts",
     "VerdictRow",
     "build_node",
+    "export_trace",
+    "format_data",
     "load_config",
     "load_parts",
     "load_tactics_text",
     "open_knowledge",
+    "open_run",
     "parse_config",
+    "reading",
+    "rebuild_goal_state",
     "replay",
+    "run_models",
+    "run_span",
     "step_nodes",
 ]
