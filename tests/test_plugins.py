@@ -64,14 +64,15 @@ def test_checks_at_registration() -> None:
         return cls
 
     reg: Registry[Widget] = Registry("widget", check=must_be_gadget, error=SlotError)
-    with pytest.raises(SlotError, match="Widget is not a gadget"):
+    with pytest.raises(SlotError, match="Widget is not a gadget"):  # the slot's rules first
         reg.register(Widget)
-    with pytest.raises(SlotError, match="Abstract is abstract; implement go"):
-        reg.register(Abstract)
-    with pytest.raises(SlotError, match="must be a class or a factory"):
-        reg.register(42)  # type: ignore[arg-type]
     with pytest.raises(SlotError, match="name must be an identifier"):
         reg.register(Gadget, name="two words")
+    plain: Registry[Any] = Registry("widget", error=SlotError)
+    with pytest.raises(SlotError, match="Abstract is abstract; implement go"):
+        plain.register(Abstract)
+    with pytest.raises(SlotError, match="a widget must be a class or a factory"):
+        plain.register(42)
 
 
 def test_a_name_is_taken_once_unless_replaced() -> None:

@@ -83,6 +83,7 @@ class Registry(Generic[T]):
             returns the factory (possibly normalised).
         error: The exception type raised (a subclass of :class:`AnunnakiError`).
         hint: Appended to the unknown-name message (e.g. how to combine names).
+        logger: Where skipped entry points are reported (the slot's own logger).
 
     """
 
@@ -95,8 +96,10 @@ class Registry(Generic[T]):
         check: Callable[[Any], Any] | None = None,
         error: type[AnunnakiError] = PluginError,
         hint: str | None = None,
+        logger: str = "anunnaki.plugins",
     ) -> None:
         self.what = what
+        self._log = logging.getLogger(logger)
         self.group = group
         self.kind = kind
         self.error = error
@@ -116,13 +119,13 @@ class Registry(Generic[T]):
         return check_name(name, what=self.what, error=self.error)
 
     def _validate(self, factory: Any) -> Callable[..., T]:
+        if self._check is not None:  # the slot's own rules first: it knows what it needs
+            factory = self._check(factory)
         if not callable(factory):
-            raise self.error(f"a {self.what} must be a class or a factory, got {factory!r}")
+            raise self.error(f"{_a(self.what)} must be a class or a factory, got {factory!r}")
         if inspect.isclass(factory) and inspect.isabstract(factory):
             missing = ", ".join(sorted(getattr(factory, "__abstractmethods__", ())))
             raise self.error(f"{factory.__name__} is abstract; implement {missing}")
-        if self._check is not None:
-            factory = self._check(factory)
         return cast(Callable[..., T], factory)
 
     def register(self, factory: F, *, name: str | None = None, replace: bool = False) -> F:
@@ -174,7 +177,7 @@ class Registry(Generic[T]):
                     factory = self._validate(ep.load())
                     key = self._name_of(factory, None if inspect.isclass(factory) else ep.name)
                 except Exception as exc:  # a broken plugin must not break the lookup
-                    log.warning(
+                    self._log.warning(
                         "skipping %s entry point %r (%s): %s: %s",
                         self.what,
                         ep.name,
@@ -185,7 +188,7 @@ class Registry(Generic[T]):
                     continue
                 current = self._factories.get(key)
                 if (current is not None and current is not factory) or key in self._lazy:
-                    log.warning(
+                    self._log.warning(
                         "skipping %s entry point %r (%s): the name %r is already taken",
                         self.what,
                         ep.name,
@@ -194,7 +197,7 @@ class Registry(Generic[T]):
                     )
                     continue
                 if ep.name != key:
-                    log.warning(
+                    self._log.warning(
                         "%s entry point %r (%s) registers as %r, its own name",
                         self.what,
                         ep.name,
@@ -264,6 +267,10 @@ class Registry(Generic[T]):
             f"expected a {self.what} name or instance, got {type(spec).__name__}; "
             f"valid names: {', '.join(self.names())}"
         )
+
+
+def _a(noun: str) -> str:
+    return f"{'an' if noun[:1] in 'aeiou' else 'a'} {noun}"
 
 
 def _describe(obj: Any) -> str:

@@ -67,8 +67,9 @@ def cache_key() -> str:
 
 def train_session_model(root: Path) -> tuple[dict[str, Any], float]:
     """Render the reduced dataset into ROOT/data, train, save ROOT/model.safetensors."""
-    from anunnaki.datasets import load_split, make_dataset
+    from anunnaki.datasets import load_split
     from anunnaki.lec import TrainConfig, save_detector, train_detector
+    from anunnaki.sim import make_dataset
 
     s = SETTINGS
     start = time.perf_counter()

@@ -6,6 +6,7 @@ import json
 import os
 import stat
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -167,3 +168,40 @@ def test_detect_refuses_bad_images(untrained: CenterNetDetector) -> None:
         untrained.detect([np.zeros((8, 8, 3), np.uint8), np.zeros((8, 8), np.uint8)])
     with pytest.raises(AnunnakiError):
         untrained.detect(np.zeros((8,), np.uint8))
+
+
+def test_a_third_party_architecture_loads_through_the_registry(saved: Path) -> None:
+    """A sidecar naming a registered architecture is built by that plugin's builder."""
+    from anunnaki.lec import ARCHITECTURES, DetectionResult, ModelCard
+
+    built: list[tuple[str, int]] = []
+
+    class Fixed:
+        classes = ("pedestrian", "deer")
+        domain = "default"
+
+        def __init__(self, card: ModelCard) -> None:
+            self.model_id = card.model_id
+
+        def detect(self, images: Any) -> list[DetectionResult]:
+            box = np.array([[1, 1, 5, 5]], np.float32)
+            return [DetectionResult(box, np.array([0]), np.array([0.9], np.float32))]
+
+    def fixed(card: ModelCard, tensors: dict[str, Any], path: Path) -> Fixed:
+        built.append((card.architecture, len(tensors)))
+        return Fixed(card)
+
+    sidecar = saved.with_suffix(".json")
+    card = json.loads(sidecar.read_text())
+    card["architecture"] = "fixed"
+    sidecar.write_text(json.dumps(card))
+    with pytest.raises(DetectorLoadError, match=r"unknown architecture 'fixed'; known: centernet"):
+        load_detector(saved)
+    ARCHITECTURES.register(fixed)
+    try:
+        det = load_detector(saved)
+        assert isinstance(det, Detector) and det.model_id == "tiny"
+        assert built and built[0][0] == "fixed" and built[0][1] > 0  # the weights were read
+        assert len(det.detect(images())) == 1
+    finally:
+        ARCHITECTURES.unregister("fixed")

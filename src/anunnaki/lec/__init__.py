@@ -41,6 +41,7 @@ from typing import TYPE_CHECKING, Any
 os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 
 from anunnaki.lec._detector import (
+    ARCHITECTURES,
     SIDECAR_FORMAT,
     DetectionResult,
     Detector,
@@ -78,7 +79,6 @@ from anunnaki.lec._node import (
 from anunnaki.lec._registry import (
     DEFAULT_DOMAIN,
     REGISTRY_FORMAT,
-    DetectorLike,
     ModelIntegrityError,
     ModelLoadError,
     ModelRegistry,
@@ -102,6 +102,7 @@ if TYPE_CHECKING:
 
 __all__ = [
     "ACTIVE_TOPIC",
+    "ARCHITECTURES",
     "DEFAULT_DOMAIN",
     "NODE_NAME",
     "REGISTRY_FORMAT",
@@ -113,7 +114,6 @@ __all__ = [
     "DetectionResult",
     "Detector",
     "DetectorError",
-    "DetectorLike",
     "DetectorLoadError",
     "ImageBatch",
     "LecNode",

@@ -20,13 +20,14 @@ import uuid
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Protocol, runtime_checkable
+from typing import Any, Protocol, cast, runtime_checkable
 
 import numpy as np
 import numpy.typing as npt
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
 from anunnaki.errors import AnunnakiError, ModelFileError
+from anunnaki.plugins import Registry
 
 __all__ = [
     "SIDECAR_FORMAT",
@@ -259,10 +260,16 @@ def _atomic_write(path: Path, write: Callable[[Path], object]) -> None:
         raise
 
 
-def _architectures() -> dict[str, Callable[[ModelCard, dict[str, Any], Path], Detector]]:
-    from anunnaki.lec._centernet import CenterNetDetector
+#: Builds a detector from its sidecar card, its tensors and its weights' path.
+Builder = Callable[[ModelCard, dict[str, Any], Path], Detector]
 
-    return {"centernet": CenterNetDetector.from_card}
+#: Detector architectures a model file's sidecar can name (``"architecture"``): built-in
+#: ``centernet`` (imported on first use: torch), third parties under the
+#: ``anunnaki.detectors`` entry-point group (a builder function, registered by its name).
+ARCHITECTURES: Registry[Detector] = Registry(
+    "detector architecture", group="anunnaki.detectors", logger="anunnaki.lec"
+)
+ARCHITECTURES.register_lazy("centernet", "anunnaki.lec._centernet:CenterNetDetector.from_card")
 
 
 def save_detector(det: Detector, path: str | Path) -> str:
@@ -418,14 +425,16 @@ def load_detector(path: str | Path) -> Detector:
             hint="the weights changed after the model was saved (corrupt copy or tampering); "
             "copy the model again or re-save it",
         )
-    builders = _architectures()
-    if card.architecture not in builders:
+    if card.architecture not in ARCHITECTURES:
         raise DetectorLoadError(
-            f"unknown architecture {card.architecture!r}; known: {', '.join(sorted(builders))}",
+            f"unknown architecture {card.architecture!r}; known: "
+            f"{', '.join(ARCHITECTURES.names())}",
             path=spath,
             element="architecture",
-            hint="a third-party model needs its own Detector adapter",
+            hint="register its builder under the anunnaki.detectors entry point, or wrap "
+            "the model in your own Detector",
         )
+    build = cast(Builder, ARCHITECTURES.factory(card.architecture))
     from safetensors import SafetensorError
     from safetensors.numpy import load_file
 
@@ -435,4 +444,4 @@ def load_detector(path: str | Path) -> Detector:
         raise DetectorLoadError(
             f"not a valid safetensors file: {exc}", path=wpath, hint="copy the model again"
         ) from None
-    return builders[card.architecture](card, tensors, wpath)
+    return build(card, tensors, wpath)

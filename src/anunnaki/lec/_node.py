@@ -45,7 +45,8 @@ import numpy.typing as npt
 from anunnaki import topics
 from anunnaki.bus import Bus, Detections, Image, Publisher, Sample, ServiceReply, body_of
 from anunnaki.errors import AnunnakiError, MissingExtraError
-from anunnaki.lec._registry import DetectorLike, ModelRegistry, ModelRegistryError, ModelSpec
+from anunnaki.lec._detector import Detector
+from anunnaki.lec._registry import ModelRegistry, ModelRegistryError, ModelSpec
 
 __all__ = [
     "ACTIVE_TOPIC",
@@ -159,10 +160,10 @@ class LecNodeStats:
 
 class _Active(NamedTuple):
     spec: ModelSpec
-    detector: DetectorLike
+    detector: Detector
 
 
-def _labels(detector: DetectorLike, labels: Any) -> list[str]:
+def _labels(detector: Detector, labels: Any) -> list[str]:
     classes = tuple(getattr(detector, "classes", ()) or ())
     out = []
     for raw in np.asarray(labels).reshape(-1).tolist():
@@ -227,7 +228,7 @@ class LecNode:
         self.swap_service = swap_service
         self.node = node
         self._cache_size = cache
-        self._cache: OrderedDict[str, DetectorLike] = OrderedDict()
+        self._cache: OrderedDict[str, Detector] = OrderedDict()
         self._lock = threading.Lock()
         self._swap_lock = threading.Lock()
         self._stop = threading.Event()

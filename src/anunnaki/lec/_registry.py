@@ -40,18 +40,17 @@ import re
 import threading
 from collections.abc import Callable, Iterable, Iterator, Mapping
 from pathlib import Path
-from typing import Annotated, Any, Literal, Protocol, runtime_checkable
+from typing import Annotated, Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
 
 from anunnaki._safeyaml import LineMap, load_yaml, validation_error
 from anunnaki.errors import AnunnakiError, MissingExtraError, ModelFileError
-from anunnaki.lec._detector import read_card, sha256_file
+from anunnaki.lec._detector import Detector, read_card, sha256_file
 
 __all__ = [
     "DEFAULT_DOMAIN",
     "REGISTRY_FORMAT",
-    "DetectorLike",
     "ModelIntegrityError",
     "ModelLoadError",
     "ModelRegistry",
@@ -90,28 +89,8 @@ class ModelLoadError(ModelRegistryError):
     """The loader refused a model file (corrupt weights, a bad sidecar, a wrong shape)."""
 
 
-@runtime_checkable
-class DetectorLike(Protocol):
-    """What the model manager needs of a loaded model (``anunnaki.lec.Detector`` fits).
-
-    Attributes:
-        model_id: The model's own name for itself (the registry's id is what is published).
-        classes: Class names; a result's ``labels`` index into it.
-        domain: The domain the model was made for.
-
-    """
-
-    model_id: str
-    classes: tuple[str, ...]
-    domain: str
-
-    def detect(self, images: Any) -> list[Any]:
-        """Detect objects; one result (``boxes``, ``labels``, ``scores``) per image."""
-        ...
-
-
 #: Turns a model file into a loaded model (default: ``anunnaki.lec.load_detector``).
-Loader = Callable[[Path], DetectorLike]
+Loader = Callable[[Path], Detector]
 
 
 def _number(value: Any) -> float | None:
@@ -407,7 +386,7 @@ class ModelRegistry:
             )
         return digest
 
-    def load(self, model: str | ModelSpec) -> DetectorLike:
+    def load(self, model: str | ModelSpec) -> Detector:
         """Verify a model's file, then load it with the registry's loader.
 
         Raises:
@@ -448,12 +427,12 @@ class ModelRegistry:
         return load_registry(path, loader=loader)
 
 
-def _default_loader(path: Path) -> DetectorLike:
+def _default_loader(path: Path) -> Detector:
     try:
         from anunnaki.lec._detector import load_detector
     except ImportError as exc:  # pragma: no cover - numpy/pydantic are core dependencies
         raise MissingExtraError("the detector", "vision") from exc
-    detector: DetectorLike = load_detector(path)
+    detector: Detector = load_detector(path)
     return detector
 
 

@@ -31,7 +31,18 @@ model's detections against the simulator's ground truth, turned into a category 
 paper's thresholds; the context is the simulator's phenomena ground truth.
 """
 
-from anunnaki.oracles._base import CLEAR, HOOKS, Frame, Oracle, OracleError, context_from_phenomena
+from anunnaki.oracles._base import (
+    CLEAR,
+    HOOKS,
+    Frame,
+    ObservesContext,
+    ObservesDetections,
+    ObservesGroundTruth,
+    ObservesIgnoreBoxes,
+    Oracle,
+    OracleError,
+    context_from_phenomena,
+)
 from anunnaki.oracles._ground_truth import (
     CleanF1,
     GroundTruthAssessor,
@@ -67,6 +78,10 @@ __all__ = [
     "CleanF1",
     "Frame",
     "GroundTruthAssessor",
+    "ObservesContext",
+    "ObservesDetections",
+    "ObservesGroundTruth",
+    "ObservesIgnoreBoxes",
     "Oracle",
     "OracleError",
     "OracleNode",

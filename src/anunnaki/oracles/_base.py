@@ -7,8 +7,10 @@ Enlil builds oracles that predict this from the raw frame alone; the ``ground_tr
 measures it against a simulator's ground truth. Both are plugins of one slot.
 
 Why a ``Protocol``: an oracle is anything with a ``name`` and an ``assess`` method; a third
-party implements it without inheriting from Anunnaki. The optional hooks are discovered by
-name, so an oracle that needs no ground truth is never sent any.
+party implements it without inheriting from Anunnaki. Each optional hook is a typed
+``Protocol`` of its own (:class:`ObservesGroundTruth`, :class:`ObservesIgnoreBoxes`,
+:class:`ObservesDetections`, :class:`ObservesContext`), checked with ``isinstance``: an
+oracle that needs no ground truth is never sent any.
 """
 
 from __future__ import annotations
@@ -27,6 +29,10 @@ __all__ = [
     "CLEAR",
     "HOOKS",
     "Frame",
+    "ObservesContext",
+    "ObservesDetections",
+    "ObservesGroundTruth",
+    "ObservesIgnoreBoxes",
     "Oracle",
     "OracleError",
     "context_from_phenomena",
@@ -85,6 +91,60 @@ class Oracle(Protocol):
             ``None`` when there is not enough evidence yet (nothing is published).
 
         """
+        ...
+
+
+@runtime_checkable
+class ObservesGroundTruth(Protocol):
+    """Optional hook: the simulator's objects in each frame (scoring against ground truth)."""
+
+    def observe_ground_truth(
+        self, seq: int, boxes: npt.ArrayLike, labels: Sequence[str] | None
+    ) -> None:
+        """Take frame ``seq``'s objects: ``[N, 4]`` float64 xyxy pixels and class names.
+
+        ``labels`` is ``None`` when the names are not known: match class-agnostically.
+        """
+        ...
+
+
+@runtime_checkable
+class ObservesIgnoreBoxes(Protocol):
+    """Optional: ``observe_ground_truth`` also takes ``ignore=`` (objects seen, not labelled).
+
+    An oracle opts in by saying so (``ignore_boxes = True``); the node then passes each
+    frame's ``[K, 4]`` ignore boxes, where a detection matching no object is no false
+    positive.
+    """
+
+    ignore_boxes: bool
+
+    def observe_ground_truth(
+        self,
+        seq: int,
+        boxes: npt.ArrayLike,
+        labels: Sequence[str] | None,
+        ignore: npt.ArrayLike | None = None,
+    ) -> None:
+        """As :class:`ObservesGroundTruth`, with the frame's ignore boxes."""
+        ...
+
+
+@runtime_checkable
+class ObservesDetections(Protocol):
+    """Optional hook: what the LEC published for each frame."""
+
+    def observe_detections(self, detections: Any) -> None:
+        """``detections``: a :class:`~anunnaki.bus.Detections` (frame, model, boxes, names)."""
+        ...
+
+
+@runtime_checkable
+class ObservesContext(Protocol):
+    """Optional hook: the simulator's phenomena (normalised by :func:`context_from_phenomena`)."""
+
+    def observe_context(self, context: dict[str, JsonValue]) -> None:
+        """``{"phenomenon": NAME, "params": {...}}``."""
         ...
 
 

@@ -109,6 +109,9 @@ class GroundTruthAssessor:
 
     """
 
+    #: ``observe_ground_truth`` takes ``ignore=`` (:class:`~anunnaki.oracles.ObservesIgnoreBoxes`).
+    ignore_boxes = True
+
     name: str = "ground_truth"
 
     def __init__(

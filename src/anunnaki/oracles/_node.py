@@ -31,7 +31,14 @@ from anunnaki import topics
 from anunnaki.bus import Assessment, Bus, Detections, Image, Publisher, Sample
 from anunnaki.errors import AnunnakiError
 from anunnaki.lec import ACTIVE_TOPIC, decode_image, detections_topic
-from anunnaki.oracles._base import Oracle, context_from_phenomena
+from anunnaki.oracles._base import (
+    ObservesContext,
+    ObservesDetections,
+    ObservesGroundTruth,
+    ObservesIgnoreBoxes,
+    Oracle,
+    context_from_phenomena,
+)
 from anunnaki.oracles._registry import OracleRegistry, get_oracle
 
 __all__ = [
@@ -169,14 +176,13 @@ class OracleNode:
         self._lock = threading.Lock()
         self._closed = False
         self._model_id: str | None = None
-        self._ignore_ok: bool | None = None
         self._frames = self._published = self._withheld = self._errors = 0
         self._agnostic_warned = False
         self._declared: list[Any] = []
         hooks = {
-            "observe_detections": callable(getattr(self.oracle, "observe_detections", None)),
-            "observe_ground_truth": callable(getattr(self.oracle, "observe_ground_truth", None)),
-            "observe_context": callable(getattr(self.oracle, "observe_context", None)),
+            "observe_detections": isinstance(self.oracle, ObservesDetections),
+            "observe_ground_truth": isinstance(self.oracle, ObservesGroundTruth),
+            "observe_context": isinstance(self.oracle, ObservesContext),
         }
         self._hooks = hooks
         try:
@@ -263,19 +269,9 @@ class OracleNode:
             self._call("observe_ground_truth", seq, boxes, names)
 
     def _takes_ignore(self) -> bool:
-        """Whether the oracle's ``observe_ground_truth`` accepts ``ignore=`` (boxes)."""
-        if self._ignore_ok is None:
-            import inspect
-
-            hook = getattr(self.oracle, "observe_ground_truth", None)
-            try:
-                params = list(inspect.signature(hook).parameters.values()) if hook else []
-            except (TypeError, ValueError):
-                params = []
-            self._ignore_ok = any(
-                p.name == "ignore" or p.kind is inspect.Parameter.VAR_KEYWORD for p in params
-            )
-        return self._ignore_ok
+        """Whether the oracle's ``observe_ground_truth`` takes ``ignore=`` (it says so)."""
+        oracle = self.oracle
+        return isinstance(oracle, ObservesIgnoreBoxes) and oracle.ignore_boxes is True
 
     def _on_phenomena(self, sample: Sample) -> None:
         self._call("observe_context", context_from_phenomena(sample.message.to_body()))

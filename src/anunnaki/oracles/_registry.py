@@ -13,12 +13,11 @@ from __future__ import annotations
 import inspect
 import logging
 import re
-import threading
-from importlib.metadata import entry_points
 from typing import Any, TypeVar
 
 from anunnaki.oracles._base import Oracle, OracleError
 from anunnaki.oracles._ground_truth import GroundTruthAssessor
+from anunnaki.plugins import Registry
 
 __all__ = [
     "BUILTIN_ORACLES",
@@ -62,8 +61,8 @@ def _check_class(cls: object) -> type[Any]:
     return cls
 
 
-class OracleRegistry:
-    """Maps names to oracle classes.
+class OracleRegistry(Registry[Oracle]):
+    """Maps names to oracle classes: the generic :class:`~anunnaki.plugins.Registry`.
 
     Args:
         builtins: Register :data:`BUILTIN_ORACLES` (default ``True``).
@@ -75,83 +74,16 @@ class OracleRegistry:
     def __init__(
         self, *, builtins: bool = True, entry_point_group: str | None = ENTRY_POINT_GROUP
     ) -> None:
-        self._classes: dict[str, type[Any]] = {}
-        self._group = entry_point_group
-        self._plugins_loaded = entry_point_group is None
-        self._lock = threading.RLock()
+        super().__init__(
+            "oracle",
+            group=entry_point_group,
+            check=_check_class,
+            error=OracleError,
+            logger="anunnaki.oracles",
+        )
         if builtins:
             for cls in BUILTIN_ORACLES:
                 self.register(cls)
-
-    def register(self, cls: C, *, replace: bool = False) -> C:
-        """Register an oracle class under its ``name``; usable as a decorator.
-
-        Raises:
-            OracleError: *cls* has no valid ``name`` or ``assess``, or another class has the
-                name and *replace* is false.
-
-        """
-        checked = _check_class(cls)
-        name: str = checked.name
-        with self._lock:
-            current = self._classes.get(name)
-            if current is not None and current is not checked and not replace:
-                raise OracleError(
-                    f"a different oracle is already registered as {name!r} "
-                    f"({current.__module__}.{current.__qualname__}); pass replace=True "
-                    "to override it"
-                )
-            self._classes[name] = checked
-        return cls
-
-    def load_entry_points(self, *, force: bool = False) -> None:
-        """Load plugins from the entry-point group (once, unless *force*).
-
-        Each failure (import error, wrong type, name clash) is logged as a warning and the
-        entry point skipped.
-        """
-        with self._lock:
-            if self._group is None or (self._plugins_loaded and not force):
-                return
-            self._plugins_loaded = True
-            for ep in entry_points(group=self._group):
-                try:
-                    cls = _check_class(ep.load())
-                except Exception as exc:  # a broken plugin must not break the lookup
-                    logger.warning(
-                        "skipping oracle entry point %r (%s): %s: %s",
-                        ep.name,
-                        ep.value,
-                        type(exc).__name__,
-                        exc,
-                    )
-                    continue
-                current = self._classes.get(cls.name)
-                if current is not None and current is not cls:
-                    logger.warning(
-                        "skipping oracle entry point %r (%s): the name %r is already taken "
-                        "by %s.%s",
-                        ep.name,
-                        ep.value,
-                        cls.name,
-                        current.__module__,
-                        current.__qualname__,
-                    )
-                    continue
-                if ep.name != cls.name:
-                    logger.warning(
-                        "oracle entry point %r (%s) registers as %r, its class's name",
-                        ep.name,
-                        ep.value,
-                        cls.name,
-                    )
-                self._classes[cls.name] = cls
-
-    def names(self) -> list[str]:
-        """Return the sorted names of all registered oracles (plugins included)."""
-        self.load_entry_points()
-        with self._lock:
-            return sorted(self._classes)
 
     def get(self, name_or_instance: str | Oracle, **options: Any) -> Oracle:
         """Return an oracle for a name (built with ``options``); pass instances through.
@@ -175,12 +107,7 @@ class OracleRegistry:
                 )
             return name_or_instance
         name = name_or_instance.strip()
-        self.load_entry_points()
-        with self._lock:
-            cls = self._classes.get(name)
-            known = ", ".join(sorted(self._classes))
-        if cls is None:
-            raise OracleError(f"unknown oracle {name_or_instance!r}; valid names: {known}")
+        cls = self.factory(name)
         try:
             oracle = cls(**options)
         except TypeError as exc:

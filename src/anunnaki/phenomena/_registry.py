@@ -16,8 +16,6 @@ from __future__ import annotations
 import inspect
 import logging
 import re
-import threading
-from importlib.metadata import entry_points
 from typing import TypeVar
 
 from anunnaki.phenomena._base import ParamSpec, Phenomenon, PhenomenonError
@@ -27,6 +25,7 @@ from anunnaki.phenomena._fog import Fog
 from anunnaki.phenomena._raindrop import Raindrop
 from anunnaki.phenomena._sensor import MotionBlur, Noise
 from anunnaki.phenomena._weather import Rain, Snow
+from anunnaki.plugins import Registry
 
 __all__ = [
     "BUILTIN_PHENOMENA",
@@ -86,8 +85,10 @@ def _check_class(cls: object) -> type[Phenomenon]:
     return cls
 
 
-class PhenomenonRegistry:
-    """Maps names to phenomenon classes.
+class PhenomenonRegistry(Registry[Phenomenon]):
+    """Maps names to phenomenon classes: the generic :class:`~anunnaki.plugins.Registry`.
+
+    A name with ``+`` is a composition (``"fog+raindrop"``).
 
     Args:
         builtins: Register :data:`BUILTIN_PHENOMENA` (default ``True``).
@@ -99,81 +100,18 @@ class PhenomenonRegistry:
     def __init__(
         self, *, builtins: bool = True, entry_point_group: str | None = ENTRY_POINT_GROUP
     ) -> None:
-        self._classes: dict[str, type[Phenomenon]] = {}
-        self._group = entry_point_group
-        self._plugins_loaded = entry_point_group is None
-        self._lock = threading.RLock()
+        super().__init__(
+            "phenomenon",
+            group=entry_point_group,
+            kind=Phenomenon,
+            check=_check_class,
+            error=PhenomenonError,
+            hint="combine them with '+', e.g. 'fog+raindrop'",
+            logger="anunnaki.phenomena",
+        )
         if builtins:
             for cls in BUILTIN_PHENOMENA:
                 self.register(cls)
-
-    def register(self, cls: P, *, replace: bool = False) -> P:
-        """Register a :class:`Phenomenon` subclass under its ``name``; usable as a decorator.
-
-        Raises:
-            PhenomenonError: *cls* is not a concrete subclass with a valid ``name`` and
-                ``params``, or another class already has the name and *replace* is false.
-
-        """
-        checked = _check_class(cls)
-        with self._lock:
-            current = self._classes.get(checked.name)
-            if current is not None and current is not checked and not replace:
-                raise PhenomenonError(
-                    f"a different phenomenon is already registered as {checked.name!r} "
-                    f"({current.__module__}.{current.__qualname__}); pass replace=True "
-                    "to override it"
-                )
-            self._classes[checked.name] = checked
-        return cls
-
-    def load_entry_points(self, *, force: bool = False) -> None:
-        """Load plugins from the entry-point group (once, unless *force*).
-
-        Each failure (import error, wrong type, name clash) is logged as a warning and
-        the entry point skipped.
-        """
-        with self._lock:
-            if self._group is None or (self._plugins_loaded and not force):
-                return
-            self._plugins_loaded = True
-            for ep in entry_points(group=self._group):
-                try:
-                    cls = _check_class(ep.load())
-                except Exception as exc:  # a broken plugin must not break the lookup
-                    logger.warning(
-                        "skipping phenomenon entry point %r (%s): %s: %s",
-                        ep.name,
-                        ep.value,
-                        type(exc).__name__,
-                        exc,
-                    )
-                    continue
-                current = self._classes.get(cls.name)
-                if current is not None and current is not cls:
-                    logger.warning(
-                        "skipping phenomenon entry point %r (%s): the name %r is already "
-                        "taken by %s.%s",
-                        ep.name,
-                        ep.value,
-                        cls.name,
-                        current.__module__,
-                        current.__qualname__,
-                    )
-                    continue
-                if ep.name != cls.name:
-                    logger.warning(
-                        "phenomenon entry point %r (%s) registers as %r, its class name",
-                        ep.name,
-                        ep.value,
-                        cls.name,
-                    )
-                self._classes[cls.name] = cls
-
-    def names(self) -> list[str]:
-        """Return the sorted names of all registered phenomena (plugins included)."""
-        self.load_entry_points()
-        return sorted(self._classes)
 
     def get(self, name_or_instance: str | Phenomenon) -> Phenomenon:
         """Return an instance for a name (``"fog"``, ``"fog+raindrop"``); pass instances through.
@@ -193,15 +131,7 @@ class PhenomenonRegistry:
         name = name_or_instance.strip()
         if "+" in name:
             return Composition(*(part.strip() for part in name.split("+")), registry=self)
-        self.load_entry_points()
-        cls = self._classes.get(name)
-        if cls is None:
-            raise PhenomenonError(
-                f"unknown phenomenon {name_or_instance!r}; valid names: "
-                f"{', '.join(sorted(self._classes))} (combine them with '+', "
-                "e.g. 'fog+raindrop')"
-            )
-        return cls()
+        return self.create(name)
 
 
 _DEFAULT = PhenomenonRegistry()
