@@ -33,12 +33,13 @@ from dashboard_helpers import (
     wait_for,
 )
 
-from anunnaki.bus import Detections, Image, open_bus
+from anunnaki.bus import Clock, Detections, Image, open_bus
 from anunnaki.cli import _dashboard
 from anunnaki.dashboard import (
     Dashboard,
     DashboardError,
     DashboardState,
+    Frame,
     create_app,
 )
 from anunnaki.dashboard._server import is_loopback, loopback_names
@@ -312,6 +313,105 @@ def test_camera_frames_and_detections_from_the_bus(rover_run: RoverRun) -> None:
         assert camera["frame"]["seq"] == 7
         assert camera["detections"]["labels"] == ["person"]
         assert camera["active"]["model"] == "centernet-fog"
+
+
+# -- the header's time, the live badge, the frame rate ----------------------------------------
+def test_header_time_is_the_latest_time_any_pane_shows(state: DashboardState) -> None:
+    assert state.snapshot()["latest_t"] is None  # nothing shown yet: the page shows `now`
+    state.take_analysis({"t": 33.8, "nodes": {"G1": [1.0, "satisfied"]}})
+    seen = state.version
+    state.take_assessment("/utu/oracle/output", {"category": 0, "confidence": 0.9}, 36.1)
+    assert state.snapshot()["latest_t"] == 36.1  # the oracle pane's row is newer than Utu's t
+    assert state.snapshot()["utu_t"] == 33.8
+    assert state.delta(seen, decisions_after=0, timeline_after=0)["latest_t"] == 36.1
+    state.take_analysis({"t": 34.0, "nodes": {"G1": [1.0, "satisfied"]}})
+    state.take_decisions([{"t": 35.0, "kind": "started", "tactic": "fail-safe", "data": {}}])
+    assert state.latest_t == 36.1  # never back
+    state.take_input("/rover/status", {"mode": "manual"}, 36.5)
+    assert state.latest_t == 36.5
+    # unchanged version: the heartbeat patch still carries it
+    assert state.delta(state.version, decisions_after=9, timeline_after=9)["latest_t"] == 36.5
+
+
+def test_the_run_is_live_while_fed_and_ended_after_idle_or_when_utu_leaves() -> None:
+    model = load_goal_model(ROVER / "goals.yaml", ROVER / "binding.yaml")
+    wall = [100.0]
+    state = DashboardState(
+        model,
+        load_tactics(ROVER / "tactics.yaml"),
+        clock=lambda: 1.0,
+        idle=5.0,
+        wall=lambda: wall[0],
+    )
+    assert state.run() == {"live": False, "state": "waiting", "reason": "no message yet"}
+    state.take_input("/rover/status", {"mode": "autonomous"}, 1.0)
+    assert state.run()["live"] is True
+    wall[0] += 5.0
+    assert state.run()["live"] is True  # at the limit: still live
+    wall[0] += 2.0
+    assert state.run() == {"live": False, "state": "ended", "reason": "no message for 7 s"}
+    assert state.delta(state.version, decisions_after=0, timeline_after=0)["run"]["live"] is False
+    state.heard()  # a /clock: fed again
+    assert state.run()["state"] == "live"
+    state.utu_node("/utu_monitor", True)
+    state.utu_node("/utu_analyze", True)
+    state.utu_node("/utu_monitor", False)
+    assert state.run()["live"] is True  # one of Utu's nodes still runs
+    state.utu_node("/utu_analyze", False)
+    assert state.run() == {"live": False, "state": "ended", "reason": "Utu's nodes are gone"}
+    state.take_input("/rover/status", {"mode": "autonomous"}, 2.0)
+    assert state.run()["state"] == "ended"  # Utu gone: late messages do not revive the run
+    state.utu_node("/utu_monitor", True)  # Utu restarted
+    assert state.run()["state"] == "live"
+
+
+def test_the_badge_follows_utus_liveliness_token_on_the_bus(rover_run: RoverRun) -> None:
+    with (
+        Dashboard(rover_run.model, rover_run.tactics, bus=rover_run.bus, port=0, idle=3600) as dash,
+        open_bus("inproc", hub=rover_run.hub, name="utu-node") as node,
+    ):
+        node.publish("/rover/status", {"mode": "autonomous"})
+        token = node.liveliness_token("/utu_monitor")
+        node.liveliness_token("/camera_driver")  # not Utu's: ignored
+        wait_for(lambda: dash.state.snapshot()["run"]["live"], what="the run live")
+        token.close()
+        run = wait_for(
+            lambda: (r := dash.state.snapshot()["run"])["state"] == "ended" and r,
+            what="the run ended once Utu's token is gone",
+        )
+        assert run == {"live": False, "state": "ended", "reason": "Utu's nodes are gone"}
+
+
+def test_frame_rate_is_measured_on_the_frames_stamps_not_their_arrivals(
+    state: DashboardState,
+) -> None:
+    data = png(8, 8, (0, 0, 0))
+    assert state.frame_rate() is None
+    for k in range(40):  # 9.6 frames/s of stamps, delivered in one burst
+        state.take_frame(Frame("/rover/camera/image", k, "png", 8, 8, data, 20.0 + k / 9.6))
+    assert state.frame_rate() == pytest.approx(9.6)
+    assert state.snapshot()["camera"]["fps"] == pytest.approx(9.6)
+    state.take_frame(Frame("/rover/camera/image", 99, "png", 8, 8, data, 0.0))  # a new run
+    assert state.frame_rate() is None
+
+
+def test_camera_frames_are_stamped_with_their_simulated_instant(rover_run: RoverRun) -> None:
+    with (
+        Dashboard(rover_run.model, rover_run.tactics, bus=rover_run.bus, port=0, clock="sim") as d,
+        open_bus("inproc", hub=rover_run.hub, name="sim") as sim,
+    ):
+        data = png(8, 8, (0, 0, 0))
+        for k in range(25):
+            t = round(30.0 + k / 9.6, 6)
+            sim.publish("/clock", Clock(time=t))
+            wait_for(lambda t=t: d.state.clock() >= t, what=f"the clock at {t}")
+            sim.publish(
+                "/rover/camera/image", Image(encoding="png", width=8, height=8, data=data, seq=k)
+            )
+            wait_for(lambda k=k: d.state.snapshot()["camera"].get("frame", {}).get("seq") == k)
+            assert d.state.snapshot()["camera"]["frame"]["t"] == t
+        assert d.state.snapshot()["camera"]["fps"] == pytest.approx(9.6)
+        assert d.state.latest_t == pytest.approx(30.0 + 24 / 9.6)
 
 
 def test_port_in_use_is_a_clear_error(state: DashboardState) -> None:

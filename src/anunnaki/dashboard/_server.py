@@ -225,6 +225,8 @@ class Dashboard:
         topics: Where the observer listens.
         max_rate: Most updates per second sent to a page.
         seed: Ask Utu for its decisions so far when attached.
+        idle: Seconds without any message after which the page's *live* badge says the
+            run has ended (see :meth:`DashboardState.run`).
 
     """
 
@@ -242,6 +244,7 @@ class Dashboard:
         topics: ObserverConfig | None = None,
         max_rate: float = 15.0,
         seed: bool = True,
+        idle: float = 5.0,
     ) -> None:
         _require()
         if token is not None and not token.strip():
@@ -254,6 +257,7 @@ class Dashboard:
             clock=self._sim.now if self._sim is not None else None,
             clock_kind=clock,
             operator=token is not None,
+            idle=idle,
         )
         self.token = token
         self.topics = topics
