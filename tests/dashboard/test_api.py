@@ -7,6 +7,7 @@ import http.client
 import json
 import os
 import queue
+import shutil
 import signal
 import socket
 import subprocess
@@ -33,7 +34,7 @@ from dashboard_helpers import (
     wait_for,
 )
 
-from anunnaki.bus import Clock, Detections, Image, open_bus
+from anunnaki.bus import BusConfigError, Clock, Detections, Image, open_bus
 from anunnaki.cli import _dashboard
 from anunnaki.dashboard import (
     Dashboard,
@@ -458,6 +459,75 @@ def test_cli_refuses_an_inproc_bus_naming_file_and_line() -> None:
     assert "anunnaki run CONFIG --dashboard" in message
 
 
+def test_cli_joins_the_launch_of_utu_processes_without_taking_its_port() -> None:
+    """The documented ways to join ``examples/rover/utu-processes.yaml`` (which listens on
+    tcp/127.0.0.1:7447) never listen on 7447 themselves, and ``--mode client`` is accepted."""
+    config = str(ROVER / "utu-processes.yaml")
+
+    def bus(*argv: str) -> Any:
+        args = _dashboard_args(config, *argv)
+        return _dashboard.joining_bus(load_launch(args.config, read_records=False), args)
+
+    for joined in (bus(), bus("--connect", "tcp/127.0.0.1:7447")):
+        assert (joined.kind, joined.mode) == ("zenoh", "peer")
+        assert joined.connect == ["tcp/127.0.0.1:7447"]
+        assert joined.listen == []  # a peer then listens on a free loopback port
+        assert joined.effective_listen(free_port=4321) == ["tcp/127.0.0.1:4321"]
+    client = bus("--mode", "client")
+    assert (client.mode, client.connect, client.listen) == ("client", ["tcp/127.0.0.1:7447"], [])
+    assert bus("--mode", "client", "--connect", "tcp/10.0.0.5:7447").connect == [
+        "tcp/10.0.0.5:7447"
+    ]
+    assert bus("--listen", "tcp/127.0.0.1:7999").listen == ["tcp/127.0.0.1:7999"]
+    with pytest.raises(BusConfigError, match="a client does not listen"):
+        bus("--mode", "client", "--listen", "tcp/127.0.0.1:7999")
+
+
+def _launch_on(tmp_path: Path, port: int) -> Path:
+    """``utu-processes.yaml`` listening on ``port`` (next to a copy of its files)."""
+    rover = tmp_path / "rover"
+    shutil.copytree(ROVER, rover)
+    launch = rover / "utu-processes.yaml"
+    launch.write_text(launch.read_text().replace(":7447", f":{port}"))
+    return launch
+
+
+@pytest.mark.parametrize(
+    "argv", [(), ("--connect", "tcp/127.0.0.1:{port}"), ("--mode", "client")], ids=str
+)
+def test_the_joining_session_meets_the_launch_session_on_loopback(
+    tmp_path: Path, argv: tuple[str, ...]
+) -> None:
+    """Two zenoh sessions on loopback (multicast scouting off): the launch's, listening on
+    its port, and the dashboard's, opened as ``anunnaki dashboard`` opens it, while the
+    launch's holds the port. A message each way arrives."""
+    pytest.importorskip("zenoh")
+    port = free_port()
+    config = _launch_on(tmp_path, port)
+    args = _dashboard_args(str(config), *(a.format(port=port) for a in argv))
+    launch = load_launch(args.config, read_records=False)
+    joined = _dashboard.joining_bus(launch, args)
+    assert not joined.multicast_scouting
+    got: queue.Queue[tuple[str, Any]] = queue.Queue()
+    with open_bus(launch.bus, name="launch") as utu, open_bus(joined, name="dashboard") as dash:
+        subs = [
+            dash.subscribe("/utu/analyze/state", lambda s: got.put(("dash", s.message))),
+            utu.subscribe("/utu/knowledge/query_probe", lambda s: got.put(("utu", s.message))),
+        ]
+
+        def heard(who: str, topic: str) -> bool:
+            (utu if who == "dash" else dash).publish(topic, {"t": 1.0})  # until the link is up
+            try:
+                return got.get(timeout=0.2)[0] == who
+            except queue.Empty:
+                return False
+
+        wait_for(lambda: heard("dash", "/utu/analyze/state"), timeout=60, what="utu -> dashboard")
+        wait_for(lambda: heard("utu", "/utu/knowledge/query_probe"), timeout=60, what="dash -> utu")
+        for sub in subs:
+            sub.close()
+
+
 def test_cli_bad_config_names_file_and_line(tmp_path: Path) -> None:
     bad = tmp_path / "bad.yaml"
     bad.write_text(
@@ -691,11 +761,13 @@ def _next_line(lines: queue.Queue[str | None], prefix: str, seen: list[str]) -> 
 
 
 @pytest.mark.slow
-def test_cli_dashboard_serves_what_a_zenoh_bus_carries() -> None:
-    """``anunnaki dashboard`` in its own process joins a zenoh bus (loopback TCP, no
-    multicast scouting) on which a stand-in for Utu publishes; its page's snapshot shows it."""
+def test_cli_dashboard_serves_what_a_zenoh_bus_carries(tmp_path: Path) -> None:
+    """``anunnaki dashboard utu-processes.yaml --mode client`` in its own process joins the
+    launch's zenoh session (loopback TCP, no multicast scouting), held by a stand-in for Utu
+    that listens on the launch's port and publishes; its page's snapshot shows it."""
     pytest.importorskip("zenoh")
     port = free_port()
+    config = _launch_on(tmp_path, port)
     model = load_goal_model(ROVER / "goals.yaml", ROVER / "binding.yaml")
     nodes = {n: [1.0, "satisfied"] for n in [*model.goals, *model.obstacles]}
     for n in ("G1", "G2", "G3", "G4"):
@@ -720,9 +792,9 @@ def test_cli_dashboard_serves_what_a_zenoh_bus_carries() -> None:
                 "-m",
                 "anunnaki.cli.main",
                 "dashboard",
-                str(ROVER / "utu.yaml"),
-                "--connect",
-                f"tcp/127.0.0.1:{port}",
+                str(config),
+                "--mode",
+                "client",
                 "--port",
                 "0",
             ],
