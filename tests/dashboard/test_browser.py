@@ -17,14 +17,24 @@ from collections.abc import Iterator
 from typing import Any
 
 import pytest
-from dashboard_helpers import ARTIFACTS, HERE, TOKEN, RoverRun, Web, png, wait_for
+from dashboard_helpers import (
+    ARTIFACTS,
+    DEADLINE,
+    HERE,
+    PATIENCE,
+    TOKEN,
+    RoverRun,
+    Web,
+    png,
+    wait_for,
+)
 
 from anunnaki.bus import Assessment, Detections, Image
-from anunnaki.dashboard import Dashboard
+from anunnaki.dashboard import Dashboard, ObserverConfig
 
 pytestmark = pytest.mark.slow
 
-WAIT = 30_000  # ms: generous, the machine is shared
+WAIT = int(DEADLINE * 1000)  # ms: generous, the machine is shared
 # Predicates of wait_for_function are arrow functions: the page's CSP forbids eval, and a
 # bare expression is evaluated with it whenever the wait has to poll.
 PHASES = ("nominal", "violation", "approved", "recovered", "silent")
@@ -85,7 +95,14 @@ class World:
 def world(chromium: Any) -> Iterator[World]:
     run = RoverRun(HERE / "data" / "rover-approval.yaml")
     dash = Dashboard(
-        run.model, run.tactics, bus=run.bus, clock="sim", port=0, token=TOKEN, name="rover"
+        run.model,
+        run.tactics,
+        bus=run.bus,
+        clock="sim",
+        port=0,
+        token=TOKEN,
+        name="rover",
+        **PATIENCE,
     )
     dash.start()
     page = chromium.new_page()
@@ -245,6 +262,12 @@ def test_explanation_of_a_node_names_the_oracle_attribute(world: World) -> None:
     page = world.page
     world.at("violation")
     page.wait_for_selector("#goal-svg [data-node=G4].unsatisfied", timeout=WAIT)
+    # The tree shows Utu's verdict; the explanation is the dashboard's own evaluator, fed on
+    # its own subscriptions: click once that evaluator has the oracle's category 1 too.
+    wait_for(
+        lambda: world.dash.state.snapshot()["values"].get("A4.category") == 1,
+        what="the dashboard's own evaluator at category 1",
+    )
     node(page, "G4").click()
     page.wait_for_selector("#explanation[data-node=G4] #explanation-text", timeout=WAIT)
     text = page.locator("#explanation").text_content()
@@ -258,7 +281,9 @@ def test_read_only_page_offers_no_operator_controls(world: World, chromium: Any)
         "#plan-queue li[data-tactic=fail-safe] button[data-op=approve]", timeout=WAIT
     )
     run = world.run
-    with Dashboard(run.model, run.tactics, bus=run.bus, clock="sim", port=0) as dash:
+    # Its pending tactic comes from its start-up query to Utu: give Utu time to answer.
+    seed = ObserverConfig(query_timeout=DEADLINE)
+    with Dashboard(run.model, run.tactics, bus=run.bus, clock="sim", port=0, topics=seed) as dash:
         page = chromium.new_page()
         try:
             page.goto(dash.url)
