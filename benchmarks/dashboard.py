@@ -223,7 +223,9 @@ def main() -> None:
         )
         page = ctx.new_page()
         page.goto(dash.url)
-        page.wait_for_selector("#connection.on", timeout=30_000)
+        page.wait_for_selector(  # the stream is up (the run may not be fed yet)
+            "#connection[data-state]:not([data-state=reconnecting])", timeout=30_000
+        )
         worker = threading.Thread(target=publish, daemon=True)
         worker.start()
         page.wait_for_selector("#goal-svg [data-node=G1].satisfied", timeout=30_000)

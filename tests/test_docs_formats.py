@@ -3,7 +3,8 @@
 Every fenced ``yaml`` block is valid YAML; every complete goal model or binding in them
 (a block starting with ``anunnaki: goal-model/1`` or ``anunnaki: binding/1``) loads cleanly;
 the table of expression values, the worked example's output, the check output and the trace
-excerpts are what the code produces today.
+excerpts are what the code produces today. Every goal-model example in README.md and
+docs/*.md, complete or a fragment, loads (see the rule at the end of the file).
 """
 
 from __future__ import annotations
@@ -240,3 +241,151 @@ def test_the_bad_trace_example_message(tmp_path: Path, capsys: pytest.CaptureFix
     err = capsys.readouterr().err.replace(str(bad), "bad.jsonl")
     shown = next(b for b in text_blocks(TRACES) if "bad.jsonl" in b)
     assert shown.splitlines()[1] == err.strip()
+
+
+# -- every goal-model example in README.md and docs/*.md loads ----------------------------------
+#
+# A fenced ``yaml`` block is a goal-model example when it is
+#   * a complete model: a mapping with ``anunnaki: goal-model/1``;
+#   * a model fragment: a mapping without ``anunnaki`` whose keys are all goal-model keys and
+#     include ``goals`` or ``obstacles``;
+#   * a list of goals: a list of mappings, each with an ``id`` and a goal's ``utility``,
+#     ``refinement`` or ``relax``;
+#   * an agent's topics: a mapping whose only key is ``topics``.
+# A complete model whose agents lack topics is loaded with the page's next
+# ``anunnaki: binding/1`` block (the README and model-manager.md show the model, then the
+# binding that gives its agents topics).
+# A fragment is wrapped into the smallest model around it: an agent for every agent it names
+# (one topic carrying every attribute it reads), a stub leaf for every goal it refers to but
+# does not define, and a root AND over its top-level goals.
+
+GOAL_MODEL_KEYS = {"name", "description", "root", "unknown_policy", "staleness", "agents"}
+GOAL_MODEL_KEYS |= {"goals", "obstacles"}
+GOAL_KEYS = {"utility", "refinement", "relax"}
+
+
+def doc_pages() -> list[Path]:
+    return [ROOT / "README.md", *sorted(DOCS.glob("*.md"))]
+
+
+def goal_model_examples() -> list[tuple[str, str, Any, str | None]]:
+    """(``page:line``, kind, parsed data, binding text) of every goal-model example."""
+    found: list[tuple[str, str, Any, str | None]] = []
+    for page in doc_pages():
+        text = page.read_text(encoding="utf-8")
+        yaml_blocks = [
+            m
+            for m in re.finditer(r"^```(\w*)\n(.*?)^```", text, re.MULTILINE | re.DOTALL)
+            if m.group(1) in ("yaml", "yml")
+        ]
+        for k, match in enumerate(yaml_blocks):
+            where = f"{page.name}:{text.count(chr(10), 0, match.start()) + 1}"
+            data, _ = load_yaml(where, text=match.group(2))
+            if isinstance(data, dict) and data.get("anunnaki") == "goal-model/1":
+                binding = next(
+                    (
+                        m.group(2)
+                        for m in yaml_blocks[k + 1 :]
+                        if m.group(2).startswith("anunnaki: binding/1")
+                    ),
+                    None,
+                )
+                unbound = any("topics" not in a for a in data.get("agents", []))
+                found.append((where, "model", data, binding if unbound else None))
+            elif (
+                isinstance(data, dict)
+                and "anunnaki" not in data
+                and set(data) <= GOAL_MODEL_KEYS
+                and {"goals", "obstacles"} & set(data)
+            ):
+                found.append((where, "fragment", data, None))
+            elif (
+                isinstance(data, list)
+                and data
+                and all(isinstance(g, dict) and "id" in g and GOAL_KEYS & set(g) for g in data)
+            ):
+                found.append((where, "fragment", {"goals": data}, None))
+            elif isinstance(data, dict) and set(data) == {"topics"}:
+                found.append((where, "agent", data, None))
+    return found
+
+
+def _expressions(item: dict[str, Any]) -> list[str]:
+    texts = [item[k] for k in ("utility", "condition") if isinstance(item.get(k), str)]
+    relax = item.get("relax")
+    if isinstance(relax, dict):
+        if isinstance(relax.get("event"), str):
+            texts.append(relax["event"])
+        texts += [a for a in relax.get("alternatives", []) if isinstance(a, str)]
+    return texts
+
+
+def wrap_fragment(data: dict[str, Any]) -> dict[str, Any]:
+    """The smallest goal model around a fragment (see the rule above)."""
+    goals: list[dict[str, Any]] = list(data.get("goals", []))
+    obstacles: list[dict[str, Any]] = list(data.get("obstacles", []))
+    attributes: dict[str, set[str]] = {}
+    for item in goals + obstacles:
+        for agent in item.get("agents", []):
+            attributes.setdefault(agent, set())
+        for text in _expressions(item):
+            expr = compile_expression(text)
+            for agent in expr.agents:
+                attributes.setdefault(agent, set())
+            for ref in expr.refs:
+                attributes[ref.agent].add(ref.attribute)
+    defined = {g["id"] for g in goals}
+    children = {c for g in goals for c in g.get("children", [])}
+    referred = children | {r for o in obstacles for r in o.get("obstructs", [])}
+    referred |= {r for o in obstacles for r in o.get("resolutions", [])}
+    stubs = sorted(referred - defined)
+    attributes.setdefault("Z0", set()).update(f"stub_{s}" for s in stubs)
+    goals += [{"id": s, "utility": f"Z0.stub_{s}"} for s in stubs]
+    tops = [g["id"] for g in goals if g["id"] not in children]
+    model = {
+        "anunnaki": "goal-model/1",
+        "name": "doc-fragment",
+        "root": "ROOT",
+        "agents": [
+            {"id": agent, "topics": [{"topic": f"/doc/{agent}", "attributes": sorted(attrs)}]}
+            for agent, attrs in sorted(attributes.items())
+        ],
+        "goals": [{"id": "ROOT", "refinement": "and", "children": tops}, *goals],
+    }
+    if obstacles:
+        model["obstacles"] = obstacles
+    return model
+
+
+def as_model(kind: str, data: Any) -> dict[str, Any]:
+    if kind == "model":
+        return dict(data)
+    if kind == "fragment":
+        return wrap_fragment(data)
+    attributes = data["topics"][0]["attributes"]
+    first = next(iter(attributes))
+    model = wrap_fragment({"goals": [{"id": "G1", "utility": f"A1 has {first}"}]})
+    model["agents"] = [{"id": "A1", **data}]
+    return model
+
+
+def test_the_rule_finds_the_goal_model_examples() -> None:
+    found = goal_model_examples()
+    pages = {where.split(":")[0] for where, *_ in found}
+    assert {"README.md", "goal-models.md", "relax.md", "model-manager.md"} <= pages
+    assert sum(where.startswith("relax.md") for where, *_ in found) == 13  # G6, G2, G8–G18
+    assert sum(kind == "model" for _, kind, *_ in found) >= 3
+
+
+@pytest.mark.parametrize(
+    ("where", "kind", "data", "binding"),
+    [pytest.param(*example, id=example[0]) for example in goal_model_examples()],
+)
+def test_every_goal_model_example_in_the_docs_loads(
+    where: str, kind: str, data: Any, binding: str | None
+) -> None:
+    text = json.dumps(as_model(kind, data))
+    bound = parse_binding(binding, source=where) if binding is not None else None
+    model = parse_goal_model(text, source=where, binding=bound, strict=True)
+    assert [f.render() for f in model.findings if f.severity == "error"] == []
+    Evaluator(model)

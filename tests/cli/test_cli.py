@@ -313,3 +313,29 @@ def test_no_command_is_a_usage_error(capsys: pytest.CaptureFixture[str]) -> None
         main([])
     assert info.value.code == 2
     assert "COMMAND" in capsys.readouterr().err
+
+
+def test_evaluate_json_a_satisfied_or_with_an_unknown_child_has_a_utility(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    model = tmp_path / "m.yaml"
+    model.write_text(
+        "anunnaki: goal-model/1\nname: or-unknown\nroot: G1\n"
+        "agents:\n"
+        "  - {id: A1, topics: [{topic: /a, attributes: [x]}]}\n"
+        "  - {id: A2, topics: [{topic: /b, attributes: [y]}]}\n"
+        "goals:\n"
+        "  - {id: G1, refinement: or, children: [G2, G3]}\n"
+        "  - {id: G2, utility: A1.x, relax: {operator: shall}, threshold: 0.5}\n"
+        "  - {id: G3, utility: A2.y >= 1}\n"
+    )
+    trace = tmp_path / "t.jsonl"
+    trace.write_text('{"t": 0, "topic": "/a", "msg": {"x": 0.6}}\n')  # A2 never publishes
+    assert main(["evaluate", str(model), "-t", str(trace), "--json"]) == 0
+    lines = [json.loads(x) for x in capsys.readouterr().out.splitlines()]
+    assert lines[0]["nodes"] == {
+        "G1": {"utility": 0.6, "status": "satisfied"},  # was: satisfied with utility null
+        "G2": {"utility": 0.6, "status": "satisfied"},
+        "G3": {"utility": None, "status": "unknown"},
+    }
+    assert lines[-1]["silent_topics"] == {"/b": ["A2"]}

@@ -39,6 +39,12 @@ CHROMIUM = os.environ.get("ANUNNAKI_CHROMIUM", "/usr/bin/chromium")
 TOKEN = "s3cret-operator-token"
 #: Set to 1 (CI does) to make a missing browser a failure instead of a skip.
 REQUIRE_BROWSER = "ANUNNAKI_REQUIRE_BROWSER"
+#: Deadlines of the tests, in seconds: generous, the machine is shared (a loaded machine
+#: answers late, never wrongly). Nothing waits for them unless something is wrong.
+DEADLINE = 60.0
+#: How long a test's dashboard waits for Utu's answer to an operator action or to its
+#: start-up query (the product's defaults, 3 s, are for people watching a page).
+PATIENCE = {"operator_timeout": DEADLINE}
 
 
 def browser_missing() -> str | None:
@@ -63,7 +69,9 @@ def need_browser() -> None:
     pytest.skip(f"{missing} (with {REQUIRE_BROWSER}=1 this is a failure)")
 
 
-def wait_for(predicate: Callable[[], Any], timeout: float = 30.0, what: str = "condition") -> Any:
+def wait_for(
+    predicate: Callable[[], Any], timeout: float = DEADLINE, what: str = "condition"
+) -> Any:
     """Re-check ``predicate`` until it returns something true (returned) or the deadline."""
     deadline = time.monotonic() + timeout
     while True:

@@ -17,18 +17,30 @@ from collections.abc import Iterator
 from typing import Any
 
 import pytest
-from dashboard_helpers import ARTIFACTS, HERE, TOKEN, RoverRun, Web, png, wait_for
+from dashboard_helpers import (
+    ARTIFACTS,
+    DEADLINE,
+    HERE,
+    PATIENCE,
+    TOKEN,
+    RoverRun,
+    Web,
+    png,
+    wait_for,
+)
 
 from anunnaki.bus import Assessment, Detections, Image
-from anunnaki.dashboard import Dashboard
+from anunnaki.dashboard import Dashboard, ObserverConfig
 
 pytestmark = pytest.mark.slow
 
-WAIT = 30_000  # ms: generous, the machine is shared
+WAIT = int(DEADLINE * 1000)  # ms: generous, the machine is shared
 # Predicates of wait_for_function are arrow functions: the page's CSP forbids eval, and a
 # bare expression is evaluated with it whenever the wait has to poll.
 PHASES = ("nominal", "violation", "approved", "recovered", "silent")
 CALLER = "dashboard:operator@127.0.0.1"
+#: The page has its stream (a snapshot arrived): the badge then says live, waiting or ended.
+CONNECTED = "#connection[data-state]:not([data-state=reconnecting])"
 
 
 class World:
@@ -83,14 +95,21 @@ class World:
 def world(chromium: Any) -> Iterator[World]:
     run = RoverRun(HERE / "data" / "rover-approval.yaml")
     dash = Dashboard(
-        run.model, run.tactics, bus=run.bus, clock="sim", port=0, token=TOKEN, name="rover"
+        run.model,
+        run.tactics,
+        bus=run.bus,
+        clock="sim",
+        port=0,
+        token=TOKEN,
+        name="rover",
+        **PATIENCE,
     )
     dash.start()
     page = chromium.new_page()
     try:
         run.run_to(22.0)
         page.goto(dash.url)
-        page.wait_for_selector("#connection.on", timeout=WAIT)
+        page.wait_for_selector(CONNECTED, timeout=WAIT)
         yield World(run, dash, page)
     finally:
         page.close()
@@ -243,6 +262,12 @@ def test_explanation_of_a_node_names_the_oracle_attribute(world: World) -> None:
     page = world.page
     world.at("violation")
     page.wait_for_selector("#goal-svg [data-node=G4].unsatisfied", timeout=WAIT)
+    # The tree shows Utu's verdict; the explanation is the dashboard's own evaluator, fed on
+    # its own subscriptions: click once that evaluator has the oracle's category 1 too.
+    wait_for(
+        lambda: world.dash.state.snapshot()["values"].get("A4.category") == 1,
+        what="the dashboard's own evaluator at category 1",
+    )
     node(page, "G4").click()
     page.wait_for_selector("#explanation[data-node=G4] #explanation-text", timeout=WAIT)
     text = page.locator("#explanation").text_content()
@@ -256,11 +281,13 @@ def test_read_only_page_offers_no_operator_controls(world: World, chromium: Any)
         "#plan-queue li[data-tactic=fail-safe] button[data-op=approve]", timeout=WAIT
     )
     run = world.run
-    with Dashboard(run.model, run.tactics, bus=run.bus, clock="sim", port=0) as dash:
+    # Its pending tactic comes from its start-up query to Utu: give Utu time to answer.
+    seed = ObserverConfig(query_timeout=DEADLINE)
+    with Dashboard(run.model, run.tactics, bus=run.bus, clock="sim", port=0, topics=seed) as dash:
         page = chromium.new_page()
         try:
             page.goto(dash.url)
-            page.wait_for_selector("#connection.on", timeout=WAIT)
+            page.wait_for_selector(CONNECTED, timeout=WAIT)
             page.wait_for_selector("#plan-queue li[data-tactic=fail-safe].pending", timeout=WAIT)
             assert page.locator("#readonly").is_visible()
             assert not page.locator("#operator").is_visible()
@@ -459,3 +486,75 @@ def test_run_stop_asks_for_confirmation_and_is_logged_with_its_caller(world: Wor
     row = page.locator("#decision-log tr[data-kind=run_stop]")
     row.wait_for(timeout=WAIT)
     assert f"caller={CALLER}" in row.locator("td.detail").text_content()
+
+
+# -- the header's time, the live badge and the frame rate, on a run of their own ---------------
+def test_header_time_live_badge_and_frame_rate(chromium: Any) -> None:
+    """The header shows the latest time any pane shows (the oracle's row is newer than Utu's
+    last analysis); the badge is *live* while Utu's liveliness token is held and *ended* once
+    it is withdrawn; the camera's fps is frames drawn over their stamps' span (9.6 frames per
+    simulated second, however fast they arrive). Frames are published one at a time, each
+    once the page has drawn the previous one."""
+    from anunnaki.bus import Clock, InprocHub, open_bus
+    from anunnaki.goals import load_goal_model
+    from anunnaki.tactics import load_tactics
+
+    rover = HERE.parents[1] / "examples" / "rover"
+    model = load_goal_model(rover / "goals.yaml", rover / "binding.yaml")
+    tactics = load_tactics(rover / "tactics.yaml")
+    hub = InprocHub()
+    with (
+        open_bus("inproc", hub=hub, name="sim") as sim,
+        Dashboard(model, tactics, bus=sim, clock="sim", port=0, seed=False, idle=3600) as dash,
+    ):
+        page = chromium.new_page()
+        try:
+            page.goto(dash.url)
+            page.wait_for_selector(CONNECTED, timeout=WAIT)
+            assert page.get_attribute("#connection", "data-state") == "waiting"
+            token = sim.liveliness_token("/utu_monitor")
+            sim.publish("/utu/analyze/state", {"t": 33.8, "nodes": {"G1": [1.0, "satisfied"]}})
+            page.wait_for_selector("#connection.on[data-state=live]", timeout=WAIT)
+            assert page.text_content("#connection") == "live"
+
+            def clock(t: float) -> None:
+                sim.publish("/clock", Clock(time=t))
+                wait_for(lambda: dash.state.clock() >= t, what=f"the dashboard's clock at {t}")
+
+            clock(36.1)
+            sim.publish(
+                "/utu/oracle/output",
+                Assessment(category=1, confidence=0.9, model_id="m", assessor="oracle"),
+            )
+            page.wait_for_function(
+                "() => document.getElementById('oracle').textContent.includes('t 36.10')",
+                timeout=WAIT,
+            )
+            page.wait_for_function(
+                "() => document.getElementById('utu-time').textContent === 't = 36.10'",
+                timeout=WAIT,
+            )
+
+            data = png(32, 24, (10, 20, 30))
+            for k in range(1, 25):
+                clock(round(40.0 + k / 9.6, 6))
+                sim.publish(
+                    "/rover/camera/image",
+                    Image(encoding="png", width=32, height=24, data=data, seq=k),
+                )
+                page.wait_for_selector(f"#camera[data-seq='{k}']", timeout=WAIT)
+            fps = float(page.get_attribute("#camera", "data-fps") or "nan")
+            assert fps == pytest.approx(9.6, abs=0.01)
+            assert "· 9.6 fps ·" in page.text_content("#camera-info")
+            page.wait_for_function(  # the header follows the frames' time too
+                "() => document.getElementById('utu-time').textContent === 't = 42.50'",
+                timeout=WAIT,
+            )
+
+            token.close()  # Utu's node stops: the run has ended
+            page.wait_for_selector("#connection.off[data-state=ended]", timeout=WAIT)
+            assert page.text_content("#connection") == "ended"
+            assert page.get_attribute("#connection", "title") == "Utu's nodes are gone"
+            assert page.text_content("#utu-time") == "t = 42.50"
+        finally:
+            page.close()

@@ -318,6 +318,7 @@ def test_garbage_on_every_topic_keeps_the_dashboard_serving(
             and any(o["category"] == 1 and o["context"] == {"lux": 3} for o in snap["oracle"])
             and snap["camera"]["active"]["model"] == "centernet-fog"
             and (snap["camera"].get("detections") or {}).get("frame_seq") == 4
+            and (snap["camera"].get("frame") or {}).get("seq") == 4  # frames: another thread
             and any(m["last"] == {"range": 0.5} for m in snap["monitor"])
         )
         return snap if ok else None

@@ -367,3 +367,81 @@ def test_and_or_are_monotone(values: list[float], which: int, bump: float) -> No
         assert ub is not None and ua is not None
         assert ua >= ub - 1e-12
         assert not math.isnan(ua)
+
+
+# -- status and utility agree: a known status has a known utility ---------------------------
+
+RELAXED = """\
+anunnaki: goal-model/1
+name: relaxed
+root: G1
+agents:
+  - {id: A1, topics: [{topic: /a1, attributes: [a, b, c, d]}]}
+goals:
+  - {id: G1, refinement: and, children: [G2, G5]}
+  - {id: G2, refinement: or, children: [G3, G4]}
+  - {id: G3, utility: A1.a, relax: {operator: shall}, threshold: 0.5}
+  - {id: G4, utility: A1.b, relax: {operator: shall}, threshold: 0.5}
+  - {id: G5, utility: A1.c, relax: {operator: shall}, threshold: 0.5}
+obstacles:
+  - {id: O1, obstructs: [G5], condition: A1.d, threshold: 0.5}
+"""
+ATTRS = ("a", "b", "c", "d")
+
+
+def relaxed(values: dict[str, float | None]) -> Evaluator:
+    ev = Evaluator(parse_goal_model(RELAXED))
+    ev.observe("/a1", {k: v for k, v in values.items() if v is not None}, 0.0)
+    return ev
+
+
+def test_a_satisfied_or_with_an_unknown_child_has_the_known_maximum() -> None:
+    ev = relaxed({"a": 0.6, "b": None, "c": 1.0, "d": 0.0})
+    assert ev.state("G4").status is None
+    assert (ev.state("G2").utility, ev.state("G2").status) == (pytest.approx(0.6), True)
+    assert (ev.state("G1").utility, ev.state("G1").status) == (pytest.approx(0.6), True)
+    # a crisp satisfied child (1.0) dominates, as before
+    ev.observe("/a1", {"a": 1.0, "c": 1.0, "d": 0.0}, 0.1)
+    assert (ev.state("G2").utility, ev.state("G2").status) == (1.0, True)
+    # not decided by the known child: unknown, as before
+    ev.observe("/a1", {"a": 0.3, "c": 1.0, "d": 0.0}, 0.2)
+    assert (ev.state("G2").utility, ev.state("G2").status) == (None, None)
+
+
+def test_an_unsatisfied_and_with_an_unknown_child_has_the_known_minimum() -> None:
+    ev = relaxed({"a": None, "b": None, "c": 0.3, "d": 0.0})
+    assert ev.state("G2").status is None
+    assert (ev.state("G5").utility, ev.state("G5").status) == (pytest.approx(0.3), False)
+    assert (ev.state("G1").utility, ev.state("G1").status) == (pytest.approx(0.3), False)
+    # an unknown obstacle on an unsatisfied goal, a holding one on an unknown goal
+    ev.observe("/a1", {"a": 1.0, "c": 0.3}, 0.1)
+    assert (ev.state("G5").utility, ev.state("G5").status) == (pytest.approx(0.3), False)
+    ev.observe("/a1", {"a": 1.0, "d": 0.8}, 0.2)
+    assert (ev.state("G5").utility, ev.state("G5").status) == (pytest.approx(0.2), False)
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.lists(st.sampled_from([None, 0.0, 0.2, 0.5, 0.7, 1.0]), min_size=4, max_size=4))
+def test_a_known_status_has_a_known_utility_that_bounds_every_completion(
+    values: list[float | None],
+) -> None:
+    given_values = dict(zip(ATTRS, values, strict=True))
+    ev = relaxed(given_values)
+    got = _snapshot(ev)
+    unknown = [k for k, v in given_values.items() if v is None]
+    completions = [
+        _snapshot(relaxed({**given_values, **dict(zip(unknown, fill, strict=True))}))
+        for fill in itertools.product((0.0, 1.0), repeat=len(unknown))
+    ]
+    for node, (u, s) in got.items():
+        if s is None:
+            continue
+        assert u is not None, f"{node} is {s} with an unknown utility"
+        for done in completions:
+            cu, cs = done[node]
+            assert cs is s  # Kleene: what the known values decide, every completion agrees with
+            assert cu is not None
+            if node == "G2" and s is True:
+                assert cu >= u - 1e-12  # a satisfied OR: the known maximum is a lower bound
+            elif node != "O1" and s is False:
+                assert cu <= u + 1e-12  # an unsatisfied goal: an upper bound

@@ -17,7 +17,9 @@ import threading
 import time
 from typing import Any
 
-from anunnaki.bus import open_bus
+from pydantic import ValidationError
+
+from anunnaki.bus import BusConfig, BusConfigError, open_bus
 from anunnaki.launch import Launch, load_launch, signals_to
 
 __all__ = [
@@ -26,6 +28,7 @@ __all__ = [
     "add_run_options",
     "announce",
     "dashboard_for_launch",
+    "joining_bus",
     "run",
     "token_from",
     "wait_for_signal",
@@ -65,12 +68,23 @@ def add_parser(sub: Any) -> None:
         help=f"enable operator actions for requests carrying this token (or ${TOKEN_ENV})",
     )
     p.add_argument(
-        "--connect", action="append", metavar="ENDPOINT", help="zenoh endpoint to connect to"
+        "--connect",
+        action="append",
+        metavar="ENDPOINT",
+        help="zenoh endpoint to connect to (default: the launch's listen endpoints, on "
+        "loopback; a client launch's connect endpoints)",
     )
     p.add_argument(
-        "--listen", action="append", metavar="ENDPOINT", help="zenoh endpoint to listen on"
+        "--listen",
+        action="append",
+        metavar="ENDPOINT",
+        help="zenoh endpoint to listen on (default: a free loopback port; a client: none)",
     )
-    p.add_argument("--mode", choices=("peer", "client", "router"), help="zenoh mode")
+    p.add_argument(
+        "--mode",
+        choices=("peer", "client", "router"),
+        help="zenoh mode (default: the launch's, peer if it is a router)",
+    )
     p.add_argument(
         "--camera", default="/*/camera/image", help="camera topic pattern (Image messages)"
     )
@@ -189,21 +203,67 @@ def wait_for_signal(stop: threading.Event | None = None, timeout: float | None =
                 return
 
 
-def run(args: argparse.Namespace) -> int:
-    """Serve the dashboard of a launch's bus until a signal; returns the exit code."""
-    from anunnaki.dashboard import ObserverConfig
+def _on_loopback(endpoint: str) -> str:
+    return endpoint.replace("/0.0.0.0:", "/127.0.0.1:").replace("/[::]:", "/[::1]:")
 
-    launch = load_launch(args.config, read_records=False)
-    from anunnaki.cli._run import bus_with_overrides
 
-    bus_config = bus_with_overrides(launch.bus, args)
-    if bus_config.kind == "inproc":
+def joining_bus(launch: Launch, args: argparse.Namespace) -> BusConfig:
+    """The standalone dashboard's bus: it joins the launch's session, never takes its place.
+
+    The launch file describes the session of the running launch; the dashboard is one more
+    session on that bus. So it never listens where the launch listens (which is taken): it
+    listens only where ``--listen`` says (by default a peer listens on a free loopback port,
+    a client nowhere), and connects where ``--connect`` says, by default to the launch's
+    ``listen`` endpoints (an endpoint on every interface is reached on loopback) or, when
+    the launch is a client, to the launch's router. ``--mode`` defaults to the launch's
+    (peer when the launch is a router). TLS, namespace, scouting and raw zenoh entries are the
+    launch's.
+
+    Raises:
+        ModelFileError: the bus is in-process and nothing on the command line says where to
+            join, or there is no endpoint to connect to.
+        BusConfigError: the options do not make a valid bus (e.g. a client with ``--listen``).
+
+    """
+    bus = launch.bus
+    if bus.kind == "inproc" and not (args.connect or args.listen or args.mode):
         raise launch.error(
             "the dashboard on its own needs a bus other processes can reach, but the bus is inproc",
             "bus",
             hint="run it with the nodes: anunnaki run CONFIG --dashboard; or set bus: "
             "{kind: zenoh, ...} or give --connect ENDPOINT",
         )
+    mode = args.mode or ("peer" if bus.mode == "router" else bus.mode)
+    if args.connect:
+        connect = list(args.connect)
+    elif bus.kind == "inproc" or bus.mode == "client":
+        connect = list(bus.connect)
+    else:
+        launch_listens = bus.listen or (bus.effective_listen() if bus.mode == "router" else [])
+        connect = [_on_loopback(ep) for ep in launch_listens] or list(bus.connect)
+    if not connect and not bus.multicast_scouting:
+        raise launch.error(
+            "the dashboard cannot find the launch's session: the bus names no listen or "
+            "connect endpoint",
+            "bus",
+            hint="give --connect ENDPOINT (where the launch listens, e.g. tcp/127.0.0.1:7447)",
+        )
+    data = bus.model_dump(exclude_unset=True, exclude={"listen", "connect", "mode", "name"})
+    data.update(kind="zenoh", mode=mode, connect=connect, listen=list(args.listen or []))
+    try:
+        return BusConfig.model_validate(data)
+    except ValidationError as exc:
+        first = exc.errors(include_url=False)[0]
+        where = ".".join(str(p) for p in first["loc"]) or "bus"
+        raise BusConfigError(f"bus option {where}: {first['msg']}") from None
+
+
+def run(args: argparse.Namespace) -> int:
+    """Serve the dashboard of a launch's bus until a signal; returns the exit code."""
+    from anunnaki.dashboard import ObserverConfig
+
+    launch = load_launch(args.config, read_records=False)
+    bus_config = joining_bus(launch, args)
     token = token_from(args.token)
     topics = ObserverConfig(
         camera=args.camera,
@@ -219,7 +279,7 @@ def run(args: argparse.Namespace) -> int:
             dashboard.attach(bus)
             dashboard.start()
             announce(dashboard, token)
-            where = ", ".join(bus.endpoints) or ", ".join(bus_config.connect) or bus.kind
+            where = ", ".join(bus_config.connect) or ", ".join(bus.endpoints) or bus.kind
             print(f"dashboard: observing {launch.name} on bus {where}; Ctrl-C to stop", flush=True)
             wait_for_signal()
     finally:

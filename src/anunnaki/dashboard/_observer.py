@@ -58,6 +58,9 @@ __all__ = ["OPERATIONS", "BusObserver", "ObserverConfig", "OperatorError", "SimT
 
 log = logging.getLogger("anunnaki.dashboard")
 
+#: Utu's nodes hold liveliness tokens ``/utu_<node>``: while one is alive, Utu runs.
+UTU_NODE_PREFIX = topics.node_token("")
+
 Operation = Literal["pause", "resume", "approve", "reject", "run_stop"]
 #: The operator's actions and the Utu service each calls.
 OPERATIONS: dict[str, str] = {
@@ -137,6 +140,20 @@ class SimTime:
     def now(self) -> float:
         """The time up to which every input has been handled (seconds)."""
         return self._mark
+
+    def instant(self, sender: str, sent_at: float) -> float:
+        """The simulated instant of a message published at ``sent_at`` (no waiting).
+
+        The simulated time of the last ``/clock`` its sender published before it, or the
+        latest simulation time for a sender that publishes no clock. For camera frames,
+        whose rate is measured on these instants, not on their arrivals.
+        """
+        with self._lock:
+            hist = self._clocks.get(sender)
+            if hist is None:
+                return self._latest
+            i = bisect.bisect_right(hist, (sent_at, float("inf"))) - 1
+            return max(hist[i][1] if i >= 0 else hist[0][1], 0.0)
 
     def clock(self, sender: str, sent_at: float, t: float) -> None:
         """A ``/clock`` message: ``t`` simulated seconds, published at ``sent_at`` (wall)."""
@@ -228,6 +245,7 @@ class BusObserver:
             self._sub(c.camera, self._on_frame, 4, Image)
             self._sub(c.detections, self._on_detections, 16, Detections)
             self._sub(c.active_model, self._on_active, 8)
+            self._declared.append(bus.watch_liveliness(self._on_liveliness))
         except BaseException:
             self.close()
             raise
@@ -248,7 +266,12 @@ class BusObserver:
         return self.state.clock()
 
     # -- callbacks (one thread per subscriber) ---------------------------------------------
+    def _on_liveliness(self, node: str, alive: bool) -> None:
+        if node.startswith(UTU_NODE_PREFIX):
+            self.state.utu_node(node, alive)
+
     def _on_clock(self, sample: Sample) -> None:
+        self.state.heard()
         t = getattr(sample.message, "time", None)
         if self.sim is not None and isinstance(t, float | int):
             self.sim.clock(sample.sender, sample.sent_at, float(t))
@@ -291,8 +314,14 @@ class BusObserver:
     def _on_frame(self, sample: Sample) -> None:
         m = sample.message
         assert isinstance(m, Image)
+        # Stamped with its publication (its simulated instant on a sim clock), not its
+        # arrival: frames arrive in bursts, and the frame rate is measured on the stamps.
+        if self.sim is None:
+            stamp = sample.sent_at
+        else:
+            stamp = self.sim.instant(sample.sender, sample.sent_at)
         self.state.take_frame(
-            Frame(sample.topic, m.seq, m.encoding, m.width, m.height, m.data, self.now())
+            Frame(sample.topic, m.seq, m.encoding, m.width, m.height, m.data, stamp)
         )
 
     def _on_detections(self, sample: Sample) -> None:

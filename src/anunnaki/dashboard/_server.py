@@ -225,6 +225,10 @@ class Dashboard:
         topics: Where the observer listens.
         max_rate: Most updates per second sent to a page.
         seed: Ask Utu for its decisions so far when attached.
+        idle: Seconds without any message after which the page's *live* badge says the
+            run has ended (see :meth:`DashboardState.run`).
+        operator_timeout: Seconds an operator action waits for Utu's answer before the
+            page is told it failed (502).
 
     """
 
@@ -242,6 +246,8 @@ class Dashboard:
         topics: ObserverConfig | None = None,
         max_rate: float = 15.0,
         seed: bool = True,
+        idle: float = 5.0,
+        operator_timeout: float = 3.0,
     ) -> None:
         _require()
         if token is not None and not token.strip():
@@ -254,8 +260,10 @@ class Dashboard:
             clock=self._sim.now if self._sim is not None else None,
             clock_kind=clock,
             operator=token is not None,
+            idle=idle,
         )
         self.token = token
+        self.operator_timeout = operator_timeout
         self.topics = topics
         self.seed = seed
         self.observer: BusObserver | None = None
@@ -281,7 +289,7 @@ class Dashboard:
         caller: str,
         tactic: str | None = None,
         reason: str | None = None,
-        timeout: float = 3.0,
+        timeout: float | None = None,
     ) -> dict[str, Any]:
         """An operator action through the observer (see :meth:`BusObserver.operate`).
 
@@ -292,6 +300,8 @@ class Dashboard:
         observer = self.observer
         if observer is None:
             raise OperatorError("the dashboard is not connected to a bus yet")
+        if timeout is None:
+            timeout = self.operator_timeout
         return observer.operate(op, caller=caller, tactic=tactic, reason=reason, timeout=timeout)
 
     @property

@@ -79,7 +79,9 @@ class Frame:
         width: Width in pixels.
         height: Height in pixels.
         data: The encoded image file.
-        t: When it arrived, on the dashboard's clock (seconds).
+        t: Its stamp on the dashboard's clock (seconds): the sender's publication time on
+            the wall clock, its simulated instant on ``clock: sim``. The frame rate is
+            measured on these stamps, never on arrivals (which come in bursts).
 
     """
 
@@ -197,6 +199,9 @@ class DashboardState:
         operator: Whether operator actions are offered (the server was given a token).
         decisions: How many decisions to keep in memory (the knowledge base has them all).
         timeline: How many root-utility changes to keep for the timeline.
+        idle: Seconds (wall clock) without any message after which the run counts as
+            ended (the page's *live* badge goes off); see :meth:`run`.
+        wall: The monotonic clock :attr:`idle` is measured on (``time.monotonic``).
 
     """
 
@@ -211,7 +216,11 @@ class DashboardState:
         operator: bool = False,
         decisions: int = 2000,
         timeline: int = 5000,
+        idle: float = 5.0,
+        wall: Callable[[], float] = time.monotonic,
     ) -> None:
+        if not idle > 0:
+            raise ValueError(f"idle must be > 0 seconds, got {idle!r}")
         self.model = model
         self.tactics = tactics
         self.name = name or model.name
@@ -265,7 +274,60 @@ class DashboardState:
         self._executions_v = 0
         self._timeline: deque[dict[str, Any]] = deque(maxlen=timeline)
         self._timeline_n = 0
+        self._frame_stamps: deque[float] = deque(maxlen=64)
+        self._latest_t: float | None = None  # the latest time any pane shows
+        self.idle = idle
+        self._wall = wall
+        self._heard_at: float | None = None  # wall time of the last message
+        self._utu_nodes: set[str] = set()  # Utu's nodes whose liveliness token is alive
+        self._utu_seen = False
         self._evaluate_own(self.clock())
+
+    # -- the run's liveliness and time ---------------------------------------------------------
+    def _saw(self, t: float | None) -> None:
+        """A message arrived (call with the lock held); ``t`` is the time a pane shows."""
+        self._heard_at = self._wall()
+        if t is not None and math.isfinite(t):
+            self._latest_t = t if self._latest_t is None else max(self._latest_t, t)
+
+    def heard(self) -> None:
+        """A message that changes no pane arrived (``/clock``): the run is being fed."""
+        with self._lock:
+            self._heard_at = self._wall()
+
+    def utu_node(self, node: str, alive: bool) -> None:
+        """Utu's node ``node`` appeared or vanished (its liveliness token)."""
+        with self._lock:
+            if alive:
+                self._utu_seen = True
+                self._utu_nodes.add(node)
+            else:
+                self._utu_nodes.discard(node)
+            self._bump()
+        self._changed()
+
+    def run(self) -> dict[str, Any]:
+        """Whether the run is live: ``{live, state, reason}``.
+
+        ``state`` is ``"waiting"`` before any message, ``"ended"`` once every Utu node seen
+        has withdrawn its liveliness token or no message has arrived for :attr:`idle`
+        seconds (wall clock), else ``"live"``. A run that is fed again is live again.
+        """
+        with self._lock:
+            if self._utu_seen and not self._utu_nodes:
+                return {"live": False, "state": "ended", "reason": "Utu's nodes are gone"}
+            if self._heard_at is None:
+                return {"live": False, "state": "waiting", "reason": "no message yet"}
+            silent = self._wall() - self._heard_at
+            if silent > self.idle:
+                reason = f"no message for {silent:.0f} s"
+                return {"live": False, "state": "ended", "reason": reason}
+            return {"live": True, "state": "live", "reason": None}
+
+    @property
+    def latest_t(self) -> float | None:
+        """The latest time any pane shows (what the header shows), ``None`` before any."""
+        return self._latest_t
 
     # -- change notification --------------------------------------------------------------
     def _bump(self) -> int:
@@ -312,7 +374,9 @@ class DashboardState:
         with self._lock:
             entry = self._topics.get(topic)
             if entry is None:
+                self._heard_at = self._wall()
                 return
+            self._saw(now)
             entry.last = _plain(message)
             entry.last_t = now
             entry.count += 1
@@ -414,6 +478,7 @@ class DashboardState:
                 for nid, (utility, status) in nodes.items():
                     self._set_goal(nid, utility, status)
             a = {**self._analysis, **fields}
+            self._saw(t)
             if t is not None:
                 a["t"] = t
                 self._utu_t = t if self._utu_t is None else max(self._utu_t, t)
@@ -450,6 +515,7 @@ class DashboardState:
             elif key in ("paused", "run_stopped", "warming_up") and isinstance(value, bool):
                 clean[key] = value
         with self._lock:
+            self._heard_at = self._wall()
             a = {**self._analysis, **clean}
             if a == self._analysis:
                 return
@@ -481,6 +547,7 @@ class DashboardState:
         """
         changed = False
         with self._lock:
+            self._heard_at = self._wall()
             for d in decisions:
                 try:
                     parsed = self._decision_row(d)
@@ -498,6 +565,7 @@ class DashboardState:
                 self._decision_n += 1
                 row["n"] = self._decision_n
                 self._decisions.append(row)
+                self._saw(row["t"])
                 self._execution(row)
                 self._decision_flags(row)
                 self._bump()
@@ -586,6 +654,7 @@ class DashboardState:
             "t": self.clock() if t is None else t,
         }
         with self._lock:
+            self._saw(_num(row["t"]))
             self._oracle_heard += 1
             self._oracle[key] = row
             self._oracle_when[key] = self._oracle_heard
@@ -598,6 +667,10 @@ class DashboardState:
     def take_frame(self, frame: Frame) -> None:
         """A camera frame."""
         with self._lock:
+            self._saw(frame.t)
+            if self._frame_stamps and frame.t < self._frame_stamps[-1]:
+                self._frame_stamps.clear()  # the clock went back (a new run): start over
+            self._frame_stamps.append(frame.t)
             self._frames.append(frame)
             self._camera_count += 1
             self._camera_v = self._bump()
@@ -630,6 +703,7 @@ class DashboardState:
             "scores": [_num(x) for x in scores[:MAX_LIST]] if isinstance(scores, list) else [],
         }
         with self._lock:
+            self._heard_at = self._wall()
             self._detections[seq] = row
             while len(self._detections) > 32:
                 del self._detections[min(self._detections)]
@@ -647,6 +721,7 @@ class DashboardState:
         if not isinstance(body, Mapping):
             return
         with self._lock:
+            self._heard_at = self._wall()
             self._active_model = {
                 "lec": _name(body.get("lec")),
                 "model": _name(body.get("model")),
@@ -797,10 +872,34 @@ class DashboardState:
                 "decisions": list(self._decisions),
                 "timeline": list(self._timeline),
                 "utu_t": self._utu_t,
+                "latest_t": self._latest_t,
+                "run": self.run(),
             }
 
+    def frame_rate(self, window: float = 2.0) -> float | None:
+        """Frames a second on the frames' own stamps, over the last ``window`` seconds of them.
+
+        ``(n - 1) / (last stamp - first stamp)`` for the ``n`` frames stamped within
+        ``window`` of the latest: a burst of late arrivals does not raise it. ``None`` with
+        fewer than two frames in the window.
+        """
+        with self._lock:
+            stamps = self._frame_stamps
+            if len(stamps) < 2:
+                return None
+            last = stamps[-1]
+            inside = [t for t in stamps if t >= last - window]
+            span = last - inside[0]
+            if len(inside) < 2 or span <= 0:
+                return None
+            return (len(inside) - 1) / span
+
     def _camera(self, frame: Frame | None) -> dict[str, Any]:
-        out: dict[str, Any] = {"active": self._active_model, "frames": self._camera_count}
+        out: dict[str, Any] = {
+            "active": self._active_model,
+            "frames": self._camera_count,
+            "fps": self.frame_rate(),
+        }
         if frame is not None:
             out["frame"] = {
                 "topic": frame.topic,
@@ -831,7 +930,13 @@ class DashboardState:
         """
         with self._lock:
             now = self.clock()
-            out: dict[str, Any] = {"version": self._version, "now": now, "utu_t": self._utu_t}
+            out: dict[str, Any] = {
+                "version": self._version,
+                "now": now,
+                "utu_t": self._utu_t,
+                "latest_t": self._latest_t,
+                "run": self.run(),
+            }
             if self._version <= since:
                 return out
             goals = {k: [u, s] for k, (u, s, v) in self._goals.items() if v > since}

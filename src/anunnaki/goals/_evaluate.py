@@ -12,7 +12,10 @@ whether it *holds*.
 * An obstacle O obstructing g gives ``u(g) = min(u, 1 - u(O))`` and ``sat(g) = sat and not
   holds(O)`` — unless one of O's resolution goals is satisfied.
 * Unknown propagates by Kleene's rules: ``min(0, ?) = 0`` and ``false and ? = false``,
-  ``max(1, ?) = 1`` and ``true or ? = true``; otherwise the result is unknown.
+  ``max(1, ?) = 1`` and ``true or ? = true``; otherwise the result is unknown. When the known
+  children decide a refined goal's status they decide its utility too, over the known
+  children: a satisfied OR takes their maximum (a lower bound), an unsatisfied AND or
+  obstructed goal their minimum (an upper bound). A known status has a known utility.
 
 The evaluator keeps every attribute value in a flat list of slots. :meth:`Evaluator.observe`
 writes the slots a message feeds and re-evaluates only the nodes that read them and, while
@@ -387,7 +390,9 @@ class Evaluator:
                     s = False
                 elif cs is None and s is True:
                     s = None
-            u = None if u_unknown and lo > 0.0 else lo
+            # Kleene: min(0, ?) = 0. An AND that a known unsatisfied child fails takes the
+            # minimum of the known children (an upper bound), so its utility is known too.
+            u = None if u_unknown and lo > 0.0 and s is not False else lo
         else:
             util, stat = self.util, self.stat
             hi = 0.0
@@ -404,7 +409,10 @@ class Evaluator:
                     s = True
                 elif cs is None and s is False:
                     s = None
-            u = None if u_unknown and hi < 1.0 else hi
+            # Kleene: max(1, ?) = 1. An OR that a known satisfied child satisfies takes the
+            # maximum of the known children (a lower bound: an unknown child could only raise
+            # it), so a satisfied OR never reports an unknown utility.
+            u = None if u_unknown and hi < 1.0 and s is not True else hi
         obstr = self._obstr[i]
         if obstr:
             u, s = self._obstruct(u, s, obstr)
@@ -419,12 +427,12 @@ class Evaluator:
                 continue  # resolved: the obstacle no longer obstructs
             ou = util[o]
             if ou is None:
-                if u is not None and u > 0.0:
-                    u = None
+                if u is not None and u > 0.0 and s is not False:
+                    u = None  # an unsatisfied goal keeps its (upper-bound) utility
             elif u is not None:
                 u = min(u, 1.0 - ou)
-            elif ou >= 1.0:
-                u = 0.0  # Kleene: min(?, 0) = 0
+            elif ou >= 1.0 or stat[o] is True:
+                u = 1.0 - ou  # Kleene: min(?, 0) = 0; a holding obstacle caps it (upper bound)
             os_ = stat[o]
             if os_ is True:
                 s = False

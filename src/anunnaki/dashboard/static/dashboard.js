@@ -8,6 +8,7 @@
   const S = {               // what the page knows
     structure: null, goals: {}, analysis: {}, monitor: {}, values: {}, oracle: [],
     camera: {}, executions: [], decisions: [], timeline: [], now: 0, utu_t: null,
+    latest_t: null, run: null, streaming: false,
     clock: "wall", t0: 0, operator: false, goal_source: "dashboard",
   };
   const dirty = new Set();   // panes to redraw
@@ -56,6 +57,7 @@
       structure: s.structure, goals: s.goals, analysis: s.analysis, values: s.values || {},
       oracle: s.oracle, camera: s.camera, executions: s.executions,
       decisions: s.decisions, timeline: s.timeline, now: s.now, utu_t: s.utu_t,
+      latest_t: s.latest_t === undefined ? null : s.latest_t, run: s.run || null,
       clock: s.clock, t0: s.t0, operator: s.operator, goal_source: s.goal_source,
     });
     S.monitor = {};
@@ -72,6 +74,8 @@
   function applyPatch(p) {
     S.now = p.now;
     if (p.utu_t !== undefined) S.utu_t = p.utu_t;
+    if (p.latest_t !== undefined) S.latest_t = p.latest_t;
+    if (p.run !== undefined) S.run = p.run;
     dirty.add("header"); dirty.add("monitor");
     if (p.goals) {
       for (const [id, v] of Object.entries(p.goals)) { S.goals[id] = v; changedGoals.add(id); }
@@ -208,13 +212,28 @@
 
   // -- panes --------------------------------------------------------------------------------
   function drawHeader() {
-    $("utu-time").textContent = "t = " + fmtT(S.utu_t !== null ? S.utu_t : S.now);
+    // The latest time any pane shows (the server keeps it), so the header never lags them.
+    $("utu-time").textContent = "t = " + fmtT(S.latest_t !== null ? S.latest_t : (S.utu_t !== null ? S.utu_t : S.now));
+    drawConnection();
     const a = S.analysis || {};
     $("flag-paused").classList.toggle("hidden", !a.paused || a.run_stopped);
     $("flag-runstop").classList.toggle("hidden", !a.run_stopped);
     $("flag-warmup").classList.toggle("hidden", !a.warming_up);
     $("readonly").classList.toggle("hidden", S.operator);
     if (S.structure) { $("run-name").textContent = "· " + S.structure.name; document.title = "Anunnaki · " + S.structure.name; }
+  }
+
+  // The badge: "live" while the run is fed, "ended" once Utu's nodes are gone or nothing
+  // has arrived for a while (the server decides: DashboardState.run), "reconnecting…" while
+  // the page's own stream is down.
+  function drawConnection() {
+    const conn = $("connection");
+    if (!S.streaming) { conn.textContent = "reconnecting…"; conn.className = "badge off"; conn.dataset.state = "reconnecting"; return; }
+    const run = S.run || { live: true, state: "live", reason: null };
+    conn.textContent = run.state === "live" ? "live" : run.state;
+    conn.className = "badge " + (run.live ? "on" : "off");
+    conn.dataset.state = run.state;
+    conn.title = run.reason || "";
   }
 
   function drawOperator() {
@@ -326,27 +345,38 @@
     }));
   }
 
-  let frameBusy = false, frameWanted = null, frameTimes = [];
+  // Frames drawn, measured on the frames' own stamps (publication, or simulated instant),
+  // over the last FPS_WINDOW seconds of stamps: arrival bursts do not inflate the rate.
+  const FPS_WINDOW = 2.0;
+  let frameBusy = false, frameWanted = null, drawnStamps = [];
+  function drawnFps(stamp) {
+    if (typeof stamp !== "number") return null;
+    if (drawnStamps.length && stamp < drawnStamps[drawnStamps.length - 1]) drawnStamps = [];
+    drawnStamps.push(stamp);
+    drawnStamps = drawnStamps.filter((t) => t >= stamp - FPS_WINDOW);
+    const span = stamp - drawnStamps[0];
+    return drawnStamps.length >= 2 && span > 0 ? (drawnStamps.length - 1) / span : null;
+  }
   function drawCamera() {
     const c = S.camera || {};
     const act = c.active;
     $("camera-model").textContent = act && act.model ? `active model ${act.model} · domain ${act.domain || "default"}` : "no active model announced";
-    if (c.frame) { frameWanted = c.frame.seq; fetchFrame(); }
+    if (c.frame) { frameWanted = { seq: c.frame.seq, t: c.frame.t }; fetchFrame(); }
   }
   async function fetchFrame() {
     if (frameBusy || frameWanted === null) return;
-    const seq = frameWanted; frameWanted = null; frameBusy = true;
+    const want = frameWanted; frameWanted = null; frameBusy = true;
     try {
-      const r = await fetch("/api/frame/" + seq);
+      const r = await fetch("/api/frame/" + want.seq);
       if (r.ok) {
         const bmp = await createImageBitmap(await r.blob());
-        paintFrame(bmp, seq);
+        paintFrame(bmp, want.seq, want.t);
       }
     } catch (err) { /* a frame that is gone is simply skipped */ }
     frameBusy = false;
-    if (frameWanted !== null && frameWanted !== seq) fetchFrame();
+    if (frameWanted !== null && frameWanted.seq !== want.seq) fetchFrame();
   }
-  function paintFrame(bmp, seq) {
+  function paintFrame(bmp, seq, stamp) {
     const cv = $("camera"), ctx = cv.getContext("2d");
     if (cv.width !== bmp.width || cv.height !== bmp.height) { cv.width = bmp.width; cv.height = bmp.height; }
     ctx.drawImage(bmp, 0, 0);
@@ -366,9 +396,10 @@
       });
     }
     cv.dataset.seq = String(seq); cv.dataset.boxes = String(n);
-    const now = performance.now(); frameTimes.push(now); frameTimes = frameTimes.filter((t) => now - t < 2000);
+    const fps = drawnFps(stamp);
+    cv.dataset.fps = fps === null ? "" : fps.toFixed(3);
     const f = (S.camera || {}).frame || {};
-    $("camera-info").textContent = `frame ${seq} · ${f.width || bmp.width}×${f.height || bmp.height} · ${n} box${n === 1 ? "" : "es"} · ${(frameTimes.length / 2).toFixed(1)} fps · ${S.camera.frames} frames`;
+    $("camera-info").textContent = `frame ${seq} · ${f.width || bmp.width}×${f.height || bmp.height} · ${n} box${n === 1 ? "" : "es"} · ${fps === null ? "–" : fps.toFixed(1)} fps · ${S.camera.frames} frames`;
   }
 
   function drawTimeline() {
@@ -479,11 +510,10 @@
   }
 
   function connect() {
-    const conn = $("connection");
     const es = new EventSource("/api/events");
-    es.addEventListener("snapshot", (ev) => { applySnapshot(JSON.parse(ev.data)); conn.textContent = "live"; conn.className = "badge on"; });
+    es.addEventListener("snapshot", (ev) => { S.streaming = true; applySnapshot(JSON.parse(ev.data)); });
     es.addEventListener("patch", (ev) => applyPatch(JSON.parse(ev.data)));
-    es.onerror = () => { conn.textContent = "reconnecting…"; conn.className = "badge off"; };
+    es.onerror = () => { S.streaming = false; drawConnection(); };
   }
 
   document.addEventListener("DOMContentLoaded", () => {
