@@ -404,3 +404,28 @@ def test_speed_0_means_as_fast_as_possible_as_for_anunnaki_sim() -> None:
     assert "at 1e+04×" in out or "at 10000×" in out
     with pytest.raises(LaunchError, match="speed must be >= 0"):
         run(EXAMPLE, speed=-1)
+
+
+@pytest.mark.slow
+def test_a_node_joins_a_running_launch_as_a_client(tmp_path: Path) -> None:
+    """``anunnaki node NAME --config LAUNCH --mode client``: connects where the launch listens."""
+    from anunnaki.bus._zenoh import free_port
+
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    p = launch_file(
+        tmp_path,
+        "anunnaki: launch/1\nutu:\n  goal_model: ROVER/goals.yaml\n"
+        "  binding: ROVER/binding.yaml\n  tactics: ROVER/tactics.yaml\n"
+        f"knowledge: kb.db\nbus: {{kind: zenoh, listen: ['{endpoint}']}}\n",
+    )
+    with open_bus("zenoh", listen=[endpoint]) as launch_session:  # the running launch's
+        proc = _anunnaki("node", "knowledge", "--config", str(p), "--mode", "client")
+        out = Lines(proc)
+        try:
+            assert out.wait(r"node knowledge ready", timeout=30), out.text
+            reply = launch_session.request(ready_service("knowledge"), {}, timeout=10.0)
+            assert reply.to_body()["ready"] is True and reply.to_body()["pid"] == proc.pid
+            proc.send_signal(signal.SIGTERM)
+            assert proc.wait(timeout=15) == 0, out.text
+        finally:
+            out.close()

@@ -207,8 +207,12 @@ def _on_loopback(endpoint: str) -> str:
     return endpoint.replace("/0.0.0.0:", "/127.0.0.1:").replace("/[::]:", "/[::1]:")
 
 
-def joining_bus(launch: Launch, args: argparse.Namespace) -> BusConfig:
-    """The standalone dashboard's bus: it joins the launch's session, never takes its place.
+def joining_bus(
+    launch: Launch, args: argparse.Namespace, *, role: str = "the dashboard"
+) -> BusConfig:
+    """The bus of a session joining a running launch (the dashboard, a node run by hand).
+
+    It joins the launch's session, never takes its place.
 
     The launch file describes the session of the running launch; the dashboard is one more
     session on that bus. So it never listens where the launch listens (which is taken): it
@@ -228,7 +232,7 @@ def joining_bus(launch: Launch, args: argparse.Namespace) -> BusConfig:
     bus = launch.bus
     if bus.kind == "inproc" and not (args.connect or args.listen or args.mode):
         raise launch.error(
-            "the dashboard on its own needs a bus other processes can reach, but the bus is inproc",
+            f"{role} on its own needs a bus other processes can reach, but the bus is inproc",
             "bus",
             hint="run it with the nodes: anunnaki run CONFIG --dashboard; or set bus: "
             "{kind: zenoh, ...} or give --connect ENDPOINT",
@@ -243,8 +247,7 @@ def joining_bus(launch: Launch, args: argparse.Namespace) -> BusConfig:
         connect = [_on_loopback(ep) for ep in launch_listens] or list(bus.connect)
     if not connect and not bus.multicast_scouting:
         raise launch.error(
-            "the dashboard cannot find the launch's session: the bus names no listen or "
-            "connect endpoint",
+            f"{role} cannot find the launch's session: the bus names no listen or connect endpoint",
             "bus",
             hint="give --connect ENDPOINT (where the launch listens, e.g. tcp/127.0.0.1:7447)",
         )

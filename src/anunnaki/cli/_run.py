@@ -17,33 +17,12 @@ import threading
 from pathlib import Path
 from typing import Any
 
-from pydantic import ValidationError
-
-from anunnaki.bus import BusConfig, BusConfigError, open_bus
+from anunnaki.bus import BusConfig, open_bus
 from anunnaki.cli import _dashboard
 from anunnaki.launch import WritesReports, load_launch, run_launch, signals_to
 from anunnaki.utu import NODE_NAMES, build_node
 
-__all__ = ["add_parser", "bus_with_overrides", "run", "run_node"]
-
-
-def bus_with_overrides(bus: BusConfig, args: argparse.Namespace) -> BusConfig:
-    """The launch's bus with ``--connect``/``--listen``/``--mode`` applied (zenoh if any)."""
-    overrides: dict[str, Any] = {}
-    if args.connect:
-        overrides["connect"] = args.connect
-    if args.listen:
-        overrides["listen"] = args.listen
-    if args.mode:
-        overrides["mode"] = args.mode
-    if overrides:
-        overrides.setdefault("kind", "zenoh")
-    try:
-        return BusConfig.model_validate({**bus.model_dump(exclude_unset=True), **overrides})
-    except ValidationError as exc:
-        first = exc.errors(include_url=False)[0]
-        where = ".".join(str(p) for p in first["loc"]) or "bus"
-        raise BusConfigError(f"bus option {where}: {first['msg']}") from None
+__all__ = ["add_parser", "run", "run_node"]
 
 
 def add_parser(sub: Any) -> None:
@@ -136,8 +115,8 @@ def run(args: argparse.Namespace) -> int:
     if getattr(args, "report", None) or getattr(args, "plot", None):
         if not isinstance(launch.managed, WritesReports):
             print(
-                "error: --report and --plot need a managed system that keeps its run as data "
-                f"('managed: {{kind: sim, …}}' in {args.config})",
+                "error: --report and --plot need a simulated managed system, a kind that keeps "
+                f"its run as data ('managed: {{kind: sim, …}}' in {args.config})",
                 file=sys.stderr,
             )
             return 2
@@ -200,16 +179,6 @@ def run_node(args: argparse.Namespace) -> int:
     utu = launch.utu
     if args.knowledge:
         utu = utu.model_copy(update={"knowledge": str(Path(args.knowledge).resolve())})
-    if args.bus_json:
-        bus_config = BusConfig.model_validate_json(args.bus_json)
-    else:
-        bus_config = bus_with_overrides(launch.bus, args)
-    if bus_config.kind == "inproc":
-        raise launch.error(
-            "a node on its own needs a bus other processes can reach, but the bus is inproc",
-            "bus",
-            hint="set bus: {kind: zenoh, ...} or give --connect ENDPOINT",
-        )
     if args.name != "monitor" and utu.knowledge == ":memory:":
         at = ("knowledge",) if launch.config.knowledge is not None else ("utu", "knowledge")
         raise launch.error(
@@ -217,6 +186,20 @@ def run_node(args: argparse.Namespace) -> int:
             "':memory:' (private to one process)",
             *at,
             hint="name a file: knowledge: run.db, or --knowledge run.db",
+        )
+    if args.bus_json:  # started by a launch: its session, as the launch says
+        bus_config = BusConfig.model_validate_json(args.bus_json)
+    elif args.connect or args.listen or args.mode:
+        # Joining a running launch by hand: its session, never its place (a client does
+        # not listen where the launch listens; a peer listens on a free loopback port).
+        bus_config = _dashboard.joining_bus(launch, args, role=f"the {args.name} node")
+    else:  # the launch file's bus as it is (this node is the session others join)
+        bus_config = launch.bus
+    if bus_config.kind == "inproc":
+        raise launch.error(
+            "a node on its own needs a bus other processes can reach, but the bus is inproc",
+            "bus",
+            hint="set bus: {kind: zenoh, ...} or give --connect ENDPOINT",
         )
     if args.name not in launch.nodes:
         print(f"note: {args.name} is not among the launch file's nodes", file=sys.stderr)
