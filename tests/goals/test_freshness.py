@@ -63,3 +63,25 @@ def test_the_monitor_and_the_goal_model_see_the_same_rate() -> None:
         assert shown == pytest.approx(judged) and 0 < judged < 4.76
     finally:
         m.close()
+
+
+def test_the_dashboard_shows_the_rate_the_goal_model_judges() -> None:
+    from anunnaki.dashboard import DashboardState
+
+    model = load_goal_model(ROVER / "goals.yaml", binding=ROVER / "binding.yaml")
+    state = DashboardState(model, TacticSet(tactics=[]), clock=lambda: 0.0)
+    t = 0.0
+    for k in range(30):
+        t = k * 0.21
+        state.take_input("/rover/ultrasonic", {"range": 3.0}, t=t)
+    m = AutonomicManager(model, TacticSet(tactics=[]), actuator=RecordingActuator())
+    try:
+        for k in range(30):
+            m.feed("/rover/ultrasonic", {"range": 3.0}, t=k * 0.21)
+        m.step(t)
+        m_eval = m.analyzer.evaluator.value("rate(A3)")
+    finally:
+        m.close()
+    rows = {r["topic"]: r for r in state.snapshot()["monitor"]}
+    ev = rows["/rover/ultrasonic"]
+    assert ev["rate"] == pytest.approx(m_eval) and ev["stale"] is False

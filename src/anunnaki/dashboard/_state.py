@@ -24,10 +24,10 @@ import threading
 import time
 from collections import deque
 from collections.abc import Callable, Iterable, Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any, Literal
 
-from anunnaki.goals import Evaluator, GoalModel
+from anunnaki.goals import Evaluator, GoalModel, TopicFreshness
 from anunnaki.tactics import TacticSet
 
 __all__ = ["DashboardState", "Frame"]
@@ -99,28 +99,41 @@ class Frame:
         return "image/png" if self.encoding == "png" else "image/jpeg"
 
 
-@dataclass
 class _Topic:
-    agents: list[str]
-    staleness: float
-    last: Any = None
-    last_t: float | None = None
-    count: int = 0
-    arrivals: deque[float] = field(default_factory=lambda: deque(maxlen=20))
-    version: int = 0
+    """A monitored topic as the monitor pane shows it: last message and freshness.
+
+    Freshness (last arrival, count, rate, staleness) is :class:`anunnaki.goals.TopicFreshness`,
+    the definition the goal model's ``rate(A)`` and Utu's Monitor use.
+    """
+
+    def __init__(self, agents: list[str], staleness: float, window: int) -> None:
+        self.agents = agents
+        self.freshness = TopicFreshness(staleness, window=window)
+        self.last: Any = None
+        self.version = 0
+
+    @property
+    def staleness(self) -> float:
+        """Seconds of silence after which the topic is stale."""
+        return self.freshness.staleness
+
+    @staleness.setter
+    def staleness(self, value: float) -> None:
+        self.freshness.staleness = value
+
+    @property
+    def last_t(self) -> float | None:
+        """When the topic last spoke."""
+        return self.freshness.last
+
+    @property
+    def count(self) -> int:
+        """Messages heard."""
+        return self.freshness.count
 
     def rate(self, now: float) -> float | None:
-        """Messages per second over the recent arrivals; decays through a silence."""
-        if len(self.arrivals) < 2:
-            return None
-        span = self.arrivals[-1] - self.arrivals[0]
-        if span <= 0:
-            return None
-        rate = (len(self.arrivals) - 1) / span
-        silent = now - self.arrivals[-1]
-        if silent > 1.0 / rate:
-            rate = min(rate, 1.0 / silent)
-        return rate
+        """Messages per second at ``now``; decays through a silence."""
+        return self.freshness.rate(now)
 
 
 def _num(value: Any) -> float | None:
@@ -255,7 +268,9 @@ class DashboardState:
             for tb in agent.topics:
                 entry = self._topics.get(tb.topic)
                 if entry is None:
-                    entry = self._topics[tb.topic] = _Topic([], agent.staleness or staleness)
+                    entry = self._topics[tb.topic] = _Topic(
+                        [], agent.staleness or staleness, model.spec.rate_window
+                    )
                 entry.agents.append(agent.id)
                 entry.staleness = min(entry.staleness, agent.staleness or staleness)
         self._oracle: dict[str, dict[str, Any]] = {}
@@ -378,9 +393,7 @@ class DashboardState:
                 return
             self._saw(now)
             entry.last = _plain(message)
-            entry.last_t = now
-            entry.count += 1
-            entry.arrivals.append(now)
+            entry.freshness.arrive(now)
             entry.version = self._bump()
             try:
                 self._evaluator.observe(topic, message, now)
@@ -836,6 +849,7 @@ class DashboardState:
                     "count": e.count,
                     "rate": e.rate(now),
                     "staleness": e.staleness,
+                    "stale": e.freshness.stale(now),
                 }
             )
         return rows
