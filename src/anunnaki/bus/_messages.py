@@ -32,7 +32,7 @@ from __future__ import annotations
 
 import json
 import struct
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import Any, ClassVar, Literal, Self, TypeVar
 
@@ -537,28 +537,22 @@ def _reject_constant(name: str) -> Any:
 _DECODER = json.JSONDecoder(parse_constant=_reject_constant)
 
 
-def decode_envelope(data: bytes | bytearray | memoryview) -> Envelope:
-    """Decode wire bytes into an envelope, strictly.
-
-    Raises:
-        MalformedMessage: Undecodable bytes, bad envelope, unknown type, wrong version or a
-            body that fails validation; the message says which.
-
-    """
-    data = bytes(data)
+def _split_frame(data: bytes) -> tuple[bytes, bytes | None]:
+    """The JSON header and the binary blob (``None`` for a pure-JSON envelope)."""
     if not data:
         raise MalformedMessage("empty payload")
-    blob: bytes | None = None
     if data[:1] == b"{":
-        header_bytes = data
-    else:
-        if len(data) < 4:
-            raise MalformedMessage("payload too short for a binary frame")
-        (n,) = struct.unpack(">I", data[:4])
-        if n >= MAX_HEADER or 4 + n > len(data):
-            raise MalformedMessage(f"binary frame header length {n} is out of bounds")
-        header_bytes = data[4 : 4 + n]
-        blob = data[4 + n :]
+        return data, None
+    if len(data) < 4:
+        raise MalformedMessage("payload too short for a binary frame")
+    (n,) = struct.unpack(">I", data[:4])
+    if n >= MAX_HEADER or 4 + n > len(data):
+        raise MalformedMessage(f"binary frame header length {n} is out of bounds")
+    return data[4 : 4 + n], data[4 + n :]
+
+
+def _header(header_bytes: bytes) -> dict[str, Any]:
+    """The envelope's header, parsed and checked key by key."""
     try:
         header = _DECODER.decode(header_bytes.decode("utf-8"))
     except (UnicodeDecodeError, ValueError) as exc:
@@ -570,26 +564,41 @@ def decode_envelope(data: bytes | bytearray | memoryview) -> Envelope:
         missing = sorted(_ENVELOPE_KEYS - keys)
         extra = sorted(keys - _ENVELOPE_KEYS)
         raise MalformedMessage(f"bad envelope keys (missing {missing}, unexpected {extra})")
-    v, name, t, seq, sender, body = (
-        header["v"],
-        header["type"],
-        header["t"],
-        header["seq"],
-        header["sender"],
-        header["body"],
-    )
-    if not isinstance(v, int) or isinstance(v, bool):
-        raise MalformedMessage(f"envelope 'v' must be an integer, got {v!r}")
-    if not isinstance(name, str):
-        raise MalformedMessage(f"envelope 'type' must be a string, got {name!r}")
-    if not isinstance(t, int | float) or isinstance(t, bool):
-        raise MalformedMessage(f"envelope 't' must be a number, got {t!r}")
-    if not isinstance(seq, int) or isinstance(seq, bool) or seq < 0:
-        raise MalformedMessage(f"envelope 'seq' must be a non-negative integer, got {seq!r}")
-    if not isinstance(sender, str):
-        raise MalformedMessage(f"envelope 'sender' must be a string, got {sender!r}")
-    if not isinstance(body, dict):
-        raise MalformedMessage("envelope 'body' must be a JSON object")
+    for key, ok, what in _HEADER_RULES:
+        if not ok(header[key]):
+            got = header[key]
+            raise MalformedMessage(
+                f"envelope '{key}' must be {what}" + ("" if key == "body" else f", got {got!r}")
+            )
+    return header
+
+
+def _is_int(v: Any) -> bool:
+    return isinstance(v, int) and not isinstance(v, bool)
+
+
+#: ``(key, check, what it must be)`` for each envelope field.
+_HEADER_RULES: tuple[tuple[str, Callable[[Any], bool], str], ...] = (
+    ("v", _is_int, "an integer"),
+    ("type", lambda v: isinstance(v, str), "a string"),
+    ("t", lambda v: isinstance(v, int | float) and not isinstance(v, bool), "a number"),
+    ("seq", lambda v: _is_int(v) and v >= 0, "a non-negative integer"),
+    ("sender", lambda v: isinstance(v, str), "a string"),
+    ("body", lambda v: isinstance(v, dict), "a JSON object"),
+)
+
+
+def decode_envelope(data: bytes | bytearray | memoryview) -> Envelope:
+    """Decode wire bytes into an envelope, strictly.
+
+    Raises:
+        MalformedMessage: Undecodable bytes, bad envelope, unknown type, wrong version or a
+            body that fails validation; the message says which.
+
+    """
+    header_bytes, blob = _split_frame(bytes(data))
+    header = _header(header_bytes)
+    v, name, body = header["v"], header["type"], header["body"]
     cls = _REGISTRY.get(name)
     if cls is None:
         raise MalformedMessage(f"unknown message type {name!r}")
@@ -608,4 +617,6 @@ def decode_envelope(data: bytes | bytearray | memoryview) -> Envelope:
         first = exc.errors(include_url=False)[0]
         where = ".".join(str(p) for p in first["loc"]) or "body"
         raise MalformedMessage(f"invalid {name} body: {where}: {first['msg']}") from None
-    return Envelope(message=message, t=float(t), seq=seq, sender=sender)
+    return Envelope(
+        message=message, t=float(header["t"]), seq=header["seq"], sender=header["sender"]
+    )

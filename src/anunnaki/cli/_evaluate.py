@@ -98,7 +98,7 @@ def render_tree(ev: Evaluator) -> Tree:
     return root
 
 
-def run(args: argparse.Namespace) -> int:
+def run(args: argparse.Namespace) -> int:  # noqa: C901, PLR0915
     """Replay the trace; exit 0 when done (the goal statuses are the output, not the code)."""
     model: GoalModel = load_goal_model(args.model, args.binding)
     ev = Evaluator(model)

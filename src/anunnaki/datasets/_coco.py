@@ -56,7 +56,7 @@ def _load_json(path: Path) -> Any:
         raise DatasetError("not UTF-8 text", path=path, hint="save it as UTF-8 JSON") from None
 
 
-def read_coco(
+def read_coco(  # noqa: C901, PLR0912, PLR0915 - over the limits since before issue 11
     path: str | Path, *, images_dir: str | Path | None = None, cache: bool = False
 ) -> Dataset:
     """Read a COCO detection file into a :class:`Dataset`.

@@ -354,7 +354,7 @@ class Evaluator:
             u = 1.0 - u
         return u
 
-    def _compute(self, i: int) -> tuple[float | None, Status]:
+    def _compute(self, i: int) -> tuple[float | None, Status]:  # noqa: C901, PLR0912
         k = self._kind[i]
         u: float | None
         s: Status
@@ -684,7 +684,7 @@ class Evaluator:
                 out[f"rate({agent})"] = self.value(f"rate({agent})")
         return out
 
-    def _explain(self, i: int, depth: int) -> Explanation:
+    def _explain(self, i: int, depth: int) -> Explanation:  # noqa: C901, PLR0912
         nid = self.ids[i]
         k = self._kind[i]
         u, s = self.util[i], self.stat[i]

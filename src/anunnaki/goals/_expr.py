@@ -287,7 +287,7 @@ class _Compiler:
 
         return cmp_lit
 
-    def compile(self, node: Tree[Token] | Token) -> Fn:
+    def compile(self, node: Tree[Token] | Token) -> Fn:  # noqa: C901
         if isinstance(node, Token):  # pragma: no cover - grammar never yields bare tokens
             raise AssertionError(node)
         rule = node.data
@@ -504,7 +504,7 @@ class _Checker:
     def fail(self, message: str, hint: str | None = None) -> ExpressionError:
         return ExpressionError(f"{message} in expression '{self.text}'", hint=hint, **self.where)
 
-    def check(self, node: Tree[Token], depth: int = 0) -> ValueType:
+    def check(self, node: Tree[Token], depth: int = 0) -> ValueType:  # noqa: C901
         self.nodes += 1
         if depth > MAX_DEPTH or self.nodes > MAX_NODES:
             raise self.fail(

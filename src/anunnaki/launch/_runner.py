@@ -401,7 +401,7 @@ class _Runner:
             self.running.finish(printer.decisions, ran)
 
     # -- one process
-    def _run_here(self) -> RunResult:
+    def _run_here(self) -> RunResult:  # noqa: C901 - over the limits since before issue 11
         launch = self.launch
         clock_t0 = 0.0
         bus = open_bus(launch.bus, name=f"{launch.name}-launch")

@@ -385,7 +385,7 @@ def _initial(
     return det
 
 
-def train_detector(
+def train_detector(  # noqa: C901, PLR0912, PLR0915 - over the limits since before issue 11
     train: Dataset,
     val: Dataset,
     *,

@@ -295,7 +295,7 @@ def _spaced(
     return None
 
 
-def layout_placements(platform: Platform, layout: int) -> list[Placement]:
+def layout_placements(platform: Platform, layout: int) -> list[Placement]:  # noqa: C901, PLR0912
     """The objects of scene ``layout`` for ``platform`` (deterministic in ``layout``).
 
     Rover: 5-8 pedestrians, 3-6 deer and 8-13 distractors along a 44 m route (x in

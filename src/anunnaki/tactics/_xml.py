@@ -501,7 +501,7 @@ def _goal(parent: ET.Element, goal: GoalState) -> None:
     ET.SubElement(parent, "goal", id=goal.goal, state=goal.state)
 
 
-def _tactic(parent: ET.Element, tactic: Tactic) -> None:
+def _tactic(parent: ET.Element, tactic: Tactic) -> None:  # noqa: C901, PLR0912
     element = ET.SubElement(parent, "tactic", name=tactic.name)
     if tactic.priority:
         element.set("priority", str(tactic.priority))
