@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 import pytest
 from hypothesis import given, settings
@@ -239,3 +241,29 @@ def test_ignore_boxes_only_ever_remove_false_positives(
     best = choose_threshold([preds], [(boxes, labels, ignore)])
     best_f1 = f1_at_iou([preds], [(boxes, labels, ignore)], score_threshold=best).f1
     assert best_f1 >= with_ignore.f1 - 1e-12
+
+
+def test_evaluate_detector_matches_classes_by_name_not_index() -> None:
+    from anunnaki.datasets import Dataset
+    from anunnaki.lec import DetectionResult, DetectorError, evaluate_detector
+
+    image = np.zeros((32, 32, 3), np.uint8)
+    data = Dataset.from_arrays(
+        [image], [np.array([[2, 2, 12, 12]], np.float32)], [np.array([1])], ("deer", "pedestrian")
+    )
+
+    class Det:
+        model_id, domain, score_threshold = "d", "default", 0.5
+
+        def __init__(self, classes: tuple[str, ...]) -> None:
+            self.classes = classes
+
+        def detect(self, images: Any) -> list[DetectionResult]:
+            box = np.array([[2, 2, 12, 12]], np.float32)  # a pedestrian, by its own index 0
+            label = self.classes.index("pedestrian")
+            return [DetectionResult(box, np.array([label]), np.array([0.9], np.float32))]
+
+    assert evaluate_detector(Det(("pedestrian", "deer")), data).f1 == 1.0  # reordered: mapped
+    assert evaluate_detector(Det(("deer", "pedestrian")), data).f1 == 1.0
+    with pytest.raises(DetectorError, match=r"\['pedestrian', 'car'\] are not the dataset's"):
+        evaluate_detector(Det(("pedestrian", "car")), data)

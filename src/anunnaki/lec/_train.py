@@ -343,6 +343,13 @@ def evaluate_detector(
         iou: IoU needed for a match.
         batch_size: Images per ``detect`` call.
 
+    What it reads of the detector: ``classes`` (matched to the dataset's by name),
+    ``detect(images)`` and, if present, ``score_threshold``.
+
+    Raises:
+        DetectorError: The detector's class names are not the dataset's, or both ``params``
+            and ``strength`` were given.
+
     """
     transform: Callable[[int, Image], Image] | None = None
     if phenomenon is not None:
@@ -358,11 +365,35 @@ def evaluate_detector(
         def transform(i: int, image: Image) -> Image:
             return phen.apply(image, chosen, seed=seed + i)
 
+    remap = class_map(det, data)
     thr = score_threshold
     if thr is None:
         thr = float(getattr(det, "score_threshold", 0.0))
     preds = predict(det, data, batch_size=batch_size, transform=transform)
+    if remap is not None:
+        preds = [DetectionResult(p.boxes, remap[p.labels], p.scores) for p in preds]
     return f1_at_iou(preds, data.truths(), iou=iou, score_threshold=thr)
+
+
+def class_map(det: Detector, data: Dataset) -> npt.NDArray[np.int64] | None:
+    """How the detector's class indices map onto the dataset's, by name (``None``: the same).
+
+    The same names in another order are mapped; a class one side has and the other has not
+    is an error naming both lists (matching by index would score apples as pears).
+
+    Raises:
+        DetectorError: The detector's and the dataset's class names differ.
+
+    """
+    mine, theirs = tuple(det.classes), tuple(data.classes)
+    if mine == theirs:
+        return None
+    if sorted(mine) != sorted(theirs) or len(set(mine)) != len(mine):
+        raise DetectorError(
+            f"the detector's classes {list(mine)} are not the dataset's {list(theirs)}; "
+            "evaluate on a dataset with the same class names (their order may differ)"
+        )
+    return np.asarray([theirs.index(name) for name in mine], dtype=np.int64)
 
 
 def _initial(
