@@ -49,27 +49,29 @@ from pathlib import Path
 from anunnaki._safeyaml import read_text_limited
 from anunnaki.errors import ModelFileError
 from anunnaki.tactics._schema import (
+    Action,
+    ChangeModeAction,
+    ExpressionCondition,
+    GoalState,
+    NotifyAction,
+    Precondition,
+    PublishAction,
+    RequestAction,
+    SwapModelAction,
+    Tactic,
+    TacticSet,
+)
+from anunnaki.tactics._values import (
     ACTION_TYPES,
     FORMAT_TAG,
     GOAL_STATES,
     MAX_DEPTH,
     MAX_PAYLOAD_DEPTH,
     NOTIFY_CHANNELS,
-    Action,
-    ChangeModeAction,
     EndpointReference,
-    ExpressionCondition,
     ExpressionReference,
     GoalReference,
-    GoalState,
-    NotifyAction,
-    Precondition,
-    PublishAction,
-    RequestAction,
     SourceRef,
-    SwapModelAction,
-    Tactic,
-    TacticSet,
 )
 from anunnaki.tactics._xml import FIELD_TYPES, dump_tactics_xml, parse_tactics_xml
 from anunnaki.tactics._yaml import dump_tactics_yaml, parse_tactics_yaml

@@ -7,7 +7,7 @@ each start tag is read. ElementTree keeps no line numbers, so the parser feeds a
 builder that asks the underlying expat parser for ``CurrentLineNumber`` at every start tag.
 
 The tree is then read into the same plain data and line map as the YAML form, and validated by
-:func:`~anunnaki.tactics._schema.build_tactic_set`: both forms report the same problems the
+:func:`~anunnaki.tactics._load.build_tactic_set`: both forms report the same problems the
 same way. Payload fields are typed (``str``, ``int``, ``float``, ``bool``, ``json``); ``json``
 is read with :func:`json.loads`, never evaluated.
 """
@@ -30,10 +30,10 @@ from pydantic import JsonValue
 
 from anunnaki._safeyaml import MAX_BYTES, LineMap, element_path
 from anunnaki.errors import ModelFileError
+from anunnaki.tactics._load import (
+    build_tactic_set,
+)
 from anunnaki.tactics._schema import (
-    ACTION_HINT,
-    ACTION_TYPES,
-    MAX_DEPTH,
     ChangeModeAction,
     ExpressionCondition,
     GoalState,
@@ -43,7 +43,11 @@ from anunnaki.tactics._schema import (
     SwapModelAction,
     Tactic,
     TacticSet,
-    build_tactic_set,
+)
+from anunnaki.tactics._values import (
+    ACTION_HINT,
+    ACTION_TYPES,
+    MAX_DEPTH,
     tactic_element,
 )
 

@@ -14,12 +14,16 @@ import yaml
 
 from anunnaki._safeyaml import load_yaml
 from anunnaki.errors import ModelFileError
+from anunnaki.tactics._load import (
+    build_tactic_set,
+)
 from anunnaki.tactics._schema import (
-    FORMAT_TAG,
-    MAX_DEPTH,
     Tactic,
     TacticSet,
-    build_tactic_set,
+)
+from anunnaki.tactics._values import (
+    FORMAT_TAG,
+    MAX_DEPTH,
 )
 
 __all__ = ["dump_tactics_yaml", "parse_tactics_yaml", "tactic_set_to_data"]
