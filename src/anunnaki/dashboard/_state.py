@@ -99,7 +99,7 @@ class Frame:
         return "image/png" if self.encoding == "png" else "image/jpeg"
 
 
-class _Topic:
+class _Topic(TopicFreshness):
     """A monitored topic as the monitor pane shows it: last message and freshness.
 
     Freshness (last arrival, count, rate, staleness) is :class:`anunnaki.goals.TopicFreshness`,
@@ -107,33 +107,10 @@ class _Topic:
     """
 
     def __init__(self, agents: list[str], staleness: float, window: int) -> None:
+        super().__init__(staleness, window=window)
         self.agents = agents
-        self.freshness = TopicFreshness(staleness, window=window)
-        self.last: Any = None
+        self.last_msg: Any = None
         self.version = 0
-
-    @property
-    def staleness(self) -> float:
-        """Seconds of silence after which the topic is stale."""
-        return self.freshness.staleness
-
-    @staleness.setter
-    def staleness(self, value: float) -> None:
-        self.freshness.staleness = value
-
-    @property
-    def last_t(self) -> float | None:
-        """When the topic last spoke."""
-        return self.freshness.last
-
-    @property
-    def count(self) -> int:
-        """Messages heard."""
-        return self.freshness.count
-
-    def rate(self, now: float) -> float | None:
-        """Messages per second at ``now``; decays through a silence."""
-        return self.freshness.rate(now)
 
 
 def _num(value: Any) -> float | None:
@@ -392,8 +369,8 @@ class DashboardState:
                 self._heard_at = self._wall()
                 return
             self._saw(now)
-            entry.last = _plain(message)
-            entry.freshness.arrive(now)
+            entry.last_msg = _plain(message)
+            entry.arrive(now)
             entry.version = self._bump()
             try:
                 self._evaluator.observe(topic, message, now)
@@ -844,12 +821,12 @@ class DashboardState:
                 {
                     "topic": topic,
                     "agents": e.agents,
-                    "last": e.last,
-                    "last_t": e.last_t,
+                    "last": e.last_msg,
+                    "last_t": e.last,
                     "count": e.count,
                     "rate": e.rate(now),
                     "staleness": e.staleness,
-                    "stale": e.freshness.stale(now),
+                    "stale": e.stale(now),
                 }
             )
         return rows

@@ -57,8 +57,6 @@ from anunnaki.utu._stages import (
     KnowledgeStage,
     MonitorStage,
     PlanStage,
-    operator_entry,
-    reloaded_parts,
 )
 
 __all__ = [
@@ -413,19 +411,13 @@ class AutonomicManager:
         return lambda message: self._op_service(op, message)
 
     def _op_service(self, op: str, message: Any) -> dict[str, Any]:
-        entry = operator_entry(op, message)
-        if "error" in entry:
-            return {"ok": False, "error": entry["error"]}
-        reply: dict[str, Any] = {"ok": True, "queued": op, "caller": entry["caller"]}
-        if op == "reload":
-            try:  # checked now, so the caller hears of a broken file at once
-                parts = reloaded_parts(self.analyze_stage.parts, entry)
-            except (AnunnakiError, OSError) as exc:
-                # Refused now, and through the cycle too, so the log says it (and replays it).
-                self._enqueue_op({**entry, "refused": str(exc)})
-                return {"ok": False, "status": "refused", "error": str(exc)}
-            entry["sources"] = {k: [p, text] for k, (p, text) in parts.sources.items()}
-            reply["status"] = "accepted"
+        entry, reply = self.monitor_stage.request(op, message)
+        if entry is None:
+            return reply
+        if self.bus is not None:  # a reload may watch new topics
+            for topic in self.monitor_stage.topics:
+                if topic not in self._pull:
+                    self._subscribe_topic(topic)
         self._enqueue_op(entry)
         return reply
 
@@ -551,25 +543,17 @@ class AutonomicManager:
         manager: use :meth:`request_reload` or ``/utu/reload`` there.
         """
         files = {"goal_model": goal_model, "binding": binding, "tactics": tactics}
-        t = self.now if now is None else now
-        entry: dict[str, Any] = {"op": "reload", "caller": "api"}
-        entry.update({k: v for k, v in files.items() if v})
-        try:
-            parts = reloaded_parts(self.analyze_stage.parts, entry)
-        except (AnunnakiError, OSError) as exc:
-            self.knowledge.record_decision(t, "reload_requested", None, caller="api")
-            self.knowledge.record_decision(t, "reload_refused", None, error=str(exc))
-            self.knowledge.flush()
-            log.warning("reload refused, the old model stays active: %s", exc)
-            return [str(exc)]
-        entry["sources"] = {k: [p, text] for k, (p, text) in parts.sources.items()}
+        request = {"caller": "api", **{k: v for k, v in files.items() if v}}
+        entry, reply = self.monitor_stage.request("reload", request)
+        if entry is None:
+            return [str(reply["error"])]
         self._enqueue_op(entry)
-        self.step(t)
+        self.step(self.now if now is None else now)
         if self.bus is not None:
-            for topic in self.analyze_stage.monitor.topics:
+            for topic in self.monitor_stage.topics:
                 if topic not in self._pull:
                     self._subscribe_topic(topic)
-        return []
+        return [] if reply["ok"] else [str(reply["error"])]
 
     # -- live ----------------------------------------------------------------------------------
     def spin(

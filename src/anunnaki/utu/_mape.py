@@ -50,7 +50,7 @@ TacticState = Literal["idle", "pending", "queued", "running", "awaiting", "rejec
 
 
 # -- Monitor -------------------------------------------------------------------------------
-class TopicStats:
+class TopicStats(TopicFreshness):
     """What the Monitor knows of one topic: its freshness, last value and recent messages.
 
     Freshness (last arrival, count, rate, staleness) is :class:`~anunnaki.goals.TopicFreshness`,
@@ -58,44 +58,17 @@ class TopicStats:
     """
 
     def __init__(self, topic: str, agents: list[str], staleness: float, window: int) -> None:
+        super().__init__(staleness, window=window)
         self.topic = topic
         self.agents = agents
-        self.freshness = TopicFreshness(staleness, window=window)
         self.last_msg: dict[str, Any] | None = None
         self.recent: deque[tuple[float, dict[str, Any]]] = deque(maxlen=64)
 
-    @property
-    def staleness(self) -> float:
-        """Seconds of silence after which the topic is stale."""
-        return self.freshness.staleness
-
-    @staleness.setter
-    def staleness(self, value: float) -> None:
-        self.freshness.staleness = value
-
-    @property
-    def last_t(self) -> float | None:
-        """When the topic last spoke (``None``: never)."""
-        return self.freshness.last
-
-    @property
-    def count(self) -> int:
-        """Messages taken."""
-        return self.freshness.count
-
     def take(self, t: float, body: dict[str, Any]) -> None:
         """Record one message arriving at ``t``."""
-        self.freshness.arrive(t)
+        self.arrive(t)
         self.last_msg = body
         self.recent.append((t, body))
-
-    def rate(self, now: float) -> float | None:
-        """Message rate (Hz) at ``now``."""
-        return self.freshness.rate(now)
-
-    def stale(self, now: float) -> bool:
-        """Whether the topic has been silent past its deadline (or never spoke)."""
-        return self.freshness.stale(now)
 
 
 class Monitor:
@@ -143,7 +116,7 @@ class Monitor:
             name: {
                 "agents": ts.agents,
                 "last": ts.last_msg,
-                "last_t": ts.last_t,
+                "last_t": ts.last,
                 "count": ts.count,
                 "rate": ts.rate(now),
                 "stale": ts.stale(now),

@@ -82,8 +82,6 @@ from anunnaki.utu._stages import (
     MonitorStage,
     PlanStage,
     decision_dict,
-    operator_entry,
-    reloaded_parts,
 )
 
 __all__ = [
@@ -301,24 +299,13 @@ class MonitorNode(UtuNode):
         return lambda message: self._op_service(op, message)
 
     def _op_service(self, op: str, message: Any) -> dict[str, Any]:
-        entry = operator_entry(op, message)
-        if "error" in entry:
-            return {"ok": False, "error": entry["error"]}
-        reply: dict[str, Any] = {"ok": True, "queued": op, "caller": entry["caller"]}
-        if op == "reload":
-            try:  # checked now, so the caller hears of a broken file at once
-                parts = reloaded_parts(self.stage.parts, entry)
-            except (AnunnakiError, OSError) as exc:
-                # Refused now, and through the cycle too, so the log says it (and replays it).
-                self._enqueue_op({**entry, "refused": str(exc)})
-                return {"ok": False, "status": "refused", "error": str(exc)}
-            entry["sources"] = {k: [p, text] for k, (p, text) in parts.sources.items()}
-            self.stage.set_parts(parts)
-            for topic in self.stage.topics:
-                if topic not in self._subs:
-                    self._subs[topic] = self.pull(topic, queue=self.config.queue)
-            reply["status"] = "accepted"
-        elif op == "run_stop":
+        entry, reply = self.stage.request(op, message)
+        if entry is None:
+            return reply
+        for topic in self.stage.topics:  # a reload may watch new topics
+            if topic not in self._subs:
+                self._subs[topic] = self.pull(topic, queue=self.config.queue)
+        if op == "run_stop" and reply["ok"]:
             self.run_stopped = True
         elif op == "resume":
             self.run_stopped = False

@@ -200,6 +200,32 @@ class MonitorStage:
                     topics.append(tb.topic)
         self.topics = topics
 
+    def request(self, op: str, message: Any) -> tuple[dict[str, Any] | None, dict[str, Any]]:
+        """An operator service request: ``(op entry to queue or None, the reply)``.
+
+        A reload is checked now, so the caller hears of a broken file at once: refused, it
+        still enters the cycle (marked ``refused``) so the decision log says it and a replay
+        repeats it; accepted, it carries the files' texts and this monitor watches the new
+        model's topics from now on.
+        """
+        entry = operator_entry(op, message)
+        if "error" in entry:
+            return None, {"ok": False, "error": entry["error"]}
+        reply: dict[str, Any] = {"ok": True, "queued": op, "caller": entry["caller"]}
+        if op == "reload":
+            try:
+                parts = reloaded_parts(self.parts, entry)
+            except (AnunnakiError, OSError) as exc:
+                return {**entry, "refused": str(exc)}, {
+                    "ok": False,
+                    "status": "refused",
+                    "error": str(exc),
+                }
+            entry["sources"] = {k: [p, text] for k, (p, text) in parts.sources.items()}
+            self.set_parts(parts)
+            reply["status"] = "accepted"
+        return entry, reply
+
     def batch(
         self,
         t: float,
