@@ -175,6 +175,7 @@ class SimulatedSystem:
         self._lock = threading.Condition()
         self._last_seq = -1
         self._truth: dict[int, tuple[float, np.ndarray, list[str], np.ndarray]] = {}
+        self._early: dict[int, Detections] = {}  # detections ahead of their truth
         self._frames: list[tuple[float, int, int, int, str]] = []  # t, tp, fp, fn, model
         self._assessments: list[tuple[float, int]] = []
         self._collisions: list[float] = []
@@ -255,6 +256,10 @@ class SimulatedSystem:
             log.warning("sim: a ground-truth message without seq/boxes/labels; skipped")
             return
         with self._lock:
+            early = self._early.pop(seq, None)
+            if early is not None:  # its detections came first (another subscriber's thread)
+                self._score(early, (t, boxes, labels, ignore))
+                return
             self._truth[seq] = (t, boxes, labels, ignore)
             while len(self._truth) > 512:
                 del self._truth[min(self._truth)]
@@ -266,10 +271,19 @@ class SimulatedSystem:
         with self._lock:
             truth = self._truth.pop(det.frame_seq, None)
             if truth is not None:
-                tp, fp, fn = _match(det, truth)
-                self._frames.append((truth[0], tp, fp, fn, det.model_id))
+                self._score(det, truth)
+            else:  # the frame's ground truth is still on its way: score it when it comes
+                self._early[det.frame_seq] = det
+                while len(self._early) > 512:
+                    del self._early[min(self._early)]
             self._last_seq = max(self._last_seq, det.frame_seq)
             self._lock.notify_all()
+
+    def _score(
+        self, det: Detections, truth: tuple[float, np.ndarray, list[str], np.ndarray]
+    ) -> None:
+        tp, fp, fn = _match(det, truth)
+        self._frames.append((truth[0], tp, fp, fn, det.model_id))
 
     def _on_assessment(self, sample: Sample) -> None:
         message = sample.message
