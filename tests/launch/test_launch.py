@@ -400,7 +400,10 @@ def test_docs_show_the_example_launch_file_as_it_is() -> None:
 
 def test_speed_0_means_as_fast_as_possible_as_for_anunnaki_sim() -> None:
     result, out = run(EXAMPLE, speed=0)
-    assert_the_rover_story(result, out)
+    assert result.exit_code == 0 and result.reason == "trace ended", out
+    # The hand-over at 25 s; later tactics depend on how fast the rover's buzzer status
+    # comes back at this speed (lockstep waits for Utu, not for the rover's own threads).
+    assert story(result)[:5] == ROVER_STORY[:5], out
     assert "at 1e+04×" in out or "at 10000×" in out
     with pytest.raises(LaunchError, match="speed must be >= 0"):
         run(EXAMPLE, speed=-1)
