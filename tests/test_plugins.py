@@ -5,7 +5,7 @@ from __future__ import annotations
 import abc
 import logging
 from importlib.metadata import EntryPoint
-from typing import Any
+from typing import Any, Protocol, runtime_checkable
 
 import pytest
 
@@ -53,7 +53,7 @@ def test_unknown_name_lists_the_valid_ones_in_the_slot_error() -> None:
     reg.register(Widget)
     with pytest.raises(SlotError, match=r"unknown widget 'wodget'; valid names: widget \(try"):
         reg.create("wodget")
-    with pytest.raises(SlotError, match="expected a widget name or instance, got int"):
+    with pytest.raises(SlotError, match="expected a widget name or a Widget instance, got int"):
         reg.create(3)  # type: ignore[arg-type]
 
 
@@ -143,3 +143,57 @@ def test_entry_points_load_lazily_and_broken_ones_are_skipped(
     assert "skipping widget entry point 'clash'" in caplog.text
     reg.names()
     assert calls == ["anunnaki.test"]  # once
+
+
+def test_combined_names_use_the_slots_combine_hook() -> None:
+    built: list[list[str]] = []
+
+    def combine(parts: list[str]) -> Widget:
+        built.append(parts)
+        return Widget(size=sum(reg.create(p).size for p in parts))
+
+    reg: Registry[Widget] = Registry("widget", kind=Widget, combine=combine, separator="+")
+    reg.register(Widget)
+    reg.register(Gadget)
+    assert reg.create(" widget + gadget ").size == 2
+    assert built == [["widget", "gadget"]]
+    assert "widget+gadget" in reg and "widget+nope" not in reg
+    with pytest.raises(PluginError, match="unknown widget 'nope'"):
+        reg.create("widget+nope")
+    with pytest.raises(PluginError, match=r"options \['size'\] apply to a single widget"):
+        reg.create("widget+gadget", size=3)
+    plain: Registry[Widget] = Registry("widget")
+    plain.register(Widget)
+    assert "widget+widget" not in plain  # no hook: '+' is just an unknown name
+
+
+def test_options_are_checked_where_they_apply() -> None:
+    reg: Registry[Widget] = Registry("widget", kind=Widget)
+    reg.register(Widget)
+    with pytest.raises(PluginError, match=r"widget 'widget': bad options \['colour'\]"):
+        reg.create("widget", colour="red")
+    with pytest.raises(PluginError, match="apply when a widget is built by name"):
+        reg.create(Widget(), size=2)
+
+
+def test_a_class_is_not_an_instance_of_a_protocol_kind() -> None:
+    @runtime_checkable
+    class Sized(Protocol):
+        name: str
+
+        def size_of(self) -> int: ...
+
+    class Box:
+        name = "box"
+
+        def size_of(self) -> int:
+            return 1
+
+    reg: Registry[Sized] = Registry("sized thing", kind=Sized)
+    reg.register(Box)
+    box = Box()
+    assert reg.create(box) is box
+    with pytest.raises(
+        PluginError, match="expected a sized thing name or a Sized instance, got the class Box"
+    ):
+        reg.create(Box)  # type: ignore[arg-type]

@@ -84,6 +84,9 @@ class Registry(Generic[T]):
         error: The exception type raised (a subclass of :class:`AnunnakiError`).
         hint: Appended to the unknown-name message (e.g. how to combine names).
         logger: Where skipped entry points are reported (the slot's own logger).
+        combine: For slots whose names combine (``"fog+raindrop"``): builds one plugin from
+            the parts of a name that contains ``separator``; each part is a name of the slot.
+        separator: What joins the parts of a combined name (``"+"``).
 
     """
 
@@ -97,6 +100,8 @@ class Registry(Generic[T]):
         error: type[AnunnakiError] = PluginError,
         hint: str | None = None,
         logger: str = "anunnaki.plugins",
+        combine: Callable[[list[str]], T] | None = None,
+        separator: str = "+",
     ) -> None:
         self.what = what
         self._log = logging.getLogger(logger)
@@ -105,6 +110,8 @@ class Registry(Generic[T]):
         self.error = error
         self.hint = hint
         self._check = check
+        self._combine = combine
+        self.separator = separator
         self._factories: dict[str, Callable[..., T]] = {}
         self._lazy: dict[str, str] = {}
         self._plugins_loaded = group is None
@@ -214,7 +221,12 @@ class Registry(Generic[T]):
             return sorted({*self._factories, *self._lazy})
 
     def __contains__(self, name: object) -> bool:
-        return isinstance(name, str) and name in self.names()
+        if not isinstance(name, str):
+            return False
+        names = self.names()
+        if self._combine is not None and self.separator in name:
+            return all(part.strip() in names for part in name.split(self.separator))
+        return name.strip() in names
 
     def unknown(self, name: object) -> AnunnakiError:
         """The error for an unknown name: it lists the valid ones."""
@@ -256,21 +268,46 @@ class Registry(Generic[T]):
     def create(self, spec: str | T, /, **kwargs: Any) -> T:
         """An instance for a name (built with ``kwargs``), or the instance itself.
 
-        Raises the slot's error for an unknown name, or for an argument that is neither a
-        name nor an instance of the slot's kind.
+        A name with the slot's ``separator`` is built by its ``combine`` hook, when it has
+        one. Raises the slot's error for an unknown name, for keyword options the factory
+        does not take, for options given with an instance (configure it yourself), or for
+        an argument that is neither a name nor an instance of the slot's kind (a class is
+        not an instance, even when it has the attributes a Protocol asks for).
         """
         if isinstance(spec, str):
-            return self.factory(spec)(**kwargs)
-        if self.kind is not None and isinstance(spec, self.kind):
+            if self._combine is not None and self.separator in spec:
+                if kwargs:
+                    raise self.error(
+                        f"options {sorted(kwargs)} apply to a single {self.what}, "
+                        f"not to the combination {spec.strip()!r}"
+                    )
+                return self._combine([part.strip() for part in spec.split(self.separator)])
+            factory = self.factory(spec)
+            if not kwargs:
+                return factory()
+            try:
+                return factory(**kwargs)
+            except TypeError as exc:
+                raise self.error(
+                    f"{self.what} {spec.strip()!r}: bad options {sorted(kwargs)}: {exc}"
+                ) from None
+        if self.kind is not None and not inspect.isclass(spec) and isinstance(spec, self.kind):
+            if kwargs:
+                raise self.error(
+                    f"options {sorted(kwargs)} apply when {_a(self.what)} is built by name; "
+                    "configure the instance yourself"
+                )
             return spec
+        kind = _a(self.kind.__name__) if isinstance(self.kind, type) else "an"
+        got = f"the class {spec.__name__}" if inspect.isclass(spec) else type(spec).__name__
         raise self.error(
-            f"expected a {self.what} name or instance, got {type(spec).__name__}; "
+            f"expected {_a(self.what)} name or {kind} instance, got {got}; "
             f"valid names: {', '.join(self.names())}"
         )
 
 
 def _a(noun: str) -> str:
-    return f"{'an' if noun[:1] in 'aeiou' else 'a'} {noun}"
+    return f"{'an' if noun[:1].lower() in 'aeiou' else 'a'} {noun}"
 
 
 def _describe(obj: Any) -> str:

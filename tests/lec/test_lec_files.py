@@ -171,7 +171,7 @@ def test_detect_refuses_bad_images(untrained: CenterNetDetector) -> None:
 
 
 def test_a_third_party_architecture_loads_through_the_registry(saved: Path) -> None:
-    """A sidecar naming a registered architecture is built by that plugin's builder."""
+    """A sidecar naming a registered architecture is built by that plugin's from_card."""
     from anunnaki.lec import ARCHITECTURES, DetectionResult, ModelCard
 
     built: list[tuple[str, int]] = []
@@ -187,9 +187,21 @@ def test_a_third_party_architecture_loads_through_the_registry(saved: Path) -> N
             box = np.array([[1, 1, 5, 5]], np.float32)
             return [DetectionResult(box, np.array([0]), np.array([0.9], np.float32))]
 
-    def fixed(card: ModelCard, tensors: dict[str, Any], path: Path) -> Fixed:
-        built.append((card.architecture, len(tensors)))
-        return Fixed(card)
+    class FixedArchitecture:
+        name = "fixed"
+
+        def load(self, file: Path, options: Any) -> Fixed:
+            raise NotImplementedError
+
+        def from_card(self, card: ModelCard, tensors: dict[str, Any], path: Path) -> Fixed:
+            built.append((card.architecture, len(tensors)))
+            return Fixed(card)
+
+    class LoadOnly:
+        name = "load_only"
+
+        def load(self, file: Path, options: Any) -> Fixed:
+            raise NotImplementedError
 
     sidecar = saved.with_suffix(".json")
     card = json.loads(sidecar.read_text())
@@ -197,11 +209,19 @@ def test_a_third_party_architecture_loads_through_the_registry(saved: Path) -> N
     sidecar.write_text(json.dumps(card))
     with pytest.raises(DetectorLoadError, match=r"unknown architecture 'fixed'; known: centernet"):
         load_detector(saved)
-    ARCHITECTURES.register(fixed)
+    with pytest.raises(AnunnakiError, match="not a class"):
+        ARCHITECTURES.register(lambda card, tensors, path: None, name="builder")
+    ARCHITECTURES.register(FixedArchitecture)
+    ARCHITECTURES.register(LoadOnly)
     try:
         det = load_detector(saved)
         assert isinstance(det, Detector) and det.model_id == "tiny"
         assert built and built[0][0] == "fixed" and built[0][1] > 0  # the weights were read
         assert len(det.detect(images())) == 1
+        card["architecture"] = "load_only"
+        sidecar.write_text(json.dumps(card))
+        with pytest.raises(DetectorLoadError, match="does not build from anunnaki model files"):
+            load_detector(saved)
     finally:
         ARCHITECTURES.unregister("fixed")
+        ARCHITECTURES.unregister("load_only")

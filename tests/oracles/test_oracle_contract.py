@@ -19,6 +19,9 @@ import pytest
 from anunnaki.bus import Assessment, Detections, Sample, open_bus
 from anunnaki.oracles import (
     HOOKS,
+    ObservesContext,
+    ObservesDetections,
+    ObservesGroundTruth,
     Oracle,
     OracleRegistry,
     available_oracles,
@@ -117,11 +120,11 @@ SCENARIO = scenario()
 def run(oracle: Oracle, frames: list[dict[str, Any]] = SCENARIO) -> list[Assessment | None]:
     results = []
     for f in frames:
-        if hasattr(oracle, "observe_context"):
+        if isinstance(oracle, ObservesContext):
             oracle.observe_context(f["context"])
-        if hasattr(oracle, "observe_ground_truth"):
+        if isinstance(oracle, ObservesGroundTruth):
             oracle.observe_ground_truth(f["seq"], *f["truth"])
-        if hasattr(oracle, "observe_detections"):
+        if isinstance(oracle, ObservesDetections):
             oracle.observe_detections(f["detections"])
         results.append(oracle.assess(f["image"], seq=f["seq"], model_id="m-default"))
     return results
@@ -135,8 +138,14 @@ def test_is_an_oracle_with_a_valid_name(make: Callable[[], Oracle]) -> None:
     assert isinstance(oracle, Oracle)
     assert re.fullmatch(r"[A-Za-z_][A-Za-z0-9_]*", oracle.name)
     assert get_oracle(oracle) is oracle  # a slot takes the object as it is
-    for hook in HOOKS:
-        assert not hasattr(oracle, hook) or callable(getattr(oracle, hook))
+    # Every observe_* method it has is a hook of HOOKS (a misspelt one would never be fed).
+    fed = {name for hook in HOOKS if isinstance(oracle, hook) for name in _methods(hook)}
+    defined = {name for name in dir(oracle) if name.startswith("observe_")}
+    assert defined <= fed, f"{sorted(defined - fed)} match no hook Protocol of {HOOKS}"
+
+
+def _methods(protocol: type) -> set[str]:
+    return {name for name in vars(protocol) if name.startswith("observe_")}
 
 
 def test_assessments_are_well_formed(make: Callable[[], Oracle]) -> None:

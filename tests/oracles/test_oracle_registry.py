@@ -64,7 +64,7 @@ def test_unknown_names_list_the_valid_ones() -> None:
 
 @pytest.mark.parametrize("bad", [None, 3, Constant, ["ground_truth"], object()])
 def test_other_arguments_are_refused(bad: Any) -> None:
-    with pytest.raises(OracleError, match="expected an oracle name or an oracle instance"):
+    with pytest.raises(OracleError, match="expected an oracle name or an Oracle instance"):
         get_oracle(bad)
 
 

@@ -5,7 +5,7 @@
 * ``train-detector --data DIR --out MODEL.safetensors`` — train the CenterNet detector,
   choose its score threshold on the validation split, report validation and test figures
   and save weights + sidecar;
-* ``evaluate-detector MODEL --data DIR`` — precision/recall/F1 on a split, optionally under
+* ``evaluate-detector MODEL|REG.yaml --data DIR`` — precision/recall/F1 on a split, optionally under
   a phenomenon, with the drop relative to clean data and the behaviour category.
 
 See docs/detector.md.
@@ -14,6 +14,7 @@ See docs/detector.md.
 from __future__ import annotations
 
 import argparse
+import importlib.util
 import json
 import math
 import time
@@ -357,7 +358,12 @@ def _add_evaluate(sub: Any) -> None:
             "to clean data is printed with its behaviour category (0 < 5 %, 1 > 5 %, 2 > 10 %)."
         ),
     )
-    p.add_argument("model", help="model file (NAME.safetensors or NAME.json)")
+    p.add_argument(
+        "model",
+        help="model file (NAME.safetensors or NAME.json), or a model registry (REG.yaml: its "
+        "default model, or --model-id; any loader plugin its entries name)",
+    )
+    p.add_argument("--model-id", help="with a registry: which of its models (default: default)")
     p.add_argument("--data", "-d", required=True, help="dataset folder or COCO JSON")
     p.add_argument("--split", default="test", help="train, val or test (test)")
     p.add_argument("--phenomenon", "-p", help="e.g. fog, raindrop, hsl, fog+raindrop")
@@ -381,32 +387,55 @@ def _add_evaluate(sub: Any) -> None:
 
 def _run_evaluate(args: argparse.Namespace) -> int:
     from anunnaki.datasets import load_split
-    from anunnaki.lec import evaluate_detector, load_detector  # before torch: OMP policy
+    from anunnaki.lec import (  # before torch: OMP policy
+        DetectorError,
+        evaluate_detector,
+        load_detector,
+    )
     from anunnaki.phenomena import get_phenomenon
 
     if args.phenomenon is None and (args.strength is not None or args.params is not None):
         raise AnunnakiError("--strength and --params need --phenomenon")
     phen = get_phenomenon(args.phenomenon) if args.phenomenon else None
     params = phen.validate(args.params) if phen is not None and args.params else None
-    import torch
+    if importlib.util.find_spec("torch") is not None:  # a plugin's model may not need it
+        import torch
 
-    torch.set_num_threads(args.threads)
-    det = load_detector(args.model)
+        torch.set_num_threads(args.threads)
+    registered = Path(args.model).suffix in (".yaml", ".yml")
+    if args.model_id is not None and not registered:
+        raise AnunnakiError("--model-id picks a model of a registry (REG.yaml); MODEL is a file")
+    if registered:
+        from anunnaki.lec import load_registry
+
+        registry = load_registry(args.model)
+        spec = registry.resolve(model_id=args.model_id)
+        if args.update_sidecar and spec.loader is not None:
+            raise AnunnakiError(
+                f"--update-sidecar writes an anunnaki model file's sidecar; model {spec.id!r} "
+                f"is loaded by {spec.loader!r}: put its metrics in the registry instead"
+            )
+        det = registry.load(spec)
+        model_file, model_id, domain = spec.file, spec.id, spec.domain
+    else:
+        det = load_detector(args.model)
+        model_file, model_id, domain = Path(args.model), det.model_id, det.domain
     data = load_split(args.data, args.split)
-    if tuple(data.classes) != tuple(det.classes):
-        raise AnunnakiError(
-            f"{args.model}: the model's classes {det.classes} differ from the data's {data.classes}"
-        )
     threshold = args.threshold
-    clean = evaluate_detector(det, data, score_threshold=threshold)
+    try:
+        clean = evaluate_detector(det, data, score_threshold=threshold)
+    except DetectorError as exc:
+        raise AnunnakiError(f"{args.model}: model {model_id!r}: {exc}") from None
     report: dict[str, Any] = {
         "model": str(args.model),
-        "model_id": det.model_id,
-        "domain": det.domain,
+        "model_id": model_id,
+        "domain": domain,
         "data": str(args.data),
         "split": args.split,
         "images": len(data),
-        "score_threshold": threshold if threshold is not None else det.score_threshold,  # type: ignore[attr-defined]
+        "score_threshold": (
+            threshold if threshold is not None else float(getattr(det, "score_threshold", 0.0))
+        ),
         "clean": clean.as_dict(),
     }
     rows = [("clean", clean)]
@@ -429,14 +458,12 @@ def _run_evaluate(args: argparse.Namespace) -> int:
         report["category"] = category
         rows.append((phen.name, perturbed))
     if args.update_sidecar:
-        report["sidecar"] = _update_sidecar(args.model, det, args.data, clean, args.split)
+        report["sidecar"] = _update_sidecar(str(model_file), det, args.data, clean, args.split)
     if args.json:
         print(json.dumps(report))
         return 0
     console = _console()
-    table = Table(
-        title=f"{det.model_id} ({det.domain}) on {args.split} of {args.data}: {len(data)} images"
-    )
+    table = Table(title=f"{model_id} ({domain}) on {args.split} of {args.data}: {len(data)} images")
     for col in ("condition", "precision", "recall", "F1", "tp", "fp", "fn"):
         table.add_column(col, justify="left" if col == "condition" else "right")
     for name, m in rows:

@@ -43,12 +43,16 @@ os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 from anunnaki.lec._detector import (
     ARCHITECTURES,
     SIDECAR_FORMAT,
+    BuildsFromCard,
     DetectionResult,
     Detector,
+    DetectorArchitecture,
     DetectorError,
     DetectorLoadError,
     ImageBatch,
     ModelCard,
+    ReadsFiles,
+    architecture_files,
     as_image_list,
     load_detector,
     read_card,
@@ -90,7 +94,7 @@ from anunnaki.lec._registry import (
 )
 
 if TYPE_CHECKING:
-    from anunnaki.lec._centernet import CenterNet, CenterNetDetector
+    from anunnaki.lec._centernet import CenterNet, CenterNetArchitecture, CenterNetDetector
     from anunnaki.lec._train import (
         Augmenter,
         TrainConfig,
@@ -110,10 +114,13 @@ __all__ = [
     "SIDECAR_FORMAT",
     "SWAP_SERVICE",
     "Augmenter",
+    "BuildsFromCard",
     "CenterNet",
+    "CenterNetArchitecture",
     "CenterNetDetector",
     "DetectionResult",
     "Detector",
+    "DetectorArchitecture",
     "DetectorError",
     "DetectorLoadError",
     "ImageBatch",
@@ -126,11 +133,13 @@ __all__ = [
     "ModelRegistry",
     "ModelRegistryError",
     "ModelSpec",
+    "ReadsFiles",
     "SwapResult",
     "TrainConfig",
     "TrainResult",
     "Truth",
     "UnknownModelError",
+    "architecture_files",
     "as_image_list",
     "box_iou",
     "choose_threshold",
@@ -155,6 +164,7 @@ __all__ = [
 
 _LAZY = {
     "CenterNet": "anunnaki.lec._centernet",
+    "CenterNetArchitecture": "anunnaki.lec._centernet",
     "CenterNetDetector": "anunnaki.lec._centernet",
     "Augmenter": "anunnaki.lec._train",
     "TrainConfig": "anunnaki.lec._train",

@@ -57,11 +57,15 @@ from anunnaki.lec._detector import (
     ImageBatch,
     ModelCard,
     as_image_list,
+    load_detector,
+    read_card,
+    sidecar_path,
 )
 
 __all__ = [
     "STRIDE",
     "CenterNet",
+    "CenterNetArchitecture",
     "CenterNetDetector",
     "cell_centres",
     "centernet_loss",
@@ -580,3 +584,40 @@ class CenterNetDetector:
             max_detections=max_det,
             sha256=card.sha256,
         )
+
+
+class CenterNetArchitecture:
+    """The built-in ``centernet`` detector architecture (plugin slot ``anunnaki.detectors``).
+
+    Builds :class:`CenterNetDetector` from anunnaki model files (``from_card``, what
+    ``load_detector`` calls for a sidecar saying ``architecture: centernet``), and loads one
+    named in a registry entry (``loader: centernet``: the same file, no options).
+    """
+
+    name = "centernet"
+
+    def load(self, file: Path, options: Mapping[str, Any]) -> CenterNetDetector:
+        """Load an anunnaki model file whose sidecar names ``centernet``."""
+        if options:
+            raise DetectorError(
+                f"the centernet loader takes no options, got {sorted(options)}; the model's "
+                "settings are in its sidecar"
+            )
+        card = read_card(file)
+        if card.architecture != self.name:
+            raise DetectorLoadError(
+                f"the sidecar names architecture {card.architecture!r}, not 'centernet'",
+                path=sidecar_path(file),
+                element="architecture",
+                hint="drop 'loader: centernet' from the registry entry: the sidecar says "
+                "which architecture builds it",
+            )
+        det = load_detector(file)
+        assert isinstance(det, CenterNetDetector)
+        return det
+
+    def from_card(
+        self, card: ModelCard, tensors: Mapping[str, npt.NDArray[Any]], weights: Path
+    ) -> CenterNetDetector:
+        """See :meth:`CenterNetDetector.from_card`."""
+        return CenterNetDetector.from_card(card, tensors, weights)

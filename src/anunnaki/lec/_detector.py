@@ -20,7 +20,7 @@ import uuid
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Protocol, cast, runtime_checkable
+from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
 import numpy.typing as npt
@@ -30,13 +30,18 @@ from anunnaki.errors import AnunnakiError, ModelFileError
 from anunnaki.plugins import Registry
 
 __all__ = [
+    "ARCHITECTURES",
     "SIDECAR_FORMAT",
+    "BuildsFromCard",
     "DetectionResult",
     "Detector",
+    "DetectorArchitecture",
     "DetectorError",
     "DetectorLoadError",
     "ImageBatch",
     "ModelCard",
+    "ReadsFiles",
+    "architecture_files",
     "as_image_list",
     "load_detector",
     "read_card",
@@ -260,16 +265,114 @@ def _atomic_write(path: Path, write: Callable[[Path], object]) -> None:
         raise
 
 
-#: Builds a detector from its sidecar card, its tensors and its weights' path.
-Builder = Callable[[ModelCard, dict[str, Any], Path], Detector]
+# -- the plugin slot: detector architectures ----------------------------------------------
 
-#: Detector architectures a model file's sidecar can name (``"architecture"``): built-in
-#: ``centernet`` (imported on first use: torch), third parties under the
-#: ``anunnaki.detectors`` entry-point group (a builder function, registered by its name).
-ARCHITECTURES: Registry[Detector] = Registry(
-    "detector architecture", group="anunnaki.detectors", logger="anunnaki.lec"
+
+@runtime_checkable
+class DetectorArchitecture(Protocol):
+    """A detector plugin (slot ``anunnaki.detectors``): turns model files into a :class:`Detector`.
+
+    A registry entry names it (``loader: NAME``), so a model that is not an anunnaki
+    safetensors file — an ONNX or TensorFlow model wrapped by a third-party package — is
+    deployed from a registry YAML. The class is instantiated without arguments.
+
+    Attributes:
+        name: The plugin's name (an identifier, e.g. ``centernet``, ``my_onnx``).
+
+    Optional hooks, each a Protocol of its own checked with ``isinstance``:
+    :class:`ReadsFiles` (which files ``load`` reads, so the registry pins each by sha256)
+    and :class:`BuildsFromCard` (the architecture of anunnaki model files whose sidecar
+    names it in ``architecture``).
+
+    """
+
+    name: str
+
+    def load(self, file: Path, options: Mapping[str, Any]) -> Detector:
+        """Load the model in ``file`` (absolute), configured by the entry's ``options``.
+
+        Called by :meth:`ModelRegistry.load <anunnaki.lec.ModelRegistry.load>` after every
+        file of :meth:`ReadsFiles.files` matched the registry's sha256 (when it states one),
+        on the model manager's service thread. Raise an exception (any) to refuse the file;
+        the registry reports it as a ``ModelLoadError`` naming the model.
+        """
+        ...
+
+
+@runtime_checkable
+class ReadsFiles(Protocol):
+    """Optional hook: the files :meth:`DetectorArchitecture.load` reads (default: ``file``)."""
+
+    def files(self, file: Path, options: Mapping[str, Any]) -> Sequence[Path]:
+        """Every file ``load(file, options)`` will read, ``file`` included, as absolute paths.
+
+        Resolve relative paths in ``options`` against ``file.parent``. The registry checks
+        that each exists when the registry file is loaded, and that each matches its sha256
+        before every load.
+        """
+        ...
+
+
+@runtime_checkable
+class BuildsFromCard(Protocol):
+    """Optional hook: build from an anunnaki model file (safetensors + sidecar).
+
+    :func:`load_detector` calls it for a sidecar whose ``architecture`` is the plugin's
+    name, after checking the weights' sha256 and reading them as plain arrays.
+    """
+
+    def from_card(
+        self, card: ModelCard, tensors: Mapping[str, npt.NDArray[Any]], weights: Path
+    ) -> Detector:
+        """Build the detector from its validated sidecar and its weights' arrays."""
+        ...
+
+
+def _check_architecture(cls: object) -> object:
+    """Return ``cls`` if it can be a detector architecture plugin, else raise."""
+    if not isinstance(cls, type):
+        raise DetectorError(
+            f"{cls!r} is not a class; register a detector architecture class (with a name "
+            "and load(file, options))"
+        )
+    if not callable(getattr(cls, "load", None)):
+        raise DetectorError(
+            f"{cls.__name__} is not a detector architecture: it has no load(file, options) method"
+        )
+    return cls
+
+
+#: Detector architectures (plugin slot ``anunnaki.detectors``): what a registry entry's
+#: ``loader`` and a sidecar's ``architecture`` name. Built-in ``centernet`` is imported on
+#: first use (torch); third parties register a class under the entry-point group.
+ARCHITECTURES: Registry[DetectorArchitecture] = Registry(
+    "detector architecture",
+    group="anunnaki.detectors",
+    kind=DetectorArchitecture,
+    check=_check_architecture,
+    error=DetectorError,
+    logger="anunnaki.lec",
 )
-ARCHITECTURES.register_lazy("centernet", "anunnaki.lec._centernet:CenterNetDetector.from_card")
+ARCHITECTURES.register_lazy("centernet", "anunnaki.lec._centernet:CenterNetArchitecture")
+
+
+def architecture_files(
+    architecture: DetectorArchitecture, file: Path, options: Mapping[str, Any]
+) -> list[Path]:
+    """The files ``architecture.load(file, options)`` reads: its :class:`ReadsFiles` hook.
+
+    Without the hook, ``[file]``. Raises :class:`DetectorError` when the hook returns
+    something other than paths.
+    """
+    if not isinstance(architecture, ReadsFiles):
+        return [file]
+    try:
+        found = [Path(f) for f in architecture.files(file, options)]
+    except TypeError as exc:
+        raise DetectorError(
+            f"detector architecture {architecture.name!r}: files() must return paths: {exc}"
+        ) from None
+    return [f if f.is_absolute() else file.parent / f for f in found]
 
 
 def save_detector(det: Detector, path: str | Path) -> str:
@@ -345,7 +448,9 @@ def read_card(path: str | Path) -> ModelCard:
             "model sidecar not found",
             path=spath,
             hint=f"a model is two files, {weights_path(path).name} and {spath.name}; "
-            "copy both, or re-save with anunnaki.lec.save_detector",
+            "copy both, or re-save with anunnaki.lec.save_detector; a model in another "
+            "format is loaded by the plugin a model registry entry names (loader: NAME, "
+            "docs/detector.md)",
         )
     raw = spath.read_bytes()
     if len(raw) > _MAX_SIDECAR_BYTES:
@@ -366,7 +471,8 @@ def read_card(path: str | Path) -> ModelCard:
             f"not an anunnaki detector sidecar (format is not {SIDECAR_FORMAT!r})",
             path=spath,
             element="format",
-            hint="load third-party models through a Detector adapter",
+            hint="a model in another format is loaded by the plugin a model registry entry "
+            "names (loader: NAME, docs/detector.md)",
         )
     if data.get("format_version") != _FORMAT_VERSION:
         raise DetectorLoadError(
@@ -431,10 +537,19 @@ def load_detector(path: str | Path) -> Detector:
             f"{', '.join(ARCHITECTURES.names())}",
             path=spath,
             element="architecture",
-            hint="register its builder under the anunnaki.detectors entry point, or wrap "
-            "the model in your own Detector",
+            hint="install the package that provides it (entry-point group anunnaki.detectors), "
+            "or wrap the model in your own Detector",
         )
-    build = cast(Builder, ARCHITECTURES.factory(card.architecture))
+    architecture = ARCHITECTURES.create(card.architecture)
+    if not isinstance(architecture, BuildsFromCard):
+        raise DetectorLoadError(
+            f"the detector architecture {card.architecture!r} does not build from anunnaki "
+            "model files (it has no from_card)",
+            path=spath,
+            element="architecture",
+            hint=f"name it as the entry's loader in the model registry (loader: "
+            f"{card.architecture}) and give its own model file",
+        )
     from safetensors import SafetensorError
     from safetensors.numpy import load_file
 
@@ -444,4 +559,4 @@ def load_detector(path: str | Path) -> Detector:
         raise DetectorLoadError(
             f"not a valid safetensors file: {exc}", path=wpath, hint="copy the model again"
         ) from None
-    return build(card, tensors, wpath)
+    return architecture.from_card(card, tensors, wpath)

@@ -27,6 +27,12 @@ A registry file (``anunnaki: models/1``)::
         file: models/detector-fog.safetensors
         sha256: 41ab…
         metrics: {f1: 0.91}                          # optional; merged over the sidecar's
+      - id: detector-onnx                            # a model in another format:
+        domain: low_light
+        loader: my_onnx                              # a detector architecture plugin
+        file: models/yolo.onnx
+        options: {labels: labels.txt}                # given to the plugin's load()
+        sha256: {models/yolo.onnx: 77c1…, models/labels.txt: 0d9e…}   # every file it reads
 
 Build one in code with :class:`ModelRegistry` and :meth:`ModelRegistry.add`, or load a file
 with :func:`load_registry`. Errors about the file name the file and the line.
@@ -46,7 +52,13 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_valida
 
 from anunnaki._safeyaml import LineMap, load_yaml, validation_error
 from anunnaki.errors import AnunnakiError, MissingExtraError, ModelFileError
-from anunnaki.lec._detector import Detector, read_card, sha256_file
+from anunnaki.lec._detector import (
+    ARCHITECTURES,
+    Detector,
+    architecture_files,
+    read_card,
+    sha256_file,
+)
 
 __all__ = [
     "DEFAULT_DOMAIN",
@@ -93,6 +105,13 @@ class ModelLoadError(ModelRegistryError):
 Loader = Callable[[Path], Detector]
 
 
+def _digest(value: str) -> str:
+    digest = value.strip().lower()
+    if not _SHA_RE.match(digest):
+        raise ValueError("sha256 must be 64 hexadecimal digits")
+    return digest
+
+
 def _number(value: Any) -> float | None:
     if isinstance(value, bool) or not isinstance(value, int | float):
         return None
@@ -107,12 +126,18 @@ class ModelSpec(BaseModel):
         id: The model id tactics and messages use, e.g. ``detector-fog``.
         domain: The operating domain it is robustified for (``default``, ``fog``,
             ``low_light``, ``raindrop`` …).
-        file: The model file (``NAME.safetensors``, its sidecar next to it).
+        file: The model file (``NAME.safetensors``, its sidecar next to it; or the file
+            the ``loader`` reads).
         sha256: Hex sha256 of ``file``, checked before every load; ``None`` skips the check
             (the loader still checks the sidecar's hash).
         metrics: Figures measured after training (from the sidecar, overridden by the
             registry); see :attr:`clean_f1`.
         description: Free text.
+        loader: The detector architecture plugin (:data:`~anunnaki.lec.ARCHITECTURES`)
+            that loads ``file``; ``None``: an anunnaki model file (``load_detector``).
+        options: Given to the loader's ``load(file, options)``.
+        pins: Hex sha256 of the other files the loader reads (its ``files()``), by path;
+            with ``sha256`` set, every file it reads must be pinned.
 
     """
 
@@ -124,6 +149,9 @@ class ModelSpec(BaseModel):
     sha256: str | None = None
     metrics: dict[str, Any] = Field(default_factory=dict)
     description: str = ""
+    loader: str | None = None
+    options: dict[str, Any] = Field(default_factory=dict)
+    pins: dict[Path, str] = Field(default_factory=dict)
 
     @field_validator("id")
     @classmethod
@@ -147,10 +175,12 @@ class ModelSpec(BaseModel):
     def _check_sha(cls, value: str | None) -> str | None:
         if value is None:
             return None
-        digest = value.strip().lower()
-        if not _SHA_RE.match(digest):
-            raise ValueError("sha256 must be 64 hexadecimal digits")
-        return digest
+        return _digest(value)
+
+    @field_validator("pins")
+    @classmethod
+    def _check_pins(cls, value: dict[Path, str]) -> dict[Path, str]:
+        return {path: _digest(digest) for path, digest in value.items()}
 
     @property
     def clean_f1(self) -> float | None:
@@ -179,8 +209,10 @@ class _EntryFile(BaseModel):
 
     id: str | None = None
     domain: str | None = None
+    loader: str | None = None
     file: Annotated[str, Field(min_length=1)]
-    sha256: str | None = None
+    options: dict[str, Any] = Field(default_factory=dict)
+    sha256: str | dict[str, str] | None = None
     metrics: dict[str, Any] = Field(default_factory=dict)
     description: str = ""
 
@@ -257,6 +289,16 @@ class ModelRegistry:
                 first = exc.errors(include_url=False)[0]
                 where = ".".join(str(p) for p in first["loc"]) or "model"
                 raise ModelRegistryError(f"model entry {where}: {first['msg']}") from None
+        if spec.loader is not None and spec.loader not in ARCHITECTURES:
+            raise ModelRegistryError(
+                f"model {spec.id!r}: {ARCHITECTURES.unknown(spec.loader)}; install the "
+                "package that provides it (entry-point group anunnaki.detectors)"
+            )
+        if spec.options and spec.loader is None:
+            raise ModelRegistryError(
+                f"model {spec.id!r}: options {sorted(spec.options)} are for a loader; name one "
+                "(loader: NAME)"
+            )
         with self._lock:
             if spec.id in self._models:
                 raise ModelRegistryError(
@@ -362,61 +404,105 @@ class ModelRegistry:
         return None if spec is None else spec.clean_f1
 
     # -- trust and loading -----------------------------------------------------------------
-    def verify(self, model: str | ModelSpec) -> str:
-        """Check a model's file against the registry's sha256; return the file's digest.
+    def files(self, model: str | ModelSpec) -> list[Path]:
+        """The files loading a model reads: its ``file`` and what its loader's ``files()`` adds.
 
         Raises:
-            ModelIntegrityError: The file is missing or unreadable, or its hash differs.
+            UnknownModelError: An unknown id.
+            ModelRegistryError: The loader's ``files()`` failed.
+
+        """
+        spec = model if isinstance(model, ModelSpec) else self.get(model)
+        if self._loader is not None or spec.loader is None:
+            return [spec.file]
+        try:
+            return architecture_files(ARCHITECTURES.create(spec.loader), spec.file, spec.options)
+        except Exception as exc:
+            raise ModelRegistryError(
+                f"model {spec.id!r}: loader {spec.loader!r} cannot say which files it reads: "
+                f"{type(exc).__name__}: {exc}"
+            ) from exc
+
+    def verify(self, model: str | ModelSpec) -> str:
+        """Check every file the model's loader reads against the registry's sha256.
+
+        Returns:
+            The digest of the model's ``file``.
+
+        Raises:
+            ModelIntegrityError: A file is missing or unreadable, its hash differs, or the
+                registry pins some files and not one the loader reads.
             UnknownModelError: An unknown id.
 
         """
         spec = model if isinstance(model, ModelSpec) else self.get(model)
-        try:
-            digest = sha256_file(spec.file)
-        except OSError as exc:
-            raise ModelIntegrityError(
-                f"model {spec.id!r}: cannot read {spec.file}: {exc.strerror or exc}"
-            ) from exc
-        if spec.sha256 is not None and digest != spec.sha256:
-            raise ModelIntegrityError(
-                f"model {spec.id!r}: sha256 mismatch for {spec.file}: the registry says "
-                f"{spec.sha256[:12]}…, the file is {digest[:12]}… (a corrupt copy or a "
-                "changed file; copy the model again, or update the registry if the change "
-                "is intended)"
-            )
-        return digest
+        pinned = spec.sha256 is not None or bool(spec.pins)
+        pins: dict[Path, str | None] = {p.resolve(): digest for p, digest in spec.pins.items()}
+        pins[spec.file.resolve()] = spec.sha256
+        digests: dict[Path, str] = {}
+        for path in self.files(spec):
+            expected = pins.get(path.resolve())
+            try:
+                digests[path] = digest = sha256_file(path)
+            except OSError as exc:
+                raise ModelIntegrityError(
+                    f"model {spec.id!r}: cannot read {path}: {exc.strerror or exc}"
+                ) from exc
+            if expected is None and pinned:
+                raise ModelIntegrityError(
+                    f"model {spec.id!r}: its loader {spec.loader!r} reads {path}, which the "
+                    f"registry does not pin; add its sha256 ({digest}) to the entry's sha256"
+                )
+            if expected is not None and digest != expected:
+                raise ModelIntegrityError(
+                    f"model {spec.id!r}: sha256 mismatch for {path}: the registry says "
+                    f"{expected[:12]}…, the file is {digest[:12]}… (a corrupt copy or a "
+                    "changed file; copy the model again, or update the registry if the change "
+                    "is intended)"
+                )
+        return digests.get(spec.file) or sha256_file(spec.file)
 
     def load(self, model: str | ModelSpec) -> Detector:
-        """Verify a model's file, then load it with the registry's loader.
+        """Verify a model's files, then load it with its loader.
+
+        The loader is the registry's ``loader`` callable when one was given in code, else
+        the entry's ``loader`` plugin (``load(file, options)``), else ``load_detector``.
 
         Raises:
-            ModelIntegrityError: Missing file or sha256 mismatch (nothing was loaded).
-            ModelLoadError: The loader refused the file (corrupt weights, bad sidecar …).
-            MissingExtraError: The default loader needs ``anunnaki[vision]``.
+            ModelIntegrityError: A missing file or a sha256 mismatch (nothing was loaded).
+            ModelLoadError: The loader refused the file (corrupt weights, bad sidecar …) or
+                returned something that is not a :class:`~anunnaki.lec.Detector`.
+            MissingExtraError: The loader needs an extra (``anunnaki[vision]``).
 
         """
         spec = model if isinstance(model, ModelSpec) else self.get(model)
         self.verify(spec)
-        loader = self._loader or _default_loader
         try:
-            detector = loader(spec.file)
+            if self._loader is not None:
+                detector: object = self._loader(spec.file)
+            elif spec.loader is not None:
+                detector = ARCHITECTURES.create(spec.loader).load(spec.file, dict(spec.options))
+            else:
+                detector = _default_loader(spec.file)
         except MissingExtraError:
             raise
         except Exception as exc:
             raise ModelLoadError(
                 f"model {spec.id!r}: the loader refused {spec.file}: {type(exc).__name__}: {exc}"
             ) from exc
-        if not callable(getattr(detector, "detect", None)):
+        if not isinstance(detector, Detector):
+            missing = [a for a in ("model_id", "classes", "domain") if not hasattr(detector, a)]
+            if not callable(getattr(detector, "detect", None)):
+                missing.append("detect()")
             raise ModelLoadError(
-                f"model {spec.id!r}: the loader returned {type(detector).__name__}, which has "
-                "no detect() method"
+                f"model {spec.id!r}: the loader returned {type(detector).__name__}, which is "
+                f"not a Detector: it has no {', no '.join(missing)}"
             )
-        reported = getattr(detector, "model_id", None)
-        if reported is not None and reported != spec.id:
+        if detector.model_id != spec.id:
             log.info(
                 "model %r: its file calls itself %r; the registry's id is what is published",
                 spec.id,
-                reported,
+                detector.model_id,
             )
         return detector
 
@@ -467,51 +553,49 @@ def _build(
     registry = ModelRegistry(lec=parsed.lec, loader=loader, source=source)
     seen: dict[str, int] = {}
     for i, entry in enumerate(parsed.models):
+
+        def fail(message: str, field: str | None, hint: str, i: int = i) -> ModelFileError:
+            return _entry_error(message, lines=lines, path=source, index=i, field=field, hint=hint)
+
         file = Path(entry.file)
         file = file if file.is_absolute() else (base / file)
         if not file.is_file():
-            raise _entry_error(
+            raise fail(
                 f"model file {entry.file!r} not found (looked at {file})",
-                lines=lines,
-                path=source,
-                index=i,
-                field="file",
-                hint="paths are relative to the registry file; copy the model there",
+                "file",
+                "paths are relative to the registry file; copy the model there",
             )
-        try:
-            card = _read_sidecar(file)
-        except AnunnakiError as exc:
-            if loader is not None:  # a third-party model may keep its own kind of .json
+        card: dict[str, Any] | None = None
+        if entry.loader is None:
+            if entry.options:
+                raise fail(
+                    f"options {sorted(entry.options)} are for a loader plugin, and the entry "
+                    "names none",
+                    "options",
+                    "name the plugin that reads the file (loader: NAME), or drop 'options'",
+                )
+            try:
+                card = _read_sidecar(file)
+            except AnunnakiError as exc:
+                if loader is None:
+                    raise fail(
+                        f"the model's sidecar is unreadable: {exc}",
+                        "file",
+                        "copy the model again, or re-save it; a model in another format "
+                        "needs 'loader: NAME' (a detector architecture plugin)",
+                    ) from None
+                # A loader given in code may read its own kind of .json.
                 log.debug("model file %s: no anunnaki sidecar (%s)", file, exc)
-                card = None
-            else:
-                raise _entry_error(
-                    f"the model's sidecar is unreadable: {exc}",
-                    lines=lines,
-                    path=source,
-                    index=i,
-                    field="file",
-                    hint="copy the model again, or re-save it",
-                ) from None
+        sha256, pins = _entry_pins(entry, file, base, fail, loader is not None)
         model_id = entry.id or (card or {}).get("model_id")
         domain = entry.domain or (card or {}).get("domain")
         if not model_id:
-            raise _entry_error(
-                "missing required field 'id'",
-                lines=lines,
-                path=source,
-                index=i,
-                field=None,
-                hint="e.g. id: detector-fog",
-            )
+            raise fail("missing required field 'id'", None, "e.g. id: detector-fog")
         if not domain:
-            raise _entry_error(
+            raise fail(
                 "missing required field 'domain' (the model has no sidecar that names it)",
-                lines=lines,
-                path=source,
-                index=i,
-                field=None,
-                hint="e.g. domain: fog",
+                None,
+                "e.g. domain: fog",
             )
         metrics = dict((card or {}).get("metrics") or {})
         metrics.update(entry.metrics)
@@ -520,9 +604,12 @@ def _build(
                 id=model_id,
                 domain=domain,
                 file=file,
-                sha256=entry.sha256,
+                sha256=sha256,
                 metrics=metrics,
                 description=entry.description,
+                loader=entry.loader,
+                options=entry.options,
+                pins=pins,
             )
         except ValidationError as exc:
             first = exc.errors(include_url=False)[0]
@@ -556,6 +643,82 @@ def _build(
             "add one with 'domain: default'",
         )
     return registry
+
+
+def _entry_pins(
+    entry: _EntryFile,
+    file: Path,
+    base: Path,
+    fail: Callable[[str, str | None, str], ModelFileError],
+    python_loader: bool,
+) -> tuple[str | None, dict[Path, str]]:
+    """The entry's loader checked, and its ``sha256`` as (the file's, the other files')."""
+    reads = [file]
+    if entry.loader is not None:
+        if entry.loader not in ARCHITECTURES:
+            raise fail(
+                str(ARCHITECTURES.unknown(entry.loader)),
+                "loader",
+                "install the package that provides it (entry-point group anunnaki.detectors), "
+                "or fix the name",
+            )
+        try:
+            architecture = ARCHITECTURES.create(entry.loader)
+            if not python_loader:
+                reads = architecture_files(architecture, file, entry.options)
+        except AnunnakiError as exc:
+            raise fail(str(exc), "loader", "see the plugin's documentation") from None
+        except Exception as exc:
+            raise fail(
+                f"loader {entry.loader!r} cannot say which files it reads: "
+                f"{type(exc).__name__}: {exc}",
+                "options",
+                "see the plugin's documentation for its options",
+            ) from None
+        for path in reads:
+            if not path.is_file():
+                raise fail(
+                    f"loader {entry.loader!r} reads {path}, which does not exist",
+                    "options",
+                    "copy the file there, or fix the options",
+                )
+    if entry.sha256 is None or isinstance(entry.sha256, str):
+        if entry.sha256 is not None and len(reads) > 1:
+            names = ", ".join(_relative(p, base) for p in reads)
+            raise fail(
+                f"loader {entry.loader!r} reads {len(reads)} files ({names}); one sha256 "
+                "pins only the first",
+                "sha256",
+                "give sha256 as a mapping, one hex digest per file: {" + names + ": …}",
+            )
+        return entry.sha256, {}
+    given = {(p if (p := Path(k)).is_absolute() else base / p).resolve(): (k, v)
+             for k, v in entry.sha256.items()}  # fmt: skip
+    pins: dict[Path, str] = {}
+    for path in reads:
+        found = given.pop(path.resolve(), None)
+        if found is None:
+            raise fail(
+                f"no sha256 for {_relative(path, base)}, which loader {entry.loader!r} reads",
+                "sha256",
+                f"add '{_relative(path, base)}: <hex sha256>' (paths relative to the registry)",
+            )
+        pins[path] = found[1]
+    if given:
+        extra = ", ".join(k for k, _ in given.values())
+        raise fail(
+            f"sha256 pins {extra}, which the loader does not read",
+            "sha256",
+            "pin the files the loader reads: " + ", ".join(_relative(p, base) for p in reads),
+        )
+    return pins.pop(file, None), pins
+
+
+def _relative(path: Path, base: Path) -> str:
+    try:
+        return str(path.resolve().relative_to(base.resolve()))
+    except ValueError:
+        return str(path)
 
 
 def parse_registry(

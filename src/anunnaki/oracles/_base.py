@@ -44,9 +44,6 @@ Frame = npt.NDArray[np.uint8]
 #: The perceived phenomenon when none is active.
 CLEAR = "clear"
 
-#: The optional hooks an oracle may implement; the oracle node feeds only those it has.
-HOOKS = ("observe_ground_truth", "observe_detections", "observe_context")
-
 
 class OracleError(AnunnakiError, ValueError):
     """An oracle is unknown, malformed, or was given options it does not take."""
@@ -146,6 +143,16 @@ class ObservesContext(Protocol):
     def observe_context(self, context: dict[str, JsonValue]) -> None:
         """``{"phenomenon": NAME, "params": {...}}``."""
         ...
+
+
+#: The optional hooks an oracle may implement, as the Protocols the oracle node checks with
+#: ``isinstance``; it feeds an oracle only the hooks it has.
+HOOKS: tuple[type, ...] = (
+    ObservesGroundTruth,
+    ObservesIgnoreBoxes,
+    ObservesDetections,
+    ObservesContext,
+)
 
 
 def _params(value: Any) -> dict[str, JsonValue]:

@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import logging
 import threading
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -179,12 +179,11 @@ class OracleNode:
         self._frames = self._published = self._withheld = self._errors = 0
         self._agnostic_warned = False
         self._declared: list[Any] = []
-        hooks = {
-            "observe_detections": isinstance(self.oracle, ObservesDetections),
-            "observe_ground_truth": isinstance(self.oracle, ObservesGroundTruth),
-            "observe_context": isinstance(self.oracle, ObservesContext),
-        }
-        self._hooks = hooks
+        # The optional hooks, found by the Protocols they implement (never by signature).
+        oracle = self.oracle
+        self._on_dets = oracle if isinstance(oracle, ObservesDetections) else None
+        self._on_gt = oracle if isinstance(oracle, ObservesGroundTruth) else None
+        self._on_ctx = oracle if isinstance(oracle, ObservesContext) else None
         try:
             self._output: Publisher = self._declare(bus.publisher(output))
             self._declare(bus.subscribe(active, self._on_active, queue=16))
@@ -196,9 +195,9 @@ class OracleNode:
                     expect=Detections,
                 )
             )
-            if hooks["observe_ground_truth"]:
+            if self._on_gt is not None:
                 self._declare(bus.subscribe(ground_truth, self._on_truth, queue=256))
-            if hooks["observe_context"]:
+            if self._on_ctx is not None:
                 self._declare(bus.subscribe(phenomena, self._on_phenomena, queue=16))
             self._declare(bus.subscribe(camera, self._on_frame, queue=frame_queue, expect=Image))
             self._declare(bus.liveliness_token(self.node))
@@ -245,8 +244,8 @@ class OracleNode:
         with self._lock:
             if self._model_id is None:
                 self._model_id = dets.model_id
-        if self._hooks["observe_detections"]:
-            self._call("observe_detections", dets)
+        if self._on_dets is not None:
+            self._call(self._on_dets.observe_detections, dets)
 
     def _on_truth(self, sample: Sample) -> None:
         try:
@@ -263,25 +262,24 @@ class OracleNode:
                 self.oracle.name,
             )
         ignore = _ignore_boxes(sample.message.to_body())
-        if len(ignore) and self._takes_ignore():
-            self._call("observe_ground_truth", seq, boxes, names, ignore=ignore)
-        else:
-            self._call("observe_ground_truth", seq, boxes, names)
-
-    def _takes_ignore(self) -> bool:
-        """Whether the oracle's ``observe_ground_truth`` takes ``ignore=`` (it says so)."""
         oracle = self.oracle
-        return isinstance(oracle, ObservesIgnoreBoxes) and oracle.ignore_boxes is True
+        if len(ignore) and isinstance(oracle, ObservesIgnoreBoxes) and oracle.ignore_boxes is True:
+            self._call(oracle.observe_ground_truth, seq, boxes, names, ignore=ignore)
+        elif self._on_gt is not None:
+            self._call(self._on_gt.observe_ground_truth, seq, boxes, names)
 
     def _on_phenomena(self, sample: Sample) -> None:
-        self._call("observe_context", context_from_phenomena(sample.message.to_body()))
+        if self._on_ctx is not None:
+            self._call(
+                self._on_ctx.observe_context, context_from_phenomena(sample.message.to_body())
+            )
 
-    def _call(self, hook: str, *args: Any, **kwargs: Any) -> Any:
+    def _call(self, hook: Callable[..., Any], *args: Any, **kwargs: Any) -> Any:
         try:
             with self._oracle_lock:
-                return getattr(self.oracle, hook)(*args, **kwargs)
+                return hook(*args, **kwargs)
         except Exception as exc:  # an oracle's bug never kills the node
-            self._error("%s raised %s: %s", hook, type(exc).__name__, exc)
+            self._error("%s raised %s: %s", hook.__name__, type(exc).__name__, exc)
             return None
 
     def _on_frame(self, sample: Sample) -> None:

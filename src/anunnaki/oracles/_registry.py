@@ -77,6 +77,7 @@ class OracleRegistry(Registry[Oracle]):
         super().__init__(
             "oracle",
             group=entry_point_group,
+            kind=Oracle,
             check=_check_class,
             error=OracleError,
             logger="anunnaki.oracles",
@@ -94,26 +95,9 @@ class OracleRegistry(Registry[Oracle]):
                 neither a name nor an oracle.
 
         """
-        if not isinstance(name_or_instance, str):
-            if isinstance(name_or_instance, type) or not isinstance(name_or_instance, Oracle):
-                raise OracleError(
-                    "expected an oracle name or an oracle instance (with a name and "
-                    f"assess()), got {type(name_or_instance).__name__}"
-                )
-            if options:
-                raise OracleError(
-                    f"options {sorted(options)} apply when an oracle is built by name; "
-                    "configure the instance yourself"
-                )
-            return name_or_instance
-        name = name_or_instance.strip()
-        cls = self.factory(name)
-        try:
-            oracle = cls(**options)
-        except TypeError as exc:
-            raise OracleError(f"oracle {name!r}: bad options {sorted(options)}: {exc}") from None
+        oracle = self.create(name_or_instance, **options)
         if not isinstance(oracle, Oracle):  # pragma: no cover - _check_class makes this hold
-            raise OracleError(f"oracle {name!r} built an object without name/assess")
+            raise OracleError(f"oracle {name_or_instance!r} built an object without name/assess")
         return oracle
 
 

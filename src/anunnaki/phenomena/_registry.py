@@ -88,7 +88,8 @@ def _check_class(cls: object) -> type[Phenomenon]:
 class PhenomenonRegistry(Registry[Phenomenon]):
     """Maps names to phenomenon classes: the generic :class:`~anunnaki.plugins.Registry`.
 
-    A name with ``+`` is a composition (``"fog+raindrop"``).
+    A name with ``+`` is a composition (``"fog+raindrop"``), built by the registry's
+    ``combine`` hook.
 
     Args:
         builtins: Register :data:`BUILTIN_PHENOMENA` (default ``True``).
@@ -108,6 +109,8 @@ class PhenomenonRegistry(Registry[Phenomenon]):
             error=PhenomenonError,
             hint="combine them with '+', e.g. 'fog+raindrop'",
             logger="anunnaki.phenomena",
+            combine=lambda parts: Composition(*parts, registry=self),
+            separator="+",
         )
         if builtins:
             for cls in BUILTIN_PHENOMENA:
@@ -121,17 +124,7 @@ class PhenomenonRegistry(Registry[Phenomenon]):
                 argument that is neither a string nor a :class:`Phenomenon`.
 
         """
-        if isinstance(name_or_instance, Phenomenon):
-            return name_or_instance
-        if not isinstance(name_or_instance, str):
-            raise PhenomenonError(
-                f"expected a phenomenon name or a Phenomenon instance, "
-                f"got {type(name_or_instance).__name__}"
-            )
-        name = name_or_instance.strip()
-        if "+" in name:
-            return Composition(*(part.strip() for part in name.split("+")), registry=self)
-        return self.create(name)
+        return self.create(name_or_instance)
 
 
 _DEFAULT = PhenomenonRegistry()
