@@ -34,7 +34,6 @@ import numpy as np
 
 from anunnaki import topics
 from anunnaki.bus import Detections
-from anunnaki.sim._models import _lite_urdf
 from anunnaki.sim._platform import SimPlatform, as_scenario, body_of
 from anunnaki.sim._scenario import ObjectSpec, Scenario
 from anunnaki.sim._scene import (
@@ -42,6 +41,7 @@ from anunnaki.sim._scene import (
     Camera,
     Placement,
     Scene,
+    _lite_urdf,
     layout_placements,
 )
 from anunnaki.sim._world import pybullet
