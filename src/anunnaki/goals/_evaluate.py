@@ -39,14 +39,10 @@ from typing import Any, Final, Literal
 from anunnaki.errors import ModelFileError
 from anunnaki.goals._expr import ABSENT, AttrRef, Expression, truth
 from anunnaki.goals._freshness import RateEstimator, is_stale
+from anunnaki.goals._history import History
 from anunnaki.goals._model import GoalModel
-from anunnaki.goals._relax import (
-    AtemporalOperator,
-    History,
-    MayOrOperator,
-    RelaxOperator,
-    TemporalOperator,
-)
+from anunnaki.goals._relax_ops import AtemporalOperator, MayOrOperator, RelaxOperator
+from anunnaki.goals._relax_temporal import TemporalOperator
 
 __all__ = ["Evaluator", "Explanation", "NodeState", "Status", "status_name"]
 
