@@ -24,10 +24,12 @@ from pathlib import Path
 from typing import Any, Literal
 
 from anunnaki import topics
+from anunnaki.sim._layout import layout_placements
 from anunnaki.sim._platform import SimPlatform, as_scenario, body_of
 from anunnaki.sim._rover import _placement
 from anunnaki.sim._scenario import Scenario
-from anunnaki.sim._scene import Camera, Scene, layout_placements
+from anunnaki.sim._scene import Scene
+from anunnaki.sim._world import Camera
 
 __all__ = ["CAMERA_DOWN", "UAV_CAMERA_FOV", "UavMode", "UavSim"]
 
