@@ -53,6 +53,9 @@ values in :mod:`anunnaki.goals._relax_ops`, the operators over time in
 
 from __future__ import annotations
 
+from collections.abc import Callable
+from typing import Any, Final
+
 from anunnaki.goals._history import DEFAULT_MAXLEN, History
 from anunnaki.goals._relax_ops import (
     AtemporalOperator,
@@ -126,31 +129,35 @@ def build_operator(spec: RelaxSpecBase) -> RelaxOperator:
         TypeError: ``spec`` is not a RELAX spec.
 
     """
-    match spec:
-        case ShallSpec():
-            return _Clamp(spec)
-        case MayOrSpec():
-            return MayOrOperator(spec)
-        case AsCloseAsPossibleToFrequencySpec() | AsCloseAsPossibleToQuantitySpec():
-            if spec.side == "at_least":
-                return _RampUp(spec, spec.target, spec.tolerance)
-            if spec.side == "at_most":
-                return _RampDown(spec, spec.target, spec.tolerance)
-            return _Triangle(spec, spec.target, spec.tolerance)
-        case AsFewAsPossibleSpec():
-            return _RampDown(spec, spec.target, spec.tolerance)
-        case AsManyAsPossibleSpec():
-            return _RampUp(spec, spec.target, spec.tolerance)
-        case EventuallySpec():
-            return _Eventually(spec, spec.within, spec.tolerance)
-        case UntilSpec():
-            return _Until(spec)
-        case BeforeSpec():
-            return _Before(spec)
-        case AfterSpec():
-            return _After(spec)
-        case AsEarlyAsPossibleSpec():
-            return _Eventually(spec, 0.0, spec.tolerance)
-        case AsLateAsPossibleSpec():
-            return _AsLate(spec)
+    for cls in type(spec).__mro__:
+        builder = _BUILDERS.get(cls)
+        if builder is not None:
+            return builder(spec)
     raise TypeError(f"not a RELAX spec: {spec!r}")
+
+
+def _close_to(
+    spec: AsCloseAsPossibleToFrequencySpec | AsCloseAsPossibleToQuantitySpec,
+) -> RelaxOperator:
+    if spec.side == "at_least":
+        return _RampUp(spec, spec.target, spec.tolerance)
+    if spec.side == "at_most":
+        return _RampDown(spec, spec.target, spec.tolerance)
+    return _Triangle(spec, spec.target, spec.tolerance)
+
+
+#: Which operator each kind of spec builds.
+_BUILDERS: Final[dict[type[RelaxSpecBase], Callable[[Any], RelaxOperator]]] = {
+    ShallSpec: _Clamp,
+    MayOrSpec: MayOrOperator,
+    AsCloseAsPossibleToFrequencySpec: _close_to,
+    AsCloseAsPossibleToQuantitySpec: _close_to,
+    AsFewAsPossibleSpec: lambda spec: _RampDown(spec, spec.target, spec.tolerance),
+    AsManyAsPossibleSpec: lambda spec: _RampUp(spec, spec.target, spec.tolerance),
+    EventuallySpec: lambda spec: _Eventually(spec, spec.within, spec.tolerance),
+    UntilSpec: _Until,
+    BeforeSpec: _Before,
+    AfterSpec: _After,
+    AsEarlyAsPossibleSpec: lambda spec: _Eventually(spec, 0.0, spec.tolerance),
+    AsLateAsPossibleSpec: _AsLate,
+}
