@@ -156,16 +156,33 @@ def _rover_layout(rng: np.random.Generator) -> list[Placement]:
 
 def _uav_layout(rng: np.random.Generator) -> list[Placement]:
     """Roads, buildings, trees, vehicles and pedestrians (some in groups) over the area."""
-    out: list[Placement] = []
     taken: list[tuple[float, float, float]] = []
+    out = _uav_roads(rng)
+    out += _uav_scenery(rng, taken)
+    out += _uav_vehicles(rng, taken)
+    out += _uav_pedestrians(rng, taken)
+    return out
+
+
+def _uav_roads(rng: np.random.Generator) -> list[Placement]:
+    """Roads (flat, visual only): a cross of two roads through the area."""
     half = UAV_AREA / 2
-    # Roads first (flat, visual only): a cross of two roads through the area.
+    out = []
     for axis in (0, 1):
         offset = float(rng.uniform(-half / 2, half / 2))
         grey = float(rng.uniform(0.3, 0.45))
         x, y = (offset, 0.0) if axis == 0 else (0.0, offset)
         yaw = math.pi / 2 if axis == 0 else 0.0
         out.append(Placement("road", x, y, yaw=yaw, size=UAV_AREA, color=(grey, grey, grey, 1)))
+    return out
+
+
+def _uav_scenery(
+    rng: np.random.Generator, taken: list[tuple[float, float, float]]
+) -> list[Placement]:
+    """Buildings, then trees."""
+    half = UAV_AREA / 2
+    out = []
     for _ in range(int(rng.integers(4, 8))):
         pos = _spaced(rng, taken, 5.0, (-half, half), (-half, half))
         if pos is not None:
@@ -189,6 +206,14 @@ def _uav_layout(rng: np.random.Generator) -> list[Placement]:
                     color=_hsv(float(rng.uniform(0.22, 0.36)), 0.6, float(rng.uniform(0.3, 0.6))),
                 )
             )
+    return out
+
+
+def _uav_vehicles(
+    rng: np.random.Generator, taken: list[tuple[float, float, float]]
+) -> list[Placement]:
+    half = UAV_AREA / 2
+    out = []
     for _ in range(int(rng.integers(6, 12))):
         pos = _spaced(rng, taken, 2.2, (-half, half), (-half, half))
         if pos is not None:
@@ -203,6 +228,15 @@ def _uav_layout(rng: np.random.Generator) -> list[Placement]:
                     variant=variant,
                 )
             )
+    return out
+
+
+def _uav_pedestrians(
+    rng: np.random.Generator, taken: list[tuple[float, float, float]]
+) -> list[Placement]:
+    """Groups of 2-5 pedestrians, then a few on their own."""
+    half = UAV_AREA / 2
+    out = []
     groups = int(rng.integers(3, 6))
     for _ in range(groups):
         cx, cy = (float(v) for v in rng.uniform(-half * 0.8, half * 0.8, size=2))
