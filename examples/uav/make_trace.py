@@ -30,6 +30,27 @@ from anunnaki.trace import Phase, Record, write_trace
 END = 80.0
 
 
+def mode(t: float) -> str:
+    return "return_home" if t >= 70 else "hover" if t >= 50 else "auto"
+
+
+def altitude(t: float) -> float:
+    if 20 <= t < 25:
+        return 36.0
+    if 25 <= t < 30:
+        return 34.0
+    return 30.0
+
+
+def oracle(t: float) -> tuple[int, str]:
+    """The oracle's category and context at ``t``: fog from 30 s, dense from 40 s."""
+    if 30 <= t < 40:
+        return 1, "fog"
+    if t >= 40:
+        return 2, "fog"
+    return 0, "clear"
+
+
 def build() -> list[Record | Phase]:
     items: list[Record | Phase] = []
 
@@ -47,16 +68,6 @@ def build() -> list[Record | Phase]:
     ]:
         items.append(Phase(t, name, note))
 
-    def mode(t: float) -> str:
-        return "return_home" if t >= 70 else "hover" if t >= 50 else "auto"
-
-    def altitude(t: float) -> float:
-        if 20 <= t < 25:
-            return 36.0
-        if 25 <= t < 30:
-            return 34.0
-        return 30.0
-
     for k in range(int(END * 2)):  # A1 status at 2 Hz
         t = k / 2
         at(t, "/uav/status", {"mode": mode(t), "altitude": altitude(t), "delivered": False})
@@ -70,12 +81,7 @@ def build() -> list[Record | Phase]:
         at(t, "/uav/battery", {"level": level})
     for k in range(int(END * 2)):  # A4 oracle at 2 Hz
         t = k / 2
-        if 30 <= t < 40:
-            category, context = 1, "fog"
-        elif t >= 40:
-            category, context = 2, "fog"
-        else:
-            category, context = 0, "clear"
+        category, context = oracle(t)
         at(
             t,
             "/utu/oracle/output",

@@ -111,28 +111,7 @@ def check_files(
     extension (``.xml`` = tactics), so ``check MODEL TACTICS`` works without a binding.
     """
     result = CheckResult()
-    for path in extra:
-        try:
-            kind = _sniff_kind(path)
-        except ModelFileError as exc:
-            result.findings.append(Finding.from_error(exc))
-            result.unreadable = True
-            continue
-        if kind == "binding" and binding is None:
-            binding = path
-            continue
-        if kind == "tactics" and tactics is None:
-            tactics = path
-            continue
-        if kind in ("binding", "tactics"):
-            message, hint = f"a second {kind} file", "give one binding and one tactics file"
-        elif kind == "goal model":
-            message, hint = "a second goal model", "give the goal model first, then the others"
-        else:
-            message = "cannot tell whether this is a binding or a tactics file"
-            hint = "start it with 'anunnaki: binding/1' or 'anunnaki: tactics/1'"
-        result.findings.append(Finding("error", message, str(path), 1, hint=hint))
-        result.unreadable = True
+    binding, tactics = _sort_extra(result, extra, binding, tactics)
     loaded_binding: Binding | None = None
     if binding is not None:
         try:
@@ -158,37 +137,87 @@ def check_files(
         except ModelFileError as exc:
             result.findings.append(Finding.from_error(exc))
     if tactics is not None:
+        _check_tactics_file(result, model, tactics)
+    return result
+
+
+def _sort_extra(
+    result: CheckResult,
+    extra: tuple[str | Path, ...],
+    binding: str | Path | None,
+    tactics: str | Path | None,
+) -> tuple[str | Path | None, str | Path | None]:
+    """Tell the extra files apart: the binding and tactics files; the others are findings."""
+    for path in extra:
         try:
-            ts = load_tactics(tactics)
+            kind = _sniff_kind(path)
         except ModelFileError as exc:
             result.findings.append(Finding.from_error(exc))
             result.unreadable = True
-            return result
-        result.tactics = ts
-        found = check_tactics(model, ts, str(tactics))
-        result.findings.extend(sorted(found, key=lambda f: f.line or 0))
-        result.findings.extend(_unaddressed(model, ts))
-    return result
+            continue
+        if kind == "binding" and binding is None:
+            binding = path
+            continue
+        if kind == "tactics" and tactics is None:
+            tactics = path
+            continue
+        if kind in ("binding", "tactics"):
+            message, hint = f"a second {kind} file", "give one binding and one tactics file"
+        elif kind == "goal model":
+            message, hint = "a second goal model", "give the goal model first, then the others"
+        else:
+            message = "cannot tell whether this is a binding or a tactics file"
+            hint = "start it with 'anunnaki: binding/1' or 'anunnaki: tactics/1'"
+        result.findings.append(Finding("error", message, str(path), 1, hint=hint))
+        result.unreadable = True
+    return binding, tactics
+
+
+def _check_tactics_file(result: CheckResult, model: GoalModel, tactics: str | Path) -> None:
+    """Load the tactics file and add what is wrong with it to ``result``."""
+    try:
+        ts = load_tactics(tactics)
+    except ModelFileError as exc:
+        result.findings.append(Finding.from_error(exc))
+        result.unreadable = True
+        return
+    result.tactics = ts
+    found = check_tactics(model, ts, str(tactics))
+    result.findings.extend(sorted(found, key=lambda f: f.line or 0))
+    result.findings.extend(_unaddressed(model, ts))
 
 
 def check_tactics(model: GoalModel, ts: TacticSet, path: str | None) -> list[Finding]:
     """Check that tactics name known goals, endpoints and attributes."""
-    out: list[Finding] = []
-    for goal, refs in ts.referenced_goals().items():
-        if goal not in model.goals:
-            from anunnaki.goals import did_you_mean as _did_you_mean
+    return [
+        *_goal_findings(model, ts, path),
+        *_endpoint_findings(model, ts, path),
+        *_expression_findings(model, ts, path),
+    ]
 
-            for ref in refs:
-                out.append(
-                    Finding(
-                        "error",
-                        f"unknown goal '{goal}'",
-                        path,
-                        ref.line,
-                        ref.element,
-                        _did_you_mean(goal, model.goals),
-                    )
-                )
+
+def _goal_findings(model: GoalModel, ts: TacticSet, path: str | None) -> list[Finding]:
+    """A finding for every reference to a goal the model does not have."""
+    from anunnaki.goals import did_you_mean as _did_you_mean
+
+    return [
+        Finding(
+            "error",
+            f"unknown goal '{goal}'",
+            path,
+            ref.line,
+            ref.element,
+            _did_you_mean(goal, model.goals),
+        )
+        for goal, refs in ts.referenced_goals().items()
+        if goal not in model.goals
+        for ref in refs
+    ]
+
+
+def _endpoint_findings(model: GoalModel, ts: TacticSet, path: str | None) -> list[Finding]:
+    """Findings for unknown endpoints, topics requested (or services published), payloads."""
+    out: list[Finding] = []
     for ep in ts.referenced_endpoints():
         spec = model.endpoints.get(ep.name)
         if spec is None:
@@ -217,6 +246,12 @@ def check_tactics(model: GoalModel, ts: TacticSet, path: str | None) -> list[Fin
             )
         for problem in _payload_problems(spec, ep.payload):
             out.append(Finding("error", problem, path, ep.line, ep.element))
+    return out
+
+
+def _expression_findings(model: GoalModel, ts: TacticSet, path: str | None) -> list[Finding]:
+    """Findings for expressions that do not compile or name unknown agents or attributes."""
+    out: list[Finding] = []
     for eref in ts.expressions():
         try:
             expr = compile_expression(
@@ -295,11 +330,7 @@ def _payload_problems(spec: EndpointSpec, payload: dict[str, Any]) -> list[str]:
 
 
 def _unaddressed(model: GoalModel, ts: TacticSet) -> list[Finding]:
-    named: set[str] = set()
-    for tactic in ts.tactics:
-        for cond in tactic.preconditions:
-            if isinstance(cond, GoalState) and cond.state in ("unsatisfied", "unknown"):
-                named.add(cond.goal)
+    named = _addressed_goals(ts)
     covered: dict[str, bool] = {}
 
     def has_named_ancestor(goal: str, seen: set[str]) -> bool:
@@ -347,3 +378,13 @@ def _unaddressed(model: GoalModel, ts: TacticSet) -> list[Finding]:
                 )
             )
     return out
+
+
+def _addressed_goals(ts: TacticSet) -> set[str]:
+    """The goals whose violation (or unknown status) some tactic's precondition names."""
+    return {
+        cond.goal
+        for tactic in ts.tactics
+        for cond in tactic.preconditions
+        if isinstance(cond, GoalState) and cond.state in ("unsatisfied", "unknown")
+    }

@@ -19,7 +19,7 @@ from dashboard_helpers import ROVER, Web, png, wait_for
 from anunnaki.bus import Bus, Clock, Detections, Image, InprocHub, open_bus
 from anunnaki.dashboard import Dashboard, DashboardState
 from anunnaki.dashboard._app import dumps
-from anunnaki.dashboard._state import MAX_ACTIONS, MAX_ASSESSORS, _num
+from anunnaki.dashboard._checks import MAX_ACTIONS, MAX_ASSESSORS, _num
 from anunnaki.goals import load_goal_model
 from anunnaki.tactics import load_tactics
 from anunnaki.topics import DECISIONS as DECISIONS_TOPIC
@@ -187,7 +187,7 @@ def test_decisions_stay_bounded(state: DashboardState) -> None:
             [{"t": float(i * 10 + j), "kind": "action", "tactic": "fail-safe"} for j in range(10)]
         )
     assert len(small.snapshot()["decisions"]) == 50
-    assert len(small._decision_keys) <= 4 * 50
+    assert len(small._log._keys) <= 4 * 50
     (run,) = small.snapshot()["executions"]
     assert len(run["actions"]) == MAX_ACTIONS  # 400 actions of one run: the first 100 kept
 

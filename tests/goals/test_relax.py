@@ -1,4 +1,4 @@
-"""Tests of the RELAX operators (anunnaki.goals._relax) and of the examples in docs/relax.md."""
+"""Tests of the RELAX operators (anunnaki.goals._relax*) and of the examples in docs/relax.md."""
 
 from __future__ import annotations
 
@@ -14,6 +14,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from pydantic import TypeAdapter, ValidationError
 
+from anunnaki.goals import History, RelaxOperator, RelaxSpec, build_operator
 from anunnaki.goals._relax import (
     AfterSpec,
     AsCloseAsPossibleToFrequencySpec,
@@ -25,16 +26,12 @@ from anunnaki.goals._relax import (
     AtemporalOperator,
     BeforeSpec,
     EventuallySpec,
-    History,
     MayOrOperator,
     MayOrSpec,
-    RelaxOperator,
-    RelaxSpec,
     RelaxSpecBase,
     ShallSpec,
     TemporalOperator,
     UntilSpec,
-    build_operator,
 )
 
 SPEC = TypeAdapter(RelaxSpec)

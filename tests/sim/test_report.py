@@ -13,8 +13,15 @@ import pytest
 
 from anunnaki.cli.main import main
 from anunnaki.errors import AnunnakiError, MissingExtraError
-from anunnaki.sim import FrameScore, RunReport, TacticEvent, load_report, plot_report, rolling_f1
-from anunnaki.sim._report import tactic_events
+from anunnaki.sim import (
+    FrameScore,
+    RunReport,
+    TacticEvent,
+    load_report,
+    plot_report,
+    rolling_f1,
+    tactic_events,
+)
 
 EXAMPLES = Path(__file__).parents[2] / "examples"
 

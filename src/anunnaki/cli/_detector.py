@@ -385,7 +385,7 @@ def _add_evaluate(sub: Any) -> None:
     p.set_defaults(run=_run_evaluate)
 
 
-def _run_evaluate(args: argparse.Namespace) -> int:
+def _run_evaluate(args: argparse.Namespace) -> int:  # noqa: C901
     from anunnaki.datasets import load_split
     from anunnaki.lec import (  # before torch: OMP policy
         DetectorError,

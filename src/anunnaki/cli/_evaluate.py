@@ -98,7 +98,7 @@ def render_tree(ev: Evaluator) -> Tree:
     return root
 
 
-def run(args: argparse.Namespace) -> int:  # noqa: C901, PLR0915
+def run(args: argparse.Namespace) -> int:
     """Replay the trace; exit 0 when done (the goal statuses are the output, not the code)."""
     model: GoalModel = load_goal_model(args.model, args.binding)
     ev = Evaluator(model)
@@ -108,56 +108,134 @@ def run(args: argparse.Namespace) -> int:  # noqa: C901, PLR0915
             f"--explain {args.explain}: the goal model has no goal or obstacle "
             f"'{args.explain}' (it has: {known})"
         )
-    seen: dict[str, int] = dict.fromkeys(model.topic_routes(), 0)
     console = Console(highlight=False)
     if not console.is_terminal:
         console = Console(highlight=False, width=160)
-    last_u: dict[str, float | None] = {n: ev.state(n).utility for n in ev.ids}
-    last_s: dict[str, Any] = {n: ev.state(n).status for n in ev.ids}
-    phase: str | None = None
-    ev.drain_changes()
-    summary: list[dict[str, Any]] = []
+    replay = _Replay(args, model, ev, console)
+    count, seen = replay.replay(args.trace)
+    routes = model.topic_routes()
+    silent = {
+        topic: sorted({agent for agent, _ in routes[topic]}) for topic, n in seen.items() if not n
+    }
+    if args.json:
+        out = {"summary": replay.summary, "messages": count, "silent_topics": silent}
+        sys.stdout.write(json.dumps(out) + "\n")
+    else:
+        replay.print_summary(count, silent)
+    return 0
 
-    def report(t: float) -> None:
-        changed = ev.drain_changes()
+
+class _Replay:
+    """Feeds a trace to the evaluator and reports each instant's notable changes."""
+
+    def __init__(
+        self, args: argparse.Namespace, model: GoalModel, ev: Evaluator, console: Console
+    ) -> None:
+        self.args = args
+        self.model = model
+        self.ev = ev
+        self.console = console
+        self.last_u: dict[str, float | None] = {n: ev.state(n).utility for n in ev.ids}
+        self.last_s: dict[str, Any] = {n: ev.state(n).status for n in ev.ids}
+        self.phase: str | None = None
+        self.summary: list[dict[str, Any]] = []
+        ev.drain_changes()
+
+    def replay(self, trace: Any) -> tuple[int, dict[str, int]]:
+        """Replay ``trace``; the number of records and the count per bound topic."""
+        ev = self.ev
+        seen: dict[str, int] = dict.fromkeys(self.model.topic_routes(), 0)
+        t = 0.0
+        count = 0
+        for item in iter_trace(trace):
+            if isinstance(item, dict):
+                continue
+            if item.t != t:
+                self.report(t)  # everything that happened at the previous instant, as one change
+                t = item.t
+            ev.tick(t)
+            if isinstance(item, Phase):
+                self.report(t)
+                self._new_phase(item, t)
+                continue
+            assert isinstance(item, Record)
+            ev.observe(item.topic, item.msg, t)
+            count += 1
+            if item.topic in seen:
+                seen[item.topic] += 1
+        self.report(t)
+        ev.tick(t)
+        self.report(t)
+        if self.phase is not None:
+            self.summary.append({"phase": self.phase, "end": t, "root": ev.root.status_name})
+        return count, seen
+
+    def _new_phase(self, item: Phase, t: float) -> None:
+        if self.phase is not None:
+            self.summary.append({"phase": self.phase, "end": t, "root": self.ev.root.status_name})
+        self.phase = item.phase
+        if not self.args.json:
+            title = f"phase {item.phase}" + (f": {item.note}" if item.note else "")
+            self.console.rule(Text(title, style="bold"))
+
+    def _notable(self) -> list[tuple[str, Any, Any, float | None, float | None]]:
+        """The nodes whose status changed or whose utility moved by ``--delta`` or more."""
+        ev, last_u, last_s = self.ev, self.last_u, self.last_s
         notable = []
-        for n in changed:
+        for n in ev.drain_changes():
             st = ev.state(n)
             prev_u = last_u[n]
             moved = (st.utility is None) != (prev_u is None) or (
                 st.utility is not None
                 and prev_u is not None
-                and abs(st.utility - prev_u) >= args.delta
+                and abs(st.utility - prev_u) >= self.args.delta
             )
             if st.status is not last_s[n] or moved:
                 notable.append((n, last_s[n], st.status, prev_u, st.utility))
                 last_u[n] = st.utility
                 last_s[n] = st.status
+        return notable
+
+    def report(self, t: float) -> None:
+        """Report what changed notably since the last report (nothing if nothing did)."""
+        notable = self._notable()
         if not notable:
             return
-        if args.json:
-            out = {
-                "t": t,
-                "phase": phase,
-                "changed": [
-                    {
-                        "node": n,
-                        "from": status_name(a),
-                        "to": status_name(b),
-                        "utility_from": ua,
-                        "utility": ub,
-                    }
-                    for n, a, b, ua, ub in notable
-                ],
-                "nodes": {
-                    n: {"utility": ev.util[i], "status": status_name(ev.stat[i])}
-                    for i, n in enumerate(ev.ids)
-                },
-            }
-            if args.explain:
-                out["explanation"] = ev.explain(args.explain).to_dict()
-            sys.stdout.write(json.dumps(out) + "\n")
-            return
+        if self.args.json:
+            self._report_json(t, notable)
+        else:
+            self._report_text(t, notable)
+
+    def _report_json(
+        self, t: float, notable: list[tuple[str, Any, Any, float | None, float | None]]
+    ) -> None:
+        ev = self.ev
+        out = {
+            "t": t,
+            "phase": self.phase,
+            "changed": [
+                {
+                    "node": n,
+                    "from": status_name(a),
+                    "to": status_name(b),
+                    "utility_from": ua,
+                    "utility": ub,
+                }
+                for n, a, b, ua, ub in notable
+            ],
+            "nodes": {
+                n: {"utility": ev.util[i], "status": status_name(ev.stat[i])}
+                for i, n in enumerate(ev.ids)
+            },
+        }
+        if self.args.explain:
+            out["explanation"] = ev.explain(self.args.explain).to_dict()
+        sys.stdout.write(json.dumps(out) + "\n")
+
+    def _report_text(
+        self, t: float, notable: list[tuple[str, Any, Any, float | None, float | None]]
+    ) -> None:
+        model, console = self.model, self.console
 
         def word(node: str, s: Any) -> str:
             if node in model.obstacles:
@@ -171,56 +249,23 @@ def run(args: argparse.Namespace) -> int:  # noqa: C901, PLR0915
             for n, a, b, ua, ub in notable
         )
         console.print(Text.assemble((f"t = {t:8.3f} s  ", "bold cyan"), what), soft_wrap=True)
-        console.print(render_tree(ev))
-        if args.explain:
-            console.print(Text(ev.explain(args.explain).render()))
+        console.print(render_tree(self.ev))
+        if self.args.explain:
+            console.print(Text(self.ev.explain(self.args.explain).render()))
         console.print()
 
-    t = 0.0
-    count = 0
-    for item in iter_trace(args.trace):
-        if isinstance(item, dict):
-            continue
-        if item.t != t:
-            report(t)  # everything that happened at the previous instant, as one change
-            t = item.t
-        ev.tick(t)
-        if isinstance(item, Phase):
-            report(t)
-            if phase is not None:
-                summary.append({"phase": phase, "end": t, "root": ev.root.status_name})
-            phase = item.phase
-            if not args.json:
-                title = f"phase {item.phase}" + (f": {item.note}" if item.note else "")
-                console.rule(Text(title, style="bold"))
-            continue
-        assert isinstance(item, Record)
-        ev.observe(item.topic, item.msg, t)
-        count += 1
-        if item.topic in seen:
-            seen[item.topic] += 1
-    report(t)
-    ev.tick(t)
-    report(t)
-    if phase is not None:
-        summary.append({"phase": phase, "end": t, "root": ev.root.status_name})
-    routes = model.topic_routes()
-    silent = {
-        topic: sorted({agent for agent, _ in routes[topic]}) for topic, n in seen.items() if not n
-    }
-    if args.json:
-        out = {"summary": summary, "messages": count, "silent_topics": silent}
-        sys.stdout.write(json.dumps(out) + "\n")
-    else:
+    def print_summary(self, count: int, silent: dict[str, list[str]]) -> None:
+        """The root's status at the end of each phase, the count, the silent topics."""
+        console, model = self.console, self.model
         console.rule(Text("summary", style="bold"))
-        for row in summary:
+        for row in self.summary:
             console.print(
                 Text.assemble(
                     f"{row['phase']:<24} root {model.root} at end of phase: ",
                     (row["root"], _STYLE[row["root"]]),
                 )
             )
-        console.print(Text(f"{count} messages replayed from {args.trace}"))
+        console.print(Text(f"{count} messages replayed from {self.args.trace}"))
         if silent:
             names = ", ".join(f"{t} ({', '.join(a)})" for t, a in silent.items())
             console.print(
@@ -231,4 +276,3 @@ def run(args: argparse.Namespace) -> int:  # noqa: C901, PLR0915
                 ),
                 soft_wrap=True,
             )
-    return 0

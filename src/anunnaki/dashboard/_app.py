@@ -100,7 +100,7 @@ def _json(obj: Any, status: int = 200) -> Response:
     )
 
 
-def create_app(  # noqa: C901 - over the limits since before issue 11
+def create_app(
     state: DashboardState,
     operator: Operator | None = None,
     *,
@@ -169,19 +169,7 @@ def create_app(  # noqa: C901 - over the limits since before issue 11
 
     @app.get("/api/frame/{seq}")
     def frame(seq: str) -> Response:
-        if seq == "latest":
-            f = state.frame()
-        elif seq.isdigit():
-            f = state.frame(int(seq))
-        else:
-            raise HTTPException(400, "give a frame number or 'latest'")
-        if f is None:
-            raise HTTPException(404, "no such frame (frames are kept only briefly)")
-        return Response(
-            f.data,
-            media_type=f.media_type,
-            headers={"Cache-Control": "no-store", "X-Frame-Seq": str(f.seq)},
-        )
+        return _frame_response(state, seq)
 
     @app.get("/api/events")
     async def events() -> StreamingResponse:
@@ -198,32 +186,55 @@ def create_app(  # noqa: C901 - over the limits since before issue 11
         body: OperatorRequest | None = None,
         authorization: str | None = Header(default=None),
     ) -> Response:
-        if token is None:
-            raise HTTPException(
-                403, "read-only dashboard: operator actions need a server started with --token"
-            )
-        given = ""
-        if authorization and authorization.lower().startswith("bearer "):
-            given = authorization[7:].strip()
-        if not hmac.compare_digest(given.encode(), token.encode()):
-            raise HTTPException(
-                401, "missing or wrong token", headers={"WWW-Authenticate": "Bearer"}
-            )
-        if action not in OPERATIONS:
-            raise HTTPException(404, f"unknown action {action!r}; actions: {', '.join(OPERATIONS)}")
-        if operator is None:
-            raise HTTPException(503, "this dashboard is not connected to a bus")
+        performer = _authorized(token, authorization, action, operator)
         req = body or OperatorRequest()
         who = _OPERATOR_NAME.sub("", req.operator or "") or "operator"
         host = request.client.host if request.client is not None else "unknown"
         caller = f"dashboard:{who}@{host}"
         try:
-            reply = operator.operate(action, caller=caller, tactic=req.tactic, reason=req.reason)
+            reply = performer.operate(action, caller=caller, tactic=req.tactic, reason=req.reason)
         except OperatorError as exc:
             raise HTTPException(502, str(exc)) from None
         return _json({"ok": True, "action": action, "caller": caller, "reply": reply})
 
     return app
+
+
+def _frame_response(state: DashboardState, seq: str) -> Response:
+    """A kept frame's encoded bytes (``seq`` a number or ``latest``), or 400/404."""
+    if seq == "latest":
+        f = state.frame()
+    elif seq.isdigit():
+        f = state.frame(int(seq))
+    else:
+        raise HTTPException(400, "give a frame number or 'latest'")
+    if f is None:
+        raise HTTPException(404, "no such frame (frames are kept only briefly)")
+    return Response(
+        f.data,
+        media_type=f.media_type,
+        headers={"Cache-Control": "no-store", "X-Frame-Seq": str(f.seq)},
+    )
+
+
+def _authorized(
+    token: str | None, authorization: str | None, action: str, operator: Operator | None
+) -> Operator:
+    """The operator to perform ``action``, once the request may (else 403/401/404/503)."""
+    if token is None:
+        raise HTTPException(
+            403, "read-only dashboard: operator actions need a server started with --token"
+        )
+    given = ""
+    if authorization and authorization.lower().startswith("bearer "):
+        given = authorization[7:].strip()
+    if not hmac.compare_digest(given.encode(), token.encode()):
+        raise HTTPException(401, "missing or wrong token", headers={"WWW-Authenticate": "Bearer"})
+    if action not in OPERATIONS:
+        raise HTTPException(404, f"unknown action {action!r}; actions: {', '.join(OPERATIONS)}")
+    if operator is None:
+        raise HTTPException(503, "this dashboard is not connected to a bus")
+    return operator
 
 
 async def _stream(

@@ -13,166 +13,45 @@ The store never calls into Utu. It holds what Utu published (``/utu/analyze/stat
 agents' topics, assessments, camera frames, detections), plus its own evaluator of the
 goal model fed with the same agent topics, which answers *why* a node has its status
 (:meth:`DashboardState.explain`) without touching the manager.
+
+This module is the store itself: the lock, the version counter and listeners, the goals
+and the analysis, the timeline and the run's liveliness. What it holds per pane lives
+beside it, called with its lock held: the checks every message passes
+(:mod:`~anunnaki.dashboard._checks`), the monitor's topics (``_monitor``), the camera's
+frames and detections (``_camera``), the decision log and executions (``_decisions``),
+and the page's fixed description of the model and tactics (``_structure``).
 """
 
 from __future__ import annotations
 
-import json
 import logging
 import math
 import threading
 import time
 from collections import deque
 from collections.abc import Callable, Iterable, Mapping
-from dataclasses import dataclass
 from typing import Any, Literal
 
-from anunnaki.goals import Evaluator, GoalModel, TopicFreshness
+from anunnaki.dashboard._camera import CameraPane, Frame
+from anunnaki.dashboard._checks import (
+    MAX_ASSESSORS,
+    _name,
+    _num,
+    _plain,
+    assessment_row,
+    detections_row,
+    parse_analysis,
+    queue_rows,
+)
+from anunnaki.dashboard._decisions import FLAG_KINDS, DecisionLog
+from anunnaki.dashboard._monitor import monitor_rows, topics_of
+from anunnaki.dashboard._structure import describe
+from anunnaki.goals import Evaluator, GoalModel
 from anunnaki.tactics import TacticSet
 
 __all__ = ["DashboardState", "Frame"]
 
 log = logging.getLogger("anunnaki.dashboard")
-
-#: Decision kinds drawn as markers on the timeline.
-TIMELINE_KINDS = frozenset(
-    {
-        "started",
-        "postcondition_ok",
-        "postcondition_failed",
-        "completed",
-        "escalated",
-        "run_stop",
-        "paused",
-        "resumed_adaptation",
-        "approved",
-        "rejected",
-        "pending_approval",
-    }
-)
-_RESULT_KINDS = frozenset({"postcondition_ok", "postcondition_failed", "completed"})
-#: Decisions that change Utu's pause and run-stop flags: the header follows the decision log
-#: as well as the analysis, so it shows an operator's call from whichever arrives first (and
-#: from a knowledge base recorded by an Utu that published its analysis on goal changes only).
-_FLAG_KINDS: dict[str, dict[str, bool]] = {
-    "paused": {"paused": True},
-    "resumed_adaptation": {"paused": False, "run_stopped": False},
-    "run_stop": {"paused": True, "run_stopped": True},
-}
-_STATUSES = ("satisfied", "unsatisfied", "unknown")
-#: Bounds on what a message can make the dashboard keep (whatever arrives on the bus).
-MAX_ASSESSORS = 32
-MAX_NAME = 200
-MAX_LIST = 500
-MAX_ACTIONS = 100
-_SAFE_INT = 2**53
-
-
-@dataclass(frozen=True)
-class Frame:
-    """One camera frame as the dashboard keeps it (the encoded bytes, never decoded).
-
-    Attributes:
-        topic: The camera topic.
-        seq: The camera's frame counter.
-        encoding: ``"jpeg"`` or ``"png"``.
-        width: Width in pixels.
-        height: Height in pixels.
-        data: The encoded image file.
-        t: Its stamp on the dashboard's clock (seconds): the sender's publication time on
-            the wall clock, its simulated instant on ``clock: sim``. The frame rate is
-            measured on these stamps, never on arrivals (which come in bursts).
-
-    """
-
-    topic: str
-    seq: int
-    encoding: str
-    width: int
-    height: int
-    data: bytes
-    t: float
-
-    @property
-    def media_type(self) -> str:
-        """The HTTP content type of :attr:`data`."""
-        return "image/png" if self.encoding == "png" else "image/jpeg"
-
-
-class _Topic(TopicFreshness):
-    """A monitored topic as the monitor pane shows it: last message and freshness.
-
-    Freshness (last arrival, count, rate, staleness) is :class:`anunnaki.goals.TopicFreshness`,
-    the definition the goal model's ``rate(A)`` and Utu's Monitor use.
-    """
-
-    def __init__(self, agents: list[str], staleness: float, window: int) -> None:
-        super().__init__(staleness, window=window)
-        self.agents = agents
-        self.last_msg: Any = None
-        self.version = 0
-
-
-def _num(value: Any) -> float | None:
-    """A finite number as a float, else ``None`` (bools, strings, NaN, ints beyond float)."""
-    if isinstance(value, bool) or not isinstance(value, int | float):
-        return None
-    try:
-        f = float(value)
-    except OverflowError:  # an int too large for a float, e.g. 10**400
-        return None
-    return f if math.isfinite(f) else None
-
-
-def _number(value: Any) -> int | float | None:
-    """Like :func:`_num`, but an int that a page can hold exactly stays an int."""
-    if isinstance(value, int) and not isinstance(value, bool) and -_SAFE_INT < value < _SAFE_INT:
-        return value
-    return _num(value)
-
-
-def _name(value: Any) -> str | None:
-    """A non-empty string of at most :data:`MAX_NAME` characters, else ``None``."""
-    return value if isinstance(value, str) and 0 < len(value) <= MAX_NAME else None
-
-
-def _names(value: Any) -> list[str] | None:
-    """A list of names (others dropped, at most :data:`MAX_LIST`); ``None`` if not a list."""
-    if not isinstance(value, list | tuple):
-        return None
-    return [v for v in (_name(x) for x in value[:MAX_LIST]) if v is not None]
-
-
-def _flag(value: Any) -> bool | None:
-    return value if isinstance(value, bool) else None
-
-
-def _plain(value: Mapping[Any, Any], limit: int = MAX_LIST) -> dict[str, Any]:
-    """A mapping with string keys (at most ``limit`` of them), as JSON can carry it."""
-    return {str(k): v for k, v in list(value.items())[:limit]}
-
-
-def _queue_rows(value: Any) -> list[dict[str, Any]] | None:
-    """The plan's queue, each row ``{tactic, priority, state, deadline}``; ``None`` if no list."""
-    if not isinstance(value, list | tuple):
-        return None
-    rows = []
-    for row in value[:MAX_LIST]:
-        if not isinstance(row, Mapping):
-            continue
-        tactic = _name(row.get("tactic"))
-        if tactic is None:
-            continue
-        state = _name(row.get("state"))
-        rows.append(
-            {
-                "tactic": tactic,
-                "priority": _number(row.get("priority")),
-                "state": state or "unknown",
-                "deadline": _number(row.get("deadline")),
-            }
-        )
-    return rows
 
 
 class DashboardState:
@@ -239,34 +118,17 @@ class DashboardState:
         self._analysis_v = 0
         self._utu_t: float | None = None
         self._flags_t: float | None = None  # Utu's time of the last pause/resume/run-stop
-        staleness = model.spec.staleness
-        self._topics: dict[str, _Topic] = {}
-        for agent in model.agents.values():
-            for tb in agent.topics:
-                entry = self._topics.get(tb.topic)
-                if entry is None:
-                    entry = self._topics[tb.topic] = _Topic(
-                        [], agent.staleness or staleness, model.spec.rate_window
-                    )
-                entry.agents.append(agent.id)
-                entry.staleness = min(entry.staleness, agent.staleness or staleness)
+        self._topics = topics_of(model)
         self._oracle: dict[str, dict[str, Any]] = {}
         self._oracle_when: dict[str, int] = {}
         self._oracle_heard = 0
         self._oracle_v = 0
-        self._frames: deque[Frame] = deque(maxlen=8)
-        self._detections: dict[int, dict[str, Any]] = {}
-        self._active_model: dict[str, Any] | None = None
+        self._camera = CameraPane()
         self._camera_v = 0
-        self._camera_count = 0
-        self._decisions: deque[dict[str, Any]] = deque(maxlen=decisions)
-        self._decision_keys: set[str] = set()
-        self._decision_n = 0
-        self._executions: deque[dict[str, Any]] = deque(maxlen=200)
+        self._log = DecisionLog(decisions)
         self._executions_v = 0
         self._timeline: deque[dict[str, Any]] = deque(maxlen=timeline)
         self._timeline_n = 0
-        self._frame_stamps: deque[float] = deque(maxlen=64)
         self._latest_t: float | None = None  # the latest time any pane shows
         self.idle = idle
         self._wall = wall
@@ -404,45 +266,6 @@ class DashboardState:
             return
         self._goals[nid] = (utility, status, self._bump())
 
-    def _parse_analysis(self, body: Mapping[str, Any]) -> dict[str, Any]:
-        """What an analysis message says, checked field by field; no side effects.
-
-        Returns:
-            ``{"nodes": {id: (utility, status)} | None, "t": float | None, "fields": {...}}``
-            with only the goal model's nodes, and only the fields that are well typed; an
-            ill-typed field is left out, so the pane keeps showing its previous value.
-
-        """
-        nodes: dict[str, tuple[float | None, str]] | None = None
-        raw = body.get("nodes")
-        if isinstance(raw, Mapping):
-            nodes = {}
-            for nid, value in raw.items():
-                if nid not in self._evaluator.index:
-                    continue  # a node this goal model does not have: never kept
-                if not isinstance(value, list | tuple) or len(value) != 2:
-                    continue
-                status = value[1] if value[1] in _STATUSES else "unknown"
-                nodes[str(nid)] = (_num(value[0]), status)
-        fields: dict[str, Any] = {}
-        violated = _names(body.get("violated"))
-        if violated is not None:
-            fields["violated"] = violated
-        eligible = _names(body["eligible"] if "eligible" in body else body.get("tactics"))
-        if eligible is not None:
-            fields["eligible"] = eligible
-        queue = _queue_rows(body.get("queue"))
-        if queue is not None:
-            fields["queue"] = queue
-        post = body.get("postconditions")
-        if isinstance(post, Mapping):
-            fields["postconditions"] = _plain(post)
-        for key in ("paused", "run_stopped", "warming_up"):
-            flag = _flag(body.get(key))
-            if flag is not None:
-                fields[key] = flag
-        return {"nodes": nodes, "t": _num(body.get("t")), "fields": fields}
-
     def take_analysis(self, body: Mapping[str, Any]) -> None:
         """A ``/utu/analyze/state`` message: utilities, statuses, violations, eligible tactics.
 
@@ -451,7 +274,7 @@ class DashboardState:
         """
         if not isinstance(body, Mapping):
             return
-        parsed = self._parse_analysis(body)
+        parsed = parse_analysis(body, self._evaluator.index)
         nodes: dict[str, tuple[float | None, str]] | None = parsed["nodes"]
         t: float | None = parsed["t"]
         fields: dict[str, Any] = parsed["fields"]
@@ -487,7 +310,7 @@ class DashboardState:
 
     def take_queue(self, queue: Any) -> None:
         """The plan's priority-sorted queue (``/utu/plan/start`` in per-node runs)."""
-        rows = _queue_rows(queue)
+        rows = queue_rows(queue)
         if rows is not None:
             self.take_flags(queue=rows)
 
@@ -499,7 +322,7 @@ class DashboardState:
         clean: dict[str, Any] = {}
         for key, value in flags.items():
             if key == "queue":
-                rows = _queue_rows(value)
+                rows = queue_rows(value)
                 if rows is not None:
                     clean[key] = rows
             elif key in ("paused", "run_stopped", "warming_up") and isinstance(value, bool):
@@ -513,22 +336,6 @@ class DashboardState:
             self._analysis_v = self._bump()
         self._changed()
 
-    @staticmethod
-    def _decision_row(d: Any) -> tuple[str, dict[str, Any]] | None:
-        """A decision's de-duplication key and its row (without ``n``), or ``None`` if bad."""
-        if not isinstance(d, Mapping):
-            return None
-        kind = _name(d.get("kind"))
-        if kind is None:
-            return None
-        raw = d.get("data")
-        data = _plain(raw) if isinstance(raw, Mapping) else {}
-        row = {"t": _num(d.get("t")), "kind": kind, "tactic": _name(d.get("tactic")), "data": data}
-        key = json.dumps(
-            [row["t"], kind, row["tactic"], data], sort_keys=True, default=str, allow_nan=True
-        )
-        return key, row
-
     def take_decisions(self, decisions: Iterable[Mapping[str, Any]]) -> None:
         """New decisions of the decision log (``/utu/knowledge/decisions`` or a query).
 
@@ -538,25 +345,10 @@ class DashboardState:
         changed = False
         with self._lock:
             self._heard_at = self._wall()
-            for d in decisions:
-                try:
-                    parsed = self._decision_row(d)
-                except (TypeError, ValueError, RecursionError):  # data JSON cannot hold
-                    parsed = None
-                if parsed is None:
-                    continue
-                key, row = parsed
-                if key in self._decision_keys:
-                    continue
-                if len(self._decision_keys) >= 4 * (self._decisions.maxlen or 1000):
-                    kept = (self._decision_row(x) for x in self._decisions)
-                    self._decision_keys = {k[0] for k in kept if k is not None}
-                self._decision_keys.add(key)
-                self._decision_n += 1
-                row["n"] = self._decision_n
-                self._decisions.append(row)
+            for row, execution_changed in self._log.add(decisions):
                 self._saw(row["t"])
-                self._execution(row)
+                if execution_changed:
+                    self._executions_v = self._bump()
                 self._decision_flags(row)
                 self._bump()
                 changed = True
@@ -564,7 +356,7 @@ class DashboardState:
             self._changed()
 
     def _decision_flags(self, d: dict[str, Any]) -> None:
-        flags = _FLAG_KINDS.get(d["kind"])
+        flags = FLAG_KINDS.get(d["kind"])
         if flags is None:
             return
         analysed = self._analysis.get("t")
@@ -577,47 +369,6 @@ class DashboardState:
             self._analysis = a
             self._analysis_v = self._bump()
 
-    def _execution(self, d: dict[str, Any]) -> None:
-        kind, tactic = d["kind"], d["tactic"]
-        if tactic is None:
-            return
-        data = d["data"]
-        if kind == "started":
-            self._executions.append(
-                {
-                    "tactic": tactic,
-                    "started": d["t"],
-                    "reason": data.get("reason"),
-                    "deadline": _number(data.get("deadline")),
-                    "actions": [],
-                    "result": "awaiting",
-                    "result_t": None,
-                    "note": None,
-                }
-            )
-            self._executions_v = self._bump()
-            return
-        run = next((e for e in reversed(self._executions) if e["tactic"] == tactic), None)
-        if run is None:
-            return
-        if kind == "action":
-            if len(run["actions"]) >= MAX_ACTIONS:
-                return
-            run["actions"].append(
-                {
-                    "type": data.get("type"),
-                    "ok": data.get("ok"),
-                    "detail": data.get("detail"),
-                }
-            )
-        elif kind in _RESULT_KINDS and run["result"] == "awaiting":
-            run["result"] = kind
-            run["result_t"] = d["t"]
-            run["note"] = data.get("note")
-        else:
-            return
-        self._executions_v = self._bump()
-
     def take_assessment(self, topic: str, body: Mapping[str, Any], t: float | None = None) -> None:
         """A behavior assessment (``Assessment``, or any message with a ``category``).
 
@@ -627,22 +378,10 @@ class DashboardState:
         """
         if not isinstance(body, Mapping):
             return
-        category = body.get("category")
-        if isinstance(category, bool) or not isinstance(category, int) or not 0 <= category <= 2:
+        row = assessment_row(topic, body, self.clock() if t is None else t)
+        if row is None:
             return
-        key = _name(body.get("assessor")) or topic
-        context = body.get("context")
-        seq = body.get("frame_seq")
-        row = {
-            "assessor": key,
-            "topic": topic,
-            "category": category,
-            "confidence": _num(body.get("confidence")),
-            "context": _plain(context, 50) if isinstance(context, Mapping) else {},
-            "model_id": _name(body.get("model_id")),
-            "frame_seq": _number(seq) if isinstance(seq, int) else None,
-            "t": self.clock() if t is None else t,
-        }
+        key = row["assessor"]
         with self._lock:
             self._saw(_num(row["t"]))
             self._oracle_heard += 1
@@ -658,11 +397,7 @@ class DashboardState:
         """A camera frame."""
         with self._lock:
             self._saw(frame.t)
-            if self._frame_stamps and frame.t < self._frame_stamps[-1]:
-                self._frame_stamps.clear()  # the clock went back (a new run): start over
-            self._frame_stamps.append(frame.t)
-            self._frames.append(frame)
-            self._camera_count += 1
+            self._camera.add_frame(frame)
             self._camera_v = self._bump()
         self._changed()
 
@@ -670,39 +405,12 @@ class DashboardState:
         """An LEC's detections for one frame (``Detections``)."""
         if not isinstance(body, Mapping):
             return
-        seq = body.get("frame_seq")
-        if isinstance(seq, bool) or not isinstance(seq, int) or not 0 <= seq < _SAFE_INT:
+        row = detections_row(body)
+        if row is None:
             return
-        boxes = body.get("boxes")
-        labels = body.get("labels")
-        scores = body.get("scores")
-        row = {
-            "frame_seq": seq,
-            "model_id": _name(body.get("model_id")),
-            "domain": _name(body.get("domain")),
-            "width": _number(body.get("width")),
-            "height": _number(body.get("height")),
-            "boxes": [
-                [_num(v) or 0.0 for v in b]
-                for b in (boxes[:MAX_LIST] if isinstance(boxes, list) else [])
-                if isinstance(b, list | tuple) and len(b) == 4
-            ],
-            "labels": [str(x)[:MAX_NAME] for x in labels[:MAX_LIST]]
-            if isinstance(labels, list)
-            else [],
-            "scores": [_num(x) for x in scores[:MAX_LIST]] if isinstance(scores, list) else [],
-        }
         with self._lock:
             self._heard_at = self._wall()
-            self._detections[seq] = row
-            while len(self._detections) > 32:
-                del self._detections[min(self._detections)]
-            if self._active_model is None or self._active_model.get("source") == "detections":
-                self._active_model = {
-                    "model": row["model_id"],
-                    "domain": row["domain"],
-                    "source": "detections",
-                }
+            self._camera.add_detections(row)
             self._camera_v = self._bump()
         self._changed()
 
@@ -712,7 +420,7 @@ class DashboardState:
             return
         with self._lock:
             self._heard_at = self._wall()
-            self._active_model = {
+            self._camera.active_model = {
                 "lec": _name(body.get("lec")),
                 "model": _name(body.get("model")),
                 "domain": _name(body.get("domain")),
@@ -725,11 +433,7 @@ class DashboardState:
     def frame(self, seq: int | None = None) -> Frame | None:
         """The latest camera frame, or the one with sequence number ``seq`` if still kept."""
         with self._lock:
-            if not self._frames:
-                return None
-            if seq is None:
-                return self._frames[-1]
-            return next((f for f in reversed(self._frames) if f.seq == seq), None)
+            return self._camera.frame(seq)
 
     def explain(self, node: str) -> dict[str, Any] | None:
         """Why ``node`` has its status: Utu's verdict and the evaluator's explanation.
@@ -756,80 +460,7 @@ class DashboardState:
 
     def structure(self) -> dict[str, Any]:
         """The goal model and tactics as the page draws them (does not change during a run)."""
-        m = self.model
-        goals = [
-            {
-                "id": g.id,
-                "description": g.description,
-                "refinement": g.refinement,
-                "children": list(g.children),
-                "utility": g.utility,
-                "relax": None if g.relax is None else g.relax.operator,
-                "agents": list(g.agents),
-                "objective": g.objective,
-            }
-            for g in m.goals.values()
-        ]
-        obstacles = [
-            {
-                "id": o.id,
-                "description": o.description,
-                "obstructs": list(o.obstructs),
-                "condition": o.condition,
-                "resolutions": list(o.resolutions),
-            }
-            for o in m.obstacles.values()
-        ]
-        agents = [
-            {
-                "id": a.id,
-                "description": a.description,
-                "topics": [
-                    {"topic": tb.topic, "attributes": list(tb.attributes)} for tb in a.topics
-                ],
-                "goals": [g.id for g in m.goals.values() if a.id in g.agents],
-            }
-            for a in m.agents.values()
-        ]
-        tactics = [
-            {
-                "name": t.name,
-                "description": t.description,
-                "priority": t.priority,
-                "requires_approval": t.requires_approval,
-                "deadline": t.deadline,
-                "preconditions": [_describe_condition(c) for c in t.preconditions],
-                "postconditions": [_describe_condition(c) for c in t.postconditions],
-            }
-            for t in self.tactics.tactics
-        ]
-        return {
-            "name": self.name,
-            "root": m.root,
-            "goals": goals,
-            "obstacles": obstacles,
-            "agents": agents,
-            "tactics": tactics,
-        }
-
-    def _monitor_rows(self, now: float, since: int) -> list[dict[str, Any]]:
-        rows = []
-        for topic, e in self._topics.items():
-            if e.version <= since and since > 0:
-                continue
-            rows.append(
-                {
-                    "topic": topic,
-                    "agents": e.agents,
-                    "last": e.last_msg,
-                    "last_t": e.last,
-                    "count": e.count,
-                    "rate": e.rate(now),
-                    "staleness": e.staleness,
-                    "stale": e.stale(now),
-                }
-            )
-        return rows
+        return describe(self.name, self.model, self.tactics)
 
     def _values(self) -> dict[str, Any]:
         out: dict[str, Any] = {}
@@ -844,7 +475,6 @@ class DashboardState:
         """Everything a page needs to draw itself from scratch, with the version it shows."""
         with self._lock:
             now = self.clock()
-            frame = self._frames[-1] if self._frames else None
             return {
                 "version": self._version,
                 "now": now,
@@ -855,12 +485,12 @@ class DashboardState:
                 "goal_source": self._goal_source,
                 "goals": {k: [u, s] for k, (u, s, _v) in self._goals.items()},
                 "analysis": dict(self._analysis),
-                "monitor": self._monitor_rows(now, 0),
+                "monitor": monitor_rows(self._topics, now, 0),
                 "values": self._values(),
                 "oracle": list(self._oracle.values()),
-                "camera": self._camera(frame),
-                "executions": list(self._executions),
-                "decisions": list(self._decisions),
+                "camera": self._camera.view(self._camera.latest()),
+                "executions": list(self._log.executions),
+                "decisions": list(self._log.decisions),
                 "timeline": list(self._timeline),
                 "utu_t": self._utu_t,
                 "latest_t": self._latest_t,
@@ -875,36 +505,7 @@ class DashboardState:
         fewer than two frames in the window.
         """
         with self._lock:
-            stamps = self._frame_stamps
-            if len(stamps) < 2:
-                return None
-            last = stamps[-1]
-            inside = [t for t in stamps if t >= last - window]
-            span = last - inside[0]
-            if len(inside) < 2 or span <= 0:
-                return None
-            return (len(inside) - 1) / span
-
-    def _camera(self, frame: Frame | None) -> dict[str, Any]:
-        out: dict[str, Any] = {
-            "active": self._active_model,
-            "frames": self._camera_count,
-            "fps": self.frame_rate(),
-        }
-        if frame is not None:
-            out["frame"] = {
-                "topic": frame.topic,
-                "seq": frame.seq,
-                "width": frame.width,
-                "height": frame.height,
-                "t": frame.t,
-            }
-            out["detections"] = self._detections.get(frame.seq) or (
-                self._detections[max(self._detections)] if self._detections else None
-            )
-        elif self._detections:
-            out["detections"] = self._detections[max(self._detections)]
-        return out
+            return self._camera.frame_rate(window)
 
     def delta(self, since: int, *, decisions_after: int, timeline_after: int) -> dict[str, Any]:
         """What changed after version ``since``, for a page that has seen it.
@@ -936,28 +537,20 @@ class DashboardState:
                 out["goal_source"] = self._goal_source
             if self._analysis_v > since:
                 out["analysis"] = dict(self._analysis)
-            rows = self._monitor_rows(now, since)
+            rows = monitor_rows(self._topics, now, since)
             if rows:
                 out["monitor"] = rows
                 out["values"] = self._values()
             if self._oracle_v > since:
                 out["oracle"] = list(self._oracle.values())
             if self._camera_v > since:
-                out["camera"] = self._camera(self._frames[-1] if self._frames else None)
+                out["camera"] = self._camera.view(self._camera.latest())
             if self._executions_v > since:
-                out["executions"] = list(self._executions)
-            new = [d for d in self._decisions if d["n"] > decisions_after]
+                out["executions"] = list(self._log.executions)
+            new = [d for d in self._log.decisions if d["n"] > decisions_after]
             if new:
                 out["decisions"] = new
             points = [p for p in self._timeline if p["n"] > timeline_after]
             if points:
                 out["timeline"] = points
             return out
-
-
-def _describe_condition(cond: Any) -> str:
-    goal = getattr(cond, "goal", None)
-    if goal is not None:
-        return f"{goal} {getattr(cond, 'state', '')}".strip()
-    expression = getattr(cond, "expression", None)
-    return str(expression) if expression is not None else str(cond)

@@ -15,7 +15,7 @@ from __future__ import annotations
 import json
 import math
 import shutil
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import replace
 from pathlib import Path
 from typing import Any
@@ -56,7 +56,7 @@ def _load_json(path: Path) -> Any:
         raise DatasetError("not UTF-8 text", path=path, hint="save it as UTF-8 JSON") from None
 
 
-def read_coco(  # noqa: C901, PLR0912, PLR0915 - over the limits since before issue 11
+def read_coco(
     path: str | Path, *, images_dir: str | Path | None = None, cache: bool = False
 ) -> Dataset:
     """Read a COCO detection file into a :class:`Dataset`.
@@ -89,10 +89,24 @@ def read_coco(  # noqa: C901, PLR0912, PLR0915 - over the limits since before is
         root = p.parent / "images" if (p.parent / "images").is_dir() else p.parent
     else:
         root = Path(images_dir)
+    cat_index, classes = _categories(data["categories"], fail)
+    images = _images(data["images"], fail)
+    boxes = _boxes(data["annotations"], images, cat_index, fail)
+    records = [
+        _record(image_id, img, root, boxes[image_id], fail) for image_id, img in images.items()
+    ]
+    return Dataset(classes, records, name=str(p), cache=cache)
 
+
+_Fail = Callable[[str, str, str], DatasetError]
+"""Makes the error for an element: ``fail(element, message, hint)``."""
+
+
+def _categories(categories: list[Any], fail: _Fail) -> tuple[dict[int, int], list[str]]:
+    """Category id → class index, and the class names in order."""
     cat_index: dict[int, int] = {}
     classes: list[str] = []
-    for i, cat in enumerate(data["categories"]):
+    for i, cat in enumerate(categories):
         where = f"categories[{i}]"
         if not isinstance(cat, dict) or not _is_int(cat.get("id")):
             raise fail(where, "a category needs an integer 'id'", 'e.g. {"id": 1, "name": "deer"}')
@@ -107,9 +121,13 @@ def read_coco(  # noqa: C901, PLR0912, PLR0915 - over the limits since before is
         classes.append(cat["name"])
     if not classes:
         raise fail("categories", "no categories", "list the classes under 'categories'")
+    return cat_index, classes
 
+
+def _images(entries: list[Any], fail: _Fail) -> dict[int, dict[str, Any]]:
+    """Image id → its checked entry."""
     images: dict[int, dict[str, Any]] = {}
-    for i, img in enumerate(data["images"]):
+    for i, img in enumerate(entries):
         if not isinstance(img, dict) or not _is_int(img.get("id")):
             raise fail(f"images[{i}]", "an image needs an integer 'id'", "number the images")
         where = f"images[id={img['id']}]"
@@ -125,77 +143,104 @@ def read_coco(  # noqa: C901, PLR0912, PLR0915 - over the limits since before is
                     "width and height are the image size in pixels",
                 )
         images[img["id"]] = img
+    return images
 
-    boxes: dict[int, list[list[float]]] = {k: [] for k in images}
-    labels: dict[int, list[int]] = {k: [] for k in images}
-    ignore: dict[int, list[list[float]]] = {k: [] for k in images}
-    ignore_labels: dict[int, list[int]] = {k: [] for k in images}
+
+_Boxes = tuple[list[list[float]], list[int], list[list[float]], list[int]]
+"""An image's boxes, labels, ignore boxes and ignore labels."""
+
+
+def _boxes(
+    annotations: list[Any],
+    images: dict[int, dict[str, Any]],
+    cat_index: dict[int, int],
+    fail: _Fail,
+) -> dict[int, _Boxes]:
+    """Image id → its labelled and (``iscrowd``) ignore boxes, clipped to the image."""
+    out: dict[int, _Boxes] = {k: ([], [], [], []) for k in images}
     seen: set[int] = set()
-    for i, ann in enumerate(data["annotations"]):
+    for i, ann in enumerate(annotations):
         if not isinstance(ann, dict) or not _is_int(ann.get("id")):
             raise fail(f"annotations[{i}]", "an annotation needs an integer 'id'", "number them")
         where = f"annotations[id={ann['id']}]"
         if ann["id"] in seen:
             raise fail(where, "duplicate annotation id", "give every annotation its own id")
         seen.add(ann["id"])
-        if ann.get("image_id") not in images or not _is_int(ann.get("image_id")):
-            raise fail(
-                f"{where}.image_id",
-                f"refers to image {ann.get('image_id')!r}, which is not in 'images'",
-                "add the image or remove the annotation",
-            )
-        if ann.get("category_id") not in cat_index or not _is_int(ann.get("category_id")):
-            raise fail(
-                f"{where}.category_id",
-                f"unknown category {ann.get('category_id')!r}; known ids: {sorted(cat_index)}",
-                "add the category or fix the id",
-            )
-        if ann.get("iscrowd", 0) not in (0, 1, False, True):
-            raise fail(f"{where}.iscrowd", "iscrowd must be 0 or 1", "use 0 for single objects")
-        bbox = ann.get("bbox")
-        if not isinstance(bbox, list) or len(bbox) != 4 or not all(_is_num(v) for v in bbox):
-            raise fail(f"{where}.bbox", f"expected four finite numbers, got {bbox!r}", _BBOX_HINT)
-        x, y, w, h = (float(v) for v in bbox)
-        if w <= 0 or h <= 0:
-            raise fail(f"{where}.bbox", f"width and height must be > 0, got {w} x {h}", _BBOX_HINT)
-        img = images[ann["image_id"]]
-        x1, y1 = max(0.0, x), max(0.0, y)
-        x2, y2 = min(float(img["width"]), x + w), min(float(img["height"]), y + h)
-        if x2 <= x1 or y2 <= y1:
-            raise fail(
-                f"{where}.bbox",
-                f"box {bbox} lies outside the {img['width']}x{img['height']} image",
-                "bbox is [x, y, width, height] in pixels from the top-left corner",
-            )
+        _check_refs(ann, where, images, cat_index, fail)
+        box = _clipped_box(ann, where, images[ann["image_id"]], fail)
+        boxes, labels, ignore, ignore_labels = out[ann["image_id"]]
         crowd = bool(ann.get("iscrowd", 0))
-        (ignore if crowd else boxes)[ann["image_id"]].append([x1, y1, x2, y2])
-        (ignore_labels if crowd else labels)[ann["image_id"]].append(cat_index[ann["category_id"]])
+        (ignore if crowd else boxes).append(box)
+        (ignore_labels if crowd else labels).append(cat_index[ann["category_id"]])
+    return out
 
-    records = []
-    for image_id, img in images.items():
-        file = root / img["file_name"]
-        if not file.is_file():
-            raise fail(
-                f"images[id={image_id}].file_name",
-                f"image file {file} not found",
-                "pass images_dir= (CLI: --images) pointing at the folder of the images",
-            )
-        meta = {k: v for k, v in img.items() if k not in ("id", "file_name", "width", "height")}
-        records.append(
-            Record(
-                file_name=img["file_name"],
-                width=img["width"],
-                height=img["height"],
-                boxes=np.asarray(boxes[image_id], np.float32).reshape(-1, 4),
-                labels=np.asarray(labels[image_id], np.int64),
-                image_id=image_id,
-                path=file,
-                meta=meta,
-                ignore=np.asarray(ignore[image_id], np.float32).reshape(-1, 4),
-                ignore_labels=np.asarray(ignore_labels[image_id], np.int64),
-            )
+
+def _check_refs(
+    ann: dict[str, Any],
+    where: str,
+    images: dict[int, dict[str, Any]],
+    cat_index: dict[int, int],
+    fail: _Fail,
+) -> None:
+    """The annotation's image and category exist, and its ``iscrowd`` is 0 or 1."""
+    if ann.get("image_id") not in images or not _is_int(ann.get("image_id")):
+        raise fail(
+            f"{where}.image_id",
+            f"refers to image {ann.get('image_id')!r}, which is not in 'images'",
+            "add the image or remove the annotation",
         )
-    return Dataset(classes, records, name=str(p), cache=cache)
+    if ann.get("category_id") not in cat_index or not _is_int(ann.get("category_id")):
+        raise fail(
+            f"{where}.category_id",
+            f"unknown category {ann.get('category_id')!r}; known ids: {sorted(cat_index)}",
+            "add the category or fix the id",
+        )
+    if ann.get("iscrowd", 0) not in (0, 1, False, True):
+        raise fail(f"{where}.iscrowd", "iscrowd must be 0 or 1", "use 0 for single objects")
+
+
+def _clipped_box(ann: dict[str, Any], where: str, img: dict[str, Any], fail: _Fail) -> list[float]:
+    """The annotation's bbox as ``[x1, y1, x2, y2]`` clipped to the image."""
+    bbox = ann.get("bbox")
+    if not isinstance(bbox, list) or len(bbox) != 4 or not all(_is_num(v) for v in bbox):
+        raise fail(f"{where}.bbox", f"expected four finite numbers, got {bbox!r}", _BBOX_HINT)
+    x, y, w, h = (float(v) for v in bbox)
+    if w <= 0 or h <= 0:
+        raise fail(f"{where}.bbox", f"width and height must be > 0, got {w} x {h}", _BBOX_HINT)
+    x1, y1 = max(0.0, x), max(0.0, y)
+    x2, y2 = min(float(img["width"]), x + w), min(float(img["height"]), y + h)
+    if x2 <= x1 or y2 <= y1:
+        raise fail(
+            f"{where}.bbox",
+            f"box {bbox} lies outside the {img['width']}x{img['height']} image",
+            "bbox is [x, y, width, height] in pixels from the top-left corner",
+        )
+    return [x1, y1, x2, y2]
+
+
+def _record(image_id: int, img: dict[str, Any], root: Path, boxes: _Boxes, fail: _Fail) -> Record:
+    """The dataset's record of one image, whose file must exist under ``root``."""
+    file = root / img["file_name"]
+    if not file.is_file():
+        raise fail(
+            f"images[id={image_id}].file_name",
+            f"image file {file} not found",
+            "pass images_dir= (CLI: --images) pointing at the folder of the images",
+        )
+    meta = {k: v for k, v in img.items() if k not in ("id", "file_name", "width", "height")}
+    kept, labels, ignore, ignore_labels = boxes
+    return Record(
+        file_name=img["file_name"],
+        width=img["width"],
+        height=img["height"],
+        boxes=np.asarray(kept, np.float32).reshape(-1, 4),
+        labels=np.asarray(labels, np.int64),
+        image_id=image_id,
+        path=file,
+        meta=meta,
+        ignore=np.asarray(ignore, np.float32).reshape(-1, 4),
+        ignore_labels=np.asarray(ignore_labels, np.int64),
+    )
 
 
 def coco_dict(ds: Dataset, *, info: Mapping[str, Any] | None = None) -> dict[str, Any]:

@@ -129,7 +129,7 @@ def _render_layout(
     return out
 
 
-def make_dataset(  # noqa: C901 - over the limits since before issue 11
+def make_dataset(  # noqa: C901, PLR0912
     platform: str,
     out_dir: str | Path,
     *,

@@ -39,14 +39,10 @@ from typing import Any, Final, Literal
 from anunnaki.errors import ModelFileError
 from anunnaki.goals._expr import ABSENT, AttrRef, Expression, truth
 from anunnaki.goals._freshness import RateEstimator, is_stale
+from anunnaki.goals._history import History
 from anunnaki.goals._model import GoalModel
-from anunnaki.goals._relax import (
-    AtemporalOperator,
-    History,
-    MayOrOperator,
-    RelaxOperator,
-    TemporalOperator,
-)
+from anunnaki.goals._relax_ops import AtemporalOperator, MayOrOperator, RelaxOperator
+from anunnaki.goals._relax_temporal import TemporalOperator
 
 __all__ = ["Evaluator", "Explanation", "NodeState", "Status", "status_name"]
 
@@ -354,69 +350,79 @@ class Evaluator:
             u = 1.0 - u
         return u
 
-    def _compute(self, i: int) -> tuple[float | None, Status]:  # noqa: C901, PLR0912
+    def _compute(self, i: int) -> tuple[float | None, Status]:
         k = self._kind[i]
         u: float | None
         s: Status
         if k in (_LEAF, _OBSTACLE):
-            fn = self._fn[i]
-            if k == _OBSTACLE or (self._relax[i] is None and not self._avoid[i]):
-                # The common case, inlined: a crisp expression mapped to [0, 1].
-                v = fn(self.slots) if fn is not None else None
-                if v is True:
-                    u = 1.0
-                elif v is False:
-                    u = 0.0
-                elif v is None:
-                    u = None
-                else:
-                    u = truth(v)
-            else:
-                u = self._leaf_utility(i)
-            s = None if u is None else u >= self._thresh[i] - _EPS
+            u, s = self._compute_leaf(i, k)
         elif k == _AND:
-            util, stat = self.util, self.stat
-            lo = 1.0
-            u_unknown = False
-            s = True
-            for c in self._children[i]:
-                cu = util[c]
-                if cu is None:
-                    u_unknown = True
-                elif cu < lo:
-                    lo = cu
-                cs = stat[c]
-                if cs is False:
-                    s = False
-                elif cs is None and s is True:
-                    s = None
-            # Kleene: min(0, ?) = 0. An AND that a known unsatisfied child fails takes the
-            # minimum of the known children (an upper bound), so its utility is known too.
-            u = None if u_unknown and lo > 0.0 and s is not False else lo
+            u, s = self._compute_and(i)
         else:
-            util, stat = self.util, self.stat
-            hi = 0.0
-            u_unknown = False
-            s = False
-            for c in self._children[i]:
-                cu = util[c]
-                if cu is None:
-                    u_unknown = True
-                elif cu > hi:
-                    hi = cu
-                cs = stat[c]
-                if cs is True:
-                    s = True
-                elif cs is None and s is False:
-                    s = None
-            # Kleene: max(1, ?) = 1. An OR that a known satisfied child satisfies takes the
-            # maximum of the known children (a lower bound: an unknown child could only raise
-            # it), so a satisfied OR never reports an unknown utility.
-            u = None if u_unknown and hi < 1.0 and s is not True else hi
+            u, s = self._compute_or(i)
         obstr = self._obstr[i]
         if obstr:
             u, s = self._obstruct(u, s, obstr)
         return u, s
+
+    def _compute_leaf(self, i: int, k: int) -> tuple[float | None, Status]:
+        u: float | None
+        if k == _OBSTACLE or (self._relax[i] is None and not self._avoid[i]):
+            # The common case, inlined: a crisp expression mapped to [0, 1].
+            fn = self._fn[i]
+            v = fn(self.slots) if fn is not None else None
+            if v is True:
+                u = 1.0
+            elif v is False:
+                u = 0.0
+            elif v is None:
+                u = None
+            else:
+                u = truth(v)
+        else:
+            u = self._leaf_utility(i)
+        return u, None if u is None else u >= self._thresh[i] - _EPS
+
+    def _compute_and(self, i: int) -> tuple[float | None, Status]:
+        util, stat = self.util, self.stat
+        lo = 1.0
+        u_unknown = False
+        s: Status = True
+        for c in self._children[i]:
+            cu = util[c]
+            if cu is None:
+                u_unknown = True
+            elif cu < lo:
+                lo = cu
+            cs = stat[c]
+            if cs is False:
+                s = False
+            elif cs is None and s is True:
+                s = None
+        # Kleene: min(0, ?) = 0. An AND that a known unsatisfied child fails takes the
+        # minimum of the known children (an upper bound), so its utility is known too.
+        return (None if u_unknown and lo > 0.0 and s is not False else lo), s
+
+    def _compute_or(self, i: int) -> tuple[float | None, Status]:
+        util, stat = self.util, self.stat
+        hi = 0.0
+        u_unknown = False
+        s: Status = False
+        for c in self._children[i]:
+            cu = util[c]
+            if cu is None:
+                u_unknown = True
+            elif cu > hi:
+                hi = cu
+            cs = stat[c]
+            if cs is True:
+                s = True
+            elif cs is None and s is False:
+                s = None
+        # Kleene: max(1, ?) = 1. An OR that a known satisfied child satisfies takes the
+        # maximum of the known children (a lower bound: an unknown child could only raise
+        # it), so a satisfied OR never reports an unknown utility.
+        return (None if u_unknown and hi < 1.0 and s is not True else hi), s
 
     def _obstruct(
         self, u: float | None, s: Status, obstr: tuple[tuple[int, tuple[int, ...]], ...]
@@ -684,7 +690,7 @@ class Evaluator:
                 out[f"rate({agent})"] = self.value(f"rate({agent})")
         return out
 
-    def _explain(self, i: int, depth: int) -> Explanation:  # noqa: C901, PLR0912
+    def _explain(self, i: int, depth: int) -> Explanation:
         nid = self.ids[i]
         k = self._kind[i]
         u, s = self.util[i], self.stat[i]
@@ -698,52 +704,14 @@ class Evaluator:
         leaves: dict[str, Any] = {}
         if k in (_LEAF, _OBSTACLE):
             leaves = self._leaf_inputs(i)
-            expr = self.model.expressions.get((nid, "utility" if k == _LEAF else "condition"))
-            alternatives = [
-                e.text
-                for (eid, role), e in sorted(self.model.expressions.items())
-                if eid == nid and role.startswith("alternative")
-            ]
-            if expr is not None:
-                text = expr.text
-            elif alternatives:
-                text = " MAY ... OR ".join(alternatives)
-            else:
-                text = "<no utility>"
-            event = self.model.expressions.get((nid, "event"))
-            if event is not None:
-                text += f" (event: {event.text})"
-            inputs = ", ".join(f"{key} = {_fmt(v)}" for key, v in leaves.items())
-            detail = f"{text}" + (f" with {inputs}" if inputs else "")
-            op = self._relax[i]
-            if op is not None:
-                spec = self.model.goals[nid].relax
-                detail += f"; RELAX {getattr(spec, 'operator', type(op).__name__)}"
-            if k == _LEAF:
-                detail += f"; threshold {self._thresh[i]:g}"
-            if self._avoid[i]:
-                detail += "; avoid: utility = 1 - value"
-            summary = f"{nid} {verdict} (utility {ustr}): {detail}"
+            summary = f"{nid} {verdict} (utility {ustr}): {self._leaf_detail(i, leaves)}"
         else:
-            children = self._children[i]
-            obstructed = s is False and any(
-                self.stat[o] is True and not any(self.stat[r] is True for r in res)
-                for o, res in self._obstr[i]
+            rule = (
+                "AND: all children must be satisfied"
+                if k == _AND
+                else ("OR: one child must be satisfied")
             )
-            if k == _AND:
-                deciding = [c for c in children if self.stat[c] is not True]
-                rule = "AND: all children must be satisfied"
-            else:
-                deciding = [c for c in children if self.stat[c] is not False]
-                deciding = [c for c in deciding if self.stat[c] is True] or deciding
-                rule = "OR: one child must be satisfied"
-            if obstructed and (not deciding or k == _OR):
-                deciding = []  # the children are fine: the obstacle decided
-            elif not deciding or (k == _OR and s is False):
-                deciding = list(children)
-            if s is None:
-                deciding = [c for c in children if self.stat[c] is None] or deciding
-            because = [self._explain(c, depth + 1) for c in deciding]
+            because = [self._explain(c, depth + 1) for c in self._deciding(i)]
             summary = f"{nid} {verdict} (utility {ustr}): {rule}"
         for o, res in self._obstr[i]:
             resolved = [self.ids[r] for r in res if self.stat[r] is True]
@@ -756,6 +724,58 @@ class Evaluator:
             for key, v in b.leaves.items():
                 leaves.setdefault(key, v)
         return Explanation(nid, kind, s, u, summary, leaves, because)
+
+    def _leaf_detail(self, i: int, leaves: Mapping[str, Any]) -> str:
+        """What a leaf goal or obstacle computes, with its inputs, RELAX and threshold."""
+        nid = self.ids[i]
+        k = self._kind[i]
+        expr = self.model.expressions.get((nid, "utility" if k == _LEAF else "condition"))
+        alternatives = [
+            e.text
+            for (eid, role), e in sorted(self.model.expressions.items())
+            if eid == nid and role.startswith("alternative")
+        ]
+        if expr is not None:
+            text = expr.text
+        elif alternatives:
+            text = " MAY ... OR ".join(alternatives)
+        else:
+            text = "<no utility>"
+        event = self.model.expressions.get((nid, "event"))
+        if event is not None:
+            text += f" (event: {event.text})"
+        inputs = ", ".join(f"{key} = {_fmt(v)}" for key, v in leaves.items())
+        detail = f"{text}" + (f" with {inputs}" if inputs else "")
+        op = self._relax[i]
+        if op is not None:
+            spec = self.model.goals[nid].relax
+            detail += f"; RELAX {getattr(spec, 'operator', type(op).__name__)}"
+        if k == _LEAF:
+            detail += f"; threshold {self._thresh[i]:g}"
+        if self._avoid[i]:
+            detail += "; avoid: utility = 1 - value"
+        return detail
+
+    def _deciding(self, i: int) -> list[int]:
+        """The children of an AND/OR node that decide its status (what to explain)."""
+        k, s = self._kind[i], self.stat[i]
+        children = self._children[i]
+        obstructed = s is False and any(
+            self.stat[o] is True and not any(self.stat[r] is True for r in res)
+            for o, res in self._obstr[i]
+        )
+        if k == _AND:
+            deciding = [c for c in children if self.stat[c] is not True]
+        else:
+            deciding = [c for c in children if self.stat[c] is not False]
+            deciding = [c for c in deciding if self.stat[c] is True] or deciding
+        if obstructed and (not deciding or k == _OR):
+            deciding = []  # the children are fine: the obstacle decided
+        elif not deciding or (k == _OR and s is False):
+            deciding = list(children)
+        if s is None:
+            deciding = [c for c in children if self.stat[c] is None] or deciding
+        return deciding
 
 
 def _fmt(v: Any) -> str:

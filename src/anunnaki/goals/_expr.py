@@ -287,130 +287,151 @@ class _Compiler:
 
         return cmp_lit
 
-    def compile(self, node: Tree[Token] | Token) -> Fn:  # noqa: C901
+    def compile(self, node: Tree[Token] | Token) -> Fn:
         if isinstance(node, Token):  # pragma: no cover - grammar never yields bare tokens
             raise AssertionError(node)
         rule = node.data
         kids = node.children
-        if rule == "number":
-            num = _number(kids[0])
-            return lambda s: num
-        if rule == "neg_number":
-            neg = -_number(kids[0])
-            return lambda s: neg
-        if rule == "string":
-            text = str(kids[0])[1:-1]
-            return lambda s: text
-        if rule == "true":
-            return lambda s: True
-        if rule == "false":
-            return lambda s: False
+        if rule in _LITERALS:
+            return _literal(rule, kids)
+        if rule in ("attr", "has", "has_no", "rate"):
+            return self._compile_read(rule, kids)
+        if rule in ("neg", "not_", "and_", "or_"):
+            return self._compile_logic(rule, kids)
+        if rule == "compare":
+            return self._compile_compare(kids)
+        if rule in ("in_", "not_in"):
+            return self._compile_member(rule, kids)
+        if rule == "arith":
+            return self._compile_arith(kids)
+        if rule == "call":
+            name = str(kids[0])
+            fs = [self.compile(k) for k in kids[1:]]
+            return _call_fn(name, fs)
+        raise AssertionError(f"unhandled rule {rule}")  # pragma: no cover
+
+    def _compile_read(self, rule: str, kids: list[Tree[Token] | Token]) -> Fn:
+        """An attribute's value, whether it is present, or a topic's rate."""
+        if rule == "rate":
+            r = self.rate_slot_of(str(kids[0]))
+            return lambda s: s[r]
+        i = self.slot_of(AttrRef(str(kids[0]), str(kids[1])))
         if rule == "attr":
-            i = self.slot_of(AttrRef(str(kids[0]), str(kids[1])))
 
             def read(s: Slots) -> Value:
                 v = s[i]
                 return None if v is ABSENT else v
 
             return read
-        if rule in ("has", "has_no"):
-            i = self.slot_of(AttrRef(str(kids[0]), str(kids[1])))
-            want = rule == "has"
+        want = rule == "has"
 
-            def has(s: Slots) -> Value:
-                v = s[i]
-                if v is None:
-                    return None
-                return (v is not ABSENT) == want
+        def has(s: Slots) -> Value:
+            v = s[i]
+            if v is None:
+                return None
+            return (v is not ABSENT) == want
 
-            return has
-        if rule == "rate":
-            i = self.rate_slot_of(str(kids[0]))
-            return lambda s: s[i]
+        return has
+
+    def _compile_logic(self, rule: str, kids: list[Tree[Token] | Token]) -> Fn:
+        """Negation, ``not`` and the Kleene ``and``/``or``."""
+        if rule in ("and_", "or_"):
+            fs = [self.compile(k) for k in kids]
+            return _and_fn(fs) if rule == "and_" else _or_fn(fs)
+        f = self.compile(kids[0])
         if rule == "neg":
-            f = self.compile(kids[0])
 
             def neg_fn(s: Slots) -> Value:
                 v = f(s)
                 return -v if isinstance(v, int | float) else None
 
             return neg_fn
-        if rule == "not_":
-            f = self.compile(kids[0])
 
-            def not_fn(s: Slots) -> Value:
-                v = f(s)
-                if v is True or v is False:
-                    return not v
-                t = truth(v)
-                return None if t is None else 1.0 - t
+        def not_fn(s: Slots) -> Value:
+            v = f(s)
+            if v is True or v is False:
+                return not v
+            t = truth(v)
+            return None if t is None else 1.0 - t
 
-            return not_fn
-        if rule in ("and_", "or_"):
-            fs = [self.compile(k) for k in kids]
-            return _and_fn(fs) if rule == "and_" else _or_fn(fs)
-        if rule == "compare":
-            op = _COMPARE[str(kids[1])]
-            equality = str(kids[1]) in ("==", "!=")
-            left, right = kids[0], kids[2]
-            if (
-                isinstance(left, Tree)
-                and left.data == "attr"
-                and isinstance(right, Tree)
-                and right.data in ("number", "neg_number", "true", "false", "string")
-            ):
-                # The common case, ``A.x >= 0.5``: one slot read against a literal.
-                return self._compare_attr_literal(left, right, op, equality)
-            a = self.compile(left)
-            b = self.compile(right)
+        return not_fn
 
-            def cmp(s: Slots) -> Value:
-                x = a(s)
-                if x is None:
-                    return None
-                y = b(s)
-                if y is None:
-                    return None
-                if equality or (_is_num(x) and _is_num(y)) or (type(x) is type(y)):
-                    return op(x, y)
-                return None  # a type clash: unknown
+    def _compile_compare(self, kids: list[Tree[Token] | Token]) -> Fn:
+        op = _COMPARE[str(kids[1])]
+        equality = str(kids[1]) in ("==", "!=")
+        left, right = kids[0], kids[2]
+        if (
+            isinstance(left, Tree)
+            and left.data == "attr"
+            and isinstance(right, Tree)
+            and right.data in _LITERALS
+        ):
+            # The common case, ``A.x >= 0.5``: one slot read against a literal.
+            return self._compare_attr_literal(left, right, op, equality)
+        a = self.compile(left)
+        b = self.compile(right)
 
-            return cmp
-        if rule in ("in_", "not_in"):
-            f = self.compile(kids[0])
-            lst = kids[1]
-            assert isinstance(lst, Tree)
-            items = tuple(self.compile(k)([]) for k in lst.children if k is not None)
-            want_in = rule == "in_"
-
-            def member(s: Slots) -> Value:
-                v = f(s)
-                if v is None:
-                    return None
-                return any(_eq(v, item) for item in items) == want_in
-
-            return member
-        if rule == "arith":
-            a = self.compile(kids[0])
-            b = self.compile(kids[2])
-            fn = _arith_fn(str(kids[1]))
-
-            def arith(s: Slots) -> Value:
-                x = a(s)
-                y = b(s)
-                if _is_num(x) and _is_num(y):
-                    r = fn(x, y)
-                    return (
-                        None if r is None or (isinstance(r, float) and not math.isfinite(r)) else r
-                    )
+        def cmp(s: Slots) -> Value:
+            x = a(s)
+            if x is None:
                 return None
+            y = b(s)
+            if y is None:
+                return None
+            if equality or (_is_num(x) and _is_num(y)) or (type(x) is type(y)):
+                return op(x, y)
+            return None  # a type clash: unknown
 
-            return arith
-        if rule == "call":
-            name = str(kids[0])
-            fs = [self.compile(k) for k in kids[1:]]
-            return _call_fn(name, fs)
-        raise AssertionError(f"unhandled rule {rule}")  # pragma: no cover
+        return cmp
+
+    def _compile_member(self, rule: str, kids: list[Tree[Token] | Token]) -> Fn:
+        f = self.compile(kids[0])
+        lst = kids[1]
+        assert isinstance(lst, Tree)
+        items = tuple(self.compile(k)([]) for k in lst.children if k is not None)
+        want_in = rule == "in_"
+
+        def member(s: Slots) -> Value:
+            v = f(s)
+            if v is None:
+                return None
+            return any(_eq(v, item) for item in items) == want_in
+
+        return member
+
+    def _compile_arith(self, kids: list[Tree[Token] | Token]) -> Fn:
+        a = self.compile(kids[0])
+        b = self.compile(kids[2])
+        fn = _arith_fn(str(kids[1]))
+
+        def arith(s: Slots) -> Value:
+            x = a(s)
+            y = b(s)
+            if _is_num(x) and _is_num(y):
+                r = fn(x, y)
+                return None if r is None or (isinstance(r, float) and not math.isfinite(r)) else r
+            return None
+
+        return arith
+
+
+_LITERALS: Final = frozenset({"number", "neg_number", "string", "true", "false"})
+
+
+def _literal(rule: str, kids: list[Tree[Token] | Token]) -> Fn:
+    """A constant: a number, a string or a boolean."""
+    if rule == "number":
+        num = _number(kids[0])
+        return lambda s: num
+    if rule == "neg_number":
+        neg = -_number(kids[0])
+        return lambda s: neg
+    if rule == "string":
+        text = str(kids[0])[1:-1]
+        return lambda s: text
+    if rule == "true":
+        return lambda s: True
+    return lambda s: False
 
 
 def _and_fn(fs: Sequence[Fn]) -> Fn:
@@ -504,7 +525,7 @@ class _Checker:
     def fail(self, message: str, hint: str | None = None) -> ExpressionError:
         return ExpressionError(f"{message} in expression '{self.text}'", hint=hint, **self.where)
 
-    def check(self, node: Tree[Token], depth: int = 0) -> ValueType:  # noqa: C901
+    def check(self, node: Tree[Token], depth: int = 0) -> ValueType:
         self.nodes += 1
         if depth > MAX_DEPTH or self.nodes > MAX_NODES:
             raise self.fail(
@@ -515,21 +536,20 @@ class _Checker:
         kids = node.children
         sub = [k for k in kids if isinstance(k, Tree)]
         types = [self.check(k, depth + 1) for k in sub if k.data != "list"]
-        if rule in ("number", "neg_number"):
-            return "number"
-        if rule == "string":
-            return "string"
-        if rule in ("true", "false"):
-            return "bool"
-        if rule == "attr":
+        if rule in _LEAF_TYPES:
+            return _LEAF_TYPES[rule]
+        if rule in ("attr", "has", "has_no"):
             self.refs.add(AttrRef(str(kids[0]), str(kids[1])))
-            return "any"
-        if rule in ("has", "has_no"):
-            self.refs.add(AttrRef(str(kids[0]), str(kids[1])))
-            return "bool"
+            return "any" if rule == "attr" else "bool"
         if rule == "rate":
             self.rated.add(str(kids[0]))
             return "number"
+        return self._check_operator(rule, kids, types)
+
+    def _check_operator(
+        self, rule: str, kids: list[Tree[Token] | Token], types: list[ValueType]
+    ) -> ValueType:
+        """The type of an operator's result from its operands' types (or a refusal)."""
         if rule in ("neg", "arith"):
             if "string" in types or "bool" in types:
                 raise self.fail(
@@ -559,6 +579,16 @@ class _Checker:
                 raise self.fail(f"{name}() takes numbers only")
             return "number"
         raise AssertionError(f"unhandled rule {rule}")  # pragma: no cover
+
+
+#: The type of each literal rule.
+_LEAF_TYPES: Final[dict[str, ValueType]] = {
+    "number": "number",
+    "neg_number": "number",
+    "string": "string",
+    "true": "bool",
+    "false": "bool",
+}
 
 
 def compile_expression(

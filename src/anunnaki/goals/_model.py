@@ -336,71 +336,79 @@ class GoalModel:
 
     def _link(self) -> None:
         for g in self.goals.values():
-            if g.children and g.threshold is not None:
+            self._link_goal(g)
+        for o in self.obstacles.values():
+            self._link_obstacle(o)
+        self._find_cycles()
+
+    def _link_goal(self, g: GoalSpec) -> None:
+        """Record ``g`` as its children's parent; report unknown children and agents."""
+        if g.children and g.threshold is not None:
+            self._add(
+                "warning",
+                "'threshold' is ignored on a refined goal: it is satisfied by the "
+                f"{g.refinement.upper() if g.refinement else 'AND'} of its children",
+                section="goals",
+                ident=g.id,
+                key=("threshold",),
+                hint="remove it, or give the threshold to the leaf goals",
+            )
+        for c in sorted({c for c in g.children if g.children.count(c) > 1}):
+            self._add(
+                "warning",
+                f"child goal '{c}' is listed twice",
+                section="goals",
+                ident=g.id,
+                key=("children",),
+                hint="list each child once",
+            )
+        for c in g.children:
+            if c not in self.goals:
                 self._add(
-                    "warning",
-                    "'threshold' is ignored on a refined goal: it is satisfied by the "
-                    f"{g.refinement.upper() if g.refinement else 'AND'} of its children",
-                    section="goals",
-                    ident=g.id,
-                    key=("threshold",),
-                    hint="remove it, or give the threshold to the leaf goals",
-                )
-            for c in sorted({c for c in g.children if g.children.count(c) > 1}):
-                self._add(
-                    "warning",
-                    f"child goal '{c}' is listed twice",
+                    "error",
+                    f"unknown child goal '{c}'",
                     section="goals",
                     ident=g.id,
                     key=("children",),
-                    hint="list each child once",
+                    hint=_did_you_mean(c, self.goals),
                 )
-            for c in g.children:
-                if c not in self.goals:
-                    self._add(
-                        "error",
-                        f"unknown child goal '{c}'",
-                        section="goals",
-                        ident=g.id,
-                        key=("children",),
-                        hint=_did_you_mean(c, self.goals),
-                    )
-                    continue
-                self.parents.setdefault(c, []).append(g.id)
-            for a in g.agents:
-                if a not in self.agents:
-                    self._add(
-                        "error",
-                        f"unknown agent '{a}'",
-                        section="goals",
-                        ident=g.id,
-                        key=("agents",),
-                        hint=_did_you_mean(a, self.agents),
-                    )
-        for o in self.obstacles.values():
-            for gid in o.obstructs:
-                if gid not in self.goals:
-                    self._add(
-                        "error",
-                        f"obstructs unknown goal '{gid}'",
-                        section="obstacles",
-                        ident=o.id,
-                        key=("obstructs",),
-                        hint=_did_you_mean(gid, self.goals),
-                    )
-                else:
-                    self.obstructed_by.setdefault(gid, []).append(o.id)
-            for gid in o.resolutions:
-                if gid not in self.goals:
-                    self._add(
-                        "error",
-                        f"unknown resolution goal '{gid}'",
-                        section="obstacles",
-                        ident=o.id,
-                        key=("resolutions",),
-                        hint=_did_you_mean(gid, self.goals),
-                    )
-        self._find_cycles()
+                continue
+            self.parents.setdefault(c, []).append(g.id)
+        for a in g.agents:
+            if a not in self.agents:
+                self._add(
+                    "error",
+                    f"unknown agent '{a}'",
+                    section="goals",
+                    ident=g.id,
+                    key=("agents",),
+                    hint=_did_you_mean(a, self.agents),
+                )
+
+    def _link_obstacle(self, o: ObstacleSpec) -> None:
+        """Record what ``o`` obstructs; report unknown obstructed and resolution goals."""
+        for gid in o.obstructs:
+            if gid not in self.goals:
+                self._add(
+                    "error",
+                    f"obstructs unknown goal '{gid}'",
+                    section="obstacles",
+                    ident=o.id,
+                    key=("obstructs",),
+                    hint=_did_you_mean(gid, self.goals),
+                )
+            else:
+                self.obstructed_by.setdefault(gid, []).append(o.id)
+        for gid in o.resolutions:
+            if gid not in self.goals:
+                self._add(
+                    "error",
+                    f"unknown resolution goal '{gid}'",
+                    section="obstacles",
+                    ident=o.id,
+                    key=("resolutions",),
+                    hint=_did_you_mean(gid, self.goals),
+                )
 
     def _find_cycles(self) -> None:
         # Iterative DFS over refinement edges (goal -> children); a model is a DAG.
@@ -541,58 +549,10 @@ class GoalModel:
 
     def _compile(self) -> None:
         for g in self.goals.values():
-            if g.children:
-                continue
-            expr = self._compile_one("goals", g.id, "utility", g.utility, "utility")
-            if g.utility is None and getattr(g.relax, "operator", None) != "may_or":
-                self._add(
-                    "error",
-                    "leaf goal without a utility function",
-                    section="goals",
-                    ident=g.id,
-                    hint="give it 'utility: <expression>' or refine it into children",
-                )
-            if g.relax is not None:
-                self._compile_relax(g)
-            if expr is not None and expr.value_type == "string":
-                self._add(
-                    "error",
-                    f"utility '{expr.text}' is a string; a utility is a boolean or a number",
-                    section="goals",
-                    ident=g.id,
-                    key=("utility",),
-                )
-            responsible = set(g.agents) | (expr.agents if expr else set())
-            for (eid, _role), e in self.expressions.items():
-                if eid == g.id:
-                    responsible |= e.agents
-            if not responsible:
-                self._add(
-                    "warning",
-                    "leaf goal without a responsible agent",
-                    section="goals",
-                    ident=g.id,
-                    hint="list the agents responsible for it under 'agents:'",
-                )
+            if not g.children:
+                self._compile_leaf(g)
         for o in self.obstacles.values():
-            cond = self._compile_one("obstacles", o.id, "condition", o.condition, "condition")
-            if cond is not None and cond.value_type == "string":
-                self._add(
-                    "error",
-                    f"condition '{cond.text}' is a string; a condition is a boolean or a number",
-                    section="obstacles",
-                    ident=o.id,
-                    key=("condition",),
-                    hint="compare it, e.g. A1.mode == 'manual'",
-                )
-            if o.condition is None:
-                self._add(
-                    "error",
-                    "obstacle without a condition",
-                    section="obstacles",
-                    ident=o.id,
-                    hint="give it 'condition: <expression>', e.g. A4.category >= 1",
-                )
+            self._compile_obstacle(o)
         for d in self.domain_properties.values():
             self._compile_one("domain_properties", d.id, "condition", d.condition, "condition")
         for agent_id, readers in self._silent.items():
@@ -605,6 +565,61 @@ class GoalModel:
                 ident=agent_id,
                 hint=f"bind {agent_id} to a topic: pass the platform binding file, or give "
                 "the agent 'topics:' in the goal model",
+            )
+
+    def _compile_leaf(self, g: GoalSpec) -> None:
+        """Compile a leaf goal's utility (and RELAX); it needs one and a responsible agent."""
+        expr = self._compile_one("goals", g.id, "utility", g.utility, "utility")
+        if g.utility is None and getattr(g.relax, "operator", None) != "may_or":
+            self._add(
+                "error",
+                "leaf goal without a utility function",
+                section="goals",
+                ident=g.id,
+                hint="give it 'utility: <expression>' or refine it into children",
+            )
+        if g.relax is not None:
+            self._compile_relax(g)
+        if expr is not None and expr.value_type == "string":
+            self._add(
+                "error",
+                f"utility '{expr.text}' is a string; a utility is a boolean or a number",
+                section="goals",
+                ident=g.id,
+                key=("utility",),
+            )
+        responsible = set(g.agents) | (expr.agents if expr else set())
+        for (eid, _role), e in self.expressions.items():
+            if eid == g.id:
+                responsible |= e.agents
+        if not responsible:
+            self._add(
+                "warning",
+                "leaf goal without a responsible agent",
+                section="goals",
+                ident=g.id,
+                hint="list the agents responsible for it under 'agents:'",
+            )
+
+    def _compile_obstacle(self, o: ObstacleSpec) -> None:
+        """Compile an obstacle's condition, which it needs and which is no string."""
+        cond = self._compile_one("obstacles", o.id, "condition", o.condition, "condition")
+        if cond is not None and cond.value_type == "string":
+            self._add(
+                "error",
+                f"condition '{cond.text}' is a string; a condition is a boolean or a number",
+                section="obstacles",
+                ident=o.id,
+                key=("condition",),
+                hint="compare it, e.g. A1.mode == 'manual'",
+            )
+        if o.condition is None:
+            self._add(
+                "error",
+                "obstacle without a condition",
+                section="obstacles",
+                ident=o.id,
+                hint="give it 'condition: <expression>', e.g. A4.category >= 1",
             )
 
     def _compile_relax(self, g: GoalSpec) -> None:

@@ -14,7 +14,7 @@ from typing import Annotated, Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
 
-from anunnaki.goals._relax import RelaxSpec
+from anunnaki.goals._relax_specs import RelaxSpec
 
 __all__ = [
     "AgentBinding",

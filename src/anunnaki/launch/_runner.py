@@ -401,7 +401,7 @@ class _Runner:
             self.running.finish(printer.decisions, ran)
 
     # -- one process
-    def _run_here(self) -> RunResult:  # noqa: C901 - over the limits since before issue 11
+    def _run_here(self) -> RunResult:
         launch = self.launch
         clock_t0 = 0.0
         bus = open_bus(launch.bus, name=f"{launch.name}-launch")
@@ -427,27 +427,8 @@ class _Runner:
             # On sim time the scripted system moves the clock itself, in order with its
             # records (a clock fed from the bus arrives on another thread: racy).
             sim = SimClock() if self.utu.clock == "sim" else None
-            if all_five:
-                nodes.append(
-                    ComposedUtu(self.parts, bus=bus, knowledge=kb, clock=sim, rates=launch.nodes)
-                )
-            else:
-                for name, rate in launch.nodes.items():
-                    nodes.append(
-                        build_node(name, self.parts, bus=bus, knowledge=kb, clock=sim, rate=rate)
-                    )
-            for node in nodes:
-
-                def spin(node: UtuNode | ComposedUtu = node) -> None:
-                    try:
-                        node.spin(halt)
-                    except Exception as exc:
-                        log.exception("a node failed")
-                        crashed.append(f"a node failed: {type(exc).__name__}: {exc}")
-
-                t = threading.Thread(target=spin, name="anunnaki-node", daemon=True)
-                t.start()
-                threads.append(t)
+            nodes.extend(self._build_nodes(bus, kb, sim, composed=all_five))
+            threads.extend(_spin(nodes, halt, crashed))
             wait_ready(bus, list(launch.nodes), timeout=launch.config.ready_timeout, stop=self.stop)
             ready_after = time.monotonic() - self.t_start
             self.say(f"ready: {', '.join(launch.nodes)} after {ready_after:.2f} s")
@@ -464,11 +445,7 @@ class _Runner:
             self.stop.set()
             if managed is not None:
                 managed.thread.join(timeout=5.0)
-            halt.set()
-            for node in nodes:
-                node.wake()
-            for t in threads:
-                t.join(timeout=5.0)
+            _halt(halt, nodes, threads)
             ran = time.monotonic() - t_run
             self._finish(printer, code, reason, ran)
             pid = os.getpid()
@@ -477,11 +454,7 @@ class _Runner:
             )
         finally:
             self.stop.set()
-            halt.set()
-            for node in nodes:
-                node.wake()
-            for t in threads:
-                t.join(timeout=5.0)
+            _halt(halt, nodes, threads)
             if managed is not None:
                 managed.close()
             for node in reversed(nodes):
@@ -490,6 +463,18 @@ class _Runner:
                 with contextlib.suppress(sqlite3.Error):  # the manager may have closed it
                     kb.close()
             bus.close()
+
+    def _build_nodes(
+        self, bus: Bus, kb: Knowledge, sim: SimClock | None, *, composed: bool
+    ) -> list[UtuNode | ComposedUtu]:
+        """The launch's Utu nodes on ``bus``: the composed manager when all five are here."""
+        launch = self.launch
+        if composed:
+            return [ComposedUtu(self.parts, bus=bus, knowledge=kb, clock=sim, rates=launch.nodes)]
+        return [
+            build_node(name, self.parts, bus=bus, knowledge=kb, clock=sim, rate=rate)
+            for name, rate in launch.nodes.items()
+        ]
 
     # -- one process per node
     def _node_argv(self, name: str, bus_config: BusConfig) -> list[str]:
@@ -581,3 +566,34 @@ class _Runner:
             if kb is not None:
                 kb.close()
             bus.close()
+
+
+def _spin(
+    nodes: list[UtuNode | ComposedUtu], halt: threading.Event, crashed: list[str]
+) -> list[threading.Thread]:
+    """Spin each node on a thread of its own until ``halt``; failures go to ``crashed``."""
+    threads = []
+    for node in nodes:
+
+        def spin(node: UtuNode | ComposedUtu = node) -> None:
+            try:
+                node.spin(halt)
+            except Exception as exc:
+                log.exception("a node failed")
+                crashed.append(f"a node failed: {type(exc).__name__}: {exc}")
+
+        t = threading.Thread(target=spin, name="anunnaki-node", daemon=True)
+        t.start()
+        threads.append(t)
+    return threads
+
+
+def _halt(
+    halt: threading.Event, nodes: list[UtuNode | ComposedUtu], threads: list[threading.Thread]
+) -> None:
+    """Stop the nodes' spinning and wait (5 s each) for their threads."""
+    halt.set()
+    for node in nodes:
+        node.wake()
+    for t in threads:
+        t.join(timeout=5.0)

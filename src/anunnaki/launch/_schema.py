@@ -214,31 +214,10 @@ def _resolve(data: Any, lines: LineMap, path: Path, *, read_records: bool) -> La
     except ValidationError as exc:
         raise validation_error(_Prefixed(exc, ()), data, lines, where) from None
     base = path.resolve().parent
-
-    def here(p: str) -> Path:
-        q = Path(p).expanduser()
-        return q if q.is_absolute() else base / q
-
-    # The Utu configuration: a file, or inline.
-    utu_data: Any
-    utu_lines: LineMap | None
-    utu_where: str
-    utu_prefix: tuple[str | int, ...]
-    if isinstance(config.utu, str):
-        utu_path = here(config.utu)
-        utu = load_config(utu_path)
-        utu_data, utu_lines = load_yaml(utu_path)
-        utu_where, utu_prefix = str(utu_path), ()
-    else:
-        inline = {**config.utu, "anunnaki": "utu/1"}
-        try:
-            utu = UtuConfig.model_validate(inline).resolve(base)
-        except ValidationError as exc:
-            raise validation_error(_Prefixed(exc, ("utu",)), data, lines, where) from None
-        utu_data, utu_lines, utu_where, utu_prefix = data, lines, where, ("utu",)
+    utu, src = _utu_of(config, _Source(data, lines, where, ()), base)
     if config.knowledge is not None:
         kb = config.knowledge
-        utu = utu.model_copy(update={"knowledge": kb if kb == ":memory:" else str(here(kb))})
+        utu = utu.model_copy(update={"knowledge": kb if kb == ":memory:" else str(_here(base, kb))})
 
     # The bus: the launch file's, else the Utu configuration's.
     if config.bus is not None:
@@ -248,7 +227,7 @@ def _resolve(data: Any, lines: LineMap, path: Path, *, read_records: bool) -> La
             bus = BusConfig.model_validate(utu.bus)
         except ValidationError as exc:
             raise validation_error(
-                _Prefixed(exc, (*utu_prefix, "bus")), utu_data, utu_lines, utu_where
+                _Prefixed(exc, (*src.prefix, "bus")), src.data, src.lines, src.where
             ) from None
 
     # Nodes and rates.
@@ -257,36 +236,80 @@ def _resolve(data: Any, lines: LineMap, path: Path, *, read_records: bool) -> La
         for n, s in config.nodes.items()
     }
     nodes: dict[str, float] = {n: rates[n] for n in NODE_NAMES if n in rates}  # cycle order
+    parts = _parts_of(utu, src)
+    managed = _managed(config.managed, data, lines, where, base)
+    if managed is not None and read_records:
+        _check_managed(managed, utu, _Source(data, lines, where, ()))
+    return Launch(config, path, utu, parts, bus, nodes, managed, lines)
 
-    # The goal model, binding and tactics (B5: fail here, with file and line).
+
+@dataclass(frozen=True)
+class _Source:
+    """Where a configuration was read: its data, lines, file and path prefix within it."""
+
+    data: Any
+    lines: LineMap | None
+    where: str
+    prefix: tuple[str | int, ...]
+
+
+def _here(base: Path, p: str) -> Path:
+    """``p`` relative to the launch file's folder (``~`` expanded)."""
+    q = Path(p).expanduser()
+    return q if q.is_absolute() else base / q
+
+
+def _utu_of(config: LaunchConfig, launch: _Source, base: Path) -> tuple[UtuConfig, _Source]:
+    """The Utu configuration (a file, or inline) and where it was read."""
+    if isinstance(config.utu, str):
+        utu_path = _here(base, config.utu)
+        utu = load_config(utu_path)
+        utu_data, utu_lines = load_yaml(utu_path)
+        return utu, _Source(utu_data, utu_lines, str(utu_path), ())
+    inline = {**config.utu, "anunnaki": "utu/1"}
     try:
-        parts = load_parts(utu)
+        utu = UtuConfig.model_validate(inline).resolve(base)
+    except ValidationError as exc:
+        raise validation_error(
+            _Prefixed(exc, ("utu",)), launch.data, launch.lines, launch.where
+        ) from None
+    return utu, dataclasses.replace(launch, prefix=("utu",))
+
+
+def _parts_of(utu: UtuConfig, src: _Source) -> UtuParts:
+    """The goal model, binding and tactics (B5: fail here, with file and line)."""
+    try:
+        return load_parts(utu)
     except ModelFileError as exc:
         if exc.element != "failsafe":
             raise
-        real, element = describe_path(utu_data, (*utu_prefix, "failsafe"))
+        real, element = describe_path(src.data, (*src.prefix, "failsafe"))
         raise ModelFileError(
             exc.message,
-            path=utu_where,
-            line=utu_lines.line(real) if utu_lines is not None else None,
+            path=src.where,
+            line=src.lines.line(real) if src.lines is not None else None,
             element=element,
             hint=exc.hint,
         ) from None
 
-    managed = _managed(config.managed, data, lines, where, base)
-    if managed is not None and read_records:
-        try:
-            managed.check(utu)
-        except ModelFileError as exc:
-            if exc.path is not None:
-                raise
-            # The plugin's problem is with an element of the launch file: say where it is.
-            element = exc.element or "managed"
-            real, _ = describe_path(data, tuple(element.split(".")))
-            raise ModelFileError(
-                exc.message, path=where, line=lines.line(real), element=element, hint=exc.hint
-            ) from None
-    return Launch(config, path, utu, parts, bus, nodes, managed, lines)
+
+def _check_managed(managed: ManagedKind, utu: UtuConfig, launch: _Source) -> None:
+    """Let the managed system check what it needs; its errors name the launch file's element."""
+    try:
+        managed.check(utu)
+    except ModelFileError as exc:
+        if exc.path is not None:
+            raise
+        # The plugin's problem is with an element of the launch file: say where it is.
+        element = exc.element or "managed"
+        real, _ = describe_path(launch.data, tuple(element.split(".")))
+        raise ModelFileError(
+            exc.message,
+            path=launch.where,
+            line=launch.lines.line(real) if launch.lines is not None else None,
+            element=element,
+            hint=exc.hint,
+        ) from None
 
 
 def _managed(

@@ -536,7 +536,7 @@ def _entry_error(
     )
 
 
-def _build(
+def _build(  # noqa: C901
     data: Any, lines: LineMap | None, source: str, base: Path, loader: Loader | None
 ) -> ModelRegistry:
     if not isinstance(data, dict) or data.get("anunnaki") != REGISTRY_FORMAT:
@@ -645,7 +645,7 @@ def _build(
     return registry
 
 
-def _entry_pins(
+def _entry_pins(  # noqa: C901
     entry: _EntryFile,
     file: Path,
     base: Path,

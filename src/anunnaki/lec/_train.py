@@ -416,7 +416,7 @@ def _initial(
     return det
 
 
-def train_detector(  # noqa: C901, PLR0912, PLR0915 - over the limits since before issue 11
+def train_detector(
     train: Dataset,
     val: Dataset,
     *,
@@ -442,15 +442,7 @@ def train_detector(  # noqa: C901, PLR0912, PLR0915 - over the limits since befo
 
     """
     cfg = config or TrainConfig()
-    if train.classes != val.classes or (test is not None and test.classes != train.classes):
-        raise DetectorError(
-            f"the splits have different classes: train {train.classes}, val {val.classes}"
-            + (f", test {test.classes}" if test is not None else "")
-        )
-    if len(train) == 0 or len(val) == 0:
-        raise DetectorError(f"empty split: train has {len(train)} images, val {len(val)}")
-    if cfg.epochs < 1 or cfg.batch_size < 1:
-        raise DetectorError("epochs and batch_size must be at least 1")
+    _check_splits(train, val, test, cfg)
     seeds = np.random.SeedSequence(cfg.seed).spawn(3)
     weight_seed = int(seeds[0].generate_state(1)[0])
     order_rng = np.random.default_rng(seeds[1])
@@ -461,41 +453,17 @@ def train_detector(  # noqa: C901, PLR0912, PLR0915 - over the limits since befo
     size = cfg.input_size or (int(first.shape[1]), int(first.shape[0]))
     augmenter = Augmenter(cfg.augment, probability=cfg.augment_prob) if cfg.augment else None
     start_from = _initial(cfg.init, train.classes)
-    det = CenterNetDetector.create(
-        train.classes,
-        input_size=size,
-        width=cfg.width if start_from is None else start_from.network.width,
-        head=None if start_from is None else start_from.network.head_channels,
-        stride=cfg.stride if start_from is None else start_from.network.stride,
-        seed=weight_seed,
-        model_id=cfg.model_id,
-        domain=cfg.domain,
-    )
-    if start_from is not None:
-        det.network.load_state_dict(start_from.network.state_dict())
+    det = _new_detector(cfg, train.classes, size, weight_seed, start_from)
     net = det.network
     old_threads = torch.get_num_threads()
     if cfg.threads is not None:
         torch.set_num_threads(cfg.threads)
     try:
-        data = []
-        no_ignore = np.zeros((0, 4), np.float32)
-        for i, r in enumerate(train.records):
-            raw = train.image(i)
-            image, boxes = _fit(raw, r.boxes, size)
-            ignore = _fit(raw, r.ignore, size)[1] if cfg.ignore else no_ignore
-            data.append((image, boxes, r.labels, ignore))
+        data = _fitted(train, size, cfg)
         steps_per_epoch = math.ceil(len(data) / cfg.batch_size)
         total = steps_per_epoch * cfg.epochs
-        warmup = min(steps_per_epoch, total // 4 + 1)
+        lr_at = _lr_schedule(cfg.lr, min(steps_per_epoch, total // 4 + 1), total)
         opt = torch.optim.AdamW(net.parameters(), lr=cfg.lr, weight_decay=cfg.weight_decay)
-
-        def lr_at(step: int) -> float:
-            if step < warmup:
-                return cfg.lr * (step + 1) / warmup
-            t = (step - warmup) / max(1, total - warmup)
-            return cfg.lr * (0.02 + 0.98 * 0.5 * (1 + math.cos(math.pi * t)))
-
         history: list[dict[str, float]] = []
         start = time.perf_counter()
         step = 0
@@ -505,24 +473,10 @@ def train_detector(  # noqa: C901, PLR0912, PLR0915 - over the limits since befo
             sums = {"loss": 0.0, "heat": 0.0, "box": 0.0}
             perm = order_rng.permutation(len(data))
             for b in range(steps_per_epoch):
-                samples = []
-                for idx in perm[b * cfg.batch_size : (b + 1) * cfg.batch_size]:
-                    image, boxes, labels, ignore = data[int(idx)]
-                    if cfg.zoom > 0:
-                        image, boxes, labels, ignore = _zoom(
-                            image, boxes, labels, aug_rng, cfg.zoom, ignore=ignore
-                        )
-                    if cfg.flip and aug_rng.random() < 0.5:
-                        image = np.ascontiguousarray(image[:, ::-1])
-                        boxes = boxes.copy()
-                        boxes[:, [0, 2]] = size[0] - boxes[:, [2, 0]]
-                        ignore = ignore.copy()
-                        ignore[:, [0, 2]] = size[0] - ignore[:, [2, 0]]
-                    if cfg.photometric > 0:
-                        image = _photometric(image, aug_rng, cfg.photometric)
-                    if augmenter is not None:
-                        image = augmenter(image, aug_rng)
-                    samples.append((image, boxes, labels, ignore))
+                samples = [
+                    _augmented(data[int(idx)], cfg, size, aug_rng, augmenter)
+                    for idx in perm[b * cfg.batch_size : (b + 1) * cfg.batch_size]
+                ]
                 x, heat_t, box_t, weight = _batch_tensors(
                     samples, size, len(train.classes), net.stride
                 )
@@ -545,12 +499,7 @@ def train_detector(  # noqa: C901, PLR0912, PLR0915 - over the limits since befo
             )
         seconds = time.perf_counter() - start
         net.eval()
-        val_preds = predict(det, val)
-        threshold = choose_threshold(val_preds, val.truths())
-        val_m = f1_at_iou(val_preds, val.truths(), score_threshold=threshold)
-        test_m = None
-        if test is not None:
-            test_m = f1_at_iou(predict(det, test), test.truths(), score_threshold=threshold)
+        threshold, val_m, test_m = _measure(det, val, test)
     finally:
         torch.set_num_threads(old_threads)
     det.score_threshold = threshold
@@ -558,7 +507,124 @@ def train_detector(  # noqa: C901, PLR0912, PLR0915 - over the limits since befo
     if test_m is not None:
         metrics["test"] = test_m.as_dict()
     det.metrics = metrics
-    det.training = {
+    det.training = _training_record(
+        cfg, train, val=val, test=test, start_from=start_from, seconds=seconds, history=history
+    )
+    return TrainResult(det, threshold, val_m, test_m, seconds, history)
+
+
+def _new_detector(
+    cfg: TrainConfig,
+    classes: Sequence[str],
+    size: tuple[int, int],
+    seed: int,
+    start_from: CenterNetDetector | None,
+) -> CenterNetDetector:
+    """A fresh detector, or one with the weights (and shape) of ``start_from``."""
+    det = CenterNetDetector.create(
+        classes,
+        input_size=size,
+        width=cfg.width if start_from is None else start_from.network.width,
+        head=None if start_from is None else start_from.network.head_channels,
+        stride=cfg.stride if start_from is None else start_from.network.stride,
+        seed=seed,
+        model_id=cfg.model_id,
+        domain=cfg.domain,
+    )
+    if start_from is not None:
+        det.network.load_state_dict(start_from.network.state_dict())
+    return det
+
+
+def _measure(
+    det: CenterNetDetector, val: Dataset, test: Dataset | None
+) -> tuple[float, Metrics, Metrics | None]:
+    """The score threshold that maximises F1 on ``val``, and the metrics at it."""
+    val_preds = predict(det, val)
+    threshold = choose_threshold(val_preds, val.truths())
+    val_m = f1_at_iou(val_preds, val.truths(), score_threshold=threshold)
+    test_m = None
+    if test is not None:
+        test_m = f1_at_iou(predict(det, test), test.truths(), score_threshold=threshold)
+    return threshold, val_m, test_m
+
+
+_Sample = tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]
+"""One training image with its boxes, labels and ignore boxes."""
+
+
+def _check_splits(train: Dataset, val: Dataset, test: Dataset | None, cfg: TrainConfig) -> None:
+    if train.classes != val.classes or (test is not None and test.classes != train.classes):
+        raise DetectorError(
+            f"the splits have different classes: train {train.classes}, val {val.classes}"
+            + (f", test {test.classes}" if test is not None else "")
+        )
+    if len(train) == 0 or len(val) == 0:
+        raise DetectorError(f"empty split: train has {len(train)} images, val {len(val)}")
+    if cfg.epochs < 1 or cfg.batch_size < 1:
+        raise DetectorError("epochs and batch_size must be at least 1")
+
+
+def _fitted(train: Dataset, size: tuple[int, int], cfg: TrainConfig) -> list[_Sample]:
+    """The training images fitted to the input size, with their boxes (ignore boxes if used)."""
+    data = []
+    no_ignore = np.zeros((0, 4), np.float32)
+    for i, r in enumerate(train.records):
+        raw = train.image(i)
+        image, boxes = _fit(raw, r.boxes, size)
+        ignore = _fit(raw, r.ignore, size)[1] if cfg.ignore else no_ignore
+        data.append((image, boxes, r.labels, ignore))
+    return data
+
+
+def _lr_schedule(lr: float, warmup: int, total: int) -> Callable[[int], float]:
+    """Linear warm-up over ``warmup`` steps, then a cosine decay to 2 % at ``total``."""
+
+    def lr_at(step: int) -> float:
+        if step < warmup:
+            return lr * (step + 1) / warmup
+        t = (step - warmup) / max(1, total - warmup)
+        return lr * (0.02 + 0.98 * 0.5 * (1 + math.cos(math.pi * t)))
+
+    return lr_at
+
+
+def _augmented(
+    sample: _Sample,
+    cfg: TrainConfig,
+    size: tuple[int, int],
+    rng: np.random.Generator,
+    augmenter: Augmenter | None,
+) -> _Sample:
+    """One sample as a step sees it: zoomed, flipped, recoloured and augmented (in order)."""
+    image, boxes, labels, ignore = sample
+    if cfg.zoom > 0:
+        image, boxes, labels, ignore = _zoom(image, boxes, labels, rng, cfg.zoom, ignore=ignore)
+    if cfg.flip and rng.random() < 0.5:
+        image = np.ascontiguousarray(image[:, ::-1])
+        boxes = boxes.copy()
+        boxes[:, [0, 2]] = size[0] - boxes[:, [2, 0]]
+        ignore = ignore.copy()
+        ignore[:, [0, 2]] = size[0] - ignore[:, [2, 0]]
+    if cfg.photometric > 0:
+        image = _photometric(image, rng, cfg.photometric)
+    if augmenter is not None:
+        image = augmenter(image, rng)
+    return image, boxes, labels, ignore
+
+
+def _training_record(
+    cfg: TrainConfig,
+    train: Dataset,
+    *,
+    val: Dataset,
+    test: Dataset | None,
+    start_from: CenterNetDetector | None,
+    seconds: float,
+    history: list[dict[str, float]],
+) -> dict[str, Any]:
+    """The settings and figures of a training, as ``detector.training`` keeps them."""
+    return {
         "epochs": cfg.epochs,
         "batch_size": cfg.batch_size,
         "lr": cfg.lr,
@@ -577,7 +643,6 @@ def train_detector(  # noqa: C901, PLR0912, PLR0915 - over the limits since befo
         "val_images": len(val),
         "test_images": len(test) if test is not None else 0,
         "seconds": round(seconds, 1),
-        "images_per_second": round(len(data) * cfg.epochs / max(seconds, 1e-9), 1),
+        "images_per_second": round(len(train) * cfg.epochs / max(seconds, 1e-9), 1),
         "final_loss": history[-1]["loss"] if history else None,
     }
-    return TrainResult(det, threshold, val_m, test_m, seconds, history)

@@ -38,6 +38,17 @@ live side by side in one process or in process pools. See ``docs/simulation.md``
 
 from anunnaki.sim._dataset import make_dataset, platform_classes, scene_frames
 from anunnaki.sim._encounter import EncounterResult, run_pedestrian_encounter, to_detections
+from anunnaki.sim._groundtruth import (
+    MIN_BOX_SIZE,
+    MIN_IN_FRAME,
+    MIN_LABEL_HEIGHT,
+    MIN_VISIBLE,
+    Annotation,
+    Frame,
+    annotate_mask,
+    boxes_from_mask,
+)
+from anunnaki.sim._layout import ROVER_CLASSES, UAV_CLASSES, Placement, Platform, layout_placements
 from anunnaki.sim._platform import GROUND_TRUTH_TOPIC, PHENOMENA_TOPIC, SimPlatform
 from anunnaki.sim._report import (
     FrameScore,
@@ -70,26 +81,9 @@ from anunnaki.sim._scenario import (
     load_scenario,
     parse_scenario,
 )
-from anunnaki.sim._scene import (
-    MIN_BOX_SIZE,
-    MIN_IN_FRAME,
-    MIN_LABEL_HEIGHT,
-    MIN_VISIBLE,
-    ROVER_CLASSES,
-    UAV_CLASSES,
-    Annotation,
-    Camera,
-    Frame,
-    Light,
-    Placement,
-    Platform,
-    Scene,
-    annotate_mask,
-    boxes_from_mask,
-    dataset_frames,
-    layout_placements,
-)
+from anunnaki.sim._scene import Scene, dataset_frames
 from anunnaki.sim._uav import UAV_CAMERA_FOV, UavMode, UavSim
+from anunnaki.sim._world import Camera, Light
 
 __all__ = [
     "CAMERA_FOV",

@@ -13,7 +13,8 @@ from typing import Any
 
 from anunnaki.datasets import make_dataset as _make_dataset
 from anunnaki.errors import AnunnakiError
-from anunnaki.sim._scene import ROVER_CLASSES, UAV_CLASSES, dataset_frames
+from anunnaki.sim._layout import ROVER_CLASSES, UAV_CLASSES
+from anunnaki.sim._scene import dataset_frames
 
 __all__ = ["make_dataset", "platform_classes", "scene_frames"]
 

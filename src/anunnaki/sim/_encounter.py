@@ -24,8 +24,9 @@ from typing import Any
 import numpy as np
 
 from anunnaki.bus import Detections, open_bus
+from anunnaki.sim._groundtruth import Frame
+from anunnaki.sim._layout import ROVER_CLASSES
 from anunnaki.sim._rover import DETECTIONS_TOPIC, RoverSim, StopRule
-from anunnaki.sim._scene import ROVER_CLASSES, Frame
 
 __all__ = ["EncounterResult", "run_pedestrian_encounter", "to_detections"]
 

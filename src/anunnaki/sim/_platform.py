@@ -30,8 +30,10 @@ import numpy as np
 
 from anunnaki import topics
 from anunnaki.bus import Clock, Detections, Image
+from anunnaki.sim._groundtruth import Frame
 from anunnaki.sim._scenario import Scenario, Timeline, load_scenario
-from anunnaki.sim._scene import Camera, Frame, Light, Scene
+from anunnaki.sim._scene import Scene
+from anunnaki.sim._world import Camera, Light
 
 __all__ = ["GROUND_TRUTH_TOPIC", "PHENOMENA_TOPIC", "FrameHook", "SimPlatform", "as_scenario"]
 

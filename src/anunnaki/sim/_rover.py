@@ -34,17 +34,12 @@ import numpy as np
 
 from anunnaki import topics
 from anunnaki.bus import Detections
+from anunnaki.sim._layout import Placement, layout_placements
+from anunnaki.sim._models import _lite_urdf
 from anunnaki.sim._platform import SimPlatform, as_scenario, body_of
 from anunnaki.sim._scenario import ObjectSpec, Scenario
-from anunnaki.sim._scene import (
-    ROBOT_GROUP,
-    Camera,
-    Placement,
-    Scene,
-    _lite_urdf,
-    layout_placements,
-)
-from anunnaki.sim._world import pybullet
+from anunnaki.sim._scene import ROBOT_GROUP, Scene
+from anunnaki.sim._world import Camera, pybullet
 
 __all__ = ["CAMERA_FOV", "CAMERA_HEIGHT", "DETECTIONS_TOPIC", "RoverMode", "RoverSim", "StopRule"]
 

@@ -24,10 +24,12 @@ from pathlib import Path
 from typing import Any, Literal
 
 from anunnaki import topics
+from anunnaki.sim._layout import layout_placements
 from anunnaki.sim._platform import SimPlatform, as_scenario, body_of
 from anunnaki.sim._rover import _placement
 from anunnaki.sim._scenario import Scenario
-from anunnaki.sim._scene import Camera, Scene, layout_placements
+from anunnaki.sim._scene import Scene
+from anunnaki.sim._world import Camera
 
 __all__ = ["CAMERA_DOWN", "UAV_CAMERA_FOV", "UavMode", "UavSim"]
 
@@ -209,31 +211,12 @@ class UavSim(SimPlatform):
             mode = "land"
             self.phase = "forced landing"
         if mode == "auto":
-            if self.leg < len(self.legs):
-                phase, tx, ty, tz = self.legs[self.leg]
-                self.phase = phase
-                if phase == "deliver":
-                    self.speed = 0.0
-                    self._hold += h
-                    if self._hold >= m.deliver_time:
-                        self.delivered = True
-                        self.leg += 1
-                elif self._fly_to(tx, ty, tz, h):
-                    self.leg += 1
-            else:
-                self.phase = "landed"
-                self.speed = 0.0
+            self._follow_mission(h)
         elif mode == "hover":
             self.phase = "hover"
             self.speed = 0.0
         elif mode == "return_home":
-            hx, hy = m.home
-            if math.hypot(hx - self.x, hy - self.y) > 0.3:
-                self.phase = "return"
-                self._fly_to(hx, hy, max(self.z, m.cruise_altitude), h)
-            else:
-                self.phase = "landing" if self.z > 0 else "landed"
-                self._fly_to(hx, hy, 0.0, h)
+            self._return_home(h)
         else:  # land, stopped, forced landing
             if self.phase != "forced landing":
                 self.phase = "landing" if self.z > 0 else "landed"
@@ -245,6 +228,34 @@ class UavSim(SimPlatform):
         if airborne:
             drain += m.drain_hover + m.drain_per_speed * self.speed
         self.battery = max(0.0, self.battery - drain * h)
+
+    def _follow_mission(self, h: float) -> None:
+        """Fly the mission's current leg (hold over the drop point to deliver), then land."""
+        if self.leg >= len(self.legs):
+            self.phase = "landed"
+            self.speed = 0.0
+            return
+        phase, tx, ty, tz = self.legs[self.leg]
+        self.phase = phase
+        if phase == "deliver":
+            self.speed = 0.0
+            self._hold += h
+            if self._hold >= self.scenario.mission.deliver_time:
+                self.delivered = True
+                self.leg += 1
+        elif self._fly_to(tx, ty, tz, h):
+            self.leg += 1
+
+    def _return_home(self, h: float) -> None:
+        """Fly home at cruise altitude (or higher), then land there."""
+        m = self.scenario.mission
+        hx, hy = m.home
+        if math.hypot(hx - self.x, hy - self.y) > 0.3:
+            self.phase = "return"
+            self._fly_to(hx, hy, max(self.z, m.cruise_altitude), h)
+        else:
+            self.phase = "landing" if self.z > 0 else "landed"
+            self._fly_to(hx, hy, 0.0, h)
 
     # -- sensors --------------------------------------------------------------------------
     def gps(self) -> tuple[float, float]:

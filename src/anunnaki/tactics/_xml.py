@@ -34,6 +34,7 @@ from anunnaki.tactics._load import (
     build_tactic_set,
 )
 from anunnaki.tactics._schema import (
+    Action,
     ChangeModeAction,
     ExpressionCondition,
     GoalState,
@@ -505,7 +506,7 @@ def _goal(parent: ET.Element, goal: GoalState) -> None:
     ET.SubElement(parent, "goal", id=goal.goal, state=goal.state)
 
 
-def _tactic(parent: ET.Element, tactic: Tactic) -> None:  # noqa: C901, PLR0912
+def _tactic(parent: ET.Element, tactic: Tactic) -> None:
     element = ET.SubElement(parent, "tactic", name=tactic.name)
     if tactic.priority:
         element.set("priority", str(tactic.priority))
@@ -523,34 +524,7 @@ def _tactic(parent: ET.Element, tactic: Tactic) -> None:  # noqa: C901, PLR0912
             _goal(pre, cond)
     actions = ET.SubElement(element, "actions")
     for action in tactic.actions:
-        act = ET.SubElement(actions, action.type)
-        if isinstance(action, PublishAction):
-            act.set("topic", action.topic)
-        elif isinstance(action, RequestAction):
-            act.set("service", action.service)
-            if action.timeout != RequestAction.model_fields["timeout"].default:
-                act.set("timeout", _number(action.timeout))
-        elif isinstance(action, ChangeModeAction):
-            act.set("service", action.service)
-            act.set("mode", action.mode)
-        elif isinstance(action, SwapModelAction):
-            act.set("lec", action.lec)
-            if action.model is not None:
-                act.set("model", action.model)
-            if action.domain is not None:
-                act.set("domain", action.domain)
-            act.set("service", action.service)
-        else:
-            assert isinstance(action, NotifyAction)
-            act.set("channel", action.channel)
-            if action.to is not None:
-                act.set("to", action.to)
-            if action.subject:
-                act.set("subject", action.subject)
-            act.text = action.message
-        if isinstance(action, PublishAction | RequestAction):
-            for name, value in action.payload.items():
-                _field(act, name, value)
+        _action(actions, action)
     default_deadline = Tactic.model_fields["deadline"].default
     if tactic.postconditions or tactic.deadline != default_deadline:
         post = ET.SubElement(element, "postconditions", deadline=_number(tactic.deadline))
@@ -560,6 +534,45 @@ def _tactic(parent: ET.Element, tactic: Tactic) -> None:  # noqa: C901, PLR0912
         conflicts = ET.SubElement(element, "conflicts")
         for name in tactic.conflicts:
             ET.SubElement(conflicts, "tactic", name=name)
+
+
+def _action(parent: ET.Element, action: Action) -> None:
+    act = ET.SubElement(parent, action.type)
+    if isinstance(action, PublishAction):
+        act.set("topic", action.topic)
+    elif isinstance(action, RequestAction):
+        act.set("service", action.service)
+        if action.timeout != RequestAction.model_fields["timeout"].default:
+            act.set("timeout", _number(action.timeout))
+    elif isinstance(action, ChangeModeAction):
+        act.set("service", action.service)
+        act.set("mode", action.mode)
+    elif isinstance(action, SwapModelAction):
+        _swap_model(act, action)
+    else:
+        assert isinstance(action, NotifyAction)
+        _notify(act, action)
+    if isinstance(action, PublishAction | RequestAction):
+        for name, value in action.payload.items():
+            _field(act, name, value)
+
+
+def _swap_model(act: ET.Element, action: SwapModelAction) -> None:
+    act.set("lec", action.lec)
+    if action.model is not None:
+        act.set("model", action.model)
+    if action.domain is not None:
+        act.set("domain", action.domain)
+    act.set("service", action.service)
+
+
+def _notify(act: ET.Element, action: NotifyAction) -> None:
+    act.set("channel", action.channel)
+    if action.to is not None:
+        act.set("to", action.to)
+    if action.subject:
+        act.set("subject", action.subject)
+    act.text = action.message
 
 
 def dump_tactics_xml(tactic_set: TacticSet) -> str:

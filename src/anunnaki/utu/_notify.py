@@ -578,7 +578,7 @@ class Notifier:
 
     # ----------------------------------------------------------------------- e-mail
 
-    def _send_email(self, n: Notification) -> None:  # noqa: C901, PLR0912
+    def _send_email(self, n: Notification) -> None:  # noqa: C901, PLR0912, PLR0915
         cfg = self._config.smtp
         if cfg is None:
             raise _Refused(

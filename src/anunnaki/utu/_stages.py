@@ -470,7 +470,7 @@ class PlanStage:
         if rows:
             self.planner.restore(rows)
 
-    def plan(self, st: ExecuteStatus) -> PlanStart:
+    def plan(self, st: ExecuteStatus) -> PlanStart:  # noqa: C901
         """Update the queue from execute's status; return what to start."""
         kb = self.knowledge
         t = float(st.t)
