@@ -159,6 +159,7 @@ class Node:
             return
         self._closed = True
         self.ready = False
+        self._wake.set()  # a spinning thread returns now
         for obj in reversed(self._declared):
             try:
                 obj.close()

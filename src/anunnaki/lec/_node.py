@@ -43,7 +43,16 @@ import numpy as np
 import numpy.typing as npt
 
 from anunnaki import topics
-from anunnaki.bus import Bus, Detections, Image, Publisher, Sample, ServiceReply, body_of
+from anunnaki.bus import (
+    Bus,
+    Detections,
+    Image,
+    Node,
+    Publisher,
+    Sample,
+    ServiceReply,
+    body_of,
+)
 from anunnaki.errors import AnunnakiError, MissingExtraError
 from anunnaki.lec._detector import Detector
 from anunnaki.lec._registry import ModelRegistry, ModelRegistryError, ModelSpec
@@ -172,8 +181,11 @@ def _labels(detector: Detector, labels: Any) -> list[str]:
     return out
 
 
-class LecNode:
+class LecNode(Node):
     """Runs an LEC's active model on a camera topic and swaps models on request.
+
+    A :class:`~anunnaki.bus.Node`: the kit owns its lifecycle (declare, liveliness token,
+    spin, close); the work runs on the bus's delivery threads.
 
     Args:
         bus: The bus to work on.
@@ -232,16 +244,12 @@ class LecNode:
         self._lock = threading.Lock()
         self._swap_lock = threading.Lock()
         self._stop = threading.Event()
-        self._closed = False
         self._frames = self._published = self._failed = self._swaps = self._refused = 0
         spec = registry.resolve(initial) if initial is not None else registry.default
         self._active = _Active(spec, registry.load(spec))
-        self._declared: list[Any] = []
+        self._frame_queue = frame_queue
+        super().__init__(bus, token=node, ready=None)
         try:
-            self._detections: Publisher = self._declare(bus.publisher(self.detections_topic))
-            self._declare(bus.service(swap_service, self._on_swap))
-            self._declare(bus.subscribe(camera, self._on_frame, queue=frame_queue, expect=Image))
-            self._declare(bus.liveliness_token(node))
             self.publish_active()
         except BaseException:
             self.close()
@@ -254,9 +262,13 @@ class LecNode:
             )  # fmt: skip
             self._heartbeat.start()
 
-    def _declare(self, obj: Any) -> Any:
-        self._declared.append(obj)
-        return obj
+    def declare(self) -> None:
+        """The detections publisher, the swap service and the camera subscription."""
+        self._detections: Publisher = self.own(self.bus.publisher(self.detections_topic))
+        self.own(self.bus.service(self.swap_service, self._on_swap))
+        self.own(
+            self.bus.subscribe(self.camera, self._on_frame, queue=self._frame_queue, expect=Image)
+        )
 
     def __repr__(self) -> str:
         return f"LecNode(lec={self.lec!r}, active={self.active.id!r}, camera={self.camera!r})"
@@ -415,27 +427,16 @@ class LecNode:
         return self.swap(fields["model"], domain=fields["domain"], lec=fields["lec"]).reply()
 
     # -- life --------------------------------------------------------------------------------
-    def spin(self, stop: threading.Event | None = None) -> None:
-        """Block until ``stop`` is set or the node is closed (the work runs on bus threads)."""
-        stop = stop or threading.Event()
-        while not stop.is_set() and not self._stop.is_set():
-            stop.wait(0.2)
-
     def close(self) -> None:
         """Stop announcing, release the camera, the service and the token (idempotent).
 
         A frame in flight finishes first.
         """
-        if self._closed:
-            return
-        self._closed = True
         self._stop.set()
-        for obj in reversed(self._declared):
-            try:
-                obj.close()
-            except Exception as exc:  # pragma: no cover - best effort at shutdown
-                log.debug("closing %r: %r", obj, exc)
-        self._declared.clear()
+        super().close()
+
+    def release(self) -> None:
+        """Join the announcer and drop the cached models."""
         heartbeat = getattr(self, "_heartbeat", None)
         if heartbeat is not None and heartbeat is not threading.current_thread():
             heartbeat.join(timeout=2.0)
@@ -443,6 +444,3 @@ class LecNode:
 
     def __enter__(self) -> LecNode:
         return self
-
-    def __exit__(self, *exc: object) -> None:
-        self.close()

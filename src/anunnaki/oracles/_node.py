@@ -28,7 +28,7 @@ from typing import Any
 import numpy as np
 
 from anunnaki import topics
-from anunnaki.bus import Assessment, Bus, Detections, Image, Publisher, Sample
+from anunnaki.bus import Assessment, Bus, Detections, Image, Node, Publisher, Sample
 from anunnaki.errors import AnunnakiError
 from anunnaki.lec import ACTIVE_TOPIC, decode_image, detections_topic
 from anunnaki.oracles._base import (
@@ -123,8 +123,11 @@ def _ignore_boxes(body: dict[str, Any]) -> np.ndarray:
     return boxes.reshape(-1, 4) if boxes.size and boxes.shape[-1] == 4 else np.zeros((0, 4))
 
 
-class OracleNode:
+class OracleNode(Node):
     """Runs one behavior oracle on the bus.
+
+    A :class:`~anunnaki.bus.Node`: the kit owns its lifecycle (declare, liveliness token,
+    spin, close); the work runs on the bus's delivery threads.
 
     Args:
         bus: The bus.
@@ -174,40 +177,40 @@ class OracleNode:
         self.node = node or f"/oracle_{self.oracle.name}"
         self._oracle_lock = threading.Lock()
         self._lock = threading.Lock()
-        self._closed = False
         self._model_id: str | None = None
         self._frames = self._published = self._withheld = self._errors = 0
         self._agnostic_warned = False
-        self._declared: list[Any] = []
         # The optional hooks, found by the Protocols they implement (never by signature).
         oracle = self.oracle
         self._on_dets = oracle if isinstance(oracle, ObservesDetections) else None
         self._on_gt = oracle if isinstance(oracle, ObservesGroundTruth) else None
         self._on_ctx = oracle if isinstance(oracle, ObservesContext) else None
-        try:
-            self._output: Publisher = self._declare(bus.publisher(output))
-            self._declare(bus.subscribe(active, self._on_active, queue=16))
-            self._declare(
-                bus.subscribe(
-                    detections or detections_topic(lec),
-                    self._on_detections,
-                    queue=256,
-                    expect=Detections,
-                )
-            )
-            if self._on_gt is not None:
-                self._declare(bus.subscribe(ground_truth, self._on_truth, queue=256))
-            if self._on_ctx is not None:
-                self._declare(bus.subscribe(phenomena, self._on_phenomena, queue=16))
-            self._declare(bus.subscribe(camera, self._on_frame, queue=frame_queue, expect=Image))
-            self._declare(bus.liveliness_token(self.node))
-        except BaseException:
-            self.close()
-            raise
+        self._topics = {
+            "camera": camera,
+            "detections": detections or detections_topic(lec),
+            "ground_truth": ground_truth,
+            "phenomena": phenomena,
+            "active": active,
+            "output": output,
+        }
+        self._frame_queue = frame_queue
+        super().__init__(bus, token=self.node, ready=None)
 
-    def _declare(self, obj: Any) -> Any:
-        self._declared.append(obj)
-        return obj
+    def declare(self) -> None:
+        """The output publisher and the inputs the oracle's hooks ask for."""
+        bus, topic = self.bus, self._topics
+        self._output: Publisher = self.own(bus.publisher(topic["output"]))
+        self.own(bus.subscribe(topic["active"], self._on_active, queue=16))
+        self.own(
+            bus.subscribe(topic["detections"], self._on_detections, queue=256, expect=Detections)
+        )
+        if self._on_gt is not None:
+            self.own(bus.subscribe(topic["ground_truth"], self._on_truth, queue=256))
+        if self._on_ctx is not None:
+            self.own(bus.subscribe(topic["phenomena"], self._on_phenomena, queue=16))
+        self.own(
+            bus.subscribe(topic["camera"], self._on_frame, queue=self._frame_queue, expect=Image)
+        )
 
     def __repr__(self) -> str:
         return f"OracleNode({self.oracle.name!r}, node={self.node!r})"
@@ -318,27 +321,5 @@ class OracleNode:
         with self._lock:
             self._published += 1
 
-    # -- life --------------------------------------------------------------------------------
-    def spin(self, stop: threading.Event | None = None) -> None:
-        """Block until ``stop`` is set or the node is closed (the work runs on bus threads)."""
-        stop = stop or threading.Event()
-        while not stop.is_set() and not self._closed:
-            stop.wait(0.2)
-
-    def close(self) -> None:
-        """Release every subscription, the publisher and the token (idempotent)."""
-        if self._closed:
-            return
-        self._closed = True
-        for obj in reversed(self._declared):
-            try:
-                obj.close()
-            except Exception as exc:  # pragma: no cover - best effort at shutdown
-                log.debug("closing %r: %r", obj, exc)
-        self._declared.clear()
-
     def __enter__(self) -> OracleNode:
         return self
-
-    def __exit__(self, *exc: object) -> None:
-        self.close()
