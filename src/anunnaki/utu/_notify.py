@@ -335,6 +335,110 @@ class _Refused(Exception):
     """A notification that cannot be sent; the message is the result's ``error``."""
 
 
+_Stage = Literal["connect", "starttls", "login", "send"]
+
+
+def _email_headers(n: Notification) -> tuple[str, str]:
+    """The recipient and subject, refused if they could inject headers."""
+    to = n.to or ""
+    subject = n.subject or f"Anunnaki: tactic {n.tactic}"
+    for what, value in (("to", to), ("subject", subject), ("tactic", n.tactic)):
+        if _LINE_BREAK.search(value):
+            raise _Refused(f"refused: {what!r} holds a line break (header injection)")
+        if _CONTROL.search(value):
+            raise _Refused(f"refused: {what!r} holds a control character")
+    if not _ADDRESS.fullmatch(to):
+        raise _Refused(f"{to!r} is not an e-mail address (e.g. operator@example.com)")
+    return to, subject
+
+
+@dataclass(frozen=True)
+class _Smtp:
+    """Where an SMTP exchange failed: the server, the stage, the configuration, the recipient."""
+
+    where: str
+    stage: _Stage
+    cfg: SmtpConfig
+    to: str
+
+
+def _smtp_text(value: bytes | str) -> str:
+    text = value.decode("utf-8", "replace") if isinstance(value, bytes) else value
+    return " ".join(text.split())
+
+
+def _not_supported(exc: Any, c: _Smtp) -> str:
+    need = {
+        "starttls": "STARTTLS (smtp.starttls is true)",
+        "login": "AUTH (smtp.username is set)",
+    }.get(c.stage)
+    if need is None:
+        return f"{c.where}: {exc} (during {c.stage})"
+    return f"{c.where} does not offer {need}"
+
+
+def _recipient_refused(exc: Any, c: _Smtp) -> str:
+    code, text = next(iter(exc.recipients.values()), (0, b""))
+    return f"{c.where} refused recipient {c.to}: {code} {_smtp_text(text)}"
+
+
+def _disconnected(exc: Any, c: _Smtp) -> str:
+    if isinstance(exc.__context__, TimeoutError):  # smtplib wraps read timeouts
+        return _timed_out(exc, c)
+    return f"{c.where} closed the connection (during {c.stage}): {exc}"
+
+
+def _timed_out(exc: Any, c: _Smtp) -> str:
+    return f"timeout: {c.where} did not answer within {c.cfg.timeout:g} s (during {c.stage})"
+
+
+# What an SMTP failure means to the operator, most specific exception first.
+_SMTP_FAILURES: tuple[tuple[type[BaseException], Callable[[Any, _Smtp], str]], ...] = (
+    (smtplib.SMTPNotSupportedError, _not_supported),
+    (
+        smtplib.SMTPAuthenticationError,
+        lambda e, c: (
+            f"{c.where} refused the login as {c.cfg.username!r}: {e.smtp_code} "
+            f"{_smtp_text(e.smtp_error)}"
+        ),
+    ),
+    (smtplib.SMTPRecipientsRefused, _recipient_refused),
+    (
+        smtplib.SMTPSenderRefused,
+        lambda e, c: (
+            f"{c.where} refused sender {c.cfg.from_addr}: {e.smtp_code} {_smtp_text(e.smtp_error)}"
+        ),
+    ),
+    (
+        smtplib.SMTPResponseException,
+        lambda e, c: (
+            f"{c.where} answered {e.smtp_code} {_smtp_text(e.smtp_error)} (during {c.stage})"
+        ),
+    ),
+    (smtplib.SMTPServerDisconnected, _disconnected),
+    (smtplib.SMTPException, lambda e, c: f"{c.where}: {e} (during {c.stage})"),
+    (TimeoutError, _timed_out),
+    (
+        ssl.SSLCertVerificationError,
+        lambda e, c: (
+            f"TLS with {c.where} failed: certificate not trusted ({e.verify_message}); "
+            "set smtp.ca_file for a private CA"
+        ),
+    ),
+    (ssl.SSLError, lambda e, c: f"TLS with {c.where} failed: {e.reason or e}"),
+    (socket.gaierror, lambda e, c: f"cannot resolve {c.where}: {e.strerror or e}"),
+    (ConnectionRefusedError, lambda e, c: f"cannot connect to {c.where}: connection refused"),
+)
+
+
+def _smtp_failure(exc: OSError, c: _Smtp) -> str:
+    """The error of a failed SMTP exchange, for the notification's result."""
+    for kind, explain in _SMTP_FAILURES:
+        if isinstance(exc, kind):
+            return explain(exc, c)
+    return f"cannot talk to {c.where} (during {c.stage}): {exc.strerror or exc}"
+
+
 class _NoRedirect(urllib.request.HTTPRedirectHandler):
     """Refuse redirects: a 3xx answer is a failed call, never a call to another host."""
 
@@ -578,22 +682,14 @@ class Notifier:
 
     # ----------------------------------------------------------------------- e-mail
 
-    def _send_email(self, n: Notification) -> None:  # noqa: C901, PLR0912, PLR0915
+    def _send_email(self, n: Notification) -> None:
         cfg = self._config.smtp
         if cfg is None:
             raise _Refused(
                 "e-mail is not configured: add a 'smtp' section (host, from_addr) under "
                 "'notify' in the Utu configuration"
             )
-        to = n.to or ""
-        subject = n.subject or f"Anunnaki: tactic {n.tactic}"
-        for what, value in (("to", to), ("subject", subject), ("tactic", n.tactic)):
-            if _LINE_BREAK.search(value):
-                raise _Refused(f"refused: {what!r} holds a line break (header injection)")
-            if _CONTROL.search(value):
-                raise _Refused(f"refused: {what!r} holds a control character")
-        if not _ADDRESS.fullmatch(to):
-            raise _Refused(f"{to!r} is not an e-mail address (e.g. operator@example.com)")
+        to, subject = _email_headers(n)
         password = self._password(cfg)
         message = self._email_message(n, cfg, to, subject)
         where = f"SMTP server {cfg.host}:{cfg.port}"
@@ -601,82 +697,42 @@ class Notifier:
             context = self._tls_context(cfg) if (cfg.starttls or cfg.ssl) else None
         except OSError as exc:
             raise _Refused(f"cannot load smtp.ca_file {str(cfg.ca_file)!r}: {exc}") from None
-        stage: Literal["connect", "starttls", "login", "send"] = "connect"
+        stage: list[_Stage] = ["connect"]
         try:
-            client: smtplib.SMTP
-            if cfg.ssl:
-                client = smtplib.SMTP_SSL(
-                    cfg.host,
-                    cfg.port,
-                    local_hostname=cfg.helo_name,
-                    timeout=cfg.timeout,
-                    context=context,
-                )
-            else:
-                client = smtplib.SMTP(
-                    cfg.host, cfg.port, local_hostname=cfg.helo_name, timeout=cfg.timeout
-                )
-            with client:
-                if cfg.starttls:
-                    stage = "starttls"
-                    client.starttls(context=context)
-                if cfg.username is not None and password is not None:
-                    stage = "login"
-                    self._login(client, cfg.username, password, where)
-                stage = "send"
-                client.send_message(message, from_addr=cfg.from_addr, to_addrs=[to])
-        except smtplib.SMTPNotSupportedError as exc:
-            need = {
-                "starttls": "STARTTLS (smtp.starttls is true)",
-                "login": "AUTH (smtp.username is set)",
-            }.get(stage)
-            if need is None:
-                raise _Refused(f"{where}: {exc} (during {stage})") from None
-            raise _Refused(f"{where} does not offer {need}") from None
-        except smtplib.SMTPAuthenticationError as exc:
-            raise _Refused(
-                f"{where} refused the login as {cfg.username!r}: {exc.smtp_code} "
-                f"{self._text(exc.smtp_error)}"
-            ) from None
-        except smtplib.SMTPRecipientsRefused as exc:
-            code, text = next(iter(exc.recipients.values()), (0, b""))
-            raise _Refused(f"{where} refused recipient {to}: {code} {self._text(text)}") from None
-        except smtplib.SMTPSenderRefused as exc:
-            raise _Refused(
-                f"{where} refused sender {cfg.from_addr}: {exc.smtp_code} "
-                f"{self._text(exc.smtp_error)}"
-            ) from None
-        except smtplib.SMTPResponseException as exc:
-            raise _Refused(
-                f"{where} answered {exc.smtp_code} {self._text(exc.smtp_error)} (during {stage})"
-            ) from None
-        except smtplib.SMTPServerDisconnected as exc:
-            if isinstance(exc.__context__, TimeoutError):  # smtplib wraps read timeouts
-                raise _Refused(
-                    f"timeout: {where} did not answer within {cfg.timeout:g} s (during {stage})"
-                ) from None
-            raise _Refused(f"{where} closed the connection (during {stage}): {exc}") from None
-        except smtplib.SMTPException as exc:
-            raise _Refused(f"{where}: {exc} (during {stage})") from None
-        except TimeoutError:
-            raise _Refused(
-                f"timeout: {where} did not answer within {cfg.timeout:g} s (during {stage})"
-            ) from None
-        except ssl.SSLCertVerificationError as exc:
-            raise _Refused(
-                f"TLS with {where} failed: certificate not trusted ({exc.verify_message}); "
-                "set smtp.ca_file for a private CA"
-            ) from None
-        except ssl.SSLError as exc:
-            raise _Refused(f"TLS with {where} failed: {exc.reason or exc}") from None
-        except socket.gaierror as exc:
-            raise _Refused(f"cannot resolve {where}: {exc.strerror or exc}") from None
-        except ConnectionRefusedError:
-            raise _Refused(f"cannot connect to {where}: connection refused") from None
-        except OSError as exc:
-            raise _Refused(
-                f"cannot talk to {where} (during {stage}): {exc.strerror or exc}"
-            ) from None
+            self._smtp_send(cfg, message, to, password, context=context, stage=stage)
+        except OSError as exc:  # smtplib's, ssl's and socket's errors all are OSErrors
+            raise _Refused(_smtp_failure(exc, _Smtp(where, stage[0], cfg, to))) from None
+
+    def _smtp_send(
+        self,
+        cfg: SmtpConfig,
+        message: EmailMessage,
+        to: str,
+        password: str | None,
+        *,
+        context: ssl.SSLContext | None,
+        stage: list[_Stage],
+    ) -> None:
+        """Connect, STARTTLS, log in and send; ``stage[0]`` says how far it got."""
+        client: smtplib.SMTP
+        if cfg.ssl:
+            client = smtplib.SMTP_SSL(
+                cfg.host, cfg.port, local_hostname=cfg.helo_name, timeout=cfg.timeout,
+                context=context,
+            )  # fmt: skip
+        else:
+            client = smtplib.SMTP(
+                cfg.host, cfg.port, local_hostname=cfg.helo_name, timeout=cfg.timeout
+            )
+        with client:
+            if cfg.starttls:
+                stage[0] = "starttls"
+                client.starttls(context=context)
+            if cfg.username is not None and password is not None:
+                stage[0] = "login"
+                self._login(client, cfg.username, password, f"SMTP server {cfg.host}:{cfg.port}")
+            stage[0] = "send"
+            client.send_message(message, from_addr=cfg.from_addr, to_addrs=[to])
 
     @staticmethod
     def _login(client: smtplib.SMTP, username: str, password: str, where: str) -> None:
@@ -713,11 +769,6 @@ class Notifier:
     def _tls_context(cfg: SmtpConfig) -> ssl.SSLContext:
         cafile = None if cfg.ca_file is None else str(cfg.ca_file)
         return ssl.create_default_context(cafile=cafile)
-
-    @staticmethod
-    def _text(value: bytes | str) -> str:
-        text = value.decode("utf-8", "replace") if isinstance(value, bytes) else value
-        return " ".join(text.split())
 
     def _email_message(
         self, n: Notification, cfg: SmtpConfig, to: str, subject: str
