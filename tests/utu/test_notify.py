@@ -13,6 +13,7 @@ import json
 import logging
 import re
 import shutil
+import smtplib
 import socket
 import ssl
 import subprocess
@@ -836,3 +837,36 @@ def test_context_manager_closes(make_notifier: Callable[..., Notifier]) -> None:
     assert future.done()
     with pytest.raises(RuntimeError):
         notifier.send_in_background(note("log", None))
+
+
+def _disconnected_by_timeout() -> smtplib.SMTPServerDisconnected:
+    exc = smtplib.SMTPServerDisconnected("Connection unexpectedly closed")
+    exc.__context__ = TimeoutError("timed out")  # as smtplib raises it after a read timeout
+    return exc
+
+
+@pytest.mark.parametrize(
+    ("exc", "stage", "expected"),
+    [
+        (smtplib.SMTPNotSupportedError("no"), "starttls", "does not offer STARTTLS"),
+        (smtplib.SMTPNotSupportedError("no"), "login", "does not offer AUTH"),
+        (smtplib.SMTPNotSupportedError("no"), "send", ": no (during send)"),
+        (smtplib.SMTPSenderRefused(553, b"bad  sender", "x"), "send", "refused sender utu@"),
+        (smtplib.SMTPResponseException(451, b"try\r\nlater"), "send", "answered 451 try later"),
+        (_disconnected_by_timeout(), "send", "did not answer within 3 s (during send)"),
+        (smtplib.SMTPServerDisconnected("gone"), "login", "closed the connection (during login)"),
+        (smtplib.SMTPException("odd"), "send", ": odd (during send)"),
+        (TimeoutError(), "connect", "did not answer within 3 s (during connect)"),
+        (ssl.SSLError(1, "wrong version"), "starttls", "TLS with SMTP server"),
+        (socket.gaierror(-2, "Name or service not known"), "connect", "cannot resolve"),
+        (ConnectionRefusedError(), "connect", "connection refused"),
+        (OSError(101, "Network is unreachable"), "connect", "(during connect): Network is"),
+    ],
+)
+def test_every_smtp_failure_is_explained(exc: OSError, stage: str, expected: str) -> None:
+    from anunnaki.utu._notify import _Smtp, _smtp_failure
+
+    cfg = SmtpConfig(host="mail.example.com", from_addr="utu@example.com", timeout=3)
+    error = _smtp_failure(exc, _Smtp("SMTP server mail.example.com:25", stage, cfg, "op@x.org"))  # type: ignore[arg-type]
+    assert expected in error
+    assert error.startswith(("SMTP server", "timeout: SMTP server", "TLS with", "cannot"))

@@ -425,7 +425,7 @@ _SMTP_FAILURES: tuple[tuple[type[BaseException], Callable[[Any, _Smtp], str]], .
             "set smtp.ca_file for a private CA"
         ),
     ),
-    (ssl.SSLError, lambda e, c: f"TLS with {c.where} failed: {e.reason or e}"),
+    (ssl.SSLError, lambda e, c: f"TLS with {c.where} failed: {getattr(e, 'reason', None) or e}"),
     (socket.gaierror, lambda e, c: f"cannot resolve {c.where}: {e.strerror or e}"),
     (ConnectionRefusedError, lambda e, c: f"cannot connect to {c.where}: connection refused"),
 )
