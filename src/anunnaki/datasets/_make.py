@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import multiprocessing
 import sys
-from collections.abc import Callable, Iterable, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from concurrent.futures import Future, ProcessPoolExecutor, as_completed
 from pathlib import Path
 from typing import Any, Protocol
@@ -129,7 +129,122 @@ def _render_layout(
     return out
 
 
-def make_dataset(  # noqa: C901, PLR0912
+def _check_layouts(splits: Mapping[str, Sequence[int]]) -> None:
+    """Layouts are numbers >= 0, each in one split only (its frames show one scene)."""
+    owner: dict[int, str] = {}
+    for split, layouts in splits.items():
+        for layout in layouts:
+            if layout < 0:
+                raise AnunnakiError(f"{split} layout {layout}: layouts are numbers >= 0")
+            if layout in owner:
+                raise AnunnakiError(
+                    f"layout {layout} is in both the {owner[layout]} and the {split} split; "
+                    "a layout may be in one split only (its frames show the same scene)"
+                )
+            owner[layout] = split
+
+
+def _render_all(
+    src: FrameSource,
+    tasks: Sequence[tuple[str, int]],
+    job: Mapping[str, Any],
+    *,
+    workers: int,
+    progress: bool,
+) -> dict[tuple[str, int], list[dict[str, Any]]]:
+    """Render every (split, layout) task, in worker processes when there are several."""
+    platform, per_layout = job["platform"], job["n"]
+    results: dict[tuple[str, int], list[dict[str, Any]]] = {}
+    from rich.progress import (
+        BarColumn,
+        MofNCompleteColumn,
+        Progress,
+        TextColumn,
+        TimeElapsedColumn,
+        TimeRemainingColumn,
+    )
+
+    columns = (
+        TextColumn(f"[bold]{platform}[/] frames"),
+        BarColumn(),
+        MofNCompleteColumn(),
+        TimeElapsedColumn(),
+        TimeRemainingColumn(),
+    )
+    if workers <= 1 or len(tasks) == 1:
+        with Progress(*columns, disable=not progress) as bar:
+            task = bar.add_task("render", total=len(tasks) * per_layout)
+            for split, layout in tasks:
+                results[split, layout] = _render_layout(src, layout=layout, **job)
+                bar.advance(task, per_layout)
+    else:
+        with ProcessPoolExecutor(max_workers=workers, mp_context=_pool_context()) as pool:
+            # Submit (and so start the workers) before the progress bar starts its thread.
+            futures: dict[Future[list[dict[str, Any]]], tuple[str, int]] = {
+                pool.submit(_render_layout, src, layout=layout, **job): (split, layout)
+                for split, layout in tasks
+            }
+            with Progress(*columns, disable=not progress) as bar:
+                task = bar.add_task("render", total=len(tasks) * per_layout)
+                for fut in as_completed(futures):
+                    results[futures[fut]] = fut.result()
+                    bar.advance(task, per_layout)
+    return results
+
+
+def _write_splits(
+    splits: Mapping[str, Sequence[int]],
+    results: Mapping[tuple[str, int], list[dict[str, Any]]],
+    out: Path,
+    names: tuple[str, ...],
+    job: Mapping[str, Any],
+    *,
+    min_label_height: float | None,
+) -> dict[str, Path]:
+    """One COCO file per split with layouts; image ids run across the splits."""
+    platform, per_layout, seed = job["platform"], job["n"], job["seed"]
+    width, height, images_dir = job["width"], job["height"], Path(job["images_dir"])
+    paths: dict[str, Path] = {}
+    next_id = 1
+    for split, layouts in splits.items():
+        if not layouts:
+            continue
+        records = []
+        for layout in layouts:
+            for item in results[split, layout]:
+                records.append(
+                    Record(
+                        file_name=item["file_name"],
+                        width=width,
+                        height=height,
+                        boxes=np.asarray(item["boxes"], np.float32).reshape(-1, 4),
+                        labels=np.asarray(item["labels"], np.int64),
+                        image_id=next_id,
+                        path=images_dir / item["file_name"],
+                        meta=item["meta"],
+                        ignore=np.asarray(item["ignore"], np.float32).reshape(-1, 4),
+                        ignore_labels=np.asarray(item["ignore_labels"], np.int64),
+                    )
+                )
+                next_id += 1
+        info = {
+            "description": f"anunnaki simulated {platform} dataset, {split} split",
+            "generator": "anunnaki make-dataset",
+            "platform": platform,
+            "split": split,
+            "layouts": list(layouts),
+            "per_layout": per_layout,
+            "seed": seed,
+            "width": width,
+            "height": height,
+            "min_label_height": min_label_height,
+        }
+        ds = Dataset(names, records, name=f"{platform} {split}")
+        paths[split] = write_coco(ds, out / f"{split}.json", info=info)
+    return paths
+
+
+def make_dataset(
     platform: str,
     out_dir: str | Path,
     *,
@@ -183,17 +298,7 @@ def make_dataset(  # noqa: C901, PLR0912
 
     """
     splits = {"train": list(train_layouts), "val": list(val_layouts), "test": list(test_layouts)}
-    owner: dict[int, str] = {}
-    for split, layouts in splits.items():
-        for layout in layouts:
-            if layout < 0:
-                raise AnunnakiError(f"{split} layout {layout}: layouts are numbers >= 0")
-            if layout in owner:
-                raise AnunnakiError(
-                    f"layout {layout} is in both the {owner[layout]} and the {split} split; "
-                    "a layout may be in one split only (its frames show the same scene)"
-                )
-            owner[layout] = split
+    _check_layouts(splits)
     if per_layout < 1:
         raise AnunnakiError(f"per_layout must be at least 1, got {per_layout}")
     if width < 16 or height < 16:
@@ -214,7 +319,6 @@ def make_dataset(  # noqa: C901, PLR0912
     images_dir.mkdir(parents=True, exist_ok=True)
     src: FrameSource = source
     tasks = [(split, layout) for split, layouts in splits.items() for layout in layouts]
-    results: dict[tuple[str, int], list[dict[str, Any]]] = {}
     job: dict[str, Any] = {
         "platform": platform,
         "seed": seed,
@@ -226,79 +330,8 @@ def make_dataset(  # noqa: C901, PLR0912
     if min_label_height is not None:
         job["min_label_height"] = min_label_height
 
-    from rich.progress import (
-        BarColumn,
-        MofNCompleteColumn,
-        Progress,
-        TextColumn,
-        TimeElapsedColumn,
-        TimeRemainingColumn,
-    )
-
-    columns = (
-        TextColumn(f"[bold]{platform}[/] frames"),
-        BarColumn(),
-        MofNCompleteColumn(),
-        TimeElapsedColumn(),
-        TimeRemainingColumn(),
-    )
-    if workers <= 1 or len(tasks) == 1:
-        with Progress(*columns, disable=not progress) as bar:
-            task = bar.add_task("render", total=len(tasks) * per_layout)
-            for split, layout in tasks:
-                results[split, layout] = _render_layout(src, layout=layout, **job)
-                bar.advance(task, per_layout)
-    else:
-        with ProcessPoolExecutor(max_workers=workers, mp_context=_pool_context()) as pool:
-            # Submit (and so start the workers) before the progress bar starts its thread.
-            futures: dict[Future[list[dict[str, Any]]], tuple[str, int]] = {
-                pool.submit(_render_layout, src, layout=layout, **job): (split, layout)
-                for split, layout in tasks
-            }
-            with Progress(*columns, disable=not progress) as bar:
-                task = bar.add_task("render", total=len(tasks) * per_layout)
-                for fut in as_completed(futures):
-                    results[futures[fut]] = fut.result()
-                    bar.advance(task, per_layout)
-
-    paths: dict[str, Path] = {}
-    next_id = 1
-    for split, layouts in splits.items():
-        if not layouts:
-            continue
-        records = []
-        for layout in layouts:
-            for item in results[split, layout]:
-                records.append(
-                    Record(
-                        file_name=item["file_name"],
-                        width=width,
-                        height=height,
-                        boxes=np.asarray(item["boxes"], np.float32).reshape(-1, 4),
-                        labels=np.asarray(item["labels"], np.int64),
-                        image_id=next_id,
-                        path=images_dir / item["file_name"],
-                        meta=item["meta"],
-                        ignore=np.asarray(item["ignore"], np.float32).reshape(-1, 4),
-                        ignore_labels=np.asarray(item["ignore_labels"], np.int64),
-                    )
-                )
-                next_id += 1
-        info = {
-            "description": f"anunnaki simulated {platform} dataset, {split} split",
-            "generator": "anunnaki make-dataset",
-            "platform": platform,
-            "split": split,
-            "layouts": layouts,
-            "per_layout": per_layout,
-            "seed": seed,
-            "width": width,
-            "height": height,
-            "min_label_height": min_label_height,
-        }
-        ds = Dataset(names, records, name=f"{platform} {split}")
-        paths[split] = write_coco(ds, out / f"{split}.json", info=info)
-    return paths
+    results = _render_all(src, tasks, job, workers=workers, progress=progress)
+    return _write_splits(splits, results, out, names, job, min_label_height=min_label_height)
 
 
 def load_split(data: str | Path, split: str = "test", *, cache: bool = False) -> Dataset:
