@@ -4,12 +4,14 @@ from __future__ import annotations
 
 import hashlib
 import json
+import os
 from pathlib import Path
 from typing import Any
 
 import pytest
 
 from anunnaki.errors import AnunnakiError, ModelFileError
+from anunnaki.lec import DetectorLoadError, load_detector, sha256_file
 from anunnaki.lec._detector import DetectionResult
 from anunnaki.lec._registry import (
     ModelIntegrityError,
@@ -262,10 +264,11 @@ def real_models(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 
 def test_real_models_take_id_domain_and_metrics_from_their_sidecar(real_models: Path) -> None:
+    pins = {n: sha256_file(real_models / f"{n}.safetensors") for n in ("uav-default", "uav-fog")}
     (real_models / "registry.yaml").write_text(
         "anunnaki: models/1\nmodels:\n"
-        "  - file: uav-default.safetensors\n"
-        "  - file: uav-fog.safetensors\n    metrics: {f1: 0.9}\n"
+        f"  - file: uav-default.safetensors\n    sha256: {pins['uav-default']}\n"
+        f"  - file: uav-fog.safetensors\n    sha256: {pins['uav-fog']}\n    metrics: {{f1: 0.9}}\n"
     )
     reg = load_registry(real_models / "registry.yaml")
     assert [(m.id, m.domain) for m in reg] == [("uav-default", "default"), ("uav-fog", "fog")]
@@ -296,9 +299,11 @@ def test_tampered_weights_are_refused_by_registry_and_by_sidecar(
     with pytest.raises(ModelIntegrityError, match="sha256 mismatch"):
         pinned.load("uav-default")
     registry.write_text("anunnaki: models/1\nmodels:\n  - file: uav-default.safetensors\n")
-    unpinned = load_registry(registry)  # no registry hash: the sidecar's hash catches it
-    with pytest.raises(ModelLoadError, match="sha256 mismatch"):
-        unpinned.load("uav-default")
+    with pytest.raises(ModelFileError, match="missing sha256") as info:
+        load_registry(registry)  # a registry pins what it loads; the hint gives the digest
+    assert info.value.line == 3 and sha256_file(weights) in str(info.value)
+    with pytest.raises(DetectorLoadError, match="sha256 mismatch"):
+        load_detector(weights)  # and the sidecar's own hash catches it too
 
 
 def test_a_bad_sidecar_is_reported_at_the_registry_line(real_models: Path, tmp_path: Path) -> None:
@@ -313,3 +318,54 @@ def test_a_bad_sidecar_is_reported_at_the_registry_line(real_models: Path, tmp_p
     # A third-party loader may keep its own .json next to the weights.
     reg = load_registry(tmp_path / "r.yaml", loader=fake_loader())
     assert reg.ids() == ["m"]
+
+
+@pytest.mark.parametrize("where", ["dotdot", "absolute", "symlink"])
+def test_a_registry_refuses_model_files_outside_its_folder(
+    real_models: Path, tmp_path: Path, where: str
+) -> None:
+    folder = tmp_path / "registry"
+    folder.mkdir()
+    outside = real_models / "uav-default.safetensors"
+    named = {
+        "dotdot": os.path.relpath(outside, folder),
+        "absolute": str(outside),
+        "symlink": "linked.safetensors",
+    }[where]
+    if where == "symlink":
+        (folder / "linked.safetensors").symlink_to(outside)
+        (folder / "linked.json").symlink_to(outside.with_suffix(".json"))
+    (folder / "r.yaml").write_text(
+        f"anunnaki: models/1\nmodels:\n  - file: {named}\n    sha256: {sha256_file(outside)}\n"
+    )
+    with pytest.raises(ModelFileError, match="outside the registry's folder") as info:
+        load_registry(folder / "r.yaml")
+    assert info.value.line == 3 and "models[0].file" in str(info.value)
+
+
+def test_non_finite_weights_are_refused(real_models: Path, tmp_path: Path) -> None:
+    import json
+
+    import numpy as np
+    from safetensors.numpy import load_file, save_file
+
+    tensors = load_file(str(real_models / "uav-default.safetensors"))
+    name = next(k for k, v in tensors.items() if v.dtype.kind == "f")
+    tensors[name] = np.full_like(tensors[name], np.nan)
+    weights = tmp_path / "uav-default.safetensors"
+    save_file(tensors, str(weights))
+    card = json.loads((real_models / "uav-default.json").read_text())
+    card["sha256"] = sha256_file(weights)  # a consistent pair: only the values are wrong
+    (tmp_path / "uav-default.json").write_text(json.dumps(card))
+    with pytest.raises(DetectorLoadError, match="non-finite") as info:
+        load_detector(weights)
+    assert name in str(info.value)
+
+
+def test_an_over_deep_sidecar_is_a_clean_error(real_models: Path, tmp_path: Path) -> None:
+    weights = tmp_path / "m.safetensors"
+    weights.write_bytes((real_models / "uav-default.safetensors").read_bytes())
+    for depth in (100, 100_000):  # within and beyond the JSON parser's own recursion limit
+        (tmp_path / "m.json").write_text("[" * depth + "]" * depth)
+        with pytest.raises(DetectorLoadError, match="nested"):
+            load_detector(weights)

@@ -107,11 +107,15 @@ managed:
 
 def write_registry(path: Path, *domains: str) -> Path:
     """The default model, also registered under each domain: a 'robust' model no better."""
+    import shutil
+
+    for part in (MODEL, MODEL.with_suffix(".json")):  # a registry's models sit in its folder
+        shutil.copy(part, path.parent / part.name)
     digest = sha256_file(MODEL)
     lines = ["anunnaki: models/1", "lec: detector", "models:"]
     for domain in ("default", *domains):
         lines.append(
-            f"  - {{id: rover-{domain}, domain: {domain}, file: {MODEL}, sha256: {digest}}}"
+            f"  - {{id: rover-{domain}, domain: {domain}, file: {MODEL.name}, sha256: {digest}}}"
         )
     path.write_text("\n".join(lines) + "\n")
     return path

@@ -435,6 +435,22 @@ def update_metrics(path: str | Path, metrics: Mapping[str, Any]) -> ModelCard:
     return new
 
 
+_MAX_SIDECAR_DEPTH = 32
+
+
+def _depth(value: Any) -> int:
+    """How deeply JSON containers nest in ``value`` (iterative: no recursion limit)."""
+    deepest, stack = 0, [(value, 1)]
+    while stack:
+        item, depth = stack.pop()
+        if not isinstance(item, dict | list):
+            continue
+        children = item.values() if isinstance(item, dict) else item
+        deepest = max(deepest, depth)
+        stack.extend((child, depth + 1) for child in children)
+    return deepest
+
+
 def read_card(path: str | Path) -> ModelCard:
     """Read and validate the sidecar of a model file (no weights are read).
 
@@ -466,6 +482,18 @@ def read_card(path: str | Path) -> ModelCard:
         raise DetectorLoadError(
             f"sidecar is not valid JSON: {exc}", path=spath, line=line, hint="re-save the model"
         ) from None
+    except RecursionError:
+        raise DetectorLoadError(
+            "sidecar is nested too deeply to be a model card",
+            path=spath,
+            hint="a model sidecar is a small, flat JSON file; re-save the model",
+        ) from None
+    if _depth(data) > _MAX_SIDECAR_DEPTH:
+        raise DetectorLoadError(
+            f"sidecar is nested more than {_MAX_SIDECAR_DEPTH} levels deep",
+            path=spath,
+            hint="a model sidecar is a small, flat JSON file; re-save the model",
+        )
     if not isinstance(data, dict) or data.get("format") != SIDECAR_FORMAT:
         raise DetectorLoadError(
             f"not an anunnaki detector sidecar (format is not {SIDECAR_FORMAT!r})",
@@ -559,4 +587,13 @@ def load_detector(path: str | Path) -> Detector:
         raise DetectorLoadError(
             f"not a valid safetensors file: {exc}", path=wpath, hint="copy the model again"
         ) from None
+    for name, tensor in tensors.items():
+        if tensor.dtype.kind in "fc" and not np.isfinite(tensor).all():
+            raise DetectorLoadError(
+                f"tensor {name!r} holds non-finite values (NaN or infinity)",
+                path=wpath,
+                element=name,
+                hint="the training diverged or the file was tampered with; retrain or copy "
+                "the model again",
+            )
     return architecture.from_card(card, tensors, wpath)

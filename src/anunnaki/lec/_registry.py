@@ -557,14 +557,7 @@ def _build(  # noqa: C901
         def fail(message: str, field: str | None, hint: str, i: int = i) -> ModelFileError:
             return _entry_error(message, lines=lines, path=source, index=i, field=field, hint=hint)
 
-        file = Path(entry.file)
-        file = file if file.is_absolute() else (base / file)
-        if not file.is_file():
-            raise fail(
-                f"model file {entry.file!r} not found (looked at {file})",
-                "file",
-                "paths are relative to the registry file; copy the model there",
-            )
+        file = _entry_file(entry, base, fail)
         card: dict[str, Any] | None = None
         if entry.loader is None:
             if entry.options:
@@ -645,6 +638,40 @@ def _build(  # noqa: C901
     return registry
 
 
+def _entry_file(
+    entry: _EntryFile, base: Path, fail: Callable[[str, str | None, str], ModelFileError]
+) -> Path:
+    """The entry's model file: it exists and, symlinks resolved, lies in the registry's folder."""
+    file = Path(entry.file)
+    file = file if file.is_absolute() else (base / file)
+    if not file.is_file():
+        raise fail(
+            f"model file {entry.file!r} not found (looked at {file})",
+            "file",
+            "paths are relative to the registry file; copy the model there",
+        )
+    _inside(file, base, entry.file, fail, "file")
+    return file
+
+
+def _inside(
+    path: Path,
+    base: Path,
+    named: str,
+    fail: Callable[[str, str | None, str], ModelFileError],
+    field: str,
+) -> None:
+    """Refuse a file that, symlinks resolved, lies outside the registry's folder."""
+    real, root = path.resolve(), base.resolve()
+    if not real.is_relative_to(root):
+        raise fail(
+            f"{named!r} is outside the registry's folder {root} (it resolves to {real})",
+            field,
+            "keep a registry's models in its own folder (no '..', absolute paths or symlinks "
+            "out of it); copy the model there",
+        )
+
+
 def _entry_pins(  # noqa: C901
     entry: _EntryFile,
     file: Path,
@@ -682,6 +709,15 @@ def _entry_pins(  # noqa: C901
                     "options",
                     "copy the file there, or fix the options",
                 )
+    if entry.sha256 is None and not python_loader:
+        digest = sha256_file(file)
+        raise fail(
+            "missing sha256: a registry pins every model file it loads",
+            "sha256",
+            f"add 'sha256: {digest}' (this file's digest now; check it is the file you trust)",
+        )
+    for path in reads:
+        _inside(path, base, _relative(path, base), fail, "options")
     if entry.sha256 is None or isinstance(entry.sha256, str):
         if entry.sha256 is not None and len(reads) > 1:
             names = ", ".join(_relative(p, base) for p in reads)
