@@ -73,7 +73,7 @@ def test_rate_reads_the_rate_slot() -> None:
         ("not A1.x", {}, None),
         ("A1.x + 1", {}, None),
         ("A1 has x", {}, None),  # silent agent: presence unknown
-        ("A1.x / 0", {"A1__x": 1}, None),  # division by zero: unknown
+        ("A1.x / A1.y", {"A1__x": 1, "A1__y": 0}, None),  # division by zero: unknown
         ("A1.s < 3", {"A1__s": "a"}, None),  # type clash at run time: unknown
         ("A1.s + 1", {"A1__s": "a"}, None),
         ("A1.z and 0.0", {}, 0.0),  # fuzzy: 0 decides

@@ -121,7 +121,7 @@ def _get_parser() -> Lark:
     with _grammar_lock:
         if _parser is None:
             text = resources.files("anunnaki.goals").joinpath("expression.lark").read_text()
-            _parser = Lark(text, parser="lalr", propagate_positions=False)
+            _parser = Lark(text, parser="lalr", propagate_positions=True)
         return _parser
 
 
@@ -537,6 +537,8 @@ class _Checker:
         sub = [k for k in kids if isinstance(k, Tree)]
         types = [self.check(k, depth + 1) for k in sub if k.data != "list"]
         if rule in _LEAF_TYPES:
+            if rule in ("number", "neg_number"):
+                self._check_number(kids[0])
             return _LEAF_TYPES[rule]
         if rule in ("attr", "has", "has_no"):
             self.refs.add(AttrRef(str(kids[0]), str(kids[1])))
@@ -544,7 +546,41 @@ class _Checker:
         if rule == "rate":
             self.rated.add(str(kids[0]))
             return "number"
-        return self._check_operator(rule, kids, types)
+        vtype = self._check_operator(rule, kids, types)
+        if rule in ("arith", "neg", "call") and _constant(node):
+            self._check_constant(node)
+        elif rule == "arith" and str(kids[1]) in ("/", "%") and _constant(sub[-1]):
+            self._check_divisor(str(kids[1]), sub[-1])
+        return vtype
+
+    def _check_number(self, token: Token | Tree[Token]) -> None:
+        value, text = _number(token), str(token)
+        if not math.isfinite(value) or abs(value) > _MAX_NUMBER:
+            raise self.fail(
+                f"number {text[:20]}{'…' if len(text) > 20 else ''} is out of range",
+                f"numbers in expressions lie within ±{_MAX_NUMBER:.0e}",
+            )
+
+    def _check_constant(self, node: Tree[Token]) -> None:
+        """A part without references is computed now: one that is always unknown is a bug."""
+        try:
+            value = _Compiler(lambda ref: 0, lambda agent: 0).compile(node)([])
+        except (ArithmeticError, ValueError):
+            value = None
+        if value is None:
+            part = self.text[node.meta.start_pos : node.meta.end_pos] if not node.meta.empty else ""
+            raise self.fail(
+                f"'{part or node.data}' is always unknown (a division by zero or a result "
+                "beyond the number range)",
+                "fix the constant; an expression that can never be known never satisfies its goal",
+            )
+
+    def _check_divisor(self, op: str, divisor: Tree[Token]) -> None:
+        if _Compiler(lambda ref: 0, lambda agent: 0).compile(divisor)([]) == 0:
+            raise self.fail(
+                f"'{op} 0' is always unknown (a division by zero)",
+                "fix the divisor; an expression that can never be known never satisfies its goal",
+            )
 
     def _check_operator(
         self, rule: str, kids: list[Tree[Token] | Token], types: list[ValueType]
@@ -579,6 +615,17 @@ class _Checker:
                 raise self.fail(f"{name}() takes numbers only")
             return "number"
         raise AssertionError(f"unhandled rule {rule}")  # pragma: no cover
+
+
+#: The largest magnitude of a number in an expression (an IEEE double's range, with margin).
+_MAX_NUMBER: Final = 1e300
+
+#: Rules whose value depends on the run (a subtree without them is a constant).
+_READS: Final = frozenset({"attr", "has", "has_no", "rate"})
+
+
+def _constant(node: Tree[Token]) -> bool:
+    return not any(t.data in _READS for t in node.iter_subtrees())
 
 
 #: The type of each literal rule.

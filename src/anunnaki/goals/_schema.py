@@ -37,7 +37,9 @@ Ident = Annotated[str, Field(pattern=ID_PATTERN, max_length=64)]
 
 
 class _Strict(BaseModel):
-    model_config = ConfigDict(extra="forbid", frozen=True, str_strip_whitespace=True)
+    model_config = ConfigDict(
+        extra="forbid", frozen=True, str_strip_whitespace=True, allow_inf_nan=False
+    )
 
 
 # The bus keeps services under ``<namespace>/srv/…`` (anunnaki.bus, ``SERVICE_SEGMENT``), so

@@ -266,7 +266,7 @@ class Tactic(_Model):
 
     name: Annotated[Line, Filled, Field(max_length=128)]
     description: Text = ""
-    priority: int = 0
+    priority: Annotated[int, Field(ge=-1_000_000, le=1_000_000)] = 0
     preconditions: Annotated[list[Precondition], Field(min_length=1)]
     actions: Annotated[list[Action], Field(min_length=1)]
     postconditions: list[GoalState] = Field(default_factory=list)

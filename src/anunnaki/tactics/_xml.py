@@ -127,6 +127,15 @@ class _LineTreeBuilder:
             if node.text_line is None and text.strip():
                 node.text_line = int(self.expat.CurrentLineNumber)
 
+    def pi(self, target: str, data: str | None = None) -> None:
+        raise ModelFileError(
+            f"refused: a processing instruction (<?{target} …?>) is not allowed",
+            path=self.source,
+            line=int(self.expat.CurrentLineNumber),
+            hint="a tactics file holds elements only: remove the <?…?> line (the XML "
+            'declaration <?xml version="1.0"?> may stay)',
+        )
+
     def close(self) -> _Node | None:
         return self.root
 

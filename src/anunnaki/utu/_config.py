@@ -33,7 +33,7 @@ __all__ = ["RunStopConfig", "UtuConfig", "load_config", "parse_config"]
 
 
 class _Strict(BaseModel):
-    model_config = ConfigDict(extra="forbid", frozen=True)
+    model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
 
 
 class RunStopConfig(_Strict):
