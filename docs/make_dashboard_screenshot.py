@@ -17,6 +17,7 @@ from __future__ import annotations
 import argparse
 import io
 import os
+import secrets
 import tempfile
 import threading
 from pathlib import Path
@@ -40,7 +41,7 @@ def main() -> None:
     ap.add_argument("--node", default="G4", help="the goal whose explanation is shown")
     args = ap.parse_args()
     launch = load_launch(args.launch)
-    dash = dashboard_for_launch(launch, port=0, token="screenshot")
+    dash = dashboard_for_launch(launch, port=0, token=secrets.token_urlsafe(16))
     dash.start()
     done = threading.Event()
 

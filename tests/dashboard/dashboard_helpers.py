@@ -36,7 +36,7 @@ ROOT = HERE.parent.parent
 ROVER = ROOT / "examples" / "rover"
 ARTIFACTS = HERE / "artifacts"
 CHROMIUM = os.environ.get("ANUNNAKI_CHROMIUM", "/usr/bin/chromium")
-TOKEN = "s3cret-operator-token"
+TOKEN = "s3cret-Operator-token-2026"
 #: Set to 1 (CI does) to make a missing browser a failure instead of a skip.
 REQUIRE_BROWSER = "ANUNNAKI_REQUIRE_BROWSER"
 #: Deadlines of the tests, in seconds: generous, the machine is shared (a loaded machine

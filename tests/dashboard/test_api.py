@@ -7,6 +7,7 @@ import http.client
 import json
 import os
 import queue
+import secrets
 import shutil
 import signal
 import socket
@@ -45,6 +46,7 @@ from anunnaki.dashboard import (
     create_app,
 )
 from anunnaki.dashboard._server import is_loopback, loopback_names
+from anunnaki.dashboard._token import Throttle, token_weakness
 from anunnaki.errors import MissingExtraError, ModelFileError
 from anunnaki.goals import load_goal_model
 from anunnaki.launch import load_launch
@@ -158,6 +160,43 @@ def test_operator_refused_read_only_and_without_token(state: DashboardState) -> 
     wrong = guarded.post("/api/operator/pause", headers={"Authorization": "Bearer nope"})
     assert wrong.status_code == 401
     assert wrong.headers["www-authenticate"] == "Bearer"
+
+
+@pytest.mark.parametrize(
+    ("token", "why"),
+    [
+        ("", "empty"),
+        ("screenshot", "bits"),
+        ("a" * 64, "distinct characters"),
+        ("correcthorsebattery", "bits"),  # 19 lower-case letters: about 89 bits
+    ],
+)
+def test_a_weak_operator_token_is_refused(state: DashboardState, token: str, why: str) -> None:
+    with pytest.raises(ValueError, match=why):
+        create_app(state, token=token)
+    assert token_weakness(secrets.token_urlsafe(16)) is None  # what the error suggests
+
+
+def test_failed_token_guesses_are_rate_limited(state: DashboardState) -> None:
+    guarded = Web.serve(create_app(state, token=TOKEN))
+    codes = [
+        guarded.post(
+            "/api/operator/pause", headers={"Authorization": f"Bearer guess-{i}"}
+        ).status_code
+        for i in range(8)
+    ]
+    assert codes == [401] * 5 + [429] * 3  # five guesses a minute, then a lock-out
+    locked = guarded.post("/api/operator/pause", headers={"Authorization": f"Bearer {TOKEN}"})
+    assert locked.status_code == 429  # even the right token waits: no oracle for guesses
+    assert int(locked.headers["retry-after"]) > 0
+
+
+def test_the_throttle_also_counts_guesses_across_clients() -> None:
+    throttle = Throttle(limit=2, window=60.0, lockout=30.0)
+    for i in range(8):  # one guess each from eight addresses: none is locked by its own
+        assert throttle.wait(f"10.0.0.{i}") == 0
+        throttle.failed(f"10.0.0.{i}")
+    assert throttle.wait("10.0.0.99") > 0  # 8 = 2 x 4 failures from anywhere lock everyone
 
 
 def test_operator_with_token_is_logged_by_utu_with_its_caller(rover_run: RoverRun) -> None:

@@ -43,6 +43,7 @@ from pydantic import BaseModel, Field
 from anunnaki.dashboard._app_types import Operator
 from anunnaki.dashboard._observer import OPERATIONS, OperatorError
 from anunnaki.dashboard._state import DashboardState
+from anunnaki.dashboard._token import Throttle, token_weakness
 
 __all__ = ["OperatorRequest", "create_app", "static_dir"]
 
@@ -124,8 +125,9 @@ def create_app(
     """
     if not max_rate > 0:
         raise ValueError(f"max_rate must be > 0, got {max_rate!r}")
-    if token is not None and not token:
-        raise ValueError("token must not be empty")
+    if token is not None and (weak := token_weakness(token)) is not None:
+        raise ValueError(f"the operator token is too weak: {weak}")
+    throttle = Throttle()
     stop = stopping or threading.Event()
     app = FastAPI(title=f"Anunnaki dashboard: {state.name}", docs_url=None, redoc_url=None)
     app.state.dashboard = state
@@ -186,10 +188,13 @@ def create_app(
         body: OperatorRequest | None = None,
         authorization: str | None = Header(default=None),
     ) -> Response:
-        performer = _authorized(token, authorization, action, operator)
+        host = request.client.host if request.client is not None else "unknown"
+        performer = _throttled(
+            throttle, host, token=token, authorization=authorization, action=action,
+            operator=operator,
+        )  # fmt: skip
         req = body or OperatorRequest()
         who = _OPERATOR_NAME.sub("", req.operator or "") or "operator"
-        host = request.client.host if request.client is not None else "unknown"
         caller = f"dashboard:{who}@{host}"
         try:
             reply = performer.operate(action, caller=caller, tactic=req.tactic, reason=req.reason)
@@ -215,6 +220,31 @@ def _frame_response(state: DashboardState, seq: str) -> Response:
         media_type=f.media_type,
         headers={"Cache-Control": "no-store", "X-Frame-Seq": str(f.seq)},
     )
+
+
+def _throttled(
+    throttle: Throttle,
+    host: str,
+    *,
+    token: str | None,
+    authorization: str | None,
+    action: str,
+    operator: Operator | None,
+) -> Operator:
+    """:func:`_authorized`, with failed token attempts counted per client (429 past them)."""
+    wait = throttle.wait(host)
+    if wait > 0:
+        raise HTTPException(
+            429,
+            "too many failed attempts; try again later",
+            headers={"Retry-After": str(math.ceil(wait))},
+        )
+    try:
+        return _authorized(token, authorization, action, operator)
+    except HTTPException as exc:
+        if exc.status_code == 401:
+            throttle.failed(host)
+        raise
 
 
 def _authorized(

@@ -21,6 +21,7 @@ from anunnaki.bus import Bus
 from anunnaki.dashboard._app_types import Operator
 from anunnaki.dashboard._observer import BusObserver, ObserverConfig, OperatorError, SimTime
 from anunnaki.dashboard._state import DashboardState
+from anunnaki.dashboard._token import token_weakness
 from anunnaki.errors import AnunnakiError, MissingExtraError
 from anunnaki.goals import GoalModel
 from anunnaki.tactics import TacticSet
@@ -250,8 +251,11 @@ class Dashboard:
         operator_timeout: float = 3.0,
     ) -> None:
         _require()
-        if token is not None and not token.strip():
-            raise DashboardError("the operator token is empty; give a non-empty --token")
+        if token is not None and (weak := token_weakness(token)) is not None:
+            raise DashboardError(
+                f"the operator token is too weak: {weak} (make one with: python -c "
+                "'import secrets; print(secrets.token_urlsafe(16))')"
+            )
         self._sim = SimTime() if clock == "sim" else None
         self.state = DashboardState(
             model,
