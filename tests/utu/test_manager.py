@@ -457,3 +457,37 @@ def test_reload_service_swaps_tactics_while_spinning(bus, tmp_path: Path) -> Non
     assert kinds_.index("reload_refused") < kinds_.index("reloaded")
     assert {t.name for t in m.tactics.tactics} == {"hand-over", "chirp"}
     m.close()
+
+
+@pytest.mark.parametrize("forged", ["/clock", "batch"])
+def test_one_forged_time_neither_freezes_nor_steers_utu(forged: str, tmp_path: Path) -> None:
+    """A /clock (or a monitor batch) stamped 1e12 is refused; the run's times go on."""
+    from anunnaki.bus import Clock, MonitorBatch
+
+    cfg = tmp_path / "utu.yaml"
+    cfg.write_text(
+        f"anunnaki: utu/1\ngoal_model: {ROVER / 'goals.yaml'}\nbinding: {ROVER / 'binding.yaml'}\n"
+        f"tactics: {ROVER / 'tactics.xml'}\nclock: sim\nwarmup: 0\n"
+    )
+    with open_bus("inproc") as bus:
+        manager = AutonomicManager.from_config(
+            parse_config(cfg.read_text(), base=tmp_path), bus=bus
+        )
+        for t in (1.0, 2.0):
+            bus.publish("/clock", Clock(time=t))
+            manager.step()
+        if forged == "/clock":
+            bus.publish("/clock", Clock(time=1e12))
+            manager.step()
+        else:
+            # as a forged /utu/monitor/input reaches the analyze node of a per-node run
+            batch = MonitorBatch(origin="", seq=99, t=1e12, inputs=[], ops=[])
+            assert manager.analyze_stage.analyze(batch) is None  # refused whole
+        for t in (25.0, 45.8):
+            bus.publish("/clock", Clock(time=t))
+            manager.step()
+        now = manager.analyze_stage.now
+        refused = manager.clock.refused if forged == "/clock" else manager.analyze_stage.refused
+        manager.close()
+    assert refused == 1
+    assert now == 45.8  # the run's last instant, not 1e12

@@ -459,3 +459,22 @@ def test_nodes_spin_live_in_one_process(tmp_path) -> None:  # type: ignore[no-un
                 n.close()
             kb.close()
         assert not any(th.is_alive() for th in threads)
+
+
+def test_a_forged_batch_time_is_refused_alone_by_the_analyze_node(tmp_path) -> None:  # type: ignore[no-untyped-def]
+    """A /utu/monitor/input stamped 1e12 is dropped; a real batch beside it is analysed."""
+    from anunnaki import topics
+    from anunnaki.bus import MonitorBatch, MonitorInput
+
+    cfg = config(knowledge=str(tmp_path / "kb.db"))
+    with open_bus("inproc") as bus:
+        analyze = AnalyzeNode(cfg, bus=bus, pace=False, clock=ManualClock())
+        try:
+            assert analyze.step(1.0)
+            real = MonitorInput(topic="/rover/status", t=2.0, msg={"mode": "autonomous"})
+            bus.publish(topics.MONITOR_INPUT, MonitorBatch(origin="m", seq=1, t=2.0, inputs=[real]))
+            bus.publish(topics.MONITOR_INPUT, MonitorBatch(origin="x", seq=2, t=1e12, inputs=[]))
+            assert wait_for(lambda: analyze.step() and analyze.stage.taken == 1)
+            assert analyze.stage.now == 2.0 and analyze.stage.refused == 1
+        finally:
+            analyze.close()

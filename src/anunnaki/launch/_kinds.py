@@ -73,7 +73,7 @@ def drive(
     speed: float,
     loop: bool,
     until: float | None,
-    on_instant: Callable[[float], None] | None = None,
+    on_instant: Callable[[float], object] | None = None,
     after_instant: Callable[[int], None] | None = None,
     watched: frozenset[str] = frozenset(),
 ) -> None:

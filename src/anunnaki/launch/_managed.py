@@ -68,7 +68,7 @@ class ManagedContext:
     speed: float
     until: float | None
     say: Callable[[str], None]
-    on_instant: Callable[[float], None] | None
+    on_instant: Callable[[float], object] | None
     taken: Callable[[int], bool] | None
     watched: frozenset[str]
 

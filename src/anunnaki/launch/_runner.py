@@ -334,7 +334,7 @@ class _Runner:
     def _start_managed(
         self,
         bus: Bus,
-        on_instant: Callable[[float], None] | None = None,
+        on_instant: Callable[[float], object] | None = None,
         taken: Callable[[int], bool] | None = None,
     ) -> ManagedRun | None:
         """Start the managed system (a plugin) in its own thread.
@@ -426,7 +426,7 @@ class _Runner:
             tail = DecisionTail(kb)
             # On sim time the scripted system moves the clock itself, in order with its
             # records (a clock fed from the bus arrives on another thread: racy).
-            sim = SimClock() if self.utu.clock == "sim" else None
+            sim = SimClock(max_jump=self.utu.max_time_jump) if self.utu.clock == "sim" else None
             nodes.extend(self._build_nodes(bus, kb, sim, composed=all_five))
             threads.extend(_spin(nodes, halt, crashed))
             wait_ready(bus, list(launch.nodes), timeout=launch.config.ready_timeout, stop=self.stop)

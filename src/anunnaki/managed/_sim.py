@@ -166,7 +166,7 @@ class SimulatedSystem:
         oracle: Mapping[str, Any] | None = None,
         lockstep: bool = True,
         lockstep_timeout: float = 2.0,
-        on_time: Callable[[float], None] | None = None,
+        on_time: Callable[[float], object] | None = None,
     ) -> None:
         self.bus = bus
         self.lockstep = lockstep

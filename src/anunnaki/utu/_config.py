@@ -64,6 +64,8 @@ class UtuConfig(_Strict):
     escalate_to_run_stop: bool = True
     run_stop: RunStopConfig = Field(default_factory=RunStopConfig)
     queue: Annotated[int, Field(ge=1, le=1_000_000)] = 1024
+    #: Seconds ahead of Utu's time beyond which a ``/clock`` or a monitor batch is refused.
+    max_time_jump: Annotated[float, Field(gt=0)] | None = 60.0
     notify: dict[str, Any] = Field(default_factory=dict)
     publish_state: bool = True
 

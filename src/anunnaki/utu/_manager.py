@@ -220,7 +220,7 @@ class AutonomicManager:
         parts = config if isinstance(config, UtuParts) else load_parts(config)
         cfg = parts.config
         if clock is None:
-            clock = SimClock() if cfg.clock == "sim" else WallClock()
+            clock = SimClock(max_jump=cfg.max_time_jump) if cfg.clock == "sim" else WallClock()
         if actuator is None and bus is not None:
             notifier = None
             if cfg.notify:

@@ -151,7 +151,11 @@ class UtuNode(Node):
         if not 0 < self.rate <= 10_000:
             raise NodeConfigError(f"{self.name}: rate must be in (0, 10000] Hz, got {rate!r}")
         self.timeout = float(timeout)
-        self.clock: Clock = clock or (SimClock() if self.config.clock == "sim" else WallClock())
+        self.clock: Clock = clock or (
+            SimClock(max_jump=self.config.max_time_jump)
+            if self.config.clock == "sim"
+            else WallClock()
+        )
         self.run_stopped = False
         self._lock = threading.Lock()
         self._kb: Knowledge | None = knowledge
@@ -463,7 +467,9 @@ class AnalyzeNode(UtuNode):
             self._awaiting = None
         batches: list[MonitorBatch] = []
         while (sample := self._batches.try_recv()) is not None:
-            batches.append(cast(MonitorBatch, sample.message))
+            b = cast(MonitorBatch, sample.message)
+            if self.stage.plausible(b):  # a forged time is refused alone, not with others
+                batches.append(b)
         if now is not None:
             t = float(now)
         elif self._presence.alive("monitor"):
@@ -480,7 +486,8 @@ class AnalyzeNode(UtuNode):
             ops=[op for b in batches for op in b.ops],
         )
         state = self.stage.analyze(batch, full=True)
-        assert state is not None  # a cycle is always analysed in full here
+        if state is None:  # refused (an implausible time given as ``now``)
+            return False
         self._flush()
         self.bus.publish(topics.ANALYSIS, state)
         if self._paced():

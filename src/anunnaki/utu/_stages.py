@@ -33,6 +33,7 @@ from __future__ import annotations
 
 import dataclasses
 import logging
+import math
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any, cast
@@ -281,6 +282,7 @@ class AnalyzeStage:
         self.taken = 0
         self.seq = 0
         self.eligible: list[str] = []
+        self.refused = 0  # batches refused as implausible (see _plausible)
         self._marked: dict[int, tuple[float, bool]] = {}
         if knowledge.tactics():  # resuming after a restart: time goes on from the last decision
             last = knowledge.decisions(limit=1)
@@ -305,6 +307,8 @@ class AnalyzeStage:
         nothing to decide now, and the next cycle marks the end of the step.
         """
         a, kb = self.analyzer, self.knowledge
+        if not self.plausible(batch):
+            return None
         t = max(float(batch.t), self.now)
         inputs = batch.inputs
         if self.started_at is None:
@@ -354,6 +358,27 @@ class AnalyzeStage:
             changed=changed,
             taken=self.taken,
         )
+
+    def plausible(self, batch: MonitorBatch) -> bool:
+        """Refuse (count, log once) a batch stamped implausibly far ahead of this run's time.
+
+        The first batch sets the time; afterwards a batch more than ``max_time_jump`` seconds
+        ahead is refused whole (a forged ``/utu/monitor/input`` must not move time on for good).
+        """
+        jump = self.parts.config.max_time_jump
+        t = float(batch.t)
+        if not math.isfinite(t) or (
+            jump is not None and self.started_at is not None and t > self.now + jump
+        ):
+            self.refused += 1
+            if self.refused == 1:
+                log.warning(
+                    "utu: refused a monitor batch stamped %r (now %.3f; max_time_jump %s s); "
+                    "further refusals are counted, not logged",
+                    t, self.now, jump,
+                )  # fmt: skip
+            return False
+        return True
 
     def _apply_op(self, op: dict[str, Any], t: float, changed: list[str]) -> dict[str, Any]:
         a = self.analyzer
