@@ -29,6 +29,7 @@ def running(tmp_path: Path) -> Iterator[tuple[str, AutonomicManager]]:
     cfg = parse_config(
         f"anunnaki: utu/1\nname: rover\ngoal_model: {ROVER}/goals.yaml\n"
         f"binding: {ROVER}/binding.yaml\ntactics: {ROVER}/tactics.yaml\nfailsafe: fail-safe\n"
+        f"reload_dirs: [{tmp_path}]\n"
     )
     with open_bus("zenoh") as bus:  # a peer on a free loopback port
         m = AutonomicManager.from_config(cfg, bus=bus, actuator=RecordingActuator())
@@ -83,6 +84,9 @@ def test_reload_reaches_every_node_of_a_launch_split_into_processes(tmp_path: Pa
     for name in ("goals.yaml", "binding.yaml", "tactics.yaml", "trace.jsonl"):
         text = text.replace(f": {name}", f": {ROVER}/{name}")
     launch = tmp_path / "launch.yaml"
+    text = text.replace(
+        "  failsafe: fail-safe\n", f"  failsafe: fail-safe\n  reload_dirs: [{tmp_path}]\n"
+    )
     launch.write_text(text.replace("    sync: true", "    sync: true\n    loop: true"))
     db = tmp_path / "run.db"
     proc = subprocess.Popen(

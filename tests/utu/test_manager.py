@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 import threading
 import time
 from collections.abc import Iterator
@@ -147,10 +148,10 @@ def feed_nominal(
     m.feed("/utu/oracle/output", {"category": category, "confidence": 0.9})
 
 
-def make(cooldown: float = 0.0, approval: bool = False, dwell: float = 0.0):  # type: ignore[no-untyped-def]
+def make(cooldown: float = 0.0, approval: bool = False, dwell: float = 0.0, **kw: object):  # type: ignore[no-untyped-def]
     tactics = parse_tactics_yaml(TACTICS.format(cooldown=cooldown, approval=str(approval).lower()))
     act = RecordingActuator()
-    m = AutonomicManager(rover_model(), tactics, actuator=act, dwell=dwell, warmup=0.5)
+    m = AutonomicManager(rover_model(), tactics, actuator=act, dwell=dwell, warmup=0.5, **kw)
     return m, act
 
 
@@ -293,7 +294,7 @@ def test_operator_services_on_the_bus(bus) -> None:  # type: ignore[no-untyped-d
 
 
 def test_hot_reload_swaps_valid_files_and_refuses_invalid_ones(tmp_path: Path) -> None:
-    m, _ = make()
+    m, _ = make(reload_dirs=[tmp_path])
     drive(m, ticks(0, 1.0))
     bad = tmp_path / "bad.yaml"
     bad.write_text(TACTICS.format(cooldown=0, approval="false").replace("G3", "G99"))
@@ -425,7 +426,9 @@ def test_bus_actuator_sees_refusals_in_generic_and_service_replies(bus) -> None:
 
 def test_reload_service_swaps_tactics_while_spinning(bus, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
     tactics = parse_tactics_yaml(TACTICS.format(cooldown=0, approval="false"))
-    m = AutonomicManager(rover_model(), tactics, bus=bus, actuator=RecordingActuator())
+    m = AutonomicManager(
+        rover_model(), tactics, bus=bus, actuator=RecordingActuator(), reload_dirs=[tmp_path]
+    )
     stop = threading.Event()
     spinner = threading.Thread(target=m.spin, args=(stop,), kwargs={"rate": 100})
     spinner.start()
@@ -491,3 +494,40 @@ def test_one_forged_time_neither_freezes_nor_steers_utu(forged: str, tmp_path: P
         manager.close()
     assert refused == 1
     assert now == 45.8  # the run's last instant, not 1e12
+
+
+@pytest.mark.parametrize("target", ["fifo", "/dev/zero", "outside", "symlink-out", "huge"])
+def test_a_reload_reads_only_small_regular_files_in_its_folders(
+    bus, tmp_path: Path, target: str
+) -> None:  # type: ignore[no-untyped-def]
+    """A named pipe hung the loop; /dev/zero grew memory to 1.86 GB (issue #12)."""
+    allowed, elsewhere = tmp_path / "run", tmp_path / "elsewhere"
+    allowed.mkdir()
+    elsewhere.mkdir()
+    good = (ROVER / "tactics.yaml").read_text()
+    (elsewhere / "t.yaml").write_text(good)
+    path = {
+        "fifo": allowed / "pipe.yaml",
+        "/dev/zero": Path("/dev/zero"),
+        "outside": elsewhere / "t.yaml",
+        "symlink-out": allowed / "link.yaml",
+        "huge": allowed / "huge.yaml",
+    }[target]
+    if target == "fifo":
+        os.mkfifo(path)
+    elif target == "symlink-out":
+        path.symlink_to(elsewhere / "t.yaml")
+    elif target == "huge":
+        path.write_text(good + "#" * (5 << 20))
+    tactics = load_tactics(ROVER / "tactics.yaml")
+    act = RecordingActuator()
+    m = AutonomicManager(rover_model(), tactics, bus=bus, actuator=act, reload_dirs=[allowed])
+    try:
+        reply = bus.request("/utu/reload", {"tactics": str(path), "caller": "x"}).to_body()
+        m.step(1.0)
+        assert reply["ok"] is False and reply["status"] == "refused"
+        assert "refused:" in reply["error"]
+        kinds = [d.kind for d in m.knowledge.decisions()]
+        assert "reload_refused" in kinds and "reloaded" not in kinds
+    finally:
+        m.close()

@@ -275,7 +275,7 @@ def test_a_vanished_agent_node_makes_its_agent_unknown(deploy) -> None:  # type:
 
 
 def test_a_hot_reload_applies_in_the_cycle(deploy, tmp_path) -> None:  # type: ignore[no-untyped-def]
-    d = deploy(config())
+    d = deploy(config(reload_dirs=f"[{tmp_path}]"))
     bad = tmp_path / "bad.yaml"
     bad.write_text((ROVER / "tactics.yaml").read_text().replace("goal: G3", "goal: G33", 1))
     renamed = tmp_path / "renamed.yaml"

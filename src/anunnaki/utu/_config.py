@@ -68,6 +68,16 @@ class UtuConfig(_Strict):
     max_time_jump: Annotated[float, Field(gt=0)] | None = 60.0
     notify: dict[str, Any] = Field(default_factory=dict)
     publish_state: bool = True
+    #: Folders a hot reload may read from, besides those of goal_model, binding and tactics.
+    reload_dirs: list[str] = Field(default_factory=list)
+
+    def reload_roots(self) -> list[Path]:
+        """The folders a hot reload may read files from (symlinks resolved)."""
+        named = [self.goal_model, self.binding, self.tactics]
+        roots = [Path(p).resolve().parent for p in named if p] + [
+            Path(d).resolve() for d in self.reload_dirs
+        ]
+        return list(dict.fromkeys(roots))
 
     def resolve(self, base: Path) -> UtuConfig:
         """Return a copy with file paths made absolute against ``base``."""
@@ -84,6 +94,7 @@ class UtuConfig(_Strict):
                 "binding": fix(self.binding),
                 "tactics": fix(self.tactics),
                 "knowledge": fix(self.knowledge),
+                "reload_dirs": [str(fix(d)) for d in self.reload_dirs],
             }
         )
 

@@ -35,7 +35,8 @@ from __future__ import annotations
 import logging
 import threading
 from collections import deque
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
+from pathlib import Path
 from typing import Any
 
 from anunnaki import topics
@@ -99,6 +100,9 @@ class AutonomicManager:
             in Knowledge (what ``replay`` and ``reload`` start from).
         name: The manager's name (its run-stop announcements say ``utu:<name>``).
         clock_topic: Where a :class:`~anunnaki.clock.SimClock` takes its time from.
+        rate: Hz of the time-driven checks in :meth:`spin`.
+        reload_dirs: Folders a hot reload may read from, besides those of the source files
+            (a manager built from objects: the working directory).
 
     """
 
@@ -123,6 +127,7 @@ class AutonomicManager:
         name: str = "utu",
         clock_topic: str = topics.CLOCK,
         rate: float = 20.0,
+        reload_dirs: Sequence[str | Path] = (),
     ) -> None:
         srcs = dict(sources or {})
         config = UtuConfig(
@@ -140,6 +145,7 @@ class AutonomicManager:
             queue=queue,
             clock_topic=clock_topic,
             rate=rate,
+            reload_dirs=[str(d) for d in reload_dirs],
         )
         self._init(UtuParts(config, srcs, model, tactics), knowledge, bus, actuator, clock)
 

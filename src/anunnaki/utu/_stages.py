@@ -34,6 +34,8 @@ from __future__ import annotations
 import dataclasses
 import logging
 import math
+import os
+import stat
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any, cast
@@ -120,20 +122,60 @@ def operator_entry(op: str, message: Any) -> dict[str, Any]:
     return entry
 
 
-def read_sources(base: Mapping[str, tuple[str | None, str]], files: Mapping[str, Any]) -> Sources:
-    """``base`` with the named files read (``goal_model``, ``binding``, ``tactics``)."""
+#: The largest file a hot reload reads (goal models and tactics are small).
+MAX_RELOAD_BYTES = 4 << 20
+
+
+def read_sources(
+    base: Mapping[str, tuple[str | None, str]],
+    files: Mapping[str, Any],
+    roots: Sequence[Path] | None = None,
+) -> Sources:
+    """``base`` with the named files read (``goal_model``, ``binding``, ``tactics``).
+
+    With ``roots``, a file must lie in one of those folders (symlinks resolved); it must be
+    a regular file of at most :data:`MAX_RELOAD_BYTES` (a pipe or a device would block or
+    never end), read without following it anywhere else.
+    """
     sources = dict(base)
     for kind in ("goal_model", "binding", "tactics"):
         path = files.get(kind)
-        if not isinstance(path, str):
-            continue
-        try:
-            sources[kind] = (path, Path(path).read_text(encoding="utf-8"))
-        except OSError as exc:
-            raise ModelFileError(
-                f"cannot read the {kind.replace('_', ' ')}: {exc.strerror}", path=path
-            ) from exc
+        if isinstance(path, str):
+            sources[kind] = (path, _read_reload_file(kind, path, roots))
     return sources
+
+
+def _read_reload_file(kind: str, path: str, roots: Sequence[Path] | None) -> str:
+    what = kind.replace("_", " ")
+    real = Path(path).resolve()
+    if roots is not None and not any(real.is_relative_to(r) for r in roots):
+        raise ModelFileError(
+            f"refused: the {what} is outside the folders a reload may read",
+            path=path,
+            hint="put it next to the running files, or list its folder in the Utu "
+            f"configuration's reload_dirs (now: {', '.join(map(str, roots)) or 'none'})",
+        )
+    try:
+        fd = os.open(real, os.O_RDONLY | os.O_NONBLOCK | getattr(os, "O_NOFOLLOW", 0))
+    except OSError as exc:
+        raise ModelFileError(f"cannot read the {what}: {exc.strerror}", path=path) from exc
+    with os.fdopen(fd, "rb") as f:
+        info = os.fstat(f.fileno())
+        if not stat.S_ISREG(info.st_mode):
+            raise ModelFileError(
+                f"refused: the {what} is not a regular file", path=path, hint="give a file"
+            )
+        data = f.read(MAX_RELOAD_BYTES + 1)
+    if len(data) > MAX_RELOAD_BYTES:
+        raise ModelFileError(
+            f"refused: the {what} is over {MAX_RELOAD_BYTES} bytes",
+            path=path,
+            hint="goal models and tactics are small; check the path",
+        )
+    try:
+        return data.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise ModelFileError(f"the {what} is not UTF-8 text", path=path) from exc
 
 
 def model_from_sources(sources: Mapping[str, tuple[str | None, str]]) -> GoalModel:
@@ -163,7 +205,7 @@ def reloaded_parts(parts: UtuParts, op: Mapping[str, Any]) -> UtuParts:
     if isinstance(texts, Mapping):
         sources = {**parts.sources, **_sources_of(op)}
     else:
-        sources = read_sources(parts.sources, op)
+        sources = read_sources(parts.sources, op, parts.config.reload_roots())
     if "goal_model" not in sources:  # a manager built from objects: keep its model
         if "binding" in sources:
             raise ModelFileError(
