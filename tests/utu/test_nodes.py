@@ -478,3 +478,33 @@ def test_a_forged_batch_time_is_refused_alone_by_the_analyze_node(tmp_path) -> N
             assert analyze.stage.now == 2.0 and analyze.stage.refused == 1
         finally:
             analyze.close()
+
+
+def test_operator_services_need_the_operator_token_but_a_run_stop_never_does(
+    deploy, tmp_path, monkeypatch
+) -> None:  # type: ignore[no-untyped-def]
+    """An anonymous /utu/resume cleared a run-stop (issue #12); with a token it cannot."""
+    token = "Op-token-for-the-test-0123456789"
+    (tmp_path / "token").write_text(token + "\n")
+    d = deploy(config(operator_token_file=str(tmp_path / "token")))
+    refused, allowed = [], []
+    for t in d.instants(until=20.0):
+        if t == 5.0:  # anyone may stop the robot (S4)
+            reply = d.bus.request("/utu/run_stop", {"caller": "anyone"}, timeout=2.0)
+            allowed.append(reply.to_body()["ok"])
+        if t == 6.0:
+            for body in ({"caller": "x"}, {"caller": "x", "token": "guess"}, {"token": 7}):
+                reply = d.bus.request("/utu/resume", body, timeout=2.0).to_body()
+                refused.append((reply["ok"], reply.get("status")))
+            reply = d.bus.request("/utu/pause", {"caller": "x"}, timeout=2.0).to_body()
+            refused.append((reply["ok"], reply.get("status")))
+        if t == 8.0:
+            reply = d.bus.request("/utu/resume", {"caller": "op", "token": token}, timeout=2.0)
+            allowed.append(reply.to_body()["ok"])
+        d.step(t)
+    assert refused == [(False, "unauthorised")] * 4 and allowed == [True, True]
+    watched = ("run_stop", "resumed_adaptation", "paused")
+    kinds = [(x.kind, x.data.get("caller")) for x in d.kb.decisions() if x.kind in watched]
+    assert kinds[:2] == [("run_stop", "anyone"), ("resumed_adaptation", "op")]
+    assert not any(k == "paused" for k, _ in kinds)
+    assert token not in json.dumps([x.data for x in d.kb.decisions()])  # never recorded

@@ -9,6 +9,7 @@ deployment (one process, or one process per node).
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 import threading
 import time
@@ -17,6 +18,7 @@ from typing import Any
 
 from anunnaki import topics
 from anunnaki.bus import BusConfig, BusError, open_bus
+from anunnaki.tokens import OPERATOR_TOKEN_ENV
 
 __all__ = ["add_parser", "run"]
 
@@ -56,7 +58,9 @@ def run(args: argparse.Namespace) -> int:
     request: dict[str, Any] = {
         k: str(v.resolve()) for k, v in files.items() if v is not None
     }  # the running Utu resolves paths against its own folder: send absolute ones
-    if not request:
+    if (token := os.environ.get(OPERATOR_TOKEN_ENV)) is not None:
+        request["token"] = token
+    if not request or set(request) == {"token"}:
         print("error: give --goal-model, --binding and/or --tactics", file=sys.stderr)
         return 2
     request["caller"] = args.caller

@@ -32,6 +32,7 @@ from __future__ import annotations
 import bisect
 import itertools
 import logging
+import os
 import threading
 import time
 from collections import deque
@@ -53,6 +54,7 @@ from anunnaki.bus import (
 )
 from anunnaki.dashboard._state import DashboardState, Frame
 from anunnaki.errors import AnunnakiError
+from anunnaki.tokens import OPERATOR_TOKEN_ENV
 
 __all__ = ["OPERATIONS", "BusObserver", "ObserverConfig", "OperatorError", "SimTime"]
 
@@ -394,6 +396,8 @@ class BusObserver:
         if service is None:
             raise OperatorError(f"unknown action {op!r}; the actions are {', '.join(OPERATIONS)}")
         payload: dict[str, Any] = {"caller": caller}
+        if (token := os.environ.get(OPERATOR_TOKEN_ENV)) is not None:
+            payload["token"] = token  # Utu's operator token, not the dashboard's own
         if op in ("approve", "reject"):
             if not tactic:
                 raise OperatorError(f"{op} needs the name of a pending tactic")

@@ -3,42 +3,12 @@
 from __future__ import annotations
 
 import collections
-import math
 import threading
 import time
 
+from anunnaki.tokens import MIN_TOKEN_BITS, token_weakness
+
 __all__ = ["MIN_TOKEN_BITS", "Throttle", "token_weakness"]
-
-#: The least estimated strength of an operator token, in bits.
-MIN_TOKEN_BITS = 128
-
-_CLASSES: tuple[tuple[str, int], ...] = (
-    ("abcdefghijklmnopqrstuvwxyz", 26),
-    ("ABCDEFGHIJKLMNOPQRSTUVWXYZ", 26),
-    ("0123456789", 10),
-)
-
-
-def token_weakness(token: str) -> str | None:
-    """Why ``token`` is too weak to guard operator actions, or ``None`` when it will do.
-
-    Its strength is estimated as ``length × log2(alphabet)``, the alphabet being the sum of
-    the character classes it uses (lower case 26, upper case 26, digits 10, anything else
-    33), and must reach :data:`MIN_TOKEN_BITS`; a token of one repeated character or with
-    fewer than 8 distinct characters is refused whatever its length. A
-    ``secrets.token_urlsafe(16)`` token (22 characters) passes.
-    """
-    if not token.strip():
-        return "it is empty"
-    alphabet = sum(size for chars, size in _CLASSES if any(c in chars for c in token))
-    if any(not any(c in chars for chars, _ in _CLASSES) for c in token):
-        alphabet += 33
-    bits = len(token) * math.log2(max(alphabet, 2))
-    if len(set(token)) < 8:
-        return f"it uses {len(set(token))} distinct characters (at least 8)"
-    if bits < MIN_TOKEN_BITS:
-        return f"about {bits:.0f} bits, fewer than {MIN_TOKEN_BITS}"
-    return None
 
 
 class Throttle:

@@ -20,6 +20,7 @@ file), the knowledge database, the bus, the clock and the policies of the MAPE-K
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 from typing import Annotated, Any, Literal
 
@@ -28,6 +29,7 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError
 from anunnaki import topics
 from anunnaki._safeyaml import LineMap, load_yaml, validation_error
 from anunnaki.errors import ModelFileError
+from anunnaki.tokens import OPERATOR_TOKEN_ENV, token_weakness
 
 __all__ = ["RunStopConfig", "UtuConfig", "load_config", "parse_config"]
 
@@ -70,6 +72,35 @@ class UtuConfig(_Strict):
     publish_state: bool = True
     #: Folders a hot reload may read from, besides those of goal_model, binding and tactics.
     reload_dirs: list[str] = Field(default_factory=list)
+    #: A file holding the operator token (``$ANUNNAKI_OPERATOR_TOKEN`` takes precedence).
+    operator_token_file: str | None = None
+
+    def operator_token(self) -> str | None:
+        """The token pause, resume, approve and reload requests must carry (``None``: open).
+
+        Raises:
+            ModelFileError: The token file is unreadable or the token too weak.
+
+        """
+        token = os.environ.get(OPERATOR_TOKEN_ENV)
+        where = f"${OPERATOR_TOKEN_ENV}"
+        if token is None and self.operator_token_file is not None:
+            where = self.operator_token_file
+            try:
+                token = Path(where).read_text(encoding="utf-8").strip()
+            except OSError as exc:
+                raise ModelFileError(
+                    f"cannot read the operator token: {exc.strerror}", path=where
+                ) from None
+        if token is None:
+            return None
+        if (weak := token_weakness(token)) is not None:
+            raise ModelFileError(
+                f"the operator token is too weak: {weak}",
+                path=where,
+                hint="make one with: python -c 'import secrets; print(secrets.token_urlsafe(16))'",
+            )
+        return token
 
     def reload_roots(self) -> list[Path]:
         """The folders a hot reload may read files from (symlinks resolved)."""
@@ -95,6 +126,7 @@ class UtuConfig(_Strict):
                 "tactics": fix(self.tactics),
                 "knowledge": fix(self.knowledge),
                 "reload_dirs": [str(fix(d)) for d in self.reload_dirs],
+                "operator_token_file": fix(self.operator_token_file),
             }
         )
 

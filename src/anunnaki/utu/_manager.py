@@ -550,6 +550,8 @@ class AutonomicManager:
         """
         files = {"goal_model": goal_model, "binding": binding, "tactics": tactics}
         request = {"caller": "api", **{k: v for k, v in files.items() if v}}
+        if self.monitor_stage.operator_token is not None:  # a call in this process is trusted
+            request["token"] = self.monitor_stage.operator_token
         entry, reply = self.monitor_stage.request("reload", request)
         if entry is None:
             return [str(reply["error"])]

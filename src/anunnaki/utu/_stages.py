@@ -52,6 +52,7 @@ from anunnaki.bus import (
 from anunnaki.errors import AnunnakiError, ModelFileError
 from anunnaki.goals import GoalModel, parse_binding, parse_goal_model, status_name
 from anunnaki.tactics import TacticSet
+from anunnaki.tokens import OPERATOR_TOKEN_ENV, token_matches
 from anunnaki.utu._knowledge import Decision, Knowledge
 from anunnaki.utu._mape import Actuator, Analyzer, Executor, Monitor, Planner, TacticRuntime
 from anunnaki.utu._parts import UtuParts, check_parts, load_tactics_text, parts_from_sources
@@ -231,6 +232,8 @@ class MonitorStage:
         self.origin = origin
         self.seq = 0
         self.last_t = 0.0  # inputs are never stamped before the start of time
+        self.operator_token = parts.config.operator_token()
+        self.unauthorised = 0  # operator requests refused for want of the token
         self.set_parts(parts)
 
     def set_parts(self, parts: UtuParts) -> None:
@@ -251,6 +254,9 @@ class MonitorStage:
         repeats it; accepted, it carries the files' texts and this monitor watches the new
         model's topics from now on.
         """
+        refused = self._unauthorised(op, message)
+        if refused is not None:
+            return None, {"ok": False, "status": "unauthorised", "error": refused}
         entry = operator_entry(op, message)
         if "error" in entry:
             return None, {"ok": False, "error": entry["error"]}
@@ -268,6 +274,23 @@ class MonitorStage:
             self.set_parts(parts)
             reply["status"] = "accepted"
         return entry, reply
+
+    def _unauthorised(self, op: str, message: Any) -> str | None:
+        """Why an operator request may not act (``None``: it may); a run-stop always may."""
+        token = self.operator_token
+        if token is None or op == "run_stop" or token_matches(body_of(message).get("token"), token):
+            return None
+        self.unauthorised += 1
+        if self.unauthorised == 1:
+            log.warning(
+                "utu: refused an operator %s without the operator token; further refusals "
+                "are counted, not logged",
+                op,
+            )
+        return (
+            f"unauthorised: {op} needs the operator token ('token' in the request; clients "
+            f"read it from ${OPERATOR_TOKEN_ENV}); anyone may request a run-stop"
+        )
 
     def batch(
         self,
