@@ -454,6 +454,27 @@ def test_request_waits_for_a_late_service(bus_pair: tuple[Bus, Bus]) -> None:
     assert result == [Generic(data={"late": True})]
 
 
+def test_a_request_that_does_not_wait_for_its_service_fails_at_once(
+    bus_pair: tuple[Bus, Bus],
+) -> None:
+    """What Utu's actions use: a dead service fails the call, it does not hold it (#12)."""
+    a, b = bus_pair
+    with pytest.raises(BusTimeout, match="it is not up"):  # not "within 30 s": tried once
+        b.request("/nobody", {}, timeout=30.0, wait_for_service=False)
+    a.service("/up", lambda r: {"up": True})
+    assert wait_for(lambda: _answers(b, "/up"))
+    reply = b.request("/up", {}, timeout=5.0, wait_for_service=False)
+    assert reply == Generic(data={"up": True})
+
+
+def _answers(bus: Bus, service: str) -> bool:
+    try:
+        bus.request(service, {}, timeout=0.5, wait_for_service=False)
+    except BusTimeout:
+        return False
+    return True
+
+
 def test_busy_service_refuses_and_closed_service_answers(bus_pair: tuple[Bus, Bus]) -> None:
     a, b = bus_pair
     entered, release = threading.Event(), threading.Event()

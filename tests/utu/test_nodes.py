@@ -208,14 +208,15 @@ def test_the_fail_safe_hands_over_to_manual(deploy) -> None:  # type: ignore[no-
     same_as_composed("hand-over", d)
 
 
-def test_a_failed_postcondition_escalates_to_run_stop(deploy) -> None:  # type: ignore[no-untyped-def]
-    # A rover that refuses manual mode: the fail-safe's postcondition fails at its deadline.
+def test_a_refused_action_escalates_to_run_stop_at_once(deploy) -> None:  # type: ignore[no-untyped-def]
+    # A rover that refuses manual mode: the fail-safe failed when its action was refused
+    # (t = 25), not when its postcondition's deadline passed (t = 30; issue #12).
     d = deploy(config(), modes=("autonomous",))
     for t in d.instants(until=50.0):
         d.step(t)
     kinds = [(x.t, x.kind) for x in d.kb.decisions()]
-    assert (30.0, "postcondition_failed") in kinds
-    assert (30.0, "run_stop") in kinds
+    assert kinds.index((25.0, "action_failed")) < kinds.index((25.0, "run_stop"))
+    assert not any(k == "postcondition_failed" for _, k in kinds)
     assert d.rover.state().get("stopped") is True
     assert d.halted()
     same_as_composed("escalation", d)

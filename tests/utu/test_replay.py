@@ -50,9 +50,9 @@ class Rover(ScriptedSystem):
     next instant, so a run records the same inputs however loaded the machine is.
     """
 
-    def __init__(self, bus: Any, trace: Path) -> None:
+    def __init__(self, bus: Any, trace: Path, **kw: Any) -> None:
         self.heard = threading.Semaphore(0)
-        super().__init__(bus, trace)
+        super().__init__(bus, trace, **kw)
 
     def _buzzer(self, sample: Any) -> None:
         super()._buzzer(sample)
@@ -90,10 +90,10 @@ def config(db: Path, goals: Path | None = None, tactics: Path | None = None) -> 
     )
 
 
-def record_rover(db: Path, goals: Path | None = None) -> Path:
+def record_rover(db: Path, goals: Path | None = None, **rover: Any) -> Path:
     """Record the rover example: scripted system on an in-process bus, stepped per instant."""
     cfg = parse_config(config(db, goals))
-    with open_bus("inproc") as bus, Rover(bus, ROVER / "trace.jsonl") as scripted:
+    with open_bus("inproc") as bus, Rover(bus, ROVER / "trace.jsonl", **rover) as scripted:
         actuator = CountingActuator(bus)
         manager = AutonomicManager.from_config(cfg, bus=bus, actuator=actuator)
         try:
@@ -164,6 +164,16 @@ def test_without_the_manual_branch_the_failsafe_fails_and_escalates(stop_run: Pa
     with Knowledge(stop_run) as k:
         esc = next(d for d in k.decisions() if d.kind == "escalated")
         assert esc.data == {"to": "run-stop"}
+
+
+def test_a_refused_action_fails_its_tactic_and_replays_identically(tmp_path: Path) -> None:
+    """The rover refuses manual mode: action_failed and a run-stop at once, replayed alike."""
+    run = record_rover(tmp_path / "refused.db", modes=("autonomous",))
+    made = decisions(run)
+    assert made.index((25.0, "action_failed", "fail-safe")) < made.index((25.0, "run_stop", None))
+    assert not any(kind == "postcondition_failed" for _, kind, _ in made)
+    report = replay(run)
+    assert report.identical, report.summary()
 
 
 # -- replay --------------------------------------------------------------------------------------
@@ -243,16 +253,18 @@ def test_replay_never_reads_the_recorded_decisions(rover_copy: Path) -> None:
     assert report.verdict_divergence is None
 
 
-def test_outcomes_reported_by_the_system_are_not_decisive(rover_copy: Path) -> None:
+def test_an_actions_outcome_is_replayed_and_its_detail_is_not_decisive(rover_copy: Path) -> None:
     with sqlite3.connect(rover_copy) as con:
-        con.execute(
-            "UPDATE decisions SET data=json_set(data, '$.ok', json('false'), '$.detail', 'x') "
-            "WHERE kind='action'"
-        )
+        con.execute("UPDATE decisions SET data=json_set(data, '$.detail', 'x') WHERE kind='action'")
     con.close()
-    assert replay(rover_copy).identical
+    assert replay(rover_copy).identical  # what the system said is not a choice of the loop
     assert decisive("action", {"ok": False, "detail": "x", "index": 0}) == {"index": 0}
     assert decisive("started", {"deadline": 30.0}) == {"deadline": 30.0}
+    with sqlite3.connect(rover_copy) as con:  # a failed action escalates: the replay fails it
+        con.execute("UPDATE decisions SET data=json_set(data, '$.ok', json('false'))")
+    con.close()
+    report = replay(rover_copy)
+    assert not report.identical  # the log says ok but recorded no action_failed: altered
 
 
 def test_floats_are_compared_with_a_tolerance(rover_copy: Path) -> None:

@@ -912,11 +912,20 @@ class Bus(ABC):
         self._adopt(srv)
         return srv
 
-    def request(self, name: str, payload: MessageLike, timeout: float = 2.0) -> Message:
+    def request(
+        self,
+        name: str,
+        payload: MessageLike,
+        timeout: float = 2.0,
+        *,
+        wait_for_service: bool = True,
+    ) -> Message:
         """Call a service and wait for its reply.
 
         If no service answers yet, the request is retried until the deadline, so a client
-        started before its service still gets through.
+        started before its service still gets through. With ``wait_for_service=False`` it
+        is tried once: a service that is not up fails the call at once (``BusTimeout``),
+        what an action of Utu wants (a dead service must not hold the loop to the deadline).
 
         Returns:
             The reply message.
@@ -946,6 +955,8 @@ class Bus(ABC):
             raw = self._query(key, data, qos, remaining)
             if raw is not None:
                 break
+            if not wait_for_service:
+                raise BusTimeout(f"no reply from service {service!r}: it is not up")
             if self._closed.wait(min(0.02, max(remaining, 0.0))):
                 raise BusClosedError(f"bus {self._name!r} closed during a request")
         try:

@@ -48,6 +48,7 @@ from anunnaki.utu import (
 _STATUS = {"satisfied": "green", "unsatisfied": "bold red", "unknown": "grey50"}
 _KIND_STYLE = {
     "postcondition_failed": "bold red",
+    "action_failed": "bold red",
     "escalation_exhausted": "bold red",
     "operator_refused": "red",
     "reload_refused": "red",

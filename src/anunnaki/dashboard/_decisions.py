@@ -23,6 +23,7 @@ TIMELINE_KINDS = frozenset(
         "started",
         "postcondition_ok",
         "postcondition_failed",
+        "action_failed",
         "completed",
         "escalated",
         "run_stop",
@@ -33,7 +34,9 @@ TIMELINE_KINDS = frozenset(
         "pending_approval",
     }
 )
-_RESULT_KINDS = frozenset({"postcondition_ok", "postcondition_failed", "completed"})
+_RESULT_KINDS = frozenset(
+    {"postcondition_ok", "postcondition_failed", "action_failed", "completed"}
+)
 #: Decisions that change Utu's pause and run-stop flags: the header follows the decision log
 #: as well as the analysis, so it shows an operator's call from whichever arrives first (and
 #: from a knowledge base recorded by an Utu that published its analysis on goal changes only).

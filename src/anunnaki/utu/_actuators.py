@@ -3,7 +3,8 @@
 from __future__ import annotations
 
 import logging
-from collections.abc import Callable, Mapping
+from collections import deque
+from collections.abc import Callable, Mapping, Sequence
 from typing import Any
 
 from anunnaki.bus import body_of
@@ -17,26 +18,46 @@ log = logging.getLogger("anunnaki.utu")
 
 
 class RecordingActuator:
-    """An actuator that performs nothing and records what it was asked (tests, replay)."""
+    """An actuator that performs nothing and records what it was asked (tests, replay).
 
-    def __init__(self, replies: Mapping[str, Mapping[str, Any]] | None = None) -> None:
+    Args:
+        replies: The reply of each service (default ``{}``).
+        outcomes: Whether each action succeeds, in the order they are asked for, as
+            ``(ok, detail)`` (a replay gives the recorded ones, so a run whose action failed
+            escalates again); past the end, every action succeeds.
+
+    """
+
+    def __init__(
+        self,
+        replies: Mapping[str, Mapping[str, Any]] | None = None,
+        *,
+        outcomes: Sequence[tuple[bool, str]] = (),
+    ) -> None:
         self.calls: list[tuple[str, str, dict[str, Any]]] = []
         self.replies = dict(replies or {})
+        self._outcomes = deque(outcomes)
+
+    def _outcome(self, detail: str, reply: dict[str, Any] | None = None) -> ActionOutcome:
+        if self._outcomes:
+            ok, recorded = self._outcomes.popleft()
+            return ActionOutcome(ok, recorded, reply if ok else None)
+        return ActionOutcome(True, detail, reply)
 
     def publish(self, topic: str, payload: Mapping[str, Any]) -> ActionOutcome:
         """Record a publication."""
         self.calls.append(("publish", topic, dict(payload)))
-        return ActionOutcome(True, "published")
+        return self._outcome("published")
 
     def request(self, service: str, payload: Mapping[str, Any], timeout: float) -> ActionOutcome:
         """Record a request; reply with the configured reply or ``{}``."""
         self.calls.append(("request", service, dict(payload)))
-        return ActionOutcome(True, "replied", dict(self.replies.get(service, {})))
+        return self._outcome("replied", dict(self.replies.get(service, {})))
 
     def notify(self, action: NotifyAction, tactic: str, now: float) -> ActionOutcome:
         """Record a notification."""
         self.calls.append(("notify", action.channel, {"to": action.to, "subject": action.subject}))
-        return ActionOutcome(True, "recorded")
+        return self._outcome("recorded")
 
 
 class BusActuator:
@@ -61,7 +82,9 @@ class BusActuator:
     def request(self, service: str, payload: Mapping[str, Any], timeout: float) -> ActionOutcome:
         """Request ``service``; a timeout or an error reply is a failed action."""
         try:
-            reply = self.bus.request(service, dict(payload), timeout=timeout)
+            reply = self.bus.request(
+                service, dict(payload), timeout=timeout, wait_for_service=False
+            )
         except AnunnakiError as exc:
             return ActionOutcome(False, f"{type(exc).__name__}: {exc}")
         body = body_of(reply)  # a Generic's object, or a ServiceReply's {ok, error, body}

@@ -503,6 +503,9 @@ class Executor:
                 detail=outcome.detail,
                 **_describe(action),
             )
+            if not outcome.ok:  # refused, timed out or no service: failed, whatever follows
+                self._finish(rt, now, ok=False, note="action failed", action=i)
+                return
         if rt.tactic.postconditions:
             rt.state = "awaiting"
             self.knowledge.save_tactic(rt.row())
@@ -549,6 +552,8 @@ class Executor:
         kind = "postcondition_ok" if ok else "postcondition_failed"
         if not rt.tactic.postconditions:
             kind = "completed"
+        if note == "action failed":
+            kind = "action_failed"
         rt.state = "idle"
         rt.cooldown_until = now + rt.tactic.cooldown
         rt.deadline = None

@@ -80,6 +80,7 @@ KINDS: tuple[str, ...] = (
     "completed",
     "postcondition_ok",
     "postcondition_failed",
+    "action_failed",
     "escalated",
     "escalation_exhausted",
     "run_stop",
@@ -500,6 +501,15 @@ def _operator(manager: AutonomicManager, op: Mapping[str, Any]) -> None:
         manager._enqueue_op(dict(op))
 
 
+def _action_outcomes(knowledge: Knowledge) -> list[tuple[bool, str]]:
+    """Each recorded action's outcome, in order: a replay's actions fail where the run's did."""
+    return [
+        (bool(d.data.get("ok", True)), str(d.data.get("detail", "")))
+        for d in knowledge.decisions()
+        if d.kind == "action"
+    ]
+
+
 def replay(
     db_path: str | Path,
     *,
@@ -571,7 +581,7 @@ def _replay(
         model,
         tactics,
         knowledge=Knowledge(":memory:"),
-        actuator=RecordingActuator(),
+        actuator=RecordingActuator(outcomes=_action_outcomes(knowledge)),
         dwell=float(settings["dwell"]),
         warmup=float(settings["warmup"]),
         failsafe=settings["failsafe"],
