@@ -294,3 +294,59 @@ def test_wrong_value_types_become_unknown_at_once(stepped: Stepped, bad: Any) ->
     s.oracle.put({"category": 0, "confidence": 0.9})
     s.step(after(at, 2))
     assert s.status("O1") == "unsatisfied"
+
+
+# --- 4. the detector's node dies (the model manager, agent A6) ----------------------------------
+
+
+def test_a_dead_detector_starts_the_fail_safe_in_the_step_that_sees_it() -> None:
+    """kill -9 of the LEC process: manual mode came 4.3-7.1 s later (issue #12), since G3 did
+    not depend on A6. In goals-lm.yaml G4 needs G18 (A6 has model): the fail-safe starts in
+    the step that sees the node's liveliness token vanish."""
+    rover_dir = DATA.parents[2] / "examples" / "rover"
+    cfg = UtuConfig(
+        anunnaki="utu/1",
+        goal_model=str(rover_dir / "goals-lm.yaml"),
+        binding=str(rover_dir / "binding-lm.yaml"),
+        tactics=str(rover_dir / "tactics-lm.yaml"),
+        warmup=1.0,
+        failsafe="fail-safe",
+    )
+    hub = InprocHub()
+    with (
+        open_bus("inproc", hub=hub, name="utu") as utu_bus,
+        open_bus("inproc", hub=hub, name="rover") as rover_bus,
+        open_bus("inproc", hub=hub, name="lm") as lm_bus,
+    ):
+        rover = Rover(rover_bus, rover_trace(12.0, rate=RATE))
+        manager = AutonomicManager.from_config(cfg, bus=utu_bus)
+        oracle_token = lm_bus.liveliness_token("/oracle_ground_truth")
+        detector = lm_bus.liveliness_token("/lm_manager")
+        assessment = {"category": 0, "confidence": 0.9, "context": {"phenomenon": "clear"}}
+        active = {"lec": "detector", "model": "rover-default", "domain": "default"}
+        try:
+            for t in instants(0.0, 3.0):
+                lm_bus.publish(ORACLE, assessment)
+                lm_bus.publish("/lm_manager/active", active)
+                rover.step(t)
+                manager.step(t)
+            state = manager.analyzer.evaluator.state
+            assert (state("G18").status_name, state("G3").status_name) == ("satisfied",) * 2
+            assert of(manager.knowledge.decisions(), "started") == []
+            detector.close()  # as kill -9 withdraws it
+            # Heard on the bus's liveliness thread: queued before the next step.
+            wait_until(lambda: len(manager._ops) == 1, 10, "the loss of /lm_manager queued")
+            lm_bus.publish(ORACLE, assessment)  # the oracle lives on and sees nothing wrong
+            t_kill = after(3.0)
+            rover.step(t_kill)
+            manager.step(t_kill)
+            made = [(d.t, d.kind, d.tactic) for d in manager.knowledge.decisions()]
+        finally:
+            oracle_token.close()
+            manager.close()
+            rover.close()
+    assert (t_kill, "liveliness_lost", None) in made
+    assert made.index((t_kill, "liveliness_lost", None)) < made.index(
+        (t_kill, "started", "fail-safe")
+    )
+    assert rover.mode_requests() == 1
