@@ -9,6 +9,7 @@ decisions, inputs, verdicts and tactic state.
 from __future__ import annotations
 
 import json
+import logging
 import threading
 import time
 from collections.abc import Callable, Iterator
@@ -470,11 +471,13 @@ def test_a_forged_batch_time_is_refused_alone_by_the_analyze_node(tmp_path) -> N
     cfg = config(knowledge=str(tmp_path / "kb.db"))
     with open_bus("inproc") as bus:
         analyze = AnalyzeNode(cfg, bus=bus, pace=False, clock=ManualClock())
+        # the monitor node's readiness says which origin its batches carry
+        bus.service("/utu/monitor/ready", lambda m: {"ready": True, "origin": "m"})
         try:
             assert analyze.step(1.0)
             real = MonitorInput(topic="/rover/status", t=2.0, msg={"mode": "autonomous"})
             bus.publish(topics.MONITOR_INPUT, MonitorBatch(origin="m", seq=1, t=2.0, inputs=[real]))
-            bus.publish(topics.MONITOR_INPUT, MonitorBatch(origin="x", seq=2, t=1e12, inputs=[]))
+            bus.publish(topics.MONITOR_INPUT, MonitorBatch(origin="m", seq=2, t=1e12, inputs=[]))
             assert wait_for(lambda: analyze.step() and analyze.stage.taken == 1)
             assert analyze.stage.now == 2.0 and analyze.stage.refused == 1
         finally:
@@ -509,3 +512,30 @@ def test_operator_services_need_the_operator_token_but_a_run_stop_never_does(
     assert kinds[:2] == [("run_stop", "anyone"), ("resumed_adaptation", "op")]
     assert not any(k == "paused" for k, _ in kinds)
     assert token not in json.dumps([x.data for x in d.kb.decisions()])  # never recorded
+
+
+def test_hostile_cycle_messages_neither_raise_nor_steer_any_deployment(deploy, caplog) -> None:  # type: ignore[no-untyped-def]
+    """Forged, type-valid messages on Utu's internal topics (issue #12: 103 tracebacks in
+    per-node mode, a forged /utu/analyze/state caused a run-stop): none raises, none changes
+    a decision — the run decides what the clean run decides."""
+    from hostile_cycle import hostile_cycle_messages
+
+    d = deploy(config())
+    sent = 0
+    with caplog.at_level(logging.WARNING):
+        for t in d.instants(until=30.0):
+            if t in (3.0, 26.0):  # nominal, and with the fail-safe in flight
+                for topic, message in hostile_cycle_messages(t):
+                    d.bus.publish(topic, message)
+                    sent += 1
+            d.step(t)
+    assert sent == 30
+    raised = [r for r in caplog.records if r.exc_info or "Traceback" in r.getMessage()]
+    assert raised == [], [r.getMessage() for r in raised]
+    kinds = [(x.t, x.kind, x.tactic) for x in d.kb.decisions()]
+    assert not any(k in ("run_stop", "paused", "escalated") for _, k, _ in kinds)
+    assert (25.0, "started", "fail-safe") in kinds and (
+        25.5,
+        "postcondition_ok",
+        "fail-safe",
+    ) in kinds

@@ -190,10 +190,18 @@ def test_forged_and_malformed_cycle_messages_are_dropped_at_the_boundary(tmp_pat
             assert analyze.stage.now < 1e12
             assert bus.stats().totals()["malformed"] >= 2
             assert [d.kind for d in kb.decisions()] == []
-            # A well-formed batch goes through.
+            # A well-formed batch from anyone but the monitor node is refused (issue #12) ...
+            pause = [{"op": "pause", "caller": "op"}]
             attacker.publish(
-                "/utu/monitor/input",
-                MonitorBatch(seq=1, t=2.0, inputs=[], ops=[{"op": "pause", "caller": "op"}]),
+                "/utu/monitor/input", MonitorBatch(origin="mon", seq=1, t=2.0, ops=pause)
+            )
+            assert analyze.step() is True
+            execute.step()
+            assert [d.kind for d in kb.decisions()] == [] and analyze.foreign == 1
+            # ... and one from the monitor node (its readiness names its origin) goes through.
+            bus.service("/utu/monitor/ready", lambda m: {"ready": True, "origin": "mon"})
+            attacker.publish(
+                "/utu/monitor/input", MonitorBatch(origin="mon", seq=2, t=2.0, ops=pause)
             )
             assert analyze.step() is True
             assert execute.step() is True

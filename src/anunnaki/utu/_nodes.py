@@ -161,6 +161,8 @@ class UtuNode(Node):
         self._kb: Knowledge | None = knowledge
         self._own_kb = False
         self._clock_sub: Subscriber | None = None
+        self._origins: dict[str, str] = {}  # peer node -> the origin its cycles carry
+        self.foreign = 0  # cycle messages refused as not from the peer they claim
         if self.needs_knowledge and knowledge is None:
             if self.config.knowledge == ":memory:":
                 raise NodeConfigError(
@@ -213,8 +215,44 @@ class UtuNode(Node):
         """Hook: a run-stop arrived on ``/utu/run_stop`` (from anyone but Utu itself)."""
 
     def ready_info(self) -> dict[str, Any]:
-        """Readiness: the Utu's name, the rate, whether a run-stop is in force."""
-        return {"utu": self.config.name, "rate": self.rate, "run_stopped": self.run_stopped}
+        """Readiness: the Utu's name, the rate, whether a run-stop is in force, its origin."""
+        info: dict[str, Any] = {
+            "utu": self.config.name,
+            "rate": self.rate,
+            "run_stopped": self.run_stopped,
+        }
+        origin = getattr(getattr(self, "stage", None), "origin", None)
+        if isinstance(origin, str):
+            info["origin"] = origin  # what its cycle messages carry (see from_peer)
+        return info
+
+    def from_peer(self, peer: str, origin: str) -> bool:
+        """Whether a cycle message stamped ``origin`` comes from the ``peer`` node.
+
+        A new origin is checked once against the peer's readiness reply (a restarted peer
+        has a new one) and then remembered; a message from anyone else on the bus — a forged
+        cycle, a stale one — is refused, counted in :attr:`foreign` and logged once.
+        """
+        known = self._origins.get(peer)
+        if origin and origin == known:
+            return True
+        try:
+            reply = body_of(
+                self.bus.request(ready_service(peer), {}, timeout=1.0, wait_for_service=False)
+            )
+        except AnunnakiError:
+            reply = {}
+        if origin and reply.get("origin") == origin:
+            self._origins[peer] = origin
+            return True
+        self.foreign += 1
+        if self.foreign == 1:
+            log.warning(
+                "%s: refused a cycle message that claims to come from the %s node (origin "
+                "%r); further refusals are counted, not logged",
+                self.name, peer, origin,
+            )  # fmt: skip
+        return False
 
     def _period(self) -> float:
         """Seconds of wall time between two time-driven rounds (scaled by the sim speed)."""
@@ -468,8 +506,8 @@ class AnalyzeNode(UtuNode):
         batches: list[MonitorBatch] = []
         while (sample := self._batches.try_recv()) is not None:
             b = cast(MonitorBatch, sample.message)
-            if self.stage.plausible(b):  # a forged time is refused alone, not with others
-                batches.append(b)
+            if self.from_peer("monitor", b.origin) and self.stage.plausible(b):
+                batches.append(b)  # a forged batch is refused alone, not with others
         if now is not None:
             t = float(now)
         elif self._presence.alive("monitor"):
@@ -544,7 +582,10 @@ class PlanNode(UtuNode):
         """Plan every cycle the execute node reported; returns whether there was one."""
         worked = False
         while (sample := self._statuses.try_recv()) is not None:
-            start = self.stage.plan(cast(ExecuteStatus, sample.message))
+            status = cast(ExecuteStatus, sample.message)
+            if not self.from_peer("analyze", status.origin):
+                continue  # not a cycle of this Utu's analyzer
+            start = self.stage.plan(status)
             self.run_stopped = self.stage.run_stopped
             self._flush()
             self.bus.publish(topics.PLAN_START, start)
@@ -688,6 +729,8 @@ class ExecuteNode(UtuNode):
             state = cast(AnalysisState, sample.message)
             if not state.is_cycle:
                 continue  # a display update (e.g. from a composed manager), not a cycle
+            if not self.from_peer("analyze", state.origin or ""):
+                continue  # a forged or stale cycle: never executed
             status = self.stage.begin(state)
             self._flush()
             self.bus.publish(topics.EXECUTE_STATUS, status)
