@@ -531,3 +531,40 @@ def test_a_reload_reads_only_small_regular_files_in_its_folders(
         assert "reload_refused" in kinds and "reloaded" not in kinds
     finally:
         m.close()
+
+
+def test_a_flood_does_not_hold_a_step(tmp_path: Path) -> None:
+    """The intake kept pulling while messages arrived: 4 cycles in 10 s under a flood
+    (issue #12). A step now takes at most one queue's worth per topic, so it returns."""
+    from anunnaki.bus import Generic, Sample
+
+    class Endless:
+        """A monitored topic whose producers refill it as fast as it is emptied."""
+
+        taken = 0
+        pending = True
+
+        def try_recv(self) -> Sample:
+            Endless.taken += 1
+            msg = Generic(data={"mode": "autonomous", "buzzer": False, "bumper": False})
+            return Sample(
+                topic="/rover/status", message=msg, sent_at=0.0, sender="x", seq=0, key="k"
+            )
+
+        def close(self) -> None:
+            pass
+
+    with open_bus("inproc") as bus:
+        m = AutonomicManager(
+            rover_model(), load_tactics(ROVER / "tactics.xml"), bus=bus, queue=16,
+            actuator=RecordingActuator(),
+        )  # fmt: skip
+        m._pull["/rover/status"] = Endless()
+        try:
+            for t in (1.0, 2.0, 3.0):
+                m.step(t)  # returns: the flood is taken a queue at a time
+            assert Endless.taken == 3 * 16
+            assert m.analyze_stage.taken == 3 * 16
+        finally:
+            m._pull.clear()
+            m.close()

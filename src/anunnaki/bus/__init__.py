@@ -67,6 +67,7 @@ from anunnaki.bus._api import (
 )
 from anunnaki.bus._config import AccessControl, AccessRule, BusConfig, TlsConfig
 from anunnaki.bus._cycle import (
+    MAX_BATCH,
     AnalysisState,
     CycleDone,
     ExecuteStatus,
@@ -121,6 +122,7 @@ from anunnaki.bus._qos import PRIORITIES, QOS_TABLE, QoS, TopicClass, qos_for
 
 __all__ = [
     "DEFAULT_NAMESPACE",
+    "MAX_BATCH",
     "PRIORITIES",
     "QOS_TABLE",
     "AccessControl",

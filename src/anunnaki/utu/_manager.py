@@ -350,15 +350,28 @@ class AutonomicManager:
             self._wake.set()
 
     def _drain(self) -> None:
+        """Take what waits on each monitored topic, at most one queue's worth per step.
+
+        Under a flood the producers refill a queue as fast as it is emptied: a step takes
+        what one queue holds (``queue``), the rest waits for the next step (or is dropped
+        and counted by the bus when the queue is full), so time-driven checks keep their
+        rate whatever the load.
+        """
         wall = isinstance(self.clock, WallClock)
+        limit = self.parts.config.queue
         for topic, sub in self._pull.items():
-            while (sample := sub.try_recv()) is not None:
+            for _ in range(limit):
+                sample = sub.try_recv()
+                if sample is None:
+                    break
                 # The sender's stamp, on the wall clock only (a sim clock is another
                 # timebase); the monitor clamps it into (previous step, this step].
                 t_in = sample.sent_at if wall else None
                 self._inputs.append((topic, body_of(sample.message), t_in))
         if self._clock_sub is not None and isinstance(self.clock, SimClock):
-            while (sample := self._clock_sub.try_recv()) is not None:
+            for _ in range(64):  # the clock's queue: a /clock flood must not hold the step
+                if (sample := self._clock_sub.try_recv()) is None:
+                    break
                 t = getattr(sample.message, "time", None)
                 if isinstance(t, int | float):
                     self.clock.update(float(t))

@@ -51,6 +51,7 @@ from typing import Any, ClassVar, cast
 
 from anunnaki import topics
 from anunnaki.bus import (
+    MAX_BATCH,
     AnalysisState,
     Bus,
     CycleDone,
@@ -196,7 +197,9 @@ class UtuNode(Node):
         sub = self._clock_sub
         if sub is None or not isinstance(self.clock, SimClock):
             return
-        while (sample := sub.try_recv()) is not None:
+        for _ in range(64):  # the clock's queue: a /clock flood must not hold the step
+            if (sample := sub.try_recv()) is None:
+                break
             t = getattr(sample.message, "time", None)
             if isinstance(t, int | float):
                 self.clock.update(float(t))
@@ -377,8 +380,13 @@ class MonitorNode(UtuNode):
         wall = isinstance(self.clock, WallClock) and now is None
         with self._lock:
             inputs, self._fed = self._fed, []
+            # At most one queue's worth per topic per step (a flood must not hold the step),
+            # and never more than a batch may carry.
+            limit = min(self.config.queue, MAX_BATCH // max(1, len(self._subs) + 1))
             for topic, sub in self._subs.items():
-                while (sample := sub.try_recv()) is not None:
+                for _ in range(limit):
+                    if (sample := sub.try_recv()) is None:
+                        break
                     inputs.append(
                         (topic, body_of(sample.message), sample.sent_at if wall else None)
                     )
