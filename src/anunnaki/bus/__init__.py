@@ -87,6 +87,7 @@ from anunnaki.bus._errors import (
     TopicNameError,
     UnknownMessageType,
 )
+from anunnaki.bus._guard import LivelinessGuard
 from anunnaki.bus._inproc import InprocBus, InprocHub
 from anunnaki.bus._keys import (
     DEFAULT_NAMESPACE,
@@ -146,6 +147,7 @@ __all__ = [
     "Image",
     "InprocBus",
     "InprocHub",
+    "LivelinessGuard",
     "LivelinessToken",
     "LivelinessWatch",
     "MalformedMessage",

@@ -25,7 +25,7 @@ from pathlib import Path
 from typing import Any
 
 from anunnaki import topics
-from anunnaki.bus import Clock, body_of
+from anunnaki.bus import Clock, LivelinessGuard, body_of
 from anunnaki.trace import Record, read_trace
 
 __all__ = ["ScriptedSystem"]
@@ -44,6 +44,9 @@ class ScriptedSystem:
             ``<prefix>/status``).
         modes: The modes ``set_mode`` accepts.
         publish_clock: Publish the trace time on ``/clock`` before each instant.
+        stop_without_utu: Seconds a Utu node it has seen may be gone before the system
+            stops by itself (``None``: never), as a real platform should
+            (docs/running.md#failure-behaviour).
 
     """
 
@@ -56,6 +59,7 @@ class ScriptedSystem:
         status_topic: str | None = None,
         modes: tuple[str, ...] = ("autonomous", "manual"),
         publish_clock: bool = False,
+        stop_without_utu: float | None = 0.5,
     ) -> None:
         self.bus = bus
         self.records: list[Record] = (
@@ -77,6 +81,14 @@ class ScriptedSystem:
             bus.subscribe(f"{prefix}/buzzer", self._buzzer, queue=16),
             bus.subscribe(f"{prefix}/teleop", self._teleop, queue=64),
         ]
+        if stop_without_utu is not None:
+            self._declared.append(
+                LivelinessGuard(
+                    bus,
+                    lambda why: self._stop({"reason": f"Utu lost: {why}"}),
+                    timeout=stop_without_utu,
+                )
+            )
 
     # -- commands ---------------------------------------------------------------------------
     def _set_mode(self, message: Any) -> dict[str, Any]:

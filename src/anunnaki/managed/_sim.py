@@ -33,7 +33,7 @@ from typing import Any
 import numpy as np
 
 from anunnaki import topics
-from anunnaki.bus import Assessment, Detections, Sample, body_of
+from anunnaki.bus import Assessment, Detections, LivelinessGuard, Sample, body_of
 from anunnaki.sim import FrameScore, RunReport, Scenario, SimPlatform, tactic_events
 
 GROUND_TRUTH_TOPIC = topics.GROUND_TRUTH
@@ -154,6 +154,8 @@ class SimulatedSystem:
             ``lockstep_timeout`` seconds of wall time).
         lockstep_timeout: The longest a frame waits for its detections.
         on_time: Called with the simulation time before each physics chunk (Utu's clock).
+        stop_without_utu: Seconds a Utu node the platform has seen may be gone before it
+            stops (rover) or lands (UAV) by itself (``None``: never).
 
     """
 
@@ -167,6 +169,7 @@ class SimulatedSystem:
         lockstep: bool = True,
         lockstep_timeout: float = 2.0,
         on_time: Callable[[float], object] | None = None,
+        stop_without_utu: float | None = 0.5,
     ) -> None:
         self.bus = bus
         self.lockstep = lockstep
@@ -203,6 +206,15 @@ class SimulatedSystem:
             self.platform = UavSim(bus, sc, frame_hook=self._frame_hook)
         self._closing.append(self.platform)
         try:
+            if stop_without_utu is not None:  # a platform stops by itself without Utu
+                platform = self.platform
+                self._closing.append(
+                    LivelinessGuard(
+                        bus,
+                        lambda why: platform.run_stop(f"Utu lost: {why}"),
+                        timeout=stop_without_utu,
+                    )
+                )
             camera = f"{self.platform.prefix}/camera/image"
             self.lec: Any = None
             self.registry: Any = None
