@@ -568,3 +568,47 @@ def test_a_flood_does_not_hold_a_step(tmp_path: Path) -> None:
         finally:
             m._pull.clear()
             m.close()
+
+
+def test_the_watchdog_run_stops_a_stuck_loop(tmp_path: Path) -> None:
+    """A loop that has not finished a step within ``watchdog`` s run-stops the platform
+    from the watchdog's thread; the loop records it once it moves again (issue #12)."""
+    from helpers_procs import wait_until
+
+    from anunnaki.bus import RunStop
+
+    cfg = parse_config(
+        f"anunnaki: utu/1\ngoal_model: {ROVER}/goals.yaml\nbinding: {ROVER}/binding.yaml\n"
+        f"tactics: {ROVER}/tactics.xml\nrun_stop: {{service: /rover/stop}}\n"
+        "watchdog: 0.3\nrate: 50\n"
+    )
+    release = threading.Event()
+    rounds: list[int] = []
+
+    def on_step(m: AutonomicManager) -> None:
+        rounds.append(1)
+        if len(rounds) == 3:
+            release.wait(30)  # the loop is stuck here (a hung handler, a deadlock, ...)
+
+    with open_bus("inproc") as bus:
+        heard: list[RunStop] = []
+        bus.subscribe("/utu/run_stop", lambda s: heard.append(s.message), queue=8)
+        act = RecordingActuator()
+        m = AutonomicManager.from_config(cfg, bus=bus, actuator=act)
+        stop = threading.Event()
+        spinner = threading.Thread(target=m.spin, args=(stop,), kwargs={"on_step": on_step})
+        spinner.start()
+        try:
+            asked = ("request", "/rover/stop", {"reason": "run-stop"})
+            wait_until(lambda: asked in act.calls, 10, "the watchdog's run-stop request")
+            assert len(rounds) == 3  # still stuck: the platform was told from outside the loop
+            wait_until(lambda: any("watchdog" in r.reason for r in heard), 10, "its announcement")
+            release.set()
+            wait_until(lambda: m.run_stopped, 10, "the loop recording the run-stop")
+        finally:
+            release.set()
+            stop.set()
+            spinner.join(10)
+            made = [(d.kind, d.data.get("caller")) for d in m.knowledge.decisions()]
+            m.close()
+    assert ("run_stop", "watchdog") in made

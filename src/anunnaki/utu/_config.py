@@ -70,6 +70,9 @@ class UtuConfig(_Strict):
     max_time_jump: Annotated[float, Field(gt=0)] | None = 60.0
     notify: dict[str, Any] = Field(default_factory=dict)
     publish_state: bool = True
+    #: Seconds a live loop may go without finishing a step before its watchdog run-stops
+    #: the platform (``None``: no watchdog).
+    watchdog: Annotated[float, Field(gt=0)] | None = 3.0
     #: Folders a hot reload may read from, besides those of goal_model, binding and tactics.
     reload_dirs: list[str] = Field(default_factory=list)
     #: A file holding the operator token (``$ANUNNAKI_OPERATOR_TOKEN`` takes precedence).

@@ -34,6 +34,7 @@ from __future__ import annotations
 
 import logging
 import threading
+import time
 from collections import deque
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
@@ -594,8 +595,12 @@ class AutonomicManager:
         period = 1.0 / (rate or self.rate)
         self._inline = isinstance(self.bus, InprocBus)
         self._live = True
+        limit = self.parts.config.watchdog
+        dog = _Watchdog(self, max(limit, 2 * period)) if limit is not None else None
         try:
             while not stop.is_set() and not self._closed:
+                if dog is not None:
+                    dog.beat()
                 self.step()
                 if on_step is not None:
                     on_step(self)
@@ -608,8 +613,27 @@ class AutonomicManager:
                     self._wake.wait(wait)
         finally:
             self._live = False
+            if dog is not None:
+                dog.close()
 
     _inline = False
+
+    def _watchdog_fired(self, stalled: float) -> None:
+        """The watchdog's run-stop, from its own thread while the loop is stuck.
+
+        The platform is told at once (its run-stop service, and ``/utu/run_stop`` for every
+        other part); the loop, once it moves again, records the run-stop through the usual
+        operator path, so the decision log and a replay have it.
+        """
+        reason = f"watchdog: the loop has not finished a step for {stalled:.1f} s"
+        log.error("utu: %s; run-stop", reason)
+        service = self.parts.config.run_stop.service
+        if service is not None:
+            outcome = self.actuator.request(service, self.parts.config.run_stop.payload, 2.0)
+            if not outcome.ok:
+                log.error("utu: the watchdog's run-stop failed: %s", outcome.detail)
+        self._announce_run_stop("watchdog", reason)
+        self._enqueue_op({"op": "run_stop", "caller": "watchdog", "reason": reason})
 
     def _pending(self) -> bool:
         return any(sub.pending for sub in self._pull.values())
@@ -650,3 +674,35 @@ class AutonomicManager:
 
     def __exit__(self, *exc: object) -> None:
         self.close()
+
+
+class _Watchdog:
+    """Run-stops the platform when a live loop has not finished a step for ``limit`` s."""
+
+    def __init__(self, manager: AutonomicManager, limit: float) -> None:
+        self.manager = manager
+        self.limit = limit
+        self._last = time.monotonic()
+        self._fired = False
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._watch, name="utu-watchdog", daemon=True)
+        self._thread.start()
+
+    def beat(self) -> None:
+        """The loop is about to step: it is alive."""
+        self._last = time.monotonic()
+        self._fired = False
+
+    def _watch(self) -> None:
+        while not self._stop.wait(min(self.limit / 4, 0.25)):
+            stalled = time.monotonic() - self._last
+            if stalled > self.limit and not self._fired:
+                self._fired = True
+                try:
+                    self.manager._watchdog_fired(stalled)
+                except Exception:  # the watchdog must outlive what it calls
+                    log.exception("utu: the watchdog's run-stop raised")
+
+    def close(self) -> None:
+        self._stop.set()
+        self._thread.join(timeout=2.0)
