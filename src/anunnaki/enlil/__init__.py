@@ -21,17 +21,45 @@ from anunnaki.enlil._context import (
     to_phenomenon_vector,
 )
 
+# The behavior oracle (issue 13, items 3 to 6): network, training, evaluation, run time.
+from anunnaki.enlil._oracle_net import (
+    ORACLE_ARCHITECTURES,
+    OracleCard,
+    OracleModel,
+    OraclePrediction,
+    load_oracle,
+)
+from anunnaki.enlil._oracle_plugin import EnlilOracle
+from anunnaki.enlil._oracle_train import (
+    ContextSet,
+    OracleTrainConfig,
+    contexts_from_archive,
+    random_contexts,
+    train_oracle,
+)
+
 __all__ = [
+    "ORACLE_ARCHITECTURES",
     "Archive",
     "ArchiveMeta",
     "ArchiveWriter",
     "ContextResult",
+    "ContextSet",
     "EnlilError",
+    "EnlilOracle",
+    "OracleCard",
+    "OracleModel",
+    "OraclePrediction",
+    "OracleTrainConfig",
+    "contexts_from_archive",
     "evaluate_context",
     "fixed_batch",
+    "load_oracle",
     "normalise",
+    "random_contexts",
     "read_archive",
     "relative_drop",
     "resolve_phenomenon",
     "to_phenomenon_vector",
+    "train_oracle",
 ]
