@@ -63,3 +63,31 @@ def test_enlil_plugin_is_per_model(oracle_file, caplog) -> None:  # type: ignore
         assert plugin.assess(frame, seq=5, model_id="other") is None
     assert sum("no behavior oracle covers model 'other'" in r.message for r in caplog.records) == 1
     assert plugin.assess(frame, seq=6, model_id="colour") is not None
+
+
+def test_registry_names_each_models_oracle(oracle_file, tmp_path) -> None:  # type: ignore[no-untyped-def]
+    from pathlib import Path
+
+    from anunnaki.errors import ModelFileError as RegistryFileError
+    from anunnaki.lec import load_registry
+
+    path, digest, _ = oracle_file
+    models = Path(__file__).resolve().parents[2] / "examples" / "models"
+    registry = tmp_path / "models.yaml"
+    body = (
+        "anunnaki: models/1\nmodels:\n"
+        f"  - id: colour\n    domain: default\n    file: {models / 'rover-default.safetensors'}\n"
+        f"    oracle: {{file: {path.with_suffix('.safetensors')}, sha256: {digest}}}\n"
+        f"  - id: rover-fog\n    domain: fog\n    file: {models / 'rover-fog.safetensors'}\n"
+    )
+    registry.write_text(body)
+    spec = load_registry(registry).get("colour")
+    assert spec.oracle is not None and spec.oracle.sha256 == digest
+    assert load_registry(registry).get("rover-fog").oracle is None  # old entries still load
+    plugin = EnlilOracle(registry)
+    assert plugin.covered == ["colour"]
+    assert plugin.assess(tiny_data(1).image(0), seq=0, model_id="colour") is not None
+    assert plugin.assess(tiny_data(1).image(0), seq=1, model_id="rover-fog") is None
+    registry.write_text(body.replace(str(path.with_suffix(".safetensors")), "missing.safetensors"))
+    with pytest.raises(RegistryFileError, match="oracle file 'missing.safetensors' not found"):
+        load_registry(registry)
