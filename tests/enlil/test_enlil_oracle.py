@@ -89,5 +89,5 @@ def test_registry_names_each_models_oracle(oracle_file, tmp_path) -> None:  # ty
     assert plugin.assess(tiny_data(1).image(0), seq=0, model_id="colour") is not None
     assert plugin.assess(tiny_data(1).image(0), seq=1, model_id="rover-fog") is None
     registry.write_text(body.replace(str(path.with_suffix(".safetensors")), "missing.safetensors"))
-    with pytest.raises(RegistryFileError, match="oracle file 'missing.safetensors' not found"):
+    with pytest.raises(RegistryFileError, match=r"oracle file 'missing\.safetensors' not found"):
         load_registry(registry)
