@@ -13,7 +13,7 @@ cd "$(dirname "$0")/.."
 scripts/setup-browser.sh
 
 PYTHON=${PYTHON:-python3}
-EXTRAS=${ANUNNAKI_EXTRAS:-dev,bus,vision,dashboard,plot}
+EXTRAS=${ANUNNAKI_EXTRAS:-dev,bus,vision,dashboard,plot,enlil}
 VENV=.venv
 
 if ! "$PYTHON" -c 'import sys; sys.exit(sys.version_info < (3, 11))'; then

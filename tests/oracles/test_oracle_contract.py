@@ -50,17 +50,36 @@ def _docs_example() -> type[Any]:
         exec(compile(code, "docs/oracles.md", "exec"), namespace)
     finally:
         registry_module._DEFAULT = saved
-    assert private.names() == ["darkness", "ground_truth"]
+    assert private.names() == ["darkness", "enlil", "ground_truth"]
     return namespace["DarknessOracle"]
 
 
 DARKNESS = _docs_example()
 
+
+def _untrained_enlil_oracle() -> Any:
+    """An untrained (random-weight) oracle for model ``m-default``: the contract, not skill."""
+    torch = pytest.importorskip("torch")
+    from anunnaki.enlil import OracleCard, OracleModel
+    from anunnaki.enlil._oracle_net import PhenomenonSpec, build_network
+
+    card = OracleCard(
+        model_id="m-default",
+        phenomena=[PhenomenonSpec(name="fog", param_names=["density", "intensity"])],
+        input_size=(32, 32),
+    )
+    torch.manual_seed(0)  # the same weights every time: the contract checks determinism
+    return OracleModel(card, build_network(card))
+
+
 #: Options the built-ins need to say anything at all.
-OPTIONS: dict[str, dict[str, Any]] = {"ground_truth": {"clean_f1": 0.9, "window": 8}}
+OPTIONS: dict[str, Callable[[], dict[str, Any]]] = {
+    "ground_truth": lambda: {"clean_f1": 0.9, "window": 8},
+    "enlil": lambda: {"oracles": {"m-default": _untrained_enlil_oracle()}},
+}
 
 CASES: dict[str, Callable[[], Oracle]] = {
-    name: (lambda name=name: get_oracle(name, **OPTIONS.get(name, {})))
+    name: (lambda name=name: get_oracle(name, **OPTIONS.get(name, dict)()))
     for name in available_oracles()
 }
 CASES["darkness (docs example)"] = DARKNESS
@@ -253,7 +272,7 @@ def test_unmatched_hook_input_is_bounded(name: str) -> None:
     assert sizes, "no container found to measure"
     assert max(sizes.values()) < 1000, sizes
     if name == "ground_truth":  # the buffers reach their bound (4 x window), the window its own
-        assert max(sizes.values()) == 4 * OPTIONS[name]["window"]
+        assert max(sizes.values()) == 4 * OPTIONS[name]()["window"]
         assert [len(v) for v in vars(oracle).values() if isinstance(v, deque)] == [8]
 
 

@@ -41,7 +41,7 @@ class Constant:
 
 def test_builtins_by_name_with_options() -> None:
     assert "ground_truth" in available_oracles()
-    assert OracleRegistry(entry_point_group=None).names() == ["ground_truth"]
+    assert OracleRegistry(entry_point_group=None).names() == ["enlil", "ground_truth"]
     oracle = get_oracle("ground_truth", window=12, clean_f1=0.9)
     assert isinstance(oracle, GroundTruthAssessor) and oracle.window == 12
     assert isinstance(get_oracle(" ground_truth "), GroundTruthAssessor)
@@ -163,7 +163,7 @@ def test_entry_point_plugins(
     registry = OracleRegistry()  # created before the plugin is installed: lookups are lazy
     install_fake_plugin(tmp_path, monkeypatch)
     with caplog.at_level(logging.WARNING, logger="anunnaki.oracles"):
-        assert registry.names() == ["ground_truth", "haze", "renamed_haze"]
+        assert registry.names() == ["enlil", "ground_truth", "haze", "renamed_haze"]
     haze = registry.get("haze", level=2)
     assert type(haze).__name__ == "Haze"
     result = haze.assess(np.zeros((2, 2, 3), np.uint8), seq=4, model_id="m")

@@ -25,6 +25,7 @@ def build_parser() -> argparse.ArgumentParser:
         _detector,
         _evaluate,
         _log,
+        _oracle,
         _reload,
         _run,
         _sim,
@@ -42,6 +43,7 @@ def build_parser() -> argparse.ArgumentParser:
     _detector.add_parser(sub)
     _evaluate.add_parser(sub)
     _log.add_parser(sub)
+    _oracle.add_parser(sub)
     _reload.add_parser(sub)
     _run.add_parser(sub)
     _sim.add_parser(sub)

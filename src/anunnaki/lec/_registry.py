@@ -68,6 +68,7 @@ __all__ = [
     "ModelRegistry",
     "ModelRegistryError",
     "ModelSpec",
+    "OracleRef",
     "UnknownModelError",
     "load_registry",
     "parse_registry",
@@ -119,6 +120,27 @@ def _number(value: Any) -> float | None:
     return f if math.isfinite(f) else None
 
 
+class OracleRef(BaseModel):
+    """The behavior oracle of a model (``oracle: {file, sha256}`` in a registry entry).
+
+    Attributes:
+        file: The oracle file (``NAME.safetensors``, its ``NAME.json`` sidecar next to it).
+        sha256: Hex sha256 of ``file``, checked before it is loaded; ``None`` trusts the
+            sidecar's own hash.
+
+    """
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+    file: Path
+    sha256: str | None = None
+
+    @field_validator("sha256")
+    @classmethod
+    def _check_sha(cls, value: str | None) -> str | None:
+        return None if value is None else _digest(value)
+
+
 class ModelSpec(BaseModel):
     """One model of the registry.
 
@@ -138,6 +160,7 @@ class ModelSpec(BaseModel):
         options: Given to the loader's ``load(file, options)``.
         pins: Hex sha256 of the other files the loader reads (its ``files()``), by path;
             with ``sha256`` set, every file it reads must be pinned.
+        oracle: The model's behavior oracle (``anunnaki.enlil``), when it has one.
 
     """
 
@@ -152,6 +175,7 @@ class ModelSpec(BaseModel):
     loader: str | None = None
     options: dict[str, Any] = Field(default_factory=dict)
     pins: dict[Path, str] = Field(default_factory=dict)
+    oracle: OracleRef | None = None
 
     @field_validator("id")
     @classmethod
@@ -204,6 +228,13 @@ class ModelSpec(BaseModel):
 # -- the registry file -----------------------------------------------------------------------
 
 
+class _OracleEntry(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+    file: Annotated[str, Field(min_length=1)]
+    sha256: str | None = None
+
+
 class _EntryFile(BaseModel):
     model_config = ConfigDict(extra="forbid", frozen=True)
 
@@ -215,6 +246,7 @@ class _EntryFile(BaseModel):
     sha256: str | dict[str, str] | None = None
     metrics: dict[str, Any] = Field(default_factory=dict)
     description: str = ""
+    oracle: _OracleEntry | None = None
 
 
 class _RegistryFile(BaseModel):
@@ -603,6 +635,7 @@ def _build(  # noqa: C901
                 loader=entry.loader,
                 options=entry.options,
                 pins=pins,
+                oracle=_entry_oracle(entry, base, fail),
             )
         except ValidationError as exc:
             first = exc.errors(include_url=False)[0]
@@ -670,6 +703,32 @@ def _inside(
             "keep a registry's models in its own folder (no '..', absolute paths or symlinks "
             "out of it); copy the model there",
         )
+
+
+def _entry_oracle(
+    entry: _EntryFile, base: Path, fail: Callable[[str, str | None, str], ModelFileError]
+) -> OracleRef | None:
+    """The entry's ``oracle:`` with its file resolved against the registry's folder."""
+    if entry.oracle is None:
+        return None
+    file = Path(entry.oracle.file)
+    file = file if file.is_absolute() else (base / file)
+    if not file.is_file():
+        raise fail(
+            f"oracle file {entry.oracle.file!r} not found (looked at {file})",
+            "oracle",
+            "paths are relative to the registry file; copy the oracle (NAME.safetensors and "
+            "NAME.json) there, or train it (anunnaki oracle train)",
+        )
+    _inside(file, base, entry.oracle.file, fail, "oracle")
+    try:
+        return OracleRef(file=file, sha256=entry.oracle.sha256)
+    except ValidationError:
+        raise fail(
+            "the oracle's sha256 must be 64 hexadecimal digits",
+            "oracle",
+            "copy the digest printed by anunnaki oracle train (or sha256sum FILE)",
+        ) from None
 
 
 def _entry_pins(  # noqa: C901

@@ -37,6 +37,10 @@ ENTRY_POINT_GROUP = "anunnaki.oracles"
 #: The oracles that ship with Anunnaki.
 BUILTIN_ORACLES: tuple[type[Any], ...] = (GroundTruthAssessor,)
 
+#: Built-ins of the packages above this one (Enlil's learned oracles need torch), imported
+#: on first use.
+LAZY_ORACLES: dict[str, str] = {"enlil": "anunnaki.enlil._oracle_plugin:EnlilOracle"}
+
 _NAME_RE = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
 
 C = TypeVar("C", bound=type[Any])
@@ -85,6 +89,8 @@ class OracleRegistry(Registry[Oracle]):
         if builtins:
             for cls in BUILTIN_ORACLES:
                 self.register(cls)
+            for name, ref in LAZY_ORACLES.items():
+                self.register_lazy(name, ref)
 
     def get(self, name_or_instance: str | Oracle, **options: Any) -> Oracle:
         """Return an oracle for a name (built with ``options``); pass instances through.

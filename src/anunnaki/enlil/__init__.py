@@ -1,0 +1,65 @@
+"""Enlil: search a phenomenon's parameter space for where a model degrades (paper §3.2, §4.1.2).
+
+One evaluation (:func:`evaluate_context`) measures the model's F1 on a fixed batch
+(:func:`fixed_batch`) under one context, a point of the phenomenon's parameter space
+normalised to ``[0, 1]^d`` (:func:`to_phenomenon_vector`, :func:`normalise`), and maps the
+relative drop to a behavior category (:func:`anunnaki.oracles.category_for_drop`).
+Searches store every evaluation in a Parquet archive (:class:`ArchiveWriter`,
+:func:`read_archive`). pyarrow, pyribs, scipy and Dask are the ``enlil`` extra and are
+imported only when used. See docs/enlil.md.
+"""
+
+from anunnaki.enlil._archive import Archive, ArchiveMeta, ArchiveWriter, read_archive
+from anunnaki.enlil._context import (
+    ContextResult,
+    EnlilError,
+    evaluate_context,
+    fixed_batch,
+    normalise,
+    relative_drop,
+    resolve_phenomenon,
+    to_phenomenon_vector,
+)
+
+# The behavior oracle (issue 13, items 3 to 6): network, training, evaluation, run time.
+from anunnaki.enlil._oracle_net import (
+    ORACLE_ARCHITECTURES,
+    OracleCard,
+    OracleModel,
+    OraclePrediction,
+    load_oracle,
+)
+from anunnaki.enlil._oracle_plugin import EnlilOracle
+from anunnaki.enlil._oracle_train import (
+    ContextSet,
+    OracleTrainConfig,
+    contexts_from_archive,
+    random_contexts,
+    train_oracle,
+)
+
+__all__ = [
+    "ORACLE_ARCHITECTURES",
+    "Archive",
+    "ArchiveMeta",
+    "ArchiveWriter",
+    "ContextResult",
+    "ContextSet",
+    "EnlilError",
+    "EnlilOracle",
+    "OracleCard",
+    "OracleModel",
+    "OraclePrediction",
+    "OracleTrainConfig",
+    "contexts_from_archive",
+    "evaluate_context",
+    "fixed_batch",
+    "load_oracle",
+    "normalise",
+    "random_contexts",
+    "read_archive",
+    "relative_drop",
+    "resolve_phenomenon",
+    "to_phenomenon_vector",
+    "train_oracle",
+]

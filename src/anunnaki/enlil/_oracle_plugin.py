@@ -1,0 +1,153 @@
+"""The ``enlil`` oracle plugin: learned behavior oracles at run time, one per model.
+
+Registered in the oracle slot (``anunnaki.oracles``) as ``enlil``; an
+:class:`~anunnaki.oracles.OracleNode` runs it as agent A4. Oracles are per model: the node
+hands ``assess`` the active model id (the LEC node announces it on ``/lm_manager/active``),
+and the plugin uses that model's oracle, named in the model registry::
+
+    models:
+      - id: rover-default
+        file: rover-default.safetensors
+        sha256: 5b47…
+        oracle: {file: rover-default.oracle.safetensors, sha256: 0c1d…}
+
+After a swap the new model's oracle is used (loaded on first use, its sha256 checked); for a
+model no oracle covers nothing is invented: ``assess`` returns ``None`` (nothing is
+published) and the plugin logs it once per model.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections import deque
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from anunnaki.bus import Assessment
+from anunnaki.enlil._oracle_net import CLEAR, OracleModel, load_oracle
+from anunnaki.oracles import Frame, OracleError
+
+__all__ = ["EnlilOracle"]
+
+log = logging.getLogger("anunnaki.enlil")
+
+
+class EnlilOracle:
+    """Assess each camera frame with the active model's learned oracle.
+
+    Args:
+        models: A model registry file (``anunnaki: models/1``) whose entries name their
+            oracle (``oracle: {file, sha256}``).
+        oracles: Oracle files by model id, instead of (or on top of) the registry's; or
+            loaded :class:`~anunnaki.enlil.OracleModel` objects.
+        window: Average the calibrated probabilities over the last *window* frames of the
+            same model (1: every frame on its own).
+
+    Raises:
+        OracleError: Neither *models* nor *oracles* given, or *window* < 1.
+
+    """
+
+    name = "enlil"
+
+    def __init__(
+        self,
+        models: str | Path | None = None,
+        *,
+        oracles: Mapping[str, str | Path | OracleModel] | None = None,
+        window: int = 1,
+    ) -> None:
+        if models is None and not oracles:
+            raise OracleError(
+                "the enlil oracle needs models=REGISTRY.yaml (entries with 'oracle:') or "
+                "oracles={model_id: FILE}"
+            )
+        if not isinstance(window, int) or window < 1:
+            raise OracleError(f"enlil: window must be a whole number >= 1, got {window!r}")
+        self.window = window
+        self._sources: dict[str, tuple[Path, str | None] | OracleModel] = {}
+        if models is not None:
+            from anunnaki.lec import load_registry
+
+            for spec in load_registry(models):
+                if spec.oracle is not None:
+                    self._sources[spec.id] = (spec.oracle.file, spec.oracle.sha256)
+        for model_id, item in (oracles or {}).items():
+            self._sources[model_id] = item if isinstance(item, OracleModel) else (Path(item), None)
+        self._loaded: dict[str, OracleModel | None] = {}
+        self._history: deque[np.ndarray] = deque(maxlen=window)
+        self._last_model: str | None = None
+
+    def __repr__(self) -> str:
+        return f"EnlilOracle(models={sorted(self._sources)}, window={self.window})"
+
+    @property
+    def covered(self) -> list[str]:
+        """The model ids an oracle is known for."""
+        return sorted(self._sources)
+
+    def oracle_for(self, model_id: str) -> OracleModel | None:
+        """The oracle of *model_id* (loaded on first use), or ``None`` (logged once)."""
+        if model_id in self._loaded:
+            return self._loaded[model_id]
+        source = self._sources.get(model_id)
+        oracle: OracleModel | None = None
+        if source is None:
+            log.warning(
+                "enlil: no behavior oracle covers model %r (covered: %s); nothing is published "
+                "for it",
+                model_id,
+                ", ".join(self.covered) or "none",
+            )
+        elif isinstance(source, OracleModel):
+            oracle = source
+        else:
+            oracle = load_oracle(source[0], sha256=source[1])
+            log.info("enlil: loaded the oracle of model %r from %s", model_id, source[0])
+        if oracle is not None and oracle.model_id != model_id:
+            log.warning(
+                "enlil: the oracle named for model %r was trained for %r; using it anyway",
+                model_id,
+                oracle.model_id,
+            )
+        self._loaded[model_id] = oracle
+        return oracle
+
+    def assess(self, frame: Frame, *, seq: int, model_id: str) -> Assessment | None:
+        """The active model's category, confidence and perceived context for *frame*."""
+        oracle = self.oracle_for(model_id)
+        if oracle is None:
+            return None
+        if model_id != self._last_model:
+            self._history.clear()
+            self._last_model = model_id
+        cat, params, phen = oracle.logits([frame])
+        self._history.append(oracle.probabilities(cat)[0])
+        probs = np.mean(np.stack(self._history), axis=0)
+        category = int(np.argmax(probs))
+        context = _context(oracle, params[0], phen[0], category)
+        context["probs"] = [round(float(p), 4) for p in probs]
+        return Assessment(
+            category=category,
+            confidence=float(np.clip(probs[category], 0.0, 1.0)),
+            context=context,
+            model_id=model_id,
+            assessor=self.name,
+            frame_seq=seq,
+        )
+
+
+def _context(oracle: OracleModel, params: np.ndarray, phen: np.ndarray, category: int) -> Any:
+    names = oracle.card.phenomenon_classes
+    if len(names) > 2:
+        which = int(np.argmax(phen))
+    else:
+        which = 1 if category > 0 or float(np.max(params)) > 0.15 else 0
+    if which == 0:
+        return {"phenomenon": CLEAR, "params": {}}
+    spec = oracle.card.phenomena[which - 1]
+    values = {n: round(float(params[j]), 4) for j, n in enumerate(spec.param_names)}
+    return {"phenomenon": spec.name, "params": values, "normalised": True}

@@ -1,0 +1,353 @@
+"""Training a behavior oracle (paper §3.2): frames perturbed by searched contexts, plus clean.
+
+Each training example is a train-split frame perturbed by one *context* (a point of a
+phenomenon's parameter space, normalised to ``[0, 1]^d``) whose behavior category was
+measured on the model (Enlil's archive, or :func:`random_contexts` for the Monte-Carlo
+baseline), or a clean frame (category 0, phenomenon ``clear``). The network learns the
+category (cross-entropy), the normalised context (mean squared error, on perturbed frames
+only) and, when it covers several phenomena, which one. A temperature fitted on val frames
+(perturbed the same way, with val-split frames and other seeds) calibrates the confidence.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import asdict, dataclass, field
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+
+from anunnaki.datasets import Dataset
+from anunnaki.enlil._context import (
+    EnlilError,
+    evaluate_context,
+    resolve_phenomenon,
+    to_phenomenon_vector,
+)
+from anunnaki.enlil._oracle_net import (
+    OracleCard,
+    OracleModel,
+    PhenomenonSpec,
+    _torch,
+    build_network,
+    classification_metrics,
+    expected_calibration_error,
+    frames_to_tensor,
+)
+from anunnaki.lec import Detector
+
+__all__ = [
+    "ContextSet",
+    "LabelledFrames",
+    "OracleTrainConfig",
+    "contexts_from_archive",
+    "fit_temperature",
+    "perturbed_frames",
+    "random_contexts",
+    "train_oracle",
+]
+
+
+@dataclass(frozen=True)
+class ContextSet:
+    """Contexts of one phenomenon with their measured categories.
+
+    Attributes:
+        phenomenon: Phenomenon or composition name.
+        param_names: Parameter names (vector order).
+        params: ``[N, d]`` normalised contexts.
+        categories: ``[N]`` behavior categories.
+        source: Where they come from (``archive:PATH``, ``random``).
+
+    """
+
+    phenomenon: str
+    param_names: tuple[str, ...]
+    params: npt.NDArray[np.float64]
+    categories: npt.NDArray[np.int64]
+    source: str = ""
+
+    def __post_init__(self) -> None:
+        if len(self.params) == 0:
+            raise EnlilError(f"{self.phenomenon}: no contexts to train on ({self.source})")
+        if self.params.shape[1] != len(self.param_names) or len(self.categories) != len(
+            self.params
+        ):
+            raise EnlilError(
+                f"{self.phenomenon}: contexts {self.params.shape} do not match parameters "
+                f"{list(self.param_names)} and {len(self.categories)} categories ({self.source})"
+            )
+
+    def counts(self) -> list[int]:
+        """Contexts per category 0, 1, 2."""
+        return [int((self.categories == c).sum()) for c in range(3)]
+
+
+def contexts_from_archive(path: str) -> ContextSet:
+    """The contexts of an Enlil archive (:func:`anunnaki.enlil.read_archive`)."""
+    from anunnaki.enlil._archive import read_archive
+
+    archive = read_archive(path)
+    return ContextSet(
+        archive.phenomenon,
+        tuple(archive.param_names),
+        np.asarray(archive.params, np.float64),
+        np.asarray(archive.categories, np.int64),
+        f"archive:{path}",
+    )
+
+
+def random_contexts(
+    detector: Detector,
+    batch: Dataset,
+    phenomenon: str,
+    n: int,
+    *,
+    clean_f1: float,
+    thresholds: tuple[float, float] = (0.05, 0.10),
+    seed: int = 0,
+) -> ContextSet:
+    """*n* uniformly random contexts measured on *batch*: the Monte-Carlo baseline's data."""
+    phen = resolve_phenomenon(phenomenon)
+    rng = np.random.default_rng(seed)
+    units = rng.random((n, len(phen.param_names)))
+    cats = [
+        evaluate_context(
+            detector, batch, phen, u, clean_f1=clean_f1, thresholds=thresholds, seed=seed
+        ).category
+        for u in units
+    ]
+    return ContextSet(
+        phenomenon, tuple(phen.param_names), units, np.asarray(cats, np.int64), "random"
+    )
+
+
+@dataclass
+class LabelledFrames:
+    """Perturbed frames and what the oracle should say about each."""
+
+    frames: list[npt.NDArray[np.uint8]]
+    category: npt.NDArray[np.int64]
+    params: npt.NDArray[np.float32]
+    params_mask: npt.NDArray[np.float32]
+    phenomenon: npt.NDArray[np.int64]
+
+
+def _pick_context(
+    rng: np.random.Generator, cset: ContextSet, balanced: bool
+) -> tuple[npt.NDArray[np.float64], int]:
+    if balanced:
+        present = [c for c in range(3) if (cset.categories == c).any()]
+        cat = present[int(rng.integers(len(present)))]
+        rows = np.flatnonzero(cset.categories == cat)
+        row = int(rows[int(rng.integers(len(rows)))])
+    else:
+        row = int(rng.integers(len(cset.params)))
+    return cset.params[row], int(cset.categories[row])
+
+
+def perturbed_frames(
+    data: Dataset,
+    sets: Sequence[ContextSet],
+    n: int,
+    *,
+    clean_fraction: float = 0.2,
+    balanced: bool = True,
+    seed: int = 0,
+) -> LabelledFrames:
+    """*n* frames of *data*, each clean or perturbed by one context of one of *sets*.
+
+    Args:
+        data: The split the frames come from.
+        sets: One :class:`ContextSet` per phenomenon (phenomenon class ``i + 1``).
+        n: Frames to make.
+        clean_fraction: Share of clean frames (category 0, phenomenon ``clear``).
+        balanced: Draw a category first, then a context of it (the archive's rare category
+            1 is seen as often as the others); else contexts uniformly.
+        seed: Frames, contexts and the phenomena's seeds derive from it.
+
+    """
+    if len(data) == 0:
+        raise EnlilError("perturbed_frames: the split has no images")
+    rng = np.random.default_rng(seed)
+    width = max(len(s.param_names) for s in sets)
+    phens = [resolve_phenomenon(s.phenomenon) for s in sets]
+    out = LabelledFrames(
+        [],
+        np.zeros(n, np.int64),
+        np.zeros((n, width), np.float32),
+        np.zeros((n, width), np.float32),
+        np.zeros(n, np.int64),
+    )
+    for i in range(n):
+        image = data.image(int(rng.integers(len(data))))
+        if rng.random() < clean_fraction:
+            out.frames.append(image)
+            continue
+        which = int(rng.integers(len(sets)))
+        unit, cat = _pick_context(rng, sets[which], balanced)
+        phen = phens[which]
+        params = phen.from_vector(to_phenomenon_vector(phen, unit))
+        out.frames.append(phen.apply(image, params, seed=int(rng.integers(2**31))))
+        d = len(unit)
+        out.category[i], out.phenomenon[i] = cat, which + 1
+        out.params[i, :d], out.params_mask[i, :d] = unit, 1.0
+    return out
+
+
+@dataclass(frozen=True)
+class OracleTrainConfig:
+    """How an oracle is trained.
+
+    Attributes:
+        frames: Training frames (perturbed + clean).
+        val_frames: Validation frames (temperature, metrics).
+        clean_fraction: Share of clean frames.
+        balanced: Draw contexts category-balanced (see :func:`perturbed_frames`).
+        epochs: Passes over the training frames.
+        batch_size: Frames per step.
+        lr: Adam's learning rate (cosine-decayed to 5 % of it).
+        input_size: ``(H, W)`` the network sees.
+        width: Channels of the first convolution (``small_cnn`` option).
+        seed: Everything derives from it.
+        threads: torch threads (``0``: leave torch's default).
+
+    """
+
+    frames: int = 3000
+    val_frames: int = 600
+    clean_fraction: float = 0.2
+    balanced: bool = True
+    epochs: int = 12
+    batch_size: int = 64
+    lr: float = 3e-3
+    input_size: tuple[int, int] = (128, 128)
+    width: int = 16
+    seed: int = 0
+    threads: int = 0
+    extra: dict[str, Any] = field(default_factory=dict)
+
+
+def fit_temperature(logits: np.ndarray, labels: np.ndarray) -> float:
+    """The temperature minimising the negative log-likelihood on (*logits*, *labels*)."""
+    if len(labels) == 0:
+        return 1.0
+    z = np.asarray(logits, np.float64)
+    best, best_t = math.inf, 1.0
+    for t in np.exp(np.linspace(math.log(0.2), math.log(10.0), 80)):
+        s = z / t
+        s = s - s.max(axis=1, keepdims=True)
+        logp = s - np.log(np.exp(s).sum(axis=1, keepdims=True))
+        nll = float(-logp[np.arange(len(labels)), labels].mean())
+        if nll < best:
+            best, best_t = nll, float(t)
+    return best_t
+
+
+def _fit(net: Any, data: LabelledFrames, config: OracleTrainConfig, multi: bool) -> list[float]:
+    torch = _torch()
+    f = torch.nn.functional
+    x = frames_to_tensor(data.frames, config.input_size)
+    y_cat = torch.from_numpy(data.category)
+    y_par = torch.from_numpy(data.params)
+    mask = torch.from_numpy(data.params_mask)
+    y_phen = torch.from_numpy(data.phenomenon)
+    gen = torch.Generator().manual_seed(config.seed)
+    opt = torch.optim.Adam(net.parameters(), lr=config.lr, weight_decay=1e-4)
+    steps = config.epochs * max(1, math.ceil(len(x) / config.batch_size))
+    sched = torch.optim.lr_scheduler.OneCycleLR(
+        opt, max_lr=config.lr, total_steps=steps, pct_start=0.15
+    )
+    losses = []
+    net.train()
+    for _ in range(config.epochs):
+        order = torch.randperm(len(x), generator=gen)
+        total = 0.0
+        for start in range(0, len(x), config.batch_size):
+            idx = order[start : start + config.batch_size]
+            xb = x[idx]
+            if torch.rand(1, generator=gen).item() < 0.5:
+                xb = xb.flip(3)  # the phenomena are symmetric left-right; the labels too
+            cat, par, phen = net(xb)
+            loss = f.cross_entropy(cat, y_cat[idx])
+            m = mask[idx]
+            loss = loss + ((par[:, : m.shape[1]] - y_par[idx]) ** 2 * m).sum() / m.sum().clamp(
+                min=1.0
+            )
+            if multi:
+                loss = loss + 0.5 * f.cross_entropy(phen, y_phen[idx])
+            opt.zero_grad()
+            loss.backward()
+            opt.step()
+            sched.step()
+            total += float(loss.detach()) * len(idx)
+        losses.append(total / len(x))
+    net.eval()
+    return losses
+
+
+def train_oracle(
+    train: Dataset,
+    val: Dataset,
+    sets: Sequence[ContextSet],
+    *,
+    model_id: str,
+    model_sha256: str = "",
+    thresholds: tuple[float, float] = (0.05, 0.10),
+    config: OracleTrainConfig | None = None,
+) -> OracleModel:
+    """Train an oracle for *model_id* on *sets* (one per phenomenon); see the module docstring.
+
+    Returns:
+        The oracle, its card holding val metrics (``val.accuracy``, ``val.macro_f1``,
+        ``val.ece`` after temperature scaling) and how it was trained.
+
+    """
+    if not sets:
+        raise EnlilError("train_oracle: give at least one set of contexts (an archive)")
+    cfg = config or OracleTrainConfig()
+    torch = _torch()
+    if cfg.threads:
+        torch.set_num_threads(cfg.threads)
+    torch.manual_seed(cfg.seed)
+    card = OracleCard(
+        model_id=model_id,
+        model_sha256=model_sha256,
+        phenomena=[
+            PhenomenonSpec(name=s.phenomenon, param_names=list(s.param_names)) for s in sets
+        ],
+        thresholds=thresholds,
+        options={"width": cfg.width},
+        input_size=cfg.input_size,
+    )
+    net = build_network(card)
+    frac, bal = cfg.clean_fraction, cfg.balanced
+    tr = perturbed_frames(train, sets, cfg.frames, clean_fraction=frac, balanced=bal, seed=cfg.seed)
+    va = perturbed_frames(
+        val, sets, cfg.val_frames, clean_fraction=frac, balanced=bal, seed=cfg.seed + 1_000_003
+    )
+    losses = _fit(net, tr, cfg, multi=len(sets) > 1)
+    oracle = OracleModel(card, net)
+    logits = np.concatenate(
+        [oracle.logits(va.frames[i : i + 256])[0] for i in range(0, len(va.frames), 256)]
+    )
+    temperature = fit_temperature(logits, va.category)
+    oracle.card = card.model_copy(update={"temperature": temperature})
+    probs = oracle.probabilities(logits)
+    val_metrics = classification_metrics(probs.argmax(axis=1), va.category)
+    val_metrics["ece"] = expected_calibration_error(probs, va.category)
+    training = {
+        "contexts": [
+            {"phenomenon": s.phenomenon, "source": s.source, "counts": s.counts()} for s in sets
+        ],
+        "config": {k: v for k, v in asdict(cfg).items() if k != "extra"} | cfg.extra,
+        "train_frames": len(tr.frames),
+        "val_frames": len(va.frames),
+        "loss": [round(v, 5) for v in losses],
+    }
+    oracle.card = oracle.card.model_copy(
+        update={"metrics": {"val": val_metrics}, "training": training}
+    )
+    return oracle

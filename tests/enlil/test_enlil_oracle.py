@@ -1,0 +1,93 @@
+"""The behavior oracle: training on contexts, the model file, the enlil plugin per model."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from enlil_helpers import tiny_data
+
+pytest.importorskip("torch")
+
+from anunnaki.enlil import (
+    ContextSet,
+    EnlilOracle,
+    OracleTrainConfig,
+    load_oracle,
+    train_oracle,
+)
+from anunnaki.errors import ModelFileError
+from anunnaki.oracles import get_oracle
+
+
+def _fog_contexts() -> ContextSet:
+    density = np.linspace(0.0, 1.0, 12)
+    units = np.stack([density, np.full(12, 0.5)], axis=1)
+    cats = np.asarray([0] * 4 + [1] * 3 + [2] * 5)
+    return ContextSet("fog", ("density", "intensity"), units, cats, "test")
+
+
+@pytest.fixture(scope="module")
+def oracle_file(tmp_path_factory: pytest.TempPathFactory):  # type: ignore[no-untyped-def]
+    data = tiny_data(16)
+    cfg = OracleTrainConfig(frames=96, val_frames=48, epochs=3, batch_size=32, input_size=(64, 64))
+    oracle = train_oracle(data, data, [_fog_contexts()], model_id="colour", config=cfg)
+    path = tmp_path_factory.mktemp("oracle") / "colour.oracle"
+    digest = oracle.save(path)
+    return path, digest, oracle
+
+
+def test_trained_oracle_round_trips_without_pickle(oracle_file) -> None:  # type: ignore[no-untyped-def]
+    path, digest, oracle = oracle_file
+    loaded = load_oracle(path, sha256=digest)
+    frame = tiny_data(1).image(0)
+    assert loaded.card.model_id == "colour"
+    assert 0.2 <= loaded.card.temperature <= 10.0
+    assert set(loaded.card.metrics["val"]) >= {"accuracy", "macro_f1", "ece"}
+    a, b = oracle.logits([frame])[0], loaded.logits([frame])[0]
+    np.testing.assert_allclose(a, b, rtol=1e-5, atol=1e-5)
+    with pytest.raises(ModelFileError, match="sha256 mismatch"):
+        load_oracle(path, sha256="0" * 64)
+
+
+def test_enlil_plugin_is_per_model(oracle_file, caplog) -> None:  # type: ignore[no-untyped-def]
+    path, _, _ = oracle_file
+    plugin = get_oracle("enlil", oracles={"colour": path})
+    assert isinstance(plugin, EnlilOracle)
+    frame = tiny_data(1).image(0)
+    first = plugin.assess(frame, seq=3, model_id="colour")
+    assert first is not None
+    assert first.assessor == "enlil" and first.model_id == "colour" and first.frame_seq == 3
+    assert 0 <= first.category <= 2
+    with caplog.at_level("WARNING", logger="anunnaki.enlil"):
+        assert plugin.assess(frame, seq=4, model_id="other") is None
+        assert plugin.assess(frame, seq=5, model_id="other") is None
+    assert sum("no behavior oracle covers model 'other'" in r.message for r in caplog.records) == 1
+    assert plugin.assess(frame, seq=6, model_id="colour") is not None
+
+
+def test_registry_names_each_models_oracle(oracle_file, tmp_path) -> None:  # type: ignore[no-untyped-def]
+    from pathlib import Path
+
+    from anunnaki.errors import ModelFileError as RegistryFileError
+    from anunnaki.lec import load_registry
+
+    path, digest, _ = oracle_file
+    models = Path(__file__).resolve().parents[2] / "examples" / "models"
+    registry = tmp_path / "models.yaml"
+    body = (
+        "anunnaki: models/1\nmodels:\n"
+        f"  - id: colour\n    domain: default\n    file: {models / 'rover-default.safetensors'}\n"
+        f"    oracle: {{file: {path.with_suffix('.safetensors')}, sha256: {digest}}}\n"
+        f"  - id: rover-fog\n    domain: fog\n    file: {models / 'rover-fog.safetensors'}\n"
+    )
+    registry.write_text(body)
+    spec = load_registry(registry).get("colour")
+    assert spec.oracle is not None and spec.oracle.sha256 == digest
+    assert load_registry(registry).get("rover-fog").oracle is None  # old entries still load
+    plugin = EnlilOracle(registry)
+    assert plugin.covered == ["colour"]
+    assert plugin.assess(tiny_data(1).image(0), seq=0, model_id="colour") is not None
+    assert plugin.assess(tiny_data(1).image(0), seq=1, model_id="rover-fog") is None
+    registry.write_text(body.replace(str(path.with_suffix(".safetensors")), "missing.safetensors"))
+    with pytest.raises(RegistryFileError, match=r"oracle file 'missing\.safetensors' not found"):
+        load_registry(registry)
