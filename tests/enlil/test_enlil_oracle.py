@@ -66,19 +66,29 @@ def test_enlil_plugin_is_per_model(oracle_file, caplog) -> None:  # type: ignore
 
 
 def test_registry_names_each_models_oracle(oracle_file, tmp_path) -> None:  # type: ignore[no-untyped-def]
+    import shutil
     from pathlib import Path
 
     from anunnaki.errors import ModelFileError as RegistryFileError
-    from anunnaki.lec import load_registry
+    from anunnaki.lec import load_registry, sha256_file
 
     path, digest, _ = oracle_file
     models = Path(__file__).resolve().parents[2] / "examples" / "models"
+    for name in ("rover-default", "rover-fog"):  # a registry's files sit in its folder
+        for suffix in (".safetensors", ".json"):
+            shutil.copy(models / f"{name}{suffix}", tmp_path / f"{name}{suffix}")
+    for suffix in (".safetensors", ".json"):
+        shutil.copy(path.with_suffix(suffix), tmp_path / path.with_suffix(suffix).name)
+    path = tmp_path / path.name
+    pin = {n: sha256_file(tmp_path / f"{n}.safetensors") for n in ("rover-default", "rover-fog")}
     registry = tmp_path / "models.yaml"
     body = (
         "anunnaki: models/1\nmodels:\n"
-        f"  - id: colour\n    domain: default\n    file: {models / 'rover-default.safetensors'}\n"
+        "  - id: colour\n    domain: default\n    file: rover-default.safetensors\n"
+        f"    sha256: {pin['rover-default']}\n"
         f"    oracle: {{file: {path.with_suffix('.safetensors')}, sha256: {digest}}}\n"
-        f"  - id: rover-fog\n    domain: fog\n    file: {models / 'rover-fog.safetensors'}\n"
+        "  - id: rover-fog\n    domain: fog\n    file: rover-fog.safetensors\n"
+        f"    sha256: {pin['rover-fog']}\n"
     )
     registry.write_text(body)
     spec = load_registry(registry).get("colour")
