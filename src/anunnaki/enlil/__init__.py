@@ -20,18 +20,30 @@ from anunnaki.enlil._context import (
     resolve_phenomenon,
     to_phenomenon_vector,
 )
+from anunnaki.enlil._run import Job, SearchOutcome, occupied_cells, run_search, summarise
+from anunnaki.enlil._search import SEARCHES, EnlilSearch, RandomSearch, Search, SobolSearch
 
 __all__ = [
+    "SEARCHES",
     "Archive",
     "ArchiveMeta",
     "ArchiveWriter",
     "ContextResult",
     "EnlilError",
+    "EnlilSearch",
+    "Job",
+    "RandomSearch",
+    "Search",
+    "SearchOutcome",
+    "SobolSearch",
     "evaluate_context",
     "fixed_batch",
     "normalise",
+    "occupied_cells",
     "read_archive",
     "relative_drop",
     "resolve_phenomenon",
+    "run_search",
+    "summarise",
     "to_phenomenon_vector",
 ]
