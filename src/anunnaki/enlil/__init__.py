@@ -20,6 +20,7 @@ from anunnaki.enlil._context import (
     resolve_phenomenon,
     to_phenomenon_vector,
 )
+from anunnaki.enlil._plot import plot_archive
 from anunnaki.enlil._run import Job, SearchOutcome, occupied_cells, run_search, summarise
 from anunnaki.enlil._search import SEARCHES, EnlilSearch, RandomSearch, Search, SobolSearch
 
@@ -40,6 +41,7 @@ __all__ = [
     "fixed_batch",
     "normalise",
     "occupied_cells",
+    "plot_archive",
     "read_archive",
     "relative_drop",
     "resolve_phenomenon",
