@@ -20,6 +20,7 @@ __all__ = ["build_parser", "main"]
 def build_parser() -> argparse.ArgumentParser:
     """Build the argument parser with every sub-command."""
     from anunnaki.cli import (
+        _assess,
         _check,
         _dashboard,
         _detector,
@@ -38,6 +39,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--version", action="version", version=f"anunnaki {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     sub.required = True
+    _assess.add_parser(sub)
     _check.add_parser(sub)
     _dashboard.add_parser(sub)
     _detector.add_parser(sub)

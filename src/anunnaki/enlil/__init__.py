@@ -37,9 +37,13 @@ from anunnaki.enlil._oracle_train import (
     random_contexts,
     train_oracle,
 )
+from anunnaki.enlil._plot import plot_archive
+from anunnaki.enlil._run import Job, SearchOutcome, occupied_cells, run_search, summarise
+from anunnaki.enlil._search import SEARCHES, EnlilSearch, RandomSearch, Search, SobolSearch
 
 __all__ = [
     "ORACLE_ARCHITECTURES",
+    "SEARCHES",
     "Archive",
     "ArchiveMeta",
     "ArchiveWriter",
@@ -47,19 +51,29 @@ __all__ = [
     "ContextSet",
     "EnlilError",
     "EnlilOracle",
+    "EnlilSearch",
+    "Job",
     "OracleCard",
     "OracleModel",
     "OraclePrediction",
     "OracleTrainConfig",
+    "RandomSearch",
+    "Search",
+    "SearchOutcome",
+    "SobolSearch",
     "contexts_from_archive",
     "evaluate_context",
     "fixed_batch",
     "load_oracle",
     "normalise",
+    "occupied_cells",
+    "plot_archive",
     "random_contexts",
     "read_archive",
     "relative_drop",
     "resolve_phenomenon",
+    "run_search",
+    "summarise",
     "to_phenomenon_vector",
     "train_oracle",
 ]

@@ -1,0 +1,64 @@
+"""The search: strategies, determinism, resume without loss or repeat, the Dask path."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+from enlil_helpers import ColourDetector, tiny_data
+
+from anunnaki.enlil import read_archive
+from anunnaki.enlil._run import Job, occupied_cells, run_search
+from anunnaki.enlil._search import SEARCHES
+
+pytest.importorskip("pyarrow")
+pytest.importorskip("ribs")
+
+
+@pytest.fixture(scope="module")
+def job() -> Job:
+    return Job(ColourDetector(), tiny_data(10), "brightness", batch_images=10, seed=0)
+
+
+def test_the_strategies_are_registered_plugins() -> None:
+    assert {"enlil", "random", "sobol"} <= set(SEARCHES.names())
+    for name in ("enlil", "random", "sobol"):
+        s = SEARCHES.create(name, dim=3, seed=4, batch=8)
+        p = s.ask()
+        assert p.shape[1] == 3 and np.all((p >= 0) & (p <= 1))
+
+
+@pytest.mark.parametrize("search", ["enlil", "random", "sobol"])
+def test_resume_equals_one_run(job: Job, tmp_path: Path, search: str) -> None:
+    whole = run_search(job, tmp_path / "a", search=search, budget=45, seed=3, batch=10)
+    assert len(whole.archive) == 45 and whole.archive.evals.tolist() == list(range(45))
+    run_search(job, tmp_path / "b", search=search, budget=23, seed=3, batch=10)
+    again = run_search(job, tmp_path / "b", search=search, budget=45, seed=3, batch=10)
+    assert again.resumed == 23 and again.evaluated == 22
+    assert np.array_equal(again.archive.params, whole.archive.params)
+    assert np.array_equal(again.archive.categories, whole.archive.categories)
+    done = run_search(job, tmp_path / "b", search=search, budget=45, seed=3, batch=10)
+    assert done.evaluated == 0
+
+
+def test_summary_counts_cells_per_category(job: Job, tmp_path: Path) -> None:
+    out = run_search(job, tmp_path / "r", search="random", budget=30, seed=1, batch=10)
+    s = out.summary
+    assert s["evaluations"] == 30 and sum(s["counts"].values()) == 30
+    assert s["cells"] == occupied_cells(read_archive(tmp_path / "r"))
+    assert s["counts"][2] > 0 and s["counts"][0] > 0  # dark gains break the colour detector
+
+
+def test_dask_local_cluster_gives_the_local_pools_archive(job: Job, tmp_path: Path) -> None:
+    distributed = pytest.importorskip("distributed")
+    local = run_search(
+        job, tmp_path / "pool", search="enlil", budget=20, seed=5, batch=10, workers=2
+    )
+    cluster = distributed.LocalCluster(n_workers=1, processes=False, dashboard_address=None)
+    with cluster, distributed.Client(cluster) as client:
+        remote = run_search(
+            job, tmp_path / "dask", search="enlil", budget=20, seed=5, batch=10, dask=client
+        )
+    assert np.array_equal(local.archive.params, remote.archive.params)
+    assert np.array_equal(local.archive.f1, remote.archive.f1)
