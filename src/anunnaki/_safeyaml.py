@@ -15,7 +15,9 @@ the line of the element at fault.
 
 from __future__ import annotations
 
+import os
 import re
+import stat
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
@@ -68,16 +70,28 @@ class LineMap:
 
 
 def read_text_limited(path: str | Path, *, max_bytes: int = MAX_BYTES) -> str:
-    """Read a UTF-8 text file, refusing files over ``max_bytes`` before reading them."""
+    """Read a UTF-8 text file, refusing files over ``max_bytes`` before reading them.
+
+    The file is opened without blocking and checked on the open descriptor: a named pipe or
+    a device (``/dev/zero``) is refused, never read, even if it replaced a file after a
+    check by name; at most ``max_bytes`` + 1 bytes are read, whatever the file grows to.
+    """
     p = Path(path)
     try:
-        size = p.stat().st_size
+        fd = os.open(p, os.O_RDONLY | os.O_NONBLOCK)
     except OSError as exc:
         raise ModelFileError(
             f"cannot read file: {exc.strerror}", path=p, hint="check the path"
         ) from exc
-    if not p.is_file():
+    info = os.fstat(fd)
+    if not stat.S_ISREG(info.st_mode):  # a folder, a pipe, a device
+        os.close(fd)
         raise ModelFileError("not a regular file", path=p, hint="give the path of a file")
+    with os.fdopen(fd, "rb") as f:
+        size = info.st_size
+        if size <= max_bytes:
+            data = f.read(max_bytes + 1)
+            size = len(data)
     if size > max_bytes:
         raise ModelFileError(
             f"file is {size} bytes, over the limit of {max_bytes}",
@@ -85,7 +99,7 @@ def read_text_limited(path: str | Path, *, max_bytes: int = MAX_BYTES) -> str:
             hint="model files are small; split it or check you passed the right file",
         )
     try:
-        return p.read_text(encoding="utf-8")
+        text = data.decode("utf-8")
     except UnicodeDecodeError as exc:
         line = exc.object[: exc.start].count(b"\n") + 1
         column = exc.start - (exc.object.rfind(b"\n", 0, exc.start) + 1) + 1
@@ -95,6 +109,7 @@ def read_text_limited(path: str | Path, *, max_bytes: int = MAX_BYTES) -> str:
             line=line,
             hint="save the file as UTF-8",
         ) from exc
+    return text.replace("\r\n", "\n").replace("\r", "\n")  # universal newlines, as read_text
 
 
 class _GuardedLoader(yaml.SafeLoader):

@@ -34,12 +34,11 @@ from __future__ import annotations
 import dataclasses
 import logging
 import math
-import os
-import stat
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any, cast
 
+from anunnaki._safeyaml import read_text_limited
 from anunnaki.bus import (
     AnalysisState,
     CycleDone,
@@ -157,26 +156,11 @@ def _read_reload_file(kind: str, path: str, roots: Sequence[Path] | None) -> str
             f"configuration's reload_dirs (now: {', '.join(map(str, roots)) or 'none'})",
         )
     try:
-        fd = os.open(real, os.O_RDONLY | os.O_NONBLOCK | getattr(os, "O_NOFOLLOW", 0))
-    except OSError as exc:
-        raise ModelFileError(f"cannot read the {what}: {exc.strerror}", path=path) from exc
-    with os.fdopen(fd, "rb") as f:
-        info = os.fstat(f.fileno())
-        if not stat.S_ISREG(info.st_mode):
-            raise ModelFileError(
-                f"refused: the {what} is not a regular file", path=path, hint="give a file"
-            )
-        data = f.read(MAX_RELOAD_BYTES + 1)
-    if len(data) > MAX_RELOAD_BYTES:
+        return read_text_limited(real, max_bytes=MAX_RELOAD_BYTES)
+    except ModelFileError as exc:  # a pipe, a device, too big, unreadable: refused, never read
         raise ModelFileError(
-            f"refused: the {what} is over {MAX_RELOAD_BYTES} bytes",
-            path=path,
-            hint="goal models and tactics are small; check the path",
-        )
-    try:
-        return data.decode("utf-8")
-    except UnicodeDecodeError as exc:
-        raise ModelFileError(f"the {what} is not UTF-8 text", path=path) from exc
+            f"refused: the {what}: {exc.message}", path=path, line=exc.line, hint=exc.hint
+        ) from None
 
 
 def model_from_sources(sources: Mapping[str, tuple[str | None, str]]) -> GoalModel:
