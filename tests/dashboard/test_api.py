@@ -46,11 +46,12 @@ from anunnaki.dashboard import (
     create_app,
 )
 from anunnaki.dashboard._server import is_loopback, loopback_names
-from anunnaki.dashboard._token import Throttle, token_weakness
+from anunnaki.dashboard._token import Throttle
 from anunnaki.errors import MissingExtraError, ModelFileError
 from anunnaki.goals import load_goal_model
 from anunnaki.launch import load_launch
 from anunnaki.tactics import load_tactics
+from anunnaki.tokens import token_weakness
 from anunnaki.topics import DECISIONS as DECISIONS_TOPIC
 
 

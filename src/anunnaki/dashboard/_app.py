@@ -17,7 +17,7 @@ isolated change (a violation) goes out at once. Every patch carries ``now``, and
 goes out at least once a second, so staleness keeps counting on the page.
 
 Operator actions exist only when the server has a token; the token is compared in constant
-time (:func:`hmac.compare_digest`) and the caller recorded by Utu is
+time (:func:`anunnaki.tokens.token_matches`) and the caller recorded by Utu is
 ``dashboard:<operator>@<client address>``.
 """
 
@@ -25,7 +25,6 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
-import hmac
 import json
 import math
 import re
@@ -43,7 +42,8 @@ from pydantic import BaseModel, Field
 from anunnaki.dashboard._app_types import Operator
 from anunnaki.dashboard._observer import OPERATIONS, OperatorError
 from anunnaki.dashboard._state import DashboardState
-from anunnaki.dashboard._token import Throttle, token_weakness
+from anunnaki.dashboard._token import Throttle
+from anunnaki.tokens import token_matches, token_weakness
 
 __all__ = ["OperatorRequest", "create_app", "static_dir"]
 
@@ -258,7 +258,7 @@ def _authorized(
     given = ""
     if authorization and authorization.lower().startswith("bearer "):
         given = authorization[7:].strip()
-    if not hmac.compare_digest(given.encode(), token.encode()):
+    if not token_matches(given, token):
         raise HTTPException(401, "missing or wrong token", headers={"WWW-Authenticate": "Bearer"})
     if action not in OPERATIONS:
         raise HTTPException(404, f"unknown action {action!r}; actions: {', '.join(OPERATIONS)}")

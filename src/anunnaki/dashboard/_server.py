@@ -21,10 +21,10 @@ from anunnaki.bus import Bus
 from anunnaki.dashboard._app_types import Operator
 from anunnaki.dashboard._observer import BusObserver, ObserverConfig, OperatorError, SimTime
 from anunnaki.dashboard._state import DashboardState
-from anunnaki.dashboard._token import token_weakness
 from anunnaki.errors import AnunnakiError, MissingExtraError
 from anunnaki.goals import GoalModel
 from anunnaki.tactics import TacticSet
+from anunnaki.tokens import token_weakness
 
 __all__ = [
     "Dashboard",

@@ -1,4 +1,7 @@
-"""The dashboard's operator token: how strong it must be, and how many guesses it allows."""
+"""How many guesses at the dashboard's operator token a client gets.
+
+How strong the token must be is :mod:`anunnaki.tokens`.
+"""
 
 from __future__ import annotations
 
@@ -6,9 +9,7 @@ import collections
 import threading
 import time
 
-from anunnaki.tokens import MIN_TOKEN_BITS, token_weakness
-
-__all__ = ["MIN_TOKEN_BITS", "Throttle", "token_weakness"]
+__all__ = ["Throttle"]
 
 
 class Throttle:
