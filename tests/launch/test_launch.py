@@ -32,7 +32,7 @@ from anunnaki.launch import (
     run_launch,
 )
 from anunnaki.topics import node_token, ready_service
-from anunnaki.utu import NODE_NAMES
+from anunnaki.utu import NODE_NAMES, Knowledge
 
 ROVER = Path(__file__).parents[2] / "examples" / "rover"
 EXAMPLE = ROVER / "utu.yaml"
@@ -62,6 +62,14 @@ def launch_file(tmp_path: Path, text: str, name: str = "launch.yaml") -> Path:
     p = tmp_path / name
     p.write_text(text.replace("ROVER", str(ROVER)))
     return p
+
+
+def looping_example(tmp_path: Path) -> Path:
+    """The rover example as a launch file in ``tmp_path`` whose trace loops (runs until stopped)."""
+    text = EXAMPLE.read_text().replace("loop: false", "loop: true")
+    for name in ("goals.yaml", "binding.yaml", "tactics.yaml", "trace.jsonl"):
+        text = text.replace(f": {name}", f": ROVER/{name}")
+    return launch_file(tmp_path, text)
 
 
 def run(launch_path: Path, **kw) -> tuple[RunResult, str]:  # type: ignore[no-untyped-def]
@@ -324,10 +332,7 @@ class Lines:
 
 @pytest.mark.slow
 def test_sigterm_stops_every_node_and_exits_0(tmp_path: Path) -> None:
-    text = EXAMPLE.read_text().replace("loop: false", "loop: true")
-    for name in ("goals.yaml", "binding.yaml", "tactics.yaml", "trace.jsonl"):
-        text = text.replace(f": {name}", f": ROVER/{name}")
-    p = launch_file(tmp_path, text)
+    p = looping_example(tmp_path)
     proc = _anunnaki("run", str(p), "--processes", "--speed", "5")
     out = Lines(proc)
     try:
@@ -432,3 +437,28 @@ def test_a_node_joins_a_running_launch_as_a_client(tmp_path: Path) -> None:
             assert proc.wait(timeout=15) == 0, out.text
         finally:
             out.close()
+
+
+@pytest.mark.slow
+def test_a_killed_node_run_stops_the_platform_before_the_launch_ends(tmp_path: Path) -> None:
+    # Issue #12: kill -9 of a Utu node ended the run with no run-stop at the platform.
+    # The execute node is the one that would otherwise send it: the launch must.
+    p = looping_example(tmp_path)
+    db = tmp_path / "run.db"
+    proc = _anunnaki("run", str(p), "--processes", "--speed", "5", "--knowledge", str(db))
+    out = Lines(proc)
+    try:
+        assert out.wait(r"^ready: ", timeout=60), out.text
+        pid = out.wait(r"node execute: pid (\d+)", timeout=5)
+        assert pid is not None, out.text
+        os.kill(int(pid.group(1)), signal.SIGKILL)
+        assert proc.wait(timeout=30) == 1, out.text
+        assert re.search(
+            r"node execute exited with code -9: run-stop sent to /rover/stop \(ok\)", out.text
+        ), out.text
+    finally:
+        out.close()
+    with Knowledge(db) as kb:
+        died = [d for d in kb.decisions() if d.kind == "node_died"]
+    assert len(died) == 1 and died[0].data["ok"] is True, died
+    assert died[0].data["service"] == "/rover/stop"

@@ -956,6 +956,8 @@ class Bus(ABC):
             if raw is not None:
                 break
             if not wait_for_service:
+                if time.monotonic() >= deadline:  # it is up, and did not answer in time
+                    raise BusTimeout(f"no reply from service {service!r} within {timeout} s")
                 raise BusTimeout(f"no reply from service {service!r}: it is not up")
             if self._closed.wait(min(0.02, max(remaining, 0.0))):
                 raise BusClosedError(f"bus {self._name!r} closed during a request")

@@ -25,8 +25,9 @@ from pathlib import Path
 from typing import Any, TextIO
 
 from anunnaki import topics
-from anunnaki.bus import Bus, BusConfig, open_bus
+from anunnaki.bus import Bus, BusConfig, RunStop, open_bus
 from anunnaki.clock import SimClock
+from anunnaki.errors import AnunnakiError
 from anunnaki.launch._kinds import clock_publisher
 from anunnaki.launch._managed import ManagedContext, ManagedRun
 from anunnaki.launch._schema import Launch, LaunchError, _StoppedDuringBringUp
@@ -388,6 +389,48 @@ class _Runner:
                 return 0, f"ran {self.until:g} s"
             self.stop.wait(0.05)
 
+    def _fail_safe(self, bus: Bus, kb: Knowledge | None, problem: str) -> None:
+        """A Utu node died: run-stop the platform now, tell everyone, record it.
+
+        The surviving nodes may be unable to (the execute node may be the one that died),
+        so the launch asks the configured run-stop service itself (guideline S4), publishes
+        ``/utu/run_stop`` for the survivors and any dashboard, and records a ``node_died``
+        decision with the outcome. A launch never just exits when part of Utu is gone.
+        """
+        service = self.utu.run_stop.service
+        ok: bool | None = None
+        error = ""
+        if service is not None:
+            try:
+                bus.request(
+                    service, dict(self.utu.run_stop.payload), timeout=1.0, wait_for_service=False
+                )
+                ok = True
+            except AnunnakiError as exc:
+                ok, error = False, str(exc)
+        with contextlib.suppress(AnunnakiError):
+            bus.publish(
+                topics.RUN_STOP,
+                RunStop(
+                    reason=f"{problem}: Utu is incomplete", caller=f"launch:{self.launch.name}"
+                ),
+            )
+        where = f"run-stop sent to {service}" if service else "no run_stop service configured"
+        status = "" if ok is None else (" (ok)" if ok else f" (FAILED: {error})")
+        self.say(f"{problem}: {where}{status}")
+        if kb is not None:
+            with contextlib.suppress(sqlite3.Error):
+                kb.record_decision(
+                    kb.last_t(),
+                    "node_died",
+                    None,
+                    problem=problem,
+                    service=service,
+                    ok=ok,
+                    error=error or None,
+                )
+                kb.flush()
+
     def _clock_publisher(self, bus: Bus) -> Callable[[float], None] | None:
         """The launch's relay of the managed system's time, ahead of each instant."""
         if self.managed is None or not self.managed.relay_clock:
@@ -442,6 +485,8 @@ class _Runner:
             code, reason = self._watch(
                 printer, managed.thread if managed else None, lambda: crashed[0] if crashed else ""
             )
+            if crashed:
+                self._fail_safe(bus, kb, crashed[0])
             self.stop.set()
             if managed is not None:
                 managed.thread.join(timeout=5.0)
@@ -497,6 +542,14 @@ class _Runner:
             "--exit-with-parent",
         ]
 
+    def _taken_counter(self, bus: Bus) -> Callable[[int], bool] | None:
+        """How the managed system learns that Utu took an instant (lockstep), if it can."""
+        if "analyze" in self.launch.nodes:
+            return _CycleCounter(bus, wait_done="execute" in self.launch.nodes)
+        if "monitor" in self.launch.nodes:
+            return _InputCounter(bus)
+        return None
+
     def _run_processes(self) -> RunResult:
         launch = self.launch
         parent_config = launch.bus
@@ -516,11 +569,7 @@ class _Runner:
             kb = open_knowledge(self.kb_path)
             self._resuming(kb)
             tail = DecisionTail(kb)
-            taken: Callable[[int], bool] | None = None
-            if "analyze" in launch.nodes:
-                taken = _CycleCounter(bus, wait_done="execute" in launch.nodes)
-            elif "monitor" in launch.nodes:
-                taken = _InputCounter(bus)
+            taken = self._taken_counter(bus)
             for name in launch.nodes:
                 config = child_bus_config(parent_config, bus.endpoints, f"{launch.name}-{name}")
                 proc = children.start(name, self._node_argv(name, config))
@@ -546,6 +595,8 @@ class _Runner:
                 )
 
             code, reason = self._watch(printer, managed.thread if managed else None, failed)
+            if code != 0:
+                self._fail_safe(bus, kb, reason)  # before anything else stops
             self.stop.set()
             if managed is not None:
                 managed.thread.join(timeout=5.0)

@@ -61,7 +61,13 @@ class RecordingActuator:
 
 
 class BusActuator:
-    """Actions over the bus: publish on topics, request services, notify through a Notifier."""
+    """Actions over the bus: publish on topics, request services, notify through a Notifier.
+
+    ``blocking``: a request waits for the managed system, so a loop runs requests through
+    an :class:`~anunnaki.utu.ThreadRunner` (off its path).
+    """
+
+    blocking = True
 
     def __init__(
         self,

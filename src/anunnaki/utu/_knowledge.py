@@ -348,6 +348,16 @@ class Knowledge:
                 rows = self._db.execute(q + " ORDER BY id", args).fetchall()
         return [Decision(i, t, k, tac, json.loads(d)) for i, t, k, tac, d in rows]
 
+    def last_t(self) -> float:
+        """The latest instant an input or a decision was recorded at (0 for an empty run)."""
+        self.flush()
+        with self._lock:
+            row = self._db.execute(
+                "SELECT max(COALESCE((SELECT max(t) FROM inputs), 0), "
+                "COALESCE((SELECT max(t) FROM decisions), 0))"
+            ).fetchone()
+        return float(row[0] or 0.0)
+
     def state_at(self, t: float) -> dict[str, tuple[float | None, str]]:
         """Each node's (utility, status) as last recorded at or before ``t``."""
         self.flush()

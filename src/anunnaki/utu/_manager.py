@@ -46,6 +46,7 @@ from anunnaki.clock import Clock, SimClock, WallClock
 from anunnaki.errors import AnunnakiError
 from anunnaki.goals import GoalModel
 from anunnaki.tactics import TacticSet
+from anunnaki.utu._actions import ActionRunner, ThreadRunner
 from anunnaki.utu._actuators import BusActuator, RecordingActuator
 from anunnaki.utu._config import RunStopConfig, UtuConfig
 from anunnaki.utu._knowledge import Knowledge
@@ -129,6 +130,7 @@ class AutonomicManager:
         clock_topic: str = topics.CLOCK,
         rate: float = 20.0,
         reload_dirs: Sequence[str | Path] = (),
+        actions: ActionRunner | None = None,
     ) -> None:
         srcs = dict(sources or {})
         config = UtuConfig(
@@ -148,7 +150,9 @@ class AutonomicManager:
             rate=rate,
             reload_dirs=[str(d) for d in reload_dirs],
         )
-        self._init(UtuParts(config, srcs, model, tactics), knowledge, bus, actuator, clock)
+        self._init(
+            UtuParts(config, srcs, model, tactics), knowledge, bus, actuator, clock, actions=actions
+        )
 
     def _init(
         self,
@@ -157,6 +161,8 @@ class AutonomicManager:
         bus: Any | None,
         actuator: Actuator | None,
         clock: Clock | None,
+        *,
+        actions: ActionRunner | None = None,
     ) -> None:
         config = parts.config
         self.parts = parts
@@ -203,8 +209,15 @@ class AutonomicManager:
         self.monitor_stage = MonitorStage(parts)
         self.analyze_stage = AnalyzeStage(parts, self.knowledge)
         self.plan_stage = PlanStage(parts, self.knowledge)
+        if actions is None and getattr(self.actuator, "blocking", False):
+            actions = ThreadRunner(on_done=self.wake)  # requests never hold the loop
+        self.actions = actions
         self.execute_stage = ExecuteStage(
-            parts, self.knowledge, self.actuator, on_run_stop=self._announce_run_stop
+            parts,
+            self.knowledge,
+            self.actuator,
+            on_run_stop=self._announce_run_stop,
+            runner=actions,
         )
         self.knowledge_stage = KnowledgeStage(parts, self.knowledge)
         self.now = self.analyze_stage.now
@@ -595,6 +608,8 @@ class AutonomicManager:
         period = 1.0 / (rate or self.rate)
         self._inline = isinstance(self.bus, InprocBus)
         self._live = True
+        if isinstance(self.actions, ThreadRunner) and not isinstance(self.clock, SimClock):
+            self.actions.settle = self.parts.config.action_settle  # live: hold the loop briefly
         limit = self.parts.config.watchdog
         dog = _Watchdog(self, max(limit, 2 * period)) if limit is not None else None
         try:
@@ -636,6 +651,8 @@ class AutonomicManager:
         self._enqueue_op({"op": "run_stop", "caller": "watchdog", "reason": reason})
 
     def _pending(self) -> bool:
+        if isinstance(self.actions, ThreadRunner) and self.actions.has_outcomes:
+            return True  # an action came back: take it now
         return any(sub.pending for sub in self._pull.values())
 
     def input_queues(self) -> list[Any]:
@@ -663,6 +680,8 @@ class AutonomicManager:
             except Exception as exc:  # pragma: no cover - best effort at shutdown
                 log.debug("closing %r: %r", d, exc)
         self._declared.clear()
+        if self.actions is not None:
+            self.actions.close()
         notifier = getattr(self.actuator, "notifier", None)
         if notifier is not None:
             notifier.close()

@@ -11,7 +11,7 @@ import logging
 from collections import deque
 from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass
-from typing import Any, Literal, Protocol
+from typing import TYPE_CHECKING, Any, Literal, Protocol
 
 from anunnaki.goals import (
     Evaluator,
@@ -33,6 +33,9 @@ from anunnaki.tactics import (
     TacticSet,
 )
 from anunnaki.utu._knowledge import Knowledge, TacticRow
+
+if TYPE_CHECKING:
+    from anunnaki.utu._actions import ActionRunner
 
 __all__ = [
     "ActionOutcome",
@@ -457,10 +460,13 @@ class Executor:
         knowledge: Knowledge,
         *,
         on_failure: Callable[[TacticRuntime, float], None],
+        runner: ActionRunner | None = None,
     ) -> None:
         self.actuator = actuator
         self.knowledge = knowledge
         self.on_failure = on_failure
+        self.runner = runner
+        self.waiting: dict[str, int] = {}  # tactic -> index of its action in flight
 
     def start(self, rt: TacticRuntime, now: float, *, reason: str = "preconditions hold") -> None:
         """Start a tactic: persist, then run its actions."""
@@ -484,7 +490,13 @@ class Executor:
         self.run_actions(rt, now)
 
     def run_actions(self, rt: TacticRuntime, now: float) -> None:
-        """Run the remaining actions of a running tactic."""
+        """Run the remaining actions of a running tactic (none while one is in flight).
+
+        A request goes to the :class:`~anunnaki.utu.ActionRunner` when there is one: the
+        tactic stays ``running`` and :meth:`resolve` continues it when the outcome is back.
+        """
+        if rt.name in self.waiting:
+            return
         actions = rt.tactic.actions
         while rt.next_action < len(actions):
             i = rt.next_action
@@ -492,19 +504,11 @@ class Executor:
             rt.next_action = i + 1
             self.knowledge.save_tactic(rt.row())  # write-ahead: action i is dispatched
             self.knowledge.flush()  # ... and on disk, with what led to it, before it runs
-            outcome = self._perform(action, rt.name, now)
-            self.knowledge.record_decision(
-                now,
-                "action",
-                rt.name,
-                index=i,
-                type=action.type,
-                ok=outcome.ok,
-                detail=outcome.detail,
-                **_describe(action),
-            )
-            if not outcome.ok:  # refused, timed out or no service: failed, whatever follows
-                self._finish(rt, now, ok=False, note="action failed", action=i)
+            outcome = self._dispatch(action, rt.name, i, now)
+            if outcome is None:  # in flight: the cycle that finds it back goes on
+                self.waiting[rt.name] = i
+                return
+            if not self._outcome(rt, i, outcome, now):
                 return
         if rt.tactic.postconditions:
             rt.state = "awaiting"
@@ -512,21 +516,61 @@ class Executor:
         else:
             self._finish(rt, now, ok=True, note="no postconditions")
 
+    def resolve(self, runtimes: Mapping[str, TacticRuntime], now: float) -> None:
+        """Take the actions that came back: record each, continue or fail its tactic."""
+        if self.runner is None:
+            return
+        for done in self.runner.finished(now):
+            rt = runtimes.get(done.tactic)
+            if rt is None or self.waiting.get(done.tactic) != done.index:
+                log.warning("no tactic waits for %s action %d", done.tactic, done.index)
+                continue
+            del self.waiting[done.tactic]
+            if rt.state == "running" and self._outcome(rt, done.index, done.outcome, now):
+                self.run_actions(rt, now)
+
+    def _outcome(self, rt: TacticRuntime, i: int, outcome: ActionOutcome, now: float) -> bool:
+        """Record action ``i``'s outcome; a failed one fails the tactic (returns False)."""
+        action = rt.tactic.actions[i]
+        self.knowledge.record_decision(
+            now,
+            "action",
+            rt.name,
+            index=i,
+            type=action.type,
+            ok=outcome.ok,
+            detail=outcome.detail,
+            **_describe(action),
+        )
+        if not outcome.ok:  # refused, timed out or no service: failed, whatever follows
+            self._finish(rt, now, ok=False, note="action failed", action=i)
+            return False
+        return True
+
+    def _dispatch(self, action: Any, tactic: str, index: int, now: float) -> ActionOutcome | None:
+        """Perform ``action``: on the loop, or through the runner for a request."""
+        request = _request_of(action)
+        if request is None or self.runner is None:
+            return self._perform(action, tactic, now)
+        service, payload, timeout = request
+        actuator = self.actuator
+
+        def call() -> ActionOutcome:
+            return actuator.request(service, payload, timeout)
+
+        try:
+            return self.runner.submit(tactic, index, call, timeout, now)
+        except Exception as exc:  # a runner that cannot start it: failed, never fatal
+            log.warning("action of %s could not start: %r", tactic, exc)
+            return ActionOutcome(False, f"{type(exc).__name__}: {exc}")
+
     def _perform(self, action: Any, tactic: str, now: float) -> ActionOutcome:
         try:
+            request = _request_of(action)
+            if request is not None:
+                return self.actuator.request(*request)
             if isinstance(action, PublishAction):
                 return self.actuator.publish(action.topic, action.payload)
-            if isinstance(action, RequestAction):
-                return self.actuator.request(action.service, action.payload, action.timeout)
-            if isinstance(action, ChangeModeAction):
-                return self.actuator.request(action.service, {"mode": action.mode}, 2.0)
-            if isinstance(action, SwapModelAction):
-                payload: dict[str, Any] = {"lec": action.lec}
-                if action.model is not None:
-                    payload["model"] = action.model
-                if action.domain is not None:
-                    payload["domain"] = action.domain
-                return self.actuator.request(action.service, payload, 5.0)
             if isinstance(action, NotifyAction):
                 return self.actuator.notify(action, tactic, now)
         except Exception as exc:  # an actuator must never kill the loop
@@ -561,6 +605,22 @@ class Executor:
         self.knowledge.record_decision(now, kind, rt.name, note=note, **data)
         if not ok:
             self.on_failure(rt, now)
+
+
+def _request_of(action: Any) -> tuple[str, dict[str, Any], float] | None:
+    """A service request's (service, payload, timeout), or ``None`` for another action."""
+    if isinstance(action, RequestAction):
+        return action.service, dict(action.payload), action.timeout
+    if isinstance(action, ChangeModeAction):
+        return action.service, {"mode": action.mode}, 2.0
+    if isinstance(action, SwapModelAction):
+        payload: dict[str, Any] = {"lec": action.lec}
+        if action.model is not None:
+            payload["model"] = action.model
+        if action.domain is not None:
+            payload["domain"] = action.domain
+        return action.service, payload, 5.0
+    return None
 
 
 def _describe(action: Any) -> dict[str, Any]:

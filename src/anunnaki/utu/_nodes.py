@@ -69,6 +69,7 @@ from anunnaki.errors import AnunnakiError
 from anunnaki.topics import UTU_NODES as NODE_NAMES
 from anunnaki.topics import UtuNodeName as NodeName
 from anunnaki.topics import node_token, ready_service
+from anunnaki.utu._actions import ThreadRunner
 from anunnaki.utu._actuators import BusActuator
 from anunnaki.utu._config import UtuConfig
 from anunnaki.utu._knowledge import Knowledge
@@ -650,8 +651,17 @@ class ExecuteNode(UtuNode):
                 self._notifier = Notifier(NotifyConfig.model_validate(self.config.notify))
             actuator = BusActuator(self.bus, self._notifier, on_notified=self._notified)
         self.actuator: Actuator = actuator
+        self.actions: ThreadRunner | None = None
+        if getattr(actuator, "blocking", False):
+            self.actions = ThreadRunner(on_done=self.wake)  # requests never hold a cycle
+            if not isinstance(self.clock, SimClock):
+                self.actions.settle = self.config.action_settle
         self.stage = ExecuteStage(
-            self.parts, self.knowledge, self.actuator, on_run_stop=self._announce_run_stop
+            self.parts,
+            self.knowledge,
+            self.actuator,
+            on_run_stop=self._announce_run_stop,
+            runner=self.actions,
         )
         self._flush()
         self._pending: tuple[str, int, float] | None = None  # (origin, seq, since)
@@ -665,7 +675,10 @@ class ExecuteNode(UtuNode):
             self.own(self._presence.watch)
 
     def release_extra(self) -> None:
-        """Stop the notifier."""
+        """Stop the notifier and the action threads."""
+        actions = getattr(self, "actions", None)
+        if actions is not None:
+            actions.close()
         if self._notifier is not None:
             self._notifier.close()
 

@@ -41,6 +41,7 @@ from anunnaki.errors import AnunnakiError, ModelFileError
 from anunnaki.goals import Evaluator, GoalModel
 from anunnaki.tactics import TacticSet
 from anunnaki.trace import Phase, Record, TraceWriter
+from anunnaki.utu._actions import RecordedOutcome, ReplayRunner
 from anunnaki.utu._actuators import RecordingActuator
 from anunnaki.utu._knowledge import SCHEMA_VERSION, Decision, Knowledge, VerdictRow
 from anunnaki.utu._manager import AutonomicManager
@@ -93,13 +94,15 @@ KINDS: tuple[str, ...] = (
     "reload_refused",
     "reload_requested",
     "notify_result",
+    "node_died",
 )
 """Every kind of decision the manager records (docs/decision-log.md describes each)."""
 
-ASYNC_KINDS: frozenset[str] = frozenset({"notify_result"})
-"""Decisions written when a background job finishes (a notification delivered or not), at
-whatever step the manager is in then: not a choice of the loop, so a replay neither makes nor
-compares them."""
+ASYNC_KINDS: frozenset[str] = frozenset({"notify_result", "node_died"})
+"""Decisions written outside the loop's steps — when a background job finishes (a
+notification delivered or not), or by the launch when a Utu node died (and it run-stopped the
+platform) — at whatever instant the run is at then: not a choice of the loop, so a replay
+neither makes nor compares them."""
 
 MARKERS: tuple[str, str] = (TICK, OPERATOR)
 """The pseudo-topics of the ``inputs`` table that are not messages: end of a step, operator call."""
@@ -501,10 +504,16 @@ def _operator(manager: AutonomicManager, op: Mapping[str, Any]) -> None:
         manager._enqueue_op(dict(op))
 
 
-def _action_outcomes(knowledge: Knowledge) -> list[tuple[bool, str]]:
-    """Each recorded action's outcome, in order: a replay's actions fail where the run's did."""
+def _action_outcomes(knowledge: Knowledge) -> list[RecordedOutcome]:
+    """Each recorded action's outcome and when it was taken (the replay's come back then)."""
     return [
-        (bool(d.data.get("ok", True)), str(d.data.get("detail", "")))
+        RecordedOutcome(
+            d.t,
+            str(d.tactic),
+            int(d.data.get("index", 0)),
+            bool(d.data.get("ok", True)),
+            str(d.data.get("detail", "")),
+        )
         for d in knowledge.decisions()
         if d.kind == "action"
     ]
@@ -581,7 +590,8 @@ def _replay(
         model,
         tactics,
         knowledge=Knowledge(":memory:"),
-        actuator=RecordingActuator(outcomes=_action_outcomes(knowledge)),
+        actuator=RecordingActuator(),
+        actions=ReplayRunner(_action_outcomes(knowledge)),
         dwell=float(settings["dwell"]),
         warmup=float(settings["warmup"]),
         failsafe=settings["failsafe"],

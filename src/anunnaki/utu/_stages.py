@@ -52,6 +52,7 @@ from anunnaki.errors import AnunnakiError, ModelFileError
 from anunnaki.goals import GoalModel, parse_binding, parse_goal_model, status_name
 from anunnaki.tactics import TacticSet
 from anunnaki.tokens import OPERATOR_TOKEN_ENV, token_matches
+from anunnaki.utu._actions import ActionRunner
 from anunnaki.utu._knowledge import Decision, Knowledge
 from anunnaki.utu._mape import Actuator, Analyzer, Executor, Monitor, Planner, TacticRuntime
 from anunnaki.utu._parts import UtuParts, check_parts, load_tactics_text, parts_from_sources
@@ -654,6 +655,7 @@ class ExecuteStage:
         actuator: Actuator,
         *,
         on_run_stop: Callable[[str, str], None] | None = None,
+        runner: ActionRunner | None = None,
     ) -> None:
         self.parts = parts
         self.knowledge = knowledge
@@ -661,7 +663,7 @@ class ExecuteStage:
         self.on_run_stop = on_run_stop
         # The planner here holds the tactic runtimes (and knows the conflicts); plan selects.
         self.planner = Planner(parts.tactics, knowledge, dwell=parts.config.dwell)
-        self.executor = Executor(actuator, knowledge, on_failure=self._escalate)
+        self.executor = Executor(actuator, knowledge, on_failure=self._escalate, runner=runner)
         self.paused = False
         self.stopped = False  # a run-stop performed here
         self.heard_run_stop = False  # a run-stop heard on its topic, not yet performed
@@ -711,6 +713,7 @@ class ExecuteStage:
             self._apply_op(op, t)
         self._before = kb.decisions_written
         runtimes = self.planner.runtimes
+        self.executor.resolve(runtimes, t)  # actions that came back since the last cycle
         for rt in list(runtimes.values()):
             if rt.state == "running":  # resumed mid-action after a restart
                 self.executor.run_actions(rt, t)

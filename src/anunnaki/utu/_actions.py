@@ -1,0 +1,247 @@
+"""Actions off the loop's path: service requests run on worker threads with their own deadline.
+
+A live loop must never wait on the managed system: a mode change to a robot that is alive
+but does not answer held every cycle for its 2 s timeout, and monitoring and analysis
+stopped with it. The :class:`~anunnaki.utu.Executor` hands each request (a ``request``,
+``change_mode`` or ``swap_model`` action) to an :class:`ActionRunner` and goes on; the
+tactic stays ``running`` while its action is in flight, and the next cycle that finds the
+outcome records it (``action`` decision) and continues with the tactic's next action — or
+fails the tactic and escalates when the action was refused, timed out or met a dead service.
+
+* :class:`ThreadRunner` (live): a few worker threads; an action whose thread has not come
+  back by its timeout plus a grace period is reported failed ("no reply within …") and its
+  thread abandoned, so even an actuator that ignores its own timeout cannot hold the loop.
+* :class:`ReplayRunner` (:func:`~anunnaki.utu.replay`): gives each action the outcome the run
+  recorded, at the instant the run took it, so a replay takes the same decisions at the
+  same times.
+
+Publications and notifications do not wait on anyone (a notification is sent in the
+background already) and stay on the loop.
+"""
+
+from __future__ import annotations
+
+import concurrent.futures as cf
+import logging
+import threading
+import time
+from collections import deque
+from collections.abc import Callable, Iterable
+from dataclasses import dataclass
+from typing import Protocol
+
+from anunnaki.utu._mape import ActionOutcome
+
+__all__ = ["ActionRunner", "Finished", "RecordedOutcome", "ReplayRunner", "ThreadRunner"]
+
+log = logging.getLogger("anunnaki.utu")
+
+#: Seconds a worker thread may overrun its action's timeout before the action is failed.
+GRACE = 0.5
+#: Seconds :meth:`ThreadRunner.submit` waits for an outcome by default (sim time, by hand).
+SETTLE = 1.0
+
+
+@dataclass(frozen=True)
+class Finished:
+    """An action that came back: which tactic, which of its actions, and how it went."""
+
+    tactic: str
+    index: int
+    outcome: ActionOutcome
+
+
+class ActionRunner(Protocol):
+    """Runs actions off the loop and hands back their outcomes when a cycle asks."""
+
+    def submit(
+        self,
+        tactic: str,
+        index: int,
+        call: Callable[[], ActionOutcome],
+        timeout: float,
+        now: float,
+    ) -> ActionOutcome | None:
+        """Start one action; its outcome now, or ``None`` while it is in flight."""
+        ...
+
+    def finished(self, now: float) -> list[Finished]:
+        """The actions that came back (or overran their deadline), in submission order."""
+        ...
+
+    def close(self) -> None:
+        """Stop taking work; in-flight actions are abandoned."""
+        ...
+
+
+@dataclass
+class _Flight:
+    tactic: str
+    index: int
+    future: cf.Future[ActionOutcome]
+    deadline: float  # time.monotonic()
+    timeout: float
+
+
+class ThreadRunner:
+    """Live actions on worker threads (``anunnaki-action``), each with a wall-clock deadline.
+
+    Args:
+        workers: Threads (an action holds one until its request returns or times out).
+        on_done: Called from the worker thread when an action came back (e.g. the loop's
+            ``wake``), so the loop takes the outcome without waiting for its period.
+        grace: Seconds past an action's timeout before it is reported failed regardless.
+        settle: Seconds :meth:`submit` waits for the outcome before leaving the action in
+            flight: a service that answers at once has its outcome recorded in the cycle
+            that started it (as a run on sim time needs to repeat itself), a slow one holds
+            the loop no longer than this.
+
+    """
+
+    def __init__(
+        self,
+        *,
+        workers: int = 4,
+        on_done: Callable[[], object] | None = None,
+        grace: float = GRACE,
+        settle: float = SETTLE,
+    ) -> None:
+        self._pool = cf.ThreadPoolExecutor(
+            max_workers=workers, thread_name_prefix="anunnaki-action"
+        )
+        self._flights: list[_Flight] = []
+        self._lock = threading.Lock()
+        self.on_done = on_done
+        self.grace = grace
+        self.settle = settle
+        self._closed = False
+
+    def submit(
+        self,
+        tactic: str,
+        index: int,
+        call: Callable[[], ActionOutcome],
+        timeout: float,
+        now: float,
+    ) -> ActionOutcome | None:
+        """Start ``call`` on a worker thread; its outcome if back within ``settle`` seconds."""
+        if self._closed:
+            return ActionOutcome(False, "the loop is closing; action not performed")
+        future = self._pool.submit(call)
+        if self.settle > 0:
+            cf.wait([future], timeout=min(self.settle, timeout))
+            if future.done():
+                return _result(future)
+        flight = _Flight(tactic, index, future, time.monotonic() + timeout + self.grace, timeout)
+        with self._lock:
+            self._flights.append(flight)
+        if self.on_done is not None:
+            callback = self.on_done
+            future.add_done_callback(lambda _f: callback())
+        return None
+
+    def finished(self, now: float) -> list[Finished]:
+        """Outcomes of the actions that returned, and failures of those past their deadline."""
+        clock = time.monotonic()
+        out: list[Finished] = []
+        with self._lock:
+            keep: list[_Flight] = []
+            for f in self._flights:
+                if f.future.done():
+                    out.append(Finished(f.tactic, f.index, _result(f.future)))
+                elif clock >= f.deadline:
+                    log.warning(
+                        "action %d of %s did not come back within %.1f s; failed",
+                        f.index,
+                        f.tactic,
+                        f.timeout,
+                    )
+                    detail = f"no reply within {f.timeout:g} s (abandoned)"
+                    out.append(Finished(f.tactic, f.index, ActionOutcome(False, detail)))
+                else:
+                    keep.append(f)
+            self._flights = keep
+        return out
+
+    @property
+    def has_outcomes(self) -> bool:
+        """Whether :meth:`finished` would hand something back now."""
+        clock = time.monotonic()
+        with self._lock:
+            return any(f.future.done() or clock >= f.deadline for f in self._flights)
+
+    @property
+    def in_flight(self) -> int:
+        """Actions submitted and not yet handed back."""
+        with self._lock:
+            return len(self._flights)
+
+    def close(self) -> None:
+        """Abandon in-flight actions; do not wait for their threads."""
+        self._closed = True
+        self._pool.shutdown(wait=False, cancel_futures=True)
+
+
+def _result(future: cf.Future[ActionOutcome]) -> ActionOutcome:
+    try:
+        return future.result()
+    except cf.CancelledError:
+        return ActionOutcome(False, "cancelled")
+    except Exception as exc:  # an actuator must never kill the loop
+        return ActionOutcome(False, f"{type(exc).__name__}: {exc}")
+
+
+@dataclass(frozen=True)
+class RecordedOutcome:
+    """One action's outcome as a run recorded it (its ``action`` decision)."""
+
+    t: float
+    tactic: str
+    index: int
+    ok: bool
+    detail: str
+
+
+class ReplayRunner:
+    """Each action gets its recorded outcome, at the instant the run took it.
+
+    An action is matched with the next recorded outcome of the same tactic and action
+    index. Recorded at the instant it was started (a run whose actions ran on the loop, or
+    that came back within the step), the outcome is given at once; recorded later, it is
+    handed back by the first cycle at or after that instant — the cycle the run took it in.
+    An action the run never recorded (the log ends first) succeeds at once.
+    """
+
+    def __init__(self, recorded: Iterable[RecordedOutcome], *, tolerance: float = 1e-9) -> None:
+        self._recorded: dict[tuple[str, int], deque[RecordedOutcome]] = {}
+        for r in recorded:
+            self._recorded.setdefault((r.tactic, r.index), deque()).append(r)
+        self._pending: list[RecordedOutcome] = []
+        self.tolerance = tolerance
+
+    def submit(
+        self,
+        tactic: str,
+        index: int,
+        call: Callable[[], ActionOutcome],
+        timeout: float,
+        now: float,
+    ) -> ActionOutcome | None:
+        """The recorded outcome now, or ``None`` until the instant the run took it."""
+        queue = self._recorded.get((tactic, index))
+        if not queue:
+            return ActionOutcome(True, "not recorded (the log ends first)")
+        rec = queue.popleft()
+        if rec.t <= now + self.tolerance:
+            return ActionOutcome(rec.ok, rec.detail)
+        self._pending.append(rec)
+        return None
+
+    def finished(self, now: float) -> list[Finished]:
+        """The recorded outcomes due by ``now``."""
+        due = [r for r in self._pending if r.t <= now + self.tolerance]
+        self._pending = [r for r in self._pending if r.t > now + self.tolerance]
+        return [Finished(r.tactic, r.index, ActionOutcome(r.ok, r.detail)) for r in due]
+
+    def close(self) -> None:
+        """Nothing runs: nothing to stop."""
