@@ -457,10 +457,14 @@ class Executor:
         knowledge: Knowledge,
         *,
         on_failure: Callable[[TacticRuntime, float], None],
+        resolve: Callable[[str], str] | None = None,
     ) -> None:
         self.actuator = actuator
         self.knowledge = knowledge
         self.on_failure = on_failure
+        # A tactic may name a logical endpoint (``set_mode``); the binding maps it to the
+        # platform's topic or service (GoalModel.endpoint_name). A ROS name stands for itself.
+        self.resolve: Callable[[str], str] = resolve or (lambda name: name)
 
     def start(self, rt: TacticRuntime, now: float, *, reason: str = "preconditions hold") -> None:
         """Start a tactic: persist, then run its actions."""
@@ -501,7 +505,7 @@ class Executor:
                 type=action.type,
                 ok=outcome.ok,
                 detail=outcome.detail,
-                **_describe(action),
+                **_describe(action, self.resolve),
             )
             if not outcome.ok:  # refused, timed out or no service: failed, whatever follows
                 self._finish(rt, now, ok=False, note="action failed", action=i)
@@ -515,18 +519,21 @@ class Executor:
     def _perform(self, action: Any, tactic: str, now: float) -> ActionOutcome:
         try:
             if isinstance(action, PublishAction):
-                return self.actuator.publish(action.topic, action.payload)
+                return self.actuator.publish(self.resolve(action.topic), action.payload)
             if isinstance(action, RequestAction):
-                return self.actuator.request(action.service, action.payload, action.timeout)
+                service = self.resolve(action.service)
+                return self.actuator.request(service, action.payload, action.timeout)
             if isinstance(action, ChangeModeAction):
-                return self.actuator.request(action.service, {"mode": action.mode}, 2.0)
+                return self.actuator.request(
+                    self.resolve(action.service), {"mode": action.mode}, 2.0
+                )
             if isinstance(action, SwapModelAction):
                 payload: dict[str, Any] = {"lec": action.lec}
                 if action.model is not None:
                     payload["model"] = action.model
                 if action.domain is not None:
                     payload["domain"] = action.domain
-                return self.actuator.request(action.service, payload, 5.0)
+                return self.actuator.request(self.resolve(action.service), payload, 5.0)
             if isinstance(action, NotifyAction):
                 return self.actuator.notify(action, tactic, now)
         except Exception as exc:  # an actuator must never kill the loop
@@ -563,16 +570,17 @@ class Executor:
             self.on_failure(rt, now)
 
 
-def _describe(action: Any) -> dict[str, Any]:
+def _describe(action: Any, resolve: Callable[[str], str]) -> dict[str, Any]:
+    """What the decision log says of an action: the topic or service it went to, resolved."""
     if isinstance(action, PublishAction):
-        return {"topic": action.topic, "payload": action.payload}
+        return {"topic": resolve(action.topic), "payload": action.payload}
     if isinstance(action, RequestAction):
-        return {"service": action.service, "payload": action.payload}
+        return {"service": resolve(action.service), "payload": action.payload}
     if isinstance(action, ChangeModeAction):
-        return {"service": action.service, "mode": action.mode}
+        return {"service": resolve(action.service), "mode": action.mode}
     if isinstance(action, SwapModelAction):
         return {
-            "service": action.service,
+            "service": resolve(action.service),
             "lec": action.lec,
             "model": action.model,
             "domain": action.domain,

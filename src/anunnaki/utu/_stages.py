@@ -661,7 +661,12 @@ class ExecuteStage:
         self.on_run_stop = on_run_stop
         # The planner here holds the tactic runtimes (and knows the conflicts); plan selects.
         self.planner = Planner(parts.tactics, knowledge, dwell=parts.config.dwell)
-        self.executor = Executor(actuator, knowledge, on_failure=self._escalate)
+        self.executor = Executor(
+            actuator,
+            knowledge,
+            on_failure=self._escalate,
+            resolve=self._endpoint_name,
+        )
         self.paused = False
         self.stopped = False  # a run-stop performed here
         self.heard_run_stop = False  # a run-stop heard on its topic, not yet performed
@@ -803,6 +808,10 @@ class ExecuteStage:
                 t, "operator_refused", None, caller=caller, reason=f"unknown operation {kind!r}"
             )
 
+    def _endpoint_name(self, name: str) -> str:
+        """The topic or service a tactic's (logical) endpoint name means in the current binding."""
+        return self.parts.model.endpoint_name(name)
+
     def _apply_reload(self, op: Mapping[str, Any], t: float, caller: str) -> None:
         kb = self.knowledge
         kb.record_decision(t, "reload_requested", None, caller=caller)
@@ -812,9 +821,9 @@ class ExecuteStage:
             return
         sources = _sources_of(op)
         tactics = tactics_from_sources(sources)
-        self.parts = dataclasses.replace(
-            self.parts, sources=sources, model=self.parts.model, tactics=tactics
-        )
+        # A new binding may map the tactics' logical endpoints elsewhere: take its model.
+        model = model_from_sources(sources) if "goal_model" in sources else self.parts.model
+        self.parts = dataclasses.replace(self.parts, sources=sources, model=model, tactics=tactics)
         self.planner.set_tactics(tactics)
         files = [op[k] for k in ("goal_model", "binding", "tactics") if isinstance(op.get(k), str)]
         kb.record_decision(t, "reloaded", None, files=files)
