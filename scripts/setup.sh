@@ -12,6 +12,9 @@ cd "$(dirname "$0")/.."
 # Chromium for the dashboard's browser tests (apt, as root; otherwise it says what to do).
 scripts/setup-browser.sh
 
+# Debian's ROS 1 Python packages for the ROS 1 bridge's tests (apt, as root; issue #14).
+scripts/setup-ros.sh
+
 PYTHON=${PYTHON:-python3}
 EXTRAS=${ANUNNAKI_EXTRAS:-dev,bus,vision,dashboard,plot,enlil}
 VENV=.venv

@@ -628,3 +628,74 @@ def test_json_output_of_an_unreadable_file(
     out = json.loads(capsys.readouterr().out)
     assert out["exit_code"] == 2
     assert out["findings"][0]["message"] == "cannot read file: No such file or directory"
+
+
+# -- logical endpoints ------------------------------------------------------------------------
+
+LOGICAL = BINDING.replace(
+    "  - name: /r/set_mode\n", "  - name: /r/set_mode\n    logical: set_mode\n"
+)
+
+
+def test_a_logical_endpoint_is_checked_against_the_one_the_binding_maps(
+    files: dict[str, Path], tmp_path: Path
+) -> None:
+    files["binding"].write_text(LOGICAL)
+    good = tactic(
+        "mode",
+        "{goal: G4, state: unsatisfied}",
+        "{type: change_mode, service: set_mode, mode: manual}",
+    )
+    bad = tactic(
+        "bad",
+        "{goal: G5, state: unsatisfied}",
+        "{type: change_mode, service: set_mode, mode: sleep}",
+    )
+    horn = tactic(
+        "horn", "{goal: G3, state: unsatisfied}", "{type: publish, topic: horn, payload: {}}"
+    )
+    tactics = write_tactics(tmp_path, COVERING, good, bad, horn)
+    result = check_files(files["model"], files["binding"], tactics)
+    assert rendered(result.errors) == [
+        f"{tactics}:{line_of(tactics, 'sleep')}: error: tactics[bad].actions[0]: field 'mode' "
+        "of /r/set_mode must be one of auto, manual; got 'sleep'",
+        f"{tactics}:{line_of(tactics, 'horn, payload')}: error: tactics[horn].actions[0]: "
+        "unknown topic horn (hint: the binding maps no logical topic 'horn'; its logical "
+        "topics: none (add 'logical: horn' to the binding's topic that does this))",
+    ]
+
+
+def test_a_direct_name_with_a_logical_name_warns_and_another_platform_says_how_to_migrate(
+    files: dict[str, Path], tmp_path: Path
+) -> None:
+    files["binding"].write_text(LOGICAL)
+    direct = tactic(
+        "mode",
+        "{goal: G4, state: unsatisfied}",
+        "{type: change_mode, service: /r/set_mode, mode: manual}",
+    )
+    tactics = write_tactics(tmp_path, COVERING, direct)
+    result = check_files(files["model"], files["binding"], tactics)
+    line = line_of(tactics, "/r/set_mode")
+    assert result.errors == []  # it still runs on this binding: a warning, not an error
+    assert (
+        f"{tactics}:{line}: warning: tactics[mode].actions[0]: /r/set_mode is named "
+        "directly; its logical name is 'set_mode'" in rendered(result.warnings)[0]
+    )
+    # another platform puts set_mode elsewhere: the direct name is unknown there
+    files["binding"].write_text(LOGICAL.replace("/r/set_mode", "/other/mode"))
+    result = check_files(files["model"], files["binding"], tactics)
+    assert rendered(result.errors) == [
+        f"{tactics}:{line}: error: tactics[mode].actions[0]: unknown service /r/set_mode "
+        "(hint: the binding's services: /other/mode, /r/stop; to migrate, name a logical "
+        "endpoint (set_mode) in the tactic, which every binding maps to its own name)"
+    ]
+
+
+def test_the_rover_check_with_the_ros_binding_passes_from_the_command_line(
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    rover = EXAMPLES / "rover"
+    args = ["check", str(rover / "goals.yaml"), str(rover / "binding-ros.yaml")]
+    assert main([*args, str(rover / "tactics.xml")]) == 0
+    assert "unknown service" not in capsys.readouterr().out

@@ -29,6 +29,20 @@ def test_examples_check_clean(name: str, tactics: str) -> None:
     assert result.exit_code == 0
 
 
+@pytest.mark.parametrize("tactics", ["tactics.xml", "tactics.yaml"])
+@pytest.mark.parametrize("binding", ["binding.yaml", "binding-ros.yaml"])
+def test_rover_tactics_check_unchanged_against_either_binding(tactics: str, binding: str) -> None:
+    """The tactics name logical endpoints (set_mode, stop, buzzer) that each binding maps."""
+    d = EXAMPLES / "rover"
+    result = check_files(d / "goals.yaml", d / binding, d / tactics)
+    assert [f.render() for f in result.findings] == []
+    model = result.model
+    assert model is not None
+    where = {"binding.yaml": "/rover/set_mode", "binding-ros.yaml": "/rover/controller/set_mode"}
+    assert model.endpoint_name("set_mode") == where[binding]
+    assert model.endpoint_name("/rover/anything") == "/rover/anything"
+
+
 def test_rover_goal_model_serves_another_platform_by_swapping_the_binding() -> None:
     d = EXAMPLES / "rover"
     result = check_files(d / "goals.yaml", d / "binding-ros.yaml")

@@ -36,7 +36,7 @@ from anunnaki.goals import (
     load_binding,
     load_goal_model,
 )
-from anunnaki.tactics import GoalState, TacticSet, load_tactics
+from anunnaki.tactics import EndpointReference, GoalState, TacticSet, load_tactics
 
 __all__ = ["CheckResult", "check_files", "check_tactics"]
 
@@ -219,19 +219,9 @@ def _endpoint_findings(model: GoalModel, ts: TacticSet, path: str | None) -> lis
     """Findings for unknown endpoints, topics requested (or services published), payloads."""
     out: list[Finding] = []
     for ep in ts.referenced_endpoints():
-        spec = model.endpoints.get(ep.name)
+        spec = model.endpoint(ep.name)
         if spec is None:
-            known = sorted(n for n, e in model.endpoints.items() if e.kind == ep.kind)
-            out.append(
-                Finding(
-                    "error",
-                    f"unknown {ep.kind} {ep.name}",
-                    path,
-                    ep.line,
-                    ep.element,
-                    f"the binding's {ep.kind}s: {', '.join(known) or 'none'}",
-                )
-            )
+            out.append(_unknown_endpoint(model, ep, path))
             continue
         if spec.kind != ep.kind:
             out.append(
@@ -244,9 +234,43 @@ def _endpoint_findings(model: GoalModel, ts: TacticSet, path: str | None) -> lis
                     "publish to topics, request services",
                 )
             )
+        if spec.logical is not None and ep.name == spec.name:
+            out.append(
+                Finding(
+                    "warning",
+                    f"{ep.name} is named directly; its logical name is '{spec.logical}'",
+                    path,
+                    ep.line,
+                    ep.element,
+                    f"write {spec.logical} instead, so the tactic runs unchanged on every "
+                    "binding that maps it (docs/tactics.md, 'Logical endpoints')",
+                )
+            )
         for problem in _payload_problems(spec, ep.payload):
             out.append(Finding("error", problem, path, ep.line, ep.element))
     return out
+
+
+def _unknown_endpoint(model: GoalModel, ep: EndpointReference, path: str | None) -> Finding:
+    """The finding for a tactic's endpoint that neither the model nor its binding has."""
+    known = sorted(n for n, e in model.endpoints.items() if e.kind == ep.kind)
+    logical = sorted(
+        k for k, n in model.logical.items() if (e := model.endpoints.get(n)) and e.kind == ep.kind
+    )
+    if ep.name.startswith("/"):
+        hint = f"the binding's {ep.kind}s: {', '.join(known) or 'none'}"
+        if logical:
+            hint += (
+                f"; to migrate, name a logical endpoint ({', '.join(logical)}) in the "
+                "tactic, which every binding maps to its own name"
+            )
+    else:
+        hint = (
+            f"the binding maps no logical {ep.kind} '{ep.name}'; its logical {ep.kind}s: "
+            f"{', '.join(logical) or 'none'} (add 'logical: {ep.name}' to the binding's "
+            f"{ep.kind} that does this)"
+        )
+    return Finding("error", f"unknown {ep.kind} {ep.name}", path, ep.line, ep.element, hint)
 
 
 def _expression_findings(model: GoalModel, ts: TacticSet, path: str | None) -> list[Finding]:

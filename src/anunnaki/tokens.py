@@ -24,6 +24,7 @@ _CLASSES: tuple[tuple[str, int], ...] = (
     ("ABCDEFGHIJKLMNOPQRSTUVWXYZ", 26),
     ("0123456789", 10),
 )
+_URLSAFE = frozenset("ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789-_")
 
 
 def token_weakness(token: str) -> str | None:
@@ -32,14 +33,18 @@ def token_weakness(token: str) -> str | None:
     Its strength is estimated as ``length × log2(alphabet)``, the alphabet being the sum of
     the character classes it uses (lower case 26, upper case 26, digits 10, anything else
     33), and must reach :data:`MIN_TOKEN_BITS`; a token of one repeated character or with
-    fewer than 8 distinct characters is refused whatever its length. A
-    ``secrets.token_urlsafe(16)`` token (22 characters) passes.
+    fewer than 8 distinct characters is refused whatever its length. A token made of the
+    URL-safe base64 alphabet in both cases counts as drawn from all 64 (a 22-character
+    ``secrets.token_urlsafe(16)`` may happen to hold no digit, no ``-`` and no ``_``: it
+    passes).
     """
     if not token.strip():
         return "it is empty"
     alphabet = sum(size for chars, size in _CLASSES if any(c in chars for c in token))
     if any(not any(c in chars for chars, _ in _CLASSES) for c in token):
         alphabet += 33
+    if set(token) <= _URLSAFE and not token.islower() and not token.isupper():
+        alphabet = max(alphabet, 64)
     bits = len(token) * math.log2(max(alphabet, 2))
     if len(set(token)) < 8:
         return f"it uses {len(set(token))} distinct characters (at least 8)"

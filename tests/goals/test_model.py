@@ -202,6 +202,38 @@ def test_endpoints_merge_and_an_override_is_a_warning() -> None:
     assert parse_goal_model(SMALL, binding=parse_binding(same)).findings == []
 
 
+def test_a_binding_maps_logical_endpoints_over_the_goal_models() -> None:
+    inline = SMALL.replace(
+        "  - name: /shared/mode\n", "  - name: /shared/mode\n    logical: mode\n"
+    )
+    inline = inline.replace(
+        "  - name: /inline/stop\n", "  - name: /inline/stop\n    logical: stop\n"
+    )
+    lab = BINDING + "  - name: /lab/halt\n    logical: stop\n    kind: service\n"
+    model = parse_goal_model(inline, binding=parse_binding(lab, source="lab.yaml"))
+    assert model.logical == {"stop": "/lab/halt", "mode": "/shared/mode"}
+    assert "/inline/stop" not in model.endpoints  # the platform put 'stop' elsewhere
+    stop = model.endpoint("stop")
+    assert stop is not None and stop.name == "/lab/halt"
+    assert model.endpoint("/lab/buzzer") is model.endpoints["/lab/buzzer"]
+    assert model.endpoint("horn") is None
+    assert model.endpoint_name("stop") == "/lab/halt"
+    # without the binding the goal model's own mapping holds
+    assert parse_goal_model(inline, strict=False).endpoint_name("stop") == "/inline/stop"
+
+
+def test_a_logical_name_mapped_twice_is_an_error() -> None:
+    twice = BINDING.replace("    kind: topic\n", "    logical: horn\n    kind: topic\n")
+    twice += "  - name: /lab/horn\n    logical: horn\n    kind: topic\n"
+    model = parse_goal_model(SMALL, binding=parse_binding(twice, source="lab.yaml"), strict=False)
+    assert (
+        "lab.yaml:24: error: endpoints[/lab/horn].logical: logical endpoint 'horn' is mapped "
+        "twice (/lab/buzzer and /lab/horn) (hint: map each logical name to one topic or "
+        "service)"
+    ) in findings(model)
+    assert model.endpoint_name("horn") == "/lab/buzzer"  # the first one stands
+
+
 def test_an_endpoint_declared_twice_is_an_error() -> None:
     twice = BINDING + "  - name: /lab/buzzer\n    kind: service\n"
     model = parse_goal_model(SMALL, binding=parse_binding(twice, source="lab.yaml"), strict=False)

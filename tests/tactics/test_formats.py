@@ -40,7 +40,7 @@ FAIL_SAFE = TacticSet(
             cooldown=30,
             preconditions=[GoalState(goal="G3", state="unsatisfied")],
             actions=[
-                ChangeModeAction(service="/rover/set_mode", mode="manual"),
+                ChangeModeAction(service="set_mode", mode="manual"),
                 NotifyAction(
                     channel="email",
                     to="operator@example.com",
@@ -73,7 +73,7 @@ def test_both_rover_examples_hold_the_papers_fail_safe_tactic() -> None:
         GoalReference("tactics[fail-safe].postconditions[0]", 16),
     ]
     assert from_yaml.referenced_endpoints()[0] == EndpointReference(
-        "service", "/rover/set_mode", {"mode": "manual"}, "tactics[fail-safe].actions[0]", 14
+        "service", "set_mode", {"mode": "manual"}, "tactics[fail-safe].actions[0]", 14
     )
     assert from_xml.expressions() == []
 

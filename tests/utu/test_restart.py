@@ -35,6 +35,7 @@ from helpers_procs import (
 )
 
 from anunnaki.bus import Bus, Generic, open_bus
+from anunnaki.utu import replay
 
 pytest.importorskip("zenoh")
 
@@ -66,6 +67,12 @@ def log(tmp_path: Path) -> Path:
 def pause_until(t: float) -> None:
     """Let the wall clock reach ``t`` (to act at a chosen moment of a scenario)."""
     threading.Event().wait(max(0.0, t - time.time()))
+
+
+def assert_replays_identically(db: Path) -> None:
+    report = replay(db)
+    assert report.identical, report.summary() + "\n" + "\n".join(report.notes)
+    assert any("the run was restarted at t = " in n for n in report.notes), report.notes
 
 
 def assert_ready(bus: Bus) -> None:
@@ -217,7 +224,9 @@ def test_kill_while_postcondition_pending_keeps_deadline_and_cooldown(
     resumed_as = (resumed.data["state"], resumed.data["next_action"], resumed.data["deadline"])
     assert resumed_as == ("awaiting", 2, deadline)  # the ORIGINAL deadline
     assert deadline <= failed.t < restarted_at + TACTIC_DEADLINE
-    assert failed.data["goals"] == {"G3": "unsatisfied"}
+    # G3 is unsatisfied (the rover stays autonomous), or unknown when the restarted manager
+    # came up on a loaded machine after its restored values had gone stale: not satisfied.
+    assert failed.data["goals"]["G3"] in ("unsatisfied", "unknown")
     assert of(second, "started") == of(second, "action") == []
     assert [d.kind for d in second if d.kind.startswith("escalat")] == ["escalation_exhausted"]
 
@@ -228,6 +237,12 @@ def test_kill_while_postcondition_pending_keeps_deadline_and_cooldown(
     assert of(third, "selected")
     assert deferred3.data["reason"] == f"cooldown until {cooldown:.3f}"
     assert deferred3.t < cooldown
+    # Each restart is in the log, and the replay restarts there too: identical (issue #12).
+    assert [d.data["node"] for d in [*second, *third] if d.kind == "restarted"] == [
+        "manager",
+        "manager",
+    ]
+    assert_replays_identically(db)
     assert of(third, "started") == of(third, "action") == []
     assert len(of(read_decisions(db), "started")) == 1
     assert rover.mode_requests() == 1  # one command for the one started tactic

@@ -147,6 +147,8 @@ class GoalModel:
         agents: Agents by id, with their topics and attribute → (topic, field) map.
         goals / obstacles / domain_properties: Elements by id.
         endpoints: Actuation endpoints by ROS name (inline ones, then the binding's).
+        logical: Logical endpoint name (``set_mode``) → ROS name; the binding's mapping of a
+            logical name replaces the goal model's (and drops that inline endpoint).
         root: The root goal's id.
         parents: Goal id → ids of goals it refines.
         obstructed_by: Goal id → ids of obstacles obstructing it.
@@ -177,6 +179,7 @@ class GoalModel:
         self.domain_properties: dict[str, DomainPropertySpec] = {}
         self.agents: dict[str, Agent] = {}
         self.endpoints: dict[str, EndpointSpec] = {}
+        self.logical: dict[str, str] = {}
         self.parents: dict[str, list[str]] = {}
         self.obstructed_by: dict[str, list[str]] = {}
         self.expressions: dict[tuple[str, str], Expression] = {}
@@ -217,11 +220,59 @@ class GoalModel:
     def _resolve(self) -> None:
         self._collect()
         self._bind_agents()
+        self._map_logical()
         self._check_agent_ids()
         self._link()
         self._find_root()
         self._find_detached()
         self._compile()
+
+    def _logical_names(
+        self, endpoints: list[EndpointSpec], lines: LineMap, path: str | None
+    ) -> dict[str, str]:
+        """Logical name → ROS name of one file's endpoints (a name mapped twice: an error)."""
+        out: dict[str, str] = {}
+        for i, ep in enumerate(endpoints):
+            if ep.logical is None:
+                continue
+            if ep.logical in out and out[ep.logical] != ep.name:
+                self._add(
+                    "error",
+                    f"logical endpoint '{ep.logical}' is mapped twice ({out[ep.logical]} "
+                    f"and {ep.name})",
+                    path=path,
+                    line=lines.line(("endpoints", i, "logical")) or lines.line(("endpoints", i)),
+                    element=f"endpoints[{ep.name}].logical",
+                    hint="map each logical name to one topic or service",
+                )
+                continue
+            out[ep.logical] = ep.name
+        return out
+
+    def _map_logical(self) -> None:
+        """Build :attr:`logical`: the goal model's names, then the binding's over them."""
+        inline = self._logical_names(self.spec.endpoints, self.lines, self.path)
+        self.logical = dict(inline)
+        if self.binding is None:
+            return
+        bound = self._logical_names(
+            self.binding.spec.endpoints, self.binding.lines, self.binding.path
+        )
+        in_binding = {ep.name for ep in self.binding.spec.endpoints}
+        for logical, name in bound.items():
+            old = inline.get(logical)
+            if old is not None and old != name and old not in in_binding:
+                # The platform puts this logical endpoint elsewhere: the default is gone.
+                self.endpoints.pop(old, None)
+            self.logical[logical] = name
+
+    def endpoint(self, name: str) -> EndpointSpec | None:
+        """The endpoint a tactic means by ``name``: a logical name or a ROS name."""
+        return self.endpoints.get(self.logical.get(name, name))
+
+    def endpoint_name(self, name: str) -> str:
+        """The ROS name a tactic's ``name`` stands for (a ROS name stands for itself)."""
+        return self.logical.get(name, name)
 
     def _check_agent_ids(self) -> None:
         # Ids may contain '-' and may be words the expression language reserves; an agent

@@ -195,11 +195,20 @@ class PayloadField(_Strict):
         return v
 
 
+LOGICAL_PATTERN = r"^[A-Za-z][A-Za-z0-9_]*$"
+
+
 class EndpointSpec(_Strict):
-    """An actuation endpoint of the managed system: a command topic or a service."""
+    """An actuation endpoint of the managed system: a command topic or a service.
+
+    ``name`` is the topic or service on the platform (``/rover/controller/set_mode``);
+    ``logical`` is the platform-free name tactics use (``set_mode``), so the same tactics
+    run on every binding that maps that logical name.
+    """
 
     name: str
     kind: Literal["topic", "service"]
+    logical: Annotated[str, Field(pattern=LOGICAL_PATTERN, max_length=64)] | None = None
     description: str = ""
     payload: dict[str, PayloadField] = Field(default_factory=dict)
 

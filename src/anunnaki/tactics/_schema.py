@@ -28,6 +28,7 @@ from anunnaki import topics
 from anunnaki.tactics._values import (
     _EMAIL,
     _URL,
+    EndpointName,
     EndpointReference,
     ExpressionReference,
     Filled,
@@ -35,7 +36,6 @@ from anunnaki.tactics._values import (
     GoalReference,
     Line,
     Payload,
-    RosName,
     Seconds,
     Text,
     Token,
@@ -119,7 +119,7 @@ class PublishAction(_Model):
     """Publish one message on a topic of the managed system."""
 
     type: Literal["publish"] = "publish"
-    topic: RosName
+    topic: EndpointName
     payload: Payload
 
     def endpoint(self) -> tuple[Literal["topic", "service"], str, dict[str, JsonValue]]:
@@ -131,7 +131,7 @@ class RequestAction(_Model):
     """Call a service of the managed system and wait up to ``timeout`` seconds for the reply."""
 
     type: Literal["request"] = "request"
-    service: RosName
+    service: EndpointName
     payload: Payload = Field(default_factory=dict)
     timeout: Annotated[Seconds, Field(gt=0)] = 2.0
 
@@ -145,7 +145,7 @@ class ChangeModeAction(_Model):
 
     type: Literal["change_mode"] = "change_mode"
     mode: Token
-    service: RosName
+    service: EndpointName
 
     def endpoint(self) -> tuple[Literal["topic", "service"], str, dict[str, JsonValue]]:
         """Return ``(kind, name, payload)`` of what this action sends."""
@@ -163,7 +163,7 @@ class SwapModelAction(_Model):
     lec: Token = "detector"
     model: Token | None = None
     domain: Token | None = None
-    service: RosName = topics.SWAP
+    service: EndpointName = topics.SWAP
 
     @model_validator(mode="after")
     def _one_target(self) -> SwapModelAction:

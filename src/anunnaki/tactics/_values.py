@@ -54,6 +54,7 @@ MAX_PAYLOAD_DEPTH: Final = 16
 
 _ID = re.compile(r"[A-Za-z][A-Za-z0-9_\-]*")
 _ROS_NAME = re.compile(r"(/[A-Za-z0-9_]+)+")
+_LOGICAL_NAME = re.compile(r"[A-Za-z][A-Za-z0-9_]*")
 _EMAIL = re.compile(r"[^@\s]+@[^@\s]+\.[^@\s]+")
 _URL = re.compile(r"https?://[^\s/?#]+\S*")
 # Control characters (C0 but tab and newline, DEL, C1) and what XML 1.0 cannot hold: they
@@ -67,6 +68,10 @@ CHANNEL_HINT: Final = "valid channels: " + ", ".join(NOTIFY_CHANNELS)
 ROS_HINT: Final = (
     "a ROS-style name starts with '/' and uses letters, digits and '_' in '/'-separated "
     "parts, e.g. /rover/set_mode"
+)
+ENDPOINT_HINT: Final = (
+    "name the endpoint by its logical name (letters, digits and '_', e.g. set_mode), which "
+    "the binding maps to a topic or service, or by a ROS-style name such as /rover/set_mode"
 )
 
 
@@ -130,6 +135,21 @@ def _check_ros_name(value: str) -> str:
     return value
 
 
+def _check_endpoint_name(value: str) -> str:
+    if not (_ROS_NAME.fullmatch(value) or _LOGICAL_NAME.fullmatch(value)):
+        raise _error(
+            "endpoint_name",
+            f"{value!r} is not a ROS-style name or a logical endpoint name",
+            hint=ENDPOINT_HINT,
+        )
+    return value
+
+
+def is_logical_name(name: str) -> bool:
+    """Tell whether ``name`` is a logical endpoint name (``set_mode``), not a ROS name."""
+    return not name.startswith("/")
+
+
 def _clean_text(value: str) -> str:
     """Strip the text and the indentation its continuation lines share (as for docstrings).
 
@@ -171,6 +191,9 @@ GoalId = Annotated[str, AfterValidator(_check_id)]
 
 RosName = Annotated[str, AfterValidator(_check_ros_name)]
 """A ROS-style global name: ``/rover/set_mode``."""
+
+EndpointName = Annotated[str, AfterValidator(_check_endpoint_name)]
+"""An actuation endpoint: a logical name the binding maps (``set_mode``) or a ROS name."""
 
 
 def _check_payload_value(value: JsonValue, where: tuple[str | int, ...]) -> None:

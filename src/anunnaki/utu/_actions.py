@@ -61,6 +61,8 @@ class ActionRunner(Protocol):
         call: Callable[[], ActionOutcome],
         timeout: float,
         now: float,
+        *,
+        attempt: int = 0,
     ) -> ActionOutcome | None:
         """Start one action; its outcome now, or ``None`` while it is in flight."""
         ...
@@ -123,6 +125,8 @@ class ThreadRunner:
         call: Callable[[], ActionOutcome],
         timeout: float,
         now: float,
+        *,
+        attempt: int = 0,
     ) -> ActionOutcome | None:
         """Start ``call`` on a worker thread; its outcome if back within ``settle`` seconds."""
         if self._closed:
@@ -200,22 +204,25 @@ class RecordedOutcome:
     index: int
     ok: bool
     detail: str
+    attempt: int | None = None  # which start of the tactic (None: an older log)
 
 
 class ReplayRunner:
     """Each action gets its recorded outcome, at the instant the run took it.
 
-    An action is matched with the next recorded outcome of the same tactic and action
-    index. Recorded at the instant it was started (a run whose actions ran on the loop, or
-    that came back within the step), the outcome is given at once; recorded later, it is
-    handed back by the first cycle at or after that instant — the cycle the run took it in.
+    An action is matched with the recorded outcome of the same tactic, start (attempt) and
+    action index — an action in flight when the run was killed has none, and a restarted
+    run goes on with the next one. Recorded at the instant it was started (a run whose
+    actions ran on the loop, or that came back within the step), the outcome is given at
+    once; recorded later, it is handed back by the first cycle at or after that instant —
+    the cycle the run took it in.
     An action the run never recorded (the log ends first) succeeds at once.
     """
 
     def __init__(self, recorded: Iterable[RecordedOutcome], *, tolerance: float = 1e-9) -> None:
-        self._recorded: dict[tuple[str, int], deque[RecordedOutcome]] = {}
+        self._recorded: dict[tuple[str, int | None, int], deque[RecordedOutcome]] = {}
         for r in recorded:
-            self._recorded.setdefault((r.tactic, r.index), deque()).append(r)
+            self._recorded.setdefault((r.tactic, r.attempt, r.index), deque()).append(r)
         self._pending: list[RecordedOutcome] = []
         self.tolerance = tolerance
 
@@ -226,9 +233,13 @@ class ReplayRunner:
         call: Callable[[], ActionOutcome],
         timeout: float,
         now: float,
+        *,
+        attempt: int = 0,
     ) -> ActionOutcome | None:
         """The recorded outcome now, or ``None`` until the instant the run took it."""
-        queue = self._recorded.get((tactic, index))
+        queue = self._recorded.get((tactic, attempt, index)) or self._recorded.get(
+            (tactic, None, index)
+        )
         if not queue:
             return ActionOutcome(True, "not recorded (the log ends first)")
         rec = queue.popleft()

@@ -348,6 +348,23 @@ class Knowledge:
                 rows = self._db.execute(q + " ORDER BY id", args).fetchall()
         return [Decision(i, t, k, tac, json.loads(d)) for i, t, k, tac, d in rows]
 
+    def holds_run(self) -> bool:
+        """Whether a run was recorded here: a decision, or an input that is not a marker."""
+        self.flush()
+        with self._lock:
+            row = self._db.execute(
+                "SELECT EXISTS(SELECT 1 FROM decisions) OR "
+                "EXISTS(SELECT 1 FROM inputs WHERE substr(topic, 1, 2) != '__')"
+            ).fetchone()
+        return bool(row[0])
+
+    def first_input_t(self) -> float | None:
+        """The instant of the first recorded input (markers included), if any."""
+        self.flush()
+        with self._lock:
+            row = self._db.execute("SELECT t FROM inputs ORDER BY id LIMIT 1").fetchone()
+        return None if row is None else float(row[0])
+
     def last_t(self) -> float:
         """The latest instant an input or a decision was recorded at (0 for an empty run)."""
         self.flush()

@@ -60,6 +60,8 @@ from anunnaki.utu._stages import (
     KnowledgeStage,
     MonitorStage,
     PlanStage,
+    mark_restart,
+    resuming,
 )
 
 __all__ = [
@@ -206,6 +208,7 @@ class AutonomicManager:
         if not self.knowledge.models_at() and parts.sources:
             for kind, (path, text) in parts.sources.items():
                 self.knowledge.record_model(0.0, kind, path, text)
+        restarted = resuming(self.knowledge)
         self.monitor_stage = MonitorStage(parts)
         self.analyze_stage = AnalyzeStage(parts, self.knowledge)
         self.plan_stage = PlanStage(parts, self.knowledge)
@@ -220,6 +223,8 @@ class AutonomicManager:
             runner=actions,
         )
         self.knowledge_stage = KnowledgeStage(parts, self.knowledge)
+        if restarted:
+            mark_restart(self.knowledge, "manager")
         self.now = self.analyze_stage.now
         self.monitor_stage.last_t = self.now
         if bus is not None:
@@ -589,6 +594,36 @@ class AutonomicManager:
                 if topic not in self._pull:
                     self._subscribe_topic(topic)
         return [] if reply["ok"] else [str(reply["error"])]
+
+    def restart_part(self, node: str) -> None:
+        """Start one part of the loop again on its knowledge, as a restarted node would.
+
+        ``node`` is ``analyze``, ``plan`` or ``execute`` (a per-node run whose node was
+        killed and started again): the stage is rebuilt from this manager's knowledge —
+        values, tactic state, run-stop — and a restart recorded. A replay does this where
+        the run's log says a node was restarted.
+
+        Raises:
+            ValueError: Another ``node``.
+
+        """
+        kb = self.knowledge
+        with self._step_lock:
+            if node == "analyze":
+                self.analyze_stage = AnalyzeStage(self.parts, kb)
+            elif node == "plan":
+                self.plan_stage = PlanStage(self.parts, kb)
+            elif node == "execute":
+                self.execute_stage = ExecuteStage(
+                    self.parts,
+                    kb,
+                    self.actuator,
+                    on_run_stop=self._announce_run_stop,
+                    runner=self.actions,
+                )
+            else:
+                raise ValueError(f"no part {node!r} to restart: analyze, plan or execute")
+            mark_restart(kb, node)
 
     # -- live ----------------------------------------------------------------------------------
     def spin(

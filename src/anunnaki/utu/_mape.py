@@ -461,12 +461,16 @@ class Executor:
         *,
         on_failure: Callable[[TacticRuntime, float], None],
         runner: ActionRunner | None = None,
+        resolve: Callable[[str], str] | None = None,
     ) -> None:
         self.actuator = actuator
         self.knowledge = knowledge
         self.on_failure = on_failure
         self.runner = runner
         self.waiting: dict[str, int] = {}  # tactic -> index of its action in flight
+        # A tactic may name a logical endpoint (``set_mode``); the binding maps it to the
+        # platform's topic or service (GoalModel.endpoint_name). A ROS name stands for itself.
+        self.resolve: Callable[[str], str] = resolve or (lambda name: name)
 
     def start(self, rt: TacticRuntime, now: float, *, reason: str = "preconditions hold") -> None:
         """Start a tactic: persist, then run its actions."""
@@ -493,7 +497,7 @@ class Executor:
         """Run the remaining actions of a running tactic (none while one is in flight).
 
         A request goes to the :class:`~anunnaki.utu.ActionRunner` when there is one: the
-        tactic stays ``running`` and :meth:`resolve` continues it when the outcome is back.
+        tactic stays ``running`` and :meth:`collect` continues it when the outcome is back.
         """
         if rt.name in self.waiting:
             return
@@ -504,7 +508,7 @@ class Executor:
             rt.next_action = i + 1
             self.knowledge.save_tactic(rt.row())  # write-ahead: action i is dispatched
             self.knowledge.flush()  # ... and on disk, with what led to it, before it runs
-            outcome = self._dispatch(action, rt.name, i, now)
+            outcome = self._dispatch(action, rt.name, i, now, rt.attempt)
             if outcome is None:  # in flight: the cycle that finds it back goes on
                 self.waiting[rt.name] = i
                 return
@@ -516,7 +520,7 @@ class Executor:
         else:
             self._finish(rt, now, ok=True, note="no postconditions")
 
-    def resolve(self, runtimes: Mapping[str, TacticRuntime], now: float) -> None:
+    def collect(self, runtimes: Mapping[str, TacticRuntime], now: float) -> None:
         """Take the actions that came back: record each, continue or fail its tactic."""
         if self.runner is None:
             return
@@ -537,19 +541,22 @@ class Executor:
             "action",
             rt.name,
             index=i,
+            attempt=rt.attempt,
             type=action.type,
             ok=outcome.ok,
             detail=outcome.detail,
-            **_describe(action),
+            **_describe(action, self.resolve),
         )
         if not outcome.ok:  # refused, timed out or no service: failed, whatever follows
             self._finish(rt, now, ok=False, note="action failed", action=i)
             return False
         return True
 
-    def _dispatch(self, action: Any, tactic: str, index: int, now: float) -> ActionOutcome | None:
+    def _dispatch(
+        self, action: Any, tactic: str, index: int, now: float, attempt: int = 0
+    ) -> ActionOutcome | None:
         """Perform ``action``: on the loop, or through the runner for a request."""
-        request = _request_of(action)
+        request = _request_of(action, self.resolve)
         if request is None or self.runner is None:
             return self._perform(action, tactic, now)
         service, payload, timeout = request
@@ -559,18 +566,18 @@ class Executor:
             return actuator.request(service, payload, timeout)
 
         try:
-            return self.runner.submit(tactic, index, call, timeout, now)
+            return self.runner.submit(tactic, index, call, timeout, now, attempt=attempt)
         except Exception as exc:  # a runner that cannot start it: failed, never fatal
             log.warning("action of %s could not start: %r", tactic, exc)
             return ActionOutcome(False, f"{type(exc).__name__}: {exc}")
 
     def _perform(self, action: Any, tactic: str, now: float) -> ActionOutcome:
         try:
-            request = _request_of(action)
+            request = _request_of(action, self.resolve)
             if request is not None:
                 return self.actuator.request(*request)
             if isinstance(action, PublishAction):
-                return self.actuator.publish(action.topic, action.payload)
+                return self.actuator.publish(self.resolve(action.topic), action.payload)
             if isinstance(action, NotifyAction):
                 return self.actuator.notify(action, tactic, now)
         except Exception as exc:  # an actuator must never kill the loop
@@ -607,32 +614,35 @@ class Executor:
             self.on_failure(rt, now)
 
 
-def _request_of(action: Any) -> tuple[str, dict[str, Any], float] | None:
-    """A service request's (service, payload, timeout), or ``None`` for another action."""
+def _request_of(
+    action: Any, resolve: Callable[[str], str]
+) -> tuple[str, dict[str, Any], float] | None:
+    """A service request's (resolved service, payload, timeout), or ``None`` for another action."""
     if isinstance(action, RequestAction):
-        return action.service, dict(action.payload), action.timeout
+        return resolve(action.service), dict(action.payload), action.timeout
     if isinstance(action, ChangeModeAction):
-        return action.service, {"mode": action.mode}, 2.0
+        return resolve(action.service), {"mode": action.mode}, 2.0
     if isinstance(action, SwapModelAction):
         payload: dict[str, Any] = {"lec": action.lec}
         if action.model is not None:
             payload["model"] = action.model
         if action.domain is not None:
             payload["domain"] = action.domain
-        return action.service, payload, 5.0
+        return resolve(action.service), payload, 5.0
     return None
 
 
-def _describe(action: Any) -> dict[str, Any]:
+def _describe(action: Any, resolve: Callable[[str], str]) -> dict[str, Any]:
+    """What the decision log says of an action: the topic or service it went to, resolved."""
     if isinstance(action, PublishAction):
-        return {"topic": action.topic, "payload": action.payload}
+        return {"topic": resolve(action.topic), "payload": action.payload}
     if isinstance(action, RequestAction):
-        return {"service": action.service, "payload": action.payload}
+        return {"service": resolve(action.service), "payload": action.payload}
     if isinstance(action, ChangeModeAction):
-        return {"service": action.service, "mode": action.mode}
+        return {"service": resolve(action.service), "mode": action.mode}
     if isinstance(action, SwapModelAction):
         return {
-            "service": action.service,
+            "service": resolve(action.service),
             "lec": action.lec,
             "model": action.model,
             "domain": action.domain,

@@ -84,6 +84,8 @@ from anunnaki.utu._stages import (
     MonitorStage,
     PlanStage,
     decision_dict,
+    mark_restart,
+    resuming,
 )
 
 __all__ = [
@@ -435,7 +437,10 @@ class AnalyzeNode(UtuNode):
 
     def bring_up(self) -> None:
         """Subscribe the batches and the execute node's reports; watch who is alive."""
+        restarted = resuming(self.knowledge)
         self.stage = AnalyzeStage(self.parts, self.knowledge, origin=secrets.token_hex(4))
+        if restarted:
+            mark_restart(self.knowledge, self.name)
         # execute itself waits up to ``timeout`` for plan: give it time to say so
         self._ack_timeout = 2 * self.timeout
         self._awaiting: tuple[int, float] | None = None  # (seq, since)
@@ -575,7 +580,10 @@ class PlanNode(UtuNode):
 
     def bring_up(self) -> None:
         """Subscribe the execute node's statuses."""
+        restarted = resuming(self.knowledge)
         self.stage = PlanStage(self.parts, self.knowledge)
+        if restarted:
+            mark_restart(self.knowledge, self.name)
         self._statuses = self.pull(topics.EXECUTE_STATUS, queue=64, expect=ExecuteStatus)
 
     @property
@@ -656,6 +664,7 @@ class ExecuteNode(UtuNode):
             self.actions = ThreadRunner(on_done=self.wake)  # requests never hold a cycle
             if not isinstance(self.clock, SimClock):
                 self.actions.settle = self.config.action_settle
+        restarted = resuming(self.knowledge)
         self.stage = ExecuteStage(
             self.parts,
             self.knowledge,
@@ -663,6 +672,8 @@ class ExecuteNode(UtuNode):
             on_run_stop=self._announce_run_stop,
             runner=self.actions,
         )
+        if restarted:
+            mark_restart(self.knowledge, self.name)
         self._flush()
         self._pending: tuple[str, int, float] | None = None  # (origin, seq, since)
         self.timeouts = 0

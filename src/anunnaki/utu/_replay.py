@@ -32,7 +32,7 @@ from __future__ import annotations
 import json
 import math
 import sqlite3
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal
@@ -43,9 +43,15 @@ from anunnaki.tactics import TacticSet
 from anunnaki.trace import Phase, Record, TraceWriter
 from anunnaki.utu._actions import RecordedOutcome, ReplayRunner
 from anunnaki.utu._actuators import RecordingActuator
-from anunnaki.utu._knowledge import SCHEMA_VERSION, Decision, Knowledge, VerdictRow
+from anunnaki.utu._knowledge import SCHEMA_VERSION, Decision, InputRow, Knowledge, VerdictRow
 from anunnaki.utu._manager import AutonomicManager
-from anunnaki.utu._stages import OPERATOR, TICK, model_from_sources, tactics_from_sources
+from anunnaki.utu._stages import (
+    OPERATOR,
+    RESTART,
+    TICK,
+    model_from_sources,
+    tactics_from_sources,
+)
 
 __all__ = [
     "ASYNC_KINDS",
@@ -90,6 +96,7 @@ KINDS: tuple[str, ...] = (
     "operator_refused",
     "liveliness_lost",
     "resumed",
+    "restarted",
     "reloaded",
     "reload_refused",
     "reload_requested",
@@ -104,8 +111,9 @@ notification delivered or not), or by the launch when a Utu node died (and it ru
 platform) — at whatever instant the run is at then: not a choice of the loop, so a replay
 neither makes nor compares them."""
 
-MARKERS: tuple[str, str] = (TICK, OPERATOR)
-"""The pseudo-topics of the ``inputs`` table that are not messages: end of a step, operator call."""
+MARKERS: tuple[str, str, str] = (TICK, OPERATOR, RESTART)
+"""The pseudo-topics of the ``inputs`` table that are not messages: end of a step, operator
+call, a part of Utu taking up the run after a restart."""
 
 OUTCOME_FIELDS: Mapping[str, frozenset[str]] = {
     "action": frozenset({"ok", "detail"}),
@@ -513,6 +521,7 @@ def _action_outcomes(knowledge: Knowledge) -> list[RecordedOutcome]:
             int(d.data.get("index", 0)),
             bool(d.data.get("ok", True)),
             str(d.data.get("detail", "")),
+            d.data["attempt"] if isinstance(d.data.get("attempt"), int) else None,
         )
         for d in knowledge.decisions()
         if d.kind == "action"
@@ -561,6 +570,61 @@ def replay(
             raise reading(path, exc) from None
 
 
+class _Feeder:
+    """Feeds recorded inputs to a replaying manager, restarting it where the run restarted."""
+
+    def __init__(self, build: Callable[[Knowledge], AutonomicManager]) -> None:
+        self.build = build
+        self.manager = build(Knowledge(":memory:"))
+        self.fed = self.steps = 0
+        self.pending: float | None = None  # the time of inputs fed since the last step
+
+    def finish_step(self) -> None:
+        """Step at the time of the inputs fed since the last step, if any."""
+        if self.pending is not None:
+            self.manager.step(self.pending)
+            self.steps += 1
+            self.pending = None
+
+    def feed(self, rows: Sequence[InputRow]) -> None:
+        """Feed every row: messages, operator calls, step ends and restarts."""
+        for row in rows:
+            if row.topic == TICK:
+                self.pending = None
+                self.manager.step(row.t)
+                self.steps += 1
+            elif row.topic == RESTART:  # the run was killed and restarted here: so is the replay
+                self.finish_step()  # the step the kill cut short: what it had recorded
+                part = str(row.msg.get("node", "manager"))
+                if part in ("analyze", "plan", "execute"):
+                    self.manager.restart_part(part)
+                else:  # a whole manager: what it had not written is gone with it
+                    self.manager = self.build(self.manager.knowledge)
+            else:
+                if row.topic == OPERATOR:
+                    _operator(self.manager, row.msg)
+                else:
+                    self.manager.feed(row.topic, row.msg, t=row.t)
+                self.fed += 1
+                self.pending = row.t
+
+
+def _restart_notes(rows: Sequence[InputRow], theirs: Sequence[Mapping[str, Any]]) -> list[str]:
+    restarts = [r for r in rows if r.topic == RESTART]
+    if restarts:
+        return [
+            "the run was restarted at t = "
+            + ", ".join(f"{r.t:.3f} ({r.msg.get('node', 'manager')})" for r in restarts)
+            + " s; the replay restarted the same parts there"
+        ]
+    if any(d["kind"] == "resumed" for d in theirs):
+        return [
+            "the run resumed in-flight tactics without a restart marker (a log from an older "
+            "version): a replay runs one manager from the start, so it diverges there"
+        ]
+    return []
+
+
 def _replay(
     knowledge: Knowledge, path: str, overrides: Mapping[str, Any], tol: float
 ) -> ReplayReport:
@@ -586,59 +650,44 @@ def _replay(
             + ", ".join(f"{t:.3f}" for t in models.reloads)
             + " s; the replay keeps the models it started with, so it may diverge from there"
         )
-    manager = AutonomicManager(
-        model,
-        tactics,
-        knowledge=Knowledge(":memory:"),
-        actuator=RecordingActuator(),
-        actions=ReplayRunner(_action_outcomes(knowledge)),
-        dwell=float(settings["dwell"]),
-        warmup=float(settings["warmup"]),
-        failsafe=settings["failsafe"],
-        escalate_to_run_stop=bool(settings["escalate_to_run_stop"]),
-        run_stop_service=settings["run_stop_service"],
-        publish_state=False,
-        sources=models.initial,
-    )
-    fed = steps = 0
-    pending: float | None = None  # the time of inputs fed since the last step
+    actions = ReplayRunner(_action_outcomes(knowledge))
+
+    def build(kb: Knowledge) -> AutonomicManager:
+        return AutonomicManager(
+            model,
+            tactics,
+            knowledge=kb,
+            actuator=RecordingActuator(),
+            actions=actions,
+            dwell=float(settings["dwell"]),
+            warmup=float(settings["warmup"]),
+            failsafe=settings["failsafe"],
+            escalate_to_run_stop=bool(settings["escalate_to_run_stop"]),
+            run_stop_service=settings["run_stop_service"],
+            publish_state=False,
+            sources=models.initial,
+        )
+
+    feeder = _Feeder(build)
     rows = list(knowledge.inputs())  # read (and decoded) first: a bad row is no replay error
     try:
-        for row in rows:
-            if row.topic == TICK:
-                manager.step(row.t)
-                steps += 1
-                pending = None
-                continue
-            if row.topic == OPERATOR:
-                _operator(manager, row.msg)
-            else:
-                manager.feed(row.topic, row.msg, t=row.t)
-            fed += 1
-            pending = row.t
-        if pending is not None:
-            manager.step(pending)
-            steps += 1
+        feeder.feed(rows)
+        if feeder.pending is not None:
             notes.append(
-                f"the log ends mid-step at t = {pending:.3f} s (the run was killed?); "
+                f"the log ends mid-step at t = {feeder.pending:.3f} s (the run was killed?); "
                 "the replay finished that step"
             )
+            feeder.finish_step()
         # The replay is over: only now read what the run decided.
-        mine = [
-            _decision_entry(d) for d in manager.knowledge.decisions() if d.kind not in ASYNC_KINDS
-        ]
-        mine_v = [_verdict_entry(v) for v in manager.knowledge.verdicts()]
+        kb = feeder.manager.knowledge
+        mine = [_decision_entry(d) for d in kb.decisions() if d.kind not in ASYNC_KINDS]
+        mine_v = [_verdict_entry(v) for v in kb.verdicts()]
     finally:
-        manager.close()
+        feeder.manager.close()
+    fed, steps = feeder.fed, feeder.steps
     theirs = [_decision_entry(d) for d in knowledge.decisions() if d.kind not in ASYNC_KINDS]
     theirs_v = [_verdict_entry(v) for v in knowledge.verdicts()]
-    restarts = sorted({d["t"] for d in theirs if d["kind"] == "resumed"})
-    if restarts:
-        notes.append(
-            "the run was restarted (resumed in-flight tactics) at t = "
-            + ", ".join(f"{t:.3f}" for t in restarts)
-            + " s; a replay runs one manager from the start, so it diverges there"
-        )
+    notes.extend(_restart_notes(rows, theirs))
     return ReplayReport(
         path=path,
         inputs=fed,

@@ -59,6 +59,7 @@ from anunnaki.utu._parts import UtuParts, check_parts, load_tactics_text, parts_
 
 __all__ = [
     "OPERATOR",
+    "RESTART",
     "TICK",
     "AnalyzeStage",
     "DecisionTail",
@@ -79,6 +80,11 @@ log = logging.getLogger("anunnaki.utu")
 #: What Knowledge's inputs table calls the end of a step and an operator call.
 TICK = "__tick__"
 OPERATOR = "__operator__"
+#: Input marker: a stage started on a run's knowledge and took up its state (``node``:
+#: which part: ``manager`` for the composed one, or ``analyze``/``plan``/``execute``).
+RESTART = "__restart__"
+#: Seconds of recorded inputs a restarted analyzer re-reads to recover its values and rates.
+RESTORE_WINDOW = 120.0
 
 Sources = dict[str, tuple[str | None, str]]
 _STATUS_OF_NAME: dict[str, bool | None] = {"satisfied": True, "unsatisfied": False}
@@ -87,6 +93,39 @@ _STATUS_OF_NAME: dict[str, bool | None] = {"satisfied": True, "unsatisfied": Fal
 def _build(c: Callable[..., Any], **fields: Any) -> Any:
     """Build a cycle message from our own, trusted values (validated only at the bus)."""
     return cast(Any, c).trusted(**fields)
+
+
+# -- restarts ------------------------------------------------------------------------------------
+def resuming(knowledge: Knowledge) -> bool:
+    """Whether ``knowledge`` already holds a run (inputs or decisions) to take up."""
+    return knowledge.holds_run()
+
+
+def mark_restart(knowledge: Knowledge, node: str) -> float:
+    """Record that ``node`` (``manager``, ``analyze``, ``plan``, ``execute``) took up the run.
+
+    An input marker (:data:`RESTART`, where a replay restarts the same part) and a
+    ``restarted`` decision (what ``anunnaki log`` and ``explain`` show), at the run's last
+    instant. Returns that instant.
+    """
+    t = knowledge.last_t()
+    knowledge.record_input(t, RESTART, {"node": node})
+    knowledge.record_decision(t, "restarted", None, node=node)
+    knowledge.flush()
+    return t
+
+
+def last_halt(knowledge: Knowledge) -> tuple[bool, bool]:
+    """(paused, run-stopped) as the run's decisions left them (a restart keeps a run-stop)."""
+    paused = stopped = False
+    for d in knowledge.decisions():
+        if d.kind == "run_stop":
+            paused = stopped = True
+        elif d.kind == "paused":
+            paused = True
+        elif d.kind == "resumed_adaptation":
+            paused = stopped = False
+    return paused, stopped
 
 
 # -- operator calls ------------------------------------------------------------------------------
@@ -334,10 +373,34 @@ class AnalyzeStage:
         self.eligible: list[str] = []
         self.refused = 0  # batches refused as implausible (see _plausible)
         self._marked: dict[int, tuple[float, bool]] = {}
-        if knowledge.tactics():  # resuming after a restart: time goes on from the last decision
-            last = knowledge.decisions(limit=1)
-            if last:
-                self.now = last[-1].t
+        if resuming(knowledge):
+            self._restore()
+
+    def _restore(self) -> None:
+        """Take up a run after a restart: its time, and the values its last inputs gave.
+
+        The inputs recorded in the last :data:`RESTORE_WINDOW` seconds are taken again (not
+        recorded again), so every attribute has the value and age it had, rates and
+        temporal goals their history, and an in-flight tactic's postconditions are judged
+        on what was known — not on nothing (before: a restarted node started with no values
+        and escalated an in-flight fail-safe to a run-stop). The verdicts this gives are the
+        ones already recorded: they are not recorded again.
+        """
+        kb, a = self.knowledge, self.analyzer
+        last = kb.last_t()
+        first = kb.first_input_t()
+        self.started_at = first if first is not None else last
+        for row in kb.inputs(since=last - RESTORE_WINDOW):
+            if row.topic.startswith("__"):
+                continue
+            ts = self.monitor.topics.get(row.topic)
+            if ts is not None:
+                ts.take(row.t, dict(row.msg))
+                a.observe(row.topic, row.msg, row.t)
+        a.tick(last)
+        a.evaluator.drain_changes()  # known already: recorded before the restart
+        self.now = last
+        self.eligible = a.eligible()
 
     def analyze(
         self,
@@ -541,6 +604,8 @@ class PlanStage:
         self.knowledge = knowledge
         self.planner = Planner(parts.tactics, knowledge, dwell=parts.config.dwell)
         self.run_stopped = False  # a run-stop heard on its topic (guideline S4)
+        if resuming(knowledge):
+            self.run_stopped = last_halt(knowledge)[1]
         rows = knowledge.tactics()
         if rows:
             self.planner.restore(rows)
@@ -663,7 +728,13 @@ class ExecuteStage:
         self.on_run_stop = on_run_stop
         # The planner here holds the tactic runtimes (and knows the conflicts); plan selects.
         self.planner = Planner(parts.tactics, knowledge, dwell=parts.config.dwell)
-        self.executor = Executor(actuator, knowledge, on_failure=self._escalate, runner=runner)
+        self.executor = Executor(
+            actuator,
+            knowledge,
+            on_failure=self._escalate,
+            resolve=self._endpoint_name,
+            runner=runner,
+        )
         self.paused = False
         self.stopped = False  # a run-stop performed here
         self.heard_run_stop = False  # a run-stop heard on its topic, not yet performed
@@ -673,12 +744,12 @@ class ExecuteStage:
         self._approvals: list[list[str]] = []
         self._state: AnalysisState | None = None
         self._before = 0
+        if resuming(knowledge):
+            self.now = knowledge.last_t()
+            self.paused, self.stopped = last_halt(knowledge)
         rows = knowledge.tactics()
         if rows:
             resumed = self.planner.restore(rows)
-            last = knowledge.decisions(limit=1)
-            if last:
-                self.now = last[-1].t
             for rt in resumed:
                 knowledge.record_decision(
                     self.now,
@@ -713,7 +784,7 @@ class ExecuteStage:
             self._apply_op(op, t)
         self._before = kb.decisions_written
         runtimes = self.planner.runtimes
-        self.executor.resolve(runtimes, t)  # actions that came back since the last cycle
+        self.executor.collect(runtimes, t)  # actions that came back since the last cycle
         for rt in list(runtimes.values()):
             if rt.state == "running":  # resumed mid-action after a restart
                 self.executor.run_actions(rt, t)
@@ -806,6 +877,10 @@ class ExecuteStage:
                 t, "operator_refused", None, caller=caller, reason=f"unknown operation {kind!r}"
             )
 
+    def _endpoint_name(self, name: str) -> str:
+        """The topic or service a tactic's (logical) endpoint name means in the current binding."""
+        return self.parts.model.endpoint_name(name)
+
     def _apply_reload(self, op: Mapping[str, Any], t: float, caller: str) -> None:
         kb = self.knowledge
         kb.record_decision(t, "reload_requested", None, caller=caller)
@@ -815,9 +890,9 @@ class ExecuteStage:
             return
         sources = _sources_of(op)
         tactics = tactics_from_sources(sources)
-        self.parts = dataclasses.replace(
-            self.parts, sources=sources, model=self.parts.model, tactics=tactics
-        )
+        # A new binding may map the tactics' logical endpoints elsewhere: take its model.
+        model = model_from_sources(sources) if "goal_model" in sources else self.parts.model
+        self.parts = dataclasses.replace(self.parts, sources=sources, model=model, tactics=tactics)
         self.planner.set_tactics(tactics)
         files = [op[k] for k in ("goal_model", "binding", "tactics") if isinstance(op.get(k), str)]
         kb.record_decision(t, "reloaded", None, files=files)
