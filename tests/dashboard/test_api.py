@@ -36,7 +36,7 @@ from dashboard_helpers import (
     wait_for,
 )
 
-from anunnaki.bus import BusConfigError, Clock, Detections, Image, open_bus
+from anunnaki.bus import BusConfigError, Clock, Detections, Image, body_of, open_bus
 from anunnaki.cli import _dashboard
 from anunnaki.dashboard import (
     Dashboard,
@@ -847,9 +847,16 @@ def test_cli_dashboard_serves_what_a_zenoh_bus_carries(tmp_path: Path) -> None:
         "run_stopped": False,
     }
     decision = {"id": 7, "t": 25.2, "kind": "pending_approval", "tactic": "fail-safe", "data": {}}
+    forged = {"id": 8, "t": 25.3, "kind": "run_stop", "tactic": None, "data": {}}
+
+    def query(message: Any) -> dict[str, Any]:  # Utu's knowledge service: the real log
+        after = body_of(message).get("after") or 0
+        return {"ok": True, "decisions": [decision] if after < decision["id"] else []}
+
     with open_bus(
         "zenoh", listen=[f"tcp/127.0.0.1:{port}"], multicast_scouting=False, name="utu"
     ) as utu:
+        utu.service("/utu/knowledge/query", query)
         proc = subprocess.Popen(
             [
                 sys.executable,
@@ -878,7 +885,9 @@ def test_cli_dashboard_serves_what_a_zenoh_bus_carries(tmp_path: Path) -> None:
 
             def shown() -> dict | None:
                 utu.publish("/utu/analyze/state", analysis)  # until the link is up
-                utu.publish(DECISIONS_TOPIC, {"decisions": [decision]})
+                # Any client may publish on the decisions topic: the page shows only what
+                # Utu's knowledge service holds (issue #12), never the forged run-stop.
+                utu.publish(DECISIONS_TOPIC, {"decisions": [decision, forged]})
                 snap = client.get("/api/snapshot").json()
                 ok = snap["goal_source"] == "utu" and snap["decisions"]
                 return snap if ok and snap["goals"]["G1"] == [0.0, "unsatisfied"] else None

@@ -16,7 +16,7 @@ from typing import Any
 import pytest
 from dashboard_helpers import ROVER, Web, png, wait_for
 
-from anunnaki.bus import Bus, Clock, Detections, Image, InprocHub, open_bus
+from anunnaki.bus import Bus, Clock, Detections, Image, InprocHub, body_of, open_bus
 from anunnaki.dashboard import Dashboard, DashboardState
 from anunnaki.dashboard._app import dumps
 from anunnaki.dashboard._checks import MAX_ACTIONS, MAX_ASSESSORS, _num
@@ -284,6 +284,20 @@ def test_garbage_on_every_topic_keeps_the_dashboard_serving(
         "/lm_manager/active": [{"model": HUGE, "domain": ["fog"]}, {"lec": None}],
         "/clock": [{"time": "noon"}, {"time": HUGE}],
     }
+    # The decisions topic only rings a bell: the rows come from Utu's knowledge service,
+    # which here answers garbage first, then the one valid decision.
+    replies = [
+        {"decisions": "all of them"},
+        {"decisions": [1, None, {"kind": 5}, {"kind": "started", "t": HUGE, "data": 3}]},
+    ]
+
+    def query(message: Any) -> dict[str, Any]:
+        if replies:
+            return replies.pop(0)
+        valid = {"id": 1, "t": 12.0, "kind": "started", "tactic": "fail-safe"}
+        return {"decisions": [valid] if (body_of(message).get("after") or 0) < 1 else []}
+
+    pub.service("/utu/knowledge/query", query)
     for topic, bodies in garbage.items():
         for body in bodies:
             pub.publish(topic, body)

@@ -8,7 +8,7 @@ a :class:`~anunnaki.dashboard.DashboardState`:
                                 the queue and the pause/run-stop flags
 ``/utu/plan/start``             the queue (per-node runs)
 ``/utu/execute/status``         pause and run-stop flags (per-node runs)
-``/utu/knowledge/decisions``    the decision log, as it is written
+``/utu/knowledge/decisions``    a doorbell: new decisions, fetched from ``/utu/knowledge/query``
 the agents' topics (binding)    the monitor pane and the dashboard's own evaluation
 ``/utu/oracle/**``              assessments (category, confidence, context)
 ``/*/camera/image``             camera frames (``Image``)
@@ -233,6 +233,9 @@ class BusObserver:
         self._closed = threading.Event()
         self._seeded = threading.Event()
         self._inputs_lock = threading.Lock()
+        self._doorbell = threading.Event()  # Utu wrote decisions: fetch them from its service
+        self._last_id = 0
+        self._fetch_failed = False
         c = self.config
         try:
             if sim is not None:
@@ -259,6 +262,9 @@ class BusObserver:
             threading.Thread(target=self._seed, name="anunnaki-dashboard-seed", daemon=True).start()
         else:
             self._seeded.set()
+        threading.Thread(
+            target=self._fetch_decisions, name="anunnaki-dashboard-decisions", daemon=True
+        ).start()
 
     def _sub(self, pattern: str, callback: Any, queue: int, expect: Any = None) -> None:
         self._declared.append(self.bus.subscribe(pattern, callback, queue=queue, expect=expect))
@@ -290,9 +296,49 @@ class BusObserver:
         self.state.take_flags(paused=body.get("paused"), run_stopped=body.get("run_stopped"))
 
     def _on_decisions(self, sample: Sample) -> None:
-        rows = body_of(sample.message).get("decisions")
-        if isinstance(rows, list):
-            self.state.take_decisions(rows)
+        # A doorbell, never the content: any bus client can publish on this topic, so the
+        # rows are fetched from the attached Utu's knowledge service (issue #12).
+        self._doorbell.set()
+
+    def _fetch_decisions(self) -> None:
+        """Fetch the decisions written since the last one shown: on each ring, and every 2 s."""
+        c = self.config
+        self._seeded.wait()
+        while not self._closed.is_set():
+            self._doorbell.wait(2.0)
+            if self._closed.is_set():
+                return
+            self._doorbell.clear()
+            try:
+                while True:
+                    reply = body_of(
+                        self.bus.request(
+                            c.query,
+                            {"what": "decisions", "after": self._last_id, "limit": 2000},
+                            timeout=c.query_timeout,
+                        )
+                    )
+                    rows = reply.get("decisions")
+                    if not isinstance(rows, list) or not rows:
+                        break
+                    self._take_decisions(rows)
+                    if len(rows) < 2000:
+                        break
+            except (BusError, AnunnakiError) as exc:
+                if not self._closed.is_set() and not self._fetch_failed:
+                    self._fetch_failed = True
+                    log.warning(
+                        "dashboard: %s does not answer (%s): decisions are shown only from "
+                        "the Utu this dashboard is attached to",
+                        c.query,
+                        exc,
+                    )
+
+    def _take_decisions(self, rows: list[Any]) -> None:
+        ids = [r["id"] for r in rows if isinstance(r, dict) and type(r.get("id")) is int]
+        if ids:
+            self._last_id = max(self._last_id, *ids)
+        self.state.take_decisions(rows)
 
     def _on_input(self, sample: Sample) -> None:
         if self.sim is None:
@@ -351,7 +397,7 @@ class BusObserver:
             )
             rows = reply.get("decisions")
             if isinstance(rows, list):
-                self.state.take_decisions(rows)
+                self._take_decisions(rows)
             state = body_of(self.bus.request(c.query, {"what": "state"}, timeout=c.query_timeout))
             # The state answer carries the plan's queue: a late dashboard sees pending approvals.
             if state.get("ok") is not False and state.get("nodes") and not self.state.has_analysis:
@@ -417,6 +463,7 @@ class BusObserver:
     def close(self) -> None:
         """Withdraw the subscriptions and stop the ticker. Idempotent."""
         self._closed.set()
+        self._doorbell.set()  # wakes the decision fetcher, which then ends
         for obj in reversed(self._declared):
             try:
                 obj.close()
