@@ -41,4 +41,5 @@ def pki(tmp_path_factory: pytest.TempPathFactory) -> Pki:
     for name in ("router", "alice", "bob", "utu", "rover"):
         make_leaf(d, name, "ca")
     make_leaf(d, "mallory", "evil_ca")
+    make_leaf(d, "faraway", "ca", san="DNS:router.lab,IP:10.0.0.1")  # names no loopback host
     return Pki(d)
