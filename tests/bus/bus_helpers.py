@@ -103,8 +103,8 @@ def run_python(code: str, *, timeout: float = 20.0) -> subprocess.CompletedProce
 class Pki:
     """A throwaway PKI.
 
-    ``ca`` signs router, alice, bob, utu, rover and faraway (whose SAN names only router.lab
-    and 10.0.0.1); ``evil_ca`` signs mallory.
+    ``ca`` signs router, alice, bob, utu, rover, operator, guest and faraway (whose SAN names
+    only router.lab and 10.0.0.1); ``evil_ca`` signs mallory.
     """
 
     dir: Path
