@@ -17,8 +17,14 @@ Kill matrix (``kill_trials``)
       ``knowledge``: the pid the launch prints);
     * ``one-process``: ``anunnaki run LAUNCH`` (the composed manager), ``kill -9`` of that
       process (victim ``manager``);
-    * ``loop``: the LEC/model manager and the oracle of the whole loop: not measured by this
-      script yet (see ``loop_note`` in the JSON).
+    * ``loop``: the whole loop of ``examples/rover/sim.yaml`` taken apart so that each part
+      can be killed alone: Utu (``anunnaki run``, the composed manager, goals-lm/binding-lm/
+      tactics-lm, sim clock), the LEC/model manager (``LecNode``, ``/lm_manager``) and the
+      ground-truth oracle node each in a process of their own (this script with
+      ``--serve lec|oracle``), and the simulated rover of ``demo-scenario.yaml`` in this
+      process, its ``/rover/set_mode`` and ``/rover/stop`` handlers stamped. Once Utu sees
+      G3 and G18 satisfied, ``kill -9`` of the LEC (victim ``lec``) or the oracle
+      (``oracle``). Inputs are not counted here (the simulator's messages carry no serial).
 
     Per trial: ``failsafe_ms``, kill to the fail-safe command arriving at the platform
     (``null``: none within ``--deadline`` seconds); ``lost``, inputs plus decisions lost:
@@ -325,7 +331,11 @@ class Launch:
                 out.append((float(m.group(1)), m.group(2), m.group(3)))
         return out
 
-    def tail(self, n: int = 30) -> str:
+    def tracebacks(self) -> int:
+        """How many tracebacks it (or its nodes) printed."""
+        return sum(1 for ln in self.lines if "Traceback (most recent call last)" in ln)
+
+    def tail(self, n: int = 40) -> str:
         return "\n".join(self.lines[-n:])
 
     def stop(self) -> None:
@@ -344,7 +354,7 @@ class Launch:
 
 def _printed_not_stored(printed: list[tuple[float, str, str]], db: Path, t0: float) -> int:
     with contextlib.closing(open_run(db)) as kb:
-        stored = [(round(d.t - t0, 3), d.kind, d.tactic or "") for d in kb.decisions()]
+        stored = [(round(d.t - t0, 3), d.kind, d.tactic or "-") for d in kb.decisions()]
     missing = 0
     pool = list(stored)
     for entry in printed:
@@ -425,6 +435,7 @@ def _trial_figures(
         "failsafe_ms": ms(rover.failsafe_at),
         "failsafe_command": rover.failsafe_what or None,
         "guard_ms": ms(rover.guard_at),
+        "tracebacks": launch.tracebacks(),
     }
     if not db.exists():
         return out | {"lost": None, "replay_identical": False, "note": "no knowledge file"}
@@ -454,6 +465,190 @@ def _t0(launch: Launch, first: Any) -> float:
     if first is None or not printed:
         return 0.0
     return float(first.t) - printed[0][0]
+
+
+# -- the whole loop: the LEC/model manager and the oracle in processes of their own ------------
+SIM_LAUNCH = """\
+anunnaki: launch/1
+name: rover-sim
+utu:
+  goal_model: {rover}/goals-lm.yaml
+  binding: {rover}/binding-lm.yaml
+  tactics: {rover}/tactics-lm.yaml
+  clock: sim
+  warmup: 3.0
+  failsafe: fail-safe
+  run_stop: {{service: /rover/stop}}
+bus: {{kind: zenoh, mode: peer, listen: [tcp/127.0.0.1:{port}]}}
+ready_timeout: 60
+"""
+MODELS = ROOT / "examples" / "models" / "rover.yaml"
+SCENARIO = ROVER / "demo-scenario.yaml"
+CAMERA = "/rover/camera/image"
+
+
+class _StampingBus:
+    """A bus whose ``/set_mode`` and ``/stop`` service handlers tell ``on_command`` first."""
+
+    def __init__(self, bus: Bus, on_command: Callable[[str, Any], None]) -> None:
+        self._bus = bus
+        self._on_command = on_command
+
+    def service(self, name: str, handler: Callable[[Any], Any], **kw: Any) -> Any:
+        if name.endswith(("/set_mode", "/stop")):
+
+            def stamped(message: Any) -> Any:
+                self._on_command(name, message)
+                return handler(message)
+
+            return self._bus.service(name, stamped, **kw)
+        return self._bus.service(name, handler, **kw)
+
+    def __getattr__(self, attr: str) -> Any:
+        return getattr(self._bus, attr)
+
+
+class _Commands:
+    """The fail-safe commands that reach the simulated platform, stamped once armed."""
+
+    def __init__(self) -> None:
+        self.event = threading.Event()
+        self.at: float | None = None
+        self.what = ""
+        self.armed = False
+
+    def __call__(self, service: str, message: Any) -> None:
+        body = message.to_body() if hasattr(message, "to_body") else dict(message or {})
+        manual = service.endswith("/set_mode") and body.get("mode") == "manual"
+        if self.armed and self.at is None and (manual or service.endswith("/stop")):
+            self.at = time.perf_counter()
+            self.what = "set_mode manual" if manual else "stop"
+            self.event.set()
+
+
+def serve(kind: str, endpoint: str) -> int:
+    """A child process: the LEC node (``/lm_manager``) or the ground-truth oracle node."""
+    from anunnaki.lec import LecNode, load_registry
+    from anunnaki.oracles import OracleNode
+    from anunnaki.sim import load_scenario
+
+    registry = load_registry(MODELS)
+    stop = threading.Event()
+    signal.signal(signal.SIGTERM, lambda *_: stop.set())
+    with open_bus("zenoh", connect=[endpoint], name=f"faults-{kind}") as bus:
+        if kind == "lec":
+            node: Any = LecNode(bus, registry, camera=CAMERA)
+        else:
+            from anunnaki.sim import RoverSim  # noqa: F401  (the scene's classes below)
+
+            classes = _classes(load_scenario(SCENARIO))
+            node = OracleNode(
+                bus, "ground_truth", camera=CAMERA, detections=topics.DETECTIONS,
+                classes=classes, clean_f1=registry.clean_f1, window=30, min_frames=20,
+                min_objects=20,
+            )  # fmt: skip
+        print("ready", flush=True)
+        stop.wait()
+        node.close()
+    return 0
+
+
+def _classes(scenario: Any) -> list[str]:
+    return sorted({o.kind for o in scenario.objects})
+
+
+def loop_trial(victim: str, delay: float, deadline: float) -> dict[str, Any]:
+    """kill -9 of the LEC/model manager or the oracle while Utu watches the simulated rover."""
+    from anunnaki.managed import SimulatedSystem
+
+    trial: dict[str, Any] = {"deployment": "loop", "victim": victim, "delay_s": delay}
+    with tempfile.TemporaryDirectory(prefix="faults-loop-") as tmp_name:
+        tmp = Path(tmp_name)
+        port = free_port()
+        endpoint = f"tcp/127.0.0.1:{port}"
+        db = tmp / "kb.db"
+        path = tmp / "sim.yaml"
+        path.write_text(SIM_LAUNCH.format(rover=ROVER, port=port))
+        launch = Launch([sys.executable, "-m", "anunnaki.cli.main", "run", str(path),
+                         "--knowledge", str(db), "--until", "120"])  # fmt: skip
+        children = {
+            kind: Launch([sys.executable, __file__, "--serve", kind, "--connect", endpoint])
+            for kind in ("lec", "oracle")
+        }
+        stop = threading.Event()
+        commands = _Commands()
+        launch.start()
+        try:
+            if not wait_until(launch.ready, 90):
+                raise RuntimeError("Utu not ready in 90 s:\n" + launch.tail())
+            for child in children.values():
+                child.start()
+            for kind, child in children.items():
+                if not wait_until(lambda c=child: "ready" in c.lines, 90):
+                    raise RuntimeError(f"{kind} not ready:\n" + child.tail())
+            with open_bus("zenoh", connect=[endpoint], name="platform") as bus:
+                system = SimulatedSystem(
+                    _StampingBus(bus, commands), SCENARIO, models=None, oracle=None,
+                    stop_without_utu=None,
+                )  # fmt: skip
+                runner = threading.Thread(
+                    target=system.run, args=(stop,), kwargs={"until": 120.0}, daemon=True
+                )
+                try:
+                    runner.start()
+                    if not wait_until(lambda: _loop_nominal(_state(bus)), 60, 0.1):
+                        raise RuntimeError("Utu never saw the loop nominal:\n" + launch.tail())
+                    commands.armed = True
+                    threading.Event().wait(delay)
+                    killed = time.perf_counter()
+                    proc = children[victim].proc
+                    assert proc is not None
+                    os.kill(proc.pid, signal.SIGKILL)
+                    commands.event.wait(deadline)
+                finally:
+                    stop.set()
+                    runner.join(timeout=20)
+                    system.close()
+            launch.stop()
+            trial |= _loop_figures(commands, killed, launch, db)
+        finally:
+            stop.set()
+            launch.stop()
+            for child in children.values():
+                child.stop()
+    return trial
+
+
+def _loop_nominal(state: dict[str, Any] | None) -> bool:
+    """Warm-up over, the detector up with a known model (G18) and obstacles detected (G3)."""
+    if not state or state.get("warming_up"):
+        return False
+    nodes = state.get("nodes") or {}
+    return all((nodes.get(g) or [None, None])[1] == "satisfied" for g in ("G3", "G18"))
+
+
+def _loop_figures(commands: _Commands, killed: float, launch: Launch, db: Path) -> dict[str, Any]:
+    out: dict[str, Any] = {
+        "failsafe_ms": None if commands.at is None else round((commands.at - killed) * 1000, 1),
+        "failsafe_command": commands.what or None,
+        "guard_ms": None,
+        "tracebacks": launch.tracebacks(),
+    }
+    if not db.exists():
+        return out | {"lost": None, "replay_identical": False, "note": "no knowledge file"}
+    printed = launch.printed()
+    lost_decisions = _printed_not_stored(printed, db, 0.0)  # sim time: printed as stored
+    identical, why = _replay(db)
+    out |= {
+        "lost": lost_decisions,
+        "lost_inputs": None,  # the simulator's messages carry no serial: not counted
+        "lost_decisions": lost_decisions,
+        "decisions_printed": len(printed),
+        "replay_identical": identical,
+    }
+    if why:
+        out["replay_note"] = why[:300]
+    return out
 
 
 # -- the flood ---------------------------------------------------------------------------------
@@ -749,20 +944,40 @@ def _trials(quick: bool, deadline: float, only: list[str] | None) -> Iterator[di
             except Exception as exc:
                 trial = {"deployment": deployment, "victim": victim, "delay_s": delay,
                          "failsafe_ms": None, "lost": None, "replay_identical": False,
-                         "error": f"{type(exc).__name__}: {exc}"[:600]}  # fmt: skip
+                         "error": f"{type(exc).__name__}: {exc}"[-2500:]}  # fmt: skip
             print(f"  {deployment} {victim} +{delay}s: {trial.get('failsafe_ms')} ms", flush=True)
+            yield trial
+
+
+def _loop_trials(quick: bool, deadline: float, only: list[str] | None) -> Iterator[dict[str, Any]]:
+    delays = KILL_DELAYS[:1] if quick else KILL_DELAYS
+    for victim in ("lec", "oracle"):
+        if only and victim not in only:
+            continue
+        for delay in delays:
+            try:
+                trial = loop_trial(victim, delay, deadline)
+            except Exception as exc:
+                trial = {"deployment": "loop", "victim": victim, "delay_s": delay,
+                         "failsafe_ms": None, "lost": None, "replay_identical": False,
+                         "error": f"{type(exc).__name__}: {exc}"[-2500:]}  # fmt: skip
+            print(f"  loop {victim} +{delay}s: {trial.get('failsafe_ms')} ms", flush=True)
             yield trial
 
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--quick", action="store_true", help="one trial per victim, 3 s flood")
+    parser.add_argument("--serve", choices=("lec", "oracle"), help=argparse.SUPPRESS)
+    parser.add_argument("--connect", help=argparse.SUPPRESS)
     parser.add_argument("--output", type=Path, default=DEFAULT_OUTPUT)
     parser.add_argument("--deadline", type=float, default=3.0, help="s to wait for a fail-safe")
     parser.add_argument("--flood-rate", type=float, default=50_000.0)
     parser.add_argument("--flood-seconds", type=float, default=None)
     parser.add_argument("--victims", nargs="*", help="only these victims (e.g. analyze manager)")
-    parser.add_argument("--skip", nargs="*", default=[], choices=("kill", "flood", "corpus"))
+    parser.add_argument(
+        "--skip", nargs="*", default=[], choices=("kill", "loop", "flood", "corpus")
+    )
     parser.add_argument(
         "--corpus",
         nargs="*",
@@ -771,6 +986,8 @@ def main(argv: list[str] | None = None) -> int:
         help="the deployments the corpus is sent to",
     )
     args = parser.parse_args(argv)
+    if args.serve:
+        return serve(args.serve, args.connect)
     logging.basicConfig(level=logging.ERROR, format="%(levelname)s %(name)s: %(message)s")
     started = time.monotonic()
     result: dict[str, Any] = {
@@ -787,10 +1004,8 @@ def main(argv: list[str] | None = None) -> int:
     result["kill_trials"] = (
         [] if "kill" in args.skip else list(_trials(args.quick, args.deadline, args.victims))
     )
-    result["loop_note"] = (
-        "the whole loop's LEC/model manager and oracle (examples/rover/sim.yaml) need them in "
-        "processes of their own, which the sim launch does not offer yet: not measured"
-    )
+    if "loop" not in args.skip:
+        result["kill_trials"] += list(_loop_trials(args.quick, args.deadline, args.victims))
     seconds = args.flood_seconds or (3.0 if args.quick else 10.0)
     print(f"flood {args.flood_rate:g} msg/s for {seconds:g} s", flush=True)
     result["flood"] = {} if "flood" in args.skip else flood(seconds, args.flood_rate)
