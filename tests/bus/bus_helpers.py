@@ -101,7 +101,11 @@ def run_python(code: str, *, timeout: float = 20.0) -> subprocess.CompletedProce
 
 @dataclass(frozen=True)
 class Pki:
-    """A throwaway PKI: ``ca`` signs router, alice, bob, utu, rover; ``evil_ca`` signs mallory."""
+    """A throwaway PKI.
+
+    ``ca`` signs router, alice, bob, utu, rover, operator, guest and faraway (whose SAN names
+    only router.lab and 10.0.0.1); ``evil_ca`` signs mallory.
+    """
 
     dir: Path
 
@@ -125,7 +129,7 @@ def make_ca(d: Path, name: str) -> None:
              cwd=d)  # fmt: skip
 
 
-def make_leaf(d: Path, name: str, ca: str) -> None:
+def make_leaf(d: Path, name: str, ca: str, san: str = "DNS:localhost,IP:127.0.0.1") -> None:
     _openssl("genpkey", "-algorithm", "EC", "-pkeyopt", "ec_paramgen_curve:P-256",
              "-out", f"{name}.key", cwd=d)  # fmt: skip
     _openssl("req", "-new", "-key", f"{name}.key", "-subj", f"/CN={name}",
@@ -134,7 +138,7 @@ def make_leaf(d: Path, name: str, ca: str) -> None:
         "basicConstraints=critical,CA:FALSE\n"
         "keyUsage=critical,digitalSignature\n"
         "extendedKeyUsage=serverAuth,clientAuth\n"
-        "subjectAltName=DNS:localhost,IP:127.0.0.1\n"
+        f"subjectAltName={san}\n"
     )
     _openssl("x509", "-req", "-in", f"{name}.csr", "-CA", f"{ca}.pem", "-CAkey", f"{ca}.key",
              "-CAcreateserial", "-days", "2", "-extfile", f"{name}.ext", "-out", f"{name}.pem",

@@ -38,7 +38,8 @@ def pki(tmp_path_factory: pytest.TempPathFactory) -> Pki:
     d = tmp_path_factory.mktemp("pki")
     make_ca(d, "ca")
     make_ca(d, "evil_ca")
-    for name in ("router", "alice", "bob", "utu", "rover"):
+    for name in ("router", "alice", "bob", "utu", "rover", "operator", "guest"):
         make_leaf(d, name, "ca")
     make_leaf(d, "mallory", "evil_ca")
+    make_leaf(d, "faraway", "ca", san="DNS:router.lab,IP:10.0.0.1")  # names no loopback host
     return Pki(d)

@@ -10,7 +10,7 @@ import pytest
 import yaml
 from bus_helpers import Collector, Pki, free_port
 
-from anunnaki.bus import BusConfig, BusTimeout, ModeReply, ModeRequest, RunStop, open_bus
+from anunnaki.bus import Bus, BusConfig, BusTimeout, ModeReply, ModeRequest, RunStop, open_bus
 
 DOC = Path(__file__).resolve().parents[2] / "docs" / "bus.md"
 
@@ -101,4 +101,65 @@ def test_documented_deployment_works(pki: Pki) -> None:
         assert forged.try_recv() is None
     finally:
         for bus in (rover, utu, router):
+            bus.close()
+
+
+def _client(pki: Pki, endpoint: str, name: str) -> Bus:
+    """A client of the documented router, as ``name`` (its certificate's common name)."""
+    conf = documented("client", pki, endpoint)
+    conf["name"] = name
+    conf["tls"] = {"root_ca": str(pki.cert("ca")), "cert": str(pki.cert(name)),
+                   "key": str(pki.key(name))}  # fmt: skip
+    return open_bus(BusConfig.model_validate(conf))
+
+
+def _answers(bus: Bus, service: str) -> bool:
+    """Whether a request to ``service`` from ``bus`` gets a reply (a denied one times out)."""
+    try:
+        bus.request(service, {}, timeout=0.5)
+    except BusTimeout:
+        return False
+    return True
+
+
+@pytest.mark.slow
+def test_documented_rules_keep_utu_to_its_operators(pki: Pki) -> None:
+    """Who may call which of Utu's services, and who may speak on its topics (issue #12)."""
+    endpoint = f"tls/127.0.0.1:{free_port()}"
+    buses: list[Bus] = [open_bus(BusConfig.model_validate(documented("router", pki, endpoint)))]
+    try:
+        utu, rover, operator, guest = (
+            _client(pki, endpoint, name) for name in ("utu", "rover", "operator", "guest")
+        )
+        buses += [utu, rover, operator, guest]
+        calls = Collector()
+        for service in ("/utu/pause", "/utu/run_stop", "/utu/knowledge/query", "/utu/ready"):
+            utu.service(service, lambda r, s=service: calls(s) or {"ok": True})
+        # Every Utu node is CN utu: they reach each other's services (readiness, queries).
+        assert _answers(utu, "/utu/ready")
+        # The operator may pause and query; the rover may only ask for a run-stop (S4).
+        assert _answers(operator, "/utu/pause")
+        assert _answers(operator, "/utu/knowledge/query")
+        assert _answers(rover, "/utu/run_stop")
+        assert not _answers(rover, "/utu/pause")
+        assert not _answers(guest, "/utu/run_stop")  # a certificate no rule names: nothing
+        assert calls.samples == ["/utu/ready", "/utu/pause", "/utu/knowledge/query",
+                                  "/utu/run_stop"]  # fmt: skip
+        # The rover cannot pose as an operator service: its declaration is refused.
+        rover.service("/utu/approve", lambda r: {"ok": True})
+        assert not _answers(operator, "/utu/approve")
+        # Utu hears the rover's sensors and the simulation clock, but no forged cycle message.
+        heard = Collector()
+        utu.subscribe("/clock", heard)
+        utu.subscribe("/utu/analyze/state", heard)
+        utu.subscribe("/utu/oracle/output", heard)
+        clock = rover.publisher("/clock", priority="normal")
+        assert clock.wait_for_subscribers(5)
+        rover.publisher("/utu/analyze/state", priority="normal").put({"forged": True})
+        rover.publisher("/utu/oracle/output", priority="normal").put({"category": 2})
+        clock.put({"time": 1.0})  # same priority and link: after any leaked forgery
+        assert heard.wait(1)
+        assert [s.topic for s in heard.samples] == ["/clock"]
+    finally:
+        for bus in reversed(buses):
             bus.close()

@@ -24,6 +24,7 @@ from typing import Any
 
 from anunnaki.bus._api import Bus, DataCallback, QueryCallback, TokenCallback, logger
 from anunnaki.bus._config import BusConfig
+from anunnaki.bus._diagnose import diagnose_connect
 from anunnaki.bus._errors import BusClosedError, BusConfigError, BusConnectError, BusError
 from anunnaki.bus._qos import QoS
 from anunnaki.errors import MissingExtraError
@@ -48,6 +49,11 @@ def free_port(host: str = "127.0.0.1") -> int:
         s.bind((host, 0))
         port: int = s.getsockname()[1]
         return port
+
+
+def _without_source_location(exc: Exception | None) -> str:
+    """The text of a zenoh error without the Rust source location it appends (`` at /…``)."""
+    return str(exc).split("  at /", 1)[0].rstrip("!. ")
 
 
 class _Link:
@@ -128,9 +134,20 @@ class ZenohBus(Bus):
                 last = exc
         else:
             where = ", ".join(config.connect) or "(no connect endpoints)"
+            found = diagnose_connect(config)
+            if found:
+                check = "; ".join(found)
+            elif config.connect:
+                check = (
+                    "check that the router runs at that address, that its certificate "
+                    "names the host connected to (subjectAltName) and that both sides' "
+                    "certificates come from the CA the other trusts"
+                )
+            else:
+                check = "check that the listen endpoints are free and valid here"
             raise BusConnectError(
                 f"cannot open a zenoh {config.mode} session (listen {listen}, connect {where}): "
-                f"{last}; check that the router runs and the TLS certificates match"
+                f"{_without_source_location(last)}. What to check: {check}"
             ) from last
         self._endpoints = tuple(listen)
         super().__init__(namespace=config.namespace, name=config.name, clock=clock)

@@ -1,0 +1,54 @@
+"""benchmarks/faults.py, shortened: one kill -9 per deployment and the hostile corpus.
+
+What must hold is asserted (counts and outcomes, never times): nothing the platform
+published well before the kill is missing from knowledge, nothing printed is missing from
+it, the run replays identically, the platform is stopped one way or another, and the corpus
+raises no traceback, kills no loop and changes no decision.
+"""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+
+pytest.importorskip("zenoh")
+
+
+@pytest.mark.slow
+def test_faults_benchmark_shortened(tmp_path: Path) -> None:
+    out = tmp_path / "faults.json"
+    argv = [sys.executable, str(ROOT / "benchmarks" / "faults.py"), "--quick"]
+    argv += ["--victims", "analyze", "manager", "--skip", "flood", "--corpus", "processes"]
+    argv += ["--deadline", "1.5", "--output", str(out)]
+    result = subprocess.run(
+        argv, capture_output=True, text=True, timeout=240, cwd=ROOT, check=False
+    )
+    assert result.returncode == 0, result.stdout[-3000:] + result.stderr[-3000:]
+    doc = json.loads(out.read_text())
+
+    trials = doc["kill_trials"]
+    assert [(t["deployment"], t["victim"]) for t in trials] == [
+        ("processes", "analyze"),
+        ("one-process", "manager"),
+    ]
+    for t in trials:
+        assert "error" not in t, t
+        assert t["inputs_expected"] > 0 and t["decisions_printed"] > 0  # a hand-over happened
+        assert (t["lost_inputs"], t["lost_decisions"]) == (0, 0), t
+        assert t["replay_identical"], t.get("replay_note")
+        # Stopped: by Utu's fail-safe or run-stop, or else by the platform's own guard.
+        assert t["failsafe_command"] in ("set_mode manual", "stop", "/utu/run_stop", None)
+        assert t["failsafe_command"] is not None or t["guard_ms"] is not None, t
+
+    corpus = doc["corpus"]
+    (per_node,) = corpus["deployments"]
+    assert per_node["deployment"] == "processes"
+    assert per_node["sent"] == 45
+    assert (per_node["tracebacks"], per_node["loop_deaths"], per_node["steered"]) == (0, 0, 0)
+    assert per_node["refused"] >= 30  # every malformed one at least (6 on each of 5 topics)
