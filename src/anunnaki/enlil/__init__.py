@@ -20,6 +20,18 @@ from anunnaki.enlil._context import (
     resolve_phenomenon,
     to_phenomenon_vector,
 )
+from anunnaki.enlil._oracle_eval import (
+    BASELINES,
+    BaselineFit,
+    HeldOut,
+    Predictions,
+    baseline_predictions,
+    evaluate_oracles,
+    fit_baseline,
+    held_out_frames,
+    oracle_predictions,
+    score_predictions,
+)
 
 # The behavior oracle (issue 13, items 3 to 6): network, training, evaluation, run time.
 from anunnaki.enlil._oracle_net import (
@@ -40,39 +52,54 @@ from anunnaki.enlil._oracle_train import (
 from anunnaki.enlil._plot import plot_archive
 from anunnaki.enlil._run import Job, SearchOutcome, occupied_cells, run_search, summarise
 from anunnaki.enlil._search import SEARCHES, EnlilSearch, RandomSearch, Search, SobolSearch
+from anunnaki.enlil._sweep import ContextDraw, ContextSpec, draw_contexts, parse_contexts
 
 __all__ = [
+    "BASELINES",
     "ORACLE_ARCHITECTURES",
     "SEARCHES",
     "Archive",
     "ArchiveMeta",
     "ArchiveWriter",
+    "BaselineFit",
+    "ContextDraw",
     "ContextResult",
     "ContextSet",
+    "ContextSpec",
     "EnlilError",
     "EnlilOracle",
     "EnlilSearch",
+    "HeldOut",
     "Job",
     "OracleCard",
     "OracleModel",
     "OraclePrediction",
     "OracleTrainConfig",
+    "Predictions",
     "RandomSearch",
     "Search",
     "SearchOutcome",
     "SobolSearch",
+    "baseline_predictions",
     "contexts_from_archive",
+    "draw_contexts",
     "evaluate_context",
+    "evaluate_oracles",
+    "fit_baseline",
     "fixed_batch",
+    "held_out_frames",
     "load_oracle",
     "normalise",
     "occupied_cells",
+    "oracle_predictions",
+    "parse_contexts",
     "plot_archive",
     "random_contexts",
     "read_archive",
     "relative_drop",
     "resolve_phenomenon",
     "run_search",
+    "score_predictions",
     "summarise",
     "to_phenomenon_vector",
     "train_oracle",
