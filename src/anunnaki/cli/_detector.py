@@ -406,6 +406,24 @@ def _add_evaluate(sub: Any) -> None:
     p.set_defaults(run=_run_evaluate)
 
 
+def _report_head(
+    args: argparse.Namespace, det: Any, model_id: str, domain: str, images: int
+) -> dict[str, Any]:
+    """What every ``evaluate-detector`` report starts with: the model, data and threshold."""
+    threshold = args.threshold
+    return {
+        "model": str(args.model),
+        "model_id": model_id,
+        "domain": domain,
+        "data": str(args.data),
+        "split": args.split,
+        "images": images,
+        "score_threshold": (
+            threshold if threshold is not None else float(getattr(det, "score_threshold", 0.0))
+        ),
+    }
+
+
 def _load_evaluated(args: argparse.Namespace) -> tuple[Any, Path, str, str]:
     """The model ``evaluate-detector`` measures: ``(detector, file, model id, domain)``."""
     from anunnaki.lec import load_detector, load_registry
@@ -465,18 +483,8 @@ def _run_evaluate(args: argparse.Namespace) -> int:
         clean = evaluate_detector(det, data, score_threshold=threshold)
     except DetectorError as exc:
         raise AnunnakiError(f"{args.model}: model {model_id!r}: {exc}") from None
-    report: dict[str, Any] = {
-        "model": str(args.model),
-        "model_id": model_id,
-        "domain": domain,
-        "data": str(args.data),
-        "split": args.split,
-        "images": len(data),
-        "score_threshold": (
-            threshold if threshold is not None else float(getattr(det, "score_threshold", 0.0))
-        ),
-        "clean": clean.as_dict(),
-    }
+    report = _report_head(args, det, model_id, domain, len(data))
+    report["clean"] = clean.as_dict()
     rows = [("clean", clean)]
     if phen is not None:
         used = (
@@ -553,18 +561,8 @@ def _run_contexts(args: argparse.Namespace, det: Any, model_id: str, domain: str
     ]
     f1s = np.asarray([r.f1 for r in drawn.results])
     counts = drawn.counts()
-    report: dict[str, Any] = {
-        "model": str(args.model),
-        "model_id": model_id,
-        "domain": domain,
-        "data": str(args.data),
-        "split": args.split,
-        "images": len(batch),
-        "score_threshold": (
-            args.threshold
-            if args.threshold is not None
-            else float(getattr(det, "score_threshold", 0.0))
-        ),
+    report = _report_head(args, det, model_id, domain, len(batch))
+    report |= {
         "phenomenon": phen.name,
         "param_names": list(phen.param_names),
         "contexts_spec": str(args.contexts),

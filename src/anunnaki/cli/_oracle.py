@@ -118,6 +118,11 @@ def _add_evaluate(osub: Any) -> None:
         choices=("atc", "max-score"),
         help="also score a detector-output baseline (repeatable)",
     )
+    e.add_argument(
+        "--fit-contexts",
+        help="val contexts the baselines' category thresholds are fitted on "
+        "(default: balanced:N with --contexts' N)",
+    )
     e.add_argument("--frames-per-context", type=int, default=10, help="frames per context (10)")
     e.add_argument("--window", type=int, default=5, help="frames per window (5)")
     e.add_argument("--batch-images", type=int, default=32, help="fixed batch size (32)")
@@ -183,6 +188,7 @@ def run_evaluate(args: argparse.Namespace) -> int:
         oracles=oracles,
         baselines=tuple(args.baseline),
         val=load_split(args.data, "val") if args.baseline else None,
+        fit_spec=parse_contexts(args.fit_contexts) if args.fit_contexts else None,
         per_context=args.frames_per_context,
         window=args.window,
         batch_images=args.batch_images,

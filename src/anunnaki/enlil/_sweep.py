@@ -6,15 +6,17 @@ draw contexts of a phenomenon, measure each one's F1, drop and category on a fix
 uniform over the normalised parameter space (what the paper's "random sampling of HSL
 variations" figure shows); a *balanced* set has about N/3 contexts of each category, so
 that the rare boundary category 1 weighs as much as the others in a macro-F1. Balanced sets
-are drawn uniformly first; when category 1 is still short after ``max_draws`` uniform draws,
-the rest is found by bisection on the segment between a category-0 and a category-2 context
-(the drop changes continuously along it, so the band in between is crossed).
+are drawn uniformly first; when category 0 or 1 is still short after ``max_draws`` uniform
+draws (most of HSL's space compromises the rover's detector, for example), the rest is found
+by bisection for category 1 on segments from the phenomenon's identity context (no effect,
+category 0) to a measured category-2 context: the drop grows along the segment, so the band
+in between is crossed, and the category-0 contexts met on the way are kept too.
 """
 
 from __future__ import annotations
 
 import re
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any, Literal
 
@@ -26,6 +28,7 @@ from anunnaki.enlil._context import (
     ContextResult,
     EnlilError,
     evaluate_context,
+    normalise,
     resolve_phenomenon,
 )
 from anunnaki.lec import Detector
@@ -107,8 +110,8 @@ def draw_contexts(
         clean_f1: The model's F1 on the clean batch.
         thresholds: Relative drops of categories 1 and 2.
         seed: Draws and phenomenon seeds derive from it.
-        max_draws: Uniform draws a balanced set may spend before bisecting
-            (default ``10 * N``).
+        max_draws: Uniform draws a balanced set may spend before it bisects segments
+            (default ``3 * N``).
         **kwargs: Passed to :func:`evaluate_context` (``score_threshold``, ``iou`` …).
 
     """
@@ -126,46 +129,44 @@ def draw_contexts(
         results = [measure(u) for u in rng.random((spec.n, d))]
         return ContextDraw(results, len(results), {})
     quota = [spec.n // 3 + (1 if c < spec.n % 3 else 0) for c in range(3)]
-    budget = 10 * spec.n if max_draws is None else max_draws
+    budget = 3 * spec.n if max_draws is None else max_draws
     pools: list[list[ContextResult]] = [[], [], []]
-    seen: list[list[ContextResult]] = [[], [], []]  # every measured context, by category
+    seen2: list[ContextResult] = []  # every category-2 context measured: segment ends
     evaluations = 0
-    while evaluations < budget and any(len(pools[c]) < quota[c] for c in range(3)):
-        result = measure(rng.random(d))
-        evaluations += 1
-        seen[result.category].append(result)
+
+    def keep(result: ContextResult) -> None:
+        if result.category == 2:
+            seen2.append(result)
         if len(pools[result.category]) < quota[result.category]:
             pools[result.category].append(result)
-    evaluations += _bisect_fill(measure, rng, pools=pools, seen=seen, quota=quota)
+
+    while evaluations < budget and any(len(pools[c]) < quota[c] for c in range(3)):
+        keep(measure(rng.random(d)))
+        evaluations += 1
+    identity = normalise(phen, phen.to_vector(phen.identity_params()))
+    tries = 0
+    while any(len(pools[c]) < quota[c] for c in (0, 1)) and tries < spec.n + 2:
+        tries += 1
+        end = seen2[int(rng.integers(len(seen2)))].params if seen2 else rng.random(d)
+        evaluations += _bisect(measure, keep, identity, end)
     short = {c: quota[c] - len(pools[c]) for c in range(3) if len(pools[c]) < quota[c]}
     order = [pools[c][i] for i in range(max(quota)) for c in range(3) if i < len(pools[c])]
     return ContextDraw(order, evaluations, short)
 
 
-def _bisect_fill(
-    measure: Any,
-    rng: np.random.Generator,
-    *,
-    pools: list[list[ContextResult]],
-    seen: list[list[ContextResult]],
-    quota: list[int],
+def _bisect(
+    measure: Callable[[npt.NDArray[np.float64]], ContextResult],
+    keep: Callable[[ContextResult], None],
+    low: npt.NDArray[np.float64],
+    high: npt.NDArray[np.float64],
 ) -> int:
-    """Find missing category-1 contexts between category-0 and category-2 ones."""
-    evaluations = 0
-    if not seen[0] or not seen[2]:
-        return 0
-    tries = 0
-    while len(pools[1]) < quota[1] and tries < 4 * quota[1] + 4:
-        tries += 1
-        low = seen[0][int(rng.integers(len(seen[0])))].params
-        high = seen[2][int(rng.integers(len(seen[2])))].params
-        a, b = 0.0, 1.0
-        for _ in range(6):  # the segment's 1/64: finer than the band on any axis here
-            t = 0.5 * (a + b)
-            result = measure(np.clip(low + t * (high - low), 0.0, 1.0))
-            evaluations += 1
-            if result.category == 1:
-                pools[1].append(result)
-                break
-            a, b = (t, b) if result.category == 0 else (a, t)
-    return evaluations
+    """Bisect the segment *low* (no effect) → *high* for category 1; keep what is measured."""
+    a, b = 0.0, 1.0
+    for step in range(6):  # down to 1/64 of the segment
+        t = 0.5 * (a + b)
+        result = measure(np.clip(low + t * (high - low), 0.0, 1.0))
+        keep(result)
+        if result.category == 1:
+            return step + 1
+        a, b = (t, b) if result.category == 0 else (a, t)
+    return 6
