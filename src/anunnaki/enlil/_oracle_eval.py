@@ -56,6 +56,7 @@ __all__ = [
     "detector_statistic",
     "evaluate_oracles",
     "fit_baseline",
+    "fit_baselines",
     "held_out_frames",
     "oracle_predictions",
     "score_predictions",
@@ -418,6 +419,40 @@ def _held_info(held: HeldOut, spec: ContextSpec) -> dict[str, Any]:
     }
 
 
+def fit_baselines(
+    detector: Detector,
+    val: Dataset,
+    phenomenon: str | Phenomenon,
+    spec: ContextSpec,
+    baselines: Sequence[Baseline] = BASELINES,
+    *,
+    per_context: int = 10,
+    window: int = 5,
+    batch_images: int = 32,
+    thresholds: tuple[float, float] = (0.05, 0.10),
+    seed: int = 0,
+    score_threshold: float | None = None,
+) -> tuple[dict[Baseline, BaselineFit], dict[str, Any]]:
+    """Fit the detector-output *baselines* on the val split (see :func:`fit_baseline`).
+
+    Returns:
+        The fits by name, and what they were fitted on (contexts, categories, clean F1).
+
+    """
+    held = held_out_frames(
+        detector, val, phenomenon, spec, per_context=per_context, batch_images=batch_images,
+        seed=seed, thresholds=thresholds, score_threshold=score_threshold,
+    )  # fmt: skip
+    clean = fixed_batch(val, n=4 * batch_images, seed=seed + 1)
+    clean_f1 = float(evaluate_detector(detector, clean, score_threshold=score_threshold).f1)
+    frames = [clean.image(i) for i in range(len(clean))]
+    fits = {
+        kind: fit_baseline(kind, detector, frames, clean_f1, held, window=window)
+        for kind in baselines
+    }
+    return fits, _held_info(held, spec) | {"clean_images": len(clean), "clean_f1": clean_f1}
+
+
 def evaluate_oracles(
     detector: Detector,
     test: Dataset,
@@ -428,6 +463,7 @@ def evaluate_oracles(
     baselines: Sequence[Baseline] = (),
     val: Dataset | None = None,
     fit_spec: ContextSpec | None = None,
+    fits: Mapping[Baseline, BaselineFit] | None = None,
     per_context: int = 10,
     window: int = 5,
     batch_images: int = 32,
@@ -443,10 +479,11 @@ def evaluate_oracles(
         phenomenon: Name or composition.
         spec: Contexts of *test*.
         oracles: Name → oracle (e.g. ``enlil``, ``monte-carlo``).
-        baselines: ``atc`` and/or ``max-score``, fitted on *val*.
-        val: The validation split (needed with *baselines*).
+        baselines: ``atc`` and/or ``max-score``, fitted on *val* (:func:`fit_baselines`).
+        val: The validation split (needed with *baselines* unless *fits* are given).
         fit_spec: Contexts of *val* the baselines' category thresholds are fitted on
             (default ``balanced:N`` with *spec*'s N).
+        fits: Baselines fitted before (then *baselines*, *val* and *fit_spec* are unused).
         per_context: Frames per context.
         window: Frames per window.
         batch_images: Images of the fixed batch each context is measured on.
@@ -459,33 +496,26 @@ def evaluate_oracles(
         (:func:`score_predictions`), "fit": val contexts info}``.
 
     """
-    if baselines and val is None:
+    if baselines and val is None and fits is None:
         raise EnlilError("the detector-output baselines are fitted on val: give the val split")
     phen = resolve_phenomenon(phenomenon)
-    kw: dict[str, Any] = {"thresholds": thresholds, "score_threshold": score_threshold}
-    held = held_out_frames(
-        detector, test, phen, spec, per_context=per_context, batch_images=batch_images,
-        seed=seed, **kw,
-    )  # fmt: skip
+    kw: dict[str, Any] = {
+        "per_context": per_context, "batch_images": batch_images, "thresholds": thresholds,
+        "score_threshold": score_threshold,
+    }  # fmt: skip
+    held = held_out_frames(detector, test, phen, spec, seed=seed, **kw)
     report: dict[str, Any] = {"phenomenon": phen.name, "test": _held_info(held, spec)}
     predictors: dict[str, Any] = {}
     for name, oracle in oracles.items():
-        predictors[name] = score_predictions(
-            held, oracle_predictions(oracle, held, window=window), window=window
-        )
-    if baselines and val is not None:
+        preds = oracle_predictions(oracle, held, window=window)
+        predictors[name] = score_predictions(held, preds, window=window)
+    if fits is None and baselines and val is not None:
         fspec = fit_spec or ContextSpec("balanced", spec.n)
-        fit_held = held_out_frames(
-            detector, val, phen, fspec, per_context=per_context, batch_images=batch_images,
-            seed=seed + 1, **kw,
-        )  # fmt: skip
-        report["fit"] = _held_info(fit_held, fspec)
-        clean = fixed_batch(val, n=4 * batch_images, seed=seed + 2)
-        clean_f1 = float(evaluate_detector(detector, clean, score_threshold=score_threshold).f1)
-        frames = [clean.image(i) for i in range(len(clean))]
-        for kind in baselines:
-            fit = fit_baseline(kind, detector, frames, clean_f1, fit_held, window=window)
-            preds = baseline_predictions(fit, detector, held, window=window)
-            predictors[kind] = score_predictions(held, preds, window=window)
+        fits, report["fit"] = fit_baselines(
+            detector, val, phen, fspec, baselines, window=window, seed=seed + 1, **kw
+        )
+    for kind, fit in (fits or {}).items():
+        preds = baseline_predictions(fit, detector, held, window=window)
+        predictors[kind] = score_predictions(held, preds, window=window)
     report["predictors"] = predictors
     return report
