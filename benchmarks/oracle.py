@@ -18,7 +18,8 @@ Writes ``benchmarks/results/oracle.json``. Data: ``anunnaki make-dataset rover -
 ``anunnaki make-dataset uav --out D --width 320 --height 240`` (docs/enlil.md).
 
 Run: ``.venv/bin/python benchmarks/oracle.py --rover-data D1 --uav-data D2
-[--mc-oracle rover-default=FILE ...] [--quick]``; ``--only-inference`` for part 1 alone.
+[--mc-oracle rover-default=FILE ...] [--quick]``; ``--only-inference`` for part 1 alone,
+``--case uav-default/fog`` for one case (the others already in the output are kept).
 """
 
 from __future__ import annotations
@@ -137,6 +138,8 @@ def accuracy(args: argparse.Namespace) -> dict[str, Any]:
     common = {"per_context": per, "batch_images": args.batch_images}
     out: dict[str, Any] = {}
     for plat, model, phen in CASES:
+        if args.case and f"{model}/{phen}" not in args.case:
+            continue
         data = getattr(args, f"{plat}_data")
         if data is None:
             out[f"{model}/{phen}"] = {"measured": False, "why": f"no --{plat}-data"}
@@ -197,6 +200,14 @@ def main() -> None:
     parser.add_argument("--threads", type=int, default=1)
     parser.add_argument("--quick", action="store_true", help="12 contexts, 5 frames each")
     parser.add_argument("--only-inference", action="store_true")
+    parser.add_argument(
+        "--case",
+        action="append",
+        default=[],
+        metavar="MODEL/PHENOMENON",
+        help="measure only these cases (repeatable), keeping the others already in --output "
+        "(e.g. the rover and the UAV in two processes, one after the other writing)",
+    )
     parser.add_argument("--output", default=str(OUT))
     args = parser.parse_args()
     if args.quick:
@@ -216,6 +227,9 @@ def main() -> None:
         result["aims"] = AIMS
         result["paper_accuracy"] = PAPER
         result["accuracy"] = accuracy(args)
+        if args.case and Path(args.output).is_file():
+            old = json.loads(Path(args.output).read_text()).get("accuracy", {})
+            result["accuracy"] = {**old, **result["accuracy"]}
     result["not_measured_yet"] = ["ramps", "loop_rate"]
     result["machine"] = {"python": platform.python_version(), "torch": torch.__version__}
     out = Path(args.output)
