@@ -29,6 +29,7 @@ import json
 import platform
 import statistics
 import time
+from functools import partial
 from pathlib import Path
 from typing import Any
 
@@ -127,51 +128,161 @@ def _aims(random: dict[str, Any], balanced: dict[str, Any]) -> dict[str, Any]:
     }
 
 
-def accuracy(args: argparse.Namespace) -> dict[str, Any]:
-    """Part 2: every case of :data:`CASES` on random and balanced held-out contexts."""
+def _save_held(path: Path, held: Any) -> None:
+    np.savez(
+        path,
+        frames=np.stack(held.frames),
+        params=np.stack([r.params for r in held.contexts]),
+        f1=np.asarray([r.f1 for r in held.contexts]),
+        drop=np.asarray([r.drop for r in held.contexts]),
+        category=np.asarray([r.category for r in held.contexts]),
+        meta=np.asarray(
+            json.dumps(
+                {
+                    "phenomenon": held.phenomenon,
+                    "param_names": list(held.param_names),
+                    "per_context": held.per_context,
+                    "clean_f1": held.clean_f1,
+                    "evaluations": held.evaluations,
+                    "short": held.short,
+                }
+            )
+        ),
+    )
+
+
+def _load_held(path: Path) -> Any:
+    from anunnaki.enlil import ContextResult, HeldOut
+
+    with np.load(path, allow_pickle=False) as z:
+        meta = json.loads(str(z["meta"]))
+        contexts = [
+            ContextResult(p, float(f), float(d), int(c))
+            for p, f, d, c in zip(z["params"], z["f1"], z["drop"], z["category"], strict=True)
+        ]
+        frames = list(z["frames"])
+    per = int(meta["per_context"])
+    index = np.repeat(np.arange(len(contexts)), per)
+    labels = np.asarray([r.category for r in contexts], np.int64)[index]
+    return HeldOut(
+        meta["phenomenon"], tuple(meta["param_names"]), contexts, frames, labels, index, per,
+        meta["clean_f1"], meta["evaluations"], {int(k): v for k, v in meta["short"].items()},
+    )  # fmt: skip
+
+
+def _cached(cache: Path | None, name: str, make: Any, save: Any, load: Any) -> Any:
+    """``make()`` once: stored under *cache* by *save*, read back by *load* on a re-run."""
+    if cache is None:
+        return make()
+    path = cache / name
+    if path.is_file():
+        return load(path)
+    value = make()
+    cache.mkdir(parents=True, exist_ok=True)
+    save(path, value)
+    return value
+
+
+def _json_save(path: Path, value: Any) -> None:
+    path.write_text(json.dumps(value))
+
+
+def _json_load(path: Path) -> Any:
+    return json.loads(path.read_text())
+
+
+def _baselines(fits: dict[str, Any], detector: Any, held: Any) -> dict[str, Any]:
+    from anunnaki.enlil import baseline_predictions, score_predictions
+
+    return {
+        k: score_predictions(held, baseline_predictions(f, detector, held)) for k, f in fits.items()
+    }
+
+
+def _case(args: argparse.Namespace, plat: str, model: str, phen: str) -> dict[str, Any]:
+    """One model and phenomenon: baselines fitted on val, every predictor on test frames.
+
+    With ``--cache DIR`` the held-out frames and the baselines' figures (the detector's
+    work, which does not depend on the oracles) are stored, so scoring oracles that land
+    later re-runs only the oracles.
+    """
+    from dataclasses import asdict
+
     from anunnaki.datasets import load_split
-    from anunnaki.enlil import ContextSpec, evaluate_oracles, fit_baselines
+    from anunnaki.enlil import (
+        BaselineFit,
+        ContextSpec,
+        fit_baselines,
+        held_out_frames,
+        oracle_predictions,
+        score_predictions,
+    )
     from anunnaki.lec import load_registry
 
-    torch.set_num_threads(args.threads)
-    n, per = (args.contexts, args.frames_per_context)
-    common = {"per_context": per, "batch_images": args.batch_images}
-    out: dict[str, Any] = {}
-    for plat, model, phen in CASES:
-        if args.case and f"{model}/{phen}" not in args.case:
-            continue
-        data = getattr(args, f"{plat}_data")
-        if data is None:
-            out[f"{model}/{phen}"] = {"measured": False, "why": f"no --{plat}-data"}
-            continue
-        registry = load_registry(MODELS / f"{plat}.yaml")
-        spec = registry.get(model)
-        detector = registry.load(spec)
-        oracles = _oracles(model, spec, args)
-        start = time.perf_counter()
-        fits, fit_info = fit_baselines(
+    data = getattr(args, f"{plat}_data")
+    n = args.uav_contexts if plat == "uav" and args.uav_contexts else args.contexts
+    batch = args.uav_batch_images if plat == "uav" and args.uav_batch_images else None
+    common = {"per_context": args.frames_per_context, "batch_images": batch or args.batch_images}
+    registry = load_registry(MODELS / f"{plat}.yaml")
+    spec = registry.get(model)
+    detector = registry.load(spec)
+    oracles = _oracles(model, spec, args)
+    cache = Path(args.cache) / f"{model}-{phen}-n{n}-s{args.seed}" if args.cache else None
+    start = time.perf_counter()
+
+    def fit() -> Any:
+        fits, info = fit_baselines(
             detector, load_split(data, "val"), phen, ContextSpec("balanced", n),
             seed=args.seed + 1, **common,
         )  # fmt: skip
-        test = load_split(data, "test")
-        runs = {}
-        for kind in ("random", "balanced"):
-            runs[kind] = evaluate_oracles(
-                detector, test, phen, ContextSpec(kind, n), oracles=oracles, fits=fits,
-                seed=args.seed, **common,
-            )  # fmt: skip
-        out[f"{model}/{phen}"] = {
-            "model": model,
-            "phenomenon": phen,
-            "data": str(data),
-            "oracles": {k: v.card.training.get("contexts") for k, v in oracles.items()},
-            "fit": fit_info,
-            **runs,
-            "paper_accuracy": PAPER.get(phen),
-            "aims": _aims(runs["random"], runs["balanced"]),
-            "seconds": round(time.perf_counter() - start, 1),
+        return {"fits": {k: asdict(v) for k, v in fits.items()}, "info": info}
+
+    fitted = _cached(cache, "fit.json", fit, _json_save, _json_load)
+    fits = {k: BaselineFit(**v) for k, v in fitted["fits"].items()}
+    test = load_split(data, "test")
+    runs: dict[str, Any] = {}
+    for kind in ("random", "balanced"):
+        cspec = ContextSpec(kind, n)
+        make_held = partial(held_out_frames, detector, test, phen, cspec, seed=args.seed, **common)
+        held = _cached(cache, f"{kind}.npz", make_held, _save_held, _load_held)
+        make_base = partial(_baselines, fits, detector, held)
+        base = _cached(cache, f"{kind}-baselines.json", make_base, _json_save, _json_load)
+        predictors = {
+            name: score_predictions(held, oracle_predictions(oracle, held))
+            for name, oracle in oracles.items()
         }
-        print(json.dumps({f"{model}/{phen}": _summary(out[f"{model}/{phen}"])}), flush=True)
+        runs[kind] = {
+            "test": {"spec": str(cspec), **held.describe()},
+            "predictors": predictors | base,
+        }
+    return {
+        "model": model,
+        "phenomenon": phen,
+        "data": str(data),
+        "oracles": {k: v.card.training.get("contexts") for k, v in oracles.items()},
+        "fit": fitted["info"],
+        **runs,
+        "paper_accuracy": PAPER.get(phen),
+        "aims": _aims(runs["random"], runs["balanced"]),
+        "contexts_n": n,
+        "batch_images": common["batch_images"],
+        "seconds": round(time.perf_counter() - start, 1),
+    }
+
+
+def accuracy(args: argparse.Namespace) -> dict[str, Any]:
+    """Part 2: every case of :data:`CASES` on random and balanced held-out contexts."""
+    torch.set_num_threads(args.threads)
+    out: dict[str, Any] = {}
+    for plat, model, phen in CASES:
+        key = f"{model}/{phen}"
+        if args.case and key not in args.case:
+            continue
+        if getattr(args, f"{plat}_data") is None:
+            out[key] = {"measured": False, "why": f"no --{plat}-data"}
+            continue
+        out[key] = _case(args, plat, model, phen)
+        print(json.dumps({key: _summary(out[key])}), flush=True)
     return out
 
 
@@ -196,6 +307,13 @@ def main() -> None:
     parser.add_argument("--contexts", type=int, default=60, help="N of random:N, balanced:N")
     parser.add_argument("--frames-per-context", type=int, default=10)
     parser.add_argument("--batch-images", type=int, default=32)
+    parser.add_argument(
+        "--uav-contexts", type=int, help="N for the UAV (320x240 frames cost 5x; default N)"
+    )
+    parser.add_argument("--uav-batch-images", type=int, help="fixed batch for the UAV")
+    parser.add_argument(
+        "--cache", help="keep held-out frames and baseline figures here for re-runs (DIR)"
+    )
     parser.add_argument("--seed", type=int, default=1000, help="no training used it (1000)")
     parser.add_argument("--threads", type=int, default=1)
     parser.add_argument("--quick", action="store_true", help="12 contexts, 5 frames each")

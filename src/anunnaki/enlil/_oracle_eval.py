@@ -98,6 +98,18 @@ class HeldOut:
     evaluations: int
     short: dict[int, int]
 
+    def describe(self) -> dict[str, Any]:
+        """Counts for a report: contexts, frames, evaluations, categories, clean F1."""
+        return {
+            "contexts": len(self.contexts),
+            "frames": len(self.frames),
+            "frames_per_context": self.per_context,
+            "evaluations": self.evaluations,
+            "category_counts": [int(sum(r.category == c for r in self.contexts)) for c in range(3)],
+            "short": {str(k): v for k, v in self.short.items()},
+            "clean_f1": self.clean_f1,
+        }
+
     def units(self) -> npt.NDArray[np.float64]:
         """``[F, d]`` the normalised context of each frame."""
         return np.stack([self.contexts[int(i)].params for i in self.context_index])
@@ -407,16 +419,7 @@ def score_predictions(held: HeldOut, pred: Predictions, *, window: int = 5) -> d
 
 
 def _held_info(held: HeldOut, spec: ContextSpec) -> dict[str, Any]:
-    return {
-        "spec": str(spec),
-        "contexts": len(held.contexts),
-        "frames": len(held.frames),
-        "frames_per_context": held.per_context,
-        "evaluations": held.evaluations,
-        "category_counts": [int((held.labels[:: held.per_context] == c).sum()) for c in range(3)],
-        "short": {str(k): v for k, v in held.short.items()},
-        "clean_f1": held.clean_f1,
-    }
+    return {"spec": str(spec), **held.describe()}
 
 
 def fit_baselines(
