@@ -104,3 +104,13 @@ def test_dashboard_benchmark(tmp_path: Path) -> None:
     assert raf["n"] > 10 and 0 < raf["p50"] <= raf["p95"] <= raf["max"]
     assert doc["violation_to_red_ms"]["n"] >= 1
     assert doc["camera_frames_drawn_per_s"] > 0
+
+
+@pytest.mark.slow
+def test_oracle_benchmark_inference_part(tmp_path: Path) -> None:
+    """The accuracy part needs datasets and oracles; its library is tested in tests/enlil."""
+    out = tmp_path / "oracle.json"
+    run("oracle.py", "--only-inference", "--frames", "5", "--output", str(out))
+    doc = load(out)
+    assert doc["inference_ms_per_frame_128"]["median"] > 0
+    assert doc["inference_ms_per_frame_128"]["threads"] == 1 and "accuracy" not in doc

@@ -127,3 +127,43 @@ def test_evaluate_detector_errors(
     assert "need --phenomenon" in capsys.readouterr().err
     assert main([*base, "--phenomenon", "fog", "--params", "density=40"]) == 2
     assert "density" in capsys.readouterr().err
+
+
+def test_evaluate_detector_random_contexts(
+    trained: Trained, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Issue 13, item 1: F1 over N uniform contexts of a fixed batch, per-context rows."""
+    capsys.readouterr()
+    base = ["evaluate-detector", str(trained.model), "--data", str(trained.data)]
+    args = [*base, "-p", "fog", "--contexts", "random:4", "--batch-images", "6", "--seed", "3"]
+    assert main([*args, "--thresholds", "0.02", "0.2", "--json"]) == 0
+    report = json.loads(capsys.readouterr().out)
+    assert report["images"] == 6 and report["contexts_spec"] == "random:4"
+    assert report["thresholds"] == [0.02, 0.2] and report["param_names"] == ["density", "intensity"]
+    items = report["contexts"]
+    assert len(items) == 4 and sum(report["category_counts"]) == 4
+    clean = report["clean"]["f1"]
+    for item in items:
+        assert set(item["params"]) == {"density", "intensity"}
+        assert all(0.0 <= v <= 1.0 for v in item["params"].values())
+        assert item["drop"] == pytest.approx(max(0.0, (clean - item["f1"]) / clean))
+        rel = item["drop"]
+        assert item["category"] == (2 if rel > 0.2 else 1 if rel > 0.02 else 0)
+    assert report["f1"] == pytest.approx(sum(i["f1"] for i in items) / 4)
+    # the same seed draws the same contexts; the table shows them
+    assert main(args) == 0
+    text = capsys.readouterr().out
+    assert "4 random fog contexts" in text and "categories 0/1/2" in text
+
+
+def test_evaluate_detector_contexts_errors(
+    trained: Trained, capsys: pytest.CaptureFixture[str]
+) -> None:
+    capsys.readouterr()
+    base = ["evaluate-detector", str(trained.model), "--data", str(trained.data)]
+    assert main([*base, "--contexts", "random:3"]) == 2
+    assert "needs --phenomenon" in capsys.readouterr().err
+    assert main([*base, "-p", "fog", "--contexts", "balanced:3"]) == 2
+    assert "write random:N with N >= 1" in capsys.readouterr().err
+    assert main([*base, "-p", "fog", "--contexts", "random:2", "--thresholds", "0.2", "0.1"]) == 2
+    assert "degraded drop must be below" in capsys.readouterr().err

@@ -17,6 +17,7 @@ from anunnaki.sim import (
     FrameScore,
     RunReport,
     TacticEvent,
+    compare_assessors,
     load_report,
     plot_report,
     rolling_f1,
@@ -129,3 +130,30 @@ def test_report_and_plot_need_the_detector(capsys: pytest.CaptureFixture[str]) -
     assert "give --models too" in capsys.readouterr().err
     assert main(["run", str(EXAMPLES / "rover" / "utu.yaml"), "--plot", "p.png"]) == 2
     assert "need a simulated managed system" in capsys.readouterr().err
+
+
+def test_compare_assessors_gives_agreement_and_signed_delays() -> None:
+    """An oracle that goes up 2 frames after the scorer and down 3 frames before it."""
+    scorer = [(s, 0) for s in range(0, 10)] + [(s, 2) for s in range(10, 30)]
+    scorer += [(s, 0) for s in range(30, 40)]
+    oracle = [(s, 0) for s in range(0, 12)] + [(s, 2) for s in range(12, 27)]
+    oracle += [(s, 0) for s in range(27, 40)] + [(40, 1)]  # frame 40: the scorer said nothing
+    out = compare_assessors(list(reversed(oracle)), scorer, rate=10.0)
+    assert out["frames"] == 40
+    assert out["agreement"] == pytest.approx(35 / 40)  # 2 frames late up, 3 frames early down
+    assert out["confusion"] == [[20, 0, 0], [0, 0, 0], [5, 0, 15]]  # scorer row, oracle column
+    assert out["changes"] == 2 and out["delays_frames"] == [2, -3]
+    assert out["median_delay_frames"] == -0.5 and out["median_delay_s"] == -0.05
+    assert out["unmatched"] == 0
+    never = compare_assessors([(s, 0) for s in range(40)], scorer, rate=10.0)
+    assert never["unmatched"] == 2 and never["median_delay_frames"] is None
+    assert compare_assessors([], scorer, rate=10.0)["agreement"] is None
+
+
+def test_report_keeps_the_scoring(tmp_path: Path) -> None:
+    scoring = {"oracle": "enlil", "scorer": "ground_truth", "agreement": 0.9}
+    run = RunReport("s", "rover", 1.0, frames=frames((0.0, 1, 0, 0)), scoring=scoring)
+    assert load_report(run.write(tmp_path / "r.json")).scoring == scoring
+    plain = RunReport("s", "rover", 1.0)
+    assert "scoring" not in plain.as_dict()
+    assert load_report(plain.write(tmp_path / "p.json")).scoring is None

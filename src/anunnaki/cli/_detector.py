@@ -372,6 +372,27 @@ def _add_evaluate(sub: Any) -> None:
     group.add_argument(
         "--params", type=_params, help="exact parameters, e.g. density=4,intensity=0.3"
     )
+    group.add_argument(
+        "--contexts",
+        metavar="random:N",
+        help="N contexts drawn uniformly from the phenomenon's parameter space, each applied "
+        "to a fixed batch of the split (--batch-images): per-context F1, drop and category, "
+        "and their mean F1 at the top level (f1)",
+    )
+    p.add_argument(
+        "--batch-images",
+        type=_positive,
+        default=64,
+        help="with --contexts: images of the split in the fixed batch (64; all if fewer)",
+    )
+    p.add_argument(
+        "--thresholds",
+        type=_unit,
+        nargs=2,
+        default=[0.05, 0.10],
+        metavar=("DEGRADED", "COMPROMISED"),
+        help="relative F1 drops above which the category is 1 and 2 (0.05 0.10)",
+    )
     p.add_argument("--seed", type=int, default=0, help="phenomenon seed (image i: seed + i)")
     p.add_argument("--threshold", type=_unit, help="score threshold (default: the model's)")
     p.add_argument("--threads", type=_positive, default=2, help="torch threads (2)")
@@ -385,59 +406,85 @@ def _add_evaluate(sub: Any) -> None:
     p.set_defaults(run=_run_evaluate)
 
 
-def _run_evaluate(args: argparse.Namespace) -> int:  # noqa: C901
-    from anunnaki.datasets import load_split
-    from anunnaki.lec import (  # before torch: OMP policy
-        DetectorError,
-        evaluate_detector,
-        load_detector,
-    )
-    from anunnaki.phenomena import get_phenomenon
+def _report_head(
+    args: argparse.Namespace, det: Any, model_id: str, domain: str, images: int
+) -> dict[str, Any]:
+    """What every ``evaluate-detector`` report starts with: the model, data and threshold."""
+    threshold = args.threshold
+    return {
+        "model": str(args.model),
+        "model_id": model_id,
+        "domain": domain,
+        "data": str(args.data),
+        "split": args.split,
+        "images": images,
+        "score_threshold": (
+            threshold if threshold is not None else float(getattr(det, "score_threshold", 0.0))
+        ),
+    }
 
+
+def _load_evaluated(args: argparse.Namespace) -> tuple[Any, Path, str, str]:
+    """The model ``evaluate-detector`` measures: ``(detector, file, model id, domain)``."""
+    from anunnaki.lec import load_detector, load_registry
+
+    registered = Path(args.model).suffix in (".yaml", ".yml")
+    if args.model_id is not None and not registered:
+        raise AnunnakiError("--model-id picks a model of a registry (REG.yaml); MODEL is a file")
+    if not registered:
+        det = load_detector(args.model)
+        return det, Path(args.model), det.model_id, det.domain
+    registry = load_registry(args.model)
+    spec = registry.resolve(model_id=args.model_id)
+    if args.update_sidecar and spec.loader is not None:
+        raise AnunnakiError(
+            f"--update-sidecar writes an anunnaki model file's sidecar; model {spec.id!r} "
+            f"is loaded by {spec.loader!r}: put its metrics in the registry instead"
+        )
+    return registry.load(spec), spec.file, spec.id, spec.domain
+
+
+def _check_evaluate_options(args: argparse.Namespace) -> None:
     if args.phenomenon is None and (args.strength is not None or args.params is not None):
         raise AnunnakiError("--strength and --params need --phenomenon")
+    if args.contexts is not None:
+        from anunnaki.enlil import parse_contexts
+
+        if args.phenomenon is None:
+            raise AnunnakiError("--contexts random:N needs --phenomenon P")
+        if args.update_sidecar:
+            raise AnunnakiError("--update-sidecar measures clean splits; drop --contexts")
+        args.contexts = parse_contexts(args.contexts, kinds=("random",))
+    low, high = args.thresholds
+    if not low < high:
+        raise AnunnakiError(
+            f"--thresholds {low} {high}: the degraded drop must be below the compromised one"
+        )
+
+
+def _run_evaluate(args: argparse.Namespace) -> int:
+    from anunnaki.datasets import load_split
+    from anunnaki.lec import DetectorError, evaluate_detector  # before torch: OMP policy
+    from anunnaki.phenomena import get_phenomenon
+
+    _check_evaluate_options(args)
     phen = get_phenomenon(args.phenomenon) if args.phenomenon else None
     params = phen.validate(args.params) if phen is not None and args.params else None
     if importlib.util.find_spec("torch") is not None:  # a plugin's model may not need it
         import torch
 
         torch.set_num_threads(args.threads)
-    registered = Path(args.model).suffix in (".yaml", ".yml")
-    if args.model_id is not None and not registered:
-        raise AnunnakiError("--model-id picks a model of a registry (REG.yaml); MODEL is a file")
-    if registered:
-        from anunnaki.lec import load_registry
-
-        registry = load_registry(args.model)
-        spec = registry.resolve(model_id=args.model_id)
-        if args.update_sidecar and spec.loader is not None:
-            raise AnunnakiError(
-                f"--update-sidecar writes an anunnaki model file's sidecar; model {spec.id!r} "
-                f"is loaded by {spec.loader!r}: put its metrics in the registry instead"
-            )
-        det = registry.load(spec)
-        model_file, model_id, domain = spec.file, spec.id, spec.domain
-    else:
-        det = load_detector(args.model)
-        model_file, model_id, domain = Path(args.model), det.model_id, det.domain
+    det, model_file, model_id, domain = _load_evaluated(args)
+    if args.contexts is not None:
+        return _run_contexts(args, det, model_id, domain)
     data = load_split(args.data, args.split)
     threshold = args.threshold
     try:
         clean = evaluate_detector(det, data, score_threshold=threshold)
     except DetectorError as exc:
         raise AnunnakiError(f"{args.model}: model {model_id!r}: {exc}") from None
-    report: dict[str, Any] = {
-        "model": str(args.model),
-        "model_id": model_id,
-        "domain": domain,
-        "data": str(args.data),
-        "split": args.split,
-        "images": len(data),
-        "score_threshold": (
-            threshold if threshold is not None else float(getattr(det, "score_threshold", 0.0))
-        ),
-        "clean": clean.as_dict(),
-    }
+    report = _report_head(args, det, model_id, domain, len(data))
+    report["clean"] = clean.as_dict()
     rows = [("clean", clean)]
     if phen is not None:
         used = (
@@ -450,7 +497,7 @@ def _run_evaluate(args: argparse.Namespace) -> int:  # noqa: C901
         )
         drop = clean.f1 - perturbed.f1
         rel = drop / clean.f1 if clean.f1 > 0 else 0.0
-        category = 2 if rel > 0.10 else 1 if rel > 0.05 else 0
+        category = 2 if rel > args.thresholds[1] else 1 if rel > args.thresholds[0] else 0
         report["phenomenon"] = {"name": phen.name, "params": used, "seed": args.seed}
         report["perturbed"] = perturbed.as_dict()
         report["f1_drop"] = drop
@@ -481,6 +528,75 @@ def _run_evaluate(args: argparse.Namespace) -> int:  # noqa: C901
             f"({100 * report['f1_drop_relative']:.1f} % of clean) → category "
             f"{report['category']} ({_CATEGORY[report['category']]})"
         )
+    return 0
+
+
+def _run_contexts(args: argparse.Namespace, det: Any, model_id: str, domain: str) -> int:
+    """``--contexts random:N``: F1 over N uniform contexts on a fixed batch (issue 13, item 1)."""
+    import numpy as np
+
+    from anunnaki.enlil import draw_contexts, fixed_batch, resolve_phenomenon, to_phenomenon_vector
+    from anunnaki.lec import DetectorError, evaluate_detector
+
+    phen = resolve_phenomenon(args.phenomenon)
+    batch = fixed_batch(args.data, args.split, args.batch_images, seed=args.seed)
+    thresholds = (float(args.thresholds[0]), float(args.thresholds[1]))
+    try:
+        clean = evaluate_detector(det, batch, score_threshold=args.threshold)
+        drawn = draw_contexts(
+            det, batch, phen, args.contexts, clean_f1=clean.f1, thresholds=thresholds,
+            seed=args.seed, score_threshold=args.threshold,
+        )  # fmt: skip
+    except DetectorError as exc:
+        raise AnunnakiError(f"{args.model}: model {model_id!r}: {exc}") from None
+    items: list[dict[str, Any]] = [
+        {
+            "params": dict(zip(phen.param_names, r.params.round(6).tolist(), strict=True)),
+            "values": phen.from_vector(to_phenomenon_vector(phen, r.params)),
+            "f1": r.f1,
+            "drop": r.drop,
+            "category": r.category,
+        }
+        for r in drawn.results
+    ]
+    f1s = np.asarray([r.f1 for r in drawn.results])
+    counts = drawn.counts()
+    report = _report_head(args, det, model_id, domain, len(batch))
+    report |= {
+        "phenomenon": phen.name,
+        "param_names": list(phen.param_names),
+        "contexts_spec": str(args.contexts),
+        "seed": args.seed,
+        "thresholds": list(thresholds),
+        "clean": clean.as_dict(),
+        "f1": float(f1s.mean()),
+        "f1_std": float(f1s.std()),
+        "f1_min": float(f1s.min()),
+        "category_counts": counts,
+        "category_fraction": [c / len(items) for c in counts],
+        "contexts": items,
+    }
+    if args.json:
+        print(json.dumps(report))
+        return 0
+    console = _console()
+    table = Table(
+        title=f"{model_id} ({domain}) under {len(items)} random {phen.name} contexts, "
+        f"{len(batch)} {args.split} images each"
+    )
+    for col in ("#", *phen.param_names, "F1", "drop", "category"):
+        table.add_column(col, justify="right")
+    for i, item in enumerate(items):
+        values = [f"{item['values'][n]:.3g}" for n in phen.param_names]
+        table.add_row(
+            str(i), *values, f"{item['f1']:.3f}", f"{100 * item['drop']:.1f} %",
+            f"{item['category']} ({_CATEGORY[item['category']]})",
+        )  # fmt: skip
+    console.print(table)
+    console.print(
+        f"clean F1 {clean.f1:.3f}; mean F1 under {phen.name} {report['f1']:.3f} "
+        f"(min {report['f1_min']:.3f}); categories 0/1/2: {counts[0]}/{counts[1]}/{counts[2]}"
+    )
     return 0
 
 

@@ -1,4 +1,4 @@
-"""``anunnaki oracle train``: train a model's behavior oracle (docs/enlil.md)."""
+"""``anunnaki oracle train | evaluate``: a model's behavior oracle (docs/enlil.md)."""
 
 from __future__ import annotations
 
@@ -12,7 +12,7 @@ __all__ = ["add_parser"]
 def add_parser(sub: Any) -> None:
     """Register ``oracle`` and its sub-commands."""
     p: argparse.ArgumentParser = sub.add_parser(
-        "oracle", help="learned behavior oracles (Enlil): train", description=__doc__
+        "oracle", help="learned behavior oracles (Enlil): train, evaluate", description=__doc__
     )
     osub = p.add_subparsers(dest="oracle_command", metavar="SUBCOMMAND")
     osub.required = True
@@ -33,6 +33,7 @@ def add_parser(sub: Any) -> None:
     t.add_argument("--seed", type=int, default=0)
     t.add_argument("--threads", type=int, default=0)
     t.set_defaults(run=run_train)
+    _add_evaluate(osub)
 
 
 def run_train(args: argparse.Namespace) -> int:
@@ -82,3 +83,155 @@ def run_train(args: argparse.Namespace) -> int:
     sha = oracle.save(args.out)
     print(json.dumps({"file": str(args.out), "sha256": sha, **oracle.card.metrics}, indent=2))
     return 0
+
+
+def _add_evaluate(osub: Any) -> None:
+    e: argparse.ArgumentParser = osub.add_parser(
+        "evaluate",
+        help="accuracy, macro-F1, ECE … of a model's oracle (and baselines) on held-out frames",
+        description=(
+            "Draw contexts of a phenomenon on a split (random:N uniform, balanced:N about N/3 "
+            "per category), measure each one's true category on a fixed batch of the split, "
+            "perturb --frames-per-context other frames of the split with it and compare the "
+            "oracle's per-frame prediction, and its mean over windows of --window frames. "
+            "--baseline atc|max-score scores the detector's own outputs on the same frames, "
+            "fitted on the val split (docs/enlil.md)."
+        ),
+    )
+    e.add_argument("--models", required=True, help="model registry YAML")
+    e.add_argument("--model", required=True, help="model id whose behavior is predicted")
+    e.add_argument("--data", required=True, help="dataset folder (the split; val for baselines)")
+    e.add_argument("--split", default="test", help="split the figures come from (test)")
+    e.add_argument("--phenomenon", "-p", required=True, help="e.g. fog, raindrop, hsl")
+    e.add_argument("--contexts", default="random:60", help="random:N or balanced:N (random:60)")
+    e.add_argument(
+        "--oracle",
+        action="append",
+        default=[],
+        metavar="[NAME=]FILE",
+        help="oracle file(s) to score (repeatable; default: the one the registry names)",
+    )
+    e.add_argument(
+        "--baseline",
+        action="append",
+        default=[],
+        choices=("atc", "max-score"),
+        help="also score a detector-output baseline (repeatable)",
+    )
+    e.add_argument(
+        "--fit-contexts",
+        help="val contexts the baselines' category thresholds are fitted on "
+        "(default: balanced:N with --contexts' N)",
+    )
+    e.add_argument("--frames-per-context", type=int, default=10, help="frames per context (10)")
+    e.add_argument("--window", type=int, default=5, help="frames per window (5)")
+    e.add_argument("--batch-images", type=int, default=32, help="fixed batch size (32)")
+    e.add_argument(
+        "--thresholds", type=float, nargs=2, default=[0.05, 0.10], metavar=("DEG", "COMP")
+    )
+    e.add_argument("--seed", type=int, default=0)
+    e.add_argument("--threads", type=int, default=0, help="torch threads (0: torch's default)")
+    e.add_argument("--json", action="store_true", help="print one JSON object")
+    e.set_defaults(run=run_evaluate)
+
+
+def _oracles(args: argparse.Namespace, spec: Any) -> dict[str, Any]:
+    """Name → loaded oracle: ``--oracle [NAME=]FILE`` or the registry's."""
+    from anunnaki.enlil import EnlilError, load_oracle
+
+    if not args.oracle:
+        if spec.oracle is None:
+            if args.baseline:
+                return {}
+            raise EnlilError(
+                f"{args.models}: model {spec.id!r} names no oracle; give --oracle FILE "
+                "(or add oracle: {file, sha256} to its entry), or only --baseline"
+            )
+        return {"oracle": load_oracle(spec.oracle.file, sha256=spec.oracle.sha256)}
+    out: dict[str, Any] = {}
+    for i, text in enumerate(args.oracle):
+        name, sep, path = text.partition("=")
+        name, path = (name, path) if sep else (f"oracle{i}" if i else "oracle", text)
+        oracle = load_oracle(path)
+        if oracle.model_id != spec.id:
+            raise EnlilError(
+                f"--oracle {path}: it assesses model {oracle.model_id!r}, not {spec.id!r}"
+            )
+        out[name] = oracle
+    return out
+
+
+def run_evaluate(args: argparse.Namespace) -> int:
+    """Score the oracle(s) and baselines; print the figures (JSON with --json)."""
+    from anunnaki.datasets import load_split
+    from anunnaki.enlil import EnlilError, evaluate_oracles, parse_contexts
+    from anunnaki.lec import load_registry
+
+    spec_contexts = parse_contexts(args.contexts)
+    low, high = args.thresholds
+    if not 0.0 <= low < high <= 1.0:
+        raise EnlilError(f"--thresholds {low} {high}: need 0 <= DEG < COMP <= 1")
+    if args.threads:
+        import torch
+
+        torch.set_num_threads(args.threads)
+    registry = load_registry(args.models)
+    spec = registry.get(args.model)
+    registry.verify(spec)
+    oracles = _oracles(args, spec)
+    detector = registry.load(spec)
+    report = evaluate_oracles(
+        detector,
+        load_split(args.data, args.split),
+        args.phenomenon,
+        spec_contexts,
+        oracles=oracles,
+        baselines=tuple(args.baseline),
+        val=load_split(args.data, "val") if args.baseline else None,
+        fit_spec=parse_contexts(args.fit_contexts) if args.fit_contexts else None,
+        per_context=args.frames_per_context,
+        window=args.window,
+        batch_images=args.batch_images,
+        thresholds=(low, high),
+        seed=args.seed,
+    )
+    report = {
+        "model_id": spec.id,
+        "data": str(args.data),
+        "split": args.split,
+        "seed": args.seed,
+        "thresholds": [low, high],
+        **report,
+    }
+    first = next(iter(report["predictors"].values()))
+    report.update({k: v for k, v in first.items() if k not in report})
+    if args.json:
+        print(json.dumps(report))
+        return 0
+    _print_table(report)
+    return 0
+
+
+def _print_table(report: dict[str, Any]) -> None:
+    from rich.console import Console
+    from rich.table import Table
+
+    info = report["test"]
+    table = Table(
+        title=f"{report['model_id']} under {report['phenomenon']}: {info['contexts']} contexts "
+        f"({info['spec']}, categories {info['category_counts']}), {info['frames']} "
+        f"{report['split']} frames"
+    )
+    for col in ("predictor", "accuracy", "macro-F1", "ECE", "context err", "win acc", "win F1"):
+        table.add_column(col, justify="left" if col == "predictor" else "right")
+
+    def fmt(v: Any) -> str:
+        return "-" if v is None else f"{v:.3f}"
+
+    for name, f in report["predictors"].items():
+        w = f["window"]
+        table.add_row(
+            name, fmt(f["accuracy"]), fmt(f["macro_f1"]), fmt(f["ece"]),
+            fmt(f["context_error"]), fmt(w["accuracy"]), fmt(w["macro_f1"]),
+        )  # fmt: skip
+    Console(highlight=False).print(table)

@@ -157,6 +157,16 @@ class OracleCard(BaseModel):
         """The phenomenon head's classes: ``clear`` then the phenomena."""
         return [CLEAR, *(p.name for p in self.phenomena)]
 
+    @property
+    def phenomenon_head(self) -> bool:
+        """Whether the phenomenon head was trained (several phenomena, or clear vs one).
+
+        Oracles trained before the head was trained for one phenomenon say it through
+        ``training.phenomenon_head``; without the head the phenomenon is guessed from the
+        category and the regressed context.
+        """
+        return len(self.phenomena) > 1 or bool(self.training.get("phenomenon_head"))
+
 
 @dataclass(frozen=True)
 class OraclePrediction:
@@ -253,7 +263,7 @@ class OracleModel:
         out = []
         for i in range(len(frames)):
             category = int(np.argmax(probs[i]))
-            which = int(np.argmax(phen[i])) if len(names) > 2 else (1 if category else 0)
+            which = int(np.argmax(phen[i])) if self.card.phenomenon_head else int(category > 0)
             name = names[which] if which < len(names) else CLEAR
             values: dict[str, float] = {}
             if name != CLEAR:

@@ -28,6 +28,7 @@ import numpy as np
 
 from anunnaki.bus import Assessment
 from anunnaki.enlil._oracle_net import CLEAR, OracleModel, load_oracle
+from anunnaki.lec import ModelRegistry
 from anunnaki.oracles import Frame, OracleError
 
 __all__ = ["EnlilOracle"]
@@ -39,8 +40,9 @@ class EnlilOracle:
     """Assess each camera frame with the active model's learned oracle.
 
     Args:
-        models: A model registry file (``anunnaki: models/1``) whose entries name their
-            oracle (``oracle: {file, sha256}``).
+        models: A model registry (a file, ``anunnaki: models/1``, or a loaded
+            :class:`~anunnaki.lec.ModelRegistry`) whose entries name their oracle
+            (``oracle: {file, sha256}``).
         oracles: Oracle files by model id, instead of (or on top of) the registry's; or
             loaded :class:`~anunnaki.enlil.OracleModel` objects.
         window: Average the calibrated probabilities over the last *window* frames of the
@@ -55,7 +57,7 @@ class EnlilOracle:
 
     def __init__(
         self,
-        models: str | Path | None = None,
+        models: str | Path | ModelRegistry | None = None,
         *,
         oracles: Mapping[str, str | Path | OracleModel] | None = None,
         window: int = 1,
@@ -72,7 +74,8 @@ class EnlilOracle:
         if models is not None:
             from anunnaki.lec import load_registry
 
-            for spec in load_registry(models):
+            registry = models if isinstance(models, ModelRegistry) else load_registry(models)
+            for spec in registry:
                 if spec.oracle is not None:
                     self._sources[spec.id] = (spec.oracle.file, spec.oracle.sha256)
         for model_id, item in (oracles or {}).items():
@@ -141,8 +144,7 @@ class EnlilOracle:
 
 
 def _context(oracle: OracleModel, params: np.ndarray, phen: np.ndarray, category: int) -> Any:
-    names = oracle.card.phenomenon_classes
-    if len(names) > 2:
+    if oracle.card.phenomenon_head:
         which = int(np.argmax(phen))
     else:
         which = 1 if category > 0 or float(np.max(params)) > 0.15 else 0

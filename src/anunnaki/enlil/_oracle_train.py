@@ -5,8 +5,10 @@ phenomenon's parameter space, normalised to ``[0, 1]^d``) whose behavior categor
 measured on the model (Enlil's archive, or :func:`random_contexts` for the Monte-Carlo
 baseline), or a clean frame (category 0, phenomenon ``clear``). The network learns the
 category (cross-entropy), the normalised context (mean squared error, on perturbed frames
-only) and, when it covers several phenomena, which one. A temperature fitted on val frames
-(perturbed the same way, with val-split frames and other seeds) calibrates the confidence.
+only) and which phenomenon it is (``clear`` or one of those covered: a tactic reads it as
+the perceived context, also when the oracle covers one phenomenon). A temperature fitted on
+val frames (perturbed the same way, with val-split frames and other seeds) calibrates the
+confidence.
 """
 
 from __future__ import annotations
@@ -246,7 +248,7 @@ def fit_temperature(logits: np.ndarray, labels: np.ndarray) -> float:
     return best_t
 
 
-def _fit(net: Any, data: LabelledFrames, config: OracleTrainConfig, multi: bool) -> list[float]:
+def _fit(net: Any, data: LabelledFrames, config: OracleTrainConfig) -> list[float]:
     torch = _torch()
     f = torch.nn.functional
     x = frames_to_tensor(data.frames, config.input_size)
@@ -276,8 +278,9 @@ def _fit(net: Any, data: LabelledFrames, config: OracleTrainConfig, multi: bool)
             loss = loss + ((par[:, : m.shape[1]] - y_par[idx]) ** 2 * m).sum() / m.sum().clamp(
                 min=1.0
             )
-            if multi:
-                loss = loss + 0.5 * f.cross_entropy(phen, y_phen[idx])
+            # clear vs each phenomenon, also for one phenomenon: a frame's perceived
+            # context ('clear' or 'fog') is what tactics read (A4.context)
+            loss = loss + 0.5 * f.cross_entropy(phen, y_phen[idx])
             opt.zero_grad()
             loss.backward()
             opt.step()
@@ -328,7 +331,7 @@ def train_oracle(
     va = perturbed_frames(
         val, sets, cfg.val_frames, clean_fraction=frac, balanced=bal, seed=cfg.seed + 1_000_003
     )
-    losses = _fit(net, tr, cfg, multi=len(sets) > 1)
+    losses = _fit(net, tr, cfg)
     oracle = OracleModel(card, net)
     logits = np.concatenate(
         [oracle.logits(va.frames[i : i + 256])[0] for i in range(0, len(va.frames), 256)]
@@ -346,6 +349,7 @@ def train_oracle(
         "train_frames": len(tr.frames),
         "val_frames": len(va.frames),
         "loss": [round(v, 5) for v in losses],
+        "phenomenon_head": True,
     }
     oracle.card = oracle.card.model_copy(
         update={"metrics": {"val": val_metrics}, "training": training}

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import multiprocessing
 from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import Executor, ProcessPoolExecutor
 from contextlib import contextmanager
@@ -103,6 +104,15 @@ def evaluate_task(task: tuple[Job, list[float]]) -> ContextResult:
     )
 
 
+def _one_thread() -> None:
+    """A pool process computes with one thread (the pool has a process per core)."""
+    try:
+        import torch
+    except ImportError:  # pragma: no cover - a detector without torch
+        return
+    torch.set_num_threads(1)
+
+
 MapFn = Callable[[list[tuple[Job, list[float]]]], list[ContextResult]]
 
 
@@ -132,7 +142,13 @@ def executor_map(workers: int = 1, dask: Any = None) -> Iterator[MapFn]:
     if workers <= 1:
         yield lambda tasks: [evaluate_task(t) for t in tasks]
         return
-    pool: Executor = ProcessPoolExecutor(max_workers=workers)
+    # spawn, not fork: the parent has usually run torch already (the clean F1), and a child
+    # forked from a process whose OpenMP pool is up hangs on its first parallel region.
+    pool: Executor = ProcessPoolExecutor(
+        max_workers=workers,
+        mp_context=multiprocessing.get_context("spawn"),
+        initializer=_one_thread,
+    )
     try:
         yield lambda tasks: list(pool.map(evaluate_task, tasks))
     finally:

@@ -256,6 +256,10 @@ class SimConfig(_Strict):
             detector runs.
         oracle: The oracle node's options: ``name`` (default ``ground_truth``) and the
             oracle's own (e.g. ``window``); ``null`` runs none.
+        scorer: A second oracle run beside it as its live scorer (same form, e.g.
+            ``{name: ground_truth, window: 30}`` beside ``oracle: {name: enlil}``); it
+            publishes on ``/sim/oracle/scorer``, which Utu does not read, and the report
+            gives their agreement and the delay between their category changes.
         speed: Simulated seconds per wall second (the detector can hold it back: lockstep).
         lockstep: A frame is not followed by the next before its detections are out.
         report: Print the per-phase table (detector F1, categories, models, tactics) at the end.
@@ -270,6 +274,7 @@ class SimConfig(_Strict):
     scenario: str
     models: str | None = None
     oracle: dict[str, Any] | None = Field(default_factory=lambda: {"name": "ground_truth"})
+    scorer: dict[str, Any] | None = None
     speed: Annotated[float, Field(gt=0, le=10_000)] = 1.0
     lockstep: bool = True
     report: bool = True
@@ -318,14 +323,14 @@ class SimKind:
             from anunnaki.lec import load_registry
 
             load_registry(sim.models)
-        if sim.oracle is not None:
-            from anunnaki.oracles import available_oracles
+        from anunnaki.oracles import available_oracles
 
-            name = sim.oracle.get("name", "ground_truth")
-            if name not in available_oracles():
+        for key, options in (("oracle", sim.oracle), ("scorer", sim.scorer)):
+            name = (options or {}).get("name", "ground_truth")
+            if options is not None and name not in available_oracles():
                 raise ModelFileError(
                     f"unknown oracle {name!r}",
-                    element="managed.sim.oracle.name",
+                    element=f"managed.sim.{key}.name",
                     hint=f"known oracles: {', '.join(available_oracles())}",
                 )
 
@@ -343,6 +348,7 @@ class SimKind:
             cfg.scenario,
             models=cfg.models,
             oracle=cfg.oracle,
+            scorer=cfg.scorer,
             lockstep=cfg.lockstep,
             on_time=ctx.on_instant,
         )
@@ -355,6 +361,7 @@ class SimKind:
             f"(t 0–{end:g} s) at {ctx.speed:g}×"
             + (", in lockstep with the detector" if cfg.lockstep and system.lec else "")
             + f"; detector {active}; oracle {oracle}"
+            + (f", scored live by {system.scorer.oracle.name}" if system.scorer else "")
         )
 
         def run() -> None:
@@ -375,7 +382,7 @@ class SimKind:
     ) -> None:
         cfg = self.options
         if cfg.report:
-            from anunnaki.managed import format_phases
+            from anunnaki.managed import format_phases, format_scoring
 
             platform = system.platform
             say(
@@ -384,6 +391,9 @@ class SimKind:
                 "per phase:"
             )
             say(format_phases(system.phases(list(decisions))))
+            scoring = system.scoring()
+            if scoring is not None:
+                say(format_scoring(scoring))
         if cfg.report_file or cfg.plot_file:
             from anunnaki.sim import save_run
 

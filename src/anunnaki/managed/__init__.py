@@ -20,15 +20,32 @@ from anunnaki.managed._scripted import ScriptedSystem
 
 if TYPE_CHECKING:
     from anunnaki.managed._sim import (
+        SCORER_TOPIC,
         PhaseScore,
         SimulatedSystem,
         format_phases,
+        format_scoring,
         scenario_phases,
     )
 
-__all__ = ["PhaseScore", "ScriptedSystem", "SimulatedSystem", "format_phases", "scenario_phases"]
+__all__ = [
+    "SCORER_TOPIC",
+    "PhaseScore",
+    "ScriptedSystem",
+    "SimulatedSystem",
+    "format_phases",
+    "format_scoring",
+    "scenario_phases",
+]
 
-_LAZY = {"PhaseScore", "SimulatedSystem", "format_phases", "scenario_phases"}
+_LAZY = {
+    "SCORER_TOPIC",
+    "PhaseScore",
+    "SimulatedSystem",
+    "format_phases",
+    "format_scoring",
+    "scenario_phases",
+}
 
 
 def __getattr__(name: str) -> Any:

@@ -34,11 +34,27 @@ import numpy as np
 
 from anunnaki import topics
 from anunnaki.bus import Assessment, Detections, LivelinessGuard, Sample, body_of
-from anunnaki.sim import FrameScore, RunReport, Scenario, SimPlatform, tactic_events
+from anunnaki.sim import (
+    FrameScore,
+    RunReport,
+    Scenario,
+    SimPlatform,
+    compare_assessors,
+    tactic_events,
+)
 
 GROUND_TRUTH_TOPIC = topics.GROUND_TRUTH
+#: Where a live scorer beside the oracle publishes (not Utu's input: no agent reads it).
+SCORER_TOPIC = "/sim/oracle/scorer"
 
-__all__ = ["PhaseScore", "SimulatedSystem", "format_phases", "scenario_phases"]
+__all__ = [
+    "SCORER_TOPIC",
+    "PhaseScore",
+    "SimulatedSystem",
+    "format_phases",
+    "format_scoring",
+    "scenario_phases",
+]
 
 log = logging.getLogger("anunnaki.managed")
 
@@ -156,6 +172,12 @@ class SimulatedSystem:
         on_time: Called with the simulation time before each physics chunk (Utu's clock).
         stop_without_utu: Seconds a Utu node the platform has seen may be gone before it
             stops (rover) or lands (UAV) by itself (``None``: never).
+        scorer: A second oracle's options, run beside the first as its live scorer (e.g.
+            ``{"name": "ground_truth", "window": 30}`` beside a learned ``enlil`` oracle);
+            it publishes on :data:`SCORER_TOPIC` (node ``/scorer_<name>``), which Utu does
+            not read, and the report compares the two (:func:`~anunnaki.sim.compare_assessors`).
+
+    An ``enlil`` oracle (or scorer) given no ``models`` uses the detector's registry.
 
     """
 
@@ -170,6 +192,7 @@ class SimulatedSystem:
         lockstep_timeout: float = 2.0,
         on_time: Callable[[float], object] | None = None,
         stop_without_utu: float | None = 0.5,
+        scorer: Mapping[str, Any] | None = None,
     ) -> None:
         self.bus = bus
         self.lockstep = lockstep
@@ -181,6 +204,7 @@ class SimulatedSystem:
         self._early: dict[int, Detections] = {}  # detections ahead of their truth
         self._frames: list[tuple[float, int, int, int, str]] = []  # t, tp, fp, fn, model
         self._assessments: list[tuple[float, int]] = []
+        self._seqs: dict[str, list[tuple[int, int]]] = {"oracle": [], "scorer": []}
         self._collisions: list[float] = []
         self._closing: list[Any] = []
         self._stopping = threading.Event()
@@ -229,31 +253,46 @@ class SimulatedSystem:
             self.detections_topic = (
                 self.lec.detections_topic if self.lec is not None else topics.DETECTIONS
             )
-            self.oracle: Any = None
-            if oracle is not None:
-                from anunnaki.oracles import OracleNode
-
-                options = dict(oracle)
-                name = options.pop("name", "ground_truth")
-                if name == "ground_truth" and self.registry is not None:
-                    options.setdefault("clean_f1", self.registry.clean_f1)
-                self.oracle = OracleNode(
-                    bus,
-                    name,
-                    camera=camera,
-                    detections=self.detections_topic,
-                    classes=self.platform.scene.classes,
-                    **options,
-                )
-                self._closing.append(self.oracle)
+            self.oracle: Any = self._oracle_node(oracle, camera)
+            self.scorer: Any = self._oracle_node(scorer, camera, output=SCORER_TOPIC)
             self._subs = [
                 bus.subscribe(GROUND_TRUTH_TOPIC, self._on_truth, queue=256),
                 bus.subscribe(self.detections_topic, self._on_detections, queue=256),
                 bus.subscribe(_OUTPUT_TOPIC, self._on_assessment, queue=256),
             ]
+            if self.scorer is not None:
+                self._subs.append(bus.subscribe(SCORER_TOPIC, self._on_scorer, queue=256))
         except BaseException:
             self.close()
             raise
+
+    def _oracle_node(
+        self, options: Mapping[str, Any] | None, camera: str, *, output: str | None = None
+    ) -> Any:
+        """An oracle node from its options (``name`` and the oracle's own), or ``None``."""
+        if options is None:
+            return None
+        from anunnaki.oracles import OracleNode
+
+        opts = dict(options)
+        name = opts.pop("name", "ground_truth")
+        if name == "ground_truth" and self.registry is not None:
+            opts.setdefault("clean_f1", self.registry.clean_f1)
+        if name == "enlil" and self.registry is not None:
+            opts.setdefault("models", self.registry)
+        if output is not None:
+            opts.setdefault("output", output)
+            opts.setdefault("node", f"/scorer_{name}")
+        node = OracleNode(
+            self.bus,
+            name,
+            camera=camera,
+            detections=self.detections_topic,
+            classes=self.platform.scene.classes,
+            **opts,
+        )
+        self._closing.append(node)
+        return node
 
     # -- what the scorer hears ---------------------------------------------------------------
     def _on_truth(self, sample: Sample) -> None:
@@ -302,6 +341,27 @@ class SimulatedSystem:
         if isinstance(message, Assessment):
             with self._lock:
                 self._assessments.append((self.platform.t, message.category))
+                if message.frame_seq is not None:
+                    self._seqs["oracle"].append((message.frame_seq, message.category))
+
+    def _on_scorer(self, sample: Sample) -> None:
+        message = sample.message
+        if isinstance(message, Assessment) and message.frame_seq is not None:
+            with self._lock:
+                self._seqs["scorer"].append((message.frame_seq, message.category))
+
+    def scoring(self) -> dict[str, Any] | None:
+        """The oracle against its live scorer (:func:`~anunnaki.sim.compare_assessors`).
+
+        ``None`` without a scorer. Keys of :func:`~anunnaki.sim.compare_assessors` plus the
+        two assessors' names.
+        """
+        if self.scorer is None or self.oracle is None:
+            return None
+        with self._lock:
+            mine, theirs = list(self._seqs["oracle"]), list(self._seqs["scorer"])
+        out = compare_assessors(mine, theirs, rate=float(self.scenario.camera.rate))
+        return {"oracle": self.oracle.oracle.name, "scorer": self.scorer.oracle.name, **out}
 
     def _frame_hook(self, sim: SimPlatform, frame: Any, image: Any) -> None:
         if not self.lockstep or self.lec is None:
@@ -444,6 +504,7 @@ class SimulatedSystem:
             tactics=tactic_events(decisions),
             collisions=collisions,
             phases=[p.as_dict() for p in phases],
+            scoring=self.scoring(),
         )
 
 
@@ -470,3 +531,24 @@ def format_phases(phases: Sequence[PhaseScore]) -> str:
     lines = ["  ".join(c.ljust(w) for c, w in zip(r, widths, strict=True)).rstrip() for r in rows]
     lines.insert(1, "  ".join("-" * w for w in widths))
     return "\n".join(lines)
+
+
+def format_scoring(scoring: Mapping[str, Any]) -> str:
+    """One paragraph on :meth:`SimulatedSystem.scoring`: agreement and delay."""
+    agreement = scoring.get("agreement")
+    text = (
+        f"{scoring['oracle']} vs {scoring['scorer']} (live scorer): "
+        + ("no frame assessed by both" if agreement is None else f"agree on {agreement:.1%}")
+        + f" of {scoring['frames']} frames"
+    )
+    median = scoring.get("median_delay_frames")
+    if scoring.get("changes"):
+        text += f"; {scoring['changes']} category changes of the scorer"
+        if median is not None:
+            text += (
+                f", the oracle's matching change {median:+g} frames"
+                f" ({scoring['median_delay_s']:+g} s) from it (median; negative: oracle first)"
+            )
+        if scoring.get("unmatched"):
+            text += f", {scoring['unmatched']} not matched"
+    return text

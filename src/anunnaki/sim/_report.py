@@ -24,6 +24,7 @@ import bisect
 import importlib.util
 import json
 import math
+import statistics
 from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -35,6 +36,7 @@ __all__ = [
     "FrameScore",
     "RunReport",
     "TacticEvent",
+    "compare_assessors",
     "load_report",
     "plot_report",
     "require_plot_extra",
@@ -81,6 +83,9 @@ class RunReport:
         tactics: The tactics Utu started, in time order.
         collisions: Simulated times of collisions.
         phases: The per-phase table (:meth:`PhaseScore.as_dict` rows).
+        scoring: When a live scorer ran beside the oracle (``managed.sim.scorer``): how
+            often they agreed and the delay between their category changes
+            (:func:`compare_assessors`); ``None`` otherwise (and absent from the file).
 
     """
 
@@ -92,10 +97,11 @@ class RunReport:
     tactics: list[TacticEvent] = field(default_factory=list)
     collisions: list[float] = field(default_factory=list)
     phases: list[dict[str, Any]] = field(default_factory=list)
+    scoring: dict[str, Any] | None = None
 
     def as_dict(self) -> dict[str, Any]:
         """JSON-ready form (the file format)."""
-        return {
+        doc: dict[str, Any] = {
             "anunnaki": FORMAT,
             "name": self.name,
             "platform": self.platform,
@@ -106,6 +112,9 @@ class RunReport:
             "tactics": [asdict(e) for e in self.tactics],
             "collisions": list(self.collisions),
         }
+        if self.scoring is not None:
+            doc["scoring"] = self.scoring
+        return doc
 
     def write(self, path: str | Path) -> Path:
         """Write the report as JSON; returns the path."""
@@ -132,6 +141,7 @@ class RunReport:
                 tactics=[TacticEvent(**e) for e in doc["tactics"]],
                 collisions=[float(t) for t in doc["collisions"]],
                 phases=list(doc["phases"]),
+                scoring=dict(doc["scoring"]) if doc.get("scoring") is not None else None,
             )
         except (KeyError, TypeError, ValueError) as exc:
             raise AnunnakiError(f"{source}: malformed simulation report: {exc!r}") from None
@@ -147,6 +157,71 @@ def load_report(path: str | Path) -> RunReport:
     if not isinstance(doc, dict):
         raise AnunnakiError(f"{p}: a simulation report is a JSON object")
     return RunReport.from_dict(doc, source=str(p))
+
+
+def _changes(series: Sequence[tuple[int, int]]) -> list[tuple[int, int]]:
+    """``(frame, category)`` where a per-frame category series takes a new value."""
+    out: list[tuple[int, int]] = []
+    for seq, cat in series:
+        if not out or cat != out[-1][1]:
+            out.append((seq, cat))
+    return out
+
+
+def compare_assessors(
+    oracle: Sequence[tuple[int, int]],
+    scorer: Sequence[tuple[int, int]],
+    *,
+    rate: float,
+    horizon: int = 100,
+) -> dict[str, Any]:
+    """How an oracle's categories agree with a live scorer's (both ``(frame seq, category)``).
+
+    Agreement is over the frames both assessed. The delay is measured at each change of the
+    scorer's category after its first assessment: from the frame it changed to the nearest
+    frame (within ``horizon`` frames either way) at which the oracle changed to the same
+    category; negative when the oracle was first (a ground-truth scorer pools a window of
+    frames, so a frame-by-frame oracle often is). Changes the oracle never matched are
+    counted as ``unmatched``.
+
+    Args:
+        oracle: The oracle's assessments, in any order (the last per frame counts).
+        scorer: The scorer's.
+        rate: Camera frames per second (delays in seconds too).
+        horizon: How far apart (frames) two changes may be and still be paired.
+
+    Returns:
+        ``{"frames", "agreement", "confusion" (scorer row x oracle column), "changes",
+        "delays_frames", "median_delay_frames", "median_delay_s", "unmatched"}``.
+
+    """
+    mine, theirs = dict(sorted(oracle)), dict(sorted(scorer))
+    both = sorted(set(mine) & set(theirs))
+    confusion = [[0, 0, 0] for _ in range(3)]
+    for seq in both:
+        confusion[min(max(theirs[seq], 0), 2)][min(max(mine[seq], 0), 2)] += 1
+    agree = sum(confusion[c][c] for c in range(3))
+    ours = _changes(sorted(mine.items()))[1:]
+    delays: list[int] = []
+    unmatched = 0
+    changes = _changes(sorted(theirs.items()))[1:]  # a first assessment is no change
+    for seq, cat in changes:
+        near = [s - seq for s, c in ours if c == cat and abs(s - seq) <= horizon]
+        if near:
+            delays.append(min(near, key=abs))
+        else:
+            unmatched += 1
+    median = float(statistics.median(delays)) if delays else None
+    return {
+        "frames": len(both),
+        "agreement": None if not both else round(agree / len(both), 4),
+        "confusion": confusion,
+        "changes": len(changes),
+        "delays_frames": delays,
+        "median_delay_frames": median,
+        "median_delay_s": None if median is None else round(median / rate, 3),
+        "unmatched": unmatched,
+    }
 
 
 def tactic_events(decisions: Sequence[Any]) -> list[TacticEvent]:
