@@ -38,8 +38,10 @@ log = logging.getLogger("anunnaki.utu")
 
 #: Seconds a worker thread may overrun its action's timeout before the action is failed.
 GRACE = 0.5
-#: Seconds :meth:`ThreadRunner.submit` waits for an outcome by default (sim time, by hand).
-SETTLE = 1.0
+#: Seconds :meth:`ThreadRunner.submit` waits for an outcome by default (sim time, by hand):
+#: ``None``, up to the action's own timeout — a run on sim time repeats itself however loaded
+#: the machine is, and a dead or hung service still cannot hold it longer than that.
+SETTLE: float | None = None
 
 
 @dataclass(frozen=True)
@@ -94,9 +96,9 @@ class ThreadRunner:
             ``wake``), so the loop takes the outcome without waiting for its period.
         grace: Seconds past an action's timeout before it is reported failed regardless.
         settle: Seconds :meth:`submit` waits for the outcome before leaving the action in
-            flight: a service that answers at once has its outcome recorded in the cycle
-            that started it (as a run on sim time needs to repeat itself), a slow one holds
-            the loop no longer than this.
+            flight (``None``: up to the action's timeout): a service that answers at once
+            has its outcome recorded in the cycle that started it (as a run on sim time
+            needs to repeat itself), a slow one holds the loop no longer than this.
 
     """
 
@@ -106,7 +108,7 @@ class ThreadRunner:
         workers: int = 4,
         on_done: Callable[[], object] | None = None,
         grace: float = GRACE,
-        settle: float = SETTLE,
+        settle: float | None = SETTLE,
     ) -> None:
         self._pool = cf.ThreadPoolExecutor(
             max_workers=workers, thread_name_prefix="anunnaki-action"
@@ -132,8 +134,9 @@ class ThreadRunner:
         if self._closed:
             return ActionOutcome(False, "the loop is closing; action not performed")
         future = self._pool.submit(call)
-        if self.settle > 0:
-            cf.wait([future], timeout=min(self.settle, timeout))
+        wait = timeout if self.settle is None else min(self.settle, timeout)
+        if wait > 0:
+            cf.wait([future], timeout=wait)
             if future.done():
                 return _result(future)
         flight = _Flight(tactic, index, future, time.monotonic() + timeout + self.grace, timeout)

@@ -75,7 +75,7 @@ class UtuConfig(_Strict):
     watchdog: Annotated[float, Field(gt=0)] | None = 3.0
     #: Seconds a live loop on the wall clock waits for a request's reply before going on
     #: with the request in flight (its outcome is taken by a later cycle). On sim time, or
-    #: stepped by hand, it waits up to 1 s, so a run repeats itself when services answer.
+    #: stepped by hand, it waits up to the action's timeout, so a run repeats itself.
     action_settle: Annotated[float, Field(ge=0, le=5)] = 0.05
     #: Folders a hot reload may read from, besides those of goal_model, binding and tactics.
     reload_dirs: list[str] = Field(default_factory=list)
