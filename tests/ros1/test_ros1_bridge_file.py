@@ -2,9 +2,12 @@
 
 from __future__ import annotations
 
+import json
+import subprocess
 from pathlib import Path
 
 import pytest
+from ros1_support import need_ros
 
 from anunnaki.errors import ModelFileError
 from anunnaki.ros1 import MESSAGE_TYPES, load_bridge, parse_bridge
@@ -121,3 +124,22 @@ def test_every_type_the_issue_names_is_converted() -> None:
         "geometry_msgs/PoseStamped",
     }
     assert named <= set(MESSAGE_TYPES)
+
+
+def test_the_type_table_matches_debians_generated_messages() -> None:
+    need_ros()
+    script = (
+        "import importlib, json\n"
+        f"names = {sorted(MESSAGE_TYPES)!r}\n"
+        "out = {}\n"
+        "for n in names:\n"
+        "    pkg, name = n.split('/')\n"
+        "    cls = getattr(importlib.import_module(pkg + '.msg'), name)\n"
+        "    out[n] = [list(p) for p in zip(cls.__slots__, cls._slot_types)]\n"
+        "print(json.dumps(out))\n"
+    )
+    done = subprocess.run(
+        ["/usr/bin/python3", "-c", script], capture_output=True, text=True, check=True
+    )
+    debian = json.loads(done.stdout)
+    assert {n: [list(f) for f in fields] for n, fields in MESSAGE_TYPES.items()} == debian
