@@ -24,7 +24,10 @@ from anunnaki.ros1 import (
 
 
 class Time:
-    """genpy.Time's shape: secs, nsecs, to_sec, from_sec."""
+    """genpy.Time's shape: slots (with _slot_types, as genpy's), to_sec, from_sec."""
+
+    __slots__ = ("nsecs", "secs")
+    _slot_types = ("int32", "int32")
 
     def __init__(self, secs: int = 0, nsecs: int = 0) -> None:
         self.secs, self.nsecs = secs, nsecs

@@ -56,11 +56,16 @@ def message_to_dict(msg: Any) -> dict[str, Any]:
     return {name: _value(getattr(msg, name)) for name in msg.__slots__}
 
 
+def _is_time(v: Any) -> bool:
+    """Tell a genpy Time or Duration (they have slots too: test them before messages)."""
+    return hasattr(v, "to_sec") and hasattr(v, "secs")
+
+
 def _value(v: Any) -> Any:
+    if _is_time(v):
+        return float(v.to_sec())
     if hasattr(v, "__slots__") and hasattr(v, "_slot_types"):
         return message_to_dict(v)
-    if hasattr(v, "to_sec") and hasattr(v, "secs"):
-        return float(v.to_sec())
     if isinstance(v, bytes | bytearray):
         return bytes(v)
     if isinstance(v, list | tuple):
@@ -84,13 +89,13 @@ def fill_message(msg: Any, data: Mapping[str, Any], where: str = "") -> Any:
             raise ConversionError(f"{msg._type} has no field '{path}'")
         current = getattr(msg, key)
         if isinstance(value, Mapping):
-            if not hasattr(current, "__slots__"):
+            if not hasattr(current, "__slots__") or _is_time(current):
                 raise ConversionError(f"'{path}' is a {types[key]}, not a message")
             fill_message(current, value, f"{path}.")
+        elif _is_time(current):
+            setattr(msg, key, type(current).from_sec(float(value)))
         elif hasattr(current, "__slots__") and hasattr(current, "_slot_types"):
             raise ConversionError(f"'{path}' is a {types[key]}: give its fields as a mapping")
-        elif hasattr(current, "to_sec") and hasattr(current, "secs"):
-            setattr(msg, key, type(current).from_sec(float(value)))
         else:
             setattr(msg, key, _coerce(types[key], value, path))
     return msg
