@@ -12,10 +12,15 @@ Header; sensor_msgs Image and CompressedImage (to and from the bus's ``Image``),
 BatteryState, NavSatFix; geometry_msgs Twist and PoseStamped; services std_srvs SetBool,
 Trigger, Empty and ``anunnaki_msgs/SetString`` (string in, success and message out) for
 mode changes.
+
+Rosbags (``rosbags``, pure Python): :func:`read_bag` turns a ROS 1 or ROS 2 bag into trace
+records through the same bridge file; :func:`write_bag` writes a run's inputs and decisions
+to a ROS 1 bag.
 """
 
 from __future__ import annotations
 
+from anunnaki.ros1._bags import DECISIONS_TOPIC, bag_message_to_dict, is_bag, read_bag, write_bag
 from anunnaki.ros1._convert import (
     ConversionError,
     bus_image_to_compressed,
@@ -40,6 +45,7 @@ from anunnaki.ros1._schema import (
 from anunnaki.ros1._types import IMAGE_TYPES, MESSAGE_TYPES, SERVICE_TYPES, SET_STRING_SRV
 
 __all__ = [
+    "DECISIONS_TOPIC",
     "FORMAT_TAG",
     "IMAGE_TYPES",
     "MESSAGE_TYPES",
@@ -51,16 +57,20 @@ __all__ = [
     "RosUnavailable",
     "ServiceBridge",
     "TopicBridge",
+    "bag_message_to_dict",
     "bus_image_to_compressed",
     "compressed_to_image",
     "encode_png",
     "fill_message",
     "image_size",
     "import_rospy",
+    "is_bag",
     "load_bridge",
     "message_to_dict",
     "parse_bridge",
     "raw_to_image",
+    "read_bag",
     "to_bus_fields",
     "to_ros_fields",
+    "write_bag",
 ]

@@ -147,13 +147,23 @@ def _put(out: dict[str, Any], path: str, value: Any) -> None:
     node[parts[-1]] = value
 
 
-def to_bus_fields(ros: Mapping[str, Any], fields: Mapping[str, str]) -> dict[str, Any]:
-    """What the bus gets of a ROS message dict: every field, or ``{bus: ros path}`` picked."""
+def to_bus_fields(
+    ros: Mapping[str, Any], fields: Mapping[str, str], *, strict: bool = True
+) -> dict[str, Any]:
+    """What the bus gets of a ROS message dict: every field, or ``{bus: ros path}`` picked.
+
+    With ``strict=False`` a mapped field the message lacks is left out (a ROS 2 recording
+    read through a ROS 1 bridge file: ROS 2's Header has no ``seq``); else it is a KeyError.
+    """
     if not fields:
         return dict(ros)
     out: dict[str, Any] = {}
     for bus_field, ros_field in fields.items():
-        _put(out, bus_field, _get(ros, ros_field))
+        try:
+            _put(out, bus_field, _get(ros, ros_field))
+        except KeyError:
+            if strict:
+                raise
     return out
 
 
