@@ -16,6 +16,9 @@ mode changes.
 Rosbags (``rosbags``, pure Python): :func:`read_bag` turns a ROS 1 or ROS 2 bag into trace
 records through the same bridge file; :func:`write_bag` writes a run's inputs and decisions
 to a ROS 1 bag.
+
+ROS 2 over zenoh (:class:`Ros2ZenohBridge`): the same bridge files, with CDR samples on the
+key expressions of zenoh-bridge-ros2dds or rmw_zenoh (:func:`ros2_key`).
 """
 
 from __future__ import annotations
@@ -32,6 +35,13 @@ from anunnaki.ros1._convert import (
     raw_to_image,
     to_bus_fields,
     to_ros_fields,
+)
+from anunnaki.ros1._ros2 import (
+    Ros2ZenohBridge,
+    dds_type_name,
+    decode_cdr,
+    encode_cdr,
+    ros2_key,
 )
 from anunnaki.ros1._rospy import ROS_DIST_PACKAGES, RosUnavailable, import_rospy
 from anunnaki.ros1._schema import (
@@ -54,12 +64,16 @@ __all__ = [
     "SET_STRING_SRV",
     "BridgeSpec",
     "ConversionError",
+    "Ros2ZenohBridge",
     "RosUnavailable",
     "ServiceBridge",
     "TopicBridge",
     "bag_message_to_dict",
     "bus_image_to_compressed",
     "compressed_to_image",
+    "dds_type_name",
+    "decode_cdr",
+    "encode_cdr",
     "encode_png",
     "fill_message",
     "image_size",
@@ -70,6 +84,7 @@ __all__ = [
     "parse_bridge",
     "raw_to_image",
     "read_bag",
+    "ros2_key",
     "to_bus_fields",
     "to_ros_fields",
     "write_bag",

@@ -55,8 +55,16 @@ def is_bag(path: str | Path) -> bool:
 
 
 def bag_message_to_dict(msg: Any) -> dict[str, Any]:
-    """A rosbags message (a dataclass) as plain data, times as float seconds."""
-    return {f.name: _plain(getattr(msg, f.name)) for f in dataclasses.fields(msg)}
+    """A rosbags message (a dataclass) as plain data, times as float seconds.
+
+    rosbags keeps the type name (``__msgtype__``) and the constants (``ULTRASOUND``) as
+    dataclass fields too; they are no message fields and are left out.
+    """
+    return {
+        f.name: _plain(getattr(msg, f.name))
+        for f in dataclasses.fields(msg)
+        if not f.name.startswith("__") and not f.name.isupper()
+    }
 
 
 def _plain(v: Any) -> Any:
