@@ -15,6 +15,7 @@ import os
 import signal
 import sys
 import threading
+import time
 from collections.abc import Sequence
 
 __all__ = ["main"]
@@ -45,7 +46,14 @@ def _parser() -> argparse.ArgumentParser:
         "--watch-every",
         type=float,
         default=0.5,
-        help="seconds between looks at the master (a restart re-declares all)",
+        help="seconds between looks at the master (a new master: register everything again)",
+    )
+    p.add_argument(
+        "--wait-master",
+        type=float,
+        default=30.0,
+        metavar="SECONDS",
+        help="how long to wait for the master to answer at start (default 30)",
     )
     return p
 
@@ -79,6 +87,14 @@ def main(argv: Sequence[str] | None = None) -> int:
         options["listen"] = args.listen or []
     elif args.listen:
         options["listen"] = args.listen
+    uri = os.environ.get("ROS_MASTER_URI", "http://localhost:11311")
+    if not _wait_for_master(spec.name, uri, args.wait_master, stop):
+        print(
+            f"error: no ROS master answers at {uri} after {args.wait_master:g} s: start "
+            "roscore (or rosmaster --core), or set ROS_MASTER_URI / --master-uri to the robot's",
+            file=sys.stderr,
+        )
+        return 2
     rospy.init_node(spec.name, anonymous=False, disable_signals=True)
     try:
         with (
@@ -86,7 +102,6 @@ def main(argv: Sequence[str] | None = None) -> int:
             Bridge(spec, bus, rospy, watch_every=args.watch_every) as bridge,
         ):
             token = bus.liveliness_token(f"/ros1_bridge_{spec.name}")
-            uri = os.environ.get("ROS_MASTER_URI", "http://localhost:11311")
             print(
                 f"ros1 bridge ready: {len(spec.topics)} topics, {len(spec.services)} "
                 f"services, master {uri}",
@@ -98,6 +113,22 @@ def main(argv: Sequence[str] | None = None) -> int:
     finally:
         rospy.signal_shutdown("stopped")
     return 0
+
+
+def _wait_for_master(name: str, uri: str, timeout: float, stop: threading.Event) -> bool:
+    """Wait until the master answers (a robot's roscore may come up after the bridge)."""
+    from anunnaki.ros1._rospy import master_pid
+
+    end = time.monotonic() + timeout
+    said = False
+    while master_pid(f"/{name}") is None:
+        if time.monotonic() >= end or stop.is_set():
+            return False
+        if not said:
+            print(f"waiting for the ROS master at {uri}", flush=True)
+            said = True
+        stop.wait(0.2)
+    return True
 
 
 if __name__ == "__main__":

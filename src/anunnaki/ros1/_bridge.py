@@ -74,6 +74,11 @@ class Bridge:
         self._watch_every = watch_every
         self._watchdog: threading.Thread | None = None
         self._master_pid: int | None = None
+        feeds: Counter[str] = Counter(
+            t.bus_topic for t in spec.topics if t.direction == "to_bus" and not t.as_image
+        )
+        # bus topics fed by several ROS topics: each message publishes the merged latest values
+        self._shared = {topic for topic, n in feeds.items() if n > 1}
 
     # -- life ----------------------------------------------------------------------------------
     def start(self) -> None:
@@ -166,22 +171,12 @@ class Bridge:
                 return compressed_to_image(data)
             return raw_to_image(data)
         fields = to_bus_fields(data, t.fields)
-        if t.direction == "to_bus" and self._shared(t):
+        if t.bus_topic in self._shared:
             with self._lock:
                 merged = self._merged.setdefault(t.bus_topic, {})
                 merged.update(fields)
                 return dict(merged)
         return fields
-
-    def _shared(self, t: TopicBridge) -> bool:
-        return (
-            sum(
-                1
-                for o in self.spec.topics
-                if o.direction == "to_bus" and not o.as_image and o.bus_topic == t.bus_topic
-            )
-            > 1
-        )
 
     # -- bus → ROS -----------------------------------------------------------------------------
     def _from_bus(self, index: int, t: TopicBridge) -> Callable[[Any], None]:
