@@ -16,7 +16,7 @@ scripts/setup-browser.sh
 scripts/setup-ros.sh
 
 PYTHON=${PYTHON:-python3}
-EXTRAS=${ANUNNAKI_EXTRAS:-dev,bus,vision,dashboard,plot,enlil}
+EXTRAS=${ANUNNAKI_EXTRAS:-dev,bus,vision,dashboard,plot,enlil,ros}
 VENV=.venv
 
 if ! "$PYTHON" -c 'import sys; sys.exit(sys.version_info < (3, 11))'; then

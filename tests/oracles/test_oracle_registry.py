@@ -163,7 +163,7 @@ def test_entry_point_plugins(
     registry = OracleRegistry()  # created before the plugin is installed: lookups are lazy
     install_fake_plugin(tmp_path, monkeypatch)
     with caplog.at_level(logging.WARNING, logger="anunnaki.oracles"):
-        assert registry.names() == ["enlil", "ground_truth", "haze", "renamed_haze"]
+        assert registry.names() == ["enlil", "ground_truth", "haze", "light", "renamed_haze"]
     haze = registry.get("haze", level=2)
     assert type(haze).__name__ == "Haze"
     result = haze.assess(np.zeros((2, 2, 3), np.uint8), seq=4, model_id="m")

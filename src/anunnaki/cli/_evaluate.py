@@ -33,7 +33,17 @@ def add_parser(sub: Any) -> None:
     )
     p.add_argument("model", help="goal-model YAML file")
     p.add_argument("--binding", "-b", help="platform-binding YAML file")
-    p.add_argument("--trace", "-t", required=True, help="JSONL trace to replay")
+    p.add_argument(
+        "--trace",
+        "-t",
+        required=True,
+        help="JSONL trace to replay, or a ROS 1/ROS 2 bag (with --bridge)",
+    )
+    p.add_argument(
+        "--bridge",
+        metavar="BRIDGE.yaml",
+        help="for a rosbag: the ROS 1 bridge file mapping its topics and fields to the bus's",
+    )
     p.add_argument("--json", action="store_true", help="one JSON object per change on stdout")
     p.add_argument(
         "--delta",
@@ -112,7 +122,7 @@ def run(args: argparse.Namespace) -> int:
     if not console.is_terminal:
         console = Console(highlight=False, width=160)
     replay = _Replay(args, model, ev, console)
-    count, seen = replay.replay(args.trace)
+    count, seen = replay.replay(_trace_items(args))
     routes = model.topic_routes()
     silent = {
         topic: sorted({agent for agent, _ in routes[topic]}) for topic, n in seen.items() if not n
@@ -123,6 +133,20 @@ def run(args: argparse.Namespace) -> int:
     else:
         replay.print_summary(count, silent)
     return 0
+
+
+def _trace_items(args: argparse.Namespace) -> Any:
+    """The trace file, or a rosbag's records through the bridge file (anunnaki[ros])."""
+    from anunnaki.ros1 import is_bag, load_bridge, read_bag
+
+    if not is_bag(args.trace):
+        return args.trace
+    if args.bridge is None:
+        raise AnunnakiError(
+            f"{args.trace} is a rosbag: give --bridge BRIDGE.yaml, which maps its topics and "
+            "fields to the goal model's (docs/ros.md)"
+        )
+    return read_bag(args.trace, load_bridge(args.bridge))
 
 
 class _Replay:
@@ -147,7 +171,7 @@ class _Replay:
         seen: dict[str, int] = dict.fromkeys(self.model.topic_routes(), 0)
         t = 0.0
         count = 0
-        for item in iter_trace(trace):
+        for item in trace if isinstance(trace, list) else iter_trace(trace):
             if isinstance(item, dict):
                 continue
             if item.t != t:

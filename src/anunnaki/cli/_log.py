@@ -96,6 +96,12 @@ def add_parser(sub: Any) -> None:
         help="write the recorded inputs (within --since/--until) as a trace and exit",
     )
     p.add_argument(
+        "--export-bag",
+        metavar="OUT.bag",
+        help="write the recorded inputs and decisions (within --since/--until) to a ROS 1 "
+        "bag (std_msgs/String JSON; decisions on /utu/decisions) and exit (anunnaki[ros])",
+    )
+    p.add_argument(
         "--mark-ticks",
         action="store_true",
         help="with --export-trace: mark steps where only time passed as 'tick' phases",
@@ -280,6 +286,8 @@ def run_log(args: argparse.Namespace) -> int:
         span = run_span(path)
         if args.export_trace is not None:
             return _export(console, knowledge, path, args)
+        if getattr(args, "export_bag", None) is not None:
+            return _export_bag(console, knowledge, args)
         decisions = knowledge.decisions(args.since, args.until)
         kinds = _kinds(args.kind, {d.kind for d in decisions})
         shown = [
@@ -314,6 +322,25 @@ def run_log(args: argparse.Namespace) -> int:
     filtered = len(shown) != counts["decisions"]
     if filtered:
         console.print(Text(f"{len(shown)} of {counts['decisions']} decisions shown", style="dim"))
+    return 0
+
+
+def _export_bag(console: Console, knowledge: Knowledge, args: argparse.Namespace) -> int:
+    """Write the run's inputs and decisions to a ROS 1 bag (issue #14)."""
+    from anunnaki.ros1 import write_bag
+    from anunnaki.trace import Record
+
+    inputs = [
+        Record(row.t, row.topic, row.msg)
+        for row in knowledge.inputs(args.since, args.until)
+        if not row.topic.startswith("__")  # the tick and operator markers are no messages
+    ]
+    decisions = [
+        (d.t, {"kind": d.kind, "tactic": d.tactic, **d.data})
+        for d in knowledge.decisions(args.since, args.until)
+    ]
+    n = write_bag(args.export_bag, inputs, decisions)
+    console.print(Text(f"wrote {n} messages ({len(decisions)} decisions) to {args.export_bag}"))
     return 0
 
 

@@ -1,0 +1,91 @@
+"""The ROS 1 bridge: a ROS robot's topics and services on the bus (``anunnaki[ros]``).
+
+A **bridge file** (``anunnaki: ros1-bridge/1``, docs/ros.md) lists ROS topics with their
+type, direction (``to_bus``/``to_ros``), bus name and field mapping, and bus services that
+call ROS services; :func:`load_bridge` checks it (unknown types, bad field paths: errors
+with file, line and element) without ROS installed. The bridge runs as its own process,
+``python -m anunnaki.ros1 BRIDGE.yaml --connect ENDPOINT``, which imports Debian's rospy
+(:func:`import_rospy`); a launch file starts it as the managed-system kind ``ros1``.
+
+Converters (:mod:`anunnaki.ros1._convert`): std_msgs Bool, String, Int32/64, Float32/64,
+Header; sensor_msgs Image and CompressedImage (to and from the bus's ``Image``), Range,
+BatteryState, NavSatFix; geometry_msgs Twist and PoseStamped; services std_srvs SetBool,
+Trigger, Empty and ``anunnaki_msgs/SetString`` (string in, success and message out) for
+mode changes.
+
+Rosbags (``rosbags``, pure Python): :func:`read_bag` turns a ROS 1 or ROS 2 bag into trace
+records through the same bridge file; :func:`write_bag` writes a run's inputs and decisions
+to a ROS 1 bag.
+
+ROS 2 over zenoh (:class:`Ros2ZenohBridge`): the same bridge files, with CDR samples on the
+key expressions of zenoh-bridge-ros2dds or rmw_zenoh (:func:`ros2_key`).
+"""
+
+from __future__ import annotations
+
+from anunnaki.ros1._bags import DECISIONS_TOPIC, bag_message_to_dict, is_bag, read_bag, write_bag
+from anunnaki.ros1._convert import (
+    ConversionError,
+    bus_image_to_compressed,
+    compressed_to_image,
+    encode_png,
+    fill_message,
+    image_size,
+    message_to_dict,
+    raw_to_image,
+    to_bus_fields,
+    to_ros_fields,
+)
+from anunnaki.ros1._ros2 import (
+    Ros2ZenohBridge,
+    dds_type_name,
+    decode_cdr,
+    encode_cdr,
+    ros2_key,
+)
+from anunnaki.ros1._rospy import ROS_DIST_PACKAGES, RosUnavailable, import_rospy
+from anunnaki.ros1._schema import (
+    FORMAT_TAG,
+    BridgeSpec,
+    ServiceBridge,
+    TopicBridge,
+    load_bridge,
+    parse_bridge,
+)
+from anunnaki.ros1._types import IMAGE_TYPES, MESSAGE_TYPES, SERVICE_TYPES, SET_STRING_SRV
+
+__all__ = [
+    "DECISIONS_TOPIC",
+    "FORMAT_TAG",
+    "IMAGE_TYPES",
+    "MESSAGE_TYPES",
+    "ROS_DIST_PACKAGES",
+    "SERVICE_TYPES",
+    "SET_STRING_SRV",
+    "BridgeSpec",
+    "ConversionError",
+    "Ros2ZenohBridge",
+    "RosUnavailable",
+    "ServiceBridge",
+    "TopicBridge",
+    "bag_message_to_dict",
+    "bus_image_to_compressed",
+    "compressed_to_image",
+    "dds_type_name",
+    "decode_cdr",
+    "encode_cdr",
+    "encode_png",
+    "fill_message",
+    "image_size",
+    "import_rospy",
+    "is_bag",
+    "load_bridge",
+    "message_to_dict",
+    "parse_bridge",
+    "raw_to_image",
+    "read_bag",
+    "ros2_key",
+    "to_bus_fields",
+    "to_ros_fields",
+    "write_bag",
+]

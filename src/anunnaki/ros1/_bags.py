@@ -1,0 +1,183 @@
+"""Rosbags in and out: a recorded robot as a trace, and a run as a bag (``rosbags``, pure Python).
+
+**In.** :func:`read_bag` reads a ROS 1 bag (``.bag``) or a ROS 2 bag (a folder with
+``metadata.yaml``, or its ``.db3``/``.mcap``) with ``rosbags.highlevel.AnyReader`` and turns
+each message of a bridged topic into a trace :class:`~anunnaki.trace.Record` through the
+**same** bridge file as the live bridge (type check, field mapping, merging of several ROS
+topics into one bus topic). Camera frames are left out (guideline P1: traces hold what is
+derived from frames, never the frames); an image entry with ``fields`` (its header, its
+size) is kept. ``anunnaki evaluate MODEL -b BINDING -t run.bag --bridge bridge.yaml`` then
+replays the robot's recording against the goal model. A ROS 2 bag goes through the same
+ROS 1 bridge file; a mapped field its type lacks (ROS 2's Header has no ``seq``) is left out.
+
+**Out.** :func:`write_bag` writes a run's inputs (one ``std_msgs/String`` topic per input
+topic, the message as JSON) and its decisions (``/utu/decisions``, JSON) to a ROS 1 bag,
+what ROS users open with ``rosbag``/``rqt_bag``; ``anunnaki export-bag RUN.db OUT.bag``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+from collections.abc import Iterable, Iterator, Mapping
+from pathlib import Path
+from typing import Any
+
+from anunnaki.errors import AnunnakiError, MissingExtraError, ModelFileError
+from anunnaki.ros1._convert import to_bus_fields
+from anunnaki.ros1._schema import BridgeSpec, TopicBridge
+from anunnaki.trace import Record
+
+__all__ = ["DECISIONS_TOPIC", "bag_message_to_dict", "is_bag", "read_bag", "write_bag"]
+
+#: The topic a run's decisions are written on in an exported bag.
+DECISIONS_TOPIC = "/utu/decisions"
+
+_TIME_TYPES = {"builtin_interfaces/msg/Time", "builtin_interfaces/msg/Duration"}
+
+
+def _rosbags() -> Any:
+    try:
+        import rosbags.highlevel
+        import rosbags.rosbag1
+        import rosbags.typesys
+    except ImportError:
+        raise MissingExtraError("rosbags", "ros") from None
+    return rosbags
+
+
+def is_bag(path: str | Path) -> bool:
+    """Whether ``path`` looks like a ROS 1 or ROS 2 bag (not a JSONL trace)."""
+    p = Path(path)
+    if p.is_dir():
+        return (p / "metadata.yaml").exists()
+    return p.suffix in {".bag", ".db3", ".mcap"}
+
+
+def bag_message_to_dict(msg: Any) -> dict[str, Any]:
+    """A rosbags message (a dataclass) as plain data, times as float seconds.
+
+    rosbags keeps the type name (``__msgtype__``) and the constants (``ULTRASOUND``) as
+    dataclass fields too; they are no message fields and are left out.
+    """
+    return {
+        f.name: _plain(getattr(msg, f.name))
+        for f in dataclasses.fields(msg)
+        if not f.name.startswith("__") and not f.name.isupper()
+    }
+
+
+def _plain(v: Any) -> Any:
+    if dataclasses.is_dataclass(v) and not isinstance(v, type):
+        if getattr(v, "__msgtype__", "") in _TIME_TYPES:
+            return float(getattr(v, "sec")) + float(getattr(v, "nanosec")) / 1e9  # noqa: B009
+        return bag_message_to_dict(v)
+    if hasattr(v, "tolist"):  # numpy arrays: uint8 data as bytes, the rest as lists
+        return bytes(v.tobytes()) if str(getattr(v, "dtype", "")) == "uint8" else v.tolist()
+    if isinstance(v, list | tuple):
+        return [_plain(x) for x in v]
+    return v
+
+
+def _ros1_type(msgtype: str) -> str:
+    """``sensor_msgs/msg/Range`` (rosbags, ROS 2) → ``sensor_msgs/Range`` (ROS 1)."""
+    return msgtype.replace("/msg/", "/")
+
+
+def read_bag(path: str | Path, spec: BridgeSpec) -> list[Record]:
+    """The bridged topics of a bag as trace records, in time order (seconds since the epoch).
+
+    Raises:
+        ModelFileError: The bag cannot be read, or a bridged topic has another type in it.
+        MissingExtraError: ``rosbags`` is not installed.
+
+    """
+    rb = _rosbags()
+    entries: dict[str, list[TopicBridge]] = {}
+    for t in spec.topics:
+        if t.direction == "to_bus" and not t.as_image:
+            entries.setdefault(t.ros, []).append(t)
+    shared = _shared_topics(spec)
+    merged: dict[str, dict[str, Any]] = {}
+    records: list[Record] = []
+    try:
+        with rb.highlevel.AnyReader([Path(path)]) as reader:
+            wanted = [c for c in reader.connections if c.topic in entries]
+            for c in wanted:
+                _check_type(path, c.topic, _ros1_type(c.msgtype), entries[c.topic])
+            for connection, stamp, raw in reader.messages(connections=wanted):
+                data = bag_message_to_dict(reader.deserialize(raw, connection.msgtype))
+                for t in entries[connection.topic]:
+                    fields = to_bus_fields(data, t.fields, strict=False)
+                    if t.bus_topic in shared:
+                        merged.setdefault(t.bus_topic, {}).update(fields)
+                        fields = dict(merged[t.bus_topic])
+                    records.append(Record(stamp / 1e9, t.bus_topic, fields))
+    except (rb.highlevel.AnyReaderError, OSError) as exc:
+        raise ModelFileError(f"cannot read the bag: {exc}", path=str(path)) from None
+    return records
+
+
+def _shared_topics(spec: BridgeSpec) -> set[str]:
+    count: dict[str, int] = {}
+    for t in spec.topics:
+        if t.direction == "to_bus" and not t.as_image:
+            count[t.bus_topic] = count.get(t.bus_topic, 0) + 1
+    return {topic for topic, n in count.items() if n > 1}
+
+
+def _check_type(path: str | Path, topic: str, found: str, entries: list[TopicBridge]) -> None:
+    for t in entries:
+        if t.type != found:
+            raise ModelFileError(
+                f"{topic} is {found} in the bag, but the bridge file says {t.type}",
+                path=str(path),
+                element=f"topics[{topic}].type",
+                hint="fix the type in the bridge file, or record the topic the robot publishes",
+            )
+
+
+def write_bag(
+    path: str | Path,
+    inputs: Iterable[Record],
+    decisions: Iterable[tuple[float, Mapping[str, Any]]] = (),
+) -> int:
+    """Write a run to a ROS 1 bag: inputs on their topics, decisions on :data:`DECISIONS_TOPIC`.
+
+    Every message is a ``std_msgs/String`` holding the JSON of the message (the bus's
+    messages have no fixed ROS type). Returns how many messages were written.
+
+    Raises:
+        AnunnakiError: The bag exists already, or cannot be written.
+
+    """
+    rb = _rosbags()
+    store = rb.typesys.get_typestore(rb.typesys.Stores.ROS1_NOETIC)
+    string = store.types["std_msgs/msg/String"]
+    out = Path(path)
+    if out.exists():
+        raise AnunnakiError(f"{out} exists already; give another name or remove it")
+    n = 0
+    try:
+        with rb.rosbag1.Writer(out) as writer:
+            connections: dict[str, Any] = {}
+            for t, topic, body in _in_time_order(inputs, decisions):
+                if topic not in connections:
+                    connections[topic] = writer.add_connection(
+                        topic, "std_msgs/msg/String", typestore=store
+                    )
+                raw = store.serialize_ros1(string(data=json.dumps(body)), "std_msgs/msg/String")
+                writer.write(connections[topic], max(0, round(t * 1e9)), raw)
+                n += 1
+    except (rb.rosbag1.WriterError, OSError) as exc:
+        raise AnunnakiError(f"cannot write the bag {out}: {exc}") from None
+    return n
+
+
+def _in_time_order(
+    inputs: Iterable[Record], decisions: Iterable[tuple[float, Mapping[str, Any]]]
+) -> Iterator[tuple[float, str, Any]]:
+    rows = [(r.t, r.topic, r.msg) for r in inputs]
+    rows += [(t, DECISIONS_TOPIC, dict(d)) for t, d in decisions]
+    rows.sort(key=lambda row: row[0])
+    return iter(rows)

@@ -1,0 +1,262 @@
+"""ROS 2 over zenoh: the same bridge files, with CDR samples on zenoh key expressions.
+
+ROS 2 speaks zenoh two ways, and Anunnaki's bus is zenoh already, so no ROS 2 install is
+needed on Anunnaki's side:
+
+* **zenoh-bridge-ros2dds** (any ROS 2 with DDS): topic ``/rover/controller/mode`` is the key
+  ``rover/controller/mode`` (the leading ``/`` dropped; the bridge's ``namespace`` option,
+  if set, comes first), the payload the CDR bytes DDS carries (4-byte encapsulation header,
+  then the message).
+* **rmw_zenoh** (ROS 2 Jazzy on): the key is
+  ``<domain>/<topic without the leading />/<pkg>::msg::dds_::<Name>_/<type hash>``, e.g.
+  ``0/rover/controller/mode/std_msgs::msg::dds_::String_/RIHS01_df66…``; the payload is
+  CDR the same way (sequence number, time and gid travel in the sample's attachment, which
+  this reader does not need). A subscriber uses ``*`` for the hash.
+
+:class:`Ros2ZenohBridge` reads and writes those samples with ``rosbags``' CDR serializers and
+ROS 2 (Humble) type store, through a bridge file written for ROS 1 (types ``std_msgs/String``
+map to ``std_msgs/msg/String``; a mapped field a ROS 2 type lacks — Header's ``seq`` — is
+left out), and publishes on Anunnaki's bus what the ROS 1 bridge publishes.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+from collections.abc import Callable, Mapping
+from typing import Any, Literal
+
+from anunnaki.bus import Bus, Image, body_of
+from anunnaki.errors import MissingExtraError
+from anunnaki.ros1._bags import bag_message_to_dict
+from anunnaki.ros1._convert import (
+    ConversionError,
+    bus_image_to_compressed,
+    compressed_to_image,
+    raw_to_image,
+    to_bus_fields,
+    to_ros_fields,
+)
+from anunnaki.ros1._schema import BridgeSpec, TopicBridge
+
+__all__ = ["Flavour", "Ros2ZenohBridge", "dds_type_name", "decode_cdr", "encode_cdr", "ros2_key"]
+
+log = logging.getLogger("anunnaki.ros1")
+
+Flavour = Literal["ros2dds", "rmw_zenoh"]
+
+
+def ros2_type(ros1_type: str) -> str:
+    """``std_msgs/String`` → ``std_msgs/msg/String``."""
+    package, name = ros1_type.split("/", 1)
+    return f"{package}/msg/{name}"
+
+
+def dds_type_name(ros1_type: str) -> str:
+    """The DDS name rmw_zenoh puts in its keys: ``std_msgs::msg::dds_::String_``."""
+    package, name = ros1_type.split("/", 1)
+    return f"{package}::msg::dds_::{name}_"
+
+
+def ros2_key(
+    topic: str,
+    ros1_type: str,
+    *,
+    flavour: Flavour = "ros2dds",
+    domain: int = 0,
+    type_hash: str = "*",
+    namespace: str = "",
+) -> str:
+    """The zenoh key expression a ROS 2 topic's samples travel on (see the module's doc)."""
+    name = topic.lstrip("/")
+    if flavour == "ros2dds":
+        return f"{namespace.strip('/')}/{name}" if namespace else name
+    return f"{domain}/{name}/{dds_type_name(ros1_type)}/{type_hash}"
+
+
+def _store() -> Any:
+    try:
+        from rosbags.typesys import Stores, get_typestore
+    except ImportError:
+        raise MissingExtraError("rosbags", "ros") from None
+    return get_typestore(Stores.ROS2_HUMBLE)
+
+
+def decode_cdr(ros1_type: str, raw: bytes, store: Any | None = None) -> dict[str, Any]:
+    """A CDR sample of ``ros1_type``'s ROS 2 message as plain data (times as float seconds)."""
+    store = store or _store()
+    return bag_message_to_dict(store.deserialize_cdr(raw, ros2_type(ros1_type)))
+
+
+def encode_cdr(ros1_type: str, data: Mapping[str, Any], store: Any | None = None) -> bytes:
+    """Plain data as a CDR sample of ``ros1_type``'s ROS 2 message (missing fields: zero).
+
+    Raises:
+        ConversionError: A field the ROS 2 type does not have.
+
+    """
+    store = store or _store()
+    msgtype = ros2_type(ros1_type)
+    return bytes(store.serialize_cdr(_build(store, msgtype, data, ""), msgtype))
+
+
+def _build(store: Any, msgtype: str, data: Mapping[str, Any], where: str) -> Any:
+    _, fields = store.fielddefs[msgtype]
+    names = {name for name, _ in fields}
+    for key in data:
+        if key not in names:
+            raise ConversionError(f"{msgtype} has no field '{where}{key}'")
+    values = {name: _field(store, desc, data.get(name), f"{where}{name}.") for name, desc in fields}
+    return store.types[msgtype](**values)
+
+
+def _field(store: Any, desc: Any, value: Any, where: str) -> Any:
+    import numpy as np
+
+    kind, detail = desc
+    kind_name = getattr(kind, "name", str(kind))
+    if kind_name == "NAME":
+        if detail in ("builtin_interfaces/msg/Time", "builtin_interfaces/msg/Duration"):
+            t = float(value or 0.0)
+            return store.types[detail](sec=int(t // 1), nanosec=round((t % 1) * 1e9))
+        return _build(store, detail, value or {}, where)
+    if kind_name == "BASE":
+        base = detail[0]
+        if base == "string":
+            return "" if value is None else str(value)
+        if base == "bool":
+            return bool(value)
+        if base.startswith("float"):
+            return float(value or 0.0)
+        return int(value or 0)
+    (inner_kind, inner), count = detail
+    base = inner[0] if getattr(inner_kind, "name", "") == "BASE" else None
+    if base is None:
+        return [_build(store, inner, v, where) for v in (value or [])]
+    if base == "uint8":
+        return np.frombuffer(bytes(value or b""), np.uint8)
+    items = list(value or ([0] * count if count else []))
+    return np.array(items, dtype=np.dtype(base))
+
+
+class Ros2ZenohBridge:
+    """ROS 2 topics as zenoh samples (CDR) to and from the bus, as a bridge file says.
+
+    Args:
+        spec: A bridge file (the ``topics``; ROS 2 services are not bridged).
+        bus: Anunnaki's bus (where the bridged values go, and actions come from).
+        session: A zenoh session that reaches ROS 2's zenoh (zenoh-bridge-ros2dds, or
+            rmw_zenoh's router); it may be another session than the bus's.
+        flavour: ``ros2dds`` or ``rmw_zenoh`` key expressions.
+        domain: The ROS domain id (rmw_zenoh keys).
+        namespace: zenoh-bridge-ros2dds's ``namespace`` option, if it sets one.
+
+    """
+
+    def __init__(
+        self,
+        spec: BridgeSpec,
+        bus: Bus,
+        session: Any,
+        *,
+        flavour: Flavour = "ros2dds",
+        domain: int = 0,
+        namespace: str = "",
+    ) -> None:
+        self.spec = spec
+        self.bus = bus
+        self.session = session
+        self.flavour: Flavour = flavour
+        self.domain = domain
+        self.namespace = namespace
+        self.store = _store()
+        self.stats: dict[str, int] = {"to_bus": 0, "to_ros": 0, "malformed": 0}
+        self._lock = threading.Lock()
+        self._merged: dict[str, dict[str, Any]] = {}
+        self._handles: list[Any] = []
+        count: dict[str, int] = {}
+        for t in spec.topics:
+            if t.direction == "to_bus" and not t.as_image:
+                count[t.bus_topic] = count.get(t.bus_topic, 0) + 1
+        self._shared = {topic for topic, n in count.items() if n > 1}
+
+    def key(self, t: TopicBridge, *, type_hash: str = "*") -> str:
+        """The zenoh key of a bridge entry's ROS 2 topic."""
+        return ros2_key(
+            t.ros,
+            t.type,
+            flavour=self.flavour,
+            domain=self.domain,
+            type_hash=type_hash,
+            namespace=self.namespace,
+        )
+
+    def start(self) -> None:
+        """Subscribe to the ROS 2 samples (to_bus) and to the bus topics (to_ros)."""
+        for t in self.spec.topics:
+            if t.direction == "to_bus":
+                handle = self.session.declare_subscriber(self.key(t), self._from_ros2(t))
+                self._handles.append(handle.undeclare)
+            else:
+                sub = self.bus.subscribe(t.bus_topic, self._from_bus(t), queue=t.queue)
+                self._handles.append(sub.close)
+
+    def close(self) -> None:
+        """Undeclare everything."""
+        for undo in reversed(self._handles):
+            undo()
+        self._handles.clear()
+
+    def __enter__(self) -> Ros2ZenohBridge:
+        self.start()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def _from_ros2(self, t: TopicBridge) -> Callable[[Any], None]:
+        def on_sample(sample: Any) -> None:
+            try:
+                data = decode_cdr(t.type, sample.payload.to_bytes(), self.store)
+                self.bus.publish(t.bus_topic, self._bus_message(t, data))
+            except Exception as exc:  # a bad sample is counted and dropped, never fatal
+                self.stats["malformed"] += 1
+                log.warning("dropped a ROS 2 sample on %s (%s): %s", t.ros, t.type, exc)
+                return
+            self.stats["to_bus"] += 1
+
+        return on_sample
+
+    def _bus_message(self, t: TopicBridge, data: dict[str, Any]) -> Image | dict[str, Any]:
+        if t.as_image:
+            if t.type == "sensor_msgs/CompressedImage":
+                return compressed_to_image(data)
+            return raw_to_image(data)
+        fields = to_bus_fields(data, t.fields, strict=False)
+        if t.bus_topic in self._shared:
+            with self._lock:
+                merged = self._merged.setdefault(t.bus_topic, {})
+                merged.update(fields)
+                return dict(merged)
+        return fields
+
+    def _from_bus(self, t: TopicBridge) -> Callable[[Any], None]:
+        key = self.key(t, type_hash="0")
+
+        def on_sample(sample: Any) -> None:
+            try:
+                message = sample.message
+                if isinstance(message, Image):
+                    fields = bus_image_to_compressed(message, 0.0)
+                    fields["header"].pop("seq", None)
+                else:
+                    fields = to_ros_fields(body_of(message), t.fields)
+                raw = encode_cdr(t.type, fields, self.store)
+            except Exception as exc:  # a bad bus message is counted and dropped
+                self.stats["malformed"] += 1
+                log.warning("dropped a bus message on %s for %s: %s", t.bus_topic, t.ros, exc)
+                return
+            self.session.put(key, raw)
+            self.stats["to_ros"] += 1
+
+        return on_sample

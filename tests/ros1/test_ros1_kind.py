@@ -1,0 +1,52 @@
+"""The managed-system kind ``ros1``: checked at bring-up, refuses a bus the bridge can't join."""
+
+from __future__ import annotations
+
+import threading
+from pathlib import Path
+
+import pytest
+
+from anunnaki.bus import open_bus
+from anunnaki.errors import ModelFileError
+from anunnaki.launch import MANAGED, ManagedContext
+from anunnaki.utu import parse_config
+
+ROVER = Path(__file__).parents[2] / "examples" / "rover"
+UTU = parse_config(f"anunnaki: utu/1\ngoal_model: {ROVER}/goals.yaml\nclock: sim\n")
+
+
+def kind(**options: object):  # type: ignore[no-untyped-def]
+    cls = MANAGED.factory("ros1")
+    return cls(cls.Options.model_validate(options), base=ROVER)  # type: ignore[attr-defined]
+
+
+def test_the_kind_is_registered_and_checks_its_files_at_bring_up(tmp_path: Path) -> None:
+    good = kind(bridge="ros1/bridge.yaml", models="../models/rover.yaml", oracle={"name": "light"})
+    good.check(UTU)
+    notes = good.notes(UTU, 2.0)
+    assert any("clock: sim" in n for n in notes) and any("speed 2" in n for n in notes)
+    bad = tmp_path / "bridge.yaml"
+    bad.write_text(
+        "anunnaki: ros1-bridge/1\ntopics:\n  - {ros: /a, type: x/Y, direction: to_bus}\n"
+    )
+    with pytest.raises(ModelFileError, match=r"bridge.yaml:3: topics\[/a\].type: unknown ROS"):
+        kind(bridge=str(bad)).check(UTU)
+    with pytest.raises(ModelFileError, match="unknown oracle 'crystal_ball'"):
+        kind(bridge="ros1/bridge.yaml", oracle={"name": "crystal_ball"}).check(UTU)
+
+
+def test_an_in_process_bus_is_refused_with_the_fix() -> None:
+    with open_bus("inproc") as bus:
+        ctx = ManagedContext(
+            bus=bus,
+            stop=threading.Event(),
+            speed=1.0,
+            until=None,
+            say=print,
+            on_instant=None,
+            taken=None,
+            watched=frozenset(),
+        )
+        with pytest.raises(ModelFileError, match=r"needs the zenoh bus.*bus: \{kind: zenoh\}"):
+            kind(bridge="ros1/bridge.yaml").start(ctx)

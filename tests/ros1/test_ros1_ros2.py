@@ -1,0 +1,153 @@
+"""ROS 2 over zenoh: CDR samples published on zenoh as ROS 2 would, read through a bridge file.
+
+No ROS 2 runs here: the "ROS 2 side" is a plain zenoh session putting CDR bytes on the key
+expressions zenoh-bridge-ros2dds and rmw_zenoh use (docs/ros.md says what was and was not
+tested against a live ROS 2).
+"""
+
+from __future__ import annotations
+
+import json
+import threading
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from anunnaki.bus import Bus, BusConfig, open_bus
+from anunnaki.ros1 import (
+    Ros2ZenohBridge,
+    decode_cdr,
+    encode_cdr,
+    load_bridge,
+    parse_bridge,
+    ros2_key,
+)
+
+pytest.importorskip("rosbags")
+zenoh = pytest.importorskip("zenoh")
+
+ROVER = Path(__file__).parents[2] / "examples" / "rover"
+DEADLINE = 30.0
+
+
+def test_key_expressions_of_both_ros2_zenoh_flavours() -> None:
+    assert ros2_key("/rover/controller/mode", "std_msgs/String") == "rover/controller/mode"
+    assert ros2_key("/a/b", "std_msgs/Bool", namespace="/robot1") == "robot1/a/b"
+    assert (
+        ros2_key("/ultrasonic/range", "sensor_msgs/Range", flavour="rmw_zenoh", domain=3)
+        == "3/ultrasonic/range/sensor_msgs::msg::dds_::Range_/*"
+    )
+
+
+def test_cdr_samples_are_what_ros2_puts_on_the_wire() -> None:
+    # encapsulation header (CDR little endian, 00 01 00 00), then the fields, 4-aligned
+    assert encode_cdr("std_msgs/String", {"data": "hi"}) == bytes.fromhex("0001000003000000686900")
+    assert encode_cdr("std_msgs/Bool", {"data": True}) == bytes.fromhex("0001000001")
+    raw = encode_cdr(
+        "sensor_msgs/Range", {"header": {"stamp": 12.5, "frame_id": "us"}, "range": 0.5}
+    )
+    assert decode_cdr("sensor_msgs/Range", raw) == {
+        "header": {"stamp": 12.5, "frame_id": "us"},
+        "radiation_type": 0,
+        "field_of_view": 0.0,
+        "min_range": 0.0,
+        "max_range": 0.0,
+        "range": 0.5,
+    }
+    twist = decode_cdr(
+        "geometry_msgs/Twist", encode_cdr("geometry_msgs/Twist", {"angular": {"z": 1.0}})
+    )
+    assert twist == {
+        "linear": {"x": 0.0, "y": 0.0, "z": 0.0},
+        "angular": {"x": 0.0, "y": 0.0, "z": 1.0},
+    }
+
+
+@pytest.fixture
+def bus() -> Iterator[Bus]:
+    with open_bus("zenoh") as b:
+        yield b
+
+
+@pytest.fixture
+def ros2_side(bus: Bus) -> Iterator[Any]:
+    """A plain zenoh session, as zenoh-bridge-ros2dds or rmw_zenoh's router would be."""
+    endpoint = bus.endpoints[0]  # type: ignore[attr-defined]
+    config = BusConfig(kind="zenoh", mode="peer", connect=[endpoint], listen=[])
+    session = zenoh.open(zenoh.Config.from_json5(json.dumps(config.to_zenoh([]))))
+    try:
+        yield session
+    finally:
+        session.close()
+
+
+class Waiter:
+    def __init__(self, bus: Bus, topic: str, until: Any) -> None:
+        self.got: list[Any] = []
+        self.done = threading.Event()
+        self.until = until
+        bus.subscribe(topic, self.on)
+
+    def on(self, sample: Any) -> None:
+        self.got.append(sample.message.to_body())
+        if self.until(self.got[-1]):
+            self.done.set()
+
+
+def publish_until(session: Any, key: str, raw: bytes, done: threading.Event) -> None:
+    """Put the sample until it arrives: the sessions find each other asynchronously."""
+    while not done.wait(0.05):
+        session.put(key, raw)
+
+
+@pytest.mark.parametrize("flavour", ["ros2dds", "rmw_zenoh"])
+def test_ros2_samples_reach_the_bus_and_actions_reach_ros2(
+    bus: Bus, ros2_side: Any, flavour: str
+) -> None:
+    spec = load_bridge(ROVER / "ros1" / "bridge.yaml")
+    with Ros2ZenohBridge(spec, bus, ros2_side, flavour=flavour, domain=0):  # type: ignore[arg-type]
+
+        def key(topic: str, ros1_type: str) -> str:
+            return ros2_key(topic, ros1_type, flavour=flavour, type_hash="RIHS01_0123")  # type: ignore[arg-type]
+
+        state = Waiter(bus, "/rover/controller/state", lambda m: m.get("control_mode") == "manual")
+        mode = encode_cdr("std_msgs/String", {"data": "manual"})
+        publish_until(ros2_side, key("/rover/controller/mode", "std_msgs/String"), mode, state.done)
+        assert state.got[-1]["control_mode"] == "manual"
+        rng = Waiter(bus, "/ultrasonic/range", lambda m: True)
+        sample = encode_cdr("sensor_msgs/Range", {"header": {"stamp": 1.5}, "range": 0.5})
+        publish_until(ros2_side, key("/ultrasonic/range", "sensor_msgs/Range"), sample, rng.done)
+        assert rng.got[-1] == {"range": 0.5}
+        # an action: the bus's buzzer command becomes a std_msgs/msg/Bool sample for ROS 2
+        heard: list[dict[str, Any]] = []
+        arrived = threading.Event()
+
+        def on_buzzer(s: Any) -> None:
+            heard.append(decode_cdr("std_msgs/Bool", s.payload.to_bytes()))
+            arrived.set()
+
+        listen = ros2_key("/rover/controller/buzzer", "std_msgs/Bool", flavour=flavour)  # type: ignore[arg-type]
+        sub = ros2_side.declare_subscriber(listen, on_buzzer)
+        try:
+            while not arrived.wait(0.05):
+                bus.publish("/rover/controller/buzzer", {"on": True})
+        finally:
+            sub.undeclare()
+        assert heard[0] == {"data": True}
+
+
+def test_a_bad_sample_is_counted_and_the_next_goes_through(bus: Bus, ros2_side: Any) -> None:
+    spec = parse_bridge(
+        "anunnaki: ros1-bridge/1\ntopics:\n"
+        "  - {ros: /battery, type: sensor_msgs/BatteryState, direction: to_bus,"
+        " fields: {pct: percentage}}\n"
+    )
+    with Ros2ZenohBridge(spec, bus, ros2_side) as bridge:
+        got = Waiter(bus, "/battery", lambda m: True)
+        ros2_side.put("battery", b"\x00\x01\x00\x00\x01")  # cut short
+        good = encode_cdr("sensor_msgs/BatteryState", {"percentage": 0.75})
+        publish_until(ros2_side, "battery", good, got.done)
+        assert got.got[-1] == {"pct": 0.75}
+        assert bridge.stats["malformed"] >= 1
