@@ -16,6 +16,7 @@ Every wait polls the database (read-only) or an event, with a generous deadline.
 
 from __future__ import annotations
 
+import sqlite3
 import threading
 import time
 from collections.abc import Iterator
@@ -67,6 +68,16 @@ def log(tmp_path: Path) -> Path:
 def pause_until(t: float) -> None:
     """Let the wall clock reach ``t`` (to act at a chosen moment of a scenario)."""
     threading.Event().wait(max(0.0, t - time.time()))
+
+
+def first_step_after_restart(db: Path) -> float:
+    """The instant of the first step a restarted manager took (the first after the marker)."""
+    with sqlite3.connect(f"file:{db}?mode=ro", uri=True) as con:
+        (marker,) = con.execute("SELECT min(id) FROM inputs WHERE topic='__restart__'").fetchone()
+        (t,) = con.execute(
+            "SELECT min(t) FROM inputs WHERE id > ? AND topic='__tick__'", (marker,)
+        ).fetchone()
+    return float(t)
 
 
 def assert_replays_identically(db: Path) -> None:
@@ -223,7 +234,9 @@ def test_kill_while_postcondition_pending_keeps_deadline_and_cooldown(
     (resumed,) = of(second, "resumed")
     resumed_as = (resumed.data["state"], resumed.data["next_action"], resumed.data["deadline"])
     assert resumed_as == ("awaiting", 2, deadline)  # the ORIGINAL deadline
-    assert deadline <= failed.t < restarted_at + TACTIC_DEADLINE
+    # Had the restart re-armed the deadline, the tactic could not fail before the restarted
+    # manager's first step + 5 s (its first step: later than restarted_at on a loaded machine).
+    assert deadline <= failed.t < max(restarted_at, first_step_after_restart(db)) + TACTIC_DEADLINE
     # G3 is unsatisfied (the rover stays autonomous), or unknown when the restarted manager
     # came up on a loaded machine after its restored values had gone stale: not satisfied.
     assert failed.data["goals"]["G3"] in ("unsatisfied", "unknown")
