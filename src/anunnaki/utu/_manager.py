@@ -369,15 +369,15 @@ class AutonomicManager:
             self._wake.set()
 
     def _drain(self) -> None:
-        """Take what waits on each monitored topic, at most one queue's worth per step.
+        """Take what waits on each monitored topic, at most ``intake`` messages per step.
 
         Under a flood the producers refill a queue as fast as it is emptied: a step takes
-        what one queue holds (``queue``), the rest waits for the next step (or is dropped
-        and counted by the bus when the queue is full), so time-driven checks keep their
-        rate whatever the load.
+        at most ``intake`` (64) from each topic, the rest waits for the next step (or is
+        dropped and counted by the bus when the queue is full), so a step stays short and
+        time-driven checks keep their rate whatever the load.
         """
         wall = isinstance(self.clock, WallClock)
-        limit = self.parts.config.queue
+        limit = min(self.parts.config.queue, self.parts.config.intake)
         for topic, sub in self._pull.items():
             for _ in range(limit):
                 sample = sub.try_recv()

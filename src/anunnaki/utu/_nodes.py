@@ -416,9 +416,13 @@ class MonitorNode(UtuNode):
         wall = isinstance(self.clock, WallClock) and now is None
         with self._lock:
             inputs, self._fed = self._fed, []
-            # At most one queue's worth per topic per step (a flood must not hold the step),
-            # and never more than a batch may carry.
-            limit = min(self.config.queue, MAX_BATCH // max(1, len(self._subs) + 1))
+            # At most ``intake`` per topic per step (a flood must not hold the step), and
+            # never more than a batch may carry.
+            limit = min(
+                self.config.queue,
+                self.config.intake,
+                MAX_BATCH // max(1, len(self._subs) + 1),
+            )
             for topic, sub in self._subs.items():
                 for _ in range(limit):
                     if (sample := sub.try_recv()) is None:
