@@ -40,6 +40,7 @@ from anunnaki.bus import Bus, Generic, InprocHub, ModeRequest, Publisher, open_b
 from anunnaki.utu import AutonomicManager, UtuConfig, load_config
 
 ORACLE = "/utu/oracle/output"
+ROVER = Path(__file__).resolve().parents[2] / "examples" / "rover"
 STALENESS = 2.0  # s: the rover model's default, which the oracle's agent A4 keeps
 RATE = 10  # Hz: the rover's messages, and the manager's steps, in the stepped tests
 
@@ -350,3 +351,34 @@ def test_a_dead_detector_starts_the_fail_safe_in_the_step_that_sees_it() -> None
         (t_kill, "started", "fail-safe")
     )
     assert rover.mode_requests() == 1
+
+
+def test_tactics_that_all_fail_at_once_end_in_a_run_stop_not_a_recursion() -> None:
+    # A stopped rover refuses every action: fail-safe (G3) and collision-stop (G5) used to
+    # hand over to each other forever (RecursionError in the execute node, issue #12).
+    from anunnaki.goals import load_goal_model
+    from anunnaki.tactics import load_tactics
+    from anunnaki.utu import Knowledge, RecordingActuator
+
+    model = load_goal_model(ROVER / "goals.yaml", ROVER / "binding.yaml")
+    tactics = load_tactics(ROVER / "tactics.xml")
+    refusing = RecordingActuator(outcomes=[(False, "the system is stopped (run-stop)")] * 50)
+    manager = AutonomicManager(
+        model,
+        tactics,
+        knowledge=Knowledge(),
+        actuator=refusing,
+        failsafe="fail-safe",
+        run_stop_service="/rover/stop",
+    )
+    with manager:
+        manager.feed("/rover/status", {"mode": "autonomous", "buzzer": False, "bumper": True}, t=1)
+        manager.feed("/rover/camera/info", {"seq": 1, "width": 128, "height": 128}, t=1)
+        manager.feed("/rover/ultrasonic", {"range": 3.0}, t=1)
+        manager.feed("/utu/oracle/output", {"category": 2, "confidence": 0.9}, t=1)
+        manager.step(1.0)
+        made = [(d.kind, d.tactic, d.data.get("to")) for d in manager.knowledge.decisions()]
+    started = [tactic for kind, tactic, _ in made if kind == "started"]
+    assert sorted(started) == ["collision-stop", "fail-safe"]  # each tried once
+    assert made[-2:] == [("escalated", made[-2][1], "run-stop"), ("run_stop", None, None)]
+    assert manager.run_stopped

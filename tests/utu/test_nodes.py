@@ -539,3 +539,44 @@ def test_hostile_cycle_messages_neither_raise_nor_steer_any_deployment(deploy, c
         "postcondition_ok",
         "fail-safe",
     ) in kinds
+
+
+def test_a_stuck_node_is_run_stopped_by_its_watchdog(tmp_path) -> None:  # type: ignore[no-untyped-def]
+    # Issue #12: the watchdog existed only in the one-process loop. A per-node round that
+    # hangs (a deadlock, a hung handler) run-stops the platform from the watchdog's thread
+    # and announces it on /utu/run_stop, which the monitor records.
+    cfg = config(knowledge=str(tmp_path / "kb.db"), watchdog=1.0)  # run_stop: /rover/stop
+    hub = InprocHub()
+    release = threading.Event()
+    stops: list[dict[str, Any]] = []
+    heard: list[RunStop] = []
+    with open_bus("inproc", hub=hub) as bus, open_bus("inproc", hub=hub) as robot:
+        robot.service("/rover/stop", lambda m: stops.append(m.to_body()) or {"ok": True})
+        robot.subscribe("/utu/run_stop", lambda s: heard.append(s.message), queue=8)
+        node = build_node("plan", cfg, bus=bus)
+        rounds = 0
+        own_round = node.spin_once
+
+        def stuck_round() -> float:
+            nonlocal rounds
+            rounds += 1
+            if rounds == 3:
+                release.wait(30)  # stuck here
+            return own_round()
+
+        node.spin_once = stuck_round  # type: ignore[method-assign]
+        stop = threading.Event()
+        spinner = threading.Thread(target=node.spin, args=(stop,))
+        spinner.start()
+        try:
+            assert wait_for(lambda: bool(stops) and bool(heard), timeout=10.0)
+            assert rounds == 3  # still stuck: the platform was told from outside the round
+            assert "watchdog: node plan" in heard[0].reason
+            assert heard[0].caller == "watchdog:plan"
+        finally:
+            release.set()
+            stop.set()
+            node.wake()
+            spinner.join(10)
+            node.close()
+    assert len(stops) == 1  # once per stall

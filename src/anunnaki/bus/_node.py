@@ -35,6 +35,7 @@ from __future__ import annotations
 import logging
 import os
 import threading
+from collections.abc import Callable
 from typing import Any, Protocol, cast
 
 from anunnaki.bus._api import Bus, Subscriber
@@ -67,6 +68,8 @@ class Node:
         self.token = token
         self.ready = False
         self.cycles = 0
+        #: Called at the start of every round of :meth:`spin` (e.g. a watchdog's beat).
+        self.on_round: Callable[[], object] | None = None
         self._declared: list[_Closable] = []
         self._wake = threading.Event()
         self._closed = False
@@ -145,6 +148,8 @@ class Node:
         stop = stop or threading.Event()
         while not stop.is_set() and not self._closed:
             self._wake.clear()
+            if self.on_round is not None:
+                self.on_round()
             try:
                 wait = self.spin_once()
             except Exception:  # one bad round must not kill the node (DESIGN: log, go on)

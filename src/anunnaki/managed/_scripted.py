@@ -59,7 +59,7 @@ class ScriptedSystem:
         status_topic: str | None = None,
         modes: tuple[str, ...] = ("autonomous", "manual"),
         publish_clock: bool = False,
-        stop_without_utu: float | None = 0.5,
+        stop_without_utu: float | None = 0.2,
     ) -> None:
         self.bus = bus
         self.records: list[Record] = (

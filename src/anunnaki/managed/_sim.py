@@ -191,7 +191,7 @@ class SimulatedSystem:
         lockstep: bool = True,
         lockstep_timeout: float = 2.0,
         on_time: Callable[[float], object] | None = None,
-        stop_without_utu: float | None = 0.5,
+        stop_without_utu: float | None = 0.2,
         scorer: Mapping[str, Any] | None = None,
     ) -> None:
         self.bus = bus

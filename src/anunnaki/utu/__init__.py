@@ -16,6 +16,7 @@ Five parts, composed by :class:`AutonomicManager`:
 ``manager.spin()`` runs live. See docs/utu.md.
 """
 
+from anunnaki.utu._actions import ActionRunner, RecordedOutcome, ReplayRunner, ThreadRunner
 from anunnaki.utu._actuators import BusActuator, RecordingActuator
 from anunnaki.utu._config import RunStopConfig, UtuConfig, load_config, parse_config
 from anunnaki.utu._knowledge import Decision, InputRow, Knowledge, TacticRow, VerdictRow
@@ -75,6 +76,7 @@ __all__ = [
     "KINDS",
     "NODE_NAMES",
     "ActionOutcome",
+    "ActionRunner",
     "Actuator",
     "AnalyzeNode",
     "AnalyzeStage",
@@ -99,12 +101,15 @@ __all__ = [
     "PlanNode",
     "PlanStage",
     "Planner",
+    "RecordedOutcome",
     "RecordingActuator",
     "ReplayReport",
+    "ReplayRunner",
     "RunLogError",
     "RunStopConfig",
     "TacticRow",
     "TacticRuntime",
+    "ThreadRunner",
     "UtuConfig",
     "UtuNode",
     "UtuParts",

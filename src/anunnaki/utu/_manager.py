@@ -369,15 +369,15 @@ class AutonomicManager:
             self._wake.set()
 
     def _drain(self) -> None:
-        """Take what waits on each monitored topic, at most one queue's worth per step.
+        """Take what waits on each monitored topic, at most ``intake`` messages per step.
 
         Under a flood the producers refill a queue as fast as it is emptied: a step takes
-        what one queue holds (``queue``), the rest waits for the next step (or is dropped
-        and counted by the bus when the queue is full), so time-driven checks keep their
-        rate whatever the load.
+        at most ``intake`` (64) from each topic, the rest waits for the next step (or is
+        dropped and counted by the bus when the queue is full), so a step stays short and
+        time-driven checks keep their rate whatever the load.
         """
         wall = isinstance(self.clock, WallClock)
-        limit = self.parts.config.queue
+        limit = min(self.parts.config.queue, self.parts.config.intake)
         for topic, sub in self._pull.items():
             for _ in range(limit):
                 sample = sub.try_recv()
@@ -646,7 +646,7 @@ class AutonomicManager:
         if isinstance(self.actions, ThreadRunner) and not isinstance(self.clock, SimClock):
             self.actions.settle = self.parts.config.action_settle  # live: hold the loop briefly
         limit = self.parts.config.watchdog
-        dog = _Watchdog(self, max(limit, 2 * period)) if limit is not None else None
+        dog = Watchdog(self._watchdog_fired, max(limit, 2 * period)) if limit is not None else None
         try:
             while not stop.is_set() and not self._closed:
                 if dog is not None:
@@ -730,11 +730,16 @@ class AutonomicManager:
         self.close()
 
 
-class _Watchdog:
-    """Run-stops the platform when a live loop has not finished a step for ``limit`` s."""
+class Watchdog:
+    """Calls ``on_fire(stalled)`` once when a loop has not beaten for ``limit`` seconds.
 
-    def __init__(self, manager: AutonomicManager, limit: float) -> None:
-        self.manager = manager
+    The loop calls :meth:`beat` before each step (or round); the watchdog's own thread
+    checks four times per ``limit`` (at least every 0.25 s). It fires again only after
+    the loop has beaten once more.
+    """
+
+    def __init__(self, on_fire: Callable[[float], None], limit: float) -> None:
+        self.on_fire = on_fire
         self.limit = limit
         self._last = time.monotonic()
         self._fired = False
@@ -753,10 +758,11 @@ class _Watchdog:
             if stalled > self.limit and not self._fired:
                 self._fired = True
                 try:
-                    self.manager._watchdog_fired(stalled)
+                    self.on_fire(stalled)
                 except Exception:  # the watchdog must outlive what it calls
                     log.exception("utu: the watchdog's run-stop raised")
 
     def close(self) -> None:
+        """Stop watching."""
         self._stop.set()
         self._thread.join(timeout=2.0)

@@ -73,7 +73,7 @@ from anunnaki.utu._actions import ThreadRunner
 from anunnaki.utu._actuators import BusActuator
 from anunnaki.utu._config import UtuConfig
 from anunnaki.utu._knowledge import Knowledge
-from anunnaki.utu._manager import AutonomicManager
+from anunnaki.utu._manager import AutonomicManager, Watchdog
 from anunnaki.utu._mape import Actuator
 from anunnaki.utu._parts import NodeConfigError, UtuParts, load_parts, open_knowledge
 from anunnaki.utu._stages import (
@@ -271,6 +271,39 @@ class UtuNode(Node):
         if self._kb is not None:
             self._kb.flush()
 
+    def spin(self, stop: threading.Event | None = None) -> None:
+        """Run live; a watchdog run-stops the platform if a round takes ``watchdog`` s."""
+        limit = self.config.watchdog
+        if limit is None:
+            super().spin(stop)
+            return
+        # An idle node's round waits up to 0.5 s for work (Node.spin): never less than 1 s.
+        dog = Watchdog(self._watchdog_fired, max(limit, 2 * self._period(), 1.0))
+        self.on_round = dog.beat
+        try:
+            super().spin(stop)
+        finally:
+            self.on_round = None
+            dog.close()
+
+    def _watchdog_fired(self, stalled: float) -> None:
+        """From the watchdog's thread: run-stop the platform and tell every part of Utu."""
+        reason = f"watchdog: node {self.name} has not finished a round for {stalled:.1f} s"
+        log.error("utu: %s; run-stop", reason)
+        service = self.config.run_stop.service
+        if service is not None:
+            try:
+                self.bus.request(
+                    service, dict(self.config.run_stop.payload), timeout=1.0, wait_for_service=False
+                )
+            except AnunnakiError as exc:
+                log.error("utu: the watchdog's run-stop failed: %s", exc)
+        try:  # the monitor node records it as an operator's run-stop (caller: the watchdog)
+            stop = RunStop(reason=reason, caller=f"watchdog:{self.name}")
+            self.bus.publish(topics.RUN_STOP, stop)
+        except AnunnakiError as exc:
+            log.error("utu: could not announce the watchdog's run-stop: %s", exc)
+
     def release(self) -> None:
         """Close the knowledge base the node opened itself."""
         self.release_extra()
@@ -383,9 +416,13 @@ class MonitorNode(UtuNode):
         wall = isinstance(self.clock, WallClock) and now is None
         with self._lock:
             inputs, self._fed = self._fed, []
-            # At most one queue's worth per topic per step (a flood must not hold the step),
-            # and never more than a batch may carry.
-            limit = min(self.config.queue, MAX_BATCH // max(1, len(self._subs) + 1))
+            # At most ``intake`` per topic per step (a flood must not hold the step), and
+            # never more than a batch may carry.
+            limit = min(
+                self.config.queue,
+                self.config.intake,
+                MAX_BATCH // max(1, len(self._subs) + 1),
+            )
             for topic, sub in self._subs.items():
                 for _ in range(limit):
                     if (sample := sub.try_recv()) is None:

@@ -742,6 +742,8 @@ class ExecuteStage:
         self.eligible: list[str] = []
         self._view = _AnalysisView()
         self._approvals: list[list[str]] = []
+        self._cascade_t: float | None = None  # the instant of the escalations in _cascade
+        self._cascade: set[str] = set()  # tactics that failed at that instant
         self._state: AnalysisState | None = None
         self._before = 0
         if resuming(knowledge):
@@ -901,8 +903,16 @@ class ExecuteStage:
         kb, planner = self.knowledge, self.planner
         if self.halted:
             return
+        # A tactic that failed at this instant is not escalated to again in it: two tactics
+        # whose actions a stopped robot refuses would otherwise hand over to each other
+        # forever (a RecursionError killed the execute node, issue #12's fault benchmark).
+        if self._cascade_t != now:
+            self._cascade_t, self._cascade = now, set()
+        self._cascade.add(failed.name)
         eligible = [
-            planner.runtimes[n] for n in self.eligible if n != failed.name and n in planner.runtimes
+            planner.runtimes[n]
+            for n in self.eligible
+            if n not in self._cascade and n in planner.runtimes
         ]
         eligible.sort(key=lambda rt: -rt.tactic.priority)
         for rt in eligible:
@@ -914,7 +924,7 @@ class ExecuteStage:
                 self.executor.start(rt, now, reason=f"escalation from {failed.name}")
                 return
         fs = planner.runtimes.get(self.parts.config.failsafe or "")
-        if fs is not None and fs.name != failed.name and not fs.in_flight:
+        if fs is not None and fs.name not in self._cascade and not fs.in_flight:
             kb.record_decision(now, "escalated", failed.name, to=fs.name)
             self.executor.start(fs, now, reason=f"escalation from {failed.name} (fail-safe)")
             return
