@@ -66,10 +66,12 @@ class UtuConfig(_Strict):
     escalate_to_run_stop: bool = True
     run_stop: RunStopConfig = Field(default_factory=RunStopConfig)
     queue: Annotated[int, Field(ge=1, le=1_000_000)] = 1024
-    #: Messages a step takes from each monitored topic at most; under a flood the rest waits
-    #: in the topic's queue (``queue``; beyond it the oldest are dropped and counted), so a
-    #: step stays short and time-driven checks keep their rate.
-    intake: Annotated[int, Field(ge=1, le=1_000_000)] = 64
+    #: Messages a step takes from each monitored topic at most (at most ``queue``); under a
+    #: flood the rest waits in the topic's queue (beyond it the oldest are dropped and
+    #: counted). Lower keeps steps shorter under a flood, but a backlog taken by a later
+    #: step is stamped no earlier than that step's predecessor, so rates read from it
+    #: compress (docs/utu.md).
+    intake: Annotated[int, Field(ge=1, le=1_000_000)] = 1024
     #: Seconds ahead of Utu's time beyond which a ``/clock`` or a monitor batch is refused.
     max_time_jump: Annotated[float, Field(gt=0)] | None = 60.0
     notify: dict[str, Any] = Field(default_factory=dict)
