@@ -34,16 +34,23 @@ from anunnaki.errors import AnunnakiError, ModelFileError
 from anunnaki.launch._managed import ManagedContext
 from anunnaki.utu import Decision, UtuConfig
 
-__all__ = ["Ros1Config", "Ros1Kind", "check_camera_nodes", "start_camera_nodes"]
+__all__ = [
+    "RobotKind",
+    "Ros1Config",
+    "Ros1Kind",
+    "check_camera_nodes",
+    "start_camera_nodes",
+]
 
 log = logging.getLogger("anunnaki.launch")
 
 
 class _CameraNodes(BaseModel):
-    """The nodes a robot kind runs on the bridged camera (shared by ``ros1`` and ``ros2``)."""
+    """A bridge file and the nodes a robot kind runs on the bridged camera (ros1, ros2)."""
 
     model_config = ConfigDict(extra="forbid", frozen=True)
 
+    bridge: str
     models: str | None = None
     camera: str = "/rover/camera/image"
     oracle: dict[str, Any] | None = None
@@ -88,6 +95,42 @@ def start_camera_nodes(bus: Any, options: _CameraNodes) -> list[Any]:
     return nodes
 
 
+class RobotKind:
+    """What the ``ros1`` and ``ros2`` kinds share: paths, bring-up checks, real time."""
+
+    speed = 1.0
+    relay_clock = False  # a robot lives in real time
+
+    def __init__(self, options: BaseModel, *, base: Path) -> None:
+        assert isinstance(options, _CameraNodes)
+
+        def here(p: str) -> str:
+            return str(p if Path(p).is_absolute() else base / p)
+
+        self.options = options.model_copy(
+            update={
+                "bridge": here(options.bridge),
+                "models": None if options.models is None else here(options.models),
+            }
+        )
+
+    def check(self, utu: UtuConfig) -> None:
+        """Load the bridge file, the registry and the oracle's name now (B5)."""
+        from anunnaki.ros1 import load_bridge
+
+        load_bridge(self.options.bridge)
+        check_camera_nodes(self.options)
+
+    def notes(self, utu: UtuConfig, speed: float) -> list[str]:
+        """A robot runs in real time: a simulation clock or a speed does not apply."""
+        out = []
+        if utu.clock == "sim":
+            out.append("note: clock: sim with a ROS robot: nothing publishes /clock; use wall")
+        if speed != 1:
+            out.append(f"note: speed {speed:g}× does not apply to a ROS robot (real time)")
+        return out
+
+
 class Ros1Config(_CameraNodes):
     """A ROS 1 robot through the bridge (``managed: {kind: ros1, …}``).
 
@@ -102,7 +145,6 @@ class Ros1Config(_CameraNodes):
 
     """
 
-    bridge: str
     master_uri: str | None = None
     ros_ip: str | None = None
     ready_timeout: Annotated[float, Field(gt=0, le=600)] = 60.0
@@ -157,42 +199,12 @@ def _loopback(endpoint: str) -> str:
     return endpoint.replace("/0.0.0.0:", "/127.0.0.1:").replace("/[::]:", "/[::1]:")
 
 
-class Ros1Kind:
+class Ros1Kind(RobotKind):
     """``kind: ros1``: a ROS 1 robot, bridged; its camera feeds the LEC and oracle nodes."""
 
     name: ClassVar[str] = "ros1"
     Options: ClassVar[type[BaseModel]] = Ros1Config
-    speed = 1.0
-    relay_clock = False  # a robot lives in real time
-
-    def __init__(self, options: BaseModel, *, base: Path) -> None:
-        assert isinstance(options, Ros1Config)
-
-        def here(p: str) -> str:
-            return str(p if Path(p).is_absolute() else base / p)
-
-        self.options = options.model_copy(
-            update={
-                "bridge": here(options.bridge),
-                "models": None if options.models is None else here(options.models),
-            }
-        )
-
-    def check(self, utu: UtuConfig) -> None:
-        """Load the bridge file, the registry and the oracle's name now (B5)."""
-        from anunnaki.ros1 import load_bridge
-
-        load_bridge(self.options.bridge)
-        check_camera_nodes(self.options)
-
-    def notes(self, utu: UtuConfig, speed: float) -> list[str]:
-        """A robot runs in real time: a simulation clock or a speed does not apply."""
-        out = []
-        if utu.clock == "sim":
-            out.append("note: clock: sim with a ROS robot: nothing publishes /clock; use wall")
-        if speed != 1:
-            out.append(f"note: speed {speed:g}× does not apply to a ROS robot (real time)")
-        return out
+    options: Ros1Config
 
     def start(self, ctx: ManagedContext) -> _BridgeRun:
         """Start the bridge process on the launch's zenoh bus, then the LEC and oracle nodes."""

@@ -20,15 +20,14 @@ import json
 import threading
 import time
 from collections.abc import Sequence
-from pathlib import Path
 from typing import Annotated, Any, ClassVar, Literal
 
 from pydantic import BaseModel, Field
 
 from anunnaki.errors import ModelFileError
 from anunnaki.launch._managed import ManagedContext
-from anunnaki.launch._ros1 import _CameraNodes, check_camera_nodes, start_camera_nodes
-from anunnaki.utu import Decision, UtuConfig
+from anunnaki.launch._ros1 import RobotKind, _CameraNodes, start_camera_nodes
+from anunnaki.utu import Decision
 
 __all__ = ["Ros2Config", "Ros2Kind"]
 
@@ -47,7 +46,6 @@ class Ros2Config(_CameraNodes):
 
     """
 
-    bridge: str
     flavour: Literal["ros2dds", "rmw_zenoh"] = "ros2dds"
     domain: Annotated[int, Field(ge=0, le=232)] = 0
     namespace: str = ""
@@ -84,37 +82,12 @@ class _Ros2Run:
         self.session.close()
 
 
-class Ros2Kind:
+class Ros2Kind(RobotKind):
     """``kind: ros2``: a ROS 2 robot over zenoh; its camera feeds the LEC and oracle nodes."""
 
     name: ClassVar[str] = "ros2"
     Options: ClassVar[type[BaseModel]] = Ros2Config
-    speed = 1.0
-    relay_clock = False
-
-    def __init__(self, options: BaseModel, *, base: Path) -> None:
-        assert isinstance(options, Ros2Config)
-
-        def here(p: str) -> str:
-            return str(p if Path(p).is_absolute() else base / p)
-
-        self.options = options.model_copy(
-            update={
-                "bridge": here(options.bridge),
-                "models": None if options.models is None else here(options.models),
-            }
-        )
-
-    def check(self, utu: UtuConfig) -> None:
-        """Load the bridge file, the registry and the oracle's name now (B5)."""
-        from anunnaki.ros1 import load_bridge
-
-        load_bridge(self.options.bridge)
-        check_camera_nodes(self.options)
-
-    def notes(self, utu: UtuConfig, speed: float) -> list[str]:
-        """A robot runs in real time."""
-        return ["note: clock: sim with a ROS 2 robot: use wall"] if utu.clock == "sim" else []
+    options: Ros2Config
 
     def start(self, ctx: ManagedContext) -> _Ros2Run:
         """Open a zenoh session to the robot, start the bridge, then the LEC and oracle nodes."""
