@@ -98,7 +98,7 @@ def test_bad_managed_sections_name_file_line_and_element(tmp_path: Path) -> None
         load_launch(bad)
     text = str(err.value)
     assert f"{bad}:4:" in text and "unknown managed system 'submarine'" in text
-    assert "valid names: ros1, scripted, sim" in text
+    assert "valid names: ros1, ros2, scripted, sim" in text
     bad.write_text(HEAD + "managed:\n  kind: scripted\n  trace: t.jsonl\n  sped: 2\n")
     with pytest.raises(ModelFileError, match=r":6: managed.sped: .*unknown field") as err2:
         load_launch(bad)

@@ -2,10 +2,14 @@
 
 from __future__ import annotations
 
+import os
+import subprocess
+import sys
 import threading
 from pathlib import Path
 
 import pytest
+from ros1_support import free_port, need_ros
 
 from anunnaki.bus import open_bus
 from anunnaki.errors import ModelFileError
@@ -50,3 +54,16 @@ def test_an_in_process_bus_is_refused_with_the_fix() -> None:
         )
         with pytest.raises(ModelFileError, match=r"needs the zenoh bus.*bus: \{kind: zenoh\}"):
             kind(bridge="ros1/bridge.yaml").start(ctx)
+
+
+def test_the_bridge_says_when_no_master_answers() -> None:
+    need_ros()
+    env = {k: v for k, v in os.environ.items() if k != "PYTHONPATH"}
+    env["ROS_MASTER_URI"] = f"http://127.0.0.1:{free_port()}"  # nobody listens there
+    args = [sys.executable, "-m", "anunnaki.ros1", str(ROVER / "ros1" / "bridge.yaml")]
+    done = subprocess.run(
+        [*args, "--wait-master", "0.5"], env=env, capture_output=True, text=True, check=False
+    )
+    assert done.returncode == 2
+    assert "waiting for the ROS master at" in done.stdout
+    assert "no ROS master answers at" in done.stderr and "start roscore" in done.stderr

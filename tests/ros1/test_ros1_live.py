@@ -18,7 +18,7 @@ from pathlib import Path
 from typing import Any
 
 import pytest
-from ros1_support import DEADLINE, ROVER, RosSetup
+from ros1_support import DEADLINE, ROVER, Proc, RosSetup, need_ros
 
 from anunnaki.bus import Bus, Detections, open_bus
 from anunnaki.goals import load_binding, parse_goal_model
@@ -62,9 +62,23 @@ def step_until(
         wake.wait(0.05)  # the pace of a live loop (spin's rate), not a synchronisation
 
 
-def test_ros_values_reach_the_goal_model_and_tactics_act_on_the_robot(ros: RosSetup) -> None:
-    rover = ros.rover("--near-from", "0", "--no-camera")  # something is near from the start
-    _, endpoint = ros.bridge()
+@pytest.fixture(scope="module")
+def shared(tmp_path_factory: pytest.TempPathFactory) -> Iterator[tuple[RosSetup, Proc, str]]:
+    """One master, rover (something near from the start) and bridge for the tests below."""
+    need_ros()
+    setup = RosSetup(tmp_path_factory.mktemp("ros_home"))
+    try:
+        rover = setup.rover("--near-from", "0")
+        _, endpoint = setup.bridge()
+        yield setup, rover, endpoint
+    finally:
+        setup.close()
+
+
+def test_ros_values_reach_the_goal_model_and_tactics_act_on_the_robot(
+    shared: tuple[RosSetup, Proc, str],
+) -> None:
+    _, rover, endpoint = shared
     with joined(endpoint) as bus:
         m = rover_utu(bus)
         ev = m.analyzer.evaluator
@@ -119,9 +133,10 @@ class SeenDetector:
         return [DetectionResult([[1, 2, 11, 12]], [1], [0.9]) for _ in images]
 
 
-def test_an_image_from_ros_reaches_the_lec_node(ros: RosSetup, tmp_path: Path) -> None:
-    ros.rover()
-    _, endpoint = ros.bridge()
+def test_an_image_from_ros_reaches_the_lec_node(
+    shared: tuple[RosSetup, Proc, str], tmp_path: Path
+) -> None:
+    _, _, endpoint = shared
     detector = SeenDetector()
     path = tmp_path / "seen.model"
     path.write_text(json.dumps({"model_id": "seen"}))

@@ -151,3 +151,41 @@ def test_a_bad_sample_is_counted_and_the_next_goes_through(bus: Bus, ros2_side: 
         publish_until(ros2_side, "battery", good, got.done)
         assert got.got[-1] == {"pct": 0.75}
         assert bridge.stats["malformed"] >= 1
+
+
+def test_the_ros2_launch_kind_bridges_a_robots_zenoh(bus: Bus, ros2_side: Any) -> None:
+    from anunnaki.launch import MANAGED, ManagedContext
+    from anunnaki.utu import parse_config
+
+    cls = MANAGED.factory("ros2")
+    options = cls.Options.model_validate(  # type: ignore[attr-defined]
+        {"bridge": "ros1/bridge.yaml", "flavour": "rmw_zenoh", "oracle": {"name": "light"}}
+    )
+    kind = cls(options, base=ROVER)
+    utu = parse_config(f"anunnaki: utu/1\ngoal_model: {ROVER}/goals.yaml\nclock: wall\n")
+    kind.check(utu)
+    said: list[str] = []
+    ctx = ManagedContext(
+        bus=bus,
+        stop=threading.Event(),
+        speed=1.0,
+        until=None,
+        say=said.append,
+        on_instant=None,
+        taken=None,
+        watched=frozenset(),
+    )
+    run = kind.start(ctx)  # no connect: the robot's zenoh joins the launch's session
+    try:
+        assert "ROS 2 robot over zenoh (rmw_zenoh" in said[0]
+        rng = Waiter(bus, "/ultrasonic/range", lambda m: True)
+        key = ros2_key(
+            "/ultrasonic/range", "sensor_msgs/Range", flavour="rmw_zenoh", type_hash="RIHS01_ab"
+        )
+        publish_until(ros2_side, key, encode_cdr("sensor_msgs/Range", {"range": 2.5}), rng.done)
+        assert rng.got[-1] == {"range": 2.5}
+    finally:
+        ctx.stop.set()
+        run.thread.join(timeout=DEADLINE)
+        run.close()
+    assert not run.thread.is_alive()

@@ -146,6 +146,7 @@ MANAGED: Registry[ManagedKind] = Registry(
 MANAGED.register_lazy("scripted", "anunnaki.launch._kinds:ScriptedKind")
 MANAGED.register_lazy("sim", "anunnaki.launch._kinds:SimKind")
 MANAGED.register_lazy("ros1", "anunnaki.launch._ros1:Ros1Kind")
+MANAGED.register_lazy("ros2", "anunnaki.launch._ros2:Ros2Kind")
 
 
 def split_managed(raw: Any) -> tuple[str | None, dict[str, Any], tuple[str, ...]]:

@@ -34,12 +34,104 @@ from anunnaki.errors import AnunnakiError, ModelFileError
 from anunnaki.launch._managed import ManagedContext
 from anunnaki.utu import Decision, UtuConfig
 
-__all__ = ["Ros1Config", "Ros1Kind"]
+__all__ = [
+    "RobotKind",
+    "Ros1Config",
+    "Ros1Kind",
+    "check_camera_nodes",
+    "start_camera_nodes",
+]
 
 log = logging.getLogger("anunnaki.launch")
 
 
-class Ros1Config(BaseModel):
+class _CameraNodes(BaseModel):
+    """A bridge file and the nodes a robot kind runs on the bridged camera (ros1, ros2)."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+    bridge: str
+    models: str | None = None
+    camera: str = "/rover/camera/image"
+    oracle: dict[str, Any] | None = None
+
+
+def check_camera_nodes(options: _CameraNodes) -> None:
+    """Load the registry and check the oracle's name now (B5)."""
+    if options.models is not None:
+        from anunnaki.lec import load_registry
+
+        load_registry(options.models)
+    if options.oracle is not None:
+        from anunnaki.oracles import available_oracles
+
+        name = options.oracle.get("name")
+        if name not in available_oracles():
+            raise ModelFileError(
+                f"unknown oracle {name!r}",
+                element="managed.oracle.name",
+                hint=f"known oracles: {', '.join(available_oracles())}",
+            )
+
+
+def start_camera_nodes(bus: Any, options: _CameraNodes) -> list[Any]:
+    """Start the LEC node and the oracle node on the bridged camera (each if configured)."""
+    nodes: list[Any] = []
+    detections = None
+    if options.models is not None:
+        from anunnaki.lec import LecNode, load_registry
+
+        lec = LecNode(bus, load_registry(options.models), camera=options.camera)
+        nodes.append(lec)
+        detections = lec.detections_topic
+    if options.oracle is not None:
+        from anunnaki.oracles import OracleNode
+
+        settings: dict[str, Any] = dict(options.oracle)
+        name = settings.pop("name")
+        if detections:
+            settings["detections"] = detections
+        nodes.append(OracleNode(bus, name, camera=options.camera, **settings))
+    return nodes
+
+
+class RobotKind:
+    """What the ``ros1`` and ``ros2`` kinds share: paths, bring-up checks, real time."""
+
+    speed = 1.0
+    relay_clock = False  # a robot lives in real time
+
+    def __init__(self, options: BaseModel, *, base: Path) -> None:
+        assert isinstance(options, _CameraNodes)
+
+        def here(p: str) -> str:
+            return str(p if Path(p).is_absolute() else base / p)
+
+        self.options = options.model_copy(
+            update={
+                "bridge": here(options.bridge),
+                "models": None if options.models is None else here(options.models),
+            }
+        )
+
+    def check(self, utu: UtuConfig) -> None:
+        """Load the bridge file, the registry and the oracle's name now (B5)."""
+        from anunnaki.ros1 import load_bridge
+
+        load_bridge(self.options.bridge)
+        check_camera_nodes(self.options)
+
+    def notes(self, utu: UtuConfig, speed: float) -> list[str]:
+        """A robot runs in real time: a simulation clock or a speed does not apply."""
+        out = []
+        if utu.clock == "sim":
+            out.append("note: clock: sim with a ROS robot: nothing publishes /clock; use wall")
+        if speed != 1:
+            out.append(f"note: speed {speed:g}× does not apply to a ROS robot (real time)")
+        return out
+
+
+class Ros1Config(_CameraNodes):
     """A ROS 1 robot through the bridge (``managed: {kind: ros1, …}``).
 
     Attributes:
@@ -53,14 +145,8 @@ class Ros1Config(BaseModel):
 
     """
 
-    model_config = ConfigDict(extra="forbid", frozen=True)
-
-    bridge: str
     master_uri: str | None = None
     ros_ip: str | None = None
-    models: str | None = None
-    camera: str = "/rover/camera/image"
-    oracle: dict[str, Any] | None = None
     ready_timeout: Annotated[float, Field(gt=0, le=600)] = 60.0
 
 
@@ -113,56 +199,12 @@ def _loopback(endpoint: str) -> str:
     return endpoint.replace("/0.0.0.0:", "/127.0.0.1:").replace("/[::]:", "/[::1]:")
 
 
-class Ros1Kind:
+class Ros1Kind(RobotKind):
     """``kind: ros1``: a ROS 1 robot, bridged; its camera feeds the LEC and oracle nodes."""
 
     name: ClassVar[str] = "ros1"
     Options: ClassVar[type[BaseModel]] = Ros1Config
-    speed = 1.0
-    relay_clock = False  # a robot lives in real time
-
-    def __init__(self, options: BaseModel, *, base: Path) -> None:
-        assert isinstance(options, Ros1Config)
-
-        def here(p: str) -> str:
-            return str(p if Path(p).is_absolute() else base / p)
-
-        self.options = options.model_copy(
-            update={
-                "bridge": here(options.bridge),
-                "models": None if options.models is None else here(options.models),
-            }
-        )
-
-    def check(self, utu: UtuConfig) -> None:
-        """Load the bridge file, the registry and the oracle's name now (B5)."""
-        from anunnaki.ros1 import load_bridge
-
-        o = self.options
-        load_bridge(o.bridge)
-        if o.models is not None:
-            from anunnaki.lec import load_registry
-
-            load_registry(o.models)
-        if o.oracle is not None:
-            from anunnaki.oracles import available_oracles
-
-            name = o.oracle.get("name")
-            if name not in available_oracles():
-                raise ModelFileError(
-                    f"unknown oracle {name!r}",
-                    element="managed.oracle.name",
-                    hint=f"known oracles: {', '.join(available_oracles())}",
-                )
-
-    def notes(self, utu: UtuConfig, speed: float) -> list[str]:
-        """A robot runs in real time: a simulation clock or a speed does not apply."""
-        out = []
-        if utu.clock == "sim":
-            out.append("note: clock: sim with a ROS robot: nothing publishes /clock; use wall")
-        if speed != 1:
-            out.append(f"note: speed {speed:g}× does not apply to a ROS robot (real time)")
-        return out
+    options: Ros1Config
 
     def start(self, ctx: ManagedContext) -> _BridgeRun:
         """Start the bridge process on the launch's zenoh bus, then the LEC and oracle nodes."""
@@ -177,7 +219,7 @@ class Ros1Kind:
         proc = self._start_bridge(endpoints[0], ctx.say)
         nodes: list[Any] = []
         try:
-            nodes = self._start_nodes(ctx)
+            nodes = start_camera_nodes(ctx.bus, o)
         except BaseException:
             _BridgeRun(proc, nodes, ctx.stop).close()
             raise
@@ -231,23 +273,3 @@ class Ros1Kind:
                 "the ROS 1 bridge did not start: " + (" | ".join(lines[-5:]) or "no output")
             )
         return proc
-
-    def _start_nodes(self, ctx: ManagedContext) -> list[Any]:
-        o = self.options
-        nodes: list[Any] = []
-        detections = None
-        if o.models is not None:
-            from anunnaki.lec import LecNode, load_registry
-
-            lec = LecNode(ctx.bus, load_registry(o.models), camera=o.camera)
-            nodes.append(lec)
-            detections = lec.detections_topic
-        if o.oracle is not None:
-            from anunnaki.oracles import OracleNode
-
-            options: dict[str, Any] = dict(o.oracle)
-            name = options.pop("name")
-            if detections:
-                options["detections"] = detections
-            nodes.append(OracleNode(ctx.bus, name, camera=o.camera, **options))
-        return nodes
