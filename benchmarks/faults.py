@@ -1004,8 +1004,6 @@ def main(argv: list[str] | None = None) -> int:
     result["kill_trials"] = (
         [] if "kill" in args.skip else list(_trials(args.quick, args.deadline, args.victims))
     )
-    if "loop" not in args.skip:
-        result["kill_trials"] += list(_loop_trials(args.quick, args.deadline, args.victims))
     seconds = args.flood_seconds or (3.0 if args.quick else 10.0)
     print(f"flood {args.flood_rate:g} msg/s for {seconds:g} s", flush=True)
     result["flood"] = {} if "flood" in args.skip else flood(seconds, args.flood_rate)
@@ -1018,6 +1016,9 @@ def main(argv: list[str] | None = None) -> int:
             key: sum(p[key] for p in per)
             for key in ("sent", "refused", "tracebacks", "loop_deaths", "steered")
         } | {"deployments": per}
+    if "loop" not in args.skip:  # last: it brings torch and pybullet into this process
+        print("kill -9 in the whole loop", flush=True)
+        result["kill_trials"] += list(_loop_trials(args.quick, args.deadline, args.victims))
     result["seconds"] = round(time.monotonic() - started, 1)
     if not args.skip:
         result["aims_met"] = _aims(result)
