@@ -14,7 +14,8 @@ Kill matrix (``kill_trials``)
       system, its bus a zenoh peer on a free loopback port that the platform joins); once
       Utu reports the rover nominal, wait one of three delays (0.2, 0.9, 1.6 s) and
       ``kill -9`` one node process (``monitor``, ``analyze``, ``plan``, ``execute``,
-      ``knowledge``: the pid the launch prints);
+      ``knowledge``: the pid the launch prints; ``launch_ended_ms`` says whether and when
+      the launch then ended by itself);
     * ``one-process``: ``anunnaki run LAUNCH`` (the composed manager), ``kill -9`` of that
       process (victim ``manager``);
     * ``loop``: the whole loop of ``examples/rover/sim.yaml`` taken apart so that each part
@@ -47,7 +48,8 @@ Hostile corpus (``corpus``)
     six malformed payloads on each of Utu's internal topics (not JSON, cut short, an unknown
     type, an unknown version, an invalid body, NaN), sent one by one to a live Utu — the five
     node classes each spinning on a thread (the wiring of ``--processes``, in one process so
-    that their counters can be read), then the composed manager — with the platform nominal.
+    that their counters can be read), then the composed manager — with the platform nominal;
+    then all at once over zenoh to ``anunnaki run --processes`` (refusals not counted there).
     ``refused``: messages after which Utu's own counters moved (the bus's ``malformed``, the
     nodes' ``foreign``) within 0.2 s (the composed manager does not subscribe Utu's internal
     topics: nothing there is delivered, or counted); ``tracebacks``: log records with an exception;
@@ -292,6 +294,7 @@ class Launch:
     argv: list[str]
     lines: list[str] = field(default_factory=list)
     proc: subprocess.Popen[str] | None = None
+    ended_at: float | None = None  # time.perf_counter() when the process ended
 
     def start(self) -> None:
         self.proc = subprocess.Popen(
@@ -305,6 +308,12 @@ class Launch:
             start_new_session=True,
         )
         threading.Thread(target=self._read, daemon=True).start()
+        threading.Thread(target=self._wait, daemon=True).start()
+
+    def _wait(self) -> None:
+        assert self.proc is not None
+        self.proc.wait()
+        self.ended_at = time.perf_counter()
 
     def _read(self) -> None:
         assert self.proc is not None and self.proc.stdout is not None
@@ -413,12 +422,14 @@ def kill_trial(deployment: str, victim: str, delay: float, deadline: float) -> d
                     os.kill(pid, signal.SIGKILL)
                     rover.failsafe.wait(deadline)
                     wait_until(lambda: rover.guard_at is not None, 2.0)
+                    ended = launch.ended_at  # by itself, before this script stops it
                     stop.set()
                 finally:
                     stop.set()
                     rover.close()
             launch.stop()
             trial |= _trial_figures(rover, launch, db, killed, killed_mono)
+            trial["launch_ended_ms"] = None if ended is None else round((ended - killed) * 1e3, 1)
         finally:
             stop.set()
             launch.stop()
@@ -888,6 +899,75 @@ def corpus(deployment: str) -> dict[str, Any]:
     }
 
 
+def corpus_launch() -> dict[str, Any]:
+    """The corpus sent over zenoh to ``anunnaki run --processes`` (five node processes).
+
+    Refusals are not visible from outside (``refused: null``); tracebacks are those the
+    nodes print, loop deaths the node processes that ended or stopped answering readiness,
+    ``steered`` the decisions the knowledge base holds afterwards (a nominal run makes none).
+    """
+    with tempfile.TemporaryDirectory(prefix="faults-corpus-") as tmp_name:
+        tmp = Path(tmp_name)
+        port = free_port()
+        db = tmp / "kb.db"
+        argv = [sys.executable, "-m", "anunnaki.cli.main", "run", str(write_launch(tmp, port))]
+        launch = Launch([*argv, "--knowledge", str(db), "--until", "120", "--processes"])
+        stop = threading.Event()
+        sent = 0
+        launch.start()
+        try:
+            if not wait_until(launch.ready, 90):
+                raise RuntimeError("not ready in 90 s:\n" + launch.tail())
+            endpoint = f"tcp/127.0.0.1:{port}"
+            with (
+                open_bus("zenoh", connect=[endpoint], name="platform") as bus,
+                open_bus("zenoh", connect=[endpoint], name="forger") as forger,
+            ):
+                rover = Platform(bus, nominal_trace(120.0))
+                try:
+                    rover.run_live(stop)
+                    if not wait_until(lambda: rover.ran(WARM) and nominal(_state(bus)), 30, 0.1):
+                        raise RuntimeError("Utu never saw the rover nominal:\n" + launch.tail())
+                    pubs = {topic: forger.publisher(topic) for topic in INTERNAL}
+                    for pub in pubs.values():
+                        pub.wait_for_subscribers(5)
+                    for topic, message, raw in corpus_messages(time.time()):
+                        pub = pubs[topic]
+                        pub.put_raw(message) if raw else pub.put(message)
+                        sent += 1
+                    threading.Event().wait(2.0)  # the platform's next messages go through
+                    deaths = _dead_nodes(launch, bus)
+                finally:
+                    stop.set()
+                    rover.close()
+            launch.stop()
+            with contextlib.closing(open_run(db)) as kb:
+                steered = sum(1 for _ in kb.decisions())
+        finally:
+            stop.set()
+            launch.stop()
+    return {
+        "deployment": "processes (five node processes, zenoh)",
+        "sent": sent,
+        "refused": None,
+        "tracebacks": launch.tracebacks(),
+        "loop_deaths": deaths,
+        "steered": steered,
+        "platform_failsafe": rover.failsafe_what or None,
+    }
+
+
+def _dead_nodes(launch: Launch, bus: Bus) -> int:
+    dead = 0
+    for name, pid in launch.pids().items():
+        try:
+            os.kill(pid, 0)
+            bus.request(topics.ready_service(name), {}, timeout=2.0)
+        except (ProcessLookupError, BusTimeout):
+            dead += 1
+    return dead
+
+
 # -- the report --------------------------------------------------------------------------------
 def summary(result: dict[str, Any]) -> str:
     rows = ["deployment   victim      delay  failsafe_ms  guard_ms  lost  replay"]
@@ -981,9 +1061,10 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument(
         "--corpus",
         nargs="*",
-        default=["processes", "one-process"],
-        choices=("processes", "one-process"),
-        help="the deployments the corpus is sent to",
+        default=["processes", "one-process", "launch"],
+        choices=("processes", "one-process", "launch"),
+        help="where the corpus goes: the node classes or the composed manager in this "
+        "process, or 'anunnaki run --processes' (launch)",
     )
     args = parser.parse_args(argv)
     if args.serve:
@@ -1011,9 +1092,9 @@ def main(argv: list[str] | None = None) -> int:
     if "corpus" in args.skip:
         result["corpus"] = {}
     else:
-        per = [corpus(deployment) for deployment in args.corpus]
+        per = [corpus_launch() if d == "launch" else corpus(d) for d in args.corpus]
         result["corpus"] = {
-            key: sum(p[key] for p in per)
+            key: sum(p[key] or 0 for p in per)
             for key in ("sent", "refused", "tracebacks", "loop_deaths", "steered")
         } | {"deployments": per}
     if "loop" not in args.skip:  # last: it brings torch and pybullet into this process
