@@ -11,7 +11,8 @@ when it would have stopped the platform (``guard_ms``), so that what Utu sends i
 
 Kill matrix (``kill_trials``)
     * ``processes``: ``anunnaki run LAUNCH --processes`` (a launch file without a managed
-      system, its bus a zenoh peer on a free loopback port that the platform joins); once
+      system, its bus a zenoh peer that joins the platform's session: the platform runs
+      first, as a robot would); once
       Utu reports the rover nominal, wait one of three delays (0.2, 0.9, 1.6 s) and
       ``kill -9`` one node process (``monitor``, ``analyze``, ``plan``, ``execute``,
       ``knowledge``: the pid the launch prints; ``launch_ended_ms`` says whether and when
@@ -29,10 +30,11 @@ Kill matrix (``kill_trials``)
 
     Per trial: ``failsafe_ms``, kill to the fail-safe command arriving at the platform
     (``null``: none within ``--deadline`` seconds); ``lost``, inputs plus decisions lost:
-    platform messages on the monitored topics published at least 0.3 s before the kill that
-    the knowledge base does not hold (by ``n``), plus decisions the launch printed that it
-    does not hold; ``replay_identical``, ``anunnaki.utu.replay`` of the knowledge base after
-    the run (``false`` also when the log cannot be replayed, with the reason).
+    platform messages on the monitored topics published from 0.5 s after Utu was ready to
+    0.3 s before the kill that the knowledge base does not hold (by ``n``), plus decisions
+    the launch printed that it does not hold; ``replay_identical``, ``anunnaki.utu.replay``
+    of the knowledge base after the run (``false`` also when it cannot be replayed, with
+    the reason).
 
 Flood (``flood``)
     The composed manager spinning (20 Hz, wall clock) on the in-process bus with the
@@ -123,8 +125,9 @@ AIMS = {
 RATE = 20  # Hz: the platform's messages per topic
 MONITORED = ("/rover/status", "/rover/camera/info", "/rover/ultrasonic", "/utu/oracle/output")
 KILL_DELAYS = (0.2, 0.9, 1.6)  # s after Utu first reports the rover nominal
-WARM = 3.0  # s of platform messages before a kill
+WARM = 2.0  # s of platform messages taken by a running Utu before a kill
 DIM_FROM = 1.5  # s: the oracle reports dim light (category 1) from then on: a hand-over
+LISTENING = 0.5  # s after Utu is ready: from then on every monitored message must be stored
 INPUT_MARGIN = 0.3  # s: inputs published this long before the kill must be in knowledge
 COUNTED = 0.2  # s: how long a corpus message may take to move Utu's counters
 NODE_RATES = {"monitor": 50, "analyze": 20, "plan": 20, "execute": 20, "knowledge": 10}
@@ -228,11 +231,11 @@ class Platform(ScriptedSystem):
         """Whether it has been replaying for ``seconds``."""
         return self.started_at is not None and time.monotonic() - self.started_at >= seconds
 
-    def published_before(self, instant: float) -> set[int]:
-        """Serials of monitored messages due before ``instant`` (``time.monotonic``)."""
+    def published_between(self, first: float, last: float) -> set[int]:
+        """Serials of monitored messages due from ``first`` to ``last`` (``time.monotonic``)."""
         assert self.started_at is not None
-        limit = instant - self.started_at
-        return {r.msg["n"] for r in self.records if r.t <= limit and r.topic in MONITORED}
+        lo, hi = first - self.started_at, last - self.started_at
+        return {r.msg["n"] for r in self.records if lo <= r.t <= hi and r.topic in MONITORED}
 
 
 def _state(bus: Bus) -> dict[str, Any] | None:
@@ -274,12 +277,13 @@ def wait_until(predicate: Callable[[], Any], timeout: float, pause: float = 0.05
 
 
 # -- the kill matrix ---------------------------------------------------------------------------
-def write_launch(tmp: Path, port: int) -> Path:
+def write_launch(tmp: Path, platform: str) -> Path:
+    """A launch file of the rover's Utu (no managed system) joining the platform's session."""
     (tmp / "utu.yaml").write_text(UTU_CONFIG.format(rover=ROVER))
     nodes = "".join(f"  {n}: {{rate: {r}}}\n" for n, r in NODE_RATES.items())
     text = (
         "anunnaki: launch/1\nname: rover\nutu: utu.yaml\n"
-        f"bus: {{kind: zenoh, mode: peer, listen: [tcp/127.0.0.1:{port}]}}\n"
+        f"bus: {{kind: zenoh, mode: peer, connect: [{platform}]}}\n"
         f"nodes:\n{nodes}ready_timeout: 60\nstop_timeout: 5\n"
     )
     path = tmp / "launch.yaml"
@@ -391,53 +395,61 @@ def _replay(db: Path) -> tuple[bool, str]:
     return report.identical, "" if report.identical else report.summary()
 
 
+def _utu_launch(tmp: Path, platform: str, deployment: str) -> tuple[Launch, Path]:
+    db = tmp / "kb.db"
+    argv = [sys.executable, "-m", "anunnaki.cli.main", "run", str(write_launch(tmp, platform))]
+    argv += ["--knowledge", str(db), "--until", "120"]
+    if deployment == "processes":
+        argv.append("--processes")
+    return Launch(argv), db
+
+
 def kill_trial(deployment: str, victim: str, delay: float, deadline: float) -> dict[str, Any]:
-    """One kill -9 of ``victim`` in ``deployment`` (``processes`` or ``one-process``)."""
-    with tempfile.TemporaryDirectory(prefix="faults-") as tmp_name:
-        tmp = Path(tmp_name)
-        port = free_port()
-        db = tmp / "kb.db"
-        argv = [sys.executable, "-m", "anunnaki.cli.main", "run", str(write_launch(tmp, port))]
-        argv += ["--knowledge", str(db), "--until", "120"]
-        if deployment == "processes":
-            argv.append("--processes")
-        launch = Launch(argv)
-        trial: dict[str, Any] = {"deployment": deployment, "victim": victim, "delay_s": delay}
-        stop = threading.Event()
-        launch.start()
+    """One kill -9 of ``victim`` in ``deployment`` (``processes`` or ``one-process``).
+
+    The platform runs first (as a robot would) and Utu joins its zenoh session.
+    """
+    trial: dict[str, Any] = {"deployment": deployment, "victim": victim, "delay_s": delay}
+    stop = threading.Event()
+    with (
+        tempfile.TemporaryDirectory(prefix="faults-") as tmp_name,
+        open_bus("zenoh", name="platform") as bus,
+    ):
+        rover = Platform(bus, nominal_trace(90.0, dim_from=DIM_FROM))
+        launch, db = _utu_launch(Path(tmp_name), bus.endpoints[0], deployment)
         try:
+            rover.run_live(stop)
+            launch.start()
             if not wait_until(launch.ready, 90):
                 raise RuntimeError("not ready in 90 s:\n" + launch.tail())
-            with open_bus("zenoh", connect=[f"tcp/127.0.0.1:{port}"], name="platform") as bus:
-                rover = Platform(bus, nominal_trace(60.0, dim_from=DIM_FROM))
-                try:
-                    rover.run_live(stop)
-                    if not wait_until(lambda: rover.ran(WARM) and handed_over(rover, bus), 30, 0.1):
-                        raise RuntimeError("no hand-over to manual mode:\n" + launch.tail())
-                    rover.arm()
-                    threading.Event().wait(delay)
-                    pid = launch.pids()[victim] if deployment == "processes" else launch.proc.pid  # type: ignore[union-attr]
-                    killed_mono = time.monotonic()
-                    killed = time.perf_counter()
-                    os.kill(pid, signal.SIGKILL)
-                    rover.failsafe.wait(deadline)
-                    wait_until(lambda: rover.guard_at is not None, 2.0)
-                    ended = launch.ended_at  # by itself, before this script stops it
-                    stop.set()
-                finally:
-                    stop.set()
-                    rover.close()
+            listening = time.monotonic() + LISTENING
+            settled = listening + WARM  # Utu has taken WARM s of the platform's messages
+            if not wait_until(
+                lambda: time.monotonic() >= settled and handed_over(rover, bus), 30, 0.1
+            ):
+                raise RuntimeError("no hand-over to manual mode:\n" + launch.tail())
+            rover.arm()
+            threading.Event().wait(delay)
+            pid = launch.pids()[victim] if deployment == "processes" else launch.proc.pid  # type: ignore[union-attr]
+            killed_mono = time.monotonic()
+            killed = time.perf_counter()
+            os.kill(pid, signal.SIGKILL)
+            rover.failsafe.wait(deadline)
+            wait_until(lambda: rover.guard_at is not None, 2.0)
+            ended = launch.ended_at  # by itself, before this script stops it
+            stop.set()
             launch.stop()
-            trial |= _trial_figures(rover, launch, db, killed, killed_mono)
+            trial |= _trial_figures(rover, launch, db, killed, (listening, killed_mono))
             trial["launch_ended_ms"] = None if ended is None else round((ended - killed) * 1e3, 1)
         finally:
             stop.set()
             launch.stop()
+            rover.close()
     return trial
 
 
 def _trial_figures(
-    rover: Platform, launch: Launch, db: Path, killed: float, killed_mono: float
+    rover: Platform, launch: Launch, db: Path, killed: float, window: tuple[float, float]
 ) -> dict[str, Any]:
     def ms(at: float | None) -> float | None:
         return None if at is None else round((at - killed) * 1000, 1)
@@ -450,7 +462,7 @@ def _trial_figures(
     }
     if not db.exists():
         return out | {"lost": None, "replay_identical": False, "note": "no knowledge file"}
-    published = rover.published_before(killed_mono - INPUT_MARGIN)
+    published = rover.published_between(window[0], window[1] - INPUT_MARGIN)
     lost_inputs = len(published - _stored_serials(db))
     with contextlib.closing(open_run(db)) as kb:
         first = next(iter(kb.decisions()), None)
@@ -906,46 +918,39 @@ def corpus_launch() -> dict[str, Any]:
     nodes print, loop deaths the node processes that ended or stopped answering readiness,
     ``steered`` the decisions the knowledge base holds afterwards (a nominal run makes none).
     """
-    with tempfile.TemporaryDirectory(prefix="faults-corpus-") as tmp_name:
-        tmp = Path(tmp_name)
-        port = free_port()
-        db = tmp / "kb.db"
-        argv = [sys.executable, "-m", "anunnaki.cli.main", "run", str(write_launch(tmp, port))]
-        launch = Launch([*argv, "--knowledge", str(db), "--until", "120", "--processes"])
-        stop = threading.Event()
-        sent = 0
-        launch.start()
+    stop = threading.Event()
+    sent = 0
+    with (
+        tempfile.TemporaryDirectory(prefix="faults-corpus-") as tmp_name,
+        open_bus("zenoh", name="platform") as bus,
+        open_bus("zenoh", connect=list(bus.endpoints), name="forger") as forger,
+    ):
+        rover = Platform(bus, nominal_trace(120.0))
+        launch, db = _utu_launch(Path(tmp_name), bus.endpoints[0], "processes")
         try:
+            rover.run_live(stop)
+            launch.start()
             if not wait_until(launch.ready, 90):
                 raise RuntimeError("not ready in 90 s:\n" + launch.tail())
-            endpoint = f"tcp/127.0.0.1:{port}"
-            with (
-                open_bus("zenoh", connect=[endpoint], name="platform") as bus,
-                open_bus("zenoh", connect=[endpoint], name="forger") as forger,
-            ):
-                rover = Platform(bus, nominal_trace(120.0))
-                try:
-                    rover.run_live(stop)
-                    if not wait_until(lambda: rover.ran(WARM) and nominal(_state(bus)), 30, 0.1):
-                        raise RuntimeError("Utu never saw the rover nominal:\n" + launch.tail())
-                    pubs = {topic: forger.publisher(topic) for topic in INTERNAL}
-                    for pub in pubs.values():
-                        pub.wait_for_subscribers(5)
-                    for topic, message, raw in corpus_messages(time.time()):
-                        pub = pubs[topic]
-                        pub.put_raw(message) if raw else pub.put(message)
-                        sent += 1
-                    threading.Event().wait(2.0)  # the platform's next messages go through
-                    deaths = _dead_nodes(launch, bus)
-                finally:
-                    stop.set()
-                    rover.close()
+            if not wait_until(lambda: rover.ran(WARM) and nominal(_state(bus)), 30, 0.1):
+                raise RuntimeError("Utu never saw the rover nominal:\n" + launch.tail())
+            decided = sum(1 for _ in read_decisions(db))
+            pubs = {topic: forger.publisher(topic) for topic in INTERNAL}
+            for pub in pubs.values():
+                pub.wait_for_subscribers(5)
+            for topic, message, raw in corpus_messages(time.time()):
+                pub = pubs[topic]
+                pub.put_raw(message) if raw else pub.put(message)
+                sent += 1
+            threading.Event().wait(2.0)  # the platform's next messages go through
+            deaths = _dead_nodes(launch, bus)
+            stop.set()
             launch.stop()
-            with contextlib.closing(open_run(db)) as kb:
-                steered = sum(1 for _ in kb.decisions())
+            steered = sum(1 for _ in read_decisions(db)) - decided
         finally:
             stop.set()
             launch.stop()
+            rover.close()
     return {
         "deployment": "processes (five node processes, zenoh)",
         "sent": sent,
@@ -955,6 +960,23 @@ def corpus_launch() -> dict[str, Any]:
         "steered": steered,
         "platform_failsafe": rover.failsafe_what or None,
     }
+
+
+def read_decisions(db: Path) -> list[Any]:
+    """The decisions of a knowledge file (none while it does not exist)."""
+    if not db.exists():
+        return []
+    with contextlib.closing(open_run(db)) as kb:
+        return list(kb.decisions())
+
+
+def _corpus(where: str) -> dict[str, Any]:
+    try:
+        return corpus_launch() if where == "launch" else corpus(where)
+    except Exception as exc:
+        return {"deployment": where, "sent": 0, "refused": None, "tracebacks": None,
+                "loop_deaths": None, "steered": None,
+                "error": f"{type(exc).__name__}: {exc}"[-2500:]}  # fmt: skip
 
 
 def _dead_nodes(launch: Launch, bus: Bus) -> int:
@@ -1092,7 +1114,7 @@ def main(argv: list[str] | None = None) -> int:
     if "corpus" in args.skip:
         result["corpus"] = {}
     else:
-        per = [corpus_launch() if d == "launch" else corpus(d) for d in args.corpus]
+        per = [_corpus(d) for d in args.corpus]
         result["corpus"] = {
             key: sum(p[key] or 0 for p in per)
             for key in ("sent", "refused", "tracebacks", "loop_deaths", "steered")
