@@ -392,7 +392,11 @@ def _replay(db: Path) -> tuple[bool, str]:
         report = replay(db)
     except RunLogError as exc:
         return False, f"cannot replay: {exc}"
-    return report.identical, "" if report.identical else report.summary()
+    if report.identical:
+        return True, ""
+    first = report.divergence or report.verdict_divergence
+    detail = first.render(limit=3) if first is not None else ""
+    return False, f"{report.summary()}: {detail}"
 
 
 def _utu_launch(tmp: Path, platform: str, deployment: str) -> tuple[Launch, Path]:
@@ -478,7 +482,7 @@ def _trial_figures(
         "replay_identical": identical,
     }
     if why:
-        out["replay_note"] = why[:300]
+        out["replay_note"] = why[:900]
     return out
 
 
@@ -670,7 +674,7 @@ def _loop_figures(commands: _Commands, killed: float, launch: Launch, db: Path) 
         "replay_identical": identical,
     }
     if why:
-        out["replay_note"] = why[:300]
+        out["replay_note"] = why[:900]
     return out
 
 
@@ -932,9 +936,20 @@ def corpus_launch() -> dict[str, Any]:
             launch.start()
             if not wait_until(launch.ready, 90):
                 raise RuntimeError("not ready in 90 s:\n" + launch.tail())
-            if not wait_until(lambda: rover.ran(WARM) and nominal(_state(bus)), 30, 0.1):
-                raise RuntimeError("Utu never saw the rover nominal:\n" + launch.tail())
-            decided = sum(1 for _ in read_decisions(db))
+            # Settled: Utu has run WARM s on the platform's messages and decided nothing
+            # for a second (its start may hand the rover over before the oracle speaks).
+            settled = time.monotonic() + LISTENING + WARM
+            history: list[tuple[float, int]] = []
+
+            def quiet() -> bool:
+                now, count = time.monotonic(), len(read_decisions(db))
+                history.append((now, count))
+                calm = [c for t, c in history if t >= now - 1.0]
+                return now >= settled and history[0][0] <= now - 1.0 and len(set(calm)) == 1
+
+            if not wait_until(quiet, 30, 0.1):
+                raise RuntimeError("Utu never settled:\n" + launch.tail())
+            decided = len(read_decisions(db))
             pubs = {topic: forger.publisher(topic) for topic in INTERNAL}
             for pub in pubs.values():
                 pub.wait_for_subscribers(5)
@@ -946,7 +961,7 @@ def corpus_launch() -> dict[str, Any]:
             deaths = _dead_nodes(launch, bus)
             stop.set()
             launch.stop()
-            steered = sum(1 for _ in read_decisions(db)) - decided
+            steered = len(read_decisions(db)) - decided
         finally:
             stop.set()
             launch.stop()
