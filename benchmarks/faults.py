@@ -11,10 +11,12 @@ when it would have stopped the platform (``guard_ms``), so that what Utu sends i
 
 Kill matrix (``kill_trials``)
     * ``processes``: ``anunnaki run LAUNCH --processes`` (a launch file without a managed
-      system, its bus a zenoh peer on a free loopback port that the platform joins); once
+      system, its bus a zenoh peer that joins the platform's session: the platform runs
+      first, as a robot would); once
       Utu reports the rover nominal, wait one of three delays (0.2, 0.9, 1.6 s) and
       ``kill -9`` one node process (``monitor``, ``analyze``, ``plan``, ``execute``,
-      ``knowledge``: the pid the launch prints);
+      ``knowledge``: the pid the launch prints; ``launch_ended_ms`` says whether and when
+      the launch then ended by itself);
     * ``one-process``: ``anunnaki run LAUNCH`` (the composed manager), ``kill -9`` of that
       process (victim ``manager``);
     * ``loop``: the whole loop of ``examples/rover/sim.yaml`` taken apart so that each part
@@ -28,10 +30,11 @@ Kill matrix (``kill_trials``)
 
     Per trial: ``failsafe_ms``, kill to the fail-safe command arriving at the platform
     (``null``: none within ``--deadline`` seconds); ``lost``, inputs plus decisions lost:
-    platform messages on the monitored topics published at least 0.3 s before the kill that
-    the knowledge base does not hold (by ``n``), plus decisions the launch printed that it
-    does not hold; ``replay_identical``, ``anunnaki.utu.replay`` of the knowledge base after
-    the run (``false`` also when the log cannot be replayed, with the reason).
+    platform messages on the monitored topics published from 0.5 s after Utu was ready to
+    0.3 s before the kill that the knowledge base does not hold (by ``n``), plus decisions
+    the launch printed that it does not hold; ``replay_identical``, ``anunnaki.utu.replay``
+    of the knowledge base after the run (``false`` also when it cannot be replayed, with
+    the reason).
 
 Flood (``flood``)
     The composed manager spinning (20 Hz, wall clock) on the in-process bus with the
@@ -47,7 +50,8 @@ Hostile corpus (``corpus``)
     six malformed payloads on each of Utu's internal topics (not JSON, cut short, an unknown
     type, an unknown version, an invalid body, NaN), sent one by one to a live Utu — the five
     node classes each spinning on a thread (the wiring of ``--processes``, in one process so
-    that their counters can be read), then the composed manager — with the platform nominal.
+    that their counters can be read), then the composed manager — with the platform nominal;
+    then all at once over zenoh to ``anunnaki run --processes`` (refusals not counted there).
     ``refused``: messages after which Utu's own counters moved (the bus's ``malformed``, the
     nodes' ``foreign``) within 0.2 s (the composed manager does not subscribe Utu's internal
     topics: nothing there is delivered, or counted); ``tracebacks``: log records with an exception;
@@ -121,8 +125,9 @@ AIMS = {
 RATE = 20  # Hz: the platform's messages per topic
 MONITORED = ("/rover/status", "/rover/camera/info", "/rover/ultrasonic", "/utu/oracle/output")
 KILL_DELAYS = (0.2, 0.9, 1.6)  # s after Utu first reports the rover nominal
-WARM = 3.0  # s of platform messages before a kill
+WARM = 2.0  # s of platform messages taken by a running Utu before a kill
 DIM_FROM = 1.5  # s: the oracle reports dim light (category 1) from then on: a hand-over
+LISTENING = 0.5  # s after Utu is ready: from then on every monitored message must be stored
 INPUT_MARGIN = 0.3  # s: inputs published this long before the kill must be in knowledge
 COUNTED = 0.2  # s: how long a corpus message may take to move Utu's counters
 NODE_RATES = {"monitor": 50, "analyze": 20, "plan": 20, "execute": 20, "knowledge": 10}
@@ -226,11 +231,11 @@ class Platform(ScriptedSystem):
         """Whether it has been replaying for ``seconds``."""
         return self.started_at is not None and time.monotonic() - self.started_at >= seconds
 
-    def published_before(self, instant: float) -> set[int]:
-        """Serials of monitored messages due before ``instant`` (``time.monotonic``)."""
+    def published_between(self, first: float, last: float) -> set[int]:
+        """Serials of monitored messages due from ``first`` to ``last`` (``time.monotonic``)."""
         assert self.started_at is not None
-        limit = instant - self.started_at
-        return {r.msg["n"] for r in self.records if r.t <= limit and r.topic in MONITORED}
+        lo, hi = first - self.started_at, last - self.started_at
+        return {r.msg["n"] for r in self.records if lo <= r.t <= hi and r.topic in MONITORED}
 
 
 def _state(bus: Bus) -> dict[str, Any] | None:
@@ -272,12 +277,13 @@ def wait_until(predicate: Callable[[], Any], timeout: float, pause: float = 0.05
 
 
 # -- the kill matrix ---------------------------------------------------------------------------
-def write_launch(tmp: Path, port: int) -> Path:
+def write_launch(tmp: Path, platform: str) -> Path:
+    """A launch file of the rover's Utu (no managed system) joining the platform's session."""
     (tmp / "utu.yaml").write_text(UTU_CONFIG.format(rover=ROVER))
     nodes = "".join(f"  {n}: {{rate: {r}}}\n" for n, r in NODE_RATES.items())
     text = (
         "anunnaki: launch/1\nname: rover\nutu: utu.yaml\n"
-        f"bus: {{kind: zenoh, mode: peer, listen: [tcp/127.0.0.1:{port}]}}\n"
+        f"bus: {{kind: zenoh, mode: peer, connect: [{platform}]}}\n"
         f"nodes:\n{nodes}ready_timeout: 60\nstop_timeout: 5\n"
     )
     path = tmp / "launch.yaml"
@@ -292,6 +298,7 @@ class Launch:
     argv: list[str]
     lines: list[str] = field(default_factory=list)
     proc: subprocess.Popen[str] | None = None
+    ended_at: float | None = None  # time.perf_counter() when the process ended
 
     def start(self) -> None:
         self.proc = subprocess.Popen(
@@ -305,6 +312,12 @@ class Launch:
             start_new_session=True,
         )
         threading.Thread(target=self._read, daemon=True).start()
+        threading.Thread(target=self._wait, daemon=True).start()
+
+    def _wait(self) -> None:
+        assert self.proc is not None
+        self.proc.wait()
+        self.ended_at = time.perf_counter()
 
     def _read(self) -> None:
         assert self.proc is not None and self.proc.stdout is not None
@@ -379,54 +392,68 @@ def _replay(db: Path) -> tuple[bool, str]:
         report = replay(db)
     except RunLogError as exc:
         return False, f"cannot replay: {exc}"
-    return report.identical, "" if report.identical else report.summary()
+    if report.identical:
+        return True, ""
+    first = report.divergence or report.verdict_divergence
+    detail = first.render(limit=3) if first is not None else ""
+    return False, f"{report.summary()}: {detail}"
+
+
+def _utu_launch(tmp: Path, platform: str, deployment: str) -> tuple[Launch, Path]:
+    db = tmp / "kb.db"
+    argv = [sys.executable, "-m", "anunnaki.cli.main", "run", str(write_launch(tmp, platform))]
+    argv += ["--knowledge", str(db), "--until", "120"]
+    if deployment == "processes":
+        argv.append("--processes")
+    return Launch(argv), db
 
 
 def kill_trial(deployment: str, victim: str, delay: float, deadline: float) -> dict[str, Any]:
-    """One kill -9 of ``victim`` in ``deployment`` (``processes`` or ``one-process``)."""
-    with tempfile.TemporaryDirectory(prefix="faults-") as tmp_name:
-        tmp = Path(tmp_name)
-        port = free_port()
-        db = tmp / "kb.db"
-        argv = [sys.executable, "-m", "anunnaki.cli.main", "run", str(write_launch(tmp, port))]
-        argv += ["--knowledge", str(db), "--until", "120"]
-        if deployment == "processes":
-            argv.append("--processes")
-        launch = Launch(argv)
-        trial: dict[str, Any] = {"deployment": deployment, "victim": victim, "delay_s": delay}
-        stop = threading.Event()
-        launch.start()
+    """One kill -9 of ``victim`` in ``deployment`` (``processes`` or ``one-process``).
+
+    The platform runs first (as a robot would) and Utu joins its zenoh session.
+    """
+    trial: dict[str, Any] = {"deployment": deployment, "victim": victim, "delay_s": delay}
+    stop = threading.Event()
+    with (
+        tempfile.TemporaryDirectory(prefix="faults-") as tmp_name,
+        open_bus("zenoh", name="platform") as bus,
+    ):
+        rover = Platform(bus, nominal_trace(90.0, dim_from=DIM_FROM))
+        launch, db = _utu_launch(Path(tmp_name), bus.endpoints[0], deployment)
         try:
+            rover.run_live(stop)
+            launch.start()
             if not wait_until(launch.ready, 90):
                 raise RuntimeError("not ready in 90 s:\n" + launch.tail())
-            with open_bus("zenoh", connect=[f"tcp/127.0.0.1:{port}"], name="platform") as bus:
-                rover = Platform(bus, nominal_trace(60.0, dim_from=DIM_FROM))
-                try:
-                    rover.run_live(stop)
-                    if not wait_until(lambda: rover.ran(WARM) and handed_over(rover, bus), 30, 0.1):
-                        raise RuntimeError("no hand-over to manual mode:\n" + launch.tail())
-                    rover.arm()
-                    threading.Event().wait(delay)
-                    pid = launch.pids()[victim] if deployment == "processes" else launch.proc.pid  # type: ignore[union-attr]
-                    killed_mono = time.monotonic()
-                    killed = time.perf_counter()
-                    os.kill(pid, signal.SIGKILL)
-                    rover.failsafe.wait(deadline)
-                    wait_until(lambda: rover.guard_at is not None, 2.0)
-                    stop.set()
-                finally:
-                    stop.set()
-                    rover.close()
+            listening = time.monotonic() + LISTENING
+            settled = listening + WARM  # Utu has taken WARM s of the platform's messages
+            if not wait_until(
+                lambda: time.monotonic() >= settled and handed_over(rover, bus), 30, 0.1
+            ):
+                raise RuntimeError("no hand-over to manual mode:\n" + launch.tail())
+            rover.arm()
+            threading.Event().wait(delay)
+            pid = launch.pids()[victim] if deployment == "processes" else launch.proc.pid  # type: ignore[union-attr]
+            killed_mono = time.monotonic()
+            killed = time.perf_counter()
+            os.kill(pid, signal.SIGKILL)
+            rover.failsafe.wait(deadline)
+            wait_until(lambda: rover.guard_at is not None, 2.0)
+            ended = launch.ended_at  # by itself, before this script stops it
+            stop.set()
             launch.stop()
-            trial |= _trial_figures(rover, launch, db, killed, killed_mono)
+            trial |= _trial_figures(rover, launch, db, killed, (listening, killed_mono))
+            trial["launch_ended_ms"] = None if ended is None else round((ended - killed) * 1e3, 1)
         finally:
             stop.set()
             launch.stop()
+            rover.close()
     return trial
 
 
 def _trial_figures(
-    rover: Platform, launch: Launch, db: Path, killed: float, killed_mono: float
+    rover: Platform, launch: Launch, db: Path, killed: float, window: tuple[float, float]
 ) -> dict[str, Any]:
     def ms(at: float | None) -> float | None:
         return None if at is None else round((at - killed) * 1000, 1)
@@ -439,7 +466,7 @@ def _trial_figures(
     }
     if not db.exists():
         return out | {"lost": None, "replay_identical": False, "note": "no knowledge file"}
-    published = rover.published_before(killed_mono - INPUT_MARGIN)
+    published = rover.published_between(window[0], window[1] - INPUT_MARGIN)
     lost_inputs = len(published - _stored_serials(db))
     with contextlib.closing(open_run(db)) as kb:
         first = next(iter(kb.decisions()), None)
@@ -455,7 +482,7 @@ def _trial_figures(
         "replay_identical": identical,
     }
     if why:
-        out["replay_note"] = why[:300]
+        out["replay_note"] = why[:900]
     return out
 
 
@@ -647,7 +674,7 @@ def _loop_figures(commands: _Commands, killed: float, launch: Launch, db: Path) 
         "replay_identical": identical,
     }
     if why:
-        out["replay_note"] = why[:300]
+        out["replay_note"] = why[:900]
     return out
 
 
@@ -888,6 +915,96 @@ def corpus(deployment: str) -> dict[str, Any]:
     }
 
 
+def corpus_launch() -> dict[str, Any]:
+    """The corpus sent over zenoh to ``anunnaki run --processes`` (five node processes).
+
+    Refusals are not visible from outside (``refused: null``); tracebacks are those the
+    nodes print, loop deaths the node processes that ended or stopped answering readiness,
+    ``steered`` the decisions the knowledge base holds afterwards (a nominal run makes none).
+    """
+    stop = threading.Event()
+    sent = 0
+    with (
+        tempfile.TemporaryDirectory(prefix="faults-corpus-") as tmp_name,
+        open_bus("zenoh", name="platform") as bus,
+        open_bus("zenoh", connect=list(bus.endpoints), name="forger") as forger,
+    ):
+        rover = Platform(bus, nominal_trace(120.0))
+        launch, db = _utu_launch(Path(tmp_name), bus.endpoints[0], "processes")
+        try:
+            rover.run_live(stop)
+            launch.start()
+            if not wait_until(launch.ready, 90):
+                raise RuntimeError("not ready in 90 s:\n" + launch.tail())
+            # Settled: Utu has run WARM s on the platform's messages and decided nothing
+            # for a second (its start may hand the rover over before the oracle speaks).
+            settled = time.monotonic() + LISTENING + WARM
+            history: list[tuple[float, int]] = []
+
+            def quiet() -> bool:
+                now, count = time.monotonic(), len(read_decisions(db))
+                history.append((now, count))
+                calm = [c for t, c in history if t >= now - 1.0]
+                return now >= settled and history[0][0] <= now - 1.0 and len(set(calm)) == 1
+
+            if not wait_until(quiet, 30, 0.1):
+                raise RuntimeError("Utu never settled:\n" + launch.tail())
+            decided = len(read_decisions(db))
+            pubs = {topic: forger.publisher(topic) for topic in INTERNAL}
+            for pub in pubs.values():
+                pub.wait_for_subscribers(5)
+            for topic, message, raw in corpus_messages(time.time()):
+                pub = pubs[topic]
+                pub.put_raw(message) if raw else pub.put(message)
+                sent += 1
+            threading.Event().wait(2.0)  # the platform's next messages go through
+            deaths = _dead_nodes(launch, bus)
+            stop.set()
+            launch.stop()
+            steered = len(read_decisions(db)) - decided
+        finally:
+            stop.set()
+            launch.stop()
+            rover.close()
+    return {
+        "deployment": "processes (five node processes, zenoh)",
+        "sent": sent,
+        "refused": None,
+        "tracebacks": launch.tracebacks(),
+        "loop_deaths": deaths,
+        "steered": steered,
+        "platform_failsafe": rover.failsafe_what or None,
+    }
+
+
+def read_decisions(db: Path) -> list[Any]:
+    """The decisions of a knowledge file (none while it does not exist)."""
+    if not db.exists():
+        return []
+    with contextlib.closing(open_run(db)) as kb:
+        return list(kb.decisions())
+
+
+def _corpus(where: str) -> dict[str, Any]:
+    try:
+        return corpus_launch() if where == "launch" else corpus(where)
+    except Exception as exc:
+        return {"deployment": where, "sent": 0, "refused": None, "tracebacks": None,
+                "loop_deaths": None, "steered": None,
+                "error": f"{type(exc).__name__}: {exc}"[-2500:]}  # fmt: skip
+
+
+def _dead_nodes(launch: Launch, bus: Bus) -> int:
+    dead = 0
+    for name, pid in launch.pids().items():
+        try:
+            os.kill(pid, 0)
+            bus.request(topics.ready_service(name), {}, timeout=2.0)
+        except (ProcessLookupError, BusTimeout):
+            dead += 1
+    return dead
+
+
 # -- the report --------------------------------------------------------------------------------
 def summary(result: dict[str, Any]) -> str:
     rows = ["deployment   victim      delay  failsafe_ms  guard_ms  lost  replay"]
@@ -981,9 +1098,10 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument(
         "--corpus",
         nargs="*",
-        default=["processes", "one-process"],
-        choices=("processes", "one-process"),
-        help="the deployments the corpus is sent to",
+        default=["processes", "one-process", "launch"],
+        choices=("processes", "one-process", "launch"),
+        help="where the corpus goes: the node classes or the composed manager in this "
+        "process, or 'anunnaki run --processes' (launch)",
     )
     args = parser.parse_args(argv)
     if args.serve:
@@ -1004,8 +1122,6 @@ def main(argv: list[str] | None = None) -> int:
     result["kill_trials"] = (
         [] if "kill" in args.skip else list(_trials(args.quick, args.deadline, args.victims))
     )
-    if "loop" not in args.skip:
-        result["kill_trials"] += list(_loop_trials(args.quick, args.deadline, args.victims))
     seconds = args.flood_seconds or (3.0 if args.quick else 10.0)
     print(f"flood {args.flood_rate:g} msg/s for {seconds:g} s", flush=True)
     result["flood"] = {} if "flood" in args.skip else flood(seconds, args.flood_rate)
@@ -1013,11 +1129,14 @@ def main(argv: list[str] | None = None) -> int:
     if "corpus" in args.skip:
         result["corpus"] = {}
     else:
-        per = [corpus(deployment) for deployment in args.corpus]
+        per = [_corpus(d) for d in args.corpus]
         result["corpus"] = {
-            key: sum(p[key] for p in per)
+            key: sum(p[key] or 0 for p in per)
             for key in ("sent", "refused", "tracebacks", "loop_deaths", "steered")
         } | {"deployments": per}
+    if "loop" not in args.skip:  # last: it brings torch and pybullet into this process
+        print("kill -9 in the whole loop", flush=True)
+        result["kill_trials"] += list(_loop_trials(args.quick, args.deadline, args.victims))
     result["seconds"] = round(time.monotonic() - started, 1)
     if not args.skip:
         result["aims_met"] = _aims(result)
