@@ -358,6 +358,15 @@ class Knowledge:
             ).fetchone()
         return bool(row[0])
 
+    def has_input(self, topic: str) -> bool:
+        """Whether an input on ``topic`` (or a marker such as ``__tick__``) was recorded."""
+        self.flush()
+        with self._lock:
+            row = self._db.execute(
+                "SELECT EXISTS(SELECT 1 FROM inputs WHERE topic = ?)", (topic,)
+            ).fetchone()
+        return bool(row[0])
+
     def first_input_t(self) -> float | None:
         """The instant of the first recorded input (markers included), if any."""
         self.flush()

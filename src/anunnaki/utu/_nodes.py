@@ -474,7 +474,7 @@ class AnalyzeNode(UtuNode):
 
     def bring_up(self) -> None:
         """Subscribe the batches and the execute node's reports; watch who is alive."""
-        restarted = resuming(self.knowledge)
+        restarted = resuming(self.knowledge, self.name)
         self.stage = AnalyzeStage(self.parts, self.knowledge, origin=secrets.token_hex(4))
         if restarted:
             mark_restart(self.knowledge, self.name)
@@ -617,7 +617,7 @@ class PlanNode(UtuNode):
 
     def bring_up(self) -> None:
         """Subscribe the execute node's statuses."""
-        restarted = resuming(self.knowledge)
+        restarted = resuming(self.knowledge, self.name)
         self.stage = PlanStage(self.parts, self.knowledge)
         if restarted:
             mark_restart(self.knowledge, self.name)
@@ -701,7 +701,7 @@ class ExecuteNode(UtuNode):
             self.actions = ThreadRunner(on_done=self.wake)  # requests never hold a cycle
             if not isinstance(self.clock, SimClock):
                 self.actions.settle = self.config.action_settle
-        restarted = resuming(self.knowledge)
+        restarted = resuming(self.knowledge, self.name)
         self.stage = ExecuteStage(
             self.parts,
             self.knowledge,

@@ -573,18 +573,29 @@ def replay(
 class _Feeder:
     """Feeds recorded inputs to a replaying manager, restarting it where the run restarted."""
 
-    def __init__(self, build: Callable[[Knowledge], AutonomicManager]) -> None:
+    def __init__(
+        self, build: Callable[[Knowledge], AutonomicManager], decided_at: set[float]
+    ) -> None:
         self.build = build
+        self.decided_at = decided_at  # the instants at which the run recorded decisions
         self.manager = build(Knowledge(":memory:"))
         self.fed = self.steps = 0
         self.pending: float | None = None  # the time of inputs fed since the last step
 
-    def finish_step(self) -> None:
-        """Step at the time of the inputs fed since the last step, if any."""
-        if self.pending is not None:
-            self.manager.step(self.pending)
-            self.steps += 1
-            self.pending = None
+    def finish_step(self) -> bool:
+        """Step at the time of the inputs fed since the last step, if the run decided then.
+
+        A step the kill cut short after it had recorded decisions (an action's write-ahead
+        flushes them) is finished, so the replay makes them too; inputs of a step that had
+        decided nothing when it was cut short (or an operator call the run ended on) are
+        not stepped: the run never acted on them. Returns whether it stepped.
+        """
+        if self.pending is None or self.pending not in self.decided_at:
+            return False
+        self.manager.step(self.pending)
+        self.steps += 1
+        self.pending = None
+        return True
 
     def feed(self, rows: Sequence[InputRow]) -> None:
         """Feed every row: messages, operator calls, step ends and restarts."""
@@ -594,11 +605,13 @@ class _Feeder:
                 self.manager.step(row.t)
                 self.steps += 1
             elif row.topic == RESTART:  # the run was killed and restarted here: so is the replay
-                self.finish_step()  # the step the kill cut short: what it had recorded
                 part = str(row.msg.get("node", "manager"))
                 if part in ("analyze", "plan", "execute"):
+                    # One node came up (again): the cycle in progress goes on after it.
                     self.manager.restart_part(part)
                 else:  # a whole manager: what it had not written is gone with it
+                    self.finish_step()  # the step the kill cut short: what it had recorded
+                    self.pending = None
                     self.manager = self.build(self.manager.knowledge)
             else:
                 if row.topic == OPERATOR:
@@ -668,16 +681,17 @@ def _replay(
             sources=models.initial,
         )
 
-    feeder = _Feeder(build)
+    feeder = _Feeder(build, {d.t for d in knowledge.decisions()})
     rows = list(knowledge.inputs())  # read (and decoded) first: a bad row is no replay error
     try:
         feeder.feed(rows)
         if feeder.pending is not None:
+            at = feeder.pending
+            finished = feeder.finish_step()
             notes.append(
-                f"the log ends mid-step at t = {feeder.pending:.3f} s (the run was killed?); "
-                "the replay finished that step"
+                f"the log ends mid-step at t = {at:.3f} s (the run was killed?); the replay "
+                + ("finished that step" if finished else "left it: the run decided nothing in it")
             )
-            feeder.finish_step()
         # The replay is over: only now read what the run decided.
         kb = feeder.manager.knowledge
         mine = [_decision_entry(d) for d in kb.decisions() if d.kind not in ASYNC_KINDS]

@@ -96,8 +96,18 @@ def _build(c: Callable[..., Any], **fields: Any) -> Any:
 
 
 # -- restarts ------------------------------------------------------------------------------------
-def resuming(knowledge: Knowledge) -> bool:
-    """Whether ``knowledge`` already holds a run (inputs or decisions) to take up."""
+def resuming(knowledge: Knowledge, node: str = "manager") -> bool:
+    """Whether ``node`` takes up a run that it (or its predecessor) was part of.
+
+    The whole manager: the knowledge holds a run (inputs or decisions). One node of a
+    per-node run, whose peers may have recorded inputs before it came up (the robot runs
+    first): analyze when a step was ever marked (it writes the step ends), plan and execute
+    when anything was decided (nothing is decided without both of them).
+    """
+    if node == "analyze":
+        return knowledge.has_input(TICK)
+    if node in ("plan", "execute"):
+        return knowledge.counts()["decisions"] > 0
     return knowledge.holds_run()
 
 
