@@ -72,6 +72,7 @@ import argparse
 import contextlib
 import datetime
 import gc
+import inspect
 import itertools
 import json
 import logging
@@ -128,6 +129,8 @@ KILL_DELAYS = (0.2, 0.9, 1.6)  # s after Utu first reports the rover nominal
 WARM = 2.0  # s of platform messages taken by a running Utu before a kill
 DIM_FROM = 1.5  # s: the oracle reports dim light (category 1) from then on: a hand-over
 LISTENING = 0.5  # s after Utu is ready: from then on every monitored message must be stored
+#: The platforms' own guard (``stop_without_utu``), as the scripted and simulated systems use it.
+GUARD: float = inspect.signature(ScriptedSystem.__init__).parameters["stop_without_utu"].default
 INPUT_MARGIN = 0.3  # s: inputs published this long before the kill must be in knowledge
 COUNTED = 0.2  # s: how long a corpus message may take to move Utu's counters
 NODE_RATES = {"monitor": 50, "analyze": 20, "plan": 20, "execute": 20, "knowledge": 10}
@@ -182,7 +185,7 @@ class Platform(ScriptedSystem):
         self.commands_seen: list[tuple[str, dict[str, Any]]] = []
         self.started_at: float | None = None
         self._declared.append(bus.subscribe(topics.RUN_STOP, self._run_stop_heard, queue=16))
-        self._declared.append(LivelinessGuard(bus, self._guard, timeout=0.5))
+        self._declared.append(LivelinessGuard(bus, self._guard, timeout=GUARD))
 
     def arm(self) -> None:
         """Forget earlier commands: stamp the next fail-safe command from now on."""
