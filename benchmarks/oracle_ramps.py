@@ -246,6 +246,11 @@ def summarise(runs: list[dict[str, Any]]) -> dict[str, Any]:
     }
 
 
+def write(path: Path, results: dict[str, Any]) -> None:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(json.dumps(results, indent=1) + "\n")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--data", default="data/rover", help="the rover dataset (its test split)")
@@ -281,10 +286,10 @@ def main() -> None:
         "aims": {"median_delay_frames": 3, "false_alarms_per_1000": 1, "loop_hz": 10},
         "ramps": {},
     }
-    every: list[dict[str, Any]] = []
-    for kind in args.ramps.split(","):
-        runs = []
-        for seed in range(args.seeds):
+    kinds = args.ramps.split(",")
+    runs: dict[str, list[dict[str, Any]]] = {kind: [] for kind in kinds}
+    for seed in range(args.seeds):  # seed-major: an interrupted run covers every ramp
+        for kind in kinds:
             r = run_ramp(
                 kind,
                 seed,
@@ -294,21 +299,23 @@ def main() -> None:
                 hold=args.hold,
                 window=args.window,
             )
-            runs.append(r)
+            runs[kind].append(r)
             print(
                 f"{kind:8s} seed {seed}: true change frame {r['true_change_frame']}, oracle "
                 f"{r['oracle_change_frame']}, delay {r['delay_frames']}; false alarms "
                 f"{r['false_alarms']}/{r['clean_frames']} ({r['wall_s']} s)",
                 flush=True,
             )
-        results["ramps"][kind] = {"summary": summarise(runs), "runs": runs}
-        every += runs
-    results["all"] = summarise(every)
+            results["ramps"][kind] = {"summary": summarise(runs[kind]), "runs": runs[kind]}
+            results["all"] = summarise([x for k in kinds for x in runs[k]])
+            write(args.output, results)  # after every run: an interrupted run keeps its figures
     results["truth_evaluations"] = truth.evaluations
-    results["loop"] = {name: loop_rate(name, args.loop_seconds) for name in LAUNCHES}
+    results["loop"] = {}
+    for name in LAUNCHES:
+        results["loop"][name] = loop_rate(name, args.loop_seconds)
+        write(args.output, results)
     results["machine"]["load_average_after"] = list(os.getloadavg())
-    args.output.parent.mkdir(parents=True, exist_ok=True)
-    args.output.write_text(json.dumps(results, indent=1) + "\n")
+    write(args.output, results)
     a = results["all"]
     print(
         f"median delay {a['median_delay_frames']} frames (aim <= 3), false alarms "
