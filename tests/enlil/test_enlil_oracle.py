@@ -78,7 +78,7 @@ def test_registry_names_each_models_oracle(oracle_file, tmp_path) -> None:  # ty
         for suffix in (".safetensors", ".json"):
             shutil.copy(models / f"{name}{suffix}", tmp_path / f"{name}{suffix}")
     for suffix in (".safetensors", ".json"):
-        shutil.copy(path.with_suffix(suffix), tmp_path / path.with_suffix(suffix).name)
+        shutil.copy(f"{path}{suffix}", tmp_path / f"{path.name}{suffix}")  # NAME.oracle + suffix
     path = tmp_path / path.name
     pin = {n: sha256_file(tmp_path / f"{n}.safetensors") for n in ("rover-default", "rover-fog")}
     registry = tmp_path / "models.yaml"
@@ -86,7 +86,7 @@ def test_registry_names_each_models_oracle(oracle_file, tmp_path) -> None:  # ty
         "anunnaki: models/1\nmodels:\n"
         "  - id: colour\n    domain: default\n    file: rover-default.safetensors\n"
         f"    sha256: {pin['rover-default']}\n"
-        f"    oracle: {{file: {path.with_suffix('.safetensors')}, sha256: {digest}}}\n"
+        f"    oracle: {{file: {path}.safetensors, sha256: {digest}}}\n"
         "  - id: rover-fog\n    domain: fog\n    file: rover-fog.safetensors\n"
         f"    sha256: {pin['rover-fog']}\n"
     )
@@ -98,6 +98,6 @@ def test_registry_names_each_models_oracle(oracle_file, tmp_path) -> None:  # ty
     assert plugin.covered == ["colour"]
     assert plugin.assess(tiny_data(1).image(0), seq=0, model_id="colour") is not None
     assert plugin.assess(tiny_data(1).image(0), seq=1, model_id="rover-fog") is None
-    registry.write_text(body.replace(str(path.with_suffix(".safetensors")), "missing.safetensors"))
+    registry.write_text(body.replace(f"{path}.safetensors", "missing.safetensors"))
     with pytest.raises(RegistryFileError, match=r"oracle file 'missing\.safetensors' not found"):
         load_registry(registry)

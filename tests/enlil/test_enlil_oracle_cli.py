@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import hashlib
 import json
 from pathlib import Path
 from typing import Any
@@ -76,7 +77,17 @@ def test_oracle_evaluate_scores_the_oracle_and_baselines(
 def test_oracle_evaluate_needs_an_oracle(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    argv = ["oracle", "evaluate", "--models", str(MODELS), "--model", "rover-default"]
+    import shutil
+
+    for suffix in (".safetensors", ".json"):  # a registry entry without an oracle
+        shutil.copy(MODELS.parent / f"rover-default{suffix}", tmp_path / f"m{suffix}")
+    digest = hashlib.sha256((tmp_path / "m.safetensors").read_bytes()).hexdigest()
+    registry = tmp_path / "reg.yaml"
+    registry.write_text(
+        "anunnaki: models/1\nmodels:\n"
+        f"  - {{id: rover-default, domain: default, file: m.safetensors, sha256: {digest}}}\n"
+    )
+    argv = ["oracle", "evaluate", "--models", str(registry), "--model", "rover-default"]
     argv += ["--data", str(tmp_path), "-p", "fog"]
     assert main([*argv, "--contexts", "some:3"]) == 2
     assert "write random:N or balanced:N" in capsys.readouterr().err

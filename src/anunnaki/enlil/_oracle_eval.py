@@ -194,8 +194,8 @@ class Predictions:
         probs: ``[F, 3]`` calibrated probabilities (oracles), else ``None``.
         window_probs: ``[W, 3]`` their window means, else ``None``.
         params: ``[F, d]`` perceived normalised context (oracles), else ``None``.
-        phenomenon_hit: ``[F]`` whether the perceived phenomenon is right (oracles
-            covering several phenomena), else ``None``.
+        phenomenon_hit: ``[F]`` whether the perceived phenomenon is right (oracles with
+            a trained phenomenon head), else ``None``.
         info: Fitted thresholds and such, copied into the report.
 
     """
@@ -235,7 +235,7 @@ def oracle_predictions(
     rows = held.windows(window)
     window_probs = probs[rows].mean(axis=1)
     hit = None
-    if len(classes) > 2:
+    if oracle.card.phenomenon_head:
         which = np.concatenate([c[2] for c in chunks]).argmax(axis=1)
         hit = which == classes.index(held.phenomenon)
     return Predictions(

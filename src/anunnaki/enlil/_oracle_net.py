@@ -192,7 +192,9 @@ def oracle_paths(path: str | Path) -> tuple[Path, Path]:
     """``(NAME.safetensors, NAME.json)`` for ``NAME``, ``NAME.safetensors`` or ``NAME.json``."""
     p = Path(path)
     base = p.with_suffix("") if p.suffix in (".safetensors", ".json") else p
-    return base.with_suffix(".safetensors"), base.with_suffix(".json")
+    # appended, not with_suffix: NAME may hold a dot ('rover-default.oracle' must not
+    # become 'rover-default.safetensors', the detector's own file)
+    return base.with_name(base.name + ".safetensors"), base.with_name(base.name + ".json")
 
 
 def frames_to_tensor(frames: Sequence[npt.NDArray[np.uint8]], size: tuple[int, int]) -> Any:

@@ -1,0 +1,329 @@
+"""The learned oracle on scripted ramps in the simulator: delay, false alarms, loop rate.
+
+Issue #13's run-time figures for the shipped ``enlil`` oracle of ``rover-default``
+(examples/models/rover.yaml). Each run is the simulated rover (background clutter as in
+the datasets, a pedestrian and a deer in view) with the detector and the ``enlil`` oracle in
+lockstep, no Utu (no swap: the default model stays active): ``--clean`` seconds of clear
+weather, then one scripted ramp, then ``--hold`` seconds at its end:
+
+* ``fog``: fog from nothing to full strength (10 layers at opacity 0.3) over ``--ramp`` s;
+* ``raindrop``: a drop appearing on the lens, its radius growing to 0.3 of the image width
+  over 1 s, at a position drawn per seed;
+* ``hsl``: an HSL sweep from the identity to poor light (saturation -0.6, lightness -0.8,
+  a hue shift drawn per seed in [-90, 90] degrees) over ``--ramp`` s.
+
+The ground-truth category of a frame is the assessment rule applied to the context in force
+at its time: the model's F1 on a fixed batch of 32 test-split images perturbed with exactly
+those parameters, against its clean F1 (``anunnaki.enlil.evaluate_context``). The ramps are
+monotone, so the time the true category first reaches 1 is found by bisection (to a tenth of
+a frame period). Per run:
+
+* **delay**: frames from that true change to the oracle's first category >= 1 at or after
+  the ramp's start (negative: the oracle said so before the detector was measurably worse);
+* **false alarms**: clean frames (before the ramp) the oracle called category >= 1,
+  reported per 1,000 clean frames over all runs.
+
+Then the whole loop's rate with the oracle in place of ground truth:
+``examples/rover/sim-enlil.yaml`` (Utu's five nodes, the enlil oracle as A4; its live
+scorer left out) run flat out for ``--loop-seconds`` simulated seconds, camera frames per
+wall second; and ``examples/rover/sim.yaml`` (ground truth as A4) the same way.
+
+Writes ``benchmarks/results/oracle_ramps.json``::
+
+    .venv/bin/python benchmarks/oracle_ramps.py --data data/rover          # 10 seeds
+    .venv/bin/python benchmarks/oracle_ramps.py --data data/rover --quick  # 2 seeds, shorter
+"""
+
+from __future__ import annotations
+
+import argparse
+import io
+import json
+import os
+import platform
+import statistics
+import threading
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+
+from anunnaki import topics
+from anunnaki.bus import Assessment, body_of, open_bus
+from anunnaki.enlil import evaluate_context, fixed_batch, normalise
+from anunnaki.launch import SimKind, load_launch, run_launch
+from anunnaki.lec import evaluate_detector, load_registry
+from anunnaki.managed import SimulatedSystem
+from anunnaki.phenomena import get_phenomenon
+
+ROOT = Path(__file__).parents[1]
+MODELS = ROOT / "examples" / "models" / "rover.yaml"
+RESULTS = Path(__file__).parent / "results" / "oracle_ramps.json"
+LAUNCHES = {
+    "enlil": ROOT / "examples" / "rover" / "sim-enlil.yaml",
+    "ground_truth": ROOT / "examples" / "rover" / "sim.yaml",
+}
+RATE = 10.0  # camera frames per second
+FAST = 1000.0  # simulated seconds per wall second asked for: as fast as the loop goes
+
+
+def ramp_event(kind: str, seed: int, at: float, ramp: float) -> dict[str, Any]:
+    """The scenario's phenomenon event of one ramp (parameters drawn from ``seed``)."""
+    rng = np.random.default_rng(seed)
+    if kind == "fog":
+        return {"at": at, "phenomenon": "fog", "params": {"density": 10, "intensity": 0.3},
+                "ramp": ramp}  # fmt: skip
+    if kind == "raindrop":
+        x, y = (float(v) for v in rng.uniform(0.25, 0.75, 2))
+        params = {"x": round(x, 3), "y": round(y, 3), "radius": 0.3, "feather": 0.25}
+        return {"at": at, "phenomenon": "raindrop", "params": params, "ramp": 1.0}
+    if kind == "hsl":
+        hue = round(float(rng.uniform(-90.0, 90.0)), 1)
+        params = {"hue": hue, "saturation": -0.6, "lightness": -0.8}
+        return {"at": at, "phenomenon": "hsl", "params": params, "ramp": ramp}
+    raise ValueError(f"unknown ramp {kind!r}: fog, raindrop or hsl")
+
+
+def scenario(kind: str, seed: int, clean: float, ramp: float, hold: float) -> dict[str, Any]:
+    """A rover scenario: ``clean`` s of clear weather, the ramp, ``hold`` s at its end."""
+    event = ramp_event(kind, seed, clean, ramp)
+    return {
+        "anunnaki": "scenario/1",
+        "platform": "rover",
+        "name": f"ramp-{kind}-s{seed}",
+        "layout": 44 + seed % 10,  # test layouts: never seen by the detector or the oracle
+        "seed": seed,
+        "duration": clean + event["ramp"] + hold,
+        "camera": {"rate": RATE, "width": 128, "height": 128},
+        "route": [[0, 0], [40, 0]],
+        "cruise_speed": 0.3,
+        "objects": [
+            {"kind": "pedestrian", "x": 5.0, "y": -2.0, "walk_to": [5.0, 2.0], "speed": 0.2},
+            {"kind": "deer", "x": 8.0, "y": 2.5, "yaw": 1.57},
+        ],
+        "phenomena": [event],
+    }
+
+
+class Truth:
+    """The true category of a context, measured on a fixed batch of test images."""
+
+    def __init__(self, data: str, model_id: str) -> None:
+        registry = load_registry(MODELS)
+        self.detector = registry.load(registry.get(model_id))
+        self.batch = fixed_batch(data, "test", 32, seed=0)
+        self.clean_f1 = float(evaluate_detector(self.detector, self.batch).f1)
+        self.evaluations = 0
+
+    def category(self, phenomena: list[tuple[str, dict[str, float]]]) -> int:
+        """The category under the phenomena in force (clear weather: 0)."""
+        if not phenomena:
+            return 0
+        (name, params), *rest = phenomena
+        assert not rest, "one phenomenon per ramp"
+        phen = get_phenomenon(name)
+        unit = normalise(phen, phen.to_vector(params))
+        self.evaluations += 1
+        return evaluate_context(
+            self.detector, self.batch, phen, unit, clean_f1=self.clean_f1, seed=0
+        ).category
+
+    def change_time(self, timeline: Any, start: float, end: float) -> float | None:
+        """The first time in ``[start, end]`` the category is >= 1 (bisection), or ``None``."""
+        if self.category(timeline.phenomena(end)) == 0:
+            return None
+        low, high = start, end  # category(low) is taken as 0 (the ramp starts at identity)
+        while high - low > 0.1 / RATE:
+            mid = (low + high) / 2
+            if self.category(timeline.phenomena(mid)) >= 1:
+                high = mid
+            else:
+                low = mid
+        return high
+
+
+def run_ramp(
+    kind: str, seed: int, truth: Truth, *, clean: float, ramp: float, hold: float, window: int
+) -> dict[str, Any]:
+    """One scripted ramp: the oracle's per-frame categories against the true change."""
+    sc = scenario(kind, seed, clean, ramp, hold)
+    said: dict[int, int] = {}
+    times: dict[int, float] = {}
+    lock = threading.Lock()
+
+    def on_assessment(sample: Any) -> None:
+        m = sample.message
+        if isinstance(m, Assessment) and m.frame_seq is not None:
+            with lock:
+                said[m.frame_seq] = m.category
+
+    def on_truth(sample: Any) -> None:
+        body = body_of(sample.message)
+        with lock:
+            times[int(body["seq"])] = float(body.get("t", 0.0))
+
+    with open_bus("inproc") as bus:
+        bus.subscribe(topics.ORACLE_OUTPUT, on_assessment, queue=1024)
+        bus.subscribe(topics.GROUND_TRUTH, on_truth, queue=1024)
+        with SimulatedSystem(
+            bus, sc, models=MODELS, oracle={"name": "enlil", "window": window}
+        ) as system:
+            t0 = time.perf_counter()
+            system.run(threading.Event(), speed=FAST)
+            wall = time.perf_counter() - t0
+            frames = system.platform.frames
+            timeline = system.platform.timeline
+    event = sc["phenomena"][0]
+    start, end = float(event["at"]), float(event["at"] + event["ramp"])
+    changed = truth.change_time(timeline, start, end)
+    with lock:
+        seqs = sorted(set(said) & set(times))
+        clean_frames = [s for s in seqs if times[s] < start]
+        alarms = [s for s in clean_frames if said[s] >= 1]
+        first = next((s for s in seqs if times[s] >= start and said[s] >= 1), None)
+        true_frame = None
+        if changed is not None:
+            true_frame = next((s for s in seqs if times[s] >= changed - 1e-9), None)
+    delay = None if first is None or true_frame is None else first - true_frame
+    return {
+        "ramp": kind,
+        "seed": seed,
+        "event": event,
+        "frames": frames,
+        "assessed": len(seqs),
+        "wall_s": round(wall, 2),
+        "true_change_s": None if changed is None else round(changed, 3),
+        "true_change_frame": true_frame,
+        "oracle_change_frame": first,
+        "delay_frames": delay,
+        "clean_frames": len(clean_frames),
+        "false_alarms": len(alarms),
+    }
+
+
+def loop_rate(name: str, seconds: float) -> dict[str, Any]:
+    """The whole launch (Utu included) flat out for ``seconds`` of simulated time.
+
+    The enlil launch runs without its live scorer: the oracle *in place of* ground truth.
+    """
+    launch = load_launch(LAUNCHES[name])
+    assert isinstance(launch.managed, SimKind)
+    launch.managed.options = launch.managed.options.model_copy(update={"scorer": None})
+    out = io.StringIO()
+    result = run_launch(launch, speed=FAST, until=seconds, out=out, handle_signals=False)
+    line = next(x for x in out.getvalue().splitlines() if x.startswith("simulated "))
+    frames = int(line.split("(")[1].split()[0])
+    return {
+        "launch": str(LAUNCHES[name].relative_to(ROOT)),
+        "frames": frames,
+        "run_s": round(result.ran, 2),
+        "fps": round(frames / result.ran, 2),
+    }
+
+
+def summarise(runs: list[dict[str, Any]]) -> dict[str, Any]:
+    """Median delay, changes missed, false alarms per 1,000 clean frames."""
+    delays = [r["delay_frames"] for r in runs if r["delay_frames"] is not None]
+    clean = sum(r["clean_frames"] for r in runs)
+    alarms = sum(r["false_alarms"] for r in runs)
+    return {
+        "runs": len(runs),
+        "median_delay_frames": statistics.median(delays) if delays else None,
+        "delays_frames": delays,
+        "no_true_change": sum(r["true_change_frame"] is None for r in runs),
+        # a ramp whose end the detector copes with, yet the oracle called it degraded
+        "alarms_without_true_change": sum(
+            r["true_change_frame"] is None and r["oracle_change_frame"] is not None for r in runs
+        ),
+        "missed": sum(
+            r["true_change_frame"] is not None and r["oracle_change_frame"] is None for r in runs
+        ),
+        "clean_frames": clean,
+        "false_alarms": alarms,
+        "false_alarms_per_1000": round(1000.0 * alarms / clean, 2) if clean else None,
+    }
+
+
+def write(path: Path, results: dict[str, Any]) -> None:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(json.dumps(results, indent=1) + "\n")
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--data", default="data/rover", help="the rover dataset (its test split)")
+    ap.add_argument("--seeds", type=int, default=10)
+    ap.add_argument("--ramps", default="fog,raindrop,hsl")
+    ap.add_argument("--clean", type=float, default=10.0, help="clear seconds before the ramp")
+    ap.add_argument("--ramp", type=float, default=10.0, help="fog and hsl ramp seconds")
+    ap.add_argument("--hold", type=float, default=3.0, help="seconds at the ramp's end")
+    ap.add_argument("--window", type=int, default=3, help="the oracle's window (frames)")
+    ap.add_argument("--loop-seconds", type=float, default=20.0)
+    ap.add_argument("--quick", action="store_true", help="2 seeds, 5 s clean, 5 s ramps")
+    ap.add_argument("--threads", type=int, default=2)
+    ap.add_argument("--output", type=Path, default=RESULTS)
+    args = ap.parse_args()
+    if args.quick:
+        args.seeds, args.clean, args.ramp, args.loop_seconds = 2, 5.0, 5.0, 10.0
+    torch.set_num_threads(args.threads)
+    truth = Truth(args.data, "rover-default")
+    results: dict[str, Any] = {
+        "benchmark": "oracle_ramps",
+        "date": time.strftime("%Y-%m-%d %H:%M:%S"),
+        "machine": {
+            "python": platform.python_version(),
+            "cpus": os.cpu_count(),
+            "torch_threads": torch.get_num_threads(),
+            "load_average_before": list(os.getloadavg()),
+        },
+        "model": "rover-default",
+        "settings": {
+            k: getattr(args, k) for k in ("seeds", "clean", "ramp", "hold", "window", "quick")
+        },
+        "clean_f1_test_batch": round(truth.clean_f1, 4),
+        "aims": {"median_delay_frames": 3, "false_alarms_per_1000": 1, "loop_hz": 10},
+        "ramps": {},
+    }
+    kinds = args.ramps.split(",")
+    runs: dict[str, list[dict[str, Any]]] = {kind: [] for kind in kinds}
+    for seed in range(args.seeds):  # seed-major: an interrupted run covers every ramp
+        for kind in kinds:
+            r = run_ramp(
+                kind,
+                seed,
+                truth,
+                clean=args.clean,
+                ramp=args.ramp,
+                hold=args.hold,
+                window=args.window,
+            )
+            runs[kind].append(r)
+            print(
+                f"{kind:8s} seed {seed}: true change frame {r['true_change_frame']}, oracle "
+                f"{r['oracle_change_frame']}, delay {r['delay_frames']}; false alarms "
+                f"{r['false_alarms']}/{r['clean_frames']} ({r['wall_s']} s)",
+                flush=True,
+            )
+            results["ramps"][kind] = {"summary": summarise(runs[kind]), "runs": runs[kind]}
+            results["all"] = summarise([x for k in kinds for x in runs[k]])
+            write(args.output, results)  # after every run: an interrupted run keeps its figures
+    results["truth_evaluations"] = truth.evaluations
+    results["loop"] = {}
+    for name in LAUNCHES:
+        results["loop"][name] = loop_rate(name, args.loop_seconds)
+        write(args.output, results)
+    results["machine"]["load_average_after"] = list(os.getloadavg())
+    write(args.output, results)
+    a = results["all"]
+    print(
+        f"median delay {a['median_delay_frames']} frames (aim <= 3), false alarms "
+        f"{a['false_alarms_per_1000']} per 1,000 clean frames (aim <= 1), loop "
+        f"{results['loop']['enlil']['fps']} Hz with enlil (aim >= 10), "
+        f"{results['loop']['ground_truth']['fps']} Hz with ground truth; wrote {args.output}"
+    )
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,165 @@
+"""The learned behavior oracle as agent A4 in the simulated loop (issue #13, item 6).
+
+One short run of the rover with the shipped models and their shipped oracles
+(examples/models/rover.yaml): the ``enlil`` oracle drives A4 (binding-enlil.yaml), the
+ground-truth oracle scores it live on /sim/oracle/scorer. Dense fog from t = 3 s: the
+default model's oracle reports it degraded in fog, Utu swaps in the fog model, and from
+then on the fog model's own oracle assesses (it says the fog model copes).
+"""
+
+from __future__ import annotations
+
+import io
+import threading
+from pathlib import Path
+from typing import Any
+
+import pytest
+import yaml
+
+from anunnaki import topics
+from anunnaki.bus import Assessment
+from anunnaki.launch import parse_launch, run_launch
+from anunnaki.sim import load_report
+
+ROOT = Path(__file__).parents[2]
+ROVER = ROOT / "examples" / "rover"
+MODELS = ROOT / "examples" / "models" / "rover.yaml"
+
+#: 10 s without background clutter: a pedestrian crossing 5 m ahead, a deer in view; dense
+#: fog (the default model's F1 falls to about 0) from t = 3 s.
+SCENARIO: dict[str, Any] = {
+    "anunnaki": "scenario/1",
+    "platform": "rover",
+    "name": "enlil-fog",
+    "layout": 3,
+    "background": False,
+    "seed": 0,
+    "duration": 10,
+    "camera": {"rate": 10, "width": 128, "height": 128},
+    "route": [[0, 0], [30, 0]],
+    "cruise_speed": 0.3,
+    "objects": [
+        {"kind": "pedestrian", "x": 5.0, "y": -1.5, "walk_to": [5.0, 1.5], "speed": 0.3},
+        {"kind": "deer", "x": 7.0, "y": 2.2, "yaw": 1.57},
+    ],
+    "phenomena": [{"at": 3, "phenomenon": "fog", "params": {"density": 8, "intensity": 0.3}}],
+}
+
+LAUNCH = """
+anunnaki: launch/1
+name: enlil-test
+utu:
+  goal_model: ROVER/goals-lm.yaml
+  binding: ROVER/binding-enlil.yaml
+  tactics: ROVER/tactics-lm.yaml
+  knowledge: ":memory:"
+  clock: sim
+  warmup: 1.0
+  watchdog: 60                # the loop is not what is tested: a starved CPU must not stop it
+  failsafe: fail-safe
+  run_stop: {service: /rover/stop}
+bus: {kind: inproc}
+managed:
+  sim:
+    scenario: SCENARIO
+    models: MODELS
+    oracle: {name: enlil, window: 3}
+    scorer: {name: ground_truth, window: 20, min_frames: 10, min_objects: 10}
+    speed: 1000
+    report_file: REPORT
+"""
+
+
+@pytest.fixture(scope="module")
+def enlil_run(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
+    """Run the loop once; keep the decisions, every published assessment and the report."""
+    tmp = tmp_path_factory.mktemp("enlil")
+    (tmp / "scenario.yaml").write_text(yaml.safe_dump(SCENARIO))
+    text = (
+        LAUNCH.replace("ROVER", str(ROVER))
+        .replace("SCENARIO", str(tmp / "scenario.yaml"))
+        .replace("MODELS", str(MODELS))
+        .replace("REPORT", str(tmp / "report.json"))
+    )
+    seen: list[Assessment] = []
+    lock = threading.Lock()
+
+    def keep(sample: Any) -> None:
+        if isinstance(sample.message, Assessment):
+            with lock:
+                seen.append(sample.message)
+
+    out = io.StringIO()
+    result = run_launch(
+        parse_launch(text),
+        out=out,
+        handle_signals=False,
+        on_bus=lambda bus: bus.subscribe(topics.ORACLE_OUTPUT, keep, queue=1024),
+    )
+    return {
+        "result": result,
+        "log": out.getvalue(),
+        "assessments": list(seen),
+        "report": load_report(tmp / "report.json"),
+    }
+
+
+@pytest.mark.timeout(300)  # the run is about 20 s on a quiet machine; shared, it can be 100
+def test_enlil_drives_a4_fog_then_the_fog_model(enlil_run: dict[str, Any]) -> None:
+    result, log = enlil_run["result"], enlil_run["log"]
+    assert result.exit_code == 0, log
+    assert "oracle enlil, scored live by ground_truth" in log
+    started = [(d.t, d.tactic) for d in result.decisions if d.kind == "started"]
+    swaps = [t for t, tactic in started if tactic == "swap-to-fog-model"]
+    assert len(swaps) == 1 and 3.0 <= swaps[0] < 10.0, started
+    swap = next(
+        d for d in result.decisions if d.kind == "action" and d.tactic == "swap-to-fog-model"
+    )
+    assert swap.data["ok"] is True and swap.data["domain"] == "fog"
+    ok = [d.tactic for d in result.decisions if d.kind == "postcondition_ok"]
+    assert "swap-to-fog-model" in ok, log  # G9: the fog model's oracle says it copes
+    assert ("started", "fail-safe") not in [(d.kind, d.tactic) for d in result.decisions]
+    # A4 came from the enlil oracle: every assessment Utu could read is enlil's.
+    assert {a.assessor for a in enlil_run["assessments"]} == {"enlil"}
+    # The live scorer's comparison is in the report and printed.
+    scoring = enlil_run["report"].scoring
+    assert scoring is not None and scoring["oracle"] == "enlil"
+    assert scoring["scorer"] == "ground_truth" and scoring["frames"] > 50
+    assert scoring["agreement"] is not None and "enlil vs ground_truth (live scorer)" in log
+
+
+@pytest.mark.timeout(300)
+def test_after_the_swap_the_fog_models_oracle_assesses(enlil_run: dict[str, Any]) -> None:
+    seen: list[Assessment] = enlil_run["assessments"]
+    models = [a.model_id for a in seen]
+    assert models[0] == "rover-default" and models[-1] == "rover-fog"
+    k = models.index("rover-fog")
+    assert all(m == "rover-default" for m in models[:k])  # one switch, no going back
+    assert all(m == "rover-fog" for m in models[k:])
+    clear = [a for a in seen[:k] if a.frame_seq is not None and a.frame_seq < 25]
+    assert clear and all(a.category == 0 for a in clear)  # no alarm in clear weather
+    # In fog the default model's oracle said degraded in fog (what started the swap) ...
+    fog = [a for a in seen[:k] if a.frame_seq is not None and a.frame_seq >= 30]
+    assert any(a.category >= 1 and a.context["phenomenon"] == "fog" for a in fog), fog
+    # ... and in the same fog the fog model's oracle says it copes.
+    after = seen[k + 3 :]  # past the window of 3 frames
+    assert after and sum(a.category == 0 for a in after) >= 0.8 * len(after)
+    assert sum(a.context["phenomenon"] == "fog" for a in after) >= 0.8 * len(after)
+
+
+def test_an_unknown_scorer_is_named_with_its_line(tmp_path: Path) -> None:
+    from anunnaki.errors import ModelFileError
+
+    (tmp_path / "scenario.yaml").write_text(yaml.safe_dump(SCENARIO))
+    text = (
+        LAUNCH.replace("ROVER", str(ROVER))
+        .replace("SCENARIO", str(tmp_path / "scenario.yaml"))
+        .replace("MODELS", str(MODELS))
+        .replace("REPORT", str(tmp_path / "report.json"))
+        .replace("scorer: {name: ground_truth", "scorer: {name: crystal_ball")
+    )
+    with pytest.raises(ModelFileError, match="unknown oracle 'crystal_ball'") as info:
+        parse_launch(text)
+    assert info.value.element == "managed.sim.scorer.name" and info.value.line is not None
+    assert "ground_truth" in (info.value.hint or "") and "enlil" in (info.value.hint or "")
