@@ -71,17 +71,22 @@ managed:
 """
 
 
-@pytest.fixture(scope="module")
-def enlil_run(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
-    """Run the loop once; keep the decisions, every published assessment and the report."""
-    tmp = tmp_path_factory.mktemp("enlil")
+def launch_text(tmp: Path) -> str:
+    """The launch above with its scenario written into *tmp* and the report going there."""
     (tmp / "scenario.yaml").write_text(yaml.safe_dump(SCENARIO))
-    text = (
+    return (
         LAUNCH.replace("ROVER", str(ROVER))
         .replace("SCENARIO", str(tmp / "scenario.yaml"))
         .replace("MODELS", str(MODELS))
         .replace("REPORT", str(tmp / "report.json"))
     )
+
+
+@pytest.fixture(scope="module")
+def enlil_run(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
+    """Run the loop once; keep the decisions, every published assessment and the report."""
+    tmp = tmp_path_factory.mktemp("enlil")
+    text = launch_text(tmp)
     seen: list[Assessment] = []
     lock = threading.Lock()
 
@@ -151,13 +156,8 @@ def test_after_the_swap_the_fog_models_oracle_assesses(enlil_run: dict[str, Any]
 def test_an_unknown_scorer_is_named_with_its_line(tmp_path: Path) -> None:
     from anunnaki.errors import ModelFileError
 
-    (tmp_path / "scenario.yaml").write_text(yaml.safe_dump(SCENARIO))
-    text = (
-        LAUNCH.replace("ROVER", str(ROVER))
-        .replace("SCENARIO", str(tmp_path / "scenario.yaml"))
-        .replace("MODELS", str(MODELS))
-        .replace("REPORT", str(tmp_path / "report.json"))
-        .replace("scorer: {name: ground_truth", "scorer: {name: crystal_ball")
+    text = launch_text(tmp_path).replace(
+        "scorer: {name: ground_truth", "scorer: {name: crystal_ball"
     )
     with pytest.raises(ModelFileError, match="unknown oracle 'crystal_ball'") as info:
         parse_launch(text)
