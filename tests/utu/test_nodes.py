@@ -580,3 +580,26 @@ def test_a_stuck_node_is_run_stopped_by_its_watchdog(tmp_path) -> None:  # type:
             spinner.join(10)
             node.close()
     assert len(stops) == 1  # once per stall
+
+
+def test_analyze_waits_for_the_nodes_it_expects_before_its_first_cycle(tmp_path) -> None:  # type: ignore[no-untyped-def]
+    # Issue #12's fault benchmark: with the platform running first, a per-node run analysed
+    # (and recorded) inputs before plan and execute were up, and its replay — every part
+    # there from the start — acted earlier. A launch's analyze node now waits for them.
+    from anunnaki.utu import Knowledge
+
+    kb_path = tmp_path / "kb.db"
+    cfg = config(knowledge=str(kb_path))
+    hub = InprocHub()
+    with open_bus("inproc", hub=hub) as bus, open_bus("inproc", hub=hub) as later:
+        analyze = build_node("analyze", cfg, bus=bus, expect=("execute",), pace=False)
+        try:
+            assert analyze.step(1.0) is False  # execute not up: no cycle, nothing recorded
+            assert analyze.stage.cycles == 0
+            token = later.liveliness_token(node_token("execute"))
+            assert wait_for(lambda: analyze.step(2.0))  # up: the first cycle runs
+            token.close()
+        finally:
+            analyze.close()
+    with Knowledge(kb_path) as kb:
+        assert [r.t for r in kb.inputs() if r.topic == "__tick__"] == [2.0]

@@ -20,7 +20,7 @@ from typing import Any
 from anunnaki.bus import BusConfig, open_bus
 from anunnaki.cli import _dashboard
 from anunnaki.launch import WritesReports, load_launch, run_launch, signals_to
-from anunnaki.utu import NODE_NAMES, build_node
+from anunnaki.utu import NODE_NAMES, NodeConfigError, build_node
 
 __all__ = ["add_parser", "run", "run_node"]
 
@@ -96,6 +96,12 @@ def add_parser(sub: Any) -> None:
     n.add_argument("--mode", choices=("peer", "client", "router"), help="zenoh mode")
     n.add_argument("--bus-json", help=argparse.SUPPRESS)
     n.add_argument("--exit-with-parent", action="store_true", help=argparse.SUPPRESS)
+    n.add_argument(
+        "--expect",
+        default="",
+        metavar="NODES",
+        help="analyze: start cycling only once these nodes are up (e.g. plan,execute)",
+    )
     n.add_argument("-v", "--verbose", action="store_true", help="log what the node does")
     n.set_defaults(run=run_node)
 
@@ -208,7 +214,13 @@ def run_node(args: argparse.Namespace) -> int:
     parts = type(parts)(utu, parts.sources, parts.model, parts.tactics, parts.warnings)
     stop = threading.Event()
     with signals_to(stop), open_bus(bus_config) as bus:
-        node = build_node(args.name, parts, bus=bus, rate=rate)
+        extra: dict[str, Any] = {}
+        expect = [n for n in args.expect.split(",") if n]
+        if expect:
+            if args.name != "analyze":
+                raise NodeConfigError("--expect applies to the analyze node only")
+            extra["expect"] = expect
+        node = build_node(args.name, parts, bus=bus, rate=rate, **extra)
         try:
             if args.exit_with_parent:
                 _watch_parent(stop, node.wake)

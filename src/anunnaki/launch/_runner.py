@@ -540,7 +540,13 @@ class _Runner:
             "--bus-json",
             bus_config.model_dump_json(exclude_none=True),
             "--exit-with-parent",
+            *self._expect_args(name),
         ]
+
+    def _expect_args(self, name: str) -> list[str]:
+        """The analyze node waits for the launch's plan and execute nodes before cycling."""
+        peers = [n for n in ("plan", "execute") if n in self.launch.nodes]
+        return ["--expect", ",".join(peers)] if name == "analyze" and peers else []
 
     def _taken_counter(self, bus: Bus) -> Callable[[int], bool] | None:
         """How the managed system learns that Utu took an instant (lockstep), if it can."""

@@ -46,7 +46,7 @@ import os
 import secrets
 import threading
 import time
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from typing import Any, ClassVar, cast
 
 from anunnaki import topics
@@ -461,6 +461,11 @@ class AnalyzeNode(UtuNode):
     Args:
         pace: Wait for the execute node to finish each cycle before starting the next:
             ``True``, ``False``, or ``None`` (default) while ``/utu_execute`` is alive.
+        expect: Nodes (e.g. ``("plan", "execute")``) that must all have come up before the
+            first cycle: the batches wait for them. A launch passes the other nodes of its
+            run, so that a platform that runs first does not have inputs analysed (and
+            recorded) by a loop that cannot act yet — which a replay, with every part there
+            from the start, would act on.
         **kwargs: As :class:`UtuNode`.
 
     """
@@ -468,9 +473,24 @@ class AnalyzeNode(UtuNode):
     name = "analyze"
     uses_clock = True
 
-    def __init__(self, utu: UtuConfig | UtuParts, *, pace: bool | None = None, **kwargs: Any):
+    def __init__(
+        self,
+        utu: UtuConfig | UtuParts,
+        *,
+        pace: bool | None = None,
+        expect: Sequence[str] = (),
+        **kwargs: Any,
+    ):
         self._pace = pace
+        self._expect = tuple(expect)
+        self._complete = not self._expect  # every expected node has been seen up
         super().__init__(utu, **kwargs)
+
+    def _loop_complete(self) -> bool:
+        if not self._complete and all(self._presence.alive(n) for n in self._expect):
+            self._complete = True
+            log.info("analyze: %s up: cycles start", ", ".join(self._expect))
+        return self._complete
 
     def bring_up(self) -> None:
         """Subscribe the batches and the execute node's reports; watch who is alive."""
@@ -540,6 +560,8 @@ class AnalyzeNode(UtuNode):
 
         """
         self.settle()
+        if not self._loop_complete():
+            return False  # the batches wait in their queue until the loop can act
         if self._awaiting is not None:
             if self.waiting():
                 return False
@@ -595,6 +617,8 @@ class AnalyzeNode(UtuNode):
     def spin_once(self) -> float:
         """A cycle as soon as a batch arrives and the last cycle is done."""
         self.settle()
+        if not self._loop_complete():
+            return self._period()  # woken when a node comes up (the presence watch)
         if self.waiting():
             assert self._awaiting is not None
             return self._ack_timeout - (time.monotonic() - self._awaiting[1])
