@@ -25,9 +25,8 @@ from pathlib import Path
 from typing import Any, TextIO
 
 from anunnaki import topics
-from anunnaki.bus import Bus, BusConfig, RunStop, open_bus
+from anunnaki.bus import Bus, BusConfig, open_bus
 from anunnaki.clock import SimClock
-from anunnaki.errors import AnunnakiError
 from anunnaki.launch._kinds import clock_publisher
 from anunnaki.launch._managed import ManagedContext, ManagedRun
 from anunnaki.launch._schema import Launch, LaunchError, _StoppedDuringBringUp
@@ -49,6 +48,7 @@ from anunnaki.utu import (
     UtuParts,
     build_node,
     open_knowledge,
+    stop_platform,
 )
 
 __all__ = ["RunResult", "format_decision", "run_launch"]
@@ -398,23 +398,12 @@ class _Runner:
         decision with the outcome. A launch never just exits when part of Utu is gone.
         """
         service = self.utu.run_stop.service
-        ok: bool | None = None
-        error = ""
-        if service is not None:
-            try:
-                bus.request(
-                    service, dict(self.utu.run_stop.payload), timeout=1.0, wait_for_service=False
-                )
-                ok = True
-            except AnunnakiError as exc:
-                ok, error = False, str(exc)
-        with contextlib.suppress(AnunnakiError):
-            bus.publish(
-                topics.RUN_STOP,
-                RunStop(
-                    reason=f"{problem}: Utu is incomplete", caller=f"launch:{self.launch.name}"
-                ),
-            )
+        ok, error = stop_platform(
+            bus,
+            self.utu,
+            reason=f"{problem}: Utu is incomplete",
+            caller=f"launch:{self.launch.name}",
+        )
         where = f"run-stop sent to {service}" if service else "no run_stop service configured"
         status = "" if ok is None else (" (ok)" if ok else f" (FAILED: {error})")
         self.say(f"{problem}: {where}{status}")

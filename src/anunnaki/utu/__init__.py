@@ -17,7 +17,7 @@ Five parts, composed by :class:`AutonomicManager`:
 """
 
 from anunnaki.utu._actions import ActionRunner, RecordedOutcome, ReplayRunner, ThreadRunner
-from anunnaki.utu._actuators import BusActuator, RecordingActuator
+from anunnaki.utu._actuators import BusActuator, RecordingActuator, stop_platform
 from anunnaki.utu._config import RunStopConfig, UtuConfig, load_config, parse_config
 from anunnaki.utu._knowledge import Decision, InputRow, Knowledge, TacticRow, VerdictRow
 from anunnaki.utu._manager import AutonomicManager
@@ -129,4 +129,5 @@ __all__ = [
     "run_models",
     "run_span",
     "step_nodes",
+    "stop_platform",
 ]

@@ -7,12 +7,14 @@ from collections import deque
 from collections.abc import Callable, Mapping, Sequence
 from typing import Any
 
-from anunnaki.bus import body_of
+from anunnaki import topics
+from anunnaki.bus import RunStop, body_of
 from anunnaki.errors import AnunnakiError
 from anunnaki.tactics import NotifyAction
+from anunnaki.utu._config import UtuConfig
 from anunnaki.utu._mape import ActionOutcome
 
-__all__ = ["BusActuator", "RecordingActuator"]
+__all__ = ["BusActuator", "RecordingActuator", "stop_platform"]
 
 log = logging.getLogger("anunnaki.utu")
 
@@ -131,3 +133,33 @@ class BusActuator:
 
         self.notifier.send_in_background(note, done)
         return ActionOutcome(True, f"{action.channel} notification queued")
+
+
+def stop_platform(
+    bus: Any, config: UtuConfig, *, reason: str, caller: str
+) -> tuple[bool | None, str]:
+    """Run-stop the platform from outside the loop (a watchdog, a launch whose node died).
+
+    Asks the configured run-stop service once (a service that is not up fails at once) and
+    publishes a :class:`~anunnaki.bus.RunStop` on ``/utu/run_stop`` for every other part of
+    Utu (the monitor records it) and any dashboard.
+
+    Returns:
+        ``(ok, error)``: ``ok`` is ``None`` when no run-stop service is configured.
+
+    """
+    service = config.run_stop.service
+    ok: bool | None = None
+    error = ""
+    if service is not None:
+        try:
+            bus.request(service, dict(config.run_stop.payload), timeout=1.0, wait_for_service=False)
+            ok = True
+        except AnunnakiError as exc:
+            ok, error = False, str(exc)
+            log.error("utu: the run-stop request to %s failed: %s", service, exc)
+    try:
+        bus.publish(topics.RUN_STOP, RunStop(reason=reason, caller=caller))
+    except AnunnakiError as exc:
+        log.error("utu: could not announce the run-stop: %s", exc)
+    return ok, error

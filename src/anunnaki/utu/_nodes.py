@@ -70,7 +70,7 @@ from anunnaki.topics import UTU_NODES as NODE_NAMES
 from anunnaki.topics import UtuNodeName as NodeName
 from anunnaki.topics import node_token, ready_service
 from anunnaki.utu._actions import ThreadRunner
-from anunnaki.utu._actuators import BusActuator
+from anunnaki.utu._actuators import BusActuator, stop_platform
 from anunnaki.utu._config import UtuConfig
 from anunnaki.utu._knowledge import Knowledge
 from anunnaki.utu._manager import AutonomicManager, Watchdog
@@ -290,19 +290,8 @@ class UtuNode(Node):
         """From the watchdog's thread: run-stop the platform and tell every part of Utu."""
         reason = f"watchdog: node {self.name} has not finished a round for {stalled:.1f} s"
         log.error("utu: %s; run-stop", reason)
-        service = self.config.run_stop.service
-        if service is not None:
-            try:
-                self.bus.request(
-                    service, dict(self.config.run_stop.payload), timeout=1.0, wait_for_service=False
-                )
-            except AnunnakiError as exc:
-                log.error("utu: the watchdog's run-stop failed: %s", exc)
-        try:  # the monitor node records it as an operator's run-stop (caller: the watchdog)
-            stop = RunStop(reason=reason, caller=f"watchdog:{self.name}")
-            self.bus.publish(topics.RUN_STOP, stop)
-        except AnunnakiError as exc:
-            log.error("utu: could not announce the watchdog's run-stop: %s", exc)
+        # The monitor node records it as an operator's run-stop (caller: the watchdog).
+        stop_platform(self.bus, self.config, reason=reason, caller=f"watchdog:{self.name}")
 
     def release(self) -> None:
         """Close the knowledge base the node opened itself."""
