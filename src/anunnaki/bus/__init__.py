@@ -65,7 +65,7 @@ from anunnaki.bus._api import (
     Service,
     Subscriber,
 )
-from anunnaki.bus._config import AccessControl, AccessRule, BusConfig, TlsConfig
+from anunnaki.bus._config import AccessControl, AccessRule, BusConfig, TlsConfig, on_loopback
 from anunnaki.bus._cycle import (
     MAX_BATCH,
     AnalysisState,
@@ -179,6 +179,7 @@ __all__ = [
     "message_type",
     "message_types",
     "node_key",
+    "on_loopback",
     "open_bus",
     "qos_for",
     "register_message",

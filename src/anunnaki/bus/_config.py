@@ -21,7 +21,7 @@ from anunnaki.bus._keys import (
     validate_pattern,
 )
 
-__all__ = ["AccessControl", "AccessRule", "BusConfig", "TlsConfig"]
+__all__ = ["AccessControl", "AccessRule", "BusConfig", "TlsConfig", "on_loopback"]
 
 _ENDPOINT = re.compile(r"(tcp|udp|tls|quic|ws|unixsock-stream|unixpipe|vsock|serial)/\S+")
 AclMessage = Literal[
@@ -339,3 +339,8 @@ class BusConfig(_Strict):
             return cls.model_validate(data)
         except ValidationError as exc:
             raise validation_error(exc, data, lines, path) from None
+
+
+def on_loopback(endpoint: str) -> str:
+    """How a process on this machine reaches ``endpoint`` (``0.0.0.0``/``[::]`` → loopback)."""
+    return endpoint.replace("/0.0.0.0:", "/127.0.0.1:").replace("/[::]:", "/[::1]:")

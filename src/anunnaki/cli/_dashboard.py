@@ -19,7 +19,7 @@ from typing import Any
 
 from pydantic import ValidationError
 
-from anunnaki.bus import BusConfig, BusConfigError, open_bus
+from anunnaki.bus import BusConfig, BusConfigError, on_loopback, open_bus
 from anunnaki.launch import Launch, load_launch, signals_to
 
 __all__ = [
@@ -203,10 +203,6 @@ def wait_for_signal(stop: threading.Event | None = None, timeout: float | None =
                 return
 
 
-def _on_loopback(endpoint: str) -> str:
-    return endpoint.replace("/0.0.0.0:", "/127.0.0.1:").replace("/[::]:", "/[::1]:")
-
-
 def joining_bus(
     launch: Launch, args: argparse.Namespace, *, role: str = "the dashboard"
 ) -> BusConfig:
@@ -244,7 +240,7 @@ def joining_bus(
         connect = list(bus.connect)
     else:
         launch_listens = bus.listen or (bus.effective_listen() if bus.mode == "router" else [])
-        connect = [_on_loopback(ep) for ep in launch_listens] or list(bus.connect)
+        connect = [on_loopback(ep) for ep in launch_listens] or list(bus.connect)
     if not connect and not bus.multicast_scouting:
         raise launch.error(
             f"{role} cannot find the launch's session: the bus names no listen or connect endpoint",

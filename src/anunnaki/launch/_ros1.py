@@ -30,6 +30,7 @@ from typing import Annotated, Any, ClassVar
 
 from pydantic import BaseModel, ConfigDict, Field
 
+from anunnaki.bus import on_loopback
 from anunnaki.errors import AnunnakiError, ModelFileError
 from anunnaki.launch._managed import ManagedContext
 from anunnaki.utu import Decision, UtuConfig
@@ -195,10 +196,6 @@ class _BridgeRun:
             self.proc.stdout.close()
 
 
-def _loopback(endpoint: str) -> str:
-    return endpoint.replace("/0.0.0.0:", "/127.0.0.1:").replace("/[::]:", "/[::1]:")
-
-
 class Ros1Kind(RobotKind):
     """``kind: ros1``: a ROS 1 robot, bridged; its camera feeds the LEC and oracle nodes."""
 
@@ -209,7 +206,7 @@ class Ros1Kind(RobotKind):
     def start(self, ctx: ManagedContext) -> _BridgeRun:
         """Start the bridge process on the launch's zenoh bus, then the LEC and oracle nodes."""
         o = self.options
-        endpoints = [_loopback(e) for e in getattr(ctx.bus, "endpoints", ())]
+        endpoints = [on_loopback(e) for e in getattr(ctx.bus, "endpoints", ())]
         if getattr(ctx.bus, "kind", None) != "zenoh" or not endpoints:
             raise ModelFileError(
                 "a ros1 managed system needs the zenoh bus (the bridge is another process)",

@@ -93,13 +93,11 @@ class Ros2Kind(RobotKind):
         """Open a zenoh session to the robot, start the bridge, then the LEC and oracle nodes."""
         import zenoh
 
-        from anunnaki.bus import BusConfig
+        from anunnaki.bus import BusConfig, on_loopback
         from anunnaki.ros1 import Ros2ZenohBridge, load_bridge
 
         o = self.options
-        connect = list(o.connect) or [
-            e.replace("/0.0.0.0:", "/127.0.0.1:") for e in getattr(ctx.bus, "endpoints", ())
-        ]
+        connect = list(o.connect) or [on_loopback(e) for e in getattr(ctx.bus, "endpoints", ())]
         if not connect:
             raise ModelFileError(
                 "a ros2 managed system needs the robot's zenoh endpoints, or the zenoh bus",

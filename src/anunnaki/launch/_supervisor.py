@@ -18,7 +18,7 @@ from collections.abc import Iterator, Sequence
 from pathlib import Path
 from typing import IO, Any, TextIO
 
-from anunnaki.bus import Bus, BusConfig, BusError, ServiceError
+from anunnaki.bus import Bus, BusConfig, BusError, ServiceError, on_loopback
 from anunnaki.launch._schema import LaunchError, _StoppedDuringBringUp
 from anunnaki.topics import ready_service
 
@@ -37,9 +37,7 @@ def child_bus_config(parent: BusConfig, endpoints: Sequence[str], node: str) -> 
     if parent.mode == "client":
         connect = list(parent.connect)
     else:
-        connect = [
-            ep.replace("/0.0.0.0:", "/127.0.0.1:").replace("/[::]:", "/[::1]:") for ep in endpoints
-        ]
+        connect = [on_loopback(ep) for ep in endpoints]
     return BusConfig(
         kind="zenoh",
         mode="client",
