@@ -35,6 +35,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import IO, Any
 
+from anunnaki._closing import Closing
 from anunnaki.errors import ModelFileError
 
 __all__ = [
@@ -328,7 +329,7 @@ def read_trace(source: str | Path | IO[str]) -> Trace:
     return Trace(header, items)
 
 
-class TraceWriter:
+class TraceWriter(Closing):
     """Write a trace file, header first; a context manager.
 
     Every item is checked as the reader checks it — ``t`` finite and not going backwards,
@@ -382,12 +383,6 @@ class TraceWriter:
     def close(self) -> None:
         """Flush and close the file."""
         self._fh.close()
-
-    def __enter__(self) -> TraceWriter:
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self.close()
 
 
 def write_trace(

@@ -29,11 +29,11 @@ from abc import ABC, abstractmethod
 from collections import defaultdict
 from collections.abc import Callable, Iterator, Mapping
 from dataclasses import dataclass, field
-from types import TracebackType
-from typing import Any, ClassVar, Literal, Protocol, Self
+from typing import Any, ClassVar, Literal, Protocol
 
 from pydantic import ValidationError
 
+from anunnaki._closing import Closing
 from anunnaki.bus._errors import (
     BusClosedError,
     BusConfigError,
@@ -224,21 +224,10 @@ def _close_ref(ref: weakref.ReferenceType[Bus]) -> None:
 # --- declared objects -----------------------------------------------------------------------
 
 
-class _Declared:
+class _Declared(Closing):
     """A context manager with an idempotent :meth:`close`."""
 
     _closed: bool
-
-    def __enter__(self) -> Self:
-        return self
-
-    def __exit__(
-        self,
-        exc_type: type[BaseException] | None,
-        exc: BaseException | None,
-        tb: TracebackType | None,
-    ) -> None:
-        self.close()
 
     @property
     def closed(self) -> bool:
@@ -729,7 +718,7 @@ class LivelinessWatch(_Declared):
 # --- the bus --------------------------------------------------------------------------------
 
 
-class Bus(ABC):
+class Bus(ABC, Closing):
     """A session on the message bus: declare everything else from it.
 
     Open one with :func:`anunnaki.bus.open_bus`; use it as a context manager or call
@@ -789,17 +778,6 @@ class Bus(ABC):
     def endpoints(self) -> tuple[str, ...]:
         """Endpoints others can connect to (empty for the in-process bus)."""
         return ()
-
-    def __enter__(self) -> Self:
-        return self
-
-    def __exit__(
-        self,
-        exc_type: type[BaseException] | None,
-        exc: BaseException | None,
-        tb: TracebackType | None,
-    ) -> None:
-        self.close()
 
     def __repr__(self) -> str:
         state = "closed" if self.closed else "open"

@@ -38,6 +38,7 @@ import threading
 from collections.abc import Callable
 from typing import Any, Protocol, cast
 
+from anunnaki._closing import Closing
 from anunnaki.bus._api import Bus, Subscriber
 from anunnaki.bus._messages import Message
 
@@ -50,7 +51,7 @@ class _Closable(Protocol):
     def close(self) -> None: ...
 
 
-class Node:
+class Node(Closing):
     """A node on the bus: declare, readiness, liveliness, spin, close.
 
     Args:
@@ -172,9 +173,3 @@ class Node:
                 log.debug("%s: closing %r: %r", self.token, obj, exc)
         self._declared.clear()
         self.release()
-
-    def __enter__(self) -> Node:
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self.close()

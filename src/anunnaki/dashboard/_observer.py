@@ -40,6 +40,7 @@ from dataclasses import dataclass
 from typing import Any, Literal
 
 from anunnaki import topics
+from anunnaki._closing import Closing
 from anunnaki.bus import (
     Assessment,
     Bus,
@@ -201,7 +202,7 @@ class SimTime:
         return [(max(t, 0.0), topic, body) for _s, _o, t, topic, body in out]
 
 
-class BusObserver:
+class BusObserver(Closing):
     """Subscribes a bus for a :class:`DashboardState`; closes what it declared.
 
     Args:
@@ -470,9 +471,3 @@ class BusObserver:
             except Exception as exc:  # best effort: the bus may be closing too
                 log.debug("closing %r: %r", obj, exc)
         self._declared.clear()
-
-    def __enter__(self) -> BusObserver:
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self.close()

@@ -17,6 +17,7 @@ import threading
 import time
 from typing import Any, Literal
 
+from anunnaki._closing import Closing
 from anunnaki.bus import Bus
 from anunnaki.dashboard._app_types import Operator
 from anunnaki.dashboard._observer import BusObserver, ObserverConfig, OperatorError, SimTime
@@ -206,7 +207,7 @@ class DashboardServer:
         self._sock.close()
 
 
-class Dashboard:
+class Dashboard(Closing):
     """State, bus observer and web server of one dashboard.
 
     The socket is bound in the constructor (a port in use fails here, before anything
@@ -326,6 +327,3 @@ class Dashboard:
 
     def __enter__(self) -> Dashboard:
         return self.start()
-
-    def __exit__(self, *exc: object) -> None:
-        self.close()

@@ -441,6 +441,3 @@ class LecNode(Node):
         if heartbeat is not None and heartbeat is not threading.current_thread():
             heartbeat.join(timeout=2.0)
         self._cache.clear()
-
-    def __enter__(self) -> LecNode:
-        return self

@@ -25,6 +25,7 @@ from pathlib import Path
 from typing import Any
 
 from anunnaki import topics
+from anunnaki._closing import Closing
 from anunnaki.bus import Clock, LivelinessGuard, body_of
 from anunnaki.trace import Record, read_trace
 
@@ -33,7 +34,7 @@ __all__ = ["ScriptedSystem"]
 log = logging.getLogger("anunnaki.managed")
 
 
-class ScriptedSystem:
+class ScriptedSystem(Closing):
     """Replays a trace on a bus and obeys mode, stop and buzzer commands.
 
     Args:
@@ -194,9 +195,3 @@ class ScriptedSystem:
         for d in self._declared:
             d.close()
         self._declared.clear()
-
-    def __enter__(self) -> ScriptedSystem:
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self.close()

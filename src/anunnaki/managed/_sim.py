@@ -33,6 +33,7 @@ from typing import Any
 import numpy as np
 
 from anunnaki import topics
+from anunnaki._closing import Closing
 from anunnaki.bus import Assessment, Detections, LivelinessGuard, Sample, body_of
 from anunnaki.sim import (
     FrameScore,
@@ -156,7 +157,7 @@ def _match(
     return tp, len(is_tp) - tp, n_truth - tp
 
 
-class SimulatedSystem:
+class SimulatedSystem(Closing):
     """A simulated platform with its LEC node and ground-truth oracle on one bus.
 
     Args:
@@ -433,12 +434,6 @@ class SimulatedSystem:
                 obj.close()
             except Exception:  # best effort at shutdown; the rest still close
                 log.exception("sim: closing %r failed", obj)
-
-    def __enter__(self) -> SimulatedSystem:
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self.close()
 
     # -- scoring ---------------------------------------------------------------------------------
     def phases(

@@ -320,6 +320,3 @@ class OracleNode(Node):
             return
         with self._lock:
             self._published += 1
-
-    def __enter__(self) -> OracleNode:
-        return self

@@ -23,6 +23,7 @@ from collections.abc import Callable
 from types import ModuleType
 from typing import Any
 
+from anunnaki._closing import Closing
 from anunnaki.bus import Bus, Image, ServiceReply, body_of
 from anunnaki.ros1._convert import (
     ConversionError,
@@ -43,7 +44,7 @@ __all__ = ["Bridge"]
 log = logging.getLogger("anunnaki.ros1")
 
 
-class Bridge:
+class Bridge(Closing):
     """Carries a bridge file's topics and services between ROS 1 and the bus.
 
     Args:
@@ -111,9 +112,6 @@ class Bridge:
     def __enter__(self) -> Bridge:
         self.start()
         return self
-
-    def __exit__(self, *exc: object) -> None:
-        self.close()
 
     # -- ROS side ------------------------------------------------------------------------------
     def _declare_ros(self) -> None:

@@ -26,6 +26,7 @@ import threading
 from collections.abc import Callable, Mapping
 from typing import Any, Literal
 
+from anunnaki._closing import Closing
 from anunnaki.bus import Bus, Image, body_of
 from anunnaki.errors import MissingExtraError
 from anunnaki.ros1._bags import bag_message_to_dict
@@ -139,7 +140,7 @@ def _field(store: Any, desc: Any, value: Any, where: str) -> Any:
     return np.array(items, dtype=np.dtype(base))
 
 
-class Ros2ZenohBridge:
+class Ros2ZenohBridge(Closing):
     """ROS 2 topics as zenoh samples (CDR) to and from the bus, as a bridge file says.
 
     Args:
@@ -210,9 +211,6 @@ class Ros2ZenohBridge:
     def __enter__(self) -> Ros2ZenohBridge:
         self.start()
         return self
-
-    def __exit__(self, *exc: object) -> None:
-        self.close()
 
     def _from_ros2(self, t: TopicBridge) -> Callable[[Any], None]:
         def on_sample(sample: Any) -> None:

@@ -29,6 +29,7 @@ from typing import Any
 import numpy as np
 
 from anunnaki import topics
+from anunnaki._closing import Closing
 from anunnaki.bus import Clock, Detections, Image
 from anunnaki.sim._groundtruth import Frame
 from anunnaki.sim._scenario import Scenario, Timeline, load_scenario
@@ -86,7 +87,7 @@ class _Schedule:
     next_tick: int = 0
 
 
-class SimPlatform:
+class SimPlatform(Closing):
     """Base of the simulated platforms: ticks, schedules, camera, clock and ground truth.
 
     Subclasses implement :meth:`_tick` (one physics step), :meth:`_camera` (the camera pose)
@@ -347,9 +348,3 @@ class SimPlatform:
                 log.debug("sim: closing %r failed", d, exc_info=True)
         self._declared.clear()
         self.scene.close()
-
-    def __enter__(self) -> SimPlatform:
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self.close()

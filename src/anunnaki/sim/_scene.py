@@ -21,6 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
+from anunnaki._closing import Closing
 from anunnaki.sim._camera import random_camera, random_light, sky_rows
 from anunnaki.sim._groundtruth import (
     MIN_LABEL_HEIGHT,
@@ -67,7 +68,7 @@ class _Body:
     extra: dict[str, float] = field(default_factory=dict)
 
 
-class Scene:
+class Scene(Closing):
     """A pybullet world for one platform and layout, rendering :class:`Frame` s.
 
     One pybullet client per scene; close it (or use ``with``). Class-object bodies are in
@@ -414,12 +415,6 @@ class Scene:
         """Disconnect the pybullet client and remove temporary files (idempotent)."""
         self.world.close()
         shutil.rmtree(self._tmp, ignore_errors=True)
-
-    def __enter__(self) -> Scene:
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self.close()
 
 
 def dataset_frames(

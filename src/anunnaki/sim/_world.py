@@ -19,6 +19,7 @@ from typing import Any
 
 import numpy as np
 
+from anunnaki._closing import Closing
 from anunnaki.errors import MissingExtraError
 
 __all__ = ["Camera", "World", "pybullet", "quiet"]
@@ -144,7 +145,7 @@ class Light:
     specular: float = 0.05
 
 
-class World:
+class World(Closing):
     """A headless pybullet client (``DIRECT``) with pybullet_data on its search path.
 
     Close it (or use ``with``): a client holds native memory until disconnected.
@@ -265,9 +266,3 @@ class World:
             self._closed = True
             with contextlib.suppress(Exception):
                 pybullet.disconnect(physicsClientId=self.client)
-
-    def __enter__(self) -> World:
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self.close()

@@ -36,6 +36,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from anunnaki._closing import Closing
+
 __all__ = ["Decision", "InputRow", "Knowledge", "TacticRow", "VerdictRow"]
 
 SCHEMA_VERSION = 1
@@ -122,7 +124,7 @@ def _dumps(obj: Any) -> str:
         return json.dumps(obj, separators=(",", ":"), default=str)
 
 
-class Knowledge:
+class Knowledge(Closing):
     """The SQLite knowledge base of one run.
 
     Args:
@@ -289,12 +291,6 @@ class Knowledge:
                 self._flush()
             finally:
                 self._db.close()
-
-    def __enter__(self) -> Knowledge:
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self.close()
 
     # -- reading ------------------------------------------------------------------------
     def tactics(self) -> dict[str, TacticRow]:

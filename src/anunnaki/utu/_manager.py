@@ -41,6 +41,7 @@ from pathlib import Path
 from typing import Any
 
 from anunnaki import topics
+from anunnaki._closing import Closing
 from anunnaki.bus import AnalysisState, InprocBus, RunStop, body_of
 from anunnaki.clock import Clock, SimClock, WallClock
 from anunnaki.errors import AnunnakiError
@@ -79,7 +80,7 @@ log = logging.getLogger("anunnaki.utu")
 _BUS_THREADS = ("anunnaki-bus-",)
 
 
-class AutonomicManager:
+class AutonomicManager(Closing):
     """Utu: the MAPE-K loop over a goal model and tactics, in one process.
 
     Args:
@@ -722,12 +723,6 @@ class AutonomicManager:
             notifier.close()
         with self._step_lock:
             self.knowledge.close()
-
-    def __enter__(self) -> AutonomicManager:
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self.close()
 
 
 class Watchdog:

@@ -47,7 +47,6 @@ from datetime import UTC, datetime
 from email.message import EmailMessage
 from email.utils import format_datetime
 from pathlib import Path
-from types import TracebackType
 from typing import Any, Final, Literal, Self
 from urllib.parse import urlsplit
 
@@ -60,6 +59,7 @@ from pydantic import (
     model_validator,
 )
 
+from anunnaki._closing import Closing
 from anunnaki.tactics import NotifyAction
 
 __all__ = [
@@ -484,7 +484,7 @@ def _log_json(value: Any) -> str:
 # --------------------------------------------------------------------------- the notifier
 
 
-class Notifier:
+class Notifier(Closing):
     """Sends notifications; never raises for a delivery failure.
 
     Use :meth:`send` from a thread that may block for up to the configured timeouts, or
@@ -596,17 +596,6 @@ class Notifier:
         with self._lock:
             self._closed = True
         self._executor.shutdown(wait=True)
-
-    def __enter__(self) -> Self:
-        return self
-
-    def __exit__(
-        self,
-        exc_type: type[BaseException] | None,
-        exc: BaseException | None,
-        tb: TracebackType | None,
-    ) -> None:
-        self.close()
 
     # ----------------------------------------------------------------------- plumbing
 
