@@ -5,7 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Literal
 
-from anunnaki.errors import ModelFileError
+from anunnaki.errors import ModelFileError, render_location
 
 __all__ = ["Finding", "Severity"]
 
@@ -25,16 +25,14 @@ class Finding:
 
     def render(self) -> str:
         """Render as ``file:line: severity: element: message (hint: …)``."""
-        where = self.path or "<input>"
-        if self.line is not None:
-            where += f":{self.line}"
-        text = f"{where}: {self.severity}: "
-        if self.element:
-            text += f"{self.element}: "
-        text += self.message
-        if self.hint:
-            text += ("\n" if "\n" in self.message else " ") + f"(hint: {self.hint})"
-        return text
+        return render_location(
+            self.message,
+            path=self.path,
+            line=self.line,
+            element=self.element,
+            hint=self.hint,
+            severity=self.severity,
+        )
 
     def to_error(self) -> ModelFileError:
         """Turn into the exception a strict loader raises."""

@@ -15,7 +15,36 @@ __all__ = [
     "ExpressionError",
     "MissingExtraError",
     "ModelFileError",
+    "render_location",
 ]
+
+
+def render_location(
+    message: str,
+    *,
+    path: str | None = None,
+    line: int | None = None,
+    element: str | None = None,
+    hint: str | None = None,
+    severity: str | None = None,
+) -> str:
+    """Render ``file:line: [severity: ]element: message (hint: …)``.
+
+    The one shape of every problem found in a user file: errors and
+    :class:`~anunnaki._findings.Finding`.
+    """
+    where = path or "<input>"
+    if line is not None:
+        where += f":{line}"
+    text = f"{where}: "
+    if severity:
+        text += f"{severity}: "
+    if element:
+        text += f"{element}: "
+    text += message
+    if hint:
+        text += ("\n" if "\n" in message else " ") + f"(hint: {hint})"
+    return text
 
 
 class AnunnakiError(Exception):
@@ -52,16 +81,9 @@ class ModelFileError(AnunnakiError):
 
     def render(self) -> str:
         """Return ``file:line: element: message (hint: …)``."""
-        where = self.path or "<input>"
-        if self.line is not None:
-            where += f":{self.line}"
-        text = f"{where}: "
-        if self.element:
-            text += f"{self.element}: "
-        text += self.message
-        if self.hint:
-            text += ("\n" if "\n" in self.message else " ") + f"(hint: {self.hint})"
-        return text
+        return render_location(
+            self.message, path=self.path, line=self.line, element=self.element, hint=self.hint
+        )
 
 
 class ExpressionError(ModelFileError):
