@@ -342,6 +342,33 @@ def test_manager_resumes_tactic_state_from_its_knowledge(tmp_path: Path) -> None
     m2.close()
 
 
+def test_a_restarted_manager_warms_up_again_before_unknown_goals_count(tmp_path: Path) -> None:
+    # Down long enough for every restored value to go stale: at its first step the restarted
+    # manager knows nothing fresh. Unknown goals count only after `warmup` from that step
+    # (as at a start), so it does not act on its own outage; then they count as before.
+    db = tmp_path / "run.db"
+    tactics = parse_tactics_yaml(TACTICS.format(cooldown=0, approval="false"))
+    m = AutonomicManager(
+        rover_model(), tactics, knowledge=Knowledge(db), actuator=RecordingActuator(), warmup=0.5
+    )
+    drive(m, ticks(0, 1.0))
+    assert kinds(m) == []
+    m.knowledge.close()  # as if the process died here
+    act2 = RecordingActuator()
+    m2 = AutonomicManager(
+        rover_model(), tactics, knowledge=Knowledge(db), actuator=act2, warmup=0.5
+    )
+    for t in ticks(6.0, 6.4):  # no inputs arrive: G3 is unknown
+        m2.step(t)
+    assert m2.analyzer.evaluator.state("G3").status is None
+    assert [k for _, k, _ in kinds(m2) if k == "started"] == []  # warming up again
+    for t in ticks(6.5, 6.7):
+        m2.step(t)
+    started = [(t, tac) for t, k, tac in kinds(m2) if k == "started"]
+    assert started == [(6.5, "hand-over")]  # unknown counts again, warm-up over
+    m2.close()
+
+
 def test_config_builds_a_manager(tmp_path: Path) -> None:
     cfg = parse_config(
         "anunnaki: utu/1\nname: rover\ngoal_model: goals.yaml\nbinding: binding.yaml\n"

@@ -191,7 +191,6 @@ class AutonomicManager(Closing):
         self._pull: dict[str, Any] = {}
         self._clock_sub: Any = None
         self._stepped = False
-        self._started_at: float | None = None
         self._last_eligible: list[str] = []
         self._state_cache: AnalysisState | None = None
         if isinstance(self.actuator, BusActuator) and self.actuator.on_notified is None:

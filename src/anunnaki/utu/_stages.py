@@ -377,6 +377,7 @@ class AnalyzeStage:
         self.analyzer = Analyzer(parts.model, parts.tactics, knowledge)
         self.now = 0.0
         self.started_at: float | None = None
+        self.warm_from: float | None = None  # the warm-up's start: the first step, or a restart's
         self.cycles = 0
         self.taken = 0
         self.seq = 0
@@ -400,6 +401,10 @@ class AnalyzeStage:
         last = kb.last_t()
         first = kb.first_input_t()
         self.started_at = first if first is not None else last
+        # The warm-up starts again at the restarted part's first step: restored values may
+        # have gone stale while it was down, and fresh inputs get `warmup` seconds to arrive
+        # before an unknown goal counts (in-flight tactics keep their deadlines).
+        self.warm_from = None
         for row in kb.inputs(since=last - RESTORE_WINDOW):
             if row.topic.startswith("__"):
                 continue
@@ -434,9 +439,10 @@ class AnalyzeStage:
             return None
         t = max(float(batch.t), self.now)
         inputs = batch.inputs
-        if self.started_at is None:
-            self.started_at = min([t, *(i.t for i in inputs)])
-        a.warming_up = t - self.started_at < self.parts.config.warmup
+        if self.warm_from is None:
+            self.warm_from = min([t, *(i.t for i in inputs)])
+            self.started_at = self.warm_from if self.started_at is None else self.started_at
+        a.warming_up = t - self.warm_from < self.parts.config.warmup
         for item in inputs:
             at = min(max(item.t, self.now), t)
             if self.monitor.take(item.topic, item.msg, at):
@@ -515,6 +521,7 @@ class AnalyzeStage:
             changed += a.record_changes(t)
             # A dead publisher is a known fact, not data still arriving: end the warm-up.
             self.started_at = min(self.started_at or t, t - self.parts.config.warmup)
+            self.warm_from = self.started_at
             a.warming_up = False
             op["agents"] = [ag.id for ag in agents]
         elif kind == "reload" and "refused" not in op:
