@@ -314,21 +314,25 @@ def test_hot_reload_swaps_valid_files_and_refuses_invalid_ones(tmp_path: Path) -
     assert m.analyzer.evaluator.value("rate(A3)") is not None
 
 
+def on_knowledge(db: Path, cooldown: float) -> tuple[AutonomicManager, RecordingActuator]:
+    """A manager on the TACTICS set (warm-up 0.5 s) whose knowledge is the file ``db``."""
+    actuator = RecordingActuator()
+    tactics = parse_tactics_yaml(TACTICS.format(cooldown=cooldown, approval="false"))
+    m = AutonomicManager(
+        rover_model(), tactics, knowledge=Knowledge(db), actuator=actuator, warmup=0.5
+    )
+    return m, actuator
+
+
 def test_manager_resumes_tactic_state_from_its_knowledge(tmp_path: Path) -> None:
     db = tmp_path / "run.db"
-    tactics = parse_tactics_yaml(TACTICS.format(cooldown=30, approval="false"))
-    m = AutonomicManager(
-        rover_model(), tactics, knowledge=Knowledge(db), actuator=RecordingActuator(), warmup=0.5
-    )
+    m, _ = on_knowledge(db, cooldown=30)
     drive(m, ticks(0, 1.0))
     drive(m, ticks(1.1, 1.2), category_at=lambda t: 1)  # hand-over awaiting its postcondition
     assert m.planner.runtimes["hand-over"].state == "awaiting"
     deadline = m.planner.runtimes["hand-over"].deadline
     m.knowledge.close()  # as if the process died here (the DB is all that remains)
-    act2 = RecordingActuator()
-    m2 = AutonomicManager(
-        rover_model(), tactics, knowledge=Knowledge(db), actuator=act2, warmup=0.5
-    )
+    m2, act2 = on_knowledge(db, cooldown=30)
     rt = m2.planner.runtimes["hand-over"]
     assert rt.state == "awaiting" and rt.deadline == deadline
     resumed = [d for d in m2.knowledge.decisions() if d.kind == "resumed"]
@@ -347,17 +351,11 @@ def test_a_restarted_manager_warms_up_again_before_unknown_goals_count(tmp_path:
     # manager knows nothing fresh. Unknown goals count only after `warmup` from that step
     # (as at a start), so it does not act on its own outage; then they count as before.
     db = tmp_path / "run.db"
-    tactics = parse_tactics_yaml(TACTICS.format(cooldown=0, approval="false"))
-    m = AutonomicManager(
-        rover_model(), tactics, knowledge=Knowledge(db), actuator=RecordingActuator(), warmup=0.5
-    )
+    m, _ = on_knowledge(db, cooldown=0)
     drive(m, ticks(0, 1.0))
     assert kinds(m) == []
     m.knowledge.close()  # as if the process died here
-    act2 = RecordingActuator()
-    m2 = AutonomicManager(
-        rover_model(), tactics, knowledge=Knowledge(db), actuator=act2, warmup=0.5
-    )
+    m2, _ = on_knowledge(db, cooldown=0)
     for t in ticks(6.0, 6.4):  # no inputs arrive: G3 is unknown
         m2.step(t)
     assert m2.analyzer.evaluator.state("G3").status is None
