@@ -491,17 +491,19 @@ class AutonomicManager:
         self._enqueue_op({"op": "run_stop", "caller": caller, "reason": reason})
 
     # -- the step -----------------------------------------------------------------------------
-    def step(self, now: float | None = None) -> None:
+    def step(self, now: float | None = None, *, execute: bool = True) -> None:
         """Run one deterministic cycle at time ``now`` (default: the clock's).
 
         Every queued input and operator call is taken in arrival order, the passing of time
         is applied, the goal model re-evaluated (incrementally), the tactics selected,
-        queued, started and checked.
+        queued, started and checked. ``execute=False`` only analyses (a replay of a step
+        that a per-node run's execute node never acted on, having died): operator calls
+        and tactics then stay unperformed, as they did.
         """
         with self._step_lock:
-            self._step(now, react=False)
+            self._step(now, react=False, execute=execute)
 
-    def _step(self, now: float | None, *, react: bool) -> None:
+    def _step(self, now: float | None, *, react: bool, execute: bool = True) -> None:
         with self._lock:
             self._drain()
             inputs = list(self._inputs)
@@ -520,6 +522,10 @@ class AutonomicManager:
             return  # nothing to decide now: the next time-driven step goes on from here
         self._last_eligible = list(state.eligible or [])
         kb = self.knowledge
+        if not execute:
+            a.finish(None, state.seq)
+            kb.flush()
+            return
         before = kb.decisions_written
         status = self.execute_stage.begin(state)
         start = self.plan_stage.plan(status)
