@@ -19,6 +19,9 @@ Kill matrix (``kill_trials``)
       the launch then ended by itself);
     * ``one-process``: ``anunnaki run LAUNCH`` (the composed manager), ``kill -9`` of that
       process (victim ``manager``);
+    * ``by-hand``: the five nodes started by hand (``anunnaki node NAME --config LAUNCH``,
+      no launch supervising them), ``kill -9`` of one: a survivor must run-stop the
+      platform;
     * ``loop``: the whole loop of ``examples/rover/sim.yaml`` taken apart so that each part
       can be killed alone: Utu (``anunnaki run``, the composed manager, goals-lm/binding-lm/
       tactics-lm, sim clock), the LEC/model manager (``LecNode``, ``/lm_manager``) and the
@@ -34,14 +37,18 @@ Kill matrix (``kill_trials``)
     0.3 s before the kill that the knowledge base does not hold (by ``n``), plus decisions
     the launch printed that it does not hold; ``replay_identical``, ``anunnaki.utu.replay``
     of the knowledge base after the run (``false`` also when it cannot be replayed, with
-    the reason).
+    the reason); ``platform_stops`` (kill matrix), the ``/rover/stop`` requests the platform
+    received until its guard's time (nodes by hand print no decisions: their ``lost``
+    counts inputs only).
 
 Flood (``flood``)
-    The composed manager spinning (20 Hz, wall clock) on the in-process bus with the
-    platform nominal, then 50,000 messages a second (``--flood-rate``) on
-    ``/rover/ultrasonic`` for 10 s (``--flood-seconds``; 3 s with ``--quick``) from another
-    thread. ``max_cycle_gap_ms`` is the longest time between the starts of two manager
-    steps during the flood, ``period_ms`` the step period; ``rss_mb_before`` is this
+    The composed manager spinning (20 Hz, wall clock, its knowledge base in a temporary
+    file as ``anunnaki run`` keeps it) on the in-process bus with the platform nominal,
+    then 50,000 messages a second (``--flood-rate``) on ``/rover/ultrasonic`` for 10 s
+    (``--flood-seconds``; 3 s with ``--quick``) from another thread. ``max_cycle_gap_ms``
+    is the longest time between the starts of two manager steps during the flood,
+    ``period_ms`` the step period, ``max_step_ms`` the longest step and
+    ``max_step_cpu_ms`` the time its thread ran in it; ``rss_mb_before`` is this
     process's resident memory before the flood, ``rss_mb_after`` 2 s after it (after a
     ``gc.collect()``).
 
@@ -294,6 +301,20 @@ def write_launch(tmp: Path, platform: str) -> Path:
     return path
 
 
+def _child(argv: list[str]) -> subprocess.Popen[str]:
+    """A child process of this script, its output merged and read as text."""
+    return subprocess.Popen(
+        argv,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        stdin=subprocess.DEVNULL,
+        text=True,
+        cwd=ROOT,
+        env={**os.environ, "PYTHONUNBUFFERED": "1"},
+        start_new_session=True,
+    )
+
+
 @dataclass
 class Launch:
     """``anunnaki run`` in a child process; its output read on a thread."""
@@ -304,16 +325,7 @@ class Launch:
     ended_at: float | None = None  # time.perf_counter() when the process ended
 
     def start(self) -> None:
-        self.proc = subprocess.Popen(
-            self.argv,
-            stdout=subprocess.PIPE,
-            stderr=subprocess.STDOUT,
-            stdin=subprocess.DEVNULL,
-            text=True,
-            cwd=ROOT,
-            env={**os.environ, "PYTHONUNBUFFERED": "1"},
-            start_new_session=True,
-        )
+        self.proc = _child(self.argv)
         threading.Thread(target=self._read, daemon=True).start()
         threading.Thread(target=self._wait, daemon=True).start()
 
@@ -368,6 +380,62 @@ class Launch:
         # node processes left behind by a killed launch see their stdin close and exit
 
 
+class HandNodes(Launch):
+    """The five nodes started by hand (``anunnaki node``, no launch), output merged.
+
+    Shaped like :class:`Launch` for the kill trial: ``pids``, ``ready``, ``tracebacks``;
+    nothing prints decisions (``printed`` is empty), and ``ended_at`` stays ``None`` (the
+    survivors keep running, run-stopped).
+    """
+
+    def __init__(self, launch: Path, db: Path) -> None:
+        super().__init__([])
+        self.procs: dict[str, subprocess.Popen[str]] = {}
+        self.launch_path, self.db = launch, db
+
+    def start(self) -> None:
+        for name in NODE_NAMES:
+            argv = [sys.executable, "-m", "anunnaki.cli.main", "node", name]
+            argv += ["--config", str(self.launch_path), "--knowledge", str(self.db)]
+            argv += ["--rate", str(NODE_RATES[name])]
+            if name == "analyze":
+                argv += ["--expect", "plan,execute"]
+            self.procs[name] = proc = _child(argv)
+            threading.Thread(target=self._read_node, args=(proc,), daemon=True).start()
+
+    def _read_node(self, proc: subprocess.Popen[str]) -> None:
+        assert proc.stdout is not None
+        for line in proc.stdout:
+            self.lines.append(line.rstrip("\n"))
+
+    def pids(self) -> dict[str, int]:
+        return {n: p.pid for n, p in self.procs.items()}
+
+    def ready(self) -> bool:
+        up = {m.group(1) for ln in self.lines if (m := re.match(r"node (\w+) ready", ln))}
+        if up >= set(NODE_NAMES):
+            return True
+        dead = [n for n, p in self.procs.items() if p.poll() is not None]
+        if dead:
+            raise RuntimeError(f"node {dead[0]} ended before it was ready:\n" + self.tail())
+        return False
+
+    def printed(self) -> list[tuple[float, str, str]]:
+        return []
+
+    def stop(self) -> None:
+        for proc in self.procs.values():
+            if proc.poll() is None:
+                with contextlib.suppress(ProcessLookupError):
+                    proc.send_signal(signal.SIGTERM)
+        for proc in self.procs.values():
+            try:
+                proc.wait(timeout=20)
+            except subprocess.TimeoutExpired:
+                os.killpg(proc.pid, signal.SIGKILL)
+                proc.wait(timeout=10)
+
+
 def _printed_not_stored(printed: list[tuple[float, str, str]], db: Path, t0: float) -> int:
     with contextlib.closing(open_run(db)) as kb:
         stored = [(round(d.t - t0, 3), d.kind, d.tactic or "-") for d in kb.decisions()]
@@ -404,6 +472,8 @@ def _replay(db: Path) -> tuple[bool, str]:
 
 def _utu_launch(tmp: Path, platform: str, deployment: str) -> tuple[Launch, Path]:
     db = tmp / "kb.db"
+    if deployment == "by-hand":
+        return HandNodes(write_launch(tmp, platform), db), db
     argv = [sys.executable, "-m", "anunnaki.cli.main", "run", str(write_launch(tmp, platform))]
     argv += ["--knowledge", str(db), "--until", "120"]
     if deployment == "processes":
@@ -412,7 +482,7 @@ def _utu_launch(tmp: Path, platform: str, deployment: str) -> tuple[Launch, Path
 
 
 def kill_trial(deployment: str, victim: str, delay: float, deadline: float) -> dict[str, Any]:
-    """One kill -9 of ``victim`` in ``deployment`` (``processes`` or ``one-process``).
+    """One kill -9 of ``victim`` in ``deployment`` (``processes``, ``one-process``, ``by-hand``).
 
     The platform runs first (as a robot would) and Utu joins its zenoh session.
     """
@@ -437,17 +507,20 @@ def kill_trial(deployment: str, victim: str, delay: float, deadline: float) -> d
                 raise RuntimeError("no hand-over to manual mode:\n" + launch.tail())
             rover.arm()
             threading.Event().wait(delay)
-            pid = launch.pids()[victim] if deployment == "processes" else launch.proc.pid  # type: ignore[union-attr]
+            pid = launch.pids()[victim] if deployment != "one-process" else launch.proc.pid  # type: ignore[union-attr]
             killed_mono = time.monotonic()
             killed = time.perf_counter()
             os.kill(pid, signal.SIGKILL)
             rover.failsafe.wait(deadline)
             wait_until(lambda: rover.guard_at is not None, 2.0)
             ended = launch.ended_at  # by itself, before this script stops it
+            # Before the survivors are stopped (nodes by hand run-stop on each departure).
+            stops = sum(1 for c in rover.commands if c[1] == "stop")
             stop.set()
             launch.stop()
             trial |= _trial_figures(rover, launch, db, killed, (listening, killed_mono))
             trial["launch_ended_ms"] = None if ended is None else round((ended - killed) * 1e3, 1)
+            trial["platform_stops"] = stops
         finally:
             stop.set()
             launch.stop()
@@ -691,28 +764,41 @@ def rss_mb() -> float:
 
 
 class _TimedManager(AutonomicManager):
-    """The composed manager, stamping the start of each step (``time.perf_counter``)."""
+    """The composed manager, stamping each step: its start (``time.perf_counter``), how long
+    it took and how much of that its thread ran (``time.thread_time``: the rest it waited
+    for the processor or the interpreter lock)."""
 
     stamps: list[float]
+    spans: list[tuple[float, float, float]]  # (start, wall s, thread cpu s)
 
-    def step(self, now: float | None = None) -> Any:
-        self.stamps.append(time.perf_counter())
-        return super().step(now)
+    def step(self, now: float | None = None, *, execute: bool = True) -> Any:
+        start, cpu = time.perf_counter(), time.thread_time()
+        self.stamps.append(start)
+        try:
+            return super().step(now, execute=execute)
+        finally:
+            wall = time.perf_counter() - start
+            self.spans.append((start, wall, time.thread_time() - cpu))
 
 
 def flood(seconds: float, rate: float) -> dict[str, Any]:
     """The composed manager under ``rate`` messages a second for ``seconds`` (in-process bus)."""
     hub = InprocHub()
-    cfg = parse_config(UTU_CONFIG.format(rover=ROVER))
+    # A knowledge file, as ``anunnaki run`` keeps one (a temporary one unless told): an
+    # in-memory knowledge base holds every input the flood gave in this process's memory.
+    tmp = tempfile.TemporaryDirectory(prefix="faults-flood-")
+    knowledge = f"knowledge: {Path(tmp.name) / 'flood.db'}\n"
+    cfg = parse_config(UTU_CONFIG.format(rover=ROVER) + knowledge)
     period = 1.0 / NODE_RATES["analyze"]
     stop, halt = threading.Event(), threading.Event()
     with (
+        tmp,
         open_bus("inproc", hub=hub, name="utu") as utu_bus,
         open_bus("inproc", hub=hub, name="platform") as rover_bus,
         open_bus("inproc", hub=hub, name="flood") as flood_bus,
     ):
         manager = _TimedManager.from_config(cfg, bus=utu_bus)
-        manager.stamps = []
+        manager.stamps, manager.spans = [], []
         spinner = threading.Thread(
             target=manager.spin, args=(halt,), kwargs={"rate": 1 / period}, daemon=True
         )
@@ -728,6 +814,10 @@ def flood(seconds: float, rate: float) -> dict[str, Any]:
             gc.collect()
             after = rss_mb()
             stamps = [s for s in manager.stamps if began <= s <= ended]
+            longest = max(
+                (sp for sp in manager.spans if began <= sp[0] <= ended), default=None,
+                key=lambda sp: sp[1],
+            )  # fmt: skip
             gaps = [b - a for a, b in itertools.pairwise(stamps)]
             if stamps:
                 gaps += [stamps[0] - began, ended - stamps[-1]]
@@ -740,6 +830,7 @@ def flood(seconds: float, rate: float) -> dict[str, Any]:
             rover.close()
             manager.close()
     return {
+        "knowledge": "file",
         "seconds": seconds,
         "rate_asked": rate,
         "sent": sent,
@@ -747,6 +838,8 @@ def flood(seconds: float, rate: float) -> dict[str, Any]:
         "cycles": len(stamps),
         "max_cycle_gap_ms": round(max(gaps) * 1000, 1) if gaps else None,
         "period_ms": round(period * 1000, 1),
+        "max_step_ms": None if longest is None else round(longest[1] * 1000, 1),
+        "max_step_cpu_ms": None if longest is None else round(longest[2] * 1000, 1),
         "rss_mb_before": round(before, 1),
         "rss_mb_after": round(after, 1),
         "loop_alive": alive,
@@ -1055,6 +1148,7 @@ def _aims(result: dict[str, Any]) -> dict[str, Any]:
 def _trials(quick: bool, deadline: float, only: list[str] | None) -> Iterator[dict[str, Any]]:
     delays = KILL_DELAYS[:1] if quick else KILL_DELAYS
     plan = [("processes", node) for node in NODE_NAMES] + [("one-process", "manager")]
+    plan += [("by-hand", node) for node in NODE_NAMES]
     for deployment, victim in plan:
         if only and victim not in only:
             continue

@@ -16,12 +16,25 @@ from pathlib import Path
 from typing import Any
 
 import pytest
+from helpers_procs import wait_until
 
-from anunnaki.bus import open_bus
+from anunnaki.bus import RunStop, open_bus
+from anunnaki.clock import ManualClock
 from anunnaki.errors import AnunnakiError
 from anunnaki.managed import ScriptedSystem
+from anunnaki.topics import UTU_NODES
 from anunnaki.trace import read_trace
-from anunnaki.utu import ActionOutcome, AutonomicManager, BusActuator, Knowledge, parse_config
+from anunnaki.utu import (
+    ActionOutcome,
+    AnalyzeNode,
+    AutonomicManager,
+    BusActuator,
+    Knowledge,
+    UtuNode,
+    build_node,
+    parse_config,
+    step_nodes,
+)
 from anunnaki.utu._replay import (
     KINDS,
     RunLogError,
@@ -511,3 +524,52 @@ def test_recording_is_deterministic(rover_run: Path, tmp_path: Path) -> None:
         assert [(r.t, r.topic, r.msg) for r in a.inputs()] == [
             (r.t, r.topic, r.msg) for r in b.inputs()
         ]
+
+
+def test_a_run_stop_that_execute_never_acted_on_is_not_acted_on_in_replay(
+    tmp_path: Path,
+) -> None:
+    """Issue #12: a run-stop reached the monitor after the execute node had gone.
+
+    The analyze node recorded the operator call and ended the step; nothing acted on it (the
+    execute node was dead), so a replay must not either — it diverged (23 of 24 trials in
+    the fault benchmark). The step's marker says that execute was gone.
+    """
+    db = tmp_path / "run.db"
+    cfg = parse_config(config(db))
+    kb = Knowledge(db)
+    with open_bus("inproc") as bus, Rover(bus, ROVER / "trace.jsonl") as rover:
+        nodes: dict[str, UtuNode] = {
+            name: build_node(name, cfg, bus=bus, knowledge=kb, clock=ManualClock())
+            for name in UTU_NODES
+        }
+        analyze = nodes["analyze"]
+        assert isinstance(analyze, AnalyzeNode)
+        try:
+            alive = analyze.stage.execute_alive
+            assert alive is not None
+            wait_until(alive, 10.0, "the analyze node to see execute up")  # watch's thread
+            for t in rover.instants():
+                if t > 27.0:
+                    break
+                rover.step(t)
+                step_nodes(nodes, t)
+            nodes.pop("execute").close()  # as kill -9 withdraws its token
+            wait_until(lambda: not alive(), 10.0, "the analyze node to see execute gone")
+            bus.publish("/utu/run_stop", RunStop(reason="node plan died", caller="launch:rover"))
+            ops = nodes["monitor"]._ops  # type: ignore[attr-defined]
+            wait_until(lambda: ops, 10.0, "the monitor to queue the run-stop")
+            step_nodes(nodes, 27.05)
+        finally:
+            for node in nodes.values():
+                node.close()
+            rover.close()
+    ticks = [r for r in kb.inputs() if r.topic == "__tick__" and r.t == 27.05]
+    ops = [r for r in kb.inputs() if r.topic == "__operator__"]
+    assert [r.msg for r in ticks] == [{"executed": False}]
+    assert [r.msg["op"] for r in ops] == ["run_stop"]
+    assert not [d for d in kb.decisions() if d.kind == "run_stop"]  # nobody acted on it
+    kb.close()
+    report = replay(db)
+    assert report.identical, report.summary()
+    assert report.replayed_decisions == report.decisions > 0

@@ -20,7 +20,7 @@ from typing import Any
 from anunnaki.bus import BusConfig, open_bus
 from anunnaki.cli import _dashboard
 from anunnaki.launch import WritesReports, load_launch, run_launch, signals_to
-from anunnaki.utu import NODE_NAMES, NodeConfigError, build_node
+from anunnaki.utu import NODE_NAMES, NodeConfigError, PeerWatch, build_node
 
 __all__ = ["add_parser", "run", "run_node"]
 
@@ -96,6 +96,12 @@ def add_parser(sub: Any) -> None:
     n.add_argument("--mode", choices=("peer", "client", "router"), help="zenoh mode")
     n.add_argument("--bus-json", help=argparse.SUPPRESS)
     n.add_argument("--exit-with-parent", action="store_true", help=argparse.SUPPRESS)
+    n.add_argument(
+        "--supervised",
+        action="store_true",
+        help="a supervisor (anunnaki run) run-stops the platform when a node dies; without "
+        "it, the surviving nodes do (one of them, once per death)",
+    )
     n.add_argument(
         "--expect",
         default="",
@@ -178,6 +184,10 @@ def _watch_parent(stop: threading.Event, wake: Any) -> None:
     threading.Thread(target=watch, name="anunnaki-parent-watch", daemon=True).start()
 
 
+def _say(line: str) -> None:
+    print(line, flush=True)
+
+
 def run_node(args: argparse.Namespace) -> int:
     """Run one node until a signal; returns the exit code."""
     _logging(args.verbose)
@@ -221,6 +231,7 @@ def run_node(args: argparse.Namespace) -> int:
                 raise NodeConfigError("--expect applies to the analyze node only")
             extra["expect"] = expect
         node = build_node(args.name, parts, bus=bus, rate=rate, **extra)
+        peers = None if args.supervised else PeerWatch(args.name, bus, utu, say=_say)
         try:
             if args.exit_with_parent:
                 _watch_parent(stop, node.wake)
@@ -232,5 +243,7 @@ def run_node(args: argparse.Namespace) -> int:
             )
             node.spin(stop)
         finally:
+            if peers is not None:
+                peers.close()
             node.close()
     return 0

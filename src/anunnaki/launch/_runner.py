@@ -529,6 +529,7 @@ class _Runner:
             "--bus-json",
             bus_config.model_dump_json(exclude_none=True),
             "--exit-with-parent",
+            "--supervised",  # the launch run-stops the platform when a node dies
             *self._expect_args(name),
         ]
 

@@ -50,6 +50,7 @@ from anunnaki.utu._parts import (
     load_tactics_text,
     open_knowledge,
 )
+from anunnaki.utu._peers import ACT_ORDER, PeerWatch
 from anunnaki.utu._replay import (
     KINDS,
     ReplayReport,
@@ -73,6 +74,7 @@ from anunnaki.utu._stages import (
 )
 
 __all__ = [
+    "ACT_ORDER",
     "KINDS",
     "NODE_NAMES",
     "ActionOutcome",
@@ -98,6 +100,7 @@ __all__ = [
     "MonitorStage",
     "NodeConfigError",
     "NodeName",
+    "PeerWatch",
     "PlanNode",
     "PlanStage",
     "Planner",

@@ -50,6 +50,7 @@ from anunnaki.tactics import TacticSet
 from anunnaki.utu._actions import ActionRunner, ThreadRunner
 from anunnaki.utu._actuators import BusActuator, RecordingActuator
 from anunnaki.utu._config import RunStopConfig, UtuConfig
+from anunnaki.utu._intake import IntakeBudget
 from anunnaki.utu._knowledge import Knowledge
 from anunnaki.utu._mape import Actuator, Analyzer, Executor, Monitor, Planner
 from anunnaki.utu._parts import UtuParts, load_parts, load_tactics_text
@@ -186,6 +187,8 @@ class AutonomicManager(Closing):
         self._ops: deque[dict[str, Any]] = deque()
         self._lock = threading.Lock()  # guards the two queues above
         self._step_lock = threading.Lock()  # one step at a time (spin, inline reactions)
+        self._step_wanted = False  # the spinning thread waits for the lock: no inline step
+        self._budget: IntakeBudget | None = None  # live on the wall clock (spin)
         self._wake = threading.Event()
         self._declared: list[Any] = []
         self._pull: dict[str, Any] = {}
@@ -355,6 +358,7 @@ class AutonomicManager(Closing):
         if (
             self._live
             and self._inline
+            and not self._step_wanted  # the spinning thread would wait behind a flood's steps
             and not threading.current_thread().name.startswith(_BUS_THREADS)
             and self._step_lock.acquire(blocking=False)
         ):
@@ -372,12 +376,15 @@ class AutonomicManager(Closing):
         """Take what waits on each monitored topic, at most ``intake`` messages per step.
 
         Under a flood the producers refill a queue as fast as it is emptied: a step takes
-        at most ``intake`` (64) from each topic, the rest waits for the next step (or is
-        dropped and counted by the bus when the queue is full), so a step stays short and
-        time-driven checks keep their rate whatever the load.
+        at most ``intake`` from each topic — a spinning loop on the wall clock only what
+        fits in half a period (:class:`~anunnaki.utu._intake.IntakeBudget`) — and the rest
+        waits for the next step (or is dropped and counted by the bus when the queue is
+        full), so a step stays short and time-driven checks keep their rate.
         """
         wall = isinstance(self.clock, WallClock)
         limit = min(self.parts.config.queue, self.parts.config.intake)
+        if self._budget is not None and self._live:
+            limit = min(limit, self._budget.limit())  # a live step's time budget
         for topic, sub in self._pull.items():
             for _ in range(limit):
                 sample = sub.try_recv()
@@ -491,17 +498,28 @@ class AutonomicManager(Closing):
         self._enqueue_op({"op": "run_stop", "caller": caller, "reason": reason})
 
     # -- the step -----------------------------------------------------------------------------
-    def step(self, now: float | None = None) -> None:
+    def step(self, now: float | None = None, *, execute: bool = True) -> None:
         """Run one deterministic cycle at time ``now`` (default: the clock's).
 
         Every queued input and operator call is taken in arrival order, the passing of time
         is applied, the goal model re-evaluated (incrementally), the tactics selected,
-        queued, started and checked.
+        queued, started and checked. ``execute=False`` only analyses (a replay of a step
+        that a per-node run's execute node never acted on, having died): operator calls
+        and tactics then stay unperformed, as they did.
         """
+        self._step_wanted = True
         with self._step_lock:
-            self._step(now, react=False)
+            self._step_wanted = False
+            self._step(now, react=False, execute=execute)
 
-    def _step(self, now: float | None, *, react: bool) -> None:
+    def _step(self, now: float | None, *, react: bool, execute: bool = True) -> None:
+        started = time.perf_counter()
+        taken = self._cycle(now, react=react, execute=execute)
+        if self._budget is not None:
+            self._budget.spent(taken, time.perf_counter() - started)
+
+    def _cycle(self, now: float | None, *, react: bool, execute: bool) -> int:
+        """One step; returns how many inputs it took."""
         with self._lock:
             self._drain()
             inputs = list(self._inputs)
@@ -517,9 +535,13 @@ class AutonomicManager(Closing):
         idle = react and not any(rt.state == "running" for rt in self.planner.runtimes.values())
         state = a.analyze(batch, full=False, unless_idle=self._last_eligible if idle else None)
         if state is None:
-            return  # nothing to decide now: the next time-driven step goes on from here
+            return len(inputs)  # nothing to decide now: the next time-driven step goes on from here
         self._last_eligible = list(state.eligible or [])
         kb = self.knowledge
+        if not execute:
+            a.finish(None, state.seq)
+            kb.flush()
+            return len(inputs)
         before = kb.decisions_written
         status = self.execute_stage.begin(state)
         start = self.plan_stage.plan(status)
@@ -534,6 +556,7 @@ class AutonomicManager(Closing):
         self._stepped = True
         if self.publish_state and (state.changed or ops or decided):
             self._publish_state()
+        return len(inputs)
 
     def _display_state(self) -> AnalysisState:
         if self._state_cache is None or self._state_cache.t != self.now:
@@ -642,6 +665,8 @@ class AutonomicManager(Closing):
         stop = stop or threading.Event()
         period = 1.0 / (rate or self.rate)
         self._inline = isinstance(self.bus, InprocBus)
+        if isinstance(self.clock, WallClock):  # a step's inputs fit in half a period
+            self._budget = IntakeBudget(period / 2, ceiling=self.parts.config.intake)
         self._live = True
         if isinstance(self.actions, ThreadRunner) and not isinstance(self.clock, SimClock):
             self.actions.settle = self.parts.config.action_settle  # live: hold the loop briefly

@@ -497,6 +497,7 @@ class AnalyzeNode(UtuNode):
         )
         self._done = self.pull(topics.CYCLE_DONE, queue=64, expect=CycleDone)
         self._presence = _Presence(self.bus, self.wake)
+        self.stage.execute_alive = lambda: self._presence.alive("execute")
         self.own(self._presence.watch)
 
     @property

@@ -107,9 +107,9 @@ KINDS: tuple[str, ...] = (
 
 ASYNC_KINDS: frozenset[str] = frozenset({"notify_result", "node_died"})
 """Decisions written outside the loop's steps — when a background job finishes (a
-notification delivered or not), or by the launch when a Utu node died (and it run-stopped the
-platform) — at whatever instant the run is at then: not a choice of the loop, so a replay
-neither makes nor compares them."""
+notification delivered or not), or by the launch or a surviving node when a Utu node died
+(and it run-stopped the platform) — at whatever instant the run is at then: not a choice of
+the loop, so a replay neither makes nor compares them."""
 
 MARKERS: tuple[str, str, str] = (TICK, OPERATOR, RESTART)
 """The pseudo-topics of the ``inputs`` table that are not messages: end of a step, operator
@@ -602,7 +602,10 @@ class _Feeder:
         for row in rows:
             if row.topic == TICK:
                 self.pending = None
-                self.manager.step(row.t)
+                # A step execute never acted on (it had died) is analysed only, unless the
+                # run recorded decisions then (execute acted before it went).
+                unexecuted = row.msg.get("executed") is False and row.t not in self.decided_at
+                self.manager.step(row.t, execute=not unexecuted)
                 self.steps += 1
             elif row.topic == RESTART:  # the run was killed and restarted here: so is the replay
                 part = str(row.msg.get("node", "manager"))
@@ -681,7 +684,8 @@ def _replay(
             sources=models.initial,
         )
 
-    feeder = _Feeder(build, {d.t for d in knowledge.decisions()})
+    # The loop's decisions (a launch's or survivor's node_died is not one of them).
+    feeder = _Feeder(build, {d.t for d in knowledge.decisions() if d.kind not in ASYNC_KINDS})
     rows = list(knowledge.inputs())  # read (and decoded) first: a bad row is no replay error
     try:
         feeder.feed(rows)

@@ -373,6 +373,7 @@ class AnalyzeStage:
         self.parts = parts
         self.knowledge = knowledge
         self.origin = origin
+        self.execute_alive: Callable[[], bool] | None = None  # per-node: is execute up?
         self.monitor = Monitor(parts.model, knowledge)
         self.analyzer = Analyzer(parts.model, parts.tactics, knowledge)
         self.now = 0.0
@@ -587,15 +588,16 @@ class AnalyzeStage:
         key = done.seq if done is not None else seq
         if key is None or key not in self._marked:
             return
-        # Older cycles that were never reported end too (their execute went away).
-        for old in [s for s in self._marked if s < key]:
-            self._mark(old, 0)
-        self._mark(key, done.decisions if done is not None else 0)
+        # Unreported while execute is gone: the marker says so (a replay analyses only).
+        gone = done is None and self.execute_alive is not None and not self.execute_alive()
+        for old in [s for s in self._marked if s < key]:  # never reported: end them too
+            self._mark(old, 0, gone)
+        self._mark(key, done.decisions if done is not None else 0, gone)
 
-    def _mark(self, seq: int, decisions: int) -> None:
+    def _mark(self, seq: int, decisions: int, gone: bool) -> None:
         t, marked = self._marked.pop(seq)
         if marked or decisions > 0:
-            self.knowledge.record_input(t, TICK, {})
+            self.knowledge.record_input(t, TICK, {"executed": False} if gone else {})
         self.cycles += 1
 
     @property
