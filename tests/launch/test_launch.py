@@ -462,3 +462,44 @@ def test_a_killed_node_run_stops_the_platform_before_the_launch_ends(tmp_path: P
         died = [d for d in kb.decisions() if d.kind == "node_died"]
     assert len(died) == 1 and died[0].data["ok"] is True, died
     assert died[0].data["service"] == "/rover/stop"
+
+
+@pytest.mark.slow
+def test_a_launch_run_stops_the_platform_when_a_node_started_by_hand_dies(
+    tmp_path: Path,
+) -> None:
+    # Issue #12: in a mixed deployment (a launch runs analyze, plan, execute and knowledge;
+    # the monitor was started by hand next to the sensors) the monitor's death left only the
+    # platform's own guard. The launch watches the nodes it does not run, as survivors do.
+    from anunnaki.bus._zenoh import free_port
+
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    text = looping_example(tmp_path).read_text()
+    text = text.replace("bus: {kind: inproc}", f"bus: {{kind: zenoh, listen: ['{endpoint}']}}")
+    text = text.replace("  monitor: {rate: 50}\n", "").replace("sync: true", "sync: false")
+    p = launch_file(tmp_path, text)
+    db = tmp_path / "run.db"
+    launch = Lines(_anunnaki("run", str(p), "--knowledge", str(db)))
+    monitor = None
+    try:
+        assert launch.wait(r"^ready: ", timeout=60), launch.text
+        monitor = Lines(_anunnaki("node", "monitor", "--config", str(p), "--mode", "client"))
+        assert monitor.wait(r"node monitor ready", timeout=60), monitor.text
+        # The loop is deciding (a fail-safe) before the monitor is killed.
+        assert launch.wait(r"started\s+fail-safe", timeout=120), launch.text
+        monitor.proc.kill()
+        monitor.proc.wait(timeout=10)
+        said = launch.wait(r"node monitor is gone .*: run-stop sent to /rover/stop \((ok)\)", 30)
+        assert said is not None, launch.text
+    finally:
+        if monitor is not None:
+            monitor.close()
+        if launch.proc.poll() is None:
+            launch.proc.send_signal(signal.SIGTERM)
+            launch.proc.wait(timeout=30)
+        launch.close()
+    with Knowledge(db) as kb:
+        died = [d for d in kb.decisions() if d.kind == "node_died"]
+    assert len(died) == 1, died
+    assert died[0].data["by"] == "execute" and died[0].data["ok"] is True
+    assert "/utu_monitor" in died[0].data["problem"]

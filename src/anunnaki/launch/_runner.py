@@ -38,12 +38,14 @@ from anunnaki.launch._supervisor import (
     wait_ready,
 )
 from anunnaki.utu import (
+    ACT_ORDER,
     NODE_NAMES,
     ComposedUtu,
     Decision,
     DecisionTail,
     Knowledge,
     MonitorNode,
+    PeerWatch,
     UtuNode,
     UtuParts,
     build_node,
@@ -444,6 +446,7 @@ class _Runner:
         halt = threading.Event()
         crashed: list[str] = []
         managed = None
+        peers: PeerWatch | None = None
         kb: Knowledge | None = None
         try:
             all_five = set(launch.nodes) == set(NODE_NAMES)
@@ -462,6 +465,7 @@ class _Runner:
             nodes.extend(self._build_nodes(bus, kb, sim, composed=all_five))
             threads.extend(_spin(nodes, halt, crashed))
             wait_ready(bus, list(launch.nodes), timeout=launch.config.ready_timeout, stop=self.stop)
+            peers = self._watch_peers(bus)
             ready_after = time.monotonic() - self.t_start
             self.say(f"ready: {', '.join(launch.nodes)} after {ready_after:.2f} s")
             if self.utu.clock == "wall":
@@ -488,6 +492,8 @@ class _Runner:
             )
         finally:
             self.stop.set()
+            if peers is not None:
+                peers.close()
             _halt(halt, nodes, threads)
             if managed is not None:
                 managed.close()
@@ -497,6 +503,19 @@ class _Runner:
                 with contextlib.suppress(sqlite3.Error):  # the manager may have closed it
                     kb.close()
             bus.close()
+
+    def _watch_peers(self, bus: Bus) -> PeerWatch | None:
+        """Watch the Utu nodes this launch does not run (started by hand elsewhere).
+
+        The launch run-stops the platform when one of its own nodes dies; when one of the
+        others does, the launch's first node in :data:`~anunnaki.utu.ACT_ORDER` acts, as the
+        survivors started by hand do for one another (:class:`~anunnaki.utu.PeerWatch`).
+        ``None`` when the launch runs all five.
+        """
+        ours = [n for n in ACT_ORDER if n in self.launch.nodes]
+        if len(ours) == len(NODE_NAMES):
+            return None
+        return PeerWatch(ours[0], bus, self.utu, say=self.say, hosts=ours)
 
     def _build_nodes(
         self, bus: Bus, kb: Knowledge, sim: SimClock | None, *, composed: bool
@@ -556,6 +575,7 @@ class _Runner:
             self.on_bus(bus)
         children = Children(self.out, self.err)
         managed = None
+        peers: PeerWatch | None = None
         kb: Knowledge | None = None
         try:
             self._header(f"{len(launch.nodes)} nodes, one process each", bus)
@@ -577,6 +597,7 @@ class _Runner:
                 stop=self.stop,
                 procs=children.procs,
             )
+            peers = self._watch_peers(bus)
             ready_after = time.monotonic() - self.t_start
             self.say(f"ready: {', '.join(launch.nodes)} after {ready_after:.2f} s")
             clock_t0 = time.time() if self.utu.clock == "wall" else 0.0
@@ -607,6 +628,8 @@ class _Runner:
             return RunResult(code, reason, printer.decisions, ready_after, ran, pids)
         finally:
             self.stop.set()
+            if peers is not None:
+                peers.close()
             children.stop(launch.config.stop_timeout)
             if managed is not None:
                 managed.close()

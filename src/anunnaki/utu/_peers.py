@@ -28,7 +28,7 @@ import contextlib
 import logging
 import sqlite3
 import threading
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 
 from anunnaki import topics
 from anunnaki.bus import Bus, RunStop
@@ -58,6 +58,9 @@ class PeerWatch:
         bus: The node's bus.
         config: The Utu configuration (its run-stop service and knowledge base file).
         say: Where to tell the operator what happened (default: the log).
+        hosts: The other nodes this process runs under a supervisor of its own (a launch
+            running some of the nodes while others were started by hand): their deaths are
+            the supervisor's to handle, and they count as survivors of the others'.
 
     Attributes:
         acted: The problems this node acted on, in order.
@@ -71,9 +74,12 @@ class PeerWatch:
         config: UtuConfig,
         *,
         say: Callable[[str], object] | None = None,
+        hosts: Iterable[str] = (),
     ) -> None:
-        if name not in UTU_NODES:
-            raise ValueError(f"unknown Utu node {name!r}; nodes: {', '.join(UTU_NODES)}")
+        self.hosts = frozenset({name, *hosts})
+        unknown = sorted(self.hosts - set(UTU_NODES))
+        if unknown:
+            raise ValueError(f"unknown Utu node(s) {unknown}; nodes: {', '.join(UTU_NODES)}")
         self.name = name
         self.bus = bus
         self.config = config
@@ -86,7 +92,7 @@ class PeerWatch:
     def _changed(self, token: str, alive: bool) -> None:
         """From the watch's thread: a token appeared or vanished."""
         node = token.lstrip("/").removeprefix("utu_")
-        if node not in UTU_NODES or node == self.name or token.lstrip("/") == node:
+        if node not in UTU_NODES or node in self.hosts or token.lstrip("/") == node:
             return
         with self._lock:
             if alive:
@@ -95,9 +101,9 @@ class PeerWatch:
             if node not in self._alive:
                 return  # never seen up, or already gone
             self._alive.discard(node)
-            survivors = self._alive | {self.name}
+            survivors = self._alive | self.hosts
         actor = next(n for n in ACT_ORDER if n in survivors)
-        if actor == self.name:
+        if actor in self.hosts:
             self._act(node, loop=all(n in survivors for n in LOOP))
 
     def _act(self, dead: str, *, loop: bool) -> None:
