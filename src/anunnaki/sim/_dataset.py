@@ -8,6 +8,7 @@ layout; this module is its source for the pybullet scenes, next to the scenes th
 from __future__ import annotations
 
 from collections.abc import Iterable
+from functools import partial
 from pathlib import Path
 from typing import Any
 
@@ -33,13 +34,17 @@ def scene_frames(platform: str, **kwargs: Any) -> Iterable[Any]:
     return frames
 
 
-def make_dataset(platform: str, out_dir: str | Path, **kwargs: Any) -> dict[str, Path]:
+def make_dataset(
+    platform: str, out_dir: str | Path, *, clutter: bool = True, **kwargs: Any
+) -> dict[str, Path]:
     """Render a labelled dataset of a simulated platform's scenes, split by layout.
 
-    ``platform`` is ``"rover"`` or ``"uav"``; every other argument is
-    :func:`anunnaki.datasets.make_dataset`'s (``per_layout``, ``width``, ``height``, ``seed``,
-    ``workers``, ``progress``, ``overwrite``, the layouts of each split, ``min_label_height``).
+    ``platform`` is ``"rover"`` or ``"uav"``; ``clutter=False`` renders only the layouts'
+    objects of a class on bare ground (:func:`anunnaki.sim.dataset_frames`); every other
+    argument is :func:`anunnaki.datasets.make_dataset`'s (``per_layout``, ``width``,
+    ``height``, ``seed``, ``workers``, ``progress``, ``overwrite``, the layouts of each
+    split, ``min_label_height``).
     """
-    kwargs.setdefault("source", scene_frames)
+    kwargs.setdefault("source", scene_frames if clutter else partial(scene_frames, clutter=False))
     kwargs.setdefault("classes", platform_classes(platform))
     return _make_dataset(platform, out_dir, **kwargs)

@@ -431,6 +431,7 @@ def dataset_frames(
     width: int = 128,
     height: int = 128,
     min_label_height: float | None = None,
+    clutter: bool = True,
 ) -> Iterator[Frame]:
     """Yield ``n`` labelled frames of scene ``layout`` from random camera poses.
 
@@ -446,6 +447,9 @@ def dataset_frames(
         min_label_height: Smallest labelled box height as a fraction of ``height``; objects
             seen but smaller are the frames' ignore boxes (default: the platform's
             :data:`MIN_LABEL_HEIGHT`, rover 0.134, UAV 0).
+        clutter: ``False`` keeps only the layout's objects of a class (no distractors,
+            roads, buildings or trees): bare ground with pedestrians and deer, the look of a
+            rover scenario with ``background: false``.
 
     Yields:
         :class:`Frame` s with ``t = seq / 10`` and ``seq = 0 … n-1``; deterministic for
@@ -456,8 +460,17 @@ def dataset_frames(
     if n < 0:
         raise ValueError(f"n must be >= 0, got {n}")
     rng = np.random.default_rng(np.random.SeedSequence([seed, layout, _PLATFORM_CODE[platform]]))
+    classes = ROVER_CLASSES if platform == "rover" else UAV_CLASSES
+    placements = (
+        None if clutter else [p for p in layout_placements(platform, layout) if p.kind in classes]
+    )
     with Scene(
-        platform, layout, width=width, height=height, min_label_height=min_label_height
+        platform,
+        layout,
+        width=width,
+        height=height,
+        placements=placements,
+        min_label_height=min_label_height,
     ) as scene:
         for i in range(n):
             scene.vary(rng)
