@@ -128,7 +128,7 @@ class EnlilOracle:
             self._history.clear()
             self._last_model = model_id
         cat, params, phen = oracle.logits([frame])
-        self._history.append(oracle.probabilities(cat)[0])
+        self._history.append(oracle.category_probabilities(cat, params, phen)[0])
         probs = np.mean(np.stack(self._history), axis=0)
         category = int(np.argmax(probs))
         context = _context(oracle, params[0], phen[0], category)

@@ -28,6 +28,12 @@ from anunnaki.enlil._context import (
     resolve_phenomenon,
     to_phenomenon_vector,
 )
+from anunnaki.enlil._oracle_lookup import (
+    ContextLookup,
+    LookupSpec,
+    choose_mix,
+    lookup_probabilities,
+)
 from anunnaki.enlil._oracle_net import (
     OracleCard,
     OracleModel,
@@ -45,7 +51,9 @@ __all__ = [
     "LabelledFrames",
     "OracleTrainConfig",
     "contexts_from_archive",
+    "fit_lookup",
     "fit_temperature",
+    "merge_context_sets",
     "perturbed_frames",
     "random_contexts",
     "train_oracle",
@@ -101,6 +109,39 @@ def contexts_from_archive(path: str) -> ContextSet:
     )
 
 
+def merge_context_sets(sets: Sequence[ContextSet]) -> list[ContextSet]:
+    """One set per phenomenon, in first-seen order; sets of one phenomenon are concatenated.
+
+    E.g. an Enlil archive and a random (Monte-Carlo) archive of the same phenomenon.
+
+    Raises:
+        EnlilError: Two sets of one phenomenon name different parameters.
+
+    """
+    merged: dict[str, list[ContextSet]] = {}
+    for cset in sets:
+        group = merged.setdefault(cset.phenomenon, [])
+        if group and group[0].param_names != cset.param_names:
+            raise EnlilError(
+                f"{cset.phenomenon}: {cset.source} has parameters {list(cset.param_names)}, "
+                f"{group[0].source} {list(group[0].param_names)}; give archives of one "
+                "phenomenon made by the same version of it"
+            )
+        group.append(cset)
+    return [
+        group[0]
+        if len(group) == 1
+        else ContextSet(
+            name,
+            group[0].param_names,
+            np.concatenate([g.params for g in group]),
+            np.concatenate([g.categories for g in group]),
+            "+".join(g.source for g in group),
+        )
+        for name, group in merged.items()
+    ]
+
+
 def random_contexts(
     detector: Detector,
     batch: Dataset,
@@ -135,11 +176,12 @@ class LabelledFrames:
     params: npt.NDArray[np.float32]
     params_mask: npt.NDArray[np.float32]
     phenomenon: npt.NDArray[np.int64]
+    rows: npt.NDArray[np.int64] | None = None  # each frame's context row in its set, -1 clean
 
 
 def _pick_context(
     rng: np.random.Generator, cset: ContextSet, balanced: bool
-) -> tuple[npt.NDArray[np.float64], int]:
+) -> tuple[npt.NDArray[np.float64], int, int]:
     if balanced:
         present = [c for c in range(3) if (cset.categories == c).any()]
         cat = present[int(rng.integers(len(present)))]
@@ -147,7 +189,7 @@ def _pick_context(
         row = int(rows[int(rng.integers(len(rows)))])
     else:
         row = int(rng.integers(len(cset.params)))
-    return cset.params[row], int(cset.categories[row])
+    return cset.params[row], int(cset.categories[row]), row
 
 
 def perturbed_frames(
@@ -183,13 +225,14 @@ def perturbed_frames(
         np.zeros((n, width), np.float32),
         np.zeros(n, np.int64),
     )
+    out.rows = rows = np.full(n, -1, np.int64)
     for i in range(n):
         image = data.image(int(rng.integers(len(data))))
         if rng.random() < clean_fraction:
             out.frames.append(image)
             continue
         which = int(rng.integers(len(sets)))
-        unit, cat = _pick_context(rng, sets[which], balanced)
+        unit, cat, rows[i] = _pick_context(rng, sets[which], balanced)
         phen = phens[which]
         params = phen.from_vector(to_phenomenon_vector(phen, unit))
         out.frames.append(phen.apply(image, params, seed=int(rng.integers(2**31))))
@@ -215,6 +258,10 @@ class OracleTrainConfig:
         width: Channels of the first convolution (``small_cnn`` option).
         seed: Everything derives from it.
         threads: torch threads (``0``: leave torch's default).
+        lookup: Also look the category up from the perceived context among the measured
+            contexts, mixed with the category head as chosen on val
+            (:mod:`anunnaki.enlil._oracle_lookup`); ``False``: the head alone.
+        lookup_k: Neighbour counts tried for the lookup.
 
     """
 
@@ -229,6 +276,8 @@ class OracleTrainConfig:
     width: int = 16
     seed: int = 0
     threads: int = 0
+    lookup: bool = True
+    lookup_k: tuple[int, ...] = (5, 10, 20, 40)
     extra: dict[str, Any] = field(default_factory=dict)
 
 
@@ -291,6 +340,49 @@ def _fit(net: Any, data: LabelledFrames, config: OracleTrainConfig) -> list[floa
     return losses
 
 
+def fit_lookup(
+    sets: Sequence[ContextSet],
+    val: LabelledFrames,
+    head: np.ndarray,
+    params: np.ndarray,
+    phenomenon_logits: np.ndarray,
+    *,
+    ks: Sequence[int] = (5, 10, 20, 40),
+) -> tuple[ContextLookup, LookupSpec]:
+    """The lookup over *sets* and its mix with the head, chosen on the *val* frames.
+
+    Each val frame's own context is left out of its vote (leave-one-out), so the choice
+    sees the lookup as it works on contexts it has not measured.
+
+    Args:
+        sets: The measured contexts, one set per phenomenon (the oracle's order).
+        val: Val frames perturbed by those contexts, with their ``rows``.
+        head: ``[F, 3]`` the category head's calibrated probabilities on them.
+        params: ``[F, D]`` the perceived contexts.
+        phenomenon_logits: ``[F, 1 + P]`` the phenomenon head's logits.
+        ks: Neighbour counts tried.
+
+    """
+    if not ks or min(ks) < 1:
+        raise EnlilError(f"lookup_k must hold neighbour counts >= 1, got {list(ks)}")
+    contexts = {s.phenomenon: (s.params, s.categories) for s in sets}
+    base = ContextLookup.from_contexts(contexts, k=max(min(ks), 15))
+    names = [s.phenomenon for s in sets]
+    rows = val.rows if val.rows is not None else np.full(len(val.category), -1, np.int64)
+    exclude = {name: np.where(val.phenomenon == i + 1, rows, -1) for i, name in enumerate(names)}
+    z = np.exp(phenomenon_logits - phenomenon_logits.max(axis=1, keepdims=True))
+    phen_probs = z / z.sum(axis=1, keepdims=True)
+    looked = {
+        k: lookup_probabilities(base.with_k(k), names, params, phen_probs, exclude=exclude)
+        for k in ks
+    }
+    k, weight, f1 = choose_mix(head, looked, val.category)
+    lookup = base.with_k(k)
+    return lookup, lookup.spec(
+        weight, {"split": "val", "frames": len(val.category), "macro_f1": f1}
+    )
+
+
 def train_oracle(
     train: Dataset,
     val: Dataset,
@@ -311,6 +403,7 @@ def train_oracle(
     if not sets:
         raise EnlilError("train_oracle: give at least one set of contexts (an archive)")
     cfg = config or OracleTrainConfig()
+    sets = merge_context_sets(sets)
     torch = _torch()
     if cfg.threads:
         torch.set_num_threads(cfg.threads)
@@ -333,14 +426,20 @@ def train_oracle(
     )
     losses = _fit(net, tr, cfg)
     oracle = OracleModel(card, net)
-    logits = np.concatenate(
-        [oracle.logits(va.frames[i : i + 256])[0] for i in range(0, len(va.frames), 256)]
-    )
+    chunks = [oracle.logits(va.frames[i : i + 256]) for i in range(0, len(va.frames), 256)]
+    logits, params, phen = (np.concatenate([c[j] for c in chunks]) for j in range(3))
     temperature = fit_temperature(logits, va.category)
     oracle.card = card.model_copy(update={"temperature": temperature})
-    probs = oracle.probabilities(logits)
+    head = oracle.probabilities(logits)
+    if cfg.lookup:
+        oracle.lookup, spec = fit_lookup(sets, va, head, params, phen, ks=cfg.lookup_k)
+        oracle.card = oracle.card.model_copy(update={"lookup": spec})
+    probs = oracle.category_probabilities(logits, params, phen)
     val_metrics = classification_metrics(probs.argmax(axis=1), va.category)
     val_metrics["ece"] = expected_calibration_error(probs, va.category)
+    if cfg.lookup:
+        head_metrics = classification_metrics(head.argmax(axis=1), va.category)
+        val_metrics["head_macro_f1"] = head_metrics["macro_f1"]
     training = {
         "contexts": [
             {"phenomenon": s.phenomenon, "source": s.source, "counts": s.counts()} for s in sets
