@@ -10,47 +10,62 @@ from enlil_helpers import tiny_data
 
 from anunnaki.enlil import ContextLookup, ContextSet, EnlilError, merge_context_sets
 from anunnaki.enlil._oracle_lookup import (
+    boosted,
     choose_mix,
-    fit_scales,
+    fit_kernel,
     lookup_probabilities,
     mixed_probabilities,
 )
 
 
 def _step_contexts(n: int = 200, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
-    """Category set by the first parameter alone (0 below 0.4, 1 up to 0.5, 2 above)."""
+    """Drops set by the first parameter alone: 0 below 0.4, rising to 1 at 0.6."""
     units = np.random.default_rng(seed).random((n, 2))
-    cats = np.where(units[:, 0] < 0.4, 0, np.where(units[:, 0] < 0.5, 1, 2))
-    return units, cats
+    drops = np.clip((units[:, 0] - 0.4) / 0.2, 0.0, 1.0) ** 2
+    return units, drops
 
 
-def test_vote_follows_the_nearest_measured_contexts() -> None:
-    units, cats = _step_contexts()
-    lookup = ContextLookup.from_contexts({"fog": (units, cats)}, k=7)
-    probs = lookup.vote("fog", [[0.1, 0.5], [0.45, 0.2], [0.9, 0.9]])
+def test_the_surrogate_gives_the_category_of_the_smooth_drop() -> None:
+    units, drops = _step_contexts()
+    lookup = ContextLookup.from_contexts({"fog": (units, drops)})
+    probs = lookup.vote("fog", [[0.1, 0.5], [0.455, 0.2], [0.9, 0.9]])
     assert probs.shape == (3, 3)
     np.testing.assert_allclose(probs.sum(axis=1), 1.0)
-    assert list(probs.argmax(axis=1)) == [0, 1, 2]
-    assert (probs > 0).all()  # a pseudo-count keeps every category possible
+    assert list(probs.argmax(axis=1)) == [0, 1, 2]  # drops 0, 0.076, 1
+    kernel = lookup.kernels["fog"]
+    assert kernel.lengthscales[0] < kernel.lengthscales[1]  # the second does not matter
 
 
-def test_exclude_leaves_a_row_out_of_its_own_vote() -> None:
-    units = np.asarray([[0.0, 0.0], [1.0, 1.0], [1.0, 0.9]])
-    cats = np.asarray([0, 2, 2])
-    lookup = ContextLookup.from_contexts({"fog": (units, cats)}, k=1, scales={"fog": [1, 1]})
-    assert lookup.vote("fog", [[0.0, 0.0]]).argmax() == 0
-    assert lookup.vote("fog", [[0.0, 0.0]], exclude=[0]).argmax() == 2
+def test_noisy_measurements_are_smoothed() -> None:
+    units, drops = _step_contexts(300)
+    noisy = drops.copy()
+    inner = (units[:, 0] > 0.1) & (units[:, 0] < 0.3) & (np.abs(units[:, 1] - 0.5) < 0.3)
+    flipped = np.flatnonzero(inner)[:5]
+    noisy[flipped] = 0.5  # five stray category-2 measurements deep in category 0
+    lookup = ContextLookup.from_contexts({"fog": (units, noisy)})
+    assert (lookup.vote("fog", units[flipped]).argmax(axis=1) == 0).all()
 
 
-def test_fit_scales_shrinks_a_parameter_that_does_not_matter() -> None:
-    units, cats = _step_contexts(300)
-    scale = fit_scales(units, cats, k=9)
-    assert scale[0] > scale[1]
+def test_exclude_leaves_a_row_out_of_its_own_prediction() -> None:
+    units, drops = _step_contexts(60)
+    lookup = ContextLookup.from_contexts({"fog": (units, drops)})
+    query = units[:4]
+    _, std = lookup.predict("fog", query)
+    loo_mean, loo_std = lookup.predict("fog", query, exclude=[0, 1, 2, 3])
+    assert (loo_std > std).all()  # its own measurement no longer pins it
+    # the closed form equals refitting the process without the row (same kernel)
+    rest = ContextLookup(
+        {"fog": lookup.params["fog"][1:]},
+        {"fog": lookup.targets["fog"][1:]},
+        dict(lookup.kernels),
+    )
+    m1, s1 = rest.predict("fog", query[:1])
+    np.testing.assert_allclose([loo_mean[0], loo_std[0]], [m1[0], s1[0]], rtol=1e-6)
 
 
 def test_lookup_probabilities_weigh_phenomena_and_clear() -> None:
-    units, cats = _step_contexts()
-    lookup = ContextLookup.from_contexts({"fog": (units, cats), "hsl": (units, 2 - cats)}, k=5)
+    units, drops = _step_contexts()
+    lookup = ContextLookup.from_contexts({"fog": (units, drops), "hsl": (units, 1.0 - drops)})
     params = np.asarray([[0.9, 0.5], [0.9, 0.5], [0.9, 0.5]])
     phen = np.asarray([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]])  # clear, fog, hsl
     probs = lookup_probabilities(lookup, ["fog", "hsl"], params, phen)
@@ -62,32 +77,40 @@ def test_choose_mix_prefers_what_predicts_val() -> None:
     labels = np.asarray([0, 1, 2] * 20)
     right = np.eye(3)[labels]
     wrong = np.eye(3)[(labels + 1) % 3]
-    k, weight, f1 = choose_mix(wrong, {5: right, 10: wrong}, labels)
-    assert k == 5 and weight < 0.5 and f1 == 1.0  # the largest weight that still works
-    k, weight, f1 = choose_mix(right, {5: wrong}, labels)
+    weight, boost, f1 = choose_mix(wrong, right, labels)
+    assert weight < 0.5 and boost == 0.0 and f1 == 1.0
+    weight, boost, f1 = choose_mix(right, wrong, labels)
     assert weight == 1.0 and f1 == 1.0
-    mixed = mixed_probabilities(right, wrong, 0.25)
-    np.testing.assert_allclose(mixed.sum(axis=1), 1.0)
+    np.testing.assert_allclose(mixed_probabilities(right, wrong, 0.25).sum(axis=1), 1.0)
+    # category 1 never wins on its own here; a boost makes it
+    shy = np.where(labels[:, None] == 1, [0.45, 0.35, 0.2], np.eye(3)[labels] * 0.9 + 0.05)
+    weight, boost, f1 = choose_mix(shy, shy, labels)
+    assert boost > 0.0 and f1 == 1.0
+    np.testing.assert_allclose(boosted(shy, boost).sum(axis=1), 1.0)
 
 
 def test_bad_lookups_are_refused() -> None:
+    units, drops = _step_contexts(20)
+    lookup = ContextLookup.from_contexts({"fog": (units, drops)})
     with pytest.raises(EnlilError, match="must be"):
-        ContextLookup({"fog": np.zeros((3, 2), np.float32)}, {"fog": np.zeros(2, np.int64)},
-                      {"fog": np.ones(2)})  # fmt: skip
-    units, cats = _step_contexts(20)
-    lookup = ContextLookup.from_contexts({"fog": (units, cats)})
+        ContextLookup({"fog": units}, {"fog": drops[:3]}, dict(lookup.kernels))
     with pytest.raises(EnlilError, match="no measured contexts of 'hsl'"):
         lookup.vote("hsl", units)
+    with pytest.raises(EnlilError, match="N >= 3"):
+        fit_kernel(units[:2], drops[:2])
 
 
 def test_merge_context_sets_joins_one_phenomenon() -> None:
-    units, cats = _step_contexts(10)
-    a = ContextSet("fog", ("density", "intensity"), units, cats, "archive:a")
-    b = ContextSet("fog", ("density", "intensity"), units[:4], cats[:4], "archive:b")
+    units, drops = _step_contexts(10)
+    cats = (drops > 0.05).astype(np.int64) + (drops > 0.10)
+    a = ContextSet("fog", ("density", "intensity"), units, cats, "archive:a", drops)
+    b = ContextSet("fog", ("density", "intensity"), units[:4], cats[:4], "archive:b", drops[:4])
     c = ContextSet("hsl", ("hue", "saturation"), units, cats, "archive:c")
     merged = merge_context_sets([a, c, b])
     assert [m.phenomenon for m in merged] == ["fog", "hsl"]
     assert len(merged[0].params) == 14 and merged[0].source == "archive:a+archive:b"
+    assert merged[0].drops is not None and len(merged[0].drops) == 14
+    assert merge_context_sets([a, ContextSet("fog", a.param_names, units, cats)])[0].drops is None
     other = ContextSet("fog", ("density", "x"), units, cats, "archive:d")
     with pytest.raises(EnlilError, match="give archives of one phenomenon"):
         merge_context_sets([a, other])
@@ -102,14 +125,15 @@ def trained(tmp_path_factory: pytest.TempPathFactory):  # type: ignore[no-untype
 
     density = np.linspace(0.0, 1.0, 24)
     units = np.stack([density, np.full(24, 0.5)], axis=1)
-    cats = np.where(density < 0.3, 0, np.where(density < 0.5, 1, 2))
-    sets = [ContextSet("fog", ("density", "intensity"), units, cats, "test")]
+    drops = np.clip((density - 0.25) / 0.4, 0.0, 1.0)
+    cats = (drops > 0.05).astype(np.int64) + (drops > 0.10)
+    sets = [ContextSet("fog", ("density", "intensity"), units, cats, "test", drops)]
     data = tiny_data(16)
     out = {}
     for lookup in (True, False):
         cfg = OracleTrainConfig(
             frames=96, val_frames=60, epochs=2, batch_size=32, input_size=(64, 64),
-            lookup=lookup, lookup_k=(3, 6),
+            lookup=lookup,
         )  # fmt: skip
         oracle = train_oracle(data, data, sets, model_id="colour", config=cfg)
         path = tmp_path_factory.mktemp("lookup") / f"colour-{lookup}.oracle"
@@ -122,13 +146,14 @@ def test_a_trained_lookup_round_trips_in_the_oracle_file(trained) -> None:  # ty
 
     oracle, path, digest = trained[True]
     spec = oracle.card.lookup
-    assert spec is not None and spec.k in (3, 6) and 0.0 <= spec.weight <= 1.0
+    assert spec is not None and 0.0 <= spec.weight <= 1.0 and spec.boost >= 0.0
     assert spec.rows == {"fog": 24} and spec.chosen_on["split"] == "val"
+    assert oracle.card.training["soft_labels"] is True
     assert oracle.card.format == "anunnaki-oracle/2"
     assert "head_macro_f1" in oracle.card.metrics["val"]
     loaded = load_oracle(path, sha256=digest)
     assert loaded.lookup is not None
-    np.testing.assert_array_equal(loaded.lookup.categories["fog"], oracle.lookup.categories["fog"])
+    np.testing.assert_array_equal(loaded.lookup.targets["fog"], oracle.lookup.targets["fog"])
     frames = [tiny_data(3, seed=5).image(i) for i in range(3)]
     a = [p.probs for p in oracle.predict(frames)]
     b = [p.probs for p in loaded.predict(frames)]
@@ -140,6 +165,7 @@ def test_an_oracle_without_lookup_keeps_format_1(trained) -> None:  # type: igno
 
     oracle, path, digest = trained[False]
     assert oracle.card.lookup is None and oracle.card.format == "anunnaki-oracle/1"
+    assert oracle.card.training["soft_labels"] is False
     loaded = load_oracle(path, sha256=digest)
     assert loaded.lookup is None
     cat, params, phen = loaded.logits([tiny_data(1).image(0)])

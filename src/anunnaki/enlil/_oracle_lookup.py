@@ -1,146 +1,291 @@
-"""The perceived context → category lookup of a behavior oracle (non-parametric).
+"""The perceived context → category lookup of a behavior oracle: a drop surrogate.
 
-A context's behavior category is (nearly) a function of the context: the assessment measures
-it on a fixed batch of images, whatever frame the oracle happens to see. The oracle's network
-already regresses the perceived context (the phenomenon's parameters, normalised to
-``[0, 1]^d``) and which phenomenon it is, so the category can also be *looked up*: the
-measured contexts nearest to the perceived one (Enlil's archive rows, hundreds per
-phenomenon) vote for their categories. :class:`ContextLookup` does that with a
-distance-weighted k-nearest-neighbour vote in a rescaled parameter space, one scale per
-parameter fitted by leave-one-out on the measured contexts themselves (a raindrop's category
-hangs on its radius far more than on where it sits).
+A context's behavior category comes from the model's relative F1 drop under it, measured on
+a fixed batch of images. The drop is (nearly) a smooth function of the context, but one
+measurement is noisy: the same context measured on another batch of 32 images often lands in
+another category near the thresholds (measured in docs/enlil.md). So rather than trusting
+each archived category, :class:`ContextLookup` fits, per phenomenon, a Gaussian process to
+``log(drop + 0.02)`` over the normalised contexts (Enlil's archive rows, hundreds per
+phenomenon): an anisotropic RBF kernel whose length scales, signal and noise variance
+maximise the marginal likelihood. Its predictive mean and variance (noise included) give the
+probability of each category, ``P(drop <= t1)``, ``P(t1 < drop <= t2)``, ``P(drop > t2)``:
+denoised labels for training (:func:`anunnaki.enlil.train_oracle` uses them as soft
+targets) and, at run time, a lookup from the context the network perceives.
 
-:func:`mixed_probabilities` blends it with the network's own category head:
-``w · p_net + (1 - w) · p_lookup``, where ``p_lookup`` weighs each phenomenon's vote by the
-phenomenon head's probability (``clear`` votes category 0). The weight *w* is chosen on
-validation frames (:func:`choose_mix`), never on the test split.
+:func:`lookup_probabilities` weighs each phenomenon's answer by the phenomenon head's
+probability (``clear`` answers category 0); :func:`mixed_probabilities` blends it with the
+category head, ``w · p_head + (1 - w) · p_lookup``, and :func:`choose_mix` picks ``w`` (and a
+boost of category 1, the thin band a macro-F1 weighs as much as the others) on validation
+frames, never on the test split.
 
 The lookup travels inside the oracle's safetensors file (``lookup.NAME.params`` ``[N, d]``
-float32, ``lookup.NAME.categories`` ``[N]`` int64) with its settings in the sidecar
-(:class:`LookupSpec`); nothing is pickled.
+and ``lookup.NAME.targets`` ``[N]``, float64) with the kernels in the sidecar
+(:class:`LookupSpec`); nothing is pickled. At most :data:`MAX_ROWS` rows per phenomenon are
+kept (a fixed subsample), so one lookup costs well under a millisecond.
 """
 
 from __future__ import annotations
 
-import itertools
+import math
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 import numpy.typing as npt
 from pydantic import BaseModel, ConfigDict, Field
 
 from anunnaki.enlil._context import EnlilError
+from anunnaki.errors import MissingExtraError
 
 __all__ = [
     "LOOKUP_PREFIX",
     "ContextLookup",
+    "Kernel",
     "LookupSpec",
+    "boosted",
     "choose_mix",
-    "fit_scales",
+    "fit_kernel",
+    "kept_rows",
     "lookup_probabilities",
     "mixed_probabilities",
 ]
 
 #: Tensor names of the lookup in an oracle's safetensors file start with this.
 LOOKUP_PREFIX = "lookup."
-#: Pseudo-count added to every category's vote (no probability is ever exactly 0).
-_PRIOR = 0.05
-#: Scales tried for each parameter when fitting (0: the parameter does not matter).
-_SCALES = (0.0, 0.25, 0.5, 1.0, 2.0, 4.0)
+#: The surrogate models ``log(drop + OFFSET)``.
+OFFSET = 0.02
+#: Rows kept per phenomenon (a fixed subsample of more).
+MAX_ROWS = 800
+#: Rows the kernel's hyper-parameters are fitted on (a fixed subsample of more).
+FIT_ROWS = 300
+_JITTER = 1e-6
+
+
+def _ndtr(x: np.ndarray) -> np.ndarray:
+    try:
+        from scipy.special import ndtr
+    except ImportError as exc:  # pragma: no cover - depends on the environment
+        raise MissingExtraError("the oracle's context lookup (scipy)", "enlil") from exc
+    out: np.ndarray = ndtr(x)
+    return out
+
+
+class Kernel(BaseModel):
+    """One phenomenon's Gaussian process: RBF kernel and constant mean.
+
+    Attributes:
+        lengthscales: One per parameter (normalised units).
+        signal: Kernel variance.
+        noise: Noise variance (a measurement's scatter around the smooth drop).
+        mean: Constant prior mean of ``log(drop + 0.02)``.
+
+    """
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+    lengthscales: list[float]
+    signal: float = Field(gt=0.0)
+    noise: float = Field(gt=0.0)
+    mean: float
 
 
 class LookupSpec(BaseModel):
     """The lookup's settings in an oracle's sidecar.
 
     Attributes:
-        k: Neighbours that vote.
-        weight: The network head's share in the mix (1: the network alone, 0: the lookup
-            alone).
-        scales: Per phenomenon, one scale per parameter (distance = Euclidean over scaled
-            normalised parameters).
-        rows: Measured contexts per phenomenon (the tensors' lengths).
-        chosen_on: What *k* and *weight* were chosen on, and the figures there.
+        weight: The category head's share in the mix (1: the head alone, 0: the lookup).
+        boost: Log-multiplier of category 1's probability before the argmax (0: none).
+        thresholds: Relative drops of categories 1 and 2.
+        kernels: Per phenomenon, its Gaussian process.
+        rows: Measured contexts kept per phenomenon.
+        chosen_on: What *weight* and *boost* were chosen on, and the figures there.
 
     """
 
     model_config = ConfigDict(extra="forbid", frozen=True)
 
-    k: int = Field(ge=1)
     weight: float = Field(ge=0.0, le=1.0)
-    scales: dict[str, list[float]]
+    boost: float = 0.0
+    thresholds: tuple[float, float] = (0.05, 0.10)
+    kernels: dict[str, Kernel]
     rows: dict[str, int] = Field(default_factory=dict)
     chosen_on: dict[str, float | int | str] = Field(default_factory=dict)
 
 
+def _kernel_matrix(a: np.ndarray, b: np.ndarray, kernel: Kernel) -> np.ndarray:
+    ls = np.asarray(kernel.lengthscales, np.float64)
+    d = (((a[:, None, :] - b[None, :, :]) / ls) ** 2).sum(axis=2)
+    out: np.ndarray = kernel.signal * np.exp(-0.5 * d)
+    return out
+
+
+def _targets(drops: npt.ArrayLike) -> npt.NDArray[np.float64]:
+    return np.log(np.clip(np.asarray(drops, np.float64), 0.0, 1.0) + OFFSET)
+
+
+def kept_rows(n: int, most: int = MAX_ROWS) -> npt.NDArray[np.int64]:
+    """The rows of *n* measured contexts a lookup keeps: all, or a fixed subsample of *most*."""
+    if n <= most:
+        return np.arange(n)
+    return np.sort(np.random.default_rng(0).choice(n, most, replace=False))
+
+
+def fit_kernel(params: npt.ArrayLike, drops: npt.ArrayLike) -> Kernel:
+    """The kernel maximising the marginal likelihood of ``log(drop + 0.02)`` at *params*.
+
+    L-BFGS (scipy) over log length scales (bounded to ``[0.01, 5]``), signal and noise, on
+    at most :data:`FIT_ROWS` of the contexts (a fixed subsample).
+
+    Raises:
+        EnlilError: Fewer than 3 contexts, or shapes that do not match.
+
+    """
+    try:
+        from scipy.linalg import LinAlgError, cho_factor, cho_solve
+        from scipy.optimize import minimize
+    except ImportError as exc:  # pragma: no cover - depends on the environment
+        raise MissingExtraError("the oracle's context lookup (scipy)", "enlil") from exc
+    x = np.asarray(params, np.float64)
+    y = _targets(drops)
+    if x.ndim != 2 or len(x) != len(y) or len(x) < 3:
+        raise EnlilError(
+            f"the context lookup needs [N, d] contexts and N drops with N >= 3, got "
+            f"{x.shape} and {y.shape}"
+        )
+    keep = kept_rows(len(x), FIT_ROWS)
+    x, y = x[keep], y[keep]
+    d, mean = x.shape[1], float(y.mean())
+    r = y - mean
+    var = max(float(y.var()), 1e-4)
+
+    def unpack(theta: np.ndarray) -> Kernel:
+        return Kernel(
+            lengthscales=[float(v) for v in np.exp(theta[:d])],
+            signal=float(np.exp(theta[d])),
+            noise=float(np.exp(theta[d + 1])),
+            mean=mean,
+        )
+
+    sq = (x[:, None, :] - x[None, :, :]) ** 2  # [N, N, d]
+
+    def nll(theta: np.ndarray) -> tuple[float, np.ndarray]:
+        """Negative log marginal likelihood and its gradient in the log parameters."""
+        ls2 = np.exp(2.0 * theta[:d])
+        rbf = np.exp(theta[d]) * np.exp(-0.5 * (sq / ls2).sum(axis=2))
+        noise = float(np.exp(theta[d + 1]))
+        k = rbf.copy()
+        k[np.diag_indices_from(k)] += noise + _JITTER
+        try:
+            factor = cho_factor(k, lower=True, check_finite=False)
+        except LinAlgError:
+            return 1e12, np.zeros_like(theta)
+        alpha = cho_solve(factor, r, check_finite=False)
+        w = cho_solve(factor, np.eye(len(r)), check_finite=False) - np.outer(alpha, alpha)
+        wr = w * rbf
+        grad = np.empty_like(theta)
+        grad[:d] = 0.5 * np.einsum("ij,ijk->k", wr, sq) / ls2
+        grad[d] = 0.5 * wr.sum()
+        grad[d + 1] = 0.5 * noise * np.trace(w)
+        value = float(0.5 * r @ alpha + np.log(np.diag(factor[0])).sum())
+        return value, grad
+
+    start = np.r_[np.full(d, math.log(0.2)), math.log(var), math.log(0.1 * var)]
+    bounds = [(math.log(0.01), math.log(5.0))] * d + [
+        (math.log(var) - 6, math.log(var) + 4),
+        (math.log(var) - 10, math.log(var) + 2),
+    ]
+    result = minimize(
+        nll, start, jac=True, method="L-BFGS-B", bounds=bounds, options={"maxiter": 100}
+    )
+    return unpack(result.x)
+
+
+@dataclass
+class _Fitted:
+    """One phenomenon's process, ready to predict (inverse kernel matrix and weights)."""
+
+    params: npt.NDArray[np.float64]
+    targets: npt.NDArray[np.float64]
+    kernel: Kernel
+    inverse: npt.NDArray[np.float64] = field(init=False)
+    alpha: npt.NDArray[np.float64] = field(init=False)
+
+    def __post_init__(self) -> None:
+        k = _kernel_matrix(self.params, self.params, self.kernel)
+        k[np.diag_indices_from(k)] += self.kernel.noise + _JITTER
+        self.inverse = np.linalg.inv(k)
+        self.alpha = self.inverse @ (self.targets - self.kernel.mean)
+
+
 @dataclass(frozen=True)
 class ContextLookup:
-    """Measured contexts per phenomenon, and the k-nearest-neighbour vote over them.
+    """Gaussian-process drop surrogates per phenomenon, and the category probabilities.
 
     Attributes:
         params: Phenomenon → ``[N, d]`` normalised contexts.
-        categories: Phenomenon → ``[N]`` their measured categories (0, 1, 2).
-        scales: Phenomenon → ``[d]`` per-parameter scales of the distance.
-        k: Neighbours that vote.
+        targets: Phenomenon → ``[N]`` their ``log(drop + 0.02)``.
+        kernels: Phenomenon → its :class:`Kernel`.
+        thresholds: Relative drops of categories 1 and 2.
 
     """
 
-    params: Mapping[str, npt.NDArray[np.float32]]
-    categories: Mapping[str, npt.NDArray[np.int64]]
-    scales: Mapping[str, npt.NDArray[np.float64]]
-    k: int = 15
+    params: Mapping[str, npt.NDArray[np.float64]]
+    targets: Mapping[str, npt.NDArray[np.float64]]
+    kernels: Mapping[str, Kernel]
+    thresholds: tuple[float, float] = (0.05, 0.10)
+    _fitted: dict[str, _Fitted] = field(default_factory=dict, init=False, repr=False)
 
     def __post_init__(self) -> None:
         for name, p in self.params.items():
-            cats = self.categories.get(name)
-            scale = self.scales.get(name)
-            if cats is None or scale is None:
-                raise EnlilError(f"lookup: phenomenon {name!r} lacks categories or scales")
-            if p.ndim != 2 or len(p) == 0 or len(cats) != len(p) or len(scale) != p.shape[1]:
+            t = self.targets.get(name)
+            kernel = self.kernels.get(name)
+            if t is None or kernel is None:
+                raise EnlilError(f"lookup: phenomenon {name!r} lacks targets or a kernel")
+            if p.ndim != 2 or len(p) == 0 or t.shape != (len(p),):
                 raise EnlilError(
-                    f"lookup: {name!r} has params {p.shape}, categories {cats.shape} and "
-                    f"scales {np.shape(scale)}; they must be [N, d], [N] and [d] with N > 0"
+                    f"lookup: {name!r} has params {p.shape} and targets {t.shape}; they must "
+                    "be [N, d] and [N] with N > 0"
                 )
-            if np.any((cats < 0) | (cats > 2)):
-                raise EnlilError(f"lookup: {name!r} has categories outside 0, 1, 2")
+            if len(kernel.lengthscales) != p.shape[1]:
+                raise EnlilError(
+                    f"lookup: {name!r}'s kernel has {len(kernel.lengthscales)} length scales "
+                    f"for {p.shape[1]} parameters"
+                )
 
     @classmethod
     def from_contexts(
         cls,
         contexts: Mapping[str, tuple[npt.ArrayLike, npt.ArrayLike]],
         *,
-        k: int = 15,
-        scales: Mapping[str, Sequence[float]] | None = None,
+        thresholds: tuple[float, float] = (0.05, 0.10),
     ) -> ContextLookup:
-        """Build from ``{phenomenon: (params [N, d], categories [N])}``; fit missing scales."""
-        params = {n: np.asarray(p, np.float32) for n, (p, _) in contexts.items()}
-        cats = {n: np.asarray(c, np.int64) for n, (_, c) in contexts.items()}
-        fitted = {
-            n: np.asarray(scales[n], np.float64)
-            if scales and n in scales
-            else fit_scales(params[n], cats[n], k=k)
-            for n in params
-        }
-        return cls(params, cats, fitted, k)
+        """Fit one process per phenomenon to ``{phenomenon: (params [N, d], drops [N])}``."""
+        params, targets, kernels = {}, {}, {}
+        for name, (p, drops) in contexts.items():
+            x = np.asarray(p, np.float64)
+            keep = kept_rows(len(x))
+            kernels[name] = fit_kernel(x, drops)
+            params[name] = x[keep]
+            targets[name] = _targets(drops)[keep]
+        return cls(params, targets, kernels, thresholds)
 
-    def with_k(self, k: int) -> ContextLookup:
-        """The same lookup with *k* neighbours."""
-        return ContextLookup(self.params, self.categories, self.scales, k)
-
-    def tensors(self) -> dict[str, npt.NDArray[np.float32] | npt.NDArray[np.int64]]:
+    def tensors(self) -> dict[str, npt.NDArray[np.float64]]:
         """The arrays to store in the oracle's safetensors file."""
-        out: dict[str, npt.NDArray[np.float32] | npt.NDArray[np.int64]] = {}
+        out: dict[str, npt.NDArray[np.float64]] = {}
         for name in self.params:
             out[f"{LOOKUP_PREFIX}{name}.params"] = np.ascontiguousarray(self.params[name])
-            out[f"{LOOKUP_PREFIX}{name}.categories"] = np.ascontiguousarray(self.categories[name])
+            out[f"{LOOKUP_PREFIX}{name}.targets"] = np.ascontiguousarray(self.targets[name])
         return out
 
-    def spec(self, weight: float, chosen_on: Mapping[str, float | int | str]) -> LookupSpec:
+    def spec(
+        self, weight: float, boost: float, chosen_on: Mapping[str, float | int | str]
+    ) -> LookupSpec:
         """The sidecar settings for this lookup mixed with weight *weight*."""
         return LookupSpec(
-            k=self.k,
             weight=float(weight),
-            scales={n: [float(v) for v in s] for n, s in self.scales.items()},
+            boost=float(boost),
+            thresholds=self.thresholds,
+            kernels=dict(self.kernels),
             rows={n: len(p) for n, p in self.params.items()},
             chosen_on=dict(chosen_on),
         )
@@ -150,103 +295,65 @@ class ContextLookup:
         cls, tensors: Mapping[str, np.ndarray], spec: LookupSpec, *, source: str = "<oracle>"
     ) -> ContextLookup:
         """Rebuild from a file's tensors and its sidecar's :class:`LookupSpec`."""
-        params, cats = {}, {}
-        for name in spec.scales:
+        params, targets = {}, {}
+        for name in spec.kernels:
             p = tensors.get(f"{LOOKUP_PREFIX}{name}.params")
-            c = tensors.get(f"{LOOKUP_PREFIX}{name}.categories")
-            if p is None or c is None:
+            t = tensors.get(f"{LOOKUP_PREFIX}{name}.targets")
+            if p is None or t is None:
                 raise EnlilError(
                     f"{source}: the sidecar's lookup names {name!r} but the weights lack "
-                    f"{LOOKUP_PREFIX}{name}.params / .categories; copy both files again"
+                    f"{LOOKUP_PREFIX}{name}.params / .targets; copy both files again"
                 )
-            params[name] = np.asarray(p, np.float32)
-            cats[name] = np.asarray(c, np.int64)
-        scales = {n: np.asarray(s, np.float64) for n, s in spec.scales.items()}
-        return cls(params, cats, scales, spec.k)
+            params[name] = np.asarray(p, np.float64)
+            targets[name] = np.asarray(t, np.float64)
+        return cls(params, targets, dict(spec.kernels), spec.thresholds)
 
-    def vote(
-        self,
-        phenomenon: str,
-        units: npt.ArrayLike,
-        *,
-        exclude: npt.ArrayLike | None = None,
-    ) -> npt.NDArray[np.float64]:
-        """``[B, 3]`` category probabilities of the contexts nearest to *units* ``[B, d]``.
+    def _process(self, name: str) -> _Fitted:
+        if name not in self.params:
+            raise EnlilError(f"lookup: no measured contexts of {name!r}")
+        if name not in self._fitted:
+            self._fitted[name] = _Fitted(self.params[name], self.targets[name], self.kernels[name])
+        return self._fitted[name]
+
+    def predict(
+        self, phenomenon: str, units: npt.ArrayLike, *, exclude: npt.ArrayLike | None = None
+    ) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]:
+        """Predictive mean and standard deviation (noise included) of ``log(drop + 0.02)``.
 
         Args:
-            phenomenon: Which phenomenon's measured contexts vote.
-            units: Perceived normalised contexts (extra columns beyond ``d`` are ignored).
-            exclude: ``[B]`` a row of the measured contexts each query must not see (its
-                own context, for leave-one-out figures), or -1.
+            phenomenon: Whose process.
+            units: ``[B, d]`` normalised contexts (extra columns beyond ``d`` are ignored).
+            exclude: ``[B]`` a stored row each query must not use (its own context, for
+                leave-one-out figures), or -1.
 
         """
-        if phenomenon not in self.params:
-            raise EnlilError(f"lookup: no measured contexts of {phenomenon!r}")
-        ref = self.params[phenomenon].astype(np.float64)
-        cats = self.categories[phenomenon]
-        scale = self.scales[phenomenon]
-        q = np.atleast_2d(np.asarray(units, np.float64))[:, : ref.shape[1]]
-        dist = np.sqrt((((q[:, None, :] - ref[None, :, :]) * scale) ** 2).sum(axis=2))
+        gp = self._process(phenomenon)
+        q = np.atleast_2d(np.asarray(units, np.float64))[:, : gp.params.shape[1]]
+        k = _kernel_matrix(q, gp.params, gp.kernel)
+        mean = gp.kernel.mean + k @ gp.alpha
+        var = gp.kernel.signal + gp.kernel.noise - np.einsum("ij,ij->i", k @ gp.inverse, k)
         if exclude is not None:
             ex = np.asarray(exclude, np.int64)
-            hit = ex >= 0
-            dist[np.flatnonzero(hit), ex[hit]] = np.inf
-        return _vote(dist, cats, self.k)
+            rows = np.flatnonzero(ex >= 0)
+            if len(rows):
+                col = gp.inverse[:, ex[rows]].T  # [b, N]
+                diag = gp.inverse[ex[rows], ex[rows]]
+                ka = np.einsum("ij,ij->i", k[rows], col)
+                mean[rows] -= ka * gp.alpha[ex[rows]] / diag
+                var[rows] += ka**2 / diag
+        return mean, np.sqrt(np.maximum(var, 1e-9))
 
-
-def _vote(
-    dist: npt.NDArray[np.float64], cats: npt.NDArray[np.int64], k: int
-) -> npt.NDArray[np.float64]:
-    """Distance-weighted vote of the *k* nearest columns of *dist* ``[B, N]``."""
-    k = min(k, dist.shape[1])
-    nearest = np.argpartition(dist, k - 1, axis=1)[:, :k]
-    d = np.take_along_axis(dist, nearest, axis=1)
-    w = np.where(np.isfinite(d), 1.0 / (d + 0.02), 0.0)
-    out = np.full((len(dist), 3), _PRIOR)
-    for c in range(3):
-        out[:, c] += (w * (cats[nearest] == c)).sum(axis=1)
-    result: npt.NDArray[np.float64] = out / out.sum(axis=1, keepdims=True)
-    return result
-
-
-def _loo_log_likelihood(
-    params: npt.NDArray[np.float64], cats: npt.NDArray[np.int64], scale: np.ndarray, k: int
-) -> float:
-    dist = np.sqrt((((params[:, None, :] - params[None, :, :]) * scale) ** 2).sum(axis=2))
-    np.fill_diagonal(dist, np.inf)
-    probs = _vote(dist, cats, k)
-    return float(np.log(probs[np.arange(len(cats)), cats]).mean())
-
-
-def fit_scales(
-    params: npt.ArrayLike, categories: npt.ArrayLike, *, k: int = 15, max_rows: int = 1500
-) -> npt.NDArray[np.float64]:
-    """Per-parameter distance scales maximising the leave-one-out likelihood of the vote.
-
-    Coordinate ascent over :data:`_SCALES` per parameter (two sweeps), from all ones; at
-    least one scale stays positive. Deterministic; on at most *max_rows* rows (a fixed
-    subsample of more).
-    """
-    p = np.asarray(params, np.float64)
-    c = np.asarray(categories, np.int64)
-    if len(p) > max_rows:
-        keep = np.random.default_rng(0).choice(len(p), max_rows, replace=False)
-        p, c = p[keep], c[keep]
-    d = p.shape[1]
-    scale = np.ones(d)
-    if len(p) < 3 or d == 0:
-        return scale
-    best = _loo_log_likelihood(p, c, scale, k)
-    for _, j in itertools.product(range(2), range(d)):
-        for value in _SCALES:
-            trial = scale.copy()
-            trial[j] = value
-            if not trial.any():
-                continue
-            score = _loo_log_likelihood(p, c, trial, k)
-            if score > best + 1e-9:
-                best, scale = score, trial
-    return scale
+    def vote(
+        self, phenomenon: str, units: npt.ArrayLike, *, exclude: npt.ArrayLike | None = None
+    ) -> npt.NDArray[np.float64]:
+        """``[B, 3]`` the probabilities of categories 0, 1, 2 at *units* (see :meth:`predict`)."""
+        mean, std = self.predict(phenomenon, units, exclude=exclude)
+        t1, t2 = (math.log(t + OFFSET) for t in self.thresholds)
+        p0 = _ndtr((t1 - mean) / std)
+        p2 = 1.0 - _ndtr((t2 - mean) / std)
+        out = np.stack([p0, np.clip(1.0 - p0 - p2, 0.0, 1.0), p2], axis=1)
+        result: npt.NDArray[np.float64] = out / out.sum(axis=1, keepdims=True)
+        return result
 
 
 def lookup_probabilities(
@@ -257,63 +364,79 @@ def lookup_probabilities(
     *,
     exclude: Mapping[str, npt.ArrayLike] | None = None,
 ) -> npt.NDArray[np.float64]:
-    """``[B, 3]``: ``clear`` votes category 0, each phenomenon its nearest contexts.
+    """``[B, 3]``: ``clear`` answers category 0, each phenomenon its surrogate.
 
     Args:
-        lookup: The measured contexts.
+        lookup: The surrogates.
         phenomena: The oracle's phenomena (the phenomenon head's classes after ``clear``).
         params: ``[B, D]`` the perceived normalised contexts (the regression head).
         phenomenon_probs: ``[B, 1 + P]`` the phenomenon head's probabilities.
-        exclude: Per phenomenon, ``[B]`` rows to leave out (see :meth:`ContextLookup.vote`).
+        exclude: Per phenomenon, ``[B]`` rows to leave out (see :meth:`ContextLookup.predict`).
 
     """
     pp = np.asarray(phenomenon_probs, np.float64)
+    q = np.asarray(params, np.float64)
     out = np.zeros((len(pp), 3))
     out[:, 0] = pp[:, 0]
     for i, name in enumerate(phenomena):
-        ex = None if exclude is None else exclude.get(name)
-        out += pp[:, i + 1 : i + 2] * lookup.vote(name, params, exclude=ex)
+        share = pp[:, i + 1]
+        rows = np.flatnonzero(share > 1e-3)  # skip the phenomena the frame surely lacks
+        if len(rows) == 0:
+            continue
+        ex = None if exclude is None or name not in exclude else np.asarray(exclude[name])[rows]
+        out[rows] += share[rows, None] * lookup.vote(name, q[rows], exclude=ex)
     result: npt.NDArray[np.float64] = out / out.sum(axis=1, keepdims=True)
     return result
 
 
 def mixed_probabilities(
-    net_probs: npt.ArrayLike, lookup_probs: npt.ArrayLike, weight: float
+    head: npt.ArrayLike, looked_up: npt.ArrayLike, weight: float
 ) -> npt.NDArray[np.float64]:
-    """``weight · net_probs + (1 - weight) · lookup_probs`` (rows sum to 1)."""
-    out: npt.NDArray[np.float64] = weight * np.asarray(net_probs, np.float64) + (
+    """``weight · head + (1 - weight) · looked_up`` (rows sum to 1)."""
+    out: npt.NDArray[np.float64] = weight * np.asarray(head, np.float64) + (
         1.0 - weight
-    ) * np.asarray(lookup_probs, np.float64)
+    ) * np.asarray(looked_up, np.float64)
     return out
 
 
+def boosted(probs: npt.ArrayLike, boost: float) -> npt.NDArray[np.float64]:
+    """Category 1's probability times ``exp(boost)``, renormalised."""
+    p = np.array(probs, np.float64)
+    if boost:
+        p[..., 1] *= math.exp(boost)
+        p /= p.sum(axis=-1, keepdims=True)
+    return p
+
+
 def choose_mix(
-    net_probs: npt.ArrayLike,
-    lookups: Mapping[int, npt.ArrayLike],
+    head: npt.ArrayLike,
+    looked_up: npt.ArrayLike,
     labels: npt.ArrayLike,
     *,
     weights: Sequence[float] = (0.0, 0.25, 0.5, 0.75, 1.0),
-) -> tuple[int, float, float]:
-    """The ``(k, weight)`` with the best macro-F1 on validation frames, and that macro-F1.
+    boosts: Sequence[float] = (0.0, 0.5, 1.0, 1.5),
+) -> tuple[float, float, float]:
+    """The ``(weight, boost)`` with the best macro-F1 on validation frames, and that macro-F1.
 
     Args:
-        net_probs: ``[F, 3]`` the network's calibrated probabilities.
-        lookups: k → ``[F, 3]`` the lookup's probabilities with k neighbours (leave-one-out).
+        head: ``[F, 3]`` the category head's calibrated probabilities.
+        looked_up: ``[F, 3]`` the lookup's (leave-one-out).
         labels: ``[F]`` true categories.
-        weights: The network's shares tried.
+        weights: The head's shares tried.
+        boosts: Category-1 boosts tried.
 
-    Ties go to the larger weight (the network alone when the lookup does not help), then
-    the smaller k.
+    Ties go to the larger weight (the head alone when the lookup does not help), then the
+    smaller boost.
 
     """
     from anunnaki.enlil._oracle_net import classification_metrics
 
     y = np.asarray(labels, np.int64)
-    best: tuple[float, float, int] = (-1.0, -1.0, 0)
-    for k in sorted(lookups):
-        for w in weights:
-            pred = mixed_probabilities(net_probs, lookups[k], w).argmax(axis=1)
-            f1 = float(classification_metrics(pred, y)["macro_f1"])
-            if (f1, w, -k) > (best[0], best[1], -best[2]):
-                best = (f1, w, k)
-    return best[2], best[1], best[0]
+    best: tuple[float, float, float] = (-1.0, 1.0, 0.0)
+    for w in weights:
+        mixed = mixed_probabilities(head, looked_up, w)
+        for b in boosts:
+            f1 = float(classification_metrics(boosted(mixed, b).argmax(axis=1), y)["macro_f1"])
+            if (f1, w, -b) > (best[0], best[1], -best[2]):
+                best = (f1, w, b)
+    return best[1], best[2], best[0]

@@ -272,19 +272,28 @@ class OracleModel:
 
         The calibrated category head (:meth:`probabilities`), mixed with the lookup of the
         perceived context when the oracle has one (``card.lookup``, see
-        :mod:`anunnaki.enlil._oracle_lookup`): ``w · head + (1 - w) · lookup``.
+        :mod:`anunnaki.enlil._oracle_lookup`): ``w · head + (1 - w) · lookup``, category 1
+        boosted by the card's ``lookup.boost``.
         """
         probs = self.probabilities(category_logits)
         spec = self.card.lookup
-        if spec is None or self.lookup is None or spec.weight >= 1.0:
+        if spec is None or self.lookup is None:
             return probs
-        from anunnaki.enlil._oracle_lookup import lookup_probabilities, mixed_probabilities
+        from anunnaki.enlil._oracle_lookup import (
+            boosted,
+            lookup_probabilities,
+            mixed_probabilities,
+        )
 
-        z = np.asarray(phenomenon_logits, np.float64)
-        z = np.exp(z - z.max(axis=1, keepdims=True))
-        names = [p.name for p in self.card.phenomena]
-        looked = lookup_probabilities(self.lookup, names, params, z / z.sum(axis=1, keepdims=True))
-        return mixed_probabilities(probs, looked, spec.weight)
+        if spec.weight < 1.0:
+            z = np.asarray(phenomenon_logits, np.float64)
+            z = np.exp(z - z.max(axis=1, keepdims=True))
+            names = [p.name for p in self.card.phenomena]
+            looked = lookup_probabilities(
+                self.lookup, names, params, z / z.sum(axis=1, keepdims=True)
+            )
+            probs = mixed_probabilities(probs, looked, spec.weight)
+        return boosted(probs, spec.boost)
 
     def predict(self, frames: Sequence[npt.NDArray[np.uint8]]) -> list[OraclePrediction]:
         """Assess each frame; see :class:`OraclePrediction`."""

@@ -32,6 +32,7 @@ from anunnaki.enlil._oracle_lookup import (
     ContextLookup,
     LookupSpec,
     choose_mix,
+    kept_rows,
     lookup_probabilities,
 )
 from anunnaki.enlil._oracle_net import (
@@ -50,12 +51,14 @@ __all__ = [
     "ContextSet",
     "LabelledFrames",
     "OracleTrainConfig",
+    "choose_lookup_mix",
     "contexts_from_archive",
     "fit_lookup",
     "fit_temperature",
     "merge_context_sets",
     "perturbed_frames",
     "random_contexts",
+    "soft_targets",
     "train_oracle",
 ]
 
@@ -70,6 +73,8 @@ class ContextSet:
         params: ``[N, d]`` normalised contexts.
         categories: ``[N]`` behavior categories.
         source: Where they come from (``archive:PATH``, ``random``).
+        drops: ``[N]`` the measured relative F1 drops (what the categories come from), or
+            ``None`` when unknown (then the oracle gets no context lookup).
 
     """
 
@@ -78,6 +83,7 @@ class ContextSet:
     params: npt.NDArray[np.float64]
     categories: npt.NDArray[np.int64]
     source: str = ""
+    drops: npt.NDArray[np.float64] | None = None
 
     def __post_init__(self) -> None:
         if len(self.params) == 0:
@@ -88,6 +94,11 @@ class ContextSet:
             raise EnlilError(
                 f"{self.phenomenon}: contexts {self.params.shape} do not match parameters "
                 f"{list(self.param_names)} and {len(self.categories)} categories ({self.source})"
+            )
+        if self.drops is not None and len(self.drops) != len(self.params):
+            raise EnlilError(
+                f"{self.phenomenon}: {len(self.drops)} drops for {len(self.params)} contexts "
+                f"({self.source})"
             )
 
     def counts(self) -> list[int]:
@@ -106,6 +117,7 @@ def contexts_from_archive(path: str) -> ContextSet:
         np.asarray(archive.params, np.float64),
         np.asarray(archive.categories, np.int64),
         f"archive:{path}",
+        np.asarray(archive.drop, np.float64),
     )
 
 
@@ -137,6 +149,9 @@ def merge_context_sets(sets: Sequence[ContextSet]) -> list[ContextSet]:
             np.concatenate([g.params for g in group]),
             np.concatenate([g.categories for g in group]),
             "+".join(g.source for g in group),
+            None
+            if any(g.drops is None for g in group)
+            else np.concatenate([g.drops for g in group if g.drops is not None]),
         )
         for name, group in merged.items()
     ]
@@ -156,15 +171,15 @@ def random_contexts(
     phen = resolve_phenomenon(phenomenon)
     rng = np.random.default_rng(seed)
     units = rng.random((n, len(phen.param_names)))
-    cats = [
+    results = [
         evaluate_context(
             detector, batch, phen, u, clean_f1=clean_f1, thresholds=thresholds, seed=seed
-        ).category
+        )
         for u in units
     ]
-    return ContextSet(
-        phenomenon, tuple(phen.param_names), units, np.asarray(cats, np.int64), "random"
-    )
+    cats = np.asarray([r.category for r in results], np.int64)
+    drops = np.asarray([r.drop for r in results], np.float64)
+    return ContextSet(phenomenon, tuple(phen.param_names), units, cats, "random", drops)
 
 
 @dataclass
@@ -258,10 +273,12 @@ class OracleTrainConfig:
         width: Channels of the first convolution (``small_cnn`` option).
         seed: Everything derives from it.
         threads: torch threads (``0``: leave torch's default).
-        lookup: Also look the category up from the perceived context among the measured
-            contexts, mixed with the category head as chosen on val
-            (:mod:`anunnaki.enlil._oracle_lookup`); ``False``: the head alone.
-        lookup_k: Neighbour counts tried for the lookup.
+        lookup: Fit a drop surrogate to the measured contexts
+            (:mod:`anunnaki.enlil._oracle_lookup`; needs their drops) and keep it in the
+            oracle as a lookup from the perceived context, mixed with the category head
+            as chosen on val; ``False``: the head alone, trained on the archive's categories.
+        soft_labels: With the surrogate, train the category head on its probabilities of
+            each context's category instead of the single measured category.
 
     """
 
@@ -277,7 +294,7 @@ class OracleTrainConfig:
     seed: int = 0
     threads: int = 0
     lookup: bool = True
-    lookup_k: tuple[int, ...] = (5, 10, 20, 40)
+    soft_labels: bool = True
     extra: dict[str, Any] = field(default_factory=dict)
 
 
@@ -297,11 +314,16 @@ def fit_temperature(logits: np.ndarray, labels: np.ndarray) -> float:
     return best_t
 
 
-def _fit(net: Any, data: LabelledFrames, config: OracleTrainConfig) -> list[float]:
+def _fit(
+    net: Any,
+    data: LabelledFrames,
+    config: OracleTrainConfig,
+    soft: npt.NDArray[np.float32] | None = None,
+) -> list[float]:
     torch = _torch()
     f = torch.nn.functional
     x = frames_to_tensor(data.frames, config.input_size)
-    y_cat = torch.from_numpy(data.category)
+    y_cat = torch.from_numpy(data.category if soft is None else soft)
     y_par = torch.from_numpy(data.params)
     mask = torch.from_numpy(data.params_mask)
     y_phen = torch.from_numpy(data.phenomenon)
@@ -341,46 +363,73 @@ def _fit(net: Any, data: LabelledFrames, config: OracleTrainConfig) -> list[floa
 
 
 def fit_lookup(
+    sets: Sequence[ContextSet], *, thresholds: tuple[float, float] = (0.05, 0.10)
+) -> ContextLookup | None:
+    """The drop surrogates of *sets* (:class:`ContextLookup`); ``None`` when drops are unknown."""
+    if any(s.drops is None for s in sets):
+        return None
+    return ContextLookup.from_contexts(
+        {s.phenomenon: (s.params, s.drops) for s in sets if s.drops is not None},
+        thresholds=thresholds,
+    )
+
+
+def soft_targets(
+    lookup: ContextLookup, sets: Sequence[ContextSet], frames: LabelledFrames
+) -> npt.NDArray[np.float32]:
+    """``[F, 3]`` the surrogate's category probabilities of each frame's context.
+
+    Clean frames get category 0. These replace the archive's single noisy measurements as
+    training targets of the category head.
+    """
+    out = np.zeros((len(frames.category), 3), np.float32)
+    out[:, 0] = 1.0
+    for i, cset in enumerate(sets):
+        rows = np.flatnonzero(frames.phenomenon == i + 1)
+        if len(rows):
+            d = len(cset.param_names)
+            out[rows] = lookup.vote(cset.phenomenon, frames.params[rows, :d])
+    return out
+
+
+def choose_lookup_mix(
+    lookup: ContextLookup,
     sets: Sequence[ContextSet],
     val: LabelledFrames,
+    *,
     head: np.ndarray,
     params: np.ndarray,
     phenomenon_logits: np.ndarray,
-    *,
-    ks: Sequence[int] = (5, 10, 20, 40),
-) -> tuple[ContextLookup, LookupSpec]:
-    """The lookup over *sets* and its mix with the head, chosen on the *val* frames.
+) -> LookupSpec:
+    """The lookup's mix with the head (and category 1's boost), chosen on the *val* frames.
 
-    Each val frame's own context is left out of its vote (leave-one-out), so the choice
-    sees the lookup as it works on contexts it has not measured.
+    Each val frame's own context is left out of the surrogate (leave-one-out), so the
+    choice sees the lookup as it works on contexts it has not measured.
 
     Args:
+        lookup: The surrogates of *sets*.
         sets: The measured contexts, one set per phenomenon (the oracle's order).
         val: Val frames perturbed by those contexts, with their ``rows``.
         head: ``[F, 3]`` the category head's calibrated probabilities on them.
         params: ``[F, D]`` the perceived contexts.
         phenomenon_logits: ``[F, 1 + P]`` the phenomenon head's logits.
-        ks: Neighbour counts tried.
 
     """
-    if not ks or min(ks) < 1:
-        raise EnlilError(f"lookup_k must hold neighbour counts >= 1, got {list(ks)}")
-    contexts = {s.phenomenon: (s.params, s.categories) for s in sets}
-    base = ContextLookup.from_contexts(contexts, k=max(min(ks), 15))
     names = [s.phenomenon for s in sets]
     rows = val.rows if val.rows is not None else np.full(len(val.category), -1, np.int64)
-    exclude = {name: np.where(val.phenomenon == i + 1, rows, -1) for i, name in enumerate(names)}
+    exclude = {}
+    for i, cset in enumerate(sets):
+        kept = np.full(len(cset.params), -1, np.int64)
+        keep = kept_rows(len(cset.params))
+        kept[keep] = np.arange(len(keep))
+        mine = (val.phenomenon == i + 1) & (rows >= 0)
+        exclude[cset.phenomenon] = np.where(mine, kept[np.where(mine, rows, 0)], -1)
     z = np.exp(phenomenon_logits - phenomenon_logits.max(axis=1, keepdims=True))
-    phen_probs = z / z.sum(axis=1, keepdims=True)
-    looked = {
-        k: lookup_probabilities(base.with_k(k), names, params, phen_probs, exclude=exclude)
-        for k in ks
-    }
-    k, weight, f1 = choose_mix(head, looked, val.category)
-    lookup = base.with_k(k)
-    return lookup, lookup.spec(
-        weight, {"split": "val", "frames": len(val.category), "macro_f1": f1}
+    looked = lookup_probabilities(
+        lookup, names, params, z / z.sum(axis=1, keepdims=True), exclude=exclude
     )
+    weight, boost, f1 = choose_mix(head, looked, val.category)
+    return lookup.spec(weight, boost, {"split": "val", "frames": len(val.category), "macro_f1": f1})
 
 
 def train_oracle(
@@ -424,20 +473,23 @@ def train_oracle(
     va = perturbed_frames(
         val, sets, cfg.val_frames, clean_fraction=frac, balanced=bal, seed=cfg.seed + 1_000_003
     )
-    losses = _fit(net, tr, cfg)
+    lookup = fit_lookup(sets, thresholds=thresholds) if cfg.lookup else None
+    soft = soft_targets(lookup, sets, tr) if lookup is not None and cfg.soft_labels else None
+    losses = _fit(net, tr, cfg, soft)
     oracle = OracleModel(card, net)
     chunks = [oracle.logits(va.frames[i : i + 256]) for i in range(0, len(va.frames), 256)]
     logits, params, phen = (np.concatenate([c[j] for c in chunks]) for j in range(3))
     temperature = fit_temperature(logits, va.category)
     oracle.card = card.model_copy(update={"temperature": temperature})
     head = oracle.probabilities(logits)
-    if cfg.lookup:
-        oracle.lookup, spec = fit_lookup(sets, va, head, params, phen, ks=cfg.lookup_k)
+    if lookup is not None:
+        spec = choose_lookup_mix(lookup, sets, va, head=head, params=params, phenomenon_logits=phen)
+        oracle.lookup = lookup
         oracle.card = oracle.card.model_copy(update={"lookup": spec})
     probs = oracle.category_probabilities(logits, params, phen)
     val_metrics = classification_metrics(probs.argmax(axis=1), va.category)
     val_metrics["ece"] = expected_calibration_error(probs, va.category)
-    if cfg.lookup:
+    if lookup is not None:
         head_metrics = classification_metrics(head.argmax(axis=1), va.category)
         val_metrics["head_macro_f1"] = head_metrics["macro_f1"]
     training = {
@@ -449,6 +501,7 @@ def train_oracle(
         "val_frames": len(va.frames),
         "loss": [round(v, 5) for v in losses],
         "phenomenon_head": True,
+        "soft_labels": soft is not None,
     }
     oracle.card = oracle.card.model_copy(
         update={"metrics": {"val": val_metrics}, "training": training}
