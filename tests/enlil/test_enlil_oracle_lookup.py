@@ -192,3 +192,18 @@ def test_a_lookup_named_but_missing_from_the_weights_is_refused(trained, tmp_pat
     bad_sidecar.write_text(json.dumps(card))
     with pytest.raises(ModelFileError, match=r"lookup\.fog\.params"):
         load_oracle(bad)
+
+
+def test_the_plugin_loads_its_oracles_when_built(trained, tmp_path) -> None:  # type: ignore[no-untyped-def]
+    from anunnaki.enlil import EnlilOracle
+    from anunnaki.errors import ModelFileError
+
+    _, path, _ = trained[True]
+    plugin = EnlilOracle(oracles={"colour": path})
+    assert plugin._loaded["colour"] is not None  # no frame waits for the file
+    missing = tmp_path / "missing.oracle"
+    with pytest.raises(ModelFileError):
+        EnlilOracle(oracles={"colour": missing})
+    lazy = EnlilOracle(oracles={"colour": missing}, preload=False)
+    with pytest.raises(ModelFileError):
+        lazy.assess(tiny_data(1).image(0), seq=0, model_id="colour")

@@ -159,6 +159,14 @@ def _add_make(sub: Any) -> None:
         help="only the layouts' pedestrians/deer (vehicles for the uav) on bare ground: no "
         "distractors, like a rover scenario with background: false",
     )
+    p.add_argument(
+        "--min-distance",
+        type=float,
+        default=1.5,
+        metavar="M",
+        help="rover: the nearest the camera comes to the object it aims at (1.5 m; 0.4 shows "
+        "objects filling the frame, as when the rover stops right before one)",
+    )
     p.set_defaults(run=_run_make)
 
 
@@ -183,6 +191,7 @@ def _run_make(args: argparse.Namespace) -> int:
         overwrite=args.overwrite,
         min_label_height=args.min_label_height,
         clutter=args.clutter,
+        min_distance=args.min_distance,
     )
     seconds = time.perf_counter() - start
     table = Table(title=f"{args.platform} dataset in {args.out} ({seconds:.0f} s)")

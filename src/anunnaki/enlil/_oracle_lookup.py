@@ -59,6 +59,9 @@ MAX_ROWS = 800
 #: Rows the kernel's hyper-parameters are fitted on (a fixed subsample of more).
 FIT_ROWS = 300
 _JITTER = 1e-6
+#: A phenomenon the phenomenon head gives at most this probability is not looked up (its
+#: share goes to the others when the row is renormalised).
+MIN_SHARE = 0.01
 
 
 def _ndtr(x: np.ndarray) -> np.ndarray:
@@ -251,6 +254,9 @@ class ContextLookup:
                     f"lookup: {name!r}'s kernel has {len(kernel.lengthscales)} length scales "
                     f"for {p.shape[1]} parameters"
                 )
+        for name in self.params:  # prepared now, not on the first frame assessed
+            self._process(name)
+        _ndtr(np.zeros(1))
 
     @classmethod
     def from_contexts(
@@ -373,6 +379,8 @@ def lookup_probabilities(
         phenomenon_probs: ``[B, 1 + P]`` the phenomenon head's probabilities.
         exclude: Per phenomenon, ``[B]`` rows to leave out (see :meth:`ContextLookup.predict`).
 
+    A phenomenon whose probability is at most :data:`MIN_SHARE` is skipped for that frame.
+
     """
     pp = np.asarray(phenomenon_probs, np.float64)
     q = np.asarray(params, np.float64)
@@ -380,7 +388,7 @@ def lookup_probabilities(
     out[:, 0] = pp[:, 0]
     for i, name in enumerate(phenomena):
         share = pp[:, i + 1]
-        rows = np.flatnonzero(share > 1e-3)  # skip the phenomena the frame surely lacks
+        rows = np.flatnonzero(share > MIN_SHARE)  # skip the phenomena the frame lacks
         if len(rows) == 0:
             continue
         ex = None if exclude is None or name not in exclude else np.asarray(exclude[name])[rows]

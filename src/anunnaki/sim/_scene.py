@@ -367,10 +367,10 @@ class Scene:
         """Every placed object, in order."""
         return [e.placement for e in self._bodies]
 
-    def random_camera(self, rng: np.random.Generator) -> Camera:
+    def random_camera(self, rng: np.random.Generator, *, min_distance: float = 1.5) -> Camera:
         """A random but plausible camera for this platform (see :func:`random_camera`)."""
         objs = [e.placement for e in self._bodies if e.label >= 0]
-        return random_camera(self.platform, objs, rng)
+        return random_camera(self.platform, objs, rng, min_distance=min_distance)
 
     @staticmethod
     def random_light(rng: np.random.Generator) -> Light:
@@ -432,6 +432,7 @@ def dataset_frames(
     height: int = 128,
     min_label_height: float | None = None,
     clutter: bool = True,
+    min_distance: float = 1.5,
 ) -> Iterator[Frame]:
     """Yield ``n`` labelled frames of scene ``layout`` from random camera poses.
 
@@ -450,6 +451,8 @@ def dataset_frames(
         clutter: ``False`` keeps only the layout's objects of a class (no distractors,
             roads, buildings or trees): bare ground with pedestrians and deer, the look of a
             rover scenario with ``background: false``.
+        min_distance: Rover: the nearest distance (m) of an object the camera aims at
+            (:func:`random_camera`).
 
     Yields:
         :class:`Frame` s with ``t = seq / 10`` and ``seq = 0 … n-1``; deterministic for
@@ -474,6 +477,6 @@ def dataset_frames(
     ) as scene:
         for i in range(n):
             scene.vary(rng)
-            camera = scene.random_camera(rng)
+            camera = scene.random_camera(rng, min_distance=min_distance)
             light = scene.random_light(rng)
             yield scene.render(camera, light=light, t=i / 10.0, seq=i)
