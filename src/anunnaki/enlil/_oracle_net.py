@@ -374,7 +374,8 @@ def _read_card(spath: Path) -> OracleCard:
             f"bad oracle sidecar at {where}: {first['msg']}",
             path=str(spath),
             element=where,
-            hint=f"an oracle sidecar has format {ORACLE_FORMAT!r}; retrain the oracle",
+            hint=f"an oracle sidecar has format {ORACLE_FORMAT!r} (or "
+            f"{ORACLE_FORMAT_LOOKUP!r} with a lookup); retrain the oracle",
         ) from None
 
 
