@@ -75,8 +75,8 @@ pick() { [[ $SELECTED == "  " || $SELECTED == *" $1 "* ]]; } # no names: all of 
 
 # rover-default: the phenomena of the issue (hsl, raindrop, fog) and brightness, the demo's dusk
 if pick rover-default || pick rover-fog || pick rover-low_light; then dataset rover; fi
-# ... and, among its frames, bare-ground scenes with close objects (no clutter), the look of
-# the demo's background: false (docs/enlil.md, "the demo's false alarm")
+# ... and, among its frames, bare-ground scenes (no clutter): the look of the demo's
+# background: false (docs/enlil.md, "In the loop", its false alarm)
 if pick rover-default; then
   dataset rover-open --no-clutter --per-layout 10 --test-layouts ""
   EXTRA=(--extra-data "$DATA/rover-open")
