@@ -36,12 +36,12 @@ timed() { # timed NAME COMMAND...: run it, append its wall seconds to $TIMES
   printf '%s\t%d\n' "$name" $((SECONDS - start)) >> "$TIMES"
 }
 
-dataset() { # dataset PLATFORM [make-dataset options]
-  local platform=$1
+dataset() { # dataset NAME [make-dataset options]: NAME is the platform, or rover-open
+  local name=$1
   shift
-  if [[ ! -f $DATA/$platform/val.json ]]; then
-    timed "make-dataset $platform" "${ANUNNAKI[@]}" make-dataset "$platform" \
-      --out "$DATA/$platform" --workers "$THREADS" "$@"
+  if [[ ! -f $DATA/$name/val.json ]]; then
+    timed "make-dataset $name" "${ANUNNAKI[@]}" make-dataset "${name%-open}" \
+      --out "$DATA/$name" --workers "$THREADS" "$@"
   fi
 }
 
@@ -51,6 +51,8 @@ assess() { # assess MODEL PLATFORM PHENOMENON BUDGET: one Enlil archive
     --data "$DATA/$platform" --phenomenon "$phenomenon" --budget "$budget" --seed "$SEED" \
     --workers "$THREADS" --out "$RUNS/$model-$phenomenon" --json > "$RUNS/$model-$phenomenon.json"
 }
+
+EXTRA=() # more `oracle train` options for the next train (rover-default: --extra-data)
 
 train() { # train MODEL PLATFORM REGISTRY BUDGET FRAMES EPOCHS PHENOMENON...
   local model=$1 platform=$2 registry=$3 budget=${BUDGET:-$4} frames=${FRAMES:-$5}
@@ -64,7 +66,7 @@ train() { # train MODEL PLATFORM REGISTRY BUDGET FRAMES EPOCHS PHENOMENON...
   timed "oracle train $model" "${ANUNNAKI[@]}" oracle train --models "$registry" \
     --model "$model" --data "$DATA/$platform" "${archives[@]}" \
     --out "$MODELS/$model.oracle" --frames "$frames" --epochs "$epochs" --seed "$SEED" \
-    --threads "$THREADS" > "$RUNS/$model.oracle.json"
+    --threads "$THREADS" "${EXTRA[@]}" > "$RUNS/$model.oracle.json"
   "$PY" scripts/pin-oracle.py "$registry" "$model" "$MODELS/$model.oracle.safetensors"
 }
 
@@ -73,9 +75,16 @@ pick() { [[ $SELECTED == "  " || $SELECTED == *" $1 "* ]]; } # no names: all of 
 
 # rover-default: the phenomena of the issue (hsl, raindrop, fog) and brightness, the demo's dusk
 if pick rover-default || pick rover-fog || pick rover-low_light; then dataset rover; fi
+# ... and, among its frames, bare-ground scenes (no clutter): the look of the demo's
+# background: false (docs/enlil.md, "In the loop", its false alarm)
+if pick rover-default; then
+  dataset rover-open --no-clutter --per-layout 10 --test-layouts ""
+  EXTRA=(--extra-data "$DATA/rover-open")
+fi
 #                                                    budget frames epochs phenomena
 pick rover-default && train rover-default rover "$MODELS/rover.yaml" 600 3000 12 \
   hsl raindrop fog brightness
+EXTRA=()
 # the domain models, on the phenomena they were fine-tuned for (docs/detector.md)
 pick rover-fog && train rover-fog rover "$MODELS/rover.yaml" 600 3000 12 fog
 pick rover-low_light && train rover-low_light rover "$MODELS/rover.yaml" 400 3000 12 brightness hsl

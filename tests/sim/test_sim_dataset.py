@@ -188,3 +188,44 @@ def test_the_generic_maker_needs_a_source_and_classes(tmp_path: Path) -> None:
         workers=1,
     )
     assert len(load_split(tmp_path / "d", "test")) == 2 and set(paths) == {"train", "val", "test"}
+
+
+def test_no_clutter_keeps_only_the_layouts_objects_of_a_class(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """Bare ground with pedestrians and deer: the look of a ``background: false`` scenario."""
+    pytest.importorskip("pybullet")
+    from anunnaki.sim import ROVER_CLASSES, _scene, dataset_frames
+
+    added: list[str] = []
+
+    class Recording(_scene.Scene):
+        def add(self, placement, **kwargs):  # type: ignore[no-untyped-def]
+            added.append(placement.kind)
+            return super().add(placement, **kwargs)
+
+    monkeypatch.setattr(_scene, "Scene", Recording)
+    frames = list(
+        dataset_frames("rover", layout=3, seed=0, n=2, width=64, height=64, clutter=False)
+    )
+    assert len(frames) == 2 and added and set(added) <= set(ROVER_CLASSES)
+    added.clear()
+    list(dataset_frames("rover", layout=3, seed=0, n=1, width=64, height=64))
+    assert set(added) - set(ROVER_CLASSES)  # the default scene has its distractors
+
+
+def test_the_cli_passes_no_clutter(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    from anunnaki.cli.main import main
+    from anunnaki.sim import _dataset
+
+    asked: list[bool] = []
+
+    def source(platform: str, *, clutter: bool = True, **kwargs: int) -> Iterator[FakeFrame]:
+        asked.append(clutter)
+        return iter(())
+
+    monkeypatch.setattr(_dataset, "scene_frames", source)
+    out = str(tmp_path / "d")
+    args = ["make-dataset", "rover", "--out", out, "--workers", "1", "--no-clutter"]
+    assert main([*args, "--train-layouts", "0", "--val-layouts", "1", "--test-layouts", "2"]) == 0
+    assert asked == [False, False, False]

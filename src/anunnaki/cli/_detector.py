@@ -152,6 +152,21 @@ def _add_make(sub: Any) -> None:
         help="smallest labelled box height as a fraction of the image height; smaller "
         "objects become ignore boxes (default: the platform's, rover 0.134, uav 0)",
     )
+    p.add_argument(
+        "--no-clutter",
+        dest="clutter",
+        action="store_false",
+        help="only the layouts' pedestrians/deer (vehicles for the uav) on bare ground: no "
+        "distractors, like a rover scenario with background: false",
+    )
+    p.add_argument(
+        "--min-distance",
+        type=float,
+        default=1.5,
+        metavar="M",
+        help="rover: the nearest the camera comes to the object it aims at (1.5 m; 0.4 shows "
+        "objects filling the frame, as when the rover stops right before one)",
+    )
     p.set_defaults(run=_run_make)
 
 
@@ -175,6 +190,8 @@ def _run_make(args: argparse.Namespace) -> int:
         progress=console.is_terminal,
         overwrite=args.overwrite,
         min_label_height=args.min_label_height,
+        clutter=args.clutter,
+        min_distance=args.min_distance,
     )
     seconds = time.perf_counter() - start
     table = Table(title=f"{args.platform} dataset in {args.out} ({seconds:.0f} s)")

@@ -32,13 +32,26 @@ def add_parser(sub: Any) -> None:
     t.add_argument("--epochs", type=int, default=12)
     t.add_argument("--seed", type=int, default=0)
     t.add_argument("--threads", type=int, default=0)
+    t.add_argument(
+        "--extra-data",
+        action="append",
+        default=[],
+        metavar="DIR",
+        help="another dataset folder whose train/val images join the frames (repeatable), "
+        "e.g. one made by make-dataset --no-clutter",
+    )
+    t.add_argument(
+        "--no-lookup",
+        dest="lookup",
+        action="store_false",
+        help="the category head alone: no perceived-context lookup over the archive",
+    )
     t.set_defaults(run=run_train)
     _add_evaluate(osub)
 
 
 def run_train(args: argparse.Namespace) -> int:
     """Train, save, print the oracle's sha256 and val metrics as JSON."""
-    from anunnaki.datasets import load_split
     from anunnaki.enlil import (
         EnlilError,
         OracleTrainConfig,
@@ -71,10 +84,12 @@ def run_train(args: argparse.Namespace) -> int:
         epochs=args.epochs,
         seed=args.seed,
         threads=args.threads,
+        lookup=args.lookup,
+        extra={"extra_data": list(args.extra_data)} if args.extra_data else {},
     )
     oracle = train_oracle(
-        load_split(args.data, "train"),
-        load_split(args.data, "val"),
+        _joined(args.data, args.extra_data, "train"),
+        _joined(args.data, args.extra_data, "val"),
         sets,
         model_id=spec.id,
         model_sha256=digest,
@@ -83,6 +98,26 @@ def run_train(args: argparse.Namespace) -> int:
     sha = oracle.save(args.out)
     print(json.dumps({"file": str(args.out), "sha256": sha, **oracle.card.metrics}, indent=2))
     return 0
+
+
+def _joined(data: str, extra: list[str], split: str) -> Any:
+    """*split* of *data* with the same split of every *extra* folder appended."""
+    from anunnaki.datasets import Dataset, load_split
+    from anunnaki.enlil import EnlilError
+
+    main = load_split(data, split)
+    if not extra:
+        return main
+    records = list(main.records)
+    for folder in extra:
+        more = load_split(folder, split)
+        if more.classes != main.classes:
+            raise EnlilError(
+                f"--extra-data {folder}: classes {list(more.classes)} differ from {data}'s "
+                f"{list(main.classes)}; render it for the same platform"
+            )
+        records.extend(more.records)
+    return Dataset(main.classes, records, name=f"{data}+{len(extra)} extra ({split})")
 
 
 def _add_evaluate(osub: Any) -> None:

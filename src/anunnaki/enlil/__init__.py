@@ -35,6 +35,7 @@ from anunnaki.enlil._oracle_eval import (
 )
 
 # The behavior oracle (issue 13, items 3 to 6): network, training, evaluation, run time.
+from anunnaki.enlil._oracle_lookup import ContextLookup, LookupSpec
 from anunnaki.enlil._oracle_net import (
     ORACLE_ARCHITECTURES,
     OracleCard,
@@ -47,6 +48,7 @@ from anunnaki.enlil._oracle_train import (
     ContextSet,
     OracleTrainConfig,
     contexts_from_archive,
+    merge_context_sets,
     random_contexts,
     train_oracle,
 )
@@ -64,6 +66,7 @@ __all__ = [
     "ArchiveWriter",
     "BaselineFit",
     "ContextDraw",
+    "ContextLookup",
     "ContextResult",
     "ContextSet",
     "ContextSpec",
@@ -72,6 +75,7 @@ __all__ = [
     "EnlilSearch",
     "HeldOut",
     "Job",
+    "LookupSpec",
     "OracleCard",
     "OracleModel",
     "OraclePrediction",
@@ -91,6 +95,7 @@ __all__ = [
     "fixed_batch",
     "held_out_frames",
     "load_oracle",
+    "merge_context_sets",
     "normalise",
     "occupied_cells",
     "oracle_predictions",

@@ -230,14 +230,15 @@ def oracle_predictions(
         for i in range(0, len(held.frames), batch_size)
     ]
     logits = np.concatenate([c[0] for c in chunks])
-    params = np.concatenate([c[1] for c in chunks])[:, : len(held.param_names)]
-    probs = oracle.probabilities(logits)
+    all_params = np.concatenate([c[1] for c in chunks])
+    phen_logits = np.concatenate([c[2] for c in chunks])
+    params = all_params[:, : len(held.param_names)]
+    probs = oracle.category_probabilities(logits, all_params, phen_logits)
     rows = held.windows(window)
     window_probs = probs[rows].mean(axis=1)
     hit = None
     if oracle.card.phenomenon_head:
-        which = np.concatenate([c[2] for c in chunks]).argmax(axis=1)
-        hit = which == classes.index(held.phenomenon)
+        hit = phen_logits.argmax(axis=1) == classes.index(held.phenomenon)
     return Predictions(
         "oracle",
         probs.argmax(axis=1).astype(np.int64),

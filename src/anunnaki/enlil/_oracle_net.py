@@ -30,6 +30,7 @@ import numpy.typing as npt
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
 from anunnaki.enlil._context import EnlilError
+from anunnaki.enlil._oracle_lookup import LOOKUP_PREFIX, ContextLookup, LookupSpec
 from anunnaki.errors import MissingExtraError, ModelFileError
 from anunnaki.lec import sha256_file
 from anunnaki.plugins import Registry
@@ -47,6 +48,8 @@ __all__ = [
 ]
 
 ORACLE_FORMAT = "anunnaki-oracle/1"
+#: The format of an oracle whose file also holds a context lookup (:class:`LookupSpec`).
+ORACLE_FORMAT_LOOKUP = "anunnaki-oracle/2"
 #: The phenomenon head's name for an unperturbed frame.
 CLEAR = "clear"
 
@@ -115,7 +118,7 @@ class OracleCard(BaseModel):
     """The JSON sidecar of an oracle file (``NAME.json`` next to ``NAME.safetensors``).
 
     Attributes:
-        format: ``anunnaki-oracle/1``.
+        format: ``anunnaki-oracle/1``; ``anunnaki-oracle/2`` when it has a ``lookup``.
         model_id: The id of the model whose behavior the oracle predicts.
         model_sha256: That model's weights sha256 (empty when unknown).
         phenomena: The phenomena covered; the phenomenon head's classes are ``clear`` then
@@ -128,12 +131,15 @@ class OracleCard(BaseModel):
         weights_sha256: sha256 of the safetensors file, checked before it is read.
         metrics: Figures measured after training (val accuracy, macro-F1, ECE …).
         training: How it was trained (contexts source, frames, epochs, seed …).
+        lookup: The perceived context → category lookup mixed with the category head
+            (:mod:`anunnaki.enlil._oracle_lookup`), or ``None`` (the head alone; every
+            ``anunnaki-oracle/1`` file).
 
     """
 
     model_config = ConfigDict(extra="forbid", frozen=True)
 
-    format: Literal["anunnaki-oracle/1"] = "anunnaki-oracle/1"
+    format: Literal["anunnaki-oracle/1", "anunnaki-oracle/2"] = "anunnaki-oracle/1"
     model_id: str
     model_sha256: str = ""
     phenomena: list[PhenomenonSpec] = Field(min_length=1)
@@ -146,6 +152,7 @@ class OracleCard(BaseModel):
     weights_sha256: str = ""
     metrics: dict[str, Any] = Field(default_factory=dict)
     training: dict[str, Any] = Field(default_factory=dict)
+    lookup: LookupSpec | None = None
 
     @property
     def max_params(self) -> int:
@@ -220,12 +227,15 @@ class OracleModel:
     Args:
         card: The sidecar.
         net: The network (``torch.nn.Module``), in eval mode after construction.
+        lookup: The measured contexts the category is looked up in (used when the card
+            has a ``lookup``; see :meth:`category_probabilities`).
 
     """
 
-    def __init__(self, card: OracleCard, net: Any) -> None:
+    def __init__(self, card: OracleCard, net: Any, lookup: ContextLookup | None = None) -> None:
         self.card = card
         self.net = net
+        self.lookup = lookup
         self.net.eval()
 
     def __repr__(self) -> str:
@@ -255,12 +265,42 @@ class OracleModel:
         out: np.ndarray = e / e.sum(axis=-1, keepdims=True)
         return out
 
+    def category_probabilities(
+        self, category_logits: np.ndarray, params: np.ndarray, phenomenon_logits: np.ndarray
+    ) -> np.ndarray:
+        """``[B, 3]`` the oracle's category probabilities from the network's raw outputs.
+
+        The calibrated category head (:meth:`probabilities`), mixed with the lookup of the
+        perceived context when the oracle has one (``card.lookup``, see
+        :mod:`anunnaki.enlil._oracle_lookup`): ``w · head + (1 - w) · lookup``, category 1
+        boosted by the card's ``lookup.boost``.
+        """
+        probs = self.probabilities(category_logits)
+        spec = self.card.lookup
+        if spec is None or self.lookup is None:
+            return probs
+        from anunnaki.enlil._oracle_lookup import (
+            boosted,
+            lookup_probabilities,
+            mixed_probabilities,
+        )
+
+        if spec.weight < 1.0:
+            z = np.asarray(phenomenon_logits, np.float64)
+            z = np.exp(z - z.max(axis=1, keepdims=True))
+            names = [p.name for p in self.card.phenomena]
+            looked = lookup_probabilities(
+                self.lookup, names, params, z / z.sum(axis=1, keepdims=True)
+            )
+            probs = mixed_probabilities(probs, looked, spec.weight)
+        return boosted(probs, spec.boost)
+
     def predict(self, frames: Sequence[npt.NDArray[np.uint8]]) -> list[OraclePrediction]:
         """Assess each frame; see :class:`OraclePrediction`."""
         if len(frames) == 0:
             return []
         cat, params, phen = self.logits(frames)
-        probs = self.probabilities(cat)
+        probs = self.category_probabilities(cat, params, phen)
         names = self.card.phenomenon_classes
         out = []
         for i in range(len(frames)):
@@ -285,7 +325,12 @@ class OracleModel:
 
         wpath, spath = oracle_paths(path)
         wpath.parent.mkdir(parents=True, exist_ok=True)
-        tensors = {k: v.detach().cpu().numpy().copy() for k, v in self.net.state_dict().items()}
+        tensors: dict[str, np.ndarray] = {
+            k: v.detach().cpu().numpy().copy() for k, v in self.net.state_dict().items()
+        }
+        if self.card.lookup is not None and self.lookup is not None:
+            tensors.update(self.lookup.tensors())
+            self.card = self.card.model_copy(update={"format": ORACLE_FORMAT_LOOKUP})
         tmp = wpath.with_name(wpath.name + ".tmp")
         save_file(tensors, str(tmp))
         tmp.replace(wpath)
@@ -329,7 +374,8 @@ def _read_card(spath: Path) -> OracleCard:
             f"bad oracle sidecar at {where}: {first['msg']}",
             path=str(spath),
             element=where,
-            hint=f"an oracle sidecar has format {ORACLE_FORMAT!r}; retrain the oracle",
+            hint=f"an oracle sidecar has format {ORACLE_FORMAT!r} (or "
+            f"{ORACLE_FORMAT_LOOKUP!r} with a lookup); retrain the oracle",
         ) from None
 
 
@@ -370,8 +416,17 @@ def load_oracle(path: str | Path, *, sha256: str | None = None) -> OracleModel:
         ) from None
     torch = _torch()
     net = build_network(card)
+    lookup = None
+    if card.lookup is not None:
+        try:
+            lookup = ContextLookup.from_tensors(arrays, card.lookup, source=str(wpath))
+        except EnlilError as exc:
+            raise ModelFileError(
+                str(exc), path=str(wpath), hint="copy NAME.safetensors and NAME.json again"
+            ) from None
+    weights = {k: v for k, v in arrays.items() if not k.startswith(LOOKUP_PREFIX)}
     try:
-        net.load_state_dict({k: torch.from_numpy(np.array(v)) for k, v in arrays.items()})
+        net.load_state_dict({k: torch.from_numpy(np.array(v)) for k, v in weights.items()})
     except RuntimeError as exc:
         raise ModelFileError(
             f"the weights do not fit architecture {card.architecture!r}: "
@@ -379,7 +434,7 @@ def load_oracle(path: str | Path, *, sha256: str | None = None) -> OracleModel:
             path=str(wpath),
             hint="the sidecar and the weights come from different trainings; copy both again",
         ) from None
-    return OracleModel(card, net)
+    return OracleModel(card, net, lookup)
 
 
 def expected_calibration_error(probs: np.ndarray, labels: np.ndarray, bins: int = 10) -> float:

@@ -11,9 +11,9 @@ and the plugin uses that model's oracle, named in the model registry::
         sha256: 5b47…
         oracle: {file: rover-default.oracle.safetensors, sha256: 0c1d…}
 
-After a swap the new model's oracle is used (loaded on first use, its sha256 checked); for a
-model no oracle covers nothing is invented: ``assess`` returns ``None`` (nothing is
-published) and the plugin logs it once per model.
+After a swap the new model's oracle is used (all are loaded when the plugin is built, each
+sha256 checked); for a model no oracle covers nothing is invented: ``assess`` returns
+``None`` (nothing is published) and the plugin logs it once per model.
 """
 
 from __future__ import annotations
@@ -47,6 +47,9 @@ class EnlilOracle:
             loaded :class:`~anunnaki.enlil.OracleModel` objects.
         window: Average the calibrated probabilities over the last *window* frames of the
             same model (1: every frame on its own).
+        preload: Load every named oracle now (a bad file is reported when the node is
+            built, and no frame waits for a file to be read and prepared); ``False``: each
+            on the first frame of its model.
 
     Raises:
         OracleError: Neither *models* nor *oracles* given, or *window* < 1.
@@ -61,6 +64,7 @@ class EnlilOracle:
         *,
         oracles: Mapping[str, str | Path | OracleModel] | None = None,
         window: int = 1,
+        preload: bool = True,
     ) -> None:
         if models is None and not oracles:
             raise OracleError(
@@ -83,6 +87,9 @@ class EnlilOracle:
         self._loaded: dict[str, OracleModel | None] = {}
         self._history: deque[np.ndarray] = deque(maxlen=window)
         self._last_model: str | None = None
+        if preload:
+            for model_id in self.covered:
+                self.oracle_for(model_id)
 
     def __repr__(self) -> str:
         return f"EnlilOracle(models={sorted(self._sources)}, window={self.window})"
@@ -128,7 +135,7 @@ class EnlilOracle:
             self._history.clear()
             self._last_model = model_id
         cat, params, phen = oracle.logits([frame])
-        self._history.append(oracle.probabilities(cat)[0])
+        self._history.append(oracle.category_probabilities(cat, params, phen)[0])
         probs = np.mean(np.stack(self._history), axis=0)
         category = int(np.argmax(probs))
         context = _context(oracle, params[0], phen[0], category)

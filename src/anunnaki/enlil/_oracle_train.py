@@ -28,6 +28,13 @@ from anunnaki.enlil._context import (
     resolve_phenomenon,
     to_phenomenon_vector,
 )
+from anunnaki.enlil._oracle_lookup import (
+    ContextLookup,
+    LookupSpec,
+    choose_mix,
+    kept_rows,
+    lookup_probabilities,
+)
 from anunnaki.enlil._oracle_net import (
     OracleCard,
     OracleModel,
@@ -44,10 +51,14 @@ __all__ = [
     "ContextSet",
     "LabelledFrames",
     "OracleTrainConfig",
+    "choose_lookup_mix",
     "contexts_from_archive",
+    "fit_lookup",
     "fit_temperature",
+    "merge_context_sets",
     "perturbed_frames",
     "random_contexts",
+    "soft_targets",
     "train_oracle",
 ]
 
@@ -62,6 +73,8 @@ class ContextSet:
         params: ``[N, d]`` normalised contexts.
         categories: ``[N]`` behavior categories.
         source: Where they come from (``archive:PATH``, ``random``).
+        drops: ``[N]`` the measured relative F1 drops (what the categories come from), or
+            ``None`` when unknown (then the oracle gets no context lookup).
 
     """
 
@@ -70,6 +83,7 @@ class ContextSet:
     params: npt.NDArray[np.float64]
     categories: npt.NDArray[np.int64]
     source: str = ""
+    drops: npt.NDArray[np.float64] | None = None
 
     def __post_init__(self) -> None:
         if len(self.params) == 0:
@@ -80,6 +94,11 @@ class ContextSet:
             raise EnlilError(
                 f"{self.phenomenon}: contexts {self.params.shape} do not match parameters "
                 f"{list(self.param_names)} and {len(self.categories)} categories ({self.source})"
+            )
+        if self.drops is not None and len(self.drops) != len(self.params):
+            raise EnlilError(
+                f"{self.phenomenon}: {len(self.drops)} drops for {len(self.params)} contexts "
+                f"({self.source})"
             )
 
     def counts(self) -> list[int]:
@@ -98,7 +117,44 @@ def contexts_from_archive(path: str) -> ContextSet:
         np.asarray(archive.params, np.float64),
         np.asarray(archive.categories, np.int64),
         f"archive:{path}",
+        np.asarray(archive.drop, np.float64),
     )
+
+
+def merge_context_sets(sets: Sequence[ContextSet]) -> list[ContextSet]:
+    """One set per phenomenon, in first-seen order; sets of one phenomenon are concatenated.
+
+    E.g. an Enlil archive and a random (Monte-Carlo) archive of the same phenomenon.
+
+    Raises:
+        EnlilError: Two sets of one phenomenon name different parameters.
+
+    """
+    merged: dict[str, list[ContextSet]] = {}
+    for cset in sets:
+        group = merged.setdefault(cset.phenomenon, [])
+        if group and group[0].param_names != cset.param_names:
+            raise EnlilError(
+                f"{cset.phenomenon}: {cset.source} has parameters {list(cset.param_names)}, "
+                f"{group[0].source} {list(group[0].param_names)}; give archives of one "
+                "phenomenon made by the same version of it"
+            )
+        group.append(cset)
+    return [
+        group[0]
+        if len(group) == 1
+        else ContextSet(
+            name,
+            group[0].param_names,
+            np.concatenate([g.params for g in group]),
+            np.concatenate([g.categories for g in group]),
+            "+".join(g.source for g in group),
+            None
+            if any(g.drops is None for g in group)
+            else np.concatenate([g.drops for g in group if g.drops is not None]),
+        )
+        for name, group in merged.items()
+    ]
 
 
 def random_contexts(
@@ -115,15 +171,15 @@ def random_contexts(
     phen = resolve_phenomenon(phenomenon)
     rng = np.random.default_rng(seed)
     units = rng.random((n, len(phen.param_names)))
-    cats = [
+    results = [
         evaluate_context(
             detector, batch, phen, u, clean_f1=clean_f1, thresholds=thresholds, seed=seed
-        ).category
+        )
         for u in units
     ]
-    return ContextSet(
-        phenomenon, tuple(phen.param_names), units, np.asarray(cats, np.int64), "random"
-    )
+    cats = np.asarray([r.category for r in results], np.int64)
+    drops = np.asarray([r.drop for r in results], np.float64)
+    return ContextSet(phenomenon, tuple(phen.param_names), units, cats, "random", drops)
 
 
 @dataclass
@@ -135,11 +191,12 @@ class LabelledFrames:
     params: npt.NDArray[np.float32]
     params_mask: npt.NDArray[np.float32]
     phenomenon: npt.NDArray[np.int64]
+    rows: npt.NDArray[np.int64] | None = None  # each frame's context row in its set, -1 clean
 
 
 def _pick_context(
     rng: np.random.Generator, cset: ContextSet, balanced: bool
-) -> tuple[npt.NDArray[np.float64], int]:
+) -> tuple[npt.NDArray[np.float64], int, int]:
     if balanced:
         present = [c for c in range(3) if (cset.categories == c).any()]
         cat = present[int(rng.integers(len(present)))]
@@ -147,7 +204,7 @@ def _pick_context(
         row = int(rows[int(rng.integers(len(rows)))])
     else:
         row = int(rng.integers(len(cset.params)))
-    return cset.params[row], int(cset.categories[row])
+    return cset.params[row], int(cset.categories[row]), row
 
 
 def perturbed_frames(
@@ -183,13 +240,14 @@ def perturbed_frames(
         np.zeros((n, width), np.float32),
         np.zeros(n, np.int64),
     )
+    out.rows = rows = np.full(n, -1, np.int64)
     for i in range(n):
         image = data.image(int(rng.integers(len(data))))
         if rng.random() < clean_fraction:
             out.frames.append(image)
             continue
         which = int(rng.integers(len(sets)))
-        unit, cat = _pick_context(rng, sets[which], balanced)
+        unit, cat, rows[i] = _pick_context(rng, sets[which], balanced)
         phen = phens[which]
         params = phen.from_vector(to_phenomenon_vector(phen, unit))
         out.frames.append(phen.apply(image, params, seed=int(rng.integers(2**31))))
@@ -215,6 +273,12 @@ class OracleTrainConfig:
         width: Channels of the first convolution (``small_cnn`` option).
         seed: Everything derives from it.
         threads: torch threads (``0``: leave torch's default).
+        lookup: Fit a drop surrogate to the measured contexts
+            (:mod:`anunnaki.enlil._oracle_lookup`; needs their drops) and keep it in the
+            oracle as a lookup from the perceived context, mixed with the category head
+            as chosen on val; ``False``: the head alone, trained on the archive's categories.
+        soft_labels: With the surrogate, train the category head on its probabilities of
+            each context's category instead of the single measured category.
 
     """
 
@@ -229,6 +293,8 @@ class OracleTrainConfig:
     width: int = 16
     seed: int = 0
     threads: int = 0
+    lookup: bool = True
+    soft_labels: bool = True
     extra: dict[str, Any] = field(default_factory=dict)
 
 
@@ -248,11 +314,16 @@ def fit_temperature(logits: np.ndarray, labels: np.ndarray) -> float:
     return best_t
 
 
-def _fit(net: Any, data: LabelledFrames, config: OracleTrainConfig) -> list[float]:
+def _fit(
+    net: Any,
+    data: LabelledFrames,
+    config: OracleTrainConfig,
+    soft: npt.NDArray[np.float32] | None = None,
+) -> list[float]:
     torch = _torch()
     f = torch.nn.functional
     x = frames_to_tensor(data.frames, config.input_size)
-    y_cat = torch.from_numpy(data.category)
+    y_cat = torch.from_numpy(data.category if soft is None else soft)
     y_par = torch.from_numpy(data.params)
     mask = torch.from_numpy(data.params_mask)
     y_phen = torch.from_numpy(data.phenomenon)
@@ -291,6 +362,76 @@ def _fit(net: Any, data: LabelledFrames, config: OracleTrainConfig) -> list[floa
     return losses
 
 
+def fit_lookup(
+    sets: Sequence[ContextSet], *, thresholds: tuple[float, float] = (0.05, 0.10)
+) -> ContextLookup | None:
+    """The drop surrogates of *sets* (:class:`ContextLookup`); ``None`` when drops are unknown."""
+    if any(s.drops is None for s in sets):
+        return None
+    return ContextLookup.from_contexts(
+        {s.phenomenon: (s.params, s.drops) for s in sets if s.drops is not None},
+        thresholds=thresholds,
+    )
+
+
+def soft_targets(
+    lookup: ContextLookup, sets: Sequence[ContextSet], frames: LabelledFrames
+) -> npt.NDArray[np.float32]:
+    """``[F, 3]`` the surrogate's category probabilities of each frame's context.
+
+    Clean frames get category 0. These replace the archive's single noisy measurements as
+    training targets of the category head.
+    """
+    out = np.zeros((len(frames.category), 3), np.float32)
+    out[:, 0] = 1.0
+    for i, cset in enumerate(sets):
+        rows = np.flatnonzero(frames.phenomenon == i + 1)
+        if len(rows):
+            d = len(cset.param_names)
+            out[rows] = lookup.vote(cset.phenomenon, frames.params[rows, :d])
+    return out
+
+
+def choose_lookup_mix(
+    lookup: ContextLookup,
+    sets: Sequence[ContextSet],
+    val: LabelledFrames,
+    *,
+    head: np.ndarray,
+    params: np.ndarray,
+    phenomenon_logits: np.ndarray,
+) -> LookupSpec:
+    """The lookup's mix with the head (and category 1's boost), chosen on the *val* frames.
+
+    Each val frame's own context is left out of the surrogate (leave-one-out), so the
+    choice sees the lookup as it works on contexts it has not measured.
+
+    Args:
+        lookup: The surrogates of *sets*.
+        sets: The measured contexts, one set per phenomenon (the oracle's order).
+        val: Val frames perturbed by those contexts, with their ``rows``.
+        head: ``[F, 3]`` the category head's calibrated probabilities on them.
+        params: ``[F, D]`` the perceived contexts.
+        phenomenon_logits: ``[F, 1 + P]`` the phenomenon head's logits.
+
+    """
+    names = [s.phenomenon for s in sets]
+    rows = val.rows if val.rows is not None else np.full(len(val.category), -1, np.int64)
+    exclude = {}
+    for i, cset in enumerate(sets):
+        kept = np.full(len(cset.params), -1, np.int64)
+        keep = kept_rows(len(cset.params))
+        kept[keep] = np.arange(len(keep))
+        mine = (val.phenomenon == i + 1) & (rows >= 0)
+        exclude[cset.phenomenon] = np.where(mine, kept[np.where(mine, rows, 0)], -1)
+    z = np.exp(phenomenon_logits - phenomenon_logits.max(axis=1, keepdims=True))
+    looked = lookup_probabilities(
+        lookup, names, params, z / z.sum(axis=1, keepdims=True), exclude=exclude
+    )
+    weight, boost, f1 = choose_mix(head, looked, val.category)
+    return lookup.spec(weight, boost, {"split": "val", "frames": len(val.category), "macro_f1": f1})
+
+
 def train_oracle(
     train: Dataset,
     val: Dataset,
@@ -311,6 +452,7 @@ def train_oracle(
     if not sets:
         raise EnlilError("train_oracle: give at least one set of contexts (an archive)")
     cfg = config or OracleTrainConfig()
+    sets = merge_context_sets(sets)
     torch = _torch()
     if cfg.threads:
         torch.set_num_threads(cfg.threads)
@@ -331,16 +473,25 @@ def train_oracle(
     va = perturbed_frames(
         val, sets, cfg.val_frames, clean_fraction=frac, balanced=bal, seed=cfg.seed + 1_000_003
     )
-    losses = _fit(net, tr, cfg)
+    lookup = fit_lookup(sets, thresholds=thresholds) if cfg.lookup else None
+    soft = soft_targets(lookup, sets, tr) if lookup is not None and cfg.soft_labels else None
+    losses = _fit(net, tr, cfg, soft)
     oracle = OracleModel(card, net)
-    logits = np.concatenate(
-        [oracle.logits(va.frames[i : i + 256])[0] for i in range(0, len(va.frames), 256)]
-    )
+    chunks = [oracle.logits(va.frames[i : i + 256]) for i in range(0, len(va.frames), 256)]
+    logits, params, phen = (np.concatenate([c[j] for c in chunks]) for j in range(3))
     temperature = fit_temperature(logits, va.category)
     oracle.card = card.model_copy(update={"temperature": temperature})
-    probs = oracle.probabilities(logits)
+    head = oracle.probabilities(logits)
+    if lookup is not None:
+        spec = choose_lookup_mix(lookup, sets, va, head=head, params=params, phenomenon_logits=phen)
+        oracle.lookup = lookup
+        oracle.card = oracle.card.model_copy(update={"lookup": spec})
+    probs = oracle.category_probabilities(logits, params, phen)
     val_metrics = classification_metrics(probs.argmax(axis=1), va.category)
     val_metrics["ece"] = expected_calibration_error(probs, va.category)
+    if lookup is not None:
+        head_metrics = classification_metrics(head.argmax(axis=1), va.category)
+        val_metrics["head_macro_f1"] = head_metrics["macro_f1"]
     training = {
         "contexts": [
             {"phenomenon": s.phenomenon, "source": s.source, "counts": s.counts()} for s in sets
@@ -350,6 +501,7 @@ def train_oracle(
         "val_frames": len(va.frames),
         "loss": [round(v, 5) for v in losses],
         "phenomenon_head": True,
+        "soft_labels": soft is not None,
     }
     oracle.card = oracle.card.model_copy(
         update={"metrics": {"val": val_metrics}, "training": training}

@@ -21,7 +21,11 @@ __all__ = ["random_camera", "random_light", "sky_rows"]
 
 
 def random_camera(
-    platform: Platform, objects: Sequence[Placement], rng: np.random.Generator
+    platform: Platform,
+    objects: Sequence[Placement],
+    rng: np.random.Generator,
+    *,
+    min_distance: float = 1.5,
 ) -> Camera:
     """A random but plausible camera for ``platform``.
 
@@ -36,18 +40,22 @@ def random_camera(
         platform: ``"rover"`` or ``"uav"``.
         objects: The scene's objects of a class (the candidates to aim at).
         rng: Draws the pose.
+        min_distance: Rover: the nearest an aimed-at object is (metres; 1.5 by default,
+            0.4 shows objects that fill the frame, as when the rover stops right before one).
 
     """
     if platform == "rover":
-        return _rover_camera(objects, rng)
+        return _rover_camera(objects, rng, min_distance)
     return _uav_camera(objects, rng)
 
 
-def _rover_camera(objects: Sequence[Placement], rng: np.random.Generator) -> Camera:
+def _rover_camera(
+    objects: Sequence[Placement], rng: np.random.Generator, min_distance: float = 1.5
+) -> Camera:
     z = 0.3 + float(rng.normal(0.0, 0.02))
     if objects and rng.random() < 0.7:
         tgt = objects[int(rng.integers(len(objects)))]
-        dist = math.exp(float(rng.uniform(math.log(1.5), math.log(12.0))))
+        dist = math.exp(float(rng.uniform(math.log(min_distance), math.log(12.0))))
         bearing = float(rng.normal(0.0, 0.35))
         yaw = bearing + float(rng.uniform(-0.35, 0.35))
         x = tgt.x - dist * math.cos(bearing)

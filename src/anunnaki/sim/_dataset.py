@@ -8,6 +8,7 @@ layout; this module is its source for the pybullet scenes, next to the scenes th
 from __future__ import annotations
 
 from collections.abc import Iterable
+from functools import partial
 from pathlib import Path
 from typing import Any
 
@@ -33,13 +34,28 @@ def scene_frames(platform: str, **kwargs: Any) -> Iterable[Any]:
     return frames
 
 
-def make_dataset(platform: str, out_dir: str | Path, **kwargs: Any) -> dict[str, Path]:
+def make_dataset(
+    platform: str,
+    out_dir: str | Path,
+    *,
+    clutter: bool = True,
+    min_distance: float = 1.5,
+    **kwargs: Any,
+) -> dict[str, Path]:
     """Render a labelled dataset of a simulated platform's scenes, split by layout.
 
-    ``platform`` is ``"rover"`` or ``"uav"``; every other argument is
-    :func:`anunnaki.datasets.make_dataset`'s (``per_layout``, ``width``, ``height``, ``seed``,
-    ``workers``, ``progress``, ``overwrite``, the layouts of each split, ``min_label_height``).
+    ``platform`` is ``"rover"`` or ``"uav"``; ``clutter=False`` renders only the layouts'
+    objects of a class on bare ground and ``min_distance`` brings the rover's camera closer
+    to what it aims at (:func:`anunnaki.sim.dataset_frames`); every other argument is
+    :func:`anunnaki.datasets.make_dataset`'s (``per_layout``, ``width``, ``height``,
+    ``seed``, ``workers``, ``progress``, ``overwrite``, the layouts of each split,
+    ``min_label_height``).
     """
-    kwargs.setdefault("source", scene_frames)
+    options: dict[str, Any] = {}
+    if not clutter:
+        options["clutter"] = False
+    if min_distance != 1.5:
+        options["min_distance"] = min_distance
+    kwargs.setdefault("source", partial(scene_frames, **options) if options else scene_frames)
     kwargs.setdefault("classes", platform_classes(platform))
     return _make_dataset(platform, out_dir, **kwargs)

@@ -368,10 +368,10 @@ class Scene(Closing):
         """Every placed object, in order."""
         return [e.placement for e in self._bodies]
 
-    def random_camera(self, rng: np.random.Generator) -> Camera:
+    def random_camera(self, rng: np.random.Generator, *, min_distance: float = 1.5) -> Camera:
         """A random but plausible camera for this platform (see :func:`random_camera`)."""
         objs = [e.placement for e in self._bodies if e.label >= 0]
-        return random_camera(self.platform, objs, rng)
+        return random_camera(self.platform, objs, rng, min_distance=min_distance)
 
     @staticmethod
     def random_light(rng: np.random.Generator) -> Light:
@@ -426,6 +426,8 @@ def dataset_frames(
     width: int = 128,
     height: int = 128,
     min_label_height: float | None = None,
+    clutter: bool = True,
+    min_distance: float = 1.5,
 ) -> Iterator[Frame]:
     """Yield ``n`` labelled frames of scene ``layout`` from random camera poses.
 
@@ -441,6 +443,11 @@ def dataset_frames(
         min_label_height: Smallest labelled box height as a fraction of ``height``; objects
             seen but smaller are the frames' ignore boxes (default: the platform's
             :data:`MIN_LABEL_HEIGHT`, rover 0.134, UAV 0).
+        clutter: ``False`` keeps only the layout's objects of a class (no distractors,
+            roads, buildings or trees): bare ground with pedestrians and deer, the look of a
+            rover scenario with ``background: false``.
+        min_distance: Rover: the nearest distance (m) of an object the camera aims at
+            (:func:`random_camera`).
 
     Yields:
         :class:`Frame` s with ``t = seq / 10`` and ``seq = 0 … n-1``; deterministic for
@@ -451,11 +458,20 @@ def dataset_frames(
     if n < 0:
         raise ValueError(f"n must be >= 0, got {n}")
     rng = np.random.default_rng(np.random.SeedSequence([seed, layout, _PLATFORM_CODE[platform]]))
+    classes = ROVER_CLASSES if platform == "rover" else UAV_CLASSES
+    placements = (
+        None if clutter else [p for p in layout_placements(platform, layout) if p.kind in classes]
+    )
     with Scene(
-        platform, layout, width=width, height=height, min_label_height=min_label_height
+        platform,
+        layout,
+        width=width,
+        height=height,
+        placements=placements,
+        min_label_height=min_label_height,
     ) as scene:
         for i in range(n):
             scene.vary(rng)
-            camera = scene.random_camera(rng)
+            camera = scene.random_camera(rng, min_distance=min_distance)
             light = scene.random_light(rng)
             yield scene.render(camera, light=light, t=i / 10.0, seq=i)
