@@ -46,6 +46,9 @@ DEFAULT_OUTPUT = ROOT / "benchmarks" / "results" / "enlil_speed.json"
 #: The last commit before the speed-ups of this benchmark's change (issue 13).
 BASELINE = "f6199dffe105fc8d4e679e6baaba8d1ddffad15b"
 STEPS = ("assess_fog", "assess_hsl", "oracle_frames", "oracle_fit", "uav_render")
+#: Sizes: assess evaluations, perturbed frames, fit frames and epochs, UAV frames, rounds.
+FULL = {"evals": 24, "frames": 600, "fit_frames": 640, "epochs": 2, "uav_frames": 10, "rounds": 2}
+QUICK = {"evals": 8, "frames": 200, "fit_frames": 192, "epochs": 1, "uav_frames": 4, "rounds": 1}
 #: The context sets of the frame and fit steps: four phenomena, 200 contexts each.
 PHENOMENA = {
     "fog": ("density", "intensity"),
@@ -242,22 +245,18 @@ def main() -> None:
     parser.add_argument("--quick", action="store_true", help="smaller sizes, one round")
     parser.add_argument("--data", default=str(ROOT / "data" / "rover"))
     parser.add_argument("--baseline", default=BASELINE, help="git revision of the baseline")
-    parser.add_argument("--rounds", type=int, default=2)
-    parser.add_argument("--evals", type=int, default=24)
-    parser.add_argument("--frames", type=int, default=600)
-    parser.add_argument("--fit-frames", type=int, default=640)
-    parser.add_argument("--epochs", type=int, default=2)
-    parser.add_argument("--uav-frames", type=int, default=10)
+    for name, value in FULL.items():  # --quick: QUICK's value unless given
+        parser.add_argument(f"--{name.replace('_', '-')}", type=int, help=f"default {value}")
     parser.add_argument("--steps", default=",".join(STEPS))
     parser.add_argument("--step", help=argparse.SUPPRESS)  # internal: run one step, print JSON
     parser.add_argument("--output", default=str(DEFAULT_OUTPUT))
     args = parser.parse_args()
+    for name, value in (QUICK if args.quick else FULL).items():
+        if getattr(args, name) is None:
+            setattr(args, name, value)
     if args.step:
         print(json.dumps(run_step(args.step, args)))
         return
-    if args.quick:
-        args.rounds, args.evals, args.frames, args.fit_frames = 1, 8, 200, 192
-        args.epochs, args.uav_frames = 1, 4
     args.steps = [s for s in args.steps.split(",") if s]
     if not (Path(args.data) / "val.json").is_file():
         sys.exit(f"{args.data}: no rendered rover dataset; run anunnaki make-dataset rover")
