@@ -18,6 +18,9 @@ has no notion of layers, so this is our own code.
 
 from __future__ import annotations
 
+from collections.abc import Iterator
+from contextlib import contextmanager
+from contextvars import ContextVar
 from functools import lru_cache
 from types import MappingProxyType
 
@@ -26,7 +29,7 @@ import numpy.typing as npt
 
 from anunnaki.phenomena._base import Image, ParamSpec, Phenomenon, require_cv2
 
-__all__ = ["Fog"]
+__all__ = ["Fog", "reuse_fog_noise"]
 
 MAX_LAYERS = 10
 #: RGB colour the fog tends to (light, slightly blue grey).
@@ -62,23 +65,39 @@ def _smooth_noise(
     return np.clip(field, 0.0, 1.0)
 
 
-#: Noise fields kept by :func:`_layer_noise`: enough for every layer of a 32-image batch
-#: (Enlil's fixed batch: image *i* gets seed ``seed + i`` for every context), about 40 MB
-#: at 128x128 and 200 MB at 320x240 at most.
-NOISE_CACHE_FIELDS = 640
+NoiseStore = dict[tuple[int, int, int, int], npt.NDArray[np.float32]]
+_REUSE: ContextVar[NoiseStore | None] = ContextVar("anunnaki_fog_noise", default=None)
 
 
-@lru_cache(maxsize=NOISE_CACHE_FIELDS)
-def _layer_noise(seed: int, index: int, height: int, width: int) -> npt.NDArray[np.float32]:
-    """Layer *index*'s noise field for *seed* (read-only): a pure function, so it is cached.
+@contextmanager
+def reuse_fog_noise(store: NoiseStore | None = None) -> Iterator[NoiseStore]:
+    """Within the block, a fog draws each noise layer once per (seed, layer, size) and keeps it.
 
-    A search measures many contexts on the same images with the same seeds, and a fog's
-    layers depend only on the seed and the size, not on ``density`` or ``intensity``: each
-    field is drawn once per (seed, layer, size), not once per context (half of a fog's cost).
+    A fog's layers depend only on the seed and the image size, not on ``density`` or
+    ``intensity``; drawing them is half of a fog's cost. Enlil measures every context on the
+    same images with the same seeds, so its workers keep the layers for the whole search
+    (pass the same *store* to each block; at most ``images x 10`` fields of ``H x W``
+    float32). Outside such a block nothing is kept: a live camera gets new seeds each frame.
+    The pixels are the same either way.
     """
+    kept: NoiseStore = {} if store is None else store
+    token = _REUSE.set(kept)
+    try:
+        yield kept
+    finally:
+        _REUSE.reset(token)
+
+
+def _layer_noise(seed: int, index: int, height: int, width: int) -> npt.NDArray[np.float32]:
+    """Layer *index*'s noise field for *seed* (kept inside :func:`reuse_fog_noise`)."""
+    store, key = _REUSE.get(), (seed, index, height, width)
+    if store is not None and key in store:
+        return store[key]
     child = np.random.SeedSequence(seed).spawn(MAX_LAYERS)[index]
     field = _smooth_noise(np.random.default_rng(child), height, width, cells=3 + index % 4)
-    field.flags.writeable = False
+    if store is not None:
+        field.flags.writeable = False
+        store[key] = field
     return field
 
 
