@@ -21,7 +21,7 @@ DATA=${DATA:-data}
 RUNS=${RUNS:-runs/oracles}
 THREADS=${THREADS:-2}
 SEED=${SEED:-0}
-MODELS=examples/models
+MODELS=${MODELS:-examples/models} # a scratch copy keeps the shipped files (and their pins) as they are
 ANUNNAKI=("$PY" -m anunnaki.cli.main)
 
 mkdir -p "$RUNS"

@@ -114,3 +114,28 @@ def test_oracle_benchmark_inference_part(tmp_path: Path) -> None:
     doc = load(out)
     assert doc["inference_ms_per_frame_128"]["median"] > 0
     assert doc["inference_ms_per_frame_128"]["threads"] == 1 and "accuracy" not in doc
+
+
+@pytest.mark.slow
+@pytest.mark.timeout(900)
+def test_enlil_speed_benchmark(tmp_path: Path) -> None:
+    pytest.importorskip("pybullet")
+    data = tmp_path / "rover"
+    subprocess.run(
+        [
+            sys.executable, "-m", "anunnaki", "make-dataset", "rover", "--out", str(data),
+            "--train-layouts", "0", "--val-layouts", "1", "--test-layouts", "2",
+            "--per-layout", "4", "--workers", "1",
+        ],
+        check=True, capture_output=True, cwd=ROOT,
+    )  # fmt: skip
+    out = tmp_path / "enlil_speed.json"
+    args = ["--quick", "--data", str(data), "--output", str(out), "--evals", "2"]
+    args += ["--frames", "32", "--fit-frames", "64"]
+    run("enlil_speed.py", *args, "--steps", "assess_fog,oracle_frames,oracle_fit", timeout=600)
+    doc = load(out)
+    assert list(doc["steps"]) == ["assess_fog", "oracle_frames", "oracle_fit"]
+    # the baseline tree and this one compute the same archive figures and frames
+    assert doc["steps"]["assess_fog"]["identical"] and doc["steps"]["oracle_frames"]["identical"]
+    assert doc["steps"]["oracle_fit"]["fit_loss_max_rel_diff"] < 1e-3
+    assert all(s["baseline_cpu_s"] > 0 and s["current_cpu_s"] > 0 for s in doc["steps"].values())

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 from enlil_helpers import ColourDetector, tiny_data
@@ -46,6 +48,18 @@ def test_fixed_batch_is_a_function_of_the_seed() -> None:
     assert len(fixed_batch(data, n=50)) == 20
     with pytest.raises(EnlilError, match="positive"):
         fixed_batch(data, n=0)
+
+
+def test_fixed_batch_reads_each_image_from_disk_once(tmp_path: Path) -> None:
+    tiny_data(10).to_coco(tmp_path / "val.json")
+    batch = fixed_batch(tmp_path, "val", n=4, seed=1)
+    first = [batch.image(i).copy() for i in range(4)]
+    pngs = list(tmp_path.rglob("*.png"))
+    assert len(pngs) == 10
+    for png in pngs:  # every context after the first reads memory
+        png.unlink()
+    assert all(np.array_equal(batch.image(i), first[i]) for i in range(4))
+    assert len(fixed_batch(tiny_data(3), n=5)) == 3
 
 
 def test_darkness_is_category_two_and_identity_is_zero() -> None:

@@ -49,6 +49,27 @@ def test_trained_oracle_round_trips_without_pickle(oracle_file) -> None:  # type
         load_oracle(path, sha256="0" * 64)
 
 
+def test_trained_network_is_left_in_the_usual_layout(oracle_file) -> None:  # type: ignore[no-untyped-def]
+    # trained channels-last for speed; saved, loaded and run in the contiguous layout
+    _path, _digest, oracle = oracle_file
+    assert all(t.is_contiguous() for t in oracle.net.state_dict().values())
+    assert not oracle.net.training
+
+
+def test_uint8_frames_are_the_float_frames_exactly() -> None:
+    from anunnaki.enlil._oracle_net import frames_to_tensor, frames_to_uint8
+
+    levels = np.arange(256, dtype=np.uint8).reshape(16, 16, 1).repeat(3, axis=2)
+    frames = [levels, tiny_data(1).image(0)]  # 16 x 16 kept, 64 x 64 resized
+    small = frames_to_uint8(frames, (16, 16))
+    assert small.dtype.is_floating_point is False and tuple(small.shape) == (2, 3, 16, 16)
+    exact = frames_to_tensor(frames, (16, 16))
+    reference = np.stack([np.asarray(small[i]).astype(np.float32) for i in range(2)])
+    reference /= 255.0  # the float path before frames were held as uint8
+    np.testing.assert_array_equal(exact.numpy(), reference)
+    assert exact.is_contiguous()
+
+
 def test_enlil_plugin_is_per_model(oracle_file, caplog) -> None:  # type: ignore[no-untyped-def]
     path, _, _ = oracle_file
     plugin = get_oracle("enlil", oracles={"colour": path})

@@ -42,6 +42,21 @@ def test_resume_equals_one_run(job: Job, tmp_path: Path, search: str) -> None:
     assert done.evaluated == 0
 
 
+def test_a_fog_search_draws_its_noise_layers_once(tmp_path: Path) -> None:
+    from anunnaki.enlil._run import _LOADED, evaluate_task
+
+    fog = Job(ColourDetector(), tiny_data(6), "fog", batch_images=6, seed=2)
+    out = run_search(fog, tmp_path / "f", search="random", budget=12, seed=0, batch=6)
+    kept = _LOADED[fog.key()][3]  # this process's state for the job (workers=1)
+    # one field per (image seed, layer, size), kept for the whole search: at most 6 x 10
+    assert 0 < len(kept) <= 60 and {k[0] for k in kept} <= set(range(2, 8))
+    assert {k[2:] for k in kept} == {(64, 64)}
+    fields = dict(kept)
+    again = evaluate_task((fog, out.archive.params[0].tolist()))
+    assert all(kept[k] is v for k, v in fields.items())  # reused, not drawn again
+    assert again.f1 == float(out.archive.f1[0])
+
+
 def test_summary_counts_cells_per_category(job: Job, tmp_path: Path) -> None:
     out = run_search(job, tmp_path / "r", search="random", budget=30, seed=1, batch=10)
     s = out.summary

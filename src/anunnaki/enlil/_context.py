@@ -130,6 +130,10 @@ def fixed_batch(
         n: Images in the batch; the whole split when it has fewer.
         seed: Which images (sorted indices, so the batch does not depend on draw order).
 
+    Returns:
+        The batch with its images decoded and held in memory: every context is measured
+        on the same images, so they are read from disk once, not once per context.
+
     Raises:
         EnlilError: *n* is not positive or the split is empty.
 
@@ -140,10 +144,10 @@ def fixed_batch(
     if len(data) == 0:
         raise EnlilError(f"fixed_batch: split {split!r} of {dataset} has no images")
     if n >= len(data):
-        return data
+        return data.in_memory()
     rng = np.random.default_rng(seed)
     chosen = np.sort(rng.choice(len(data), size=n, replace=False))
-    return data.subset(chosen)
+    return data.subset(chosen).in_memory()
 
 
 def evaluate_context(

@@ -43,7 +43,7 @@ from anunnaki.enlil._oracle_net import (
     build_network,
     classification_metrics,
     expected_calibration_error,
-    frames_to_tensor,
+    frames_to_uint8,
 )
 from anunnaki.lec import Detector
 
@@ -322,7 +322,12 @@ def _fit(
 ) -> list[float]:
     torch = _torch()
     f = torch.nn.functional
-    x = frames_to_tensor(data.frames, config.input_size)
+    # uint8 until a batch is drawn (a quarter of the memory; the same floats), and
+    # channels-last: these convolutions train in about 3/4 of the time in that layout
+    # (benchmarks/enlil_speed.py); the result differs only by float summation order.
+    x = frames_to_uint8(data.frames, config.input_size)
+    channels_last = torch.channels_last
+    net.to(memory_format=channels_last)
     y_cat = torch.from_numpy(data.category if soft is None else soft)
     y_par = torch.from_numpy(data.params)
     mask = torch.from_numpy(data.params_mask)
@@ -340,7 +345,7 @@ def _fit(
         total = 0.0
         for start in range(0, len(x), config.batch_size):
             idx = order[start : start + config.batch_size]
-            xb = x[idx]
+            xb = (x[idx].float() / 255.0).contiguous(memory_format=channels_last)
             if torch.rand(1, generator=gen).item() < 0.5:
                 xb = xb.flip(3)  # the phenomena are symmetric left-right; the labels too
             cat, par, phen = net(xb)
@@ -358,6 +363,7 @@ def _fit(
             sched.step()
             total += float(loss.detach()) * len(idx)
         losses.append(total / len(x))
+    net.to(memory_format=torch.contiguous_format)  # saved and run as before
     net.eval()
     return losses
 

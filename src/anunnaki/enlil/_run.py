@@ -25,6 +25,7 @@ from anunnaki.enlil._archive import Archive, ArchiveMeta, ArchiveWriter, read_ar
 from anunnaki.enlil._context import ContextResult, EnlilError, evaluate_context, fixed_batch
 from anunnaki.enlil._search import SEARCHES, Search
 from anunnaki.lec import Detector, evaluate_detector
+from anunnaki.phenomena import reuse_fog_noise
 
 __all__ = [
     "Job",
@@ -67,10 +68,12 @@ class Job:
         return json.dumps(parts, default=str)
 
 
-_LOADED: dict[str, tuple[Detector, Dataset, float]] = {}
+#: Per job in this process: the model, the fixed batch, its clean F1 and the fog noise
+#: layers of the batch's seeds (the same for every context, see ``reuse_fog_noise``).
+_LOADED: dict[str, tuple[Detector, Dataset, float, dict[Any, Any]]] = {}
 
 
-def _loaded(job: Job) -> tuple[Detector, Dataset, float]:
+def _loaded(job: Job) -> tuple[Detector, Dataset, float, dict[Any, Any]]:
     key = job.key()
     if key not in _LOADED:
         if isinstance(job.model, str):
@@ -80,7 +83,7 @@ def _loaded(job: Job) -> tuple[Detector, Dataset, float]:
         else:
             det = job.model
         batch = fixed_batch(job.data, job.split, job.batch_images, job.seed)
-        _LOADED[key] = (det, batch, float(evaluate_detector(det, batch).f1))
+        _LOADED[key] = (det, batch, float(evaluate_detector(det, batch).f1), {})
     return _LOADED[key]
 
 
@@ -92,16 +95,17 @@ def clean_f1(job: Job) -> float:
 def evaluate_task(task: tuple[Job, list[float]]) -> ContextResult:
     """Evaluate one context (runs in a pool process or on a Dask worker)."""
     job, vector = task
-    det, batch, clean = _loaded(job)
-    return evaluate_context(
-        det,
-        batch,
-        job.phenomenon,
-        vector,
-        clean_f1=clean,
-        thresholds=job.thresholds,
-        seed=job.seed,
-    )
+    det, batch, clean, noise = _loaded(job)
+    with reuse_fog_noise(noise):
+        return evaluate_context(
+            det,
+            batch,
+            job.phenomenon,
+            vector,
+            clean_f1=clean,
+            thresholds=job.thresholds,
+            seed=job.seed,
+        )
 
 
 def _one_thread() -> None:

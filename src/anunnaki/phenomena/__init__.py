@@ -34,6 +34,9 @@ Built-ins (``available_phenomena()``): ``brightness``, ``fog``, ``hsl``, ``motio
 prefixed with the step label (``fog.density``, ``raindrop.x``; repeats become ``raindrop_2``)
 and whose steps get seeds spawned from the one seed.
 
+``with reuse_fog_noise(store):`` keeps a fog's noise layers for the seeds it sees, for work
+that applies many contexts to the same images with the same seeds (Enlil's search).
+
 Plugins: subclass :class:`Phenomenon`, then either call :func:`register_phenomenon` or
 declare an entry point in the ``anunnaki.phenomena`` group of your package (see
 ``docs/phenomena.md``). Importing this package needs only numpy; OpenCV and albumentations
@@ -44,7 +47,7 @@ missing one raises :class:`~anunnaki.errors.MissingExtraError` naming ``anunnaki
 from anunnaki.phenomena._base import Image, ParamSpec, Phenomenon, PhenomenonError
 from anunnaki.phenomena._color import HSL, Brightness
 from anunnaki.phenomena._composition import Composition, CompositionStep, StepLike, compose
-from anunnaki.phenomena._fog import Fog
+from anunnaki.phenomena._fog import Fog, reuse_fog_noise
 from anunnaki.phenomena._raindrop import Raindrop
 from anunnaki.phenomena._registry import (
     ENTRY_POINT_GROUP,
@@ -82,5 +85,6 @@ __all__ = [
     "get_phenomenon",
     "motion_kernel",
     "register_phenomenon",
+    "reuse_fog_noise",
     "synthetic_scene",
 ]

@@ -18,6 +18,9 @@ has no notion of layers, so this is our own code.
 
 from __future__ import annotations
 
+from collections.abc import Iterator
+from contextlib import contextmanager
+from contextvars import ContextVar
 from functools import lru_cache
 from types import MappingProxyType
 
@@ -26,7 +29,7 @@ import numpy.typing as npt
 
 from anunnaki.phenomena._base import Image, ParamSpec, Phenomenon, require_cv2
 
-__all__ = ["Fog"]
+__all__ = ["Fog", "reuse_fog_noise"]
 
 MAX_LAYERS = 10
 #: RGB colour the fog tends to (light, slightly blue grey).
@@ -60,6 +63,42 @@ def _smooth_noise(
         cols = _cubic_upsampler(width, octave_cells)
         field += np.float32(weight) * (rows @ grid @ cols.T)
     return np.clip(field, 0.0, 1.0)
+
+
+NoiseStore = dict[tuple[int, int, int, int], npt.NDArray[np.float32]]
+_REUSE: ContextVar[NoiseStore | None] = ContextVar("anunnaki_fog_noise", default=None)
+
+
+@contextmanager
+def reuse_fog_noise(store: NoiseStore | None = None) -> Iterator[NoiseStore]:
+    """Within the block, a fog draws each noise layer once per (seed, layer, size) and keeps it.
+
+    A fog's layers depend only on the seed and the image size, not on ``density`` or
+    ``intensity``; drawing them is half of a fog's cost. Enlil measures every context on the
+    same images with the same seeds, so its workers keep the layers for the whole search
+    (pass the same *store* to each block; at most ``images x 10`` fields of ``H x W``
+    float32). Outside such a block nothing is kept: a live camera gets new seeds each frame.
+    The pixels are the same either way.
+    """
+    kept: NoiseStore = {} if store is None else store
+    token = _REUSE.set(kept)
+    try:
+        yield kept
+    finally:
+        _REUSE.reset(token)
+
+
+def _layer_noise(seed: int, index: int, height: int, width: int) -> npt.NDArray[np.float32]:
+    """Layer *index*'s noise field for *seed* (kept inside :func:`reuse_fog_noise`)."""
+    store, key = _REUSE.get(), (seed, index, height, width)
+    if store is not None and key in store:
+        return store[key]
+    child = np.random.SeedSequence(seed).spawn(MAX_LAYERS)[index]
+    field = _smooth_noise(np.random.default_rng(child), height, width, cells=3 + index % 4)
+    if store is not None:
+        field.flags.writeable = False
+        store[key] = field
+    return field
 
 
 class Fog(Phenomenon):
@@ -98,9 +137,8 @@ class Fog(Phenomenon):
         # Blending toward one colour layer by layer, out += alpha_i * (colour - out), leaves
         # out = colour + (image - colour) * prod(1 - alpha_i): one pass over the colour image.
         clear = np.ones((height, width), dtype=np.float32)
-        for index, child in enumerate(np.random.SeedSequence(seed).spawn(MAX_LAYERS)[:layers]):
-            rng = np.random.default_rng(child)
-            noise = _smooth_noise(rng, height, width, cells=3 + index % 4)
+        for index in range(min(layers, MAX_LAYERS)):
+            noise = _layer_noise(int(seed), index, height, width)
             clear *= np.float32(1.0 - 0.6 * intensity) - np.float32(0.4 * intensity) * noise
         colour = np.array(FOG_COLOUR, dtype=np.float32)
         out = image.astype(np.float32)
