@@ -48,6 +48,17 @@ def test_rate_is_positive_and_never_rises_while_silent(gaps: list[float], silenc
     assert 0 < later <= now + 1e-9
 
 
+def test_arrivals_stamped_at_one_instant_give_a_rate_once_time_passes() -> None:
+    # A backlog a step takes at once is stamped at that step's instant: the rate is the
+    # arrivals over the time since then (it was unknown until ten new arrivals spread out).
+    r = RateEstimator(window=10)
+    for _ in range(11):
+        r.arrive(5.0)
+    assert r.rate(5.0) is None  # no time has passed: unknown
+    assert r.rate(5.5) == pytest.approx(10 / 0.5)
+    assert r.rate(7.0) == pytest.approx(10 / 2.0)  # and it decays through a silence
+
+
 def test_the_monitor_and_the_goal_model_see_the_same_rate() -> None:
     model = load_goal_model(ROVER / "goals.yaml", binding=ROVER / "binding.yaml")
     m = AutonomicManager(model, TacticSet(tactics=[]), actuator=RecordingActuator())

@@ -46,7 +46,10 @@ class RateEstimator:
             return None
         span = a[-1] - a[0]
         if span <= 0.0:
-            return None
+            # All at one instant (a backlog a step took at once is stamped at that step's
+            # time): n intervals in the time since then, or unknown if no time has passed.
+            span = now - a[0]
+            return n / span if span > 0.0 else None
         gap = now - a[-1]
         mean = span / n
         if gap > mean:
