@@ -360,6 +360,28 @@ def test_a_log_that_ends_mid_step_is_finished(rover_copy: Path) -> None:
     assert any("ends mid-step" in n for n in report.notes)
 
 
+def test_a_log_cut_after_a_steps_analysis_replays_that_analysis(rover_copy: Path) -> None:
+    # A copy taken (or a kill) after a step's verdicts were written and before its end
+    # marker: the replay analyses that step as far as the run went (it left it, and its
+    # verdicts diverged: a by-hand node test's snapshot hit this).
+    with sqlite3.connect(rover_copy) as con:
+        tick_id, at = next(
+            (i, t)
+            for i, t in con.execute(
+                "SELECT id, t FROM inputs WHERE topic='__tick__' AND t > 5 ORDER BY id"
+            )
+            if con.execute("SELECT COUNT(*) FROM verdicts WHERE t=?", (t,)).fetchone()[0]
+            and not con.execute("SELECT COUNT(*) FROM decisions WHERE t=?", (t,)).fetchone()[0]
+        )
+        con.execute("DELETE FROM inputs WHERE id>=?", (tick_id,))
+        con.execute("DELETE FROM verdicts WHERE t>?", (at,))
+        con.execute("DELETE FROM decisions WHERE t>?", (at,))
+    con.close()
+    report = replay(rover_copy)
+    assert report.identical, report.summary()
+    assert any("finished that step as far as the run went" in n for n in report.notes)
+
+
 # -- the goal model at an instant --------------------------------------------------------------
 @pytest.mark.parametrize("at", [0.0, 1.05, 10.0, 20.3, 25.0, 27.0, 45.9, 47.0, 49.8, 60.0])
 def test_the_rebuilt_goal_state_agrees_with_the_recorded_verdicts(

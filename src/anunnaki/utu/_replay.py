@@ -582,17 +582,24 @@ class _Feeder:
         self.fed = self.steps = 0
         self.pending: float | None = None  # the time of inputs fed since the last step
 
-    def finish_step(self) -> bool:
+    def finish_step(self, analysed_until: float | None = None) -> bool:
         """Step at the time of the inputs fed since the last step, if the run decided then.
 
         A step the kill cut short after it had recorded decisions (an action's write-ahead
         flushes them) is finished, so the replay makes them too; inputs of a step that had
         decided nothing when it was cut short (or an operator call the run ended on) are
-        not stepped: the run never acted on them. Returns whether it stepped.
+        not stepped: the run never acted on them — except that the log's last step, cut short
+        after its analysis had recorded verdicts (``analysed_until``: the run's last verdict)
+        and before any decision, is analysed as far as it went. Returns whether it stepped.
         """
-        if self.pending is None or self.pending not in self.decided_at:
+        if self.pending is None:
             return False
-        self.manager.step(self.pending)
+        if self.pending in self.decided_at:
+            self.manager.step(self.pending)
+        elif analysed_until is not None and analysed_until >= self.pending:
+            self.manager.step(analysed_until, execute=False)
+        else:
+            return False
         self.steps += 1
         self.pending = None
         return True
@@ -691,10 +698,14 @@ def _replay(
         feeder.feed(rows)
         if feeder.pending is not None:
             at = feeder.pending
-            finished = feeder.finish_step()
+            finished = feeder.finish_step(max((v.t for v in knowledge.verdicts()), default=None))
             notes.append(
                 f"the log ends mid-step at t = {at:.3f} s (the run was killed?); the replay "
-                + ("finished that step" if finished else "left it: the run decided nothing in it")
+                + (
+                    "finished that step as far as the run went"
+                    if finished
+                    else "left it: the run decided nothing in it"
+                )
             )
         # The replay is over: only now read what the run decided.
         kb = feeder.manager.knowledge
