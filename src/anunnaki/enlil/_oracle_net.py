@@ -30,7 +30,14 @@ import numpy.typing as npt
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
 from anunnaki.enlil._context import EnlilError
-from anunnaki.enlil._oracle_lookup import LOOKUP_PREFIX, ContextLookup, LookupSpec
+from anunnaki.enlil._oracle_lookup import (
+    LOOKUP_PREFIX,
+    ContextLookup,
+    LookupSpec,
+    boosted,
+    lookup_probabilities,
+    mixed_probabilities,
+)
 from anunnaki.errors import MissingExtraError, ModelFileError
 from anunnaki.lec import sha256_file
 from anunnaki.plugins import Registry
@@ -229,6 +236,13 @@ def frames_to_uint8(frames: Sequence[npt.NDArray[np.uint8]], size: tuple[int, in
     return torch.from_numpy(out).permute(0, 3, 1, 2).contiguous()
 
 
+def _softmax(z: np.ndarray) -> np.ndarray:
+    """Softmax over the last axis of float logits *z*."""
+    e = np.exp(z - z.max(axis=-1, keepdims=True))
+    out: np.ndarray = e / e.sum(axis=-1, keepdims=True)
+    return out
+
+
 class OracleModel:
     """A loaded (or freshly trained) behavior oracle: a network and its card.
 
@@ -267,11 +281,7 @@ class OracleModel:
 
     def probabilities(self, category_logits: np.ndarray) -> np.ndarray:
         """Calibrated category probabilities (softmax of the logits over the temperature)."""
-        z = np.asarray(category_logits, np.float64) / self.card.temperature
-        z -= z.max(axis=-1, keepdims=True)
-        e = np.exp(z)
-        out: np.ndarray = e / e.sum(axis=-1, keepdims=True)
-        return out
+        return _softmax(np.asarray(category_logits, np.float64) / self.card.temperature)
 
     def category_probabilities(
         self, category_logits: np.ndarray, params: np.ndarray, phenomenon_logits: np.ndarray
@@ -287,19 +297,10 @@ class OracleModel:
         spec = self.card.lookup
         if spec is None or self.lookup is None:
             return probs
-        from anunnaki.enlil._oracle_lookup import (
-            boosted,
-            lookup_probabilities,
-            mixed_probabilities,
-        )
-
         if spec.weight < 1.0:
-            z = np.asarray(phenomenon_logits, np.float64)
-            z = np.exp(z - z.max(axis=1, keepdims=True))
             names = [p.name for p in self.card.phenomena]
-            looked = lookup_probabilities(
-                self.lookup, names, params, z / z.sum(axis=1, keepdims=True)
-            )
+            phenomena = _softmax(np.asarray(phenomenon_logits, np.float64))
+            looked = lookup_probabilities(self.lookup, names, params, phenomena)
             probs = mixed_probabilities(probs, looked, spec.weight)
         return boosted(probs, spec.boost)
 
