@@ -589,14 +589,15 @@ class _Feeder:
         flushes them) is finished, so the replay makes them too; inputs of a step that had
         decided nothing when it was cut short (or an operator call the run ended on) are
         not stepped: the run never acted on them — except that the log's last step, cut short
-        after its analysis had recorded verdicts (``analysed_until``: the run's last verdict)
-        and before any decision, is analysed as far as it went. Returns whether it stepped.
+        after its analysis had recorded verdicts (``analysed_until``: the last of them, at or
+        after the step's inputs) and before any decision, is analysed as far as it went.
+        Returns whether it stepped.
         """
         if self.pending is None:
             return False
         if self.pending in self.decided_at:
             self.manager.step(self.pending)
-        elif analysed_until is not None and analysed_until >= self.pending:
+        elif analysed_until is not None:
             self.manager.step(analysed_until, execute=False)
         else:
             return False
@@ -698,7 +699,9 @@ def _replay(
         feeder.feed(rows)
         if feeder.pending is not None:
             at = feeder.pending
-            finished = feeder.finish_step(max((v.t for v in knowledge.verdicts()), default=None))
+            # The verdicts the cut step recorded: only the log's tail, not the whole table.
+            analysed = knowledge.verdicts(since=at)
+            finished = feeder.finish_step(analysed[-1].t if analysed else None)
             notes.append(
                 f"the log ends mid-step at t = {at:.3f} s (the run was killed?); the replay "
                 + (
