@@ -162,10 +162,10 @@ def _add_make(sub: Any) -> None:
     p.add_argument(
         "--min-distance",
         type=float,
-        default=1.5,
+        default=None,
         metavar="M",
-        help="rover: the nearest the camera comes to the object it aims at (1.5 m; 0.4 shows "
-        "objects filling the frame, as when the rover stops right before one)",
+        help="rover: the nearest the camera comes to the object it aims at (default 1.5 m; "
+        "0.4 shows objects filling the frame, as when the rover stops right before one)",
     )
     p.set_defaults(run=_run_make)
 

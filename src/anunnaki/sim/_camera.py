@@ -17,7 +17,10 @@ import numpy as np
 from anunnaki.sim._layout import ROUTE_LENGTH, UAV_AREA, Placement, Platform
 from anunnaki.sim._world import Camera, Light
 
-__all__ = ["random_camera", "random_light", "sky_rows"]
+__all__ = ["MIN_DISTANCE", "random_camera", "random_light", "sky_rows"]
+
+MIN_DISTANCE = 1.5
+"""Rover: the nearest (m) an object the camera aims at is, by default."""
 
 
 def random_camera(
@@ -25,7 +28,7 @@ def random_camera(
     objects: Sequence[Placement],
     rng: np.random.Generator,
     *,
-    min_distance: float = 1.5,
+    min_distance: float = MIN_DISTANCE,
 ) -> Camera:
     """A random but plausible camera for ``platform``.
 
@@ -50,7 +53,7 @@ def random_camera(
 
 
 def _rover_camera(
-    objects: Sequence[Placement], rng: np.random.Generator, min_distance: float = 1.5
+    objects: Sequence[Placement], rng: np.random.Generator, min_distance: float
 ) -> Camera:
     z = 0.3 + float(rng.normal(0.0, 0.02))
     if objects and rng.random() < 0.7:

@@ -39,14 +39,16 @@ def make_dataset(
     out_dir: str | Path,
     *,
     clutter: bool = True,
-    min_distance: float = 1.5,
+    min_distance: float | None = None,
     **kwargs: Any,
 ) -> dict[str, Path]:
     """Render a labelled dataset of a simulated platform's scenes, split by layout.
 
     ``platform`` is ``"rover"`` or ``"uav"``; ``clutter=False`` renders only the layouts'
-    objects of a class on bare ground and ``min_distance`` brings the rover's camera closer
-    to what it aims at (:func:`anunnaki.sim.dataset_frames`); every other argument is
+    objects of a class on bare ground and ``min_distance`` (metres; ``None``: the camera's
+    default, 1.5) brings the rover's camera closer to what it aims at
+    (:func:`anunnaki.sim.dataset_frames`); only what differs from the defaults is passed to
+    the frame source. Every other argument is
     :func:`anunnaki.datasets.make_dataset`'s (``per_layout``, ``width``, ``height``,
     ``seed``, ``workers``, ``progress``, ``overwrite``, the layouts of each split,
     ``min_label_height``).
@@ -54,7 +56,7 @@ def make_dataset(
     options: dict[str, Any] = {}
     if not clutter:
         options["clutter"] = False
-    if min_distance != 1.5:
+    if min_distance is not None:
         options["min_distance"] = min_distance
     kwargs.setdefault("source", partial(scene_frames, **options) if options else scene_frames)
     kwargs.setdefault("classes", platform_classes(platform))

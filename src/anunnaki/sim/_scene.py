@@ -22,7 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from anunnaki._closing import Closing
-from anunnaki.sim._camera import random_camera, random_light, sky_rows
+from anunnaki.sim._camera import MIN_DISTANCE, random_camera, random_light, sky_rows
 from anunnaki.sim._groundtruth import (
     MIN_LABEL_HEIGHT,
     Frame,
@@ -368,7 +368,9 @@ class Scene(Closing):
         """Every placed object, in order."""
         return [e.placement for e in self._bodies]
 
-    def random_camera(self, rng: np.random.Generator, *, min_distance: float = 1.5) -> Camera:
+    def random_camera(
+        self, rng: np.random.Generator, *, min_distance: float = MIN_DISTANCE
+    ) -> Camera:
         """A random but plausible camera for this platform (see :func:`random_camera`)."""
         objs = [e.placement for e in self._bodies if e.label >= 0]
         return random_camera(self.platform, objs, rng, min_distance=min_distance)
@@ -427,7 +429,7 @@ def dataset_frames(
     height: int = 128,
     min_label_height: float | None = None,
     clutter: bool = True,
-    min_distance: float = 1.5,
+    min_distance: float = MIN_DISTANCE,
 ) -> Iterator[Frame]:
     """Yield ``n`` labelled frames of scene ``layout`` from random camera poses.
 
