@@ -440,9 +440,10 @@ class AnalyzeStage:
             return None
         t = max(float(batch.t), self.now)
         inputs = batch.inputs
-        if self.warm_from is None:
+        if self.warm_from is None:  # the first step, or a restarted part's first
             self.warm_from = min([t, *(i.t for i in inputs)])
-            self.started_at = self.warm_from if self.started_at is None else self.started_at
+            if self.started_at is None:
+                self.started_at = self.warm_from
         a.warming_up = t - self.warm_from < self.parts.config.warmup
         for item in inputs:
             at = min(max(item.t, self.now), t)
