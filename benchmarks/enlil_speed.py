@@ -11,7 +11,12 @@ timed here at a fixed small size on the rendered rover dataset:
   (one torch thread);
 - ``oracle_frames``: ``perturbed_frames`` of four phenomena, ``--frames`` train-split frames;
 - ``oracle_fit``: the training loop over those frames, ``--epochs`` epochs, one thread;
-- ``uav_render``: ``--uav-frames`` frames of a UAV scene at 320 x 240 (unchanged code).
+- ``uav_render``: ``--uav-frames`` frames of a UAV scene at 320 x 240 (unchanged code);
+- ``oracle_predict``: the shipped ``rover-default`` oracle's whole ``predict`` (network,
+  context lookup, mix) on one 128 x 128 frame at a time, ``--predict-calls`` calls over 16
+  val frames under fog, HSL and raindrop contexts (the ``enlil`` plugin's per-frame work;
+  aim <= 3 ms); its baseline is ``--predict-baseline`` (the commit before its speed-up),
+  and both must give the same probabilities to float rounding (``max_prob_diff``).
 
 The baseline is the source tree of ``--baseline`` (a git revision, default the commit before
 the speed-ups; extracted with ``git archive``). Baseline and current code run in alternation,
@@ -45,10 +50,28 @@ MODEL = ROOT / "examples" / "models" / "rover-default.safetensors"
 DEFAULT_OUTPUT = ROOT / "benchmarks" / "results" / "enlil_speed.json"
 #: The last commit before the speed-ups of this benchmark's change (issue 13).
 BASELINE = "f6199dffe105fc8d4e679e6baaba8d1ddffad15b"
-STEPS = ("assess_fog", "assess_hsl", "oracle_frames", "oracle_fit", "uav_render")
+#: The last commit before the oracle's per-frame speed-up (``oracle_predict``).
+PREDICT_BASELINE = "b23725c3e1a5e82f7dd570fefbed67d1e878d845"
+STEPS = ("assess_fog", "assess_hsl", "oracle_frames", "oracle_fit", "uav_render", "oracle_predict")
 #: Sizes: assess evaluations, perturbed frames, fit frames and epochs, UAV frames, rounds.
-FULL = {"evals": 24, "frames": 600, "fit_frames": 640, "epochs": 2, "uav_frames": 10, "rounds": 2}
-QUICK = {"evals": 8, "frames": 200, "fit_frames": 192, "epochs": 1, "uav_frames": 4, "rounds": 1}
+FULL = {
+    "evals": 24,
+    "frames": 600,
+    "fit_frames": 640,
+    "epochs": 2,
+    "uav_frames": 10,
+    "predict_calls": 1000,
+    "rounds": 2,
+}
+QUICK = {
+    "evals": 8,
+    "frames": 200,
+    "fit_frames": 192,
+    "epochs": 1,
+    "uav_frames": 4,
+    "predict_calls": 200,
+    "rounds": 1,
+}
 #: The context sets of the frame and fit steps: four phenomena, 200 contexts each.
 PHENOMENA = {
     "fog": ("density", "intensity"),
@@ -141,6 +164,47 @@ def _render(n: int) -> dict[str, Any]:
     return {"wall": wall, "cpu": cpu, "per_frame_wall": wall / n, "digest": digest}
 
 
+def _predict(data: str, calls: int) -> dict[str, Any]:
+    import numpy as np
+
+    from anunnaki.datasets import load_split
+    from anunnaki.enlil import load_oracle
+    from anunnaki.lec import load_registry
+    from anunnaki.phenomena import get_phenomenon
+
+    spec = load_registry(ROOT / "examples" / "models" / "rover.yaml").get("rover-default")
+    oracle = load_oracle(spec.oracle.file, sha256=spec.oracle.sha256)
+    val = load_split(data, "val")
+    rng = np.random.default_rng(0)
+    frames = []
+    for i in range(16):
+        image = val.image(i % len(val))
+        name = ("clear", "fog", "hsl", "raindrop")[i % 4]
+        if name != "clear":
+            ph = get_phenomenon(name)
+            low, high = np.asarray(ph.bounds(), np.float64).T
+            vector = low + rng.random(len(low)) * (high - low)
+            image = ph.apply(image, ph.from_vector(vector), seed=i)
+        frames.append(image)
+    for frame in frames:  # warm-up
+        oracle.predict([frame])
+    times = []
+    t0, c0 = time.perf_counter(), time.process_time()
+    for i in range(calls):
+        start = time.perf_counter()
+        oracle.predict([frames[i % len(frames)]])
+        times.append(time.perf_counter() - start)
+    wall, cpu = time.perf_counter() - t0, time.process_time() - c0
+    probs = [list(oracle.predict([f])[0].probs) for f in frames]
+    return {
+        "wall": wall,
+        "cpu": cpu,
+        "median_ms": 1000 * float(np.median(times)),
+        "p90_ms": 1000 * float(np.percentile(times, 90)),
+        "probs": probs,
+    }
+
+
 def run_step(step: str, args: argparse.Namespace) -> dict[str, Any]:
     """Time one step in this process (the code imported is whatever ``sys.path`` finds)."""
     import torch
@@ -152,6 +216,8 @@ def run_step(step: str, args: argparse.Namespace) -> dict[str, Any]:
         return _frames(args.data, args.frames)[1]
     if step == "oracle_fit":
         return _fit(args.data, args.fit_frames, args.epochs)
+    if step == "oracle_predict":
+        return _predict(args.data, args.predict_calls)
     return _render(args.uav_frames)
 
 
@@ -172,7 +238,7 @@ def _child(step: str, src: Path, args: argparse.Namespace) -> dict[str, Any]:
     cmd = [sys.executable, __file__, "--step", step, "--data", args.data]
     cmd += ["--evals", str(args.evals), "--frames", str(args.frames)]
     cmd += ["--fit-frames", str(args.fit_frames), "--epochs", str(args.epochs)]
-    cmd += ["--uav-frames", str(args.uav_frames)]
+    cmd += ["--uav-frames", str(args.uav_frames), "--predict-calls", str(args.predict_calls)]
     out = subprocess.run(cmd, env=env, check=True, capture_output=True, text=True).stdout
     result: dict[str, Any] = json.loads(out.strip().splitlines()[-1])
     return result
@@ -188,6 +254,9 @@ def compare(args: argparse.Namespace) -> dict[str, Any]:
     """Run every step for the baseline and the current tree, alternating, and compare."""
     tmp = Path(tempfile.mkdtemp(prefix="enlil-speed-"))
     trees = {"baseline": _extract(args.baseline, tmp), "current": ROOT / "src"}
+    if "oracle_predict" in args.steps:
+        (tmp / "predict").mkdir()
+        trees["predict_baseline"] = _extract(args.predict_baseline, tmp / "predict")
     runs: dict[str, dict[str, list[dict[str, Any]]]] = {
         s: {"baseline": [], "current": []} for s in args.steps
     }
@@ -195,7 +264,9 @@ def compare(args: argparse.Namespace) -> dict[str, Any]:
     for _ in range(args.rounds):
         for step in args.steps:
             for side in ("baseline", "current"):
-                runs[step][side].append(_child(step, trees[side], args))
+                own = side == "baseline" and step == "oracle_predict"
+                tree = "predict_baseline" if own else side
+                runs[step][side].append(_child(step, trees[tree], args))
                 print(step, side, round(runs[step][side][-1]["cpu"], 2), file=sys.stderr)
     steps: dict[str, Any] = {}
     for step, sides in runs.items():
@@ -212,6 +283,18 @@ def compare(args: argparse.Namespace) -> dict[str, Any]:
             entry["setup_cpu_s"] = [round(base["setup_cpu"], 3), round(cur["setup_cpu"], 3)]
         if "digest" in base:
             entry["identical"] = base["digest"] == cur["digest"]
+        if "median_ms" in base:
+            entry["baseline_median_ms"] = round(base["median_ms"], 3)
+            entry["current_median_ms"] = round(cur["median_ms"], 3)
+            entry["median_ratio"] = round(base["median_ms"] / cur["median_ms"], 2)
+            entry["current_p90_ms"] = round(cur["p90_ms"], 3)
+            diff = max(
+                abs(a - b)
+                for pa, pb in zip(base["probs"], cur["probs"], strict=True)
+                for a, b in zip(pa, pb, strict=True)
+            )
+            entry["max_prob_diff"] = float(f"{diff:.2e}")
+            entry["baseline"] = args.predict_baseline
         if "losses" in base:
             rel = [abs(a - b) / abs(a) for a, b in zip(base["losses"], cur["losses"], strict=True)]
             entry["fit_loss_max_rel_diff"] = float(f"{max(rel):.2e}")
@@ -227,6 +310,7 @@ def compare(args: argparse.Namespace) -> dict[str, Any]:
             "fit_frames": args.fit_frames,
             "fit_epochs": args.epochs,
             "uav_frames": args.uav_frames,
+            "predict_calls": args.predict_calls,
         },
         "rounds": args.rounds,
         "steps": steps,
@@ -245,6 +329,9 @@ def main() -> None:
     parser.add_argument("--quick", action="store_true", help="smaller sizes, one round")
     parser.add_argument("--data", default=str(ROOT / "data" / "rover"))
     parser.add_argument("--baseline", default=BASELINE, help="git revision of the baseline")
+    parser.add_argument(
+        "--predict-baseline", default=PREDICT_BASELINE, help="baseline revision of oracle_predict"
+    )
     for name, value in FULL.items():  # --quick: QUICK's value unless given
         parser.add_argument(f"--{name.replace('_', '-')}", type=int, help=f"default {value}")
     parser.add_argument("--steps", default=",".join(STEPS))

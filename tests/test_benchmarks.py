@@ -132,9 +132,14 @@ def test_enlil_speed_benchmark(tmp_path: Path) -> None:
     out = tmp_path / "enlil_speed.json"
     args = ["--quick", "--data", str(data), "--output", str(out), "--evals", "2"]
     args += ["--frames", "32", "--fit-frames", "64"]
-    run("enlil_speed.py", *args, "--steps", "assess_fog,oracle_frames,oracle_fit", timeout=600)
+    args += ["--predict-calls", "20"]
+    steps = "assess_fog,oracle_frames,oracle_fit,oracle_predict"
+    run("enlil_speed.py", *args, "--steps", steps, timeout=600)
     doc = load(out)
-    assert list(doc["steps"]) == ["assess_fog", "oracle_frames", "oracle_fit"]
+    assert list(doc["steps"]) == ["assess_fog", "oracle_frames", "oracle_fit", "oracle_predict"]
+    # the shipped oracle's predict: the same probabilities as before its speed-up
+    assert doc["steps"]["oracle_predict"]["max_prob_diff"] < 1e-5
+    assert doc["steps"]["oracle_predict"]["current_median_ms"] > 0
     # the baseline tree and this one compute the same archive figures and frames
     assert doc["steps"]["assess_fog"]["identical"] and doc["steps"]["oracle_frames"]["identical"]
     assert doc["steps"]["oracle_fit"]["fit_loss_max_rel_diff"] < 1e-3

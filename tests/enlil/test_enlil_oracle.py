@@ -49,10 +49,19 @@ def test_trained_oracle_round_trips_without_pickle(oracle_file) -> None:  # type
         load_oracle(path, sha256="0" * 64)
 
 
-def test_trained_network_is_left_in_the_usual_layout(oracle_file) -> None:  # type: ignore[no-untyped-def]
-    # trained channels-last for speed; saved, loaded and run in the contiguous layout
-    _path, _digest, oracle = oracle_file
-    assert all(t.is_contiguous() for t in oracle.net.state_dict().values())
+def test_trained_network_is_saved_in_the_usual_layout(oracle_file) -> None:  # type: ignore[no-untyped-def]
+    # trained and run channels-last for speed; the file holds each tensor's values in the
+    # usual index order (raw channels-last memory would scramble the convolutions' weights)
+    from safetensors.numpy import load_file
+
+    from anunnaki.enlil._oracle_net import oracle_paths
+
+    path, _digest, oracle = oracle_file
+    weights = oracle.net.state_dict()
+    assert not all(t.is_contiguous() for t in weights.values())  # channels-last in memory
+    saved = load_file(str(oracle_paths(path)[0]))
+    for name, tensor in weights.items():
+        np.testing.assert_array_equal(saved[name], tensor.numpy())
     assert not oracle.net.training
 
 

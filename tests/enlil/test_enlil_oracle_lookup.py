@@ -46,6 +46,37 @@ def test_noisy_measurements_are_smoothed() -> None:
     assert (lookup.vote("fog", units[flipped]).argmax(axis=1) == 0).all()
 
 
+def _exact(lookup: ContextLookup, name: str, query: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The textbook predictive mean and standard deviation, from the full float64 inverse."""
+    x, kernel = lookup.params[name], lookup.kernels[name]
+    ls = np.asarray(kernel.lengthscales)
+
+    def rbf(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+        return kernel.signal * np.exp(-0.5 * ((((a[:, None] - b[None]) / ls) ** 2).sum(axis=2)))
+
+    inverse = np.linalg.inv(rbf(x, x) + (kernel.noise + 1e-6) * np.eye(len(x)))
+    k = rbf(query, x)
+    mean = kernel.mean + k @ inverse @ (lookup.targets[name] - kernel.mean)
+    var = kernel.signal + kernel.noise - np.einsum("ij,ij->i", k @ inverse, k)
+    return mean, np.sqrt(var)
+
+
+@pytest.mark.parametrize(("noise", "dtype"), [(0.3, np.float32), (0.0, np.float64)])
+def test_a_lookup_predicts_in_float32_only_where_float64_would_agree(
+    noise: float, dtype: type
+) -> None:
+    units, drops = _step_contexts(300)
+    rng = np.random.default_rng(1)
+    noisy = np.clip(drops + noise * rng.standard_normal(len(drops)) * drops, 0.0, 1.0)
+    lookup = ContextLookup.from_contexts({"fog": (units, noisy)})
+    assert lookup._process("fog").whiten.dtype == dtype  # noisy: float32; exact drops: 64
+    query = np.vstack([units[:20], rng.random((200, 2))])
+    mean, std = lookup.predict("fog", query)
+    exact_mean, exact_std = _exact(lookup, "fog", query)
+    np.testing.assert_allclose(mean, exact_mean, rtol=1e-9, atol=1e-9)
+    np.testing.assert_allclose(std, exact_std, rtol=2e-4)
+
+
 def test_exclude_leaves_a_row_out_of_its_own_prediction() -> None:
     units, drops = _step_contexts(60)
     lookup = ContextLookup.from_contexts({"fog": (units, drops)})

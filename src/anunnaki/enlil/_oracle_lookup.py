@@ -29,6 +29,7 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
@@ -59,6 +60,9 @@ MAX_ROWS = 800
 #: Rows the kernel's hyper-parameters are fitted on (a fixed subsample of more).
 FIT_ROWS = 300
 _JITTER = 1e-6
+#: A lookup predicts in float32 when that moves no predictive standard deviation by more
+#: than this (relative) at its stored contexts; otherwise in float64.
+WHITEN_RTOL = 1e-4
 #: A phenomenon the phenomenon head gives at most this probability is not looked up (its
 #: share goes to the others when the row is renormalised).
 MIN_SHARE = 0.01
@@ -205,19 +209,79 @@ def fit_kernel(params: npt.ArrayLike, drops: npt.ArrayLike) -> Kernel:
 
 @dataclass
 class _Fitted:
-    """One phenomenon's process, ready to predict (inverse kernel matrix and weights)."""
+    """One phenomenon's process, ready to predict.
+
+    A frame's lookup is on the oracle's per-frame path, so what does not depend on the
+    query is computed once here: the contexts divided by the length scales, the weights
+    ``alpha = K⁻¹ (y - m)`` and the whitening ``W = L⁻¹`` of the Cholesky factor ``K = L Lᵀ``,
+    stored transposed (``whiten = Wᵀ``), so that the predictive variance is
+    ``s + n - ‖k Wᵀ‖²``. ``whiten`` is float32, half the memory traffic of the one
+    matrix-vector product per query, when that keeps every predictive standard deviation
+    within :data:`WHITEN_RTOL` of float64's at the stored contexts themselves (the smallest
+    variances, where float32's rounding counts most); otherwise float64 (a process with
+    little noise). The full inverse, used only to leave rows out
+    (:meth:`ContextLookup.predict`'s *exclude*), is computed on first use.
+    """
 
     params: npt.NDArray[np.float64]
     targets: npt.NDArray[np.float64]
     kernel: Kernel
-    inverse: npt.NDArray[np.float64] = field(init=False)
+    scaled: npt.NDArray[np.float64] = field(init=False)
+    factor: npt.NDArray[np.float64] = field(init=False)
     alpha: npt.NDArray[np.float64] = field(init=False)
+    whiten: npt.NDArray[np.floating[Any]] = field(init=False)
+    _inverse: npt.NDArray[np.float64] | None = field(default=None, init=False)
 
     def __post_init__(self) -> None:
+        from scipy.linalg import cho_solve, solve_triangular
+
+        self.scaled = self.params / np.asarray(self.kernel.lengthscales, np.float64)
         k = _kernel_matrix(self.params, self.params, self.kernel)
         k[np.diag_indices_from(k)] += self.kernel.noise + _JITTER
-        self.inverse = np.linalg.inv(k)
-        self.alpha = self.inverse @ (self.targets - self.kernel.mean)
+        self.factor = np.linalg.cholesky(k)
+        self.alpha = cho_solve(
+            (self.factor, True), self.targets - self.kernel.mean, check_finite=False
+        )
+        eye = np.eye(len(k))
+        whiten = solve_triangular(self.factor, eye, lower=True, check_finite=False).T
+        self.whiten = np.ascontiguousarray(whiten)
+        single = np.ascontiguousarray(whiten, np.float32)
+        probe = self.cross(self.params[kept_rows(len(self.params), 64)])
+        exact = self.std(probe)
+        self.whiten = single
+        if np.max(np.abs(self.std(probe) / exact - 1.0)) > WHITEN_RTOL:
+            self.whiten = np.ascontiguousarray(whiten)
+
+    def std(self, cross: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
+        """``[B]`` the predictive standard deviations (noise included) at ``cross`` ``[B, N]``."""
+        v = cross.astype(self.whiten.dtype, copy=False) @ self.whiten
+        var = self.variance_prior - np.einsum("ij,ij->i", v, v).astype(np.float64)
+        out: npt.NDArray[np.float64] = np.sqrt(np.maximum(var, 1e-9))
+        return out
+
+    @property
+    def variance_prior(self) -> float:
+        """The variance of a measurement far from every stored context: signal + noise."""
+        return self.kernel.signal + self.kernel.noise
+
+    @property
+    def inverse(self) -> npt.NDArray[np.float64]:
+        """``K⁻¹`` (noise included), for leave-one-out queries."""
+        if self._inverse is None:
+            from scipy.linalg import cho_solve
+
+            eye = np.eye(len(self.factor))
+            self._inverse = cho_solve((self.factor, True), eye, check_finite=False)
+        return self._inverse
+
+    def cross(self, units: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
+        """``[B, N]`` the kernel between the queries *units* ``[B, d]`` and the stored rows."""
+        q = units / np.asarray(self.kernel.lengthscales, np.float64)
+        diff = q[:, None, :] - self.scaled[None, :, :]
+        out: npt.NDArray[np.float64] = self.kernel.signal * np.exp(
+            -0.5 * np.einsum("bnd,bnd->bn", diff, diff)
+        )
+        return out
 
 
 @dataclass(frozen=True)
@@ -335,9 +399,9 @@ class ContextLookup:
         """
         gp = self._process(phenomenon)
         q = np.atleast_2d(np.asarray(units, np.float64))[:, : gp.params.shape[1]]
-        k = _kernel_matrix(q, gp.params, gp.kernel)
+        k = gp.cross(q)
         mean = gp.kernel.mean + k @ gp.alpha
-        var = gp.kernel.signal + gp.kernel.noise - np.einsum("ij,ij->i", k @ gp.inverse, k)
+        std = gp.std(k)
         if exclude is not None:
             ex = np.asarray(exclude, np.int64)
             rows = np.flatnonzero(ex >= 0)
@@ -346,8 +410,8 @@ class ContextLookup:
                 diag = gp.inverse[ex[rows], ex[rows]]
                 ka = np.einsum("ij,ij->i", k[rows], col)
                 mean[rows] -= ka * gp.alpha[ex[rows]] / diag
-                var[rows] += ka**2 / diag
-        return mean, np.sqrt(np.maximum(var, 1e-9))
+                std[rows] = np.sqrt(std[rows] ** 2 + ka**2 / diag)
+        return mean, std
 
     def vote(
         self, phenomenon: str, units: npt.ArrayLike, *, exclude: npt.ArrayLike | None = None

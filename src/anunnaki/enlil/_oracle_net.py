@@ -103,13 +103,27 @@ def build_small_cnn(n_params: int, n_phenomena: int, *, width: int = 16, hidden:
             self.phenomenon = nn.Linear(hidden, max(n_phenomena, 1))
 
         def forward(self, x: Any) -> tuple[Any, Any, Any]:
-            stats = torch.cat([x.mean(dim=(2, 3)), x.std(dim=(2, 3))], dim=1)
+            stats = torch.cat(_mean_std(x), dim=1)
             f = self.features(x)
-            pooled = torch.cat([f.mean(dim=(2, 3)), f.std(dim=(2, 3)), stats], dim=1)
+            pooled = torch.cat([*_mean_std(f), stats], dim=1)
             h = self.trunk(pooled)
             return self.category(h), torch.sigmoid(self.params(h)), self.phenomenon(h)
 
     return SmallOracleCNN()
+
+
+def _mean_std(x: Any) -> tuple[Any, Any]:
+    """Per channel ``(mean, std)`` of ``x`` ``[B, C, H, W]`` (unbiased std, as ``Tensor.std``).
+
+    Two passes (the mean, then the squared deviations): the same figures as
+    ``x.mean(dim=(2, 3)), x.std(dim=(2, 3))`` to float rounding, in a sixth of the time
+    for one frame (torch's ``std`` kernel took 0.37 ms of a 128 x 128 frame's 1.8 ms).
+    """
+    mean = x.mean(dim=(2, 3), keepdim=True)
+    d = x - mean
+    n = x.shape[2] * x.shape[3]
+    std = (d * d).sum(dim=(2, 3)).div_(max(n - 1, 1)).sqrt_()
+    return mean.flatten(1), std
 
 
 class PhenomenonSpec(BaseModel):
@@ -216,11 +230,14 @@ def frames_to_tensor(frames: Sequence[npt.NDArray[np.uint8]], size: tuple[int, i
     return frames_to_uint8(frames, size).float() / 255.0
 
 
-def frames_to_uint8(frames: Sequence[npt.NDArray[np.uint8]], size: tuple[int, int]) -> Any:
+def frames_to_uint8(
+    frames: Sequence[npt.NDArray[np.uint8]], size: tuple[int, int], *, channels_last: bool = False
+) -> Any:
     """``[B, 3, H, W]`` ``uint8`` tensor, each frame resized to *size* if needed.
 
     A quarter of the memory of :func:`frames_to_tensor` (training holds thousands of
     frames); ``frames_to_uint8(f, s).float() / 255.0`` is :func:`frames_to_tensor` exactly.
+    *channels_last*: in that memory layout (the frames' own, so no copy), else contiguous.
     """
     torch = _torch()
     out = np.empty((len(frames), size[0], size[1], 3), np.uint8)
@@ -233,7 +250,8 @@ def frames_to_uint8(frames: Sequence[npt.NDArray[np.uint8]], size: tuple[int, in
 
             image = cv2.resize(image, (size[1], size[0]), interpolation=cv2.INTER_AREA)
         out[i] = image
-    return torch.from_numpy(out).permute(0, 3, 1, 2).contiguous()
+    nchw = torch.from_numpy(out).permute(0, 3, 1, 2)
+    return nchw if channels_last else nchw.contiguous()
 
 
 def _softmax(z: np.ndarray) -> np.ndarray:
@@ -259,6 +277,9 @@ class OracleModel:
         self.net = net
         self.lookup = lookup
         self.net.eval()
+        # one frame at a time runs about a tenth faster channels-last (same figures to float
+        # rounding); the frames are in that layout already (H, W, 3)
+        self.net.to(memory_format=_torch().channels_last)
 
     def __repr__(self) -> str:
         names = "+".join(p.name for p in self.card.phenomena)
@@ -274,7 +295,7 @@ class OracleModel:
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Raw outputs for *frames*: category logits (untempered), params, phenomenon logits."""
         torch = _torch()
-        x = frames_to_tensor(frames, self.card.input_size)
+        x = frames_to_uint8(frames, self.card.input_size, channels_last=True).float() / 255.0
         with torch.inference_mode():
             cat, params, phen = self.net(x)
         return cat.numpy(), params.numpy(), phen.numpy()
