@@ -3,8 +3,8 @@
 G4 (detect obstacles autonomously) fails in the step the oracle reports the detector
 degraded, which is what the swap tactics act on; G3, the fail-safe's condition, holds
 through such an alarm (its child G19, G4 RELAX-ed in time) until the oracle has reported no
-nominal frame for over 1 s. A failure that is not the oracle's (G18: the detector's node is
-gone) still fails G3 at once.
+nominal frame for over 1 s. A failure that is not the oracle's verdict (G18: the detector's
+node is gone; G21: the oracle's own) still fails G3 at once.
 """
 
 from __future__ import annotations
@@ -89,6 +89,16 @@ def test_alarms_broken_by_nominal_frames_never_fail_g3() -> None:
     for _ in range(5):
         assert all(g3 for _, g3 in rover.run(0.8, 2, "raindrop"))
         rover.run(0.1, 0)
+
+
+def test_a_dead_oracle_fails_g3_at_once() -> None:
+    """The oracle's node goes away just after a nominal verdict: no tolerance (G21)."""
+    rover = Rover()
+    rover.run(3.0, 0)
+    rover.ev.expire("/utu/oracle/output", rover.t)
+    assert rover.ev.state("G21").status is not True
+    assert rover.ev.satisfied_for_tactics("G19") is False
+    assert rover.ev.satisfied_for_tactics("G3") is False
 
 
 def test_a_failure_that_is_not_the_oracles_fails_g3_at_once() -> None:
