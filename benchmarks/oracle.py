@@ -281,6 +281,51 @@ def _remeasured(detector: Any, test: Any, held: Any, batch_images: int, seed: in
     }
 
 
+def label_reproducibility(
+    detector: Any, test: Any, held: Any, sizes: list[int], seed: int
+) -> dict[str, Any]:
+    """How well one set of contexts' categories reproduce, per label batch size.
+
+    The same contexts (*held*'s) are measured on two disjoint batches of the split for each
+    size in *sizes* (disjoint from each other too when the split allows; sizes above half
+    the split are skipped), each batch with its own clean F1. Per size: ``drop_sd``, the
+    standard deviation of one measurement's relative F1 drop (from the two batches'
+    differences, pooled over contexts), and the second batch's categories scored against the
+    first's like a predictor's (``macro_f1``, ``agreement`` per context), as ``remeasured``
+    does. Apart from the batch, nothing changes: the part of the label noise a larger batch
+    removes.
+    """
+    from anunnaki.enlil import evaluate_context
+    from anunnaki.enlil._oracle_net import classification_metrics
+    from anunnaki.lec import evaluate_detector
+
+    order = np.random.default_rng([seed, 3]).permutation(len(test))
+    out: dict[str, Any] = {}
+    for size in sizes:
+        if 2 * size > len(test):
+            continue
+        drops, cats = [], []
+        for k in range(2):
+            batch = test.subset(np.sort(order[k * size : (k + 1) * size])).in_memory()
+            clean = float(evaluate_detector(detector, batch).f1)
+            results = [
+                evaluate_context(
+                    detector, batch, held.phenomenon, r.params, clean_f1=clean, seed=seed
+                )
+                for r in held.contexts
+            ]
+            drops.append(np.asarray([r.drop for r in results]))
+            cats.append([r.category for r in results])
+        metrics = classification_metrics(cats[1], cats[0])
+        out[str(size)] = {
+            "drop_sd": float(np.sqrt(np.mean((drops[0] - drops[1]) ** 2) / 2.0)),
+            "macro_f1": metrics["macro_f1"],
+            "agreement": metrics["accuracy"],
+            "confusion": metrics["confusion"],
+        }
+    return out
+
+
 def _case(args: argparse.Namespace, plat: str, model: str, phen: str) -> dict[str, Any]:
     """One model and phenomenon: baselines fitted on val, every predictor on test frames.
 
@@ -341,6 +386,11 @@ def _case(args: argparse.Namespace, plat: str, model: str, phen: str) -> dict[st
             "predictors": predictors | base,
             "remeasured": again,
         }
+        if kind == "balanced" and args.reproducibility:
+            sizes = [int(v) for v in args.reproducibility.split(",")]
+            name = f"balanced-reproducibility-{'-'.join(map(str, sizes))}.json"
+            make_rep = partial(label_reproducibility, detector, test, held, sizes, args.seed)
+            runs[kind]["reproducibility"] = _cached(cache, name, make_rep, _json_save, _json_load)
     return {
         "model": model,
         "phenomenon": phen,
@@ -460,6 +510,12 @@ def main() -> None:
         metavar="MODEL/PHENOMENON",
         help="measure only these cases (repeatable), keeping the others already in --output "
         "(e.g. the rover and the UAV in two processes, one after the other writing)",
+    )
+    parser.add_argument(
+        "--reproducibility",
+        metavar="SIZES",
+        help="also measure the balanced contexts on two disjoint test batches of each size "
+        "(e.g. 32,64,128,250): how far their categories reproduce per label batch size",
     )
     parser.add_argument("--output", default=str(OUT))
     args = parser.parse_args()
