@@ -28,7 +28,10 @@ Writes ``benchmarks/results/oracle.json``. Data: ``anunnaki make-dataset rover -
 
 Run: ``.venv/bin/python benchmarks/oracle.py --rover-data D1 --uav-data D2
 [--mc-oracle rover-default=FILE ...] [--quick]``; ``--only-inference`` for part 1 alone,
-``--case uav-default/fog`` for one case (the others already in the output are kept).
+``--case uav-default/fog`` for one case (the others already in the output are kept);
+``--batch-images 64`` for labels on 64 test images (beside the default's rows);
+``--reproducibility 32,64,128,250`` to measure the balanced contexts on two disjoint test
+batches of each size (:func:`label_reproducibility`).
 """
 
 from __future__ import annotations
