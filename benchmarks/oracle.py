@@ -16,14 +16,22 @@
 3. **How far the labels reproduce.** Each held-out context's category is one measurement on
    a fixed batch of test images; ``remeasured`` measures every context again on a disjoint
    batch of as many test images and scores those categories like a predictor's: a ceiling
-   for any predictor that never sees the labelling batch.
+   for any predictor that never sees the labelling batch. The batch's size is a setting
+   (``--batch-images``, :data:`LABEL_BATCH_IMAGES` by default; the baselines are fitted on
+   val contexts measured on as many val images): the test split has 500 images, so up to
+   250 per batch leave a disjoint one to re-measure on. Rows at another size than the
+   default are written beside the default's (``accuracy_other_label_batches``), and
+   ``--cache`` keeps each size's frames apart.
 
 Writes ``benchmarks/results/oracle.json``. Data: ``anunnaki make-dataset rover --out D`` and
 ``anunnaki make-dataset uav --out D --width 320 --height 240`` (docs/enlil.md).
 
 Run: ``.venv/bin/python benchmarks/oracle.py --rover-data D1 --uav-data D2
 [--mc-oracle rover-default=FILE ...] [--quick]``; ``--only-inference`` for part 1 alone,
-``--case uav-default/fog`` for one case (the others already in the output are kept).
+``--case uav-default/fog`` for one case (the others already in the output are kept);
+``--batch-images 64`` for labels on 64 test images (beside the default's rows);
+``--reproducibility 32,64,128,250`` to measure the balanced contexts on two disjoint test
+batches of each size (:func:`label_reproducibility`).
 """
 
 from __future__ import annotations
@@ -55,6 +63,12 @@ CASES = (
 )
 #: The paper's oracle accuracies (§4.2.1).
 PAPER = {"hsl": 0.83, "raindrop": 0.87, "fog": 0.74}
+#: Test images each held-out context's true category is measured on (``--batch-images``;
+#: the UAV's is ``--uav-batch-images``). The category is one measurement on this fixed
+#: batch, and how well it reproduces on another batch of as many images (``remeasured``)
+#: grows with it: docs/enlil.md, "Figures". Rows measured at other sizes are kept in the
+#: output under ``accuracy_other_label_batches`` (size → case → row).
+LABEL_BATCH_IMAGES = 32
 AIMS = {"accuracy_random": 0.90, "macro_f1_balanced": 0.85, "margin_over_baselines": 0.10}
 
 
@@ -270,6 +284,51 @@ def _remeasured(detector: Any, test: Any, held: Any, batch_images: int, seed: in
     }
 
 
+def label_reproducibility(
+    detector: Any, test: Any, held: Any, sizes: list[int], seed: int
+) -> dict[str, Any]:
+    """How well one set of contexts' categories reproduce, per label batch size.
+
+    The same contexts (*held*'s) are measured on two disjoint batches of the split for each
+    size in *sizes* (disjoint from each other too when the split allows; sizes above half
+    the split are skipped), each batch with its own clean F1. Per size: ``drop_sd``, the
+    standard deviation of one measurement's relative F1 drop (from the two batches'
+    differences, pooled over contexts), and the second batch's categories scored against the
+    first's like a predictor's (``macro_f1``, ``agreement`` per context), as ``remeasured``
+    does. Apart from the batch, nothing changes: the part of the label noise a larger batch
+    removes.
+    """
+    from anunnaki.enlil import evaluate_context
+    from anunnaki.enlil._oracle_net import classification_metrics
+    from anunnaki.lec import evaluate_detector
+
+    order = np.random.default_rng([seed, 3]).permutation(len(test))
+    out: dict[str, Any] = {}
+    for size in sizes:
+        if 2 * size > len(test):
+            continue
+        drops, cats = [], []
+        for k in range(2):
+            batch = test.subset(np.sort(order[k * size : (k + 1) * size])).in_memory()
+            clean = float(evaluate_detector(detector, batch).f1)
+            results = [
+                evaluate_context(
+                    detector, batch, held.phenomenon, r.params, clean_f1=clean, seed=seed
+                )
+                for r in held.contexts
+            ]
+            drops.append(np.asarray([r.drop for r in results]))
+            cats.append([r.category for r in results])
+        metrics = classification_metrics(cats[1], cats[0])
+        out[str(size)] = {
+            "drop_sd": float(np.sqrt(np.mean((drops[0] - drops[1]) ** 2) / 2.0)),
+            "macro_f1": metrics["macro_f1"],
+            "agreement": metrics["accuracy"],
+            "confusion": metrics["confusion"],
+        }
+    return out
+
+
 def _case(args: argparse.Namespace, plat: str, model: str, phen: str) -> dict[str, Any]:
     """One model and phenomenon: baselines fitted on val, every predictor on test frames.
 
@@ -298,7 +357,8 @@ def _case(args: argparse.Namespace, plat: str, model: str, phen: str) -> dict[st
     spec = registry.get(model)
     detector = registry.load(spec)
     oracles = _oracles(model, spec, args)
-    cache = Path(args.cache) / f"{model}-{phen}-n{n}-s{args.seed}" if args.cache else None
+    label = f"-b{common['batch_images']}" if common["batch_images"] != 32 else ""  # 32: as before
+    cache = Path(args.cache) / f"{model}-{phen}-n{n}-s{args.seed}{label}" if args.cache else None
     start = time.perf_counter()
 
     def fit() -> Any:
@@ -329,6 +389,11 @@ def _case(args: argparse.Namespace, plat: str, model: str, phen: str) -> dict[st
             "predictors": predictors | base,
             "remeasured": again,
         }
+        if kind == "balanced" and args.reproducibility:
+            sizes = [int(v) for v in args.reproducibility.split(",")]
+            name = f"balanced-reproducibility-{'-'.join(map(str, sizes))}.json"
+            make_rep = partial(label_reproducibility, detector, test, held, sizes, args.seed)
+            runs[kind]["reproducibility"] = _cached(cache, name, make_rep, _json_save, _json_load)
     return {
         "model": model,
         "phenomenon": phen,
@@ -373,6 +438,40 @@ def _summary(case: dict[str, Any]) -> dict[str, Any]:
     }
 
 
+def merge_accuracy(
+    previous: dict[str, Any],
+    rows: dict[str, Any],
+    settings: dict[str, Any] | None,
+    *,
+    keep_others: bool,
+) -> dict[str, Any]:
+    """The accuracy part of the output: *rows* measured with *settings*, merged into *previous*.
+
+    Rows measured at the documented label batch (:data:`LABEL_BATCH_IMAGES`) are
+    ``accuracy`` (with ``settings``, ``aims``, ``paper_accuracy``); rows at another size go
+    to ``accuracy_other_label_batches[size]``, and the figures at the documented size stay as
+    they were. *keep_others*: keep the cases of *previous* that were not measured again
+    (``--case``); else the measured rows replace those of their size. ``settings=None``
+    (nothing measured): *previous*'s accuracy figures as they were.
+    """
+    kinds = ("settings", "aims", "paper_accuracy", "accuracy")
+    out = {k: previous[k] for k in kinds if k in previous}
+    others = {k: dict(v) for k, v in previous.get("accuracy_other_label_batches", {}).items()}
+    if settings is not None:
+        size = int(settings["batch_images"])
+        if size == LABEL_BATCH_IMAGES:
+            kept = previous.get("accuracy", {}) if keep_others else {}
+            out |= {"settings": settings, "aims": AIMS, "paper_accuracy": PAPER}
+            out["accuracy"] = {**kept, **rows}
+        else:
+            kept = others.get(str(size), {}) if keep_others else {}
+            others[str(size)] = {**kept, **rows}
+    if others:
+        by_size = sorted(others.items(), key=lambda kv: int(kv[0]))
+        out["accuracy_other_label_batches"] = dict(by_size)
+    return out
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("--frames", type=int, default=500, help="inference calls (500)")
@@ -382,7 +481,14 @@ def main() -> None:
     parser.add_argument("--mc-oracle", action="append", default=[], metavar="MODEL=FILE")
     parser.add_argument("--contexts", type=int, default=60, help="N of random:N, balanced:N")
     parser.add_argument("--frames-per-context", type=int, default=10)
-    parser.add_argument("--batch-images", type=int, default=32)
+    parser.add_argument(
+        "--batch-images",
+        type=int,
+        default=LABEL_BATCH_IMAGES,
+        help=f"test images each context's true category is measured on ({LABEL_BATCH_IMAGES}); "
+        "the baselines are fitted with as many val images. Rows at another size go to "
+        "accuracy_other_label_batches, beside those at the default",
+    )
     parser.add_argument(
         "--uav-contexts", type=int, help="N for the UAV (320x240 frames cost 5x; default N)"
     )
@@ -408,6 +514,12 @@ def main() -> None:
         help="measure only these cases (repeatable), keeping the others already in --output "
         "(e.g. the rover and the UAV in two processes, one after the other writing)",
     )
+    parser.add_argument(
+        "--reproducibility",
+        metavar="SIZES",
+        help="also measure the balanced contexts on two disjoint test batches of each size "
+        "(e.g. 32,64,128,250): how far their categories reproduce per label batch size",
+    )
     parser.add_argument("--output", default=str(OUT))
     args = parser.parse_args()
     if args.quick:
@@ -422,7 +534,7 @@ def main() -> None:
         "inference_ms_per_frame_128_shipped_rover_default": inference_shipped(args.frames),
     }
     if not args.only_inference:
-        result["settings"] = {
+        settings = {
             "contexts": args.contexts,
             "frames_per_context": args.frames_per_context,
             "window": 5,
@@ -432,11 +544,10 @@ def main() -> None:
             "quick": args.quick,
             "split": "test (baselines fitted on val)",
         }
-        result["aims"] = AIMS
-        result["paper_accuracy"] = PAPER
-        result["accuracy"] = accuracy(args)
-        if args.case:
-            result["accuracy"] = {**previous.get("accuracy", {}), **result["accuracy"]}
+        rows = accuracy(args)
+        result |= merge_accuracy(previous, rows, settings, keep_others=bool(args.case))
+    else:
+        result |= merge_accuracy(previous, {}, None, keep_others=True)
     result["not_measured_yet"] = ["ramps", "loop_rate"]
     result["machine"] = {"python": platform.python_version(), "torch": torch.__version__}
     out = Path(args.output)

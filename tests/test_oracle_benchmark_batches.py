@@ -1,0 +1,68 @@
+"""benchmarks/oracle.py keeps the figures of every label batch size apart (issue 13).
+
+The true category of a held-out context is one measurement on a fixed batch of test images
+(``--batch-images``); rows measured at another size than the documented one must land beside
+the documented figures, never over them.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+@pytest.fixture(scope="module")
+def bench() -> Any:
+    pytest.importorskip("torch")
+    spec = importlib.util.spec_from_file_location("oracle_bench", ROOT / "benchmarks" / "oracle.py")
+    assert spec is not None and spec.loader is not None
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def settings(size: int) -> dict[str, Any]:
+    return {"contexts": 30, "batch_images": size, "seed": 1000}
+
+
+def test_rows_at_the_documented_size_are_the_accuracy(bench: Any) -> None:
+    size = bench.LABEL_BATCH_IMAGES
+    previous = {"accuracy": {"a/x": {"batch_images": size, "v": 1}, "a/y": {"v": 2}}}
+    out = bench.merge_accuracy(previous, {"a/x": {"v": 3}}, settings(size), keep_others=True)
+    assert out["accuracy"] == {"a/x": {"v": 3}, "a/y": {"v": 2}}
+    assert out["settings"]["batch_images"] == size and out["aims"] == bench.AIMS
+    assert "accuracy_other_label_batches" not in out
+    fresh = bench.merge_accuracy(previous, {"a/x": {"v": 3}}, settings(size), keep_others=False)
+    assert fresh["accuracy"] == {"a/x": {"v": 3}}
+
+
+def test_rows_at_another_size_go_beside_and_keep_the_documented_ones(bench: Any) -> None:
+    size = bench.LABEL_BATCH_IMAGES
+    other = size * 2
+    previous = {
+        "settings": settings(size),
+        "accuracy": {"a/x": {"v": 1}},
+        "accuracy_other_label_batches": {str(other): {"a/y": {"v": 2}}, "7": {"a/x": {"v": 5}}},
+    }
+    out = bench.merge_accuracy(previous, {"a/x": {"v": 9}}, settings(other), keep_others=True)
+    assert out["accuracy"] == {"a/x": {"v": 1}} and out["settings"]["batch_images"] == size
+    by_size = out["accuracy_other_label_batches"]
+    assert by_size[str(other)] == {"a/x": {"v": 9}, "a/y": {"v": 2}}
+    assert by_size["7"] == {"a/x": {"v": 5}}
+    assert list(by_size) == sorted(by_size, key=int)  # smallest batch first
+
+
+def test_nothing_measured_keeps_every_figure(bench: Any) -> None:
+    previous = {
+        "accuracy": {"a/x": {"v": 1}},
+        "accuracy_other_label_batches": {"128": {"a/x": {"v": 2}}},
+        "inference_ms_per_frame_128": {"median": 1.0},
+    }
+    out = bench.merge_accuracy(previous, {}, None, keep_others=True)
+    assert out == {k: previous[k] for k in ("accuracy", "accuracy_other_label_batches")}
+    assert bench.merge_accuracy({}, {}, None, keep_others=True) == {}
