@@ -114,6 +114,15 @@ def test_oracle_benchmark_inference_part(tmp_path: Path) -> None:
     doc = load(out)
     assert doc["inference_ms_per_frame_128"]["median"] > 0
     assert doc["inference_ms_per_frame_128"]["threads"] == 1 and "accuracy" not in doc
+    assert doc["measured_elsewhere"]["ramps"].startswith("benchmarks/results/oracle_ramps.json")
+    # --keep-inference keeps both figures of an earlier (quieter) run, the shipped one's too
+    kept = {"median": 123.0, "p90": 456.0}
+    doc["inference_ms_per_frame_128_shipped_rover_default"] = kept
+    out.write_text(json.dumps(doc))
+    run("oracle.py", "--only-inference", "--keep-inference", "--frames", "5", "--output", str(out))
+    again = load(out)
+    assert again["inference_ms_per_frame_128"] == doc["inference_ms_per_frame_128"]
+    assert again["inference_ms_per_frame_128_shipped_rover_default"] == kept
 
 
 @pytest.mark.slow

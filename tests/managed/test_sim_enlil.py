@@ -19,7 +19,7 @@ import yaml
 
 from anunnaki import topics
 from anunnaki.bus import Assessment
-from anunnaki.launch import SimKind, load_launch, parse_launch, run_launch
+from anunnaki.launch import parse_launch, run_launch
 from anunnaki.sim import load_report
 
 ROOT = Path(__file__).parents[2]
@@ -166,7 +166,7 @@ def test_an_unknown_scorer_is_named_with_its_line(tmp_path: Path) -> None:
 
 
 @pytest.mark.timeout(600)  # 42 s simulated: about 25 s on a quiet machine, a minute shared
-def test_the_demo_with_the_learned_oracle_swaps_and_keeps_the_rover(tmp_path: Path) -> None:
+def test_the_demo_with_the_learned_oracle_swaps_and_keeps_the_rover(run_demo: Any) -> None:
     """examples/rover/sim-enlil.yaml as shipped: the three swaps of the demo and no fail-safe.
 
     The shipped default model's oracle calls a few clear frames degraded when the first
@@ -175,24 +175,12 @@ def test_the_demo_with_the_learned_oracle_swaps_and_keeps_the_rover(tmp_path: Pa
     G3 (goals-lm.yaml, G19/G20) tolerates an alarm of up to 1 s, so neither hands the rover
     over, while G4 fails at once and the swaps come in their phases.
     """
-    launch = load_launch(ROVER / "sim-enlil.yaml")
-    assert isinstance(launch.managed, SimKind)
-    report = tmp_path / "demo.json"
-    launch.managed.with_reports(report=str(report), plot=None)
-    out = io.StringIO()
-    result = run_launch(launch, speed=1000, out=out, handle_signals=False)
-    log = out.getvalue()
-    assert result.exit_code == 0, log
-    assert ("started", "fail-safe") not in [(d.kind, d.tactic) for d in result.decisions], log
-    swaps = [
-        (d.t, d.data["domain"])
-        for d in result.decisions
-        if d.kind == "action" and d.data.get("type") == "swap_model"
-    ]
-    assert [domain for _, domain in swaps] == ["fog", "default", "low_light"], log
-    fog_on, back, dusk = (t for t, _ in swaps)
-    assert 8.0 <= fog_on < 12.0 and 20.0 <= back < 30.0 and 30.0 <= dusk < 34.0, swaps
-    verified = [d.tactic for d in result.decisions if d.kind == "postcondition_ok"]
-    assert "swap-to-fog-model" in verified and "swap-to-low-light-model" in verified, log
-    run = load_report(report)
+    demo = run_demo(ROVER / "sim-enlil.yaml")
+    log = demo.log
+    assert not demo.started("fail-safe"), log
+    assert [domain for _, domain in demo.swaps] == ["fog", "default", "low_light"], log
+    fog_on, back, dusk = (t for t, _ in demo.swaps)
+    assert 8.0 <= fog_on < 12.0 and 20.0 <= back < 30.0 and 30.0 <= dusk < 34.0, demo.swaps
+    assert {"swap-to-fog-model", "swap-to-low-light-model"} <= set(demo.verified), log
+    run = load_report(demo.report)
     assert run.scoring is not None and run.scoring["oracle"] == "enlil"

@@ -18,7 +18,7 @@ import pytest
 
 from anunnaki.bus import Detections
 from anunnaki.errors import ModelFileError
-from anunnaki.launch import SimKind, load_launch, parse_launch, run_launch
+from anunnaki.launch import parse_launch, run_launch
 from anunnaki.lec import load_registry, sha256_file
 from anunnaki.managed import SimulatedSystem, format_phases, scenario_phases
 from anunnaki.sim import load_report, load_scenario
@@ -176,39 +176,27 @@ def test_sim_section_errors_name_the_file(tmp_path: Path) -> None:
     assert "models.yaml" in str(bad.value)
 
 
-def test_the_demo_swaps_in_the_fog_model_and_back_without_oscillation(tmp_path: Path) -> None:
+def test_the_demo_swaps_in_the_fog_model_and_back_without_oscillation(run_demo: Any) -> None:
     """The README's demo, the real models: fog → fog model → clear → default → dusk → low light.
 
     Each swap happens once, in its phase (no oscillation), no fail-safe is needed, the
     rover touches nobody, and the robust models restore the F1 their condition took away.
     """
-    out = io.StringIO()
-    launch = load_launch(ROVER / "sim.yaml")
-    assert isinstance(launch.managed, SimKind)
-    report = tmp_path / "demo.json"
-    launch.managed.with_reports(report=str(report), plot=None)
-    result = run_launch(launch, speed=1000, out=out, handle_signals=False)
-    log = out.getvalue()
-    assert result.exit_code == 0, log
-    swaps = [
-        (d.t, d.data["domain"])
-        for d in result.decisions
-        if d.kind == "action" and d.data.get("type") == "swap_model"
-    ]
-    assert [domain for _, domain in swaps] == ["fog", "default", "low_light"], log
-    fog_on, back, dusk = (t for t, _ in swaps)
-    assert 8.0 <= fog_on < 20.0 and 20.0 <= back < 30.0 and 30.0 <= dusk < 42.0, swaps
-    verified = [d.tactic for d in result.decisions if d.kind == "postcondition_ok"]
-    assert "swap-to-fog-model" in verified and "swap-to-low-light-model" in verified, log
-    assert ("started", "fail-safe") not in [(d.kind, d.tactic) for d in result.decisions], log
+    demo = run_demo(ROVER / "sim.yaml")
+    log = demo.log
+    assert [domain for _, domain in demo.swaps] == ["fog", "default", "low_light"], log
+    fog_on, back, dusk = (t for t, _ in demo.swaps)
+    assert 8.0 <= fog_on < 20.0 and 20.0 <= back < 30.0 and 30.0 <= dusk < 42.0, demo.swaps
+    assert {"swap-to-fog-model", "swap-to-low-light-model"} <= set(demo.verified), log
+    assert not demo.started("fail-safe"), log
     rows = {
         line.split()[1]: line for line in log.split("per phase:")[1].splitlines() if "–" in line
     }
     assert all(row.split()[-1] == "0" for row in rows.values())  # no collisions in any phase
     assert "rover-low_light" in rows["42.0"]
     # The report file holds the same run: each swap once, verified, models in that order.
-    run = load_report(report)
-    assert f"report: {report}" in log
+    run = load_report(demo.report)
+    assert f"report: {demo.report}" in log
     assert len(run.frames) == 420 and run.duration == pytest.approx(42.0)
     swap_events = [e for e in run.tactics if e.tactic.startswith(("swap", "default-model"))]
     assert [(e.tactic, e.outcome) for e in swap_events] == [
