@@ -75,6 +75,9 @@ def test_a_lookup_predicts_in_float32_only_where_float64_would_agree(
     exact_mean, exact_std = _exact(lookup, "fog", query)
     np.testing.assert_allclose(mean, exact_mean, rtol=1e-9, atol=1e-9)
     np.testing.assert_allclose(std, exact_std, rtol=2e-4)
+    for i in (0, 7, 150):  # one query at a time (a frame at run time: the triangular product)
+        m1, s1 = lookup.predict("fog", query[i])
+        np.testing.assert_allclose([m1[0], s1[0]], [exact_mean[i], exact_std[i]], rtol=2e-4)
 
 
 def test_exclude_leaves_a_row_out_of_its_own_prediction() -> None:

@@ -253,8 +253,20 @@ class _Fitted:
             self.whiten = np.ascontiguousarray(whiten)
 
     def std(self, cross: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
-        """``[B]`` the predictive standard deviations (noise included) at ``cross`` ``[B, N]``."""
-        v = cross.astype(self.whiten.dtype, copy=False) @ self.whiten
+        """``[B]`` the predictive standard deviations (noise included) at ``cross`` ``[B, N]``.
+
+        One query (a frame at run time) goes through BLAS's triangular ``trmv``, which reads
+        only the triangle of ``W`` that is not zero: half the memory of a full product, and
+        about half the time once the network has flushed the cache. Batches use ``gemm``.
+        """
+        k = cross.astype(self.whiten.dtype, copy=False)
+        if len(k) == 1:
+            from scipy.linalg.blas import get_blas_funcs
+
+            trmv = get_blas_funcs("trmv", (self.whiten,))  # about 1 µs
+            v = trmv(self.whiten.T, k[0], lower=1)[None, :]  # whiten.T: W, Fortran order
+        else:
+            v = k @ self.whiten
         var = self.variance_prior - np.einsum("ij,ij->i", v, v).astype(np.float64)
         out: npt.NDArray[np.float64] = np.sqrt(np.maximum(var, 1e-9))
         return out
