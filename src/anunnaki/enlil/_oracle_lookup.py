@@ -119,13 +119,6 @@ class LookupSpec(BaseModel):
     chosen_on: dict[str, float | int | str] = Field(default_factory=dict)
 
 
-def _kernel_matrix(a: np.ndarray, b: np.ndarray, kernel: Kernel) -> np.ndarray:
-    ls = np.asarray(kernel.lengthscales, np.float64)
-    d = (((a[:, None, :] - b[None, :, :]) / ls) ** 2).sum(axis=2)
-    out: np.ndarray = kernel.signal * np.exp(-0.5 * d)
-    return out
-
-
 def _targets(drops: npt.ArrayLike) -> npt.NDArray[np.float64]:
     return np.log(np.clip(np.asarray(drops, np.float64), 0.0, 1.0) + OFFSET)
 
@@ -227,7 +220,7 @@ class _Fitted:
     targets: npt.NDArray[np.float64]
     kernel: Kernel
     scaled: npt.NDArray[np.float64] = field(init=False)
-    factor: npt.NDArray[np.float64] = field(init=False)
+    factor: npt.NDArray[np.floating[Any]] = field(init=False)
     alpha: npt.NDArray[np.float64] = field(init=False)
     whiten: npt.NDArray[np.floating[Any]] = field(init=False)
     _inverse: npt.NDArray[np.float64] | None = field(default=None, init=False)
@@ -236,21 +229,22 @@ class _Fitted:
         from scipy.linalg import cho_solve, solve_triangular
 
         self.scaled = self.params / np.asarray(self.kernel.lengthscales, np.float64)
-        k = _kernel_matrix(self.params, self.params, self.kernel)
+        k = self.cross(self.params)
         k[np.diag_indices_from(k)] += self.kernel.noise + _JITTER
         self.factor = np.linalg.cholesky(k)
         self.alpha = cho_solve(
             (self.factor, True), self.targets - self.kernel.mean, check_finite=False
         )
         eye = np.eye(len(k))
-        whiten = solve_triangular(self.factor, eye, lower=True, check_finite=False).T
-        self.whiten = np.ascontiguousarray(whiten)
-        single = np.ascontiguousarray(whiten, np.float32)
+        double = np.ascontiguousarray(
+            solve_triangular(self.factor, eye, lower=True, check_finite=False).T
+        )
         probe = self.cross(self.params[kept_rows(len(self.params), 64)])
+        self.whiten = double
         exact = self.std(probe)
-        self.whiten = single
+        self.whiten = double.astype(np.float32)
         if np.max(np.abs(self.std(probe) / exact - 1.0)) > WHITEN_RTOL:
-            self.whiten = np.ascontiguousarray(whiten)
+            self.whiten = double
 
     def std(self, cross: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
         """``[B]`` the predictive standard deviations (noise included) at ``cross`` ``[B, N]``.
