@@ -92,6 +92,11 @@ class Proc:
         with self._changed:
             self._changed.notify_all()
 
+    def printed(self, text: str) -> bool:
+        """Whether an output line so far contains ``text`` (does not wait)."""
+        with self._changed:
+            return any(text in line for line in self.lines)
+
     def wait_for(self, text: str, timeout: float = DEADLINE) -> str:
         """The first output line containing ``text`` (fails the test after ``timeout``)."""
         end = time.monotonic() + timeout

@@ -91,8 +91,10 @@ def test_ros_values_reach_the_goal_model_and_tactics_act_on_the_robot(
                 "the rover's mode and range in the goal model",
             )
             # G12 (warn pedestrians) fails → warn-pedestrians publishes on the logical
-            # 'buzzer' → /rover/controller/buzzer → a std_msgs/Bool on ROS
-            rover.wait_for("buzzer True")
+            # 'buzzer' → /rover/controller/buzzer → a std_msgs/Bool on ROS. Utu keeps
+            # stepping meanwhile: the tactic may start a step or more after the values
+            # arrived (a loaded machine's run waited 60 s on a loop nobody stepped)
+            step_until(m, lambda: rover.printed("buzzer True"), "the buzzer on ROS")
             step_until(m, lambda: ev.value("A1.buzzer") is True, "the buzzer_on state back")
             # the oracle reports category 1 → G3 fails → the fail-safe requests the logical
             # 'set_mode' → /rover/controller/set_mode → an anunnaki_msgs/SetString call
