@@ -363,8 +363,7 @@ def _fit(
             sched.step()
             total += float(loss.detach()) * len(idx)
         losses.append(total / len(x))
-    net.to(memory_format=torch.contiguous_format)  # saved and run as before
-    net.eval()
+    net.eval()  # left channels-last: OracleModel runs it so, and save() writes C order
     return losses
 
 
