@@ -12,15 +12,8 @@ from pydantic import BaseModel
 
 from anunnaki.bus import open_bus
 from anunnaki.errors import ModelFileError
-from anunnaki.launch import (
-    MANAGED,
-    ManagedContext,
-    ScriptedKind,
-    SimKind,
-    load_launch,
-    parse_launch,
-    run_launch,
-)
+from anunnaki.launch import load_launch, parse_launch, run_launch
+from anunnaki.managed import MANAGED, ManagedContext, ScriptedKind, SimKind
 from anunnaki.utu import Decision, UtuConfig, parse_config
 
 ROOT = Path(__file__).parents[2]

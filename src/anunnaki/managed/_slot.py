@@ -1,15 +1,15 @@
-"""The managed-system slot of a launch file: one plugin per ``kind``.
+"""The managed-system slot: one plugin per ``kind``, a :class:`~anunnaki.plugins.Registry`.
 
 A launch file names the system Utu adapts in its ``managed:`` section::
 
     managed: {kind: scripted, trace: trace.jsonl, speed: 5}     # the general form
     managed: {scripted: {trace: trace.jsonl, speed: 5}}         # the same, older form
 
-``kind`` picks a plugin from :data:`MANAGED` (a :class:`~anunnaki.plugins.Registry`): the
-built-ins ``scripted`` (a trace replayed onto the bus) and ``sim`` (a simulated platform
-with its detector and oracle), imported only when a launch file names them; third parties
-register more under the ``anunnaki.managed`` entry-point group (a ROS robot is one more
-kind). A plugin is a class with
+``kind`` picks a plugin from :data:`MANAGED`: the built-ins ``scripted`` (a trace replayed
+onto the bus), ``sim`` (a simulated platform with its detector and oracle), ``ros1`` and
+``ros2`` (a real robot through a bridge), imported only when a launch file names them;
+third parties register more under the ``anunnaki.managed`` entry-point group. A plugin is
+a class with
 
 * ``name`` and ``Options`` (a pydantic model: the section's other keys, validated with file
   and line like the rest of the launch file);
@@ -19,6 +19,9 @@ kind). A plugin is a class with
 
 Optional hooks are typed Protocols: :class:`WritesReports` for kinds that can keep the run
 as data and a picture (``anunnaki run --report/--plot``).
+
+This layer sits below Utu: a kind sees Utu's settings through :class:`UtuSettings` (which
+``anunnaki.utu.UtuConfig`` satisfies) and Utu's decisions as :class:`DecisionLike`.
 """
 
 from __future__ import annotations
@@ -26,7 +29,6 @@ from __future__ import annotations
 import threading
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from pathlib import Path
 from typing import Any, ClassVar, Protocol, runtime_checkable
 
 from pydantic import BaseModel
@@ -34,15 +36,44 @@ from pydantic import BaseModel
 from anunnaki.bus import Bus
 from anunnaki.errors import ModelFileError
 from anunnaki.plugins import Registry
-from anunnaki.utu import Decision, UtuConfig
 
 __all__ = [
     "MANAGED",
+    "DecisionLike",
     "ManagedContext",
     "ManagedKind",
     "ManagedRun",
+    "UtuSettings",
     "WritesReports",
 ]
+
+
+class UtuSettings(Protocol):
+    """What a kind reads of Utu's configuration (``anunnaki.utu.UtuConfig`` has it)."""
+
+    @property
+    def clock(self) -> str:
+        """``wall`` or ``sim`` (time from ``/clock``)."""
+        ...
+
+
+class DecisionLike(Protocol):
+    """What a kind reads of one of Utu's decisions (``anunnaki.utu.Decision`` has it)."""
+
+    @property
+    def t(self) -> float:
+        """When it was taken (Utu's clock, s)."""
+        ...
+
+    @property
+    def kind(self) -> str:
+        """What happened: ``started``, ``action``, ``postcondition_ok`` and so on."""
+        ...
+
+    @property
+    def tactic(self) -> str | None:
+        """The tactic it concerns, if any."""
+        ...
 
 
 @dataclass
@@ -81,7 +112,7 @@ class ManagedRun(Protocol):
     #: Why it finished by itself, e.g. ``trace ended``.
     ended: str
 
-    def finish(self, decisions: Sequence[Decision], ran: float) -> None:
+    def finish(self, decisions: Sequence[DecisionLike], ran: float) -> None:
         """Called once after the run stopped: print what it has to say (reports)."""
         ...
 
@@ -102,11 +133,11 @@ class ManagedKind(Protocol):
     #: before its time has come).
     relay_clock: bool
 
-    def check(self, utu: UtuConfig) -> None:
+    def check(self, utu: UtuSettings) -> None:
         """Bring-up checks (B5): load what it needs now, raise a ModelFileError if it can't."""
         ...
 
-    def notes(self, utu: UtuConfig, speed: float) -> list[str]:
+    def notes(self, utu: UtuSettings, speed: float) -> list[str]:
         """Warnings about this combination of settings, printed at start."""
         ...
 
@@ -136,48 +167,15 @@ def _check_kind(cls: Any) -> Any:
     return cls
 
 
-#: The managed-system kinds: built-ins ``scripted`` and ``sim``, plugins by entry point.
+#: The managed-system kinds: built-ins ``scripted``, ``sim``, ``ros1``, ``ros2``; plugins by
+#: entry point (group ``anunnaki.managed``).
 MANAGED: Registry[ManagedKind] = Registry(
     "managed system",
     group="anunnaki.managed",
     check=_check_kind,
     error=ModelFileError,
 )
-MANAGED.register_lazy("scripted", "anunnaki.launch._kinds:ScriptedKind")
-MANAGED.register_lazy("sim", "anunnaki.launch._kinds:SimKind")
-MANAGED.register_lazy("ros1", "anunnaki.launch._ros1:Ros1Kind")
-MANAGED.register_lazy("ros2", "anunnaki.launch._ros2:Ros2Kind")
-
-
-def split_managed(raw: Any) -> tuple[str | None, dict[str, Any], tuple[str, ...]]:
-    """``(kind, options, where)`` of a ``managed:`` section (``where``: the options' path).
-
-    ``{kind: K, …}`` is the general form; ``{K: {…}}`` (one key naming a kind) the older one.
-    """
-    if raw is None or raw == {}:
-        return None, {}, ("managed",)
-    if not isinstance(raw, dict):
-        raise ValueError("managed must be a mapping: {kind: scripted, trace: …}")
-    if "kind" in raw:
-        kind = raw["kind"]
-        if not isinstance(kind, str):
-            raise ValueError(f"managed.kind must be a name, got {kind!r}")
-        return kind, {k: v for k, v in raw.items() if k != "kind"}, ("managed",)
-    if len(raw) == 1:
-        ((kind, options),) = raw.items()
-        if options is None:
-            options = {}
-        if not isinstance(options, dict):
-            raise ValueError(f"managed.{kind} must be a mapping of its options")
-        return str(kind), dict(options), ("managed", str(kind))
-    raise ValueError(
-        "give one managed system: {kind: NAME, …options} (or the older {NAME: {…options}}); "
-        f"got the keys {', '.join(sorted(map(str, raw)))}"
-    )
-
-
-def resolve_kind(name: str, options: BaseModel, base: Path) -> ManagedKind:
-    """Build kind ``name`` from its validated options."""
-    factory = MANAGED.factory(name)
-    kind: ManagedKind = factory(options, base=base)
-    return kind
+MANAGED.register_lazy("scripted", "anunnaki.managed._kinds:ScriptedKind")
+MANAGED.register_lazy("sim", "anunnaki.managed._kinds:SimKind")
+MANAGED.register_lazy("ros1", "anunnaki.managed._ros1:Ros1Kind")
+MANAGED.register_lazy("ros2", "anunnaki.managed._ros2:Ros2Kind")

@@ -1,0 +1,68 @@
+"""A launch file's ``managed:`` section: which kind of :data:`anunnaki.managed.MANAGED`.
+
+The kinds and their slot live in :mod:`anunnaki.managed`; this module reads the section
+(the general ``{kind: K, …}`` form or the older ``{K: {…}}``), builds the kind from its
+validated options, and relays a managed system's time on ``/clock`` when the kind asks.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+from pydantic import BaseModel
+
+from anunnaki.bus import Bus, Clock
+from anunnaki.managed import MANAGED, ManagedKind
+
+__all__ = ["clock_publisher", "resolve_kind", "split_managed"]
+
+
+def split_managed(raw: Any) -> tuple[str | None, dict[str, Any], tuple[str, ...]]:
+    """``(kind, options, where)`` of a ``managed:`` section (``where``: the options' path).
+
+    ``{kind: K, …}`` is the general form; ``{K: {…}}`` (one key naming a kind) the older one.
+    """
+    if raw is None or raw == {}:
+        return None, {}, ("managed",)
+    if not isinstance(raw, dict):
+        raise ValueError("managed must be a mapping: {kind: scripted, trace: …}")
+    if "kind" in raw:
+        kind = raw["kind"]
+        if not isinstance(kind, str):
+            raise ValueError(f"managed.kind must be a name, got {kind!r}")
+        return kind, {k: v for k, v in raw.items() if k != "kind"}, ("managed",)
+    if len(raw) == 1:
+        ((kind, options),) = raw.items()
+        if options is None:
+            options = {}
+        if not isinstance(options, dict):
+            raise ValueError(f"managed.{kind} must be a mapping of its options")
+        return str(kind), dict(options), ("managed", str(kind))
+    raise ValueError(
+        "give one managed system: {kind: NAME, …options} (or the older {NAME: {…options}}); "
+        f"got the keys {', '.join(sorted(map(str, raw)))}"
+    )
+
+
+def resolve_kind(name: str, options: BaseModel, base: Path) -> ManagedKind:
+    """Build kind ``name`` from its validated options."""
+    factory = MANAGED.factory(name)
+    kind: ManagedKind = factory(options, base=base)
+    return kind
+
+
+def clock_publisher(bus: Bus, topic: str) -> Callable[[float], None]:
+    """Publish the simulation time before each instant, ahead of the instant's records.
+
+    The scripted system publishes ``/clock`` at normal priority; assessments travel at
+    high priority and could overtake it. Published here at high priority first, the
+    time of an instant always reaches a node before the instant's messages.
+    """
+    pub = bus.publisher(topic, priority="high")
+
+    def publish(t: float) -> None:
+        pub.put(Clock(time=max(t, 0.0)))
+
+    return publish
