@@ -36,8 +36,8 @@ from __future__ import annotations
 from typing import TYPE_CHECKING, Any
 
 from anunnaki.managed._camera import SCORER_TOPIC, CameraChain, TakesModels, check_camera_chain
-from anunnaki.managed._kinds import ScriptedConfig, ScriptedKind, SimConfig, SimKind
-from anunnaki.managed._robot import Link, RobotConfig, RobotKind, RobotRun
+from anunnaki.managed._kinds import ScriptedKind, SimKind
+from anunnaki.managed._robot import Link, RobotConfig, RobotKind
 from anunnaki.managed._scripted import ScriptedSystem
 from anunnaki.managed._slot import (
     MANAGED,
@@ -70,11 +70,8 @@ __all__ = [
     "PhaseScore",
     "RobotConfig",
     "RobotKind",
-    "RobotRun",
-    "ScriptedConfig",
     "ScriptedKind",
     "ScriptedSystem",
-    "SimConfig",
     "SimKind",
     "SimulatedSystem",
     "TakesModels",
