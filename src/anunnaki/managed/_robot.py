@@ -15,7 +15,7 @@ import time
 from abc import ABC, abstractmethod
 from collections.abc import Sequence
 from pathlib import Path
-from typing import Any, Protocol
+from typing import Any, ClassVar, Protocol
 
 from pydantic import BaseModel, ConfigDict
 
@@ -102,6 +102,7 @@ class RobotKind(ABC):
     :meth:`connect` and :meth:`describe`.
     """
 
+    name: ClassVar[str]
     speed = 1.0
     relay_clock = False  # a robot lives in real time
     options: RobotConfig
@@ -156,4 +157,4 @@ class RobotKind(ABC):
             link.close()
             raise
         ctx.say(f"managed: {self.describe(ctx)}; {chain.describe()}")
-        return RobotRun(link, chain, ctx, getattr(self, "name", "robot"))
+        return RobotRun(link, chain, ctx, self.name)
