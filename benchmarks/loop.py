@@ -36,8 +36,8 @@ from typing import Any
 import torch
 
 from anunnaki.bus import open_bus
-from anunnaki.launch import SimKind, load_launch, run_launch
-from anunnaki.managed import SimulatedSystem
+from anunnaki.launch import load_launch, run_launch
+from anunnaki.managed import SimKind, SimulatedSystem
 
 ROOT = Path(__file__).parents[1]
 LAUNCH = ROOT / "examples" / "rover" / "sim.yaml"

@@ -53,9 +53,9 @@ import torch
 from anunnaki import topics
 from anunnaki.bus import Assessment, body_of, open_bus
 from anunnaki.enlil import evaluate_context, fixed_batch, normalise
-from anunnaki.launch import SimKind, load_launch, run_launch
+from anunnaki.launch import load_launch, run_launch
 from anunnaki.lec import evaluate_detector, load_registry
-from anunnaki.managed import SimulatedSystem
+from anunnaki.managed import SimKind, SimulatedSystem
 from anunnaki.phenomena import get_phenomenon
 
 ROOT = Path(__file__).parents[1]

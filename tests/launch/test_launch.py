@@ -26,11 +26,11 @@ from anunnaki.errors import ModelFileError
 from anunnaki.launch import (
     LaunchError,
     RunResult,
-    ScriptedKind,
     load_launch,
     parse_launch,
     run_launch,
 )
+from anunnaki.managed import ScriptedKind
 from anunnaki.topics import node_token, ready_service
 from anunnaki.utu import NODE_NAMES, Knowledge
 

@@ -11,7 +11,8 @@ from typing import Any
 import pytest
 
 from anunnaki.bus import open_bus
-from anunnaki.launch import SimKind, load_launch, run_launch
+from anunnaki.launch import load_launch, run_launch
+from anunnaki.managed import SimKind
 
 
 @pytest.fixture

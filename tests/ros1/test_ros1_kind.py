@@ -13,7 +13,7 @@ from ros1_support import free_port, need_ros
 
 from anunnaki.bus import open_bus
 from anunnaki.errors import ModelFileError
-from anunnaki.launch import MANAGED, ManagedContext
+from anunnaki.managed import MANAGED, ManagedContext
 from anunnaki.utu import parse_config
 
 ROVER = Path(__file__).parents[2] / "examples" / "rover"

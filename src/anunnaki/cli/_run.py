@@ -19,7 +19,8 @@ from typing import Any
 
 from anunnaki.bus import BusConfig, open_bus
 from anunnaki.cli import _dashboard
-from anunnaki.launch import WritesReports, load_launch, run_launch, signals_to
+from anunnaki.launch import load_launch, run_launch, signals_to
+from anunnaki.managed import WritesReports
 from anunnaki.utu import NODE_NAMES, NodeConfigError, PeerWatch, build_node
 
 __all__ = ["add_parser", "run", "run_node"]

@@ -91,6 +91,11 @@ class EnlilOracle:
             for model_id in self.covered:
                 self.oracle_for(model_id)
 
+    @classmethod
+    def options_from_models(cls, models: ModelRegistry) -> dict[str, Any]:
+        """Use the assessed detector's registry, whose entries name their oracles (hook)."""
+        return {"models": models}
+
     def __repr__(self) -> str:
         return f"EnlilOracle(models={sorted(self._sources)}, window={self.window})"
 

@@ -1,9 +1,10 @@
 """Launching: a launch file's Utu nodes, on which bus, against which managed system.
 
 The top of the house: it wires Utu (``anunnaki.utu``), the bus and a managed system — a
-plugin chosen by ``kind`` in the launch file (:data:`MANAGED`: ``scripted``, ``sim``, or a
-third party's under the ``anunnaki.managed`` entry-point group) — so that Utu itself never
-imports a simulator, a detector or an oracle::
+plugin chosen by ``kind`` in the launch file (:data:`anunnaki.managed.MANAGED`:
+``scripted``, ``sim``, ``ros1``, ``ros2``, or a third party's under the ``anunnaki.managed``
+entry-point group) — so that Utu itself never imports a simulator, a detector or an
+oracle::
 
     from anunnaki.launch import load_launch, run_launch
 
@@ -19,14 +20,6 @@ imports a simulator, a detector or an oracle::
 See docs/running.md.
 """
 
-from anunnaki.launch._kinds import ScriptedConfig, ScriptedKind, SimConfig, SimKind
-from anunnaki.launch._managed import (
-    MANAGED,
-    ManagedContext,
-    ManagedKind,
-    ManagedRun,
-    WritesReports,
-)
 from anunnaki.launch._runner import RunResult, format_decision, run_launch
 from anunnaki.launch._schema import (
     Launch,
@@ -39,21 +32,12 @@ from anunnaki.launch._schema import (
 from anunnaki.launch._supervisor import Children, child_bus_config, signals_to, wait_ready
 
 __all__ = [
-    "MANAGED",
     "Children",
     "Launch",
     "LaunchConfig",
     "LaunchError",
-    "ManagedContext",
-    "ManagedKind",
-    "ManagedRun",
     "NodeSettings",
     "RunResult",
-    "ScriptedConfig",
-    "ScriptedKind",
-    "SimConfig",
-    "SimKind",
-    "WritesReports",
     "child_bus_config",
     "format_decision",
     "load_launch",

@@ -1,152 +1,22 @@
-"""The managed-system slot of a launch file: one plugin per ``kind``.
+"""A launch file's ``managed:`` section: which kind of :data:`anunnaki.managed.MANAGED`.
 
-A launch file names the system Utu adapts in its ``managed:`` section::
-
-    managed: {kind: scripted, trace: trace.jsonl, speed: 5}     # the general form
-    managed: {scripted: {trace: trace.jsonl, speed: 5}}         # the same, older form
-
-``kind`` picks a plugin from :data:`MANAGED` (a :class:`~anunnaki.plugins.Registry`): the
-built-ins ``scripted`` (a trace replayed onto the bus) and ``sim`` (a simulated platform
-with its detector and oracle), imported only when a launch file names them; third parties
-register more under the ``anunnaki.managed`` entry-point group (a ROS robot is one more
-kind). A plugin is a class with
-
-* ``name`` and ``Options`` (a pydantic model: the section's other keys, validated with file
-  and line like the rest of the launch file);
-* ``__init__(options, *, base)`` — paths are relative to ``base`` (the launch file's folder);
-* what :class:`ManagedKind` lists: ``speed``, ``relay_clock``, ``check`` (bring-up
-  checks, guideline B5), ``notes`` and ``start``, which returns a :class:`ManagedRun`.
-
-Optional hooks are typed Protocols: :class:`WritesReports` for kinds that can keep the run
-as data and a picture (``anunnaki run --report/--plot``).
+The kinds and their slot live in :mod:`anunnaki.managed`; this module reads the section
+(the general ``{kind: K, …}`` form or the older ``{K: {…}}``), builds the kind from its
+validated options, and relays a managed system's time on ``/clock`` when the kind asks.
 """
 
 from __future__ import annotations
 
-import threading
-from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from collections.abc import Callable
 from pathlib import Path
-from typing import Any, ClassVar, Protocol, runtime_checkable
+from typing import Any
 
 from pydantic import BaseModel
 
-from anunnaki.bus import Bus
-from anunnaki.errors import ModelFileError
-from anunnaki.plugins import Registry
-from anunnaki.utu import Decision, UtuConfig
+from anunnaki.bus import Bus, Clock
+from anunnaki.managed import MANAGED, ManagedKind
 
-__all__ = [
-    "MANAGED",
-    "ManagedContext",
-    "ManagedKind",
-    "ManagedRun",
-    "WritesReports",
-]
-
-
-@dataclass
-class ManagedContext:
-    """What a managed system gets from the launch when it starts.
-
-    Attributes:
-        bus: The launch's bus.
-        stop: Set when the run stops; a system's thread ends soon after.
-        speed: Simulated or replayed seconds per wall second.
-        until: Stop at this time of the system's own clock (``None``: at its end).
-        say: Print one line of the launch's output.
-        on_instant: Call before the messages of each instant go out, with its time (it
-            moves Utu's simulation clock first); ``None`` when nothing needs it.
-        taken: ``taken(n)`` — whether Utu has taken (and acted on) ``n`` inputs on the
-            watched topics so far: a lockstep system waits for it; ``None``: no lockstep.
-        watched: The topics Utu monitors (the goal model's binding).
-
-    """
-
-    bus: Bus
-    stop: threading.Event
-    speed: float
-    until: float | None
-    say: Callable[[str], None]
-    on_instant: Callable[[float], object] | None
-    taken: Callable[[int], bool] | None
-    watched: frozenset[str]
-
-
-class ManagedRun(Protocol):
-    """A managed system started by a launch."""
-
-    #: The thread that drives it; the run ends (after ``linger``) once it has finished.
-    thread: threading.Thread
-    #: Why it finished by itself, e.g. ``trace ended``.
-    ended: str
-
-    def finish(self, decisions: Sequence[Decision], ran: float) -> None:
-        """Called once after the run stopped: print what it has to say (reports)."""
-        ...
-
-    def close(self) -> None:
-        """Release everything it declared on the bus."""
-        ...
-
-
-class ManagedKind(Protocol):
-    """A kind of managed system a launch file can name (``managed: {kind: NAME, …}``)."""
-
-    name: ClassVar[str]
-    Options: ClassVar[type[BaseModel]]
-    #: The default speed (``anunnaki run --speed`` overrides it).
-    speed: float
-    #: Whether the launch relays its simulation time on ``/clock`` at high priority, ahead
-    #: of each instant's messages (nodes in other processes then never take a message
-    #: before its time has come).
-    relay_clock: bool
-
-    def check(self, utu: UtuConfig) -> None:
-        """Bring-up checks (B5): load what it needs now, raise a ModelFileError if it can't."""
-        ...
-
-    def notes(self, utu: UtuConfig, speed: float) -> list[str]:
-        """Warnings about this combination of settings, printed at start."""
-        ...
-
-    def start(self, ctx: ManagedContext) -> ManagedRun:
-        """Build the system on ``ctx.bus`` and start driving it in a thread."""
-        ...
-
-
-@runtime_checkable
-class WritesReports(Protocol):
-    """Optional: a kind that can keep its run as data (JSON) and draw it (``--report/--plot``)."""
-
-    def with_reports(self, *, report: str | None, plot: str | None) -> None:
-        """Write the run's report and plot to these files at the end."""
-        ...
-
-
-def _check_kind(cls: Any) -> Any:
-    options = getattr(cls, "Options", None)
-    if not (isinstance(options, type) and issubclass(options, BaseModel)):
-        raise ModelFileError(
-            f"managed-system plugin {getattr(cls, '__name__', cls)!r} has no Options model",
-            hint="give the class an 'Options' pydantic model for its launch-file section",
-        )
-    if not callable(getattr(cls, "start", None)):
-        raise ModelFileError(f"managed-system plugin {cls.__name__!r} has no start(ctx)")
-    return cls
-
-
-#: The managed-system kinds: built-ins ``scripted`` and ``sim``, plugins by entry point.
-MANAGED: Registry[ManagedKind] = Registry(
-    "managed system",
-    group="anunnaki.managed",
-    check=_check_kind,
-    error=ModelFileError,
-)
-MANAGED.register_lazy("scripted", "anunnaki.launch._kinds:ScriptedKind")
-MANAGED.register_lazy("sim", "anunnaki.launch._kinds:SimKind")
-MANAGED.register_lazy("ros1", "anunnaki.launch._ros1:Ros1Kind")
-MANAGED.register_lazy("ros2", "anunnaki.launch._ros2:Ros2Kind")
+__all__ = ["clock_publisher", "resolve_kind", "split_managed"]
 
 
 def split_managed(raw: Any) -> tuple[str | None, dict[str, Any], tuple[str, ...]]:
@@ -181,3 +51,18 @@ def resolve_kind(name: str, options: BaseModel, base: Path) -> ManagedKind:
     factory = MANAGED.factory(name)
     kind: ManagedKind = factory(options, base=base)
     return kind
+
+
+def clock_publisher(bus: Bus, topic: str) -> Callable[[float], None]:
+    """Publish the simulation time before each instant, ahead of the instant's records.
+
+    The scripted system publishes ``/clock`` at normal priority; assessments travel at
+    high priority and could overtake it. Published here at high priority first, the
+    time of an instant always reaches a node before the instant's messages.
+    """
+    pub = bus.publisher(topic, priority="high")
+
+    def publish(t: float) -> None:
+        pub.put(Clock(time=max(t, 0.0)))
+
+    return publish

@@ -2,7 +2,7 @@
 
 One :class:`_Runner` per run: it opens the launch's bus, starts the nodes (the composed
 :class:`~anunnaki.utu.AutonomicManager` when all five run in this process), waits until all
-are ready, starts the managed system (a plugin, :mod:`anunnaki.launch._managed`), prints one
+are ready, starts the managed system (a plugin of :data:`anunnaki.managed.MANAGED`), prints one
 line per decision and stops everything on a signal, at ``until`` or when the system ends.
 """
 
@@ -27,8 +27,7 @@ from typing import Any, TextIO
 from anunnaki import topics
 from anunnaki.bus import Bus, BusConfig, open_bus
 from anunnaki.clock import SimClock
-from anunnaki.launch._kinds import clock_publisher
-from anunnaki.launch._managed import ManagedContext, ManagedRun
+from anunnaki.launch._managed import clock_publisher
 from anunnaki.launch._schema import Launch, LaunchError, _StoppedDuringBringUp
 from anunnaki.launch._supervisor import (
     Children,
@@ -37,6 +36,7 @@ from anunnaki.launch._supervisor import (
     signals_to,
     wait_ready,
 )
+from anunnaki.managed import ManagedContext, ManagedRun
 from anunnaki.utu import (
     ACT_ORDER,
     NODE_NAMES,

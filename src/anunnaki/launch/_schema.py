@@ -42,7 +42,8 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_valida
 from anunnaki._safeyaml import LineMap, describe_path, load_yaml, validation_error
 from anunnaki.bus import BusConfig
 from anunnaki.errors import AnunnakiError, ModelFileError
-from anunnaki.launch._managed import MANAGED, ManagedKind, resolve_kind, split_managed
+from anunnaki.launch._managed import resolve_kind, split_managed
+from anunnaki.managed import MANAGED, ManagedKind
 from anunnaki.utu import NODE_NAMES, NodeName, UtuConfig, UtuParts, load_config, load_parts
 
 __all__ = ["Launch", "LaunchConfig", "LaunchError", "NodeSettings", "load_launch", "parse_launch"]

@@ -1,26 +1,56 @@
-"""Managed systems: what Utu adapts, each a plugin a launch file names by ``kind``.
+"""Managed systems: what Utu adapts, every kind in one room, each a plugin named by ``kind``.
 
-* :class:`ScriptedSystem` — replays a trace onto the bus and obeys mode changes, run-stop
-  and buzzer commands; the stand-in robot of tests and examples (``kind: scripted``).
-* :class:`SimulatedSystem` — a pybullet rover or UAV with its detector (the LEC node) and
-  its oracle, in lockstep, scored per phase of its scenario (``kind: sim``; needs the
-  ``vision`` extra, imported on first use).
+A launch file names the system with ``managed: {kind: NAME, …options}``; :data:`MANAGED`
+(an :class:`~anunnaki.plugins.Registry`, entry-point group ``anunnaki.managed``) maps the
+name to a kind:
 
-Both publish the same topics and obey the same services (guideline H1), so one goal model
-and binding run against either. A launch file picks one with ``managed: {kind: …}``; third
-parties add kinds through the ``anunnaki.managed`` entry-point group (see
-:mod:`anunnaki.launch`).
+* ``scripted`` (:class:`ScriptedKind`) — :class:`ScriptedSystem` replays a trace onto the
+  bus and obeys mode changes, run-stop and buzzer commands; the stand-in robot of tests
+  and examples;
+* ``sim`` (:class:`SimKind`) — :class:`SimulatedSystem`: a pybullet rover or UAV with its
+  camera chain, in lockstep, scored per phase of its scenario (needs the ``vision`` extra,
+  imported on first use);
+* ``ros1`` and ``ros2`` — a real robot through the ROS 1 bridge process
+  (:mod:`anunnaki.ros1`) or over zenoh (:mod:`anunnaki.ros2`); both are a
+  :class:`RobotKind` and differ only in how they reach the robot.
+
+All publish the same topics and obey the same services (guideline H1), so one goal model
+and binding run against any of them. **The camera chain** — the LEC node, the oracle node
+and a live scorer on one camera topic — is :class:`CameraChain`, used by every kind that
+has a camera; an oracle that takes something from the detector's model registry says so
+with the hook :class:`TakesModels`.
+
+A kind is a class with ``name``, ``Options`` (a pydantic model of its launch-file keys),
+``__init__(options, *, base)``, ``speed``, ``relay_clock``, ``check``, ``notes`` and
+``start(ctx) -> ManagedRun`` (:class:`ManagedKind`); optional hooks are Protocols
+(:class:`WritesReports`). A third party adds one with a module and an entry point::
+
+    [project.entry-points."anunnaki.managed"]
+    my_robot = "my_package.robot:MyRobotKind"
+
+``examples/managed/echo.py`` is a whole kind in 60 lines (docs/architecture.md).
 """
 
 from __future__ import annotations
 
 from typing import TYPE_CHECKING, Any
 
+from anunnaki.managed._camera import SCORER_TOPIC, CameraChain, TakesModels, check_camera_chain
+from anunnaki.managed._kinds import ScriptedKind, SimKind
+from anunnaki.managed._robot import Link, RobotConfig, RobotKind
 from anunnaki.managed._scripted import ScriptedSystem
+from anunnaki.managed._slot import (
+    MANAGED,
+    DecisionLike,
+    ManagedContext,
+    ManagedKind,
+    ManagedRun,
+    UtuSettings,
+    WritesReports,
+)
 
 if TYPE_CHECKING:
     from anunnaki.managed._sim import (
-        SCORER_TOPIC,
         PhaseScore,
         SimulatedSystem,
         format_phases,
@@ -29,17 +59,31 @@ if TYPE_CHECKING:
     )
 
 __all__ = [
+    "MANAGED",
     "SCORER_TOPIC",
+    "CameraChain",
+    "DecisionLike",
+    "Link",
+    "ManagedContext",
+    "ManagedKind",
+    "ManagedRun",
     "PhaseScore",
+    "RobotConfig",
+    "RobotKind",
+    "ScriptedKind",
     "ScriptedSystem",
+    "SimKind",
     "SimulatedSystem",
+    "TakesModels",
+    "UtuSettings",
+    "WritesReports",
+    "check_camera_chain",
     "format_phases",
     "format_scoring",
     "scenario_phases",
 ]
 
 _LAZY = {
-    "SCORER_TOPIC",
     "PhaseScore",
     "SimulatedSystem",
     "format_phases",

@@ -35,6 +35,7 @@ import numpy as np
 from anunnaki import topics
 from anunnaki._closing import Closing
 from anunnaki.bus import Assessment, Detections, LivelinessGuard, Sample, body_of
+from anunnaki.managed._camera import SCORER_TOPIC, CameraChain
 from anunnaki.sim import (
     FrameScore,
     RunReport,
@@ -45,11 +46,8 @@ from anunnaki.sim import (
 )
 
 GROUND_TRUTH_TOPIC = topics.GROUND_TRUTH
-#: Where a live scorer beside the oracle publishes (not Utu's input: no agent reads it).
-SCORER_TOPIC = "/sim/oracle/scorer"
 
 __all__ = [
-    "SCORER_TOPIC",
     "PhaseScore",
     "SimulatedSystem",
     "format_phases",
@@ -178,7 +176,9 @@ class SimulatedSystem(Closing):
             it publishes on :data:`SCORER_TOPIC` (node ``/scorer_<name>``), which Utu does
             not read, and the report compares the two (:func:`~anunnaki.sim.compare_assessors`).
 
-    An ``enlil`` oracle (or scorer) given no ``models`` uses the detector's registry.
+    The detector, the oracle and the scorer are the camera chain every kind shares
+    (:class:`~anunnaki.managed.CameraChain`): an oracle that takes what it needs from the
+    detector's registry (``enlil`` its oracles, ``ground_truth`` the clean F1) gets it there.
 
     """
 
@@ -240,22 +240,22 @@ class SimulatedSystem(Closing):
                         timeout=stop_without_utu,
                     )
                 )
-            camera = f"{self.platform.prefix}/camera/image"
-            self.lec: Any = None
-            self.registry: Any = None
-            if models is not None:
-                from anunnaki.lec import LecNode, ModelRegistry, load_registry
-
-                self.registry = (
-                    models if isinstance(models, ModelRegistry) else load_registry(models)
-                )
-                self.lec = LecNode(bus, self.registry, camera=camera)
-                self._closing.append(self.lec)
-            self.detections_topic = (
-                self.lec.detections_topic if self.lec is not None else topics.DETECTIONS
+            chain = CameraChain(
+                bus,
+                camera=f"{self.platform.prefix}/camera/image",
+                models=models,
+                oracle=oracle,
+                scorer=scorer,
+                classes=self.platform.scene.classes,
+                default_oracle="ground_truth",
             )
-            self.oracle: Any = self._oracle_node(oracle, camera)
-            self.scorer: Any = self._oracle_node(scorer, camera, output=SCORER_TOPIC)
+            self._closing.append(chain)
+            self.chain = chain
+            self.registry: Any = chain.registry
+            self.lec: Any = chain.lec
+            self.oracle: Any = chain.oracle
+            self.scorer: Any = chain.scorer
+            self.detections_topic = chain.detections_topic
             self._subs = [
                 bus.subscribe(GROUND_TRUTH_TOPIC, self._on_truth, queue=256),
                 bus.subscribe(self.detections_topic, self._on_detections, queue=256),
@@ -266,34 +266,6 @@ class SimulatedSystem(Closing):
         except BaseException:
             self.close()
             raise
-
-    def _oracle_node(
-        self, options: Mapping[str, Any] | None, camera: str, *, output: str | None = None
-    ) -> Any:
-        """An oracle node from its options (``name`` and the oracle's own), or ``None``."""
-        if options is None:
-            return None
-        from anunnaki.oracles import OracleNode
-
-        opts = dict(options)
-        name = opts.pop("name", "ground_truth")
-        if name == "ground_truth" and self.registry is not None:
-            opts.setdefault("clean_f1", self.registry.clean_f1)
-        if name == "enlil" and self.registry is not None:
-            opts.setdefault("models", self.registry)
-        if output is not None:
-            opts.setdefault("output", output)
-            opts.setdefault("node", f"/scorer_{name}")
-        node = OracleNode(
-            self.bus,
-            name,
-            camera=camera,
-            detections=self.detections_topic,
-            classes=self.platform.scene.classes,
-            **opts,
-        )
-        self._closing.append(node)
-        return node
 
     # -- what the scorer hears ---------------------------------------------------------------
     def _on_truth(self, sample: Sample) -> None:

@@ -37,7 +37,7 @@ import numpy.typing as npt
 from pydantic import JsonValue
 
 from anunnaki.bus import Assessment, Detections
-from anunnaki.lec import DetectionResult, match_image
+from anunnaki.lec import DetectionResult, ModelRegistry, match_image
 from anunnaki.oracles._base import Frame, OracleError
 
 __all__ = ["CleanF1", "GroundTruthAssessor", "WindowMetrics", "category_for_drop"]
@@ -156,6 +156,11 @@ class GroundTruthAssessor:
         self._model: str | None = None
         self._context: dict[str, JsonValue] | None = None
         self._warned: set[str] = set()
+
+    @classmethod
+    def options_from_models(cls, models: ModelRegistry) -> dict[str, Any]:
+        """Take the clean F1 of the assessed detector's registry (``TakesModels`` hook)."""
+        return {"clean_f1": models.clean_f1}
 
     def __repr__(self) -> str:
         return (

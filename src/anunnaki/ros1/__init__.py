@@ -5,7 +5,8 @@ type, direction (``to_bus``/``to_ros``), bus name and field mapping, and bus ser
 call ROS services; :func:`load_bridge` checks it (unknown types, bad field paths: errors
 with file, line and element) without ROS installed. The bridge runs as its own process,
 ``python -m anunnaki.ros1 BRIDGE.yaml --connect ENDPOINT``, which imports Debian's rospy
-(:func:`import_rospy`); a launch file starts it as the managed-system kind ``ros1``.
+(:func:`import_rospy`); a launch file starts it as the managed-system kind ``ros1``
+(:mod:`anunnaki.managed`).
 
 Converters (:mod:`anunnaki.ros1._convert`): std_msgs Bool, String, Int32/64, Float32/64,
 Header; sensor_msgs Image and CompressedImage (to and from the bus's ``Image``), Range,
@@ -17,8 +18,8 @@ Rosbags (``rosbags``, pure Python): :func:`read_bag` turns a ROS 1 or ROS 2 bag 
 records through the same bridge file; :func:`write_bag` writes a run's inputs and decisions
 to a ROS 1 bag.
 
-ROS 2 over zenoh (:class:`Ros2ZenohBridge`): the same bridge files, with CDR samples on the
-key expressions of zenoh-bridge-ros2dds or rmw_zenoh (:func:`ros2_key`).
+ROS 2 over zenoh is its own package, :mod:`anunnaki.ros2`, which reads the same bridge
+files; the launch kinds ``ros1`` and ``ros2`` are in :mod:`anunnaki.managed`.
 """
 
 from __future__ import annotations
@@ -35,13 +36,6 @@ from anunnaki.ros1._convert import (
     raw_to_image,
     to_bus_fields,
     to_ros_fields,
-)
-from anunnaki.ros1._ros2 import (
-    Ros2ZenohBridge,
-    dds_type_name,
-    decode_cdr,
-    encode_cdr,
-    ros2_key,
 )
 from anunnaki.ros1._rospy import ROS_DIST_PACKAGES, RosUnavailable, import_rospy
 from anunnaki.ros1._schema import (
@@ -64,16 +58,12 @@ __all__ = [
     "SET_STRING_SRV",
     "BridgeSpec",
     "ConversionError",
-    "Ros2ZenohBridge",
     "RosUnavailable",
     "ServiceBridge",
     "TopicBridge",
     "bag_message_to_dict",
     "bus_image_to_compressed",
     "compressed_to_image",
-    "dds_type_name",
-    "decode_cdr",
-    "encode_cdr",
     "encode_png",
     "fill_message",
     "image_size",
@@ -84,7 +74,6 @@ __all__ = [
     "parse_bridge",
     "raw_to_image",
     "read_bag",
-    "ros2_key",
     "to_bus_fields",
     "to_ros_fields",
     "write_bag",

@@ -16,14 +16,8 @@ from typing import Any
 import pytest
 
 from anunnaki.bus import Bus, BusConfig, open_bus
-from anunnaki.ros1 import (
-    Ros2ZenohBridge,
-    decode_cdr,
-    encode_cdr,
-    load_bridge,
-    parse_bridge,
-    ros2_key,
-)
+from anunnaki.ros1 import load_bridge, parse_bridge
+from anunnaki.ros2 import Ros2ZenohBridge, decode_cdr, encode_cdr, ros2_key
 
 pytest.importorskip("rosbags")
 zenoh = pytest.importorskip("zenoh")
@@ -154,7 +148,7 @@ def test_a_bad_sample_is_counted_and_the_next_goes_through(bus: Bus, ros2_side: 
 
 
 def test_the_ros2_launch_kind_bridges_a_robots_zenoh(bus: Bus, ros2_side: Any) -> None:
-    from anunnaki.launch import MANAGED, ManagedContext
+    from anunnaki.managed import MANAGED, ManagedContext
     from anunnaki.utu import parse_config
 
     cls = MANAGED.factory("ros2")

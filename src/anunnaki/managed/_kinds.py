@@ -1,7 +1,8 @@
 """The built-in managed-system kinds: ``scripted`` (a trace) and ``sim`` (a simulated platform).
 
-Each is a plugin of :data:`anunnaki.launch.MANAGED` (see :mod:`anunnaki.launch._managed`),
-imported only when a launch file names it: ``sim`` needs the ``vision`` extra.
+Each is a plugin of :data:`anunnaki.managed.MANAGED` (see :mod:`anunnaki.managed._slot`),
+imported only when a launch file names it: ``sim`` needs the ``vision`` extra. The robots
+(``ros1``, ``ros2``) are in :mod:`anunnaki.managed._robot`.
 """
 
 from __future__ import annotations
@@ -15,15 +16,14 @@ from typing import Annotated, Any, ClassVar
 
 from pydantic import BaseModel, ConfigDict, Field
 
-from anunnaki.bus import Clock
 from anunnaki.errors import AnunnakiError, ModelFileError
-from anunnaki.launch._managed import ManagedContext
+from anunnaki.managed._camera import check_camera_chain
+from anunnaki.managed._slot import DecisionLike, ManagedContext, UtuSettings
 from anunnaki.trace import Record, read_trace
-from anunnaki.utu import Decision, UtuConfig
 
 __all__ = ["ScriptedConfig", "ScriptedKind", "SimConfig", "SimKind"]
 
-log = logging.getLogger("anunnaki.launch")
+log = logging.getLogger("anunnaki.managed")
 
 
 class _Strict(BaseModel):
@@ -126,14 +126,14 @@ class _Running:
         system: Any,
         thread: threading.Thread,
         ended: str,
-        finish: Callable[[Sequence[Decision], float], None] | None = None,
+        finish: Callable[[Sequence[DecisionLike], float], None] | None = None,
     ) -> None:
         self.system = system
         self.thread = thread
         self.ended = ended
         self._finish = finish
 
-    def finish(self, decisions: Sequence[Decision], ran: float) -> None:
+    def finish(self, decisions: Sequence[DecisionLike], ran: float) -> None:
         if self._finish is not None:
             self._finish(decisions, ran)
 
@@ -154,15 +154,18 @@ class ScriptedKind:
         self.relay_clock = self.options.publish_clock
         self.records: list[Record] = []
 
-    def check(self, utu: UtuConfig) -> None:
+    def check(self, utu: UtuSettings) -> None:
         """Read the trace now (B5)."""
+        self._read()
+
+    def _read(self) -> None:
         self.records = read_trace(self.options.trace).records
         if not self.records:
             raise ModelFileError(
                 "the trace has no records", path=self.options.trace, hint="record or write some"
             )
 
-    def notes(self, utu: UtuConfig, speed: float) -> list[str]:
+    def notes(self, utu: UtuSettings, speed: float) -> list[str]:
         """Clock and speed combinations that do not do what one may think."""
         out = []
         if utu.clock == "wall" and speed != 1:
@@ -184,7 +187,7 @@ class ScriptedKind:
 
         sc = self.options
         if not self.records:
-            self.check(UtuConfig(anunnaki="utu/1", goal_model="-"))
+            self._read()
         system = ScriptedSystem(
             ctx.bus,
             list(self.records),
@@ -311,7 +314,7 @@ class SimKind:
 
             require_plot_extra()  # before the run, not after it
 
-    def check(self, utu: UtuConfig) -> None:
+    def check(self, utu: UtuSettings) -> None:
         """Load the scenario and the registry now, so that errors come before bring-up (B5)."""
         from anunnaki.sim import load_scenario, require_plot_extra
 
@@ -319,22 +322,15 @@ class SimKind:
         load_scenario(sim.scenario)
         if sim.plot_file is not None:
             require_plot_extra()
-        if sim.models is not None:
-            from anunnaki.lec import load_registry
+        check_camera_chain(
+            models=sim.models,
+            oracle=sim.oracle,
+            scorer=sim.scorer,
+            default_oracle="ground_truth",
+            where="managed.sim",
+        )
 
-            load_registry(sim.models)
-        from anunnaki.oracles import available_oracles
-
-        for key, options in (("oracle", sim.oracle), ("scorer", sim.scorer)):
-            name = (options or {}).get("name", "ground_truth")
-            if options is not None and name not in available_oracles():
-                raise ModelFileError(
-                    f"unknown oracle {name!r}",
-                    element=f"managed.sim.{key}.name",
-                    hint=f"known oracles: {', '.join(available_oracles())}",
-                )
-
-    def notes(self, utu: UtuConfig, speed: float) -> list[str]:
+    def notes(self, utu: UtuSettings, speed: float) -> list[str]:
         """Nothing to warn about."""
         return []
 
@@ -354,14 +350,11 @@ class SimKind:
         )
         sc = system.scenario
         end = sc.duration if ctx.until is None else ctx.until
-        active = system.lec.active.id if system.lec is not None else "no detector"
-        oracle = system.oracle.oracle.name if system.oracle is not None else "no oracle"
         ctx.say(
             f"managed: simulated {sc.platform} '{sc.name}' from {cfg.scenario} "
             f"(t 0–{end:g} s) at {ctx.speed:g}×"
             + (", in lockstep with the detector" if cfg.lockstep and system.lec else "")
-            + f"; detector {active}; oracle {oracle}"
-            + (f", scored live by {system.scorer.oracle.name}" if system.scorer else "")
+            + f"; {system.chain.describe()}"
         )
 
         def run() -> None:
@@ -370,7 +363,7 @@ class SimKind:
             except Exception:  # a bug: say so; the run then ends as after the scenario
                 log.exception("the simulation failed")
 
-        def finish(decisions: Sequence[Decision], ran: float) -> None:
+        def finish(decisions: Sequence[DecisionLike], ran: float) -> None:
             self._finish(system, decisions, ran, ctx.say)
 
         thread = threading.Thread(target=run, name="anunnaki-sim", daemon=True)
@@ -378,7 +371,7 @@ class SimKind:
         return _Running(system, thread, "scenario ended", finish)
 
     def _finish(
-        self, system: Any, decisions: Sequence[Decision], ran: float, say: Callable[[str], None]
+        self, system: Any, decisions: Sequence[DecisionLike], ran: float, say: Callable[[str], None]
     ) -> None:
         cfg = self.options
         if cfg.report:
@@ -406,18 +399,3 @@ class SimKind:
                 )
             except (OSError, AnunnakiError) as exc:
                 say(f"report: not written: {exc}")
-
-
-def clock_publisher(bus: Any, topic: str) -> Callable[[float], None]:
-    """Publish the simulation time before each instant, ahead of the instant's records.
-
-    The scripted system publishes ``/clock`` at normal priority; assessments travel at
-    high priority and could overtake it. Published here at high priority first, the
-    time of an instant always reaches a node before the instant's messages.
-    """
-    pub = bus.publisher(topic, priority="high")
-
-    def publish(t: float) -> None:
-        pub.put(Clock(time=max(t, 0.0)))
-
-    return publish

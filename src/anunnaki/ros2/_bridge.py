@@ -29,20 +29,21 @@ from typing import Any, Literal
 from anunnaki._closing import Closing
 from anunnaki.bus import Bus, Image, body_of
 from anunnaki.errors import MissingExtraError
-from anunnaki.ros1._bags import bag_message_to_dict
-from anunnaki.ros1._convert import (
+from anunnaki.ros1 import (
+    BridgeSpec,
     ConversionError,
+    TopicBridge,
+    bag_message_to_dict,
     bus_image_to_compressed,
     compressed_to_image,
     raw_to_image,
     to_bus_fields,
     to_ros_fields,
 )
-from anunnaki.ros1._schema import BridgeSpec, TopicBridge
 
 __all__ = ["Flavour", "Ros2ZenohBridge", "dds_type_name", "decode_cdr", "encode_cdr", "ros2_key"]
 
-log = logging.getLogger("anunnaki.ros1")
+log = logging.getLogger("anunnaki.ros2")
 
 Flavour = Literal["ros2dds", "rmw_zenoh"]
 

@@ -12,16 +12,16 @@ from pydantic import BaseModel
 
 from anunnaki.bus import open_bus
 from anunnaki.errors import ModelFileError
-from anunnaki.launch import (
+from anunnaki.launch import load_launch, parse_launch, run_launch
+from anunnaki.managed import (
     MANAGED,
+    DecisionLike,
     ManagedContext,
     ScriptedKind,
     SimKind,
-    load_launch,
-    parse_launch,
-    run_launch,
+    UtuSettings,
 )
-from anunnaki.utu import Decision, UtuConfig, parse_config
+from anunnaki.utu import parse_config
 
 ROOT = Path(__file__).parents[2]
 ROVER = ROOT / "examples" / "rover"
@@ -120,10 +120,10 @@ class _Silent:
         self.speed = 1.0
         self.started = False
 
-    def check(self, utu: UtuConfig) -> None:
+    def check(self, utu: UtuSettings) -> None:
         return None
 
-    def notes(self, utu: UtuConfig, speed: float) -> list[str]:
+    def notes(self, utu: UtuSettings, speed: float) -> list[str]:
         return ["note: a silent robot"]
 
     def start(self, ctx: ManagedContext) -> Any:
@@ -137,7 +137,7 @@ class _Silent:
             def __init__(self) -> None:
                 self.thread = thread
 
-            def finish(self, decisions: Sequence[Decision], ran: float) -> None:
+            def finish(self, decisions: Sequence[DecisionLike], ran: float) -> None:
                 ctx.say(f"silent: {len(decisions)} decisions")
 
             def close(self) -> None:

@@ -3,8 +3,8 @@
 ROS 2 reaches zenoh through zenoh-bridge-ros2dds or rmw_zenoh (docs/ros.md, "ROS 2 over
 zenoh"); this kind opens a zenoh session to it (``connect``: the robot's zenoh router or
 bridge; default: the launch's own session, when the robot's zenoh joins that one) and runs
-:class:`~anunnaki.ros1.Ros2ZenohBridge` with a bridge file, plus the LEC and oracle nodes on
-the bridged camera as ``ros1`` does::
+:class:`~anunnaki.ros2.Ros2ZenohBridge` with a bridge file; the camera chain on the bridged
+camera and the run are every robot kind's (:mod:`anunnaki.managed._robot`)::
 
     managed:
       kind: ros2
@@ -17,22 +17,18 @@ the bridged camera as ``ros1`` does::
 from __future__ import annotations
 
 import json
-import threading
-import time
-from collections.abc import Sequence
 from typing import Annotated, Any, ClassVar, Literal
 
 from pydantic import BaseModel, Field
 
 from anunnaki.errors import ModelFileError
-from anunnaki.launch._managed import ManagedContext
-from anunnaki.launch._ros1 import RobotKind, _CameraNodes, start_camera_nodes
-from anunnaki.utu import Decision
+from anunnaki.managed._robot import RobotConfig, RobotKind
+from anunnaki.managed._slot import ManagedContext
 
 __all__ = ["Ros2Config", "Ros2Kind"]
 
 
-class Ros2Config(_CameraNodes):
+class Ros2Config(RobotConfig):
     """A ROS 2 robot over zenoh (``managed: {kind: ros2, …}``).
 
     Attributes:
@@ -42,7 +38,7 @@ class Ros2Config(_CameraNodes):
         domain: The ROS domain id (rmw_zenoh keys).
         namespace: zenoh-bridge-ros2dds's ``namespace`` option, if it sets one.
         connect: zenoh endpoints of the robot's zenoh; empty: the launch's own session.
-        models / camera / oracle: as for ``ros1``.
+        models / camera / oracle / scorer: the camera chain (:class:`RobotConfig`).
 
     """
 
@@ -52,58 +48,40 @@ class Ros2Config(_CameraNodes):
     connect: list[str] = Field(default_factory=list)
 
 
-class _Ros2Run:
-    """The running ROS 2 bridge: its zenoh session, the bridge, the nodes."""
+class _ZenohLink:
+    """The zenoh session to the robot and the bridge on it (reachable until closed)."""
 
-    def __init__(self, session: Any, bridge: Any, nodes: list[Any], ctx: ManagedContext) -> None:
+    gone = "the zenoh session closed"
+
+    def __init__(self, session: Any, bridge: Any) -> None:
         self.session = session
         self.bridge = bridge
-        self.nodes = nodes
-        self.ended = "stopped"
-        self._ctx = ctx
-        self.thread = threading.Thread(target=self._watch, name="anunnaki-ros2", daemon=True)
-        self.thread.start()
 
-    def _watch(self) -> None:
-        started = time.monotonic()
-        until = self._ctx.until
-        while not self._ctx.stop.wait(0.1):
-            if until is not None and time.monotonic() - started >= until:
-                self.ended = f"ran {until:g} s"
-                return
-
-    def finish(self, decisions: Sequence[Decision], ran: float) -> None:
-        return None
+    def alive(self) -> bool:
+        return True  # zenoh reconnects by itself; liveliness says when the robot is gone
 
     def close(self) -> None:
-        for node in reversed(self.nodes):
-            node.close()
         self.bridge.close()
         self.session.close()
 
 
 class Ros2Kind(RobotKind):
-    """``kind: ros2``: a ROS 2 robot over zenoh; its camera feeds the LEC and oracle nodes."""
+    """``kind: ros2``: a ROS 2 robot over zenoh; its camera feeds the camera chain."""
 
     name: ClassVar[str] = "ros2"
     Options: ClassVar[type[BaseModel]] = Ros2Config
     options: Ros2Config
 
-    def start(self, ctx: ManagedContext) -> _Ros2Run:
-        """Open a zenoh session to the robot, start the bridge, then the LEC and oracle nodes."""
+    def connect(self, ctx: ManagedContext) -> _ZenohLink:
+        """Open a zenoh session to the robot and start the bridge on it."""
         import zenoh
 
-        from anunnaki.bus import BusConfig, on_loopback
-        from anunnaki.ros1 import Ros2ZenohBridge, load_bridge
+        from anunnaki.bus import BusConfig
+        from anunnaki.ros1 import load_bridge
+        from anunnaki.ros2 import Ros2ZenohBridge
 
         o = self.options
-        connect = list(o.connect) or [on_loopback(e) for e in getattr(ctx.bus, "endpoints", ())]
-        if not connect:
-            raise ModelFileError(
-                "a ros2 managed system needs the robot's zenoh endpoints, or the zenoh bus",
-                element="managed.connect",
-                hint="give connect: [tcp/ROBOT:7447], or write bus: {kind: zenoh}",
-            )
+        connect = self._endpoints(ctx)
         config = BusConfig(kind="zenoh", mode="peer", connect=connect)
         # listening too (a free loopback port): peers that reach the same session find this
         # one through zenoh's gossip and connect directly (peers do not route for others)
@@ -117,15 +95,30 @@ class Ros2Kind(RobotKind):
             domain=o.domain,
             namespace=o.namespace,
         )
-        nodes: list[Any] = []
+        link = _ZenohLink(session, bridge)
         try:
             bridge.start()
-            nodes = start_camera_nodes(ctx.bus, o)
         except BaseException:
-            _Ros2Run(session, bridge, nodes, ctx).close()
+            link.close()
             raise
-        ctx.say(
-            f"managed: ROS 2 robot over zenoh ({o.flavour}, {', '.join(connect)}) through "
-            f"{o.bridge}"
-        )
-        return _Ros2Run(session, bridge, nodes, ctx)
+        return link
+
+    def _endpoints(self, ctx: ManagedContext) -> list[str]:
+        from anunnaki.bus import on_loopback
+
+        connect = list(self.options.connect) or [
+            on_loopback(e) for e in getattr(ctx.bus, "endpoints", ())
+        ]
+        if not connect:
+            raise ModelFileError(
+                "a ros2 managed system needs the robot's zenoh endpoints, or the zenoh bus",
+                element="managed.connect",
+                hint="give connect: [tcp/ROBOT:7447], or write bus: {kind: zenoh}",
+            )
+        return connect
+
+    def describe(self, ctx: ManagedContext) -> str:
+        """``ROS 2 robot over zenoh (FLAVOUR, ENDPOINTS) through BRIDGE``."""
+        o = self.options
+        where = ", ".join(self._endpoints(ctx))
+        return f"ROS 2 robot over zenoh ({o.flavour}, {where}) through {o.bridge}"
