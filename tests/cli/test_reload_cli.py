@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import importlib.util
 import os
+import shutil
 import signal
 import socket
 import subprocess
@@ -15,7 +17,7 @@ from typing import Any
 
 import pytest
 
-from anunnaki.bus import open_bus
+from anunnaki.bus import BusConfig, TlsConfig, open_bus
 from anunnaki.cli.main import main
 from anunnaki.utu import AutonomicManager, RecordingActuator, parse_config
 
@@ -70,6 +72,58 @@ def test_reload_says_when_no_utu_answers(capsys: pytest.CaptureFixture[str]) -> 
         )
     assert code == 2
     assert "no running Utu answered" in capsys.readouterr().err
+
+
+def test_reload_over_tls_takes_the_operators_certificate(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Before: ``--connect tls/…`` ended in a pydantic traceback (no certificate options)."""
+    pytest.importorskip("zenoh")
+    if shutil.which("openssl") is None:
+        pytest.skip("the openssl command is needed to make test certificates")
+    helpers = sys.modules.get("bus_helpers")
+    if helpers is None:  # the bus tests' PKI (tests/bus/bus_helpers.py), loaded once
+        spec = importlib.util.spec_from_file_location(
+            "bus_helpers", Path(__file__).parents[1] / "bus" / "bus_helpers.py"
+        )
+        assert spec is not None and spec.loader is not None
+        helpers = sys.modules["bus_helpers"] = importlib.util.module_from_spec(spec)
+        spec.loader.exec_module(helpers)
+    pki = tmp_path / "pki"
+    pki.mkdir()
+    helpers.make_ca(pki, "ca")
+    for name in ("utu", "operator"):
+        helpers.make_leaf(pki, name, "ca")
+    endpoint = f"tls/127.0.0.1:{helpers.free_port()}"
+    tactics = ["--tactics", str(ROVER / "tactics.yaml")]
+    assert main(["reload", "--connect", endpoint, *tactics]) == 2
+    err = capsys.readouterr().err
+    assert f"{endpoint} is a TLS endpoint" in err and "--root-ca, --cert and --key" in err
+    assert "Traceback" not in err and "ValidationError" not in err
+    cfg = parse_config(
+        f"anunnaki: utu/1\nname: rover\ngoal_model: {ROVER}/goals.yaml\n"
+        f"binding: {ROVER}/binding.yaml\ntactics: {ROVER}/tactics.yaml\nfailsafe: fail-safe\n"
+    )
+    tls = {
+        "root_ca": str(pki / "ca.pem"),
+        "cert": str(pki / "utu.pem"),
+        "key": str(pki / "utu.key"),
+    }
+    with open_bus(BusConfig(kind="zenoh", listen=[endpoint], tls=TlsConfig(**tls))) as bus:
+        m = AutonomicManager.from_config(cfg, bus=bus, actuator=RecordingActuator())
+        stop = threading.Event()
+        spinner = threading.Thread(target=m.spin, args=(stop,), daemon=True)
+        spinner.start()
+        try:
+            certs = ["--root-ca", str(pki / "ca.pem"), "--cert", str(pki / "operator.pem")]
+            certs += ["--key", str(pki / "operator.key")]
+            code = main(["reload", "--connect", endpoint, *certs, *tactics, "--timeout", "10"])
+            assert (code, capsys.readouterr().out.strip()) == (0, f"applied: {ROVER}/tactics.yaml")
+        finally:
+            stop.set()
+            m.wake()
+            spinner.join(5.0)
+            m.close()
 
 
 @pytest.mark.slow
