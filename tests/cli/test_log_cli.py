@@ -208,6 +208,12 @@ def test_exported_trace_evaluates_to_the_recorded_verdicts(
     out = tmp_path / "run.jsonl"
     code, text, _ = cli(capsys, "log", str(run_db), "--export-trace", str(out))
     assert code == 0 and "wrote 718 messages" in text and "anunnaki evaluate" in text
+    out.write_text("mine\n")  # an existing file is not overwritten without --force
+    code, _, err = cli(capsys, "log", str(run_db), "--export-trace", str(out))
+    assert code == 2 and f"{out} exists already" in err and "--force" in err
+    assert out.read_text() == "mine\n"
+    code, text, _ = cli(capsys, "log", str(run_db), "--export-trace", str(out), "--force")
+    assert code == 0 and "wrote 718 messages" in text
     code, text, _ = cli(
         capsys,
         "evaluate",

@@ -102,6 +102,11 @@ def add_parser(sub: Any) -> None:
         "bag (std_msgs/String JSON; decisions on /utu/decisions) and exit (anunnaki[ros])",
     )
     p.add_argument(
+        "--force",
+        action="store_true",
+        help="with --export-trace or --export-bag: replace an existing file",
+    )
+    p.add_argument(
         "--mark-ticks",
         action="store_true",
         help="with --export-trace: mark steps where only time passed as 'tick' phases",
@@ -339,13 +344,15 @@ def _export_bag(console: Console, knowledge: Knowledge, args: argparse.Namespace
         (d.t, {"kind": d.kind, "tactic": d.tactic, **d.data})
         for d in knowledge.decisions(args.since, args.until)
     ]
-    n = write_bag(args.export_bag, inputs, decisions)
+    n = write_bag(args.export_bag, inputs, decisions, overwrite=args.force)
     console.print(Text(f"wrote {n} messages ({len(decisions)} decisions) to {args.export_bag}"))
     return 0
 
 
 def _export(console: Console, knowledge: Knowledge, path: str, args: argparse.Namespace) -> int:
     out: str = args.export_trace
+    if Path(out).exists() and not args.force:
+        raise AnunnakiError(f"{out} exists already; give another name, or --force")
     header = {
         "name": Path(path).stem,
         "description": f"inputs recorded in the decision log {path}",
