@@ -7,6 +7,7 @@ import os
 import shutil
 import signal
 import socket
+import stat
 import subprocess
 import sys
 import threading
@@ -19,6 +20,7 @@ import pytest
 
 from anunnaki.bus import BusConfig, TlsConfig, open_bus
 from anunnaki.cli.main import main
+from anunnaki.tokens import OPERATOR_TOKEN_ENV, default_token_file
 from anunnaki.utu import AutonomicManager, RecordingActuator, parse_config
 
 ROVER = Path(__file__).parents[2] / "examples" / "rover"
@@ -127,9 +129,13 @@ def test_reload_over_tls_takes_the_operators_certificate(
 
 
 @pytest.mark.slow
-def test_reload_reaches_every_node_of_a_launch_split_into_processes(tmp_path: Path) -> None:
+def test_reload_reaches_every_node_of_a_launch_split_into_processes(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
     """``anunnaki run --processes`` + ``anunnaki reload``: applied by all five node processes."""
     pytest.importorskip("zenoh")
+    monkeypatch.delenv(OPERATOR_TOKEN_ENV, raising=False)  # Utu makes its own, as for a user
+    monkeypatch.setenv("XDG_CONFIG_HOME", str(tmp_path / "config"))
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
         port = s.getsockname()[1]
@@ -167,6 +173,10 @@ def test_reload_reaches_every_node_of_a_launch_split_into_processes(tmp_path: Pa
         while not ready.wait(0.1) and proc.poll() is None and time.monotonic() < deadline:
             pass
         assert ready.is_set(), "".join(lines)
+        # No token configured: the run says where its own is; reload (below) reads it there.
+        where = default_token_file()
+        assert f"operator token: {where} (written now, " in "".join(lines)
+        assert stat.S_IMODE(where.stat().st_mode) == 0o600
         endpoint = f"tcp/127.0.0.1:{port}"
         good = tmp_path / "good.yaml"
         good.write_text(

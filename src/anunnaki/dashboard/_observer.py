@@ -442,8 +442,12 @@ class BusObserver(Closing):
         if service is None:
             raise OperatorError(f"unknown action {op!r}; the actions are {', '.join(OPERATIONS)}")
         payload: dict[str, Any] = {"caller": caller}
-        if (token := client_operator_token()) is not None:
-            payload["token"] = token  # Utu's operator token, not the dashboard's own
+        try:
+            token = client_operator_token()  # Utu's operator token, not the dashboard's own
+        except AnunnakiError as exc:  # the user's token file is unreadable or open to others
+            raise OperatorError(str(exc)) from None
+        if token is not None:
+            payload["token"] = token
         if op in ("approve", "reject"):
             if not tactic:
                 raise OperatorError(f"{op} needs the name of a pending tactic")
