@@ -66,6 +66,21 @@ def test_reload_is_applied_or_refused_with_the_error(
     assert main(["reload", "--connect", endpoint]) == 2  # nothing to reload
 
 
+def test_reload_with_another_token_is_refused_and_says_where_its_token_came_from(
+    running: tuple[str, Any],
+    tmp_path: Path,
+    capsys: pytest.CaptureFixture[str],
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    endpoint, m = running  # started with the user's own token (none was given)
+    monkeypatch.setenv(OPERATOR_TOKEN_ENV, "Not-the-running-Utus-token-42")
+    assert main(["reload", "--connect", endpoint, "--tactics", str(ROVER / "tactics.yaml")]) == 1
+    out, err = capsys.readouterr()
+    assert out.startswith("refused: unauthorised: reload needs the operator token")
+    assert f"hint: this command sent the token in ${OPERATOR_TOKEN_ENV}" in err
+    assert not any(d.kind.startswith("reload") for d in m.knowledge.decisions())
+
+
 def test_reload_says_when_no_utu_answers(capsys: pytest.CaptureFixture[str]) -> None:
     pytest.importorskip("zenoh")
     with open_bus("zenoh") as bus:  # a bus with no Utu on it

@@ -9,6 +9,7 @@ deployment (one process, or one process per node).
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 import threading
 import time
@@ -19,7 +20,7 @@ from pydantic import ValidationError
 
 from anunnaki import topics
 from anunnaki.bus import BusConfig, BusError, open_bus
-from anunnaki.tokens import client_operator_token
+from anunnaki.tokens import OPERATOR_TOKEN_ENV, client_operator_token, default_token_file
 
 __all__ = ["add_parser", "run"]
 
@@ -85,6 +86,8 @@ def run(args: argparse.Namespace) -> int:
             reply = bus.request(topics.RELOAD, request, timeout=args.timeout).to_body()
             if not reply.get("ok"):
                 print(f"refused: {reply.get('error', 'no reason given')}")
+                if reply.get("status") == "unauthorised":
+                    print(f"hint: {_token_hint(token)}", file=sys.stderr)
                 return 1
             outcome = _wait_outcome(bus, after, args.timeout)
         except BusError as exc:
@@ -99,6 +102,20 @@ def run(args: argparse.Namespace) -> int:
         return 0
     print(f"refused: {data.get('error', 'no reason given')}")
     return 1
+
+
+def _token_hint(sent: str | None) -> str:
+    """Where this command's operator token came from, and how to give the right one."""
+    where = (
+        f"${OPERATOR_TOKEN_ENV}"
+        if os.environ.get(OPERATOR_TOKEN_ENV) is not None
+        else str(default_token_file())
+    )
+    said = f"the token in {where}" if sent is not None else f"no token (no {where})"
+    return (
+        f"this command sent {said}; set ${OPERATOR_TOKEN_ENV} to the running Utu's token "
+        "(its operator_token_file, or the file its 'anunnaki run' named)"
+    )
 
 
 def _bus_config(args: argparse.Namespace) -> BusConfig | str:
