@@ -16,6 +16,7 @@ import pytest
 
 from anunnaki.bus import open_bus
 from anunnaki.cli.main import main
+from anunnaki.launch import format_decision
 from anunnaki.managed import ScriptedSystem
 from anunnaki.trace import read_trace
 from anunnaki.utu import (
@@ -326,6 +327,11 @@ def test_a_wall_clock_log_reads_in_seconds_from_the_start(
     code, out, _ = cli(capsys, "replay", str(wall_db), "--json")
     report = json.loads(out)
     assert report["identical"] and report["origin"] == pytest.approx(EPOCH)
+    kb = Knowledge(str(wall_db))  # what 'anunnaki run' prints as the run goes
+    started = next(d for d in kb.decisions() if d.kind == "started")
+    line = format_decision(started, t0=kb.time_origin())
+    kb.close()
+    assert line.split()[:2] == ["25.000", "started"] and "deadline=30.000" in line
 
 
 def test_explain_at_a_printed_decision_time_explains_that_decision(
