@@ -166,7 +166,7 @@ def test_a_run_exports_to_a_bag_and_reads_back(
     assert any(d.tactic == "warn-pedestrians" for d in decisions)  # the near object
     out = tmp_path / "out.bag"
     assert main(["log", str(db), "--export-bag", str(out)]) == 0
-    assert "decisions) to" in capsys.readouterr().out
+    assert "decisions) to" in capsys.readouterr().out  # (no model texts recorded: no hint)
     with AnyReader([out]) as reader:
         got: dict[str, list[Any]] = {}
         for conn, _, raw in reader.messages():

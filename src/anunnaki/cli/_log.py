@@ -364,8 +364,28 @@ def _export_bag(
         (d.t, {"kind": d.kind, "tactic": d.tactic, **d.data}) for d in knowledge.decisions(*span)
     ]
     n = write_bag(args.export_bag, inputs, decisions, overwrite=args.force)
-    console.print(Text(f"wrote {n} messages ({len(decisions)} decisions) to {args.export_bag}"))
+    hint = _evaluate_hint(args.db, args.export_bag)
+    console.print(
+        Text(f"wrote {n} messages ({len(decisions)} decisions) to {args.export_bag}{hint}"),
+        soft_wrap=True,
+    )
     return 0
+
+
+def _evaluate_hint(path: str, out: str) -> str:
+    """``; replay it: anunnaki evaluate …`` for an exported trace or bag ('' if unknown)."""
+    try:
+        models = run_models(path).initial
+    except RunLogError:
+        return ""
+    gm, bd = models.get("goal_model", (None, ""))[0], models.get("binding", (None, ""))[0]
+    if not gm:
+        return ""
+    return (
+        f"; replay it: anunnaki evaluate {gm}"
+        + (f" --binding {bd}" if bd else "")
+        + (f" --trace {out}")
+    )
 
 
 def _export(
@@ -394,17 +414,8 @@ def _export(
         )
     except OSError as exc:
         raise AnunnakiError(f"{out}: cannot write the trace: {exc.strerror}") from None
-    hint = ""
-    try:
-        models = run_models(path).initial
-        gm, bd = models.get("goal_model", (None, ""))[0], models.get("binding", (None, ""))[0]
-        if gm:
-            hint = f"; replay it: anunnaki evaluate {gm}" + (f" --binding {bd}" if bd else "")
-            hint += f" --trace {out}"
-    except RunLogError:
-        pass
     what = "empty run: wrote no messages" if n == 0 else f"wrote {n} messages"
-    console.print(Text(f"{what} from {path} to {out}{hint}"), soft_wrap=True)
+    console.print(Text(f"{what} from {path} to {out}{_evaluate_hint(path, out)}"), soft_wrap=True)
     return 0
 
 
