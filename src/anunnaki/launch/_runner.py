@@ -63,6 +63,8 @@ _AS_FAST_AS_POSSIBLE = 10_000.0
 
 # -- printing ----------------------------------------------------------------------------------
 def _short(value: Any, width: int = 40) -> str:
+    if isinstance(value, float):  # a time or a utility: to the millisecond, as 'log' shows it
+        value = round(value, 3)
     text = value if isinstance(value, str) else json.dumps(value, separators=(",", ":"))
     return text if len(text) <= width else text[: width - 1] + "…"
 
