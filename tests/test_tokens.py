@@ -94,3 +94,14 @@ def test_the_variable_wins_and_a_file_open_to_others_is_refused(
     assert f"chmod 600 {home}" in str(err.value)
     monkeypatch.setenv(OPERATOR_TOKEN_ENV, "Explicit-token-wins-0123456789")
     assert client_operator_token() == "Explicit-token-wins-0123456789"
+
+
+def test_a_token_that_cannot_be_written_is_an_error_naming_the_file_and_the_fix(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    monkeypatch.delenv(OPERATOR_TOKEN_ENV, raising=False)
+    (tmp_path / "config").write_text("a file where a folder should be\n")
+    monkeypatch.setenv("XDG_CONFIG_HOME", str(tmp_path / "config"))
+    with pytest.raises(ModelFileError, match="cannot write the operator token") as err:
+        user_operator_token()
+    assert str(default_token_file()) in str(err.value) and OPERATOR_TOKEN_ENV in str(err.value)

@@ -127,22 +127,35 @@ def user_operator_token() -> tuple[str, Path, bool]:
     """
     path = default_token_file()
     if not path.exists():
-        path.parent.mkdir(parents=True, exist_ok=True, mode=0o700)
-        tmp = path.with_name(f".{path.name}.{os.getpid()}.{secrets.token_hex(4)}")
-        fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600)
         try:
-            with os.fdopen(fd, "w", encoding="utf-8") as f:
-                f.write(secrets.token_urlsafe(32) + "\n")
-            try:
-                os.link(tmp, path)
-            except FileExistsError:  # another process won the race: its token holds
-                pass
-            else:
-                return _read_private(path), path, True
-        finally:
-            with contextlib.suppress(OSError):
-                tmp.unlink()
+            made = _write_new(path)
+        except OSError as exc:
+            raise ModelFileError(
+                f"cannot write the operator token: {exc.strerror}",
+                path=str(path),
+                hint=f"give one in ${OPERATOR_TOKEN_ENV}, or set XDG_CONFIG_HOME to a folder "
+                "you can write",
+            ) from None
+        return _read_private(path), path, made
     return _read_private(path), path, False
+
+
+def _write_new(path: Path) -> bool:
+    """Write a fresh token to ``path`` unless another process did first; ``True``: this one."""
+    path.parent.mkdir(parents=True, exist_ok=True, mode=0o700)
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.{secrets.token_hex(4)}")
+    fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600)
+    try:
+        with os.fdopen(fd, "w", encoding="utf-8") as f:
+            f.write(secrets.token_urlsafe(32) + "\n")
+        try:
+            os.link(tmp, path)
+        except FileExistsError:  # another process won the race: its token holds
+            return False
+        return True
+    finally:
+        with contextlib.suppress(OSError):
+            tmp.unlink()
 
 
 def client_operator_token() -> str | None:
