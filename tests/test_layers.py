@@ -42,3 +42,42 @@ def test_import_linter_contracts_hold() -> None:
     done = subprocess.run([exe], cwd=ROOT, capture_output=True, text=True, check=False)
     assert done.returncode == 0, done.stdout[-3000:]
     assert "3 kept, 0 broken" in done.stdout
+
+
+def _module_cycle(package: str) -> list[str]:
+    """A cycle among ``package``'s modules, counting every import (in a function or under
+    ``TYPE_CHECKING`` too: such an import only hides a cycle), or ``[]``."""
+    folder = SRC / package
+    graph: dict[str, set[str]] = {}
+    for path in sorted(folder.rglob("*.py")):
+        name = ".".join(path.relative_to(folder).with_suffix("").parts)
+        deps = graph.setdefault(name, set())
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            if isinstance(node, ast.ImportFrom) and node.module:
+                target = node.module.removeprefix(f"anunnaki.{package}.")
+                if target != node.module and target != name:
+                    deps.add(target)
+    visiting: list[str] = []
+    done: set[str] = set()
+
+    def visit(name: str) -> list[str]:
+        if name in visiting:
+            return [*visiting[visiting.index(name) :], name]
+        if name in done or name not in graph:
+            return []
+        visiting.append(name)
+        for dep in sorted(graph[name]):
+            if cycle := visit(dep):
+                return cycle
+        visiting.pop()
+        done.add(name)
+        return []
+
+    return next((c for c in map(visit, sorted(graph)) if c), [])
+
+
+@pytest.mark.parametrize("package", ["datasets", "sim"])
+def test_no_cycle_between_a_packages_modules(package: str) -> None:
+    """Issue 21 item 6: ``datasets`` ``_dataset↔_coco/_yolo`` and ``sim`` ``_layout↔_models``
+    were cycles dodged by function-local and TYPE_CHECKING imports."""
+    assert _module_cycle(package) == []

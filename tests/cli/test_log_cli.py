@@ -8,6 +8,7 @@ import shutil
 import sqlite3
 import threading
 from collections.abc import Mapping
+from itertools import groupby
 from pathlib import Path
 from typing import Any
 
@@ -15,8 +16,17 @@ import pytest
 
 from anunnaki.bus import open_bus
 from anunnaki.cli.main import main
+from anunnaki.launch import format_decision
 from anunnaki.managed import ScriptedSystem
-from anunnaki.utu import ActionOutcome, AutonomicManager, BusActuator, Knowledge, parse_config
+from anunnaki.trace import read_trace
+from anunnaki.utu import (
+    ActionOutcome,
+    AutonomicManager,
+    BusActuator,
+    Knowledge,
+    RecordingActuator,
+    parse_config,
+)
 
 ROVER = Path(__file__).resolve().parents[2] / "examples" / "rover"
 ESC = "\x1b["
@@ -208,6 +218,12 @@ def test_exported_trace_evaluates_to_the_recorded_verdicts(
     out = tmp_path / "run.jsonl"
     code, text, _ = cli(capsys, "log", str(run_db), "--export-trace", str(out))
     assert code == 0 and "wrote 718 messages" in text and "anunnaki evaluate" in text
+    out.write_text("mine\n")  # an existing file is not overwritten without --force
+    code, _, err = cli(capsys, "log", str(run_db), "--export-trace", str(out))
+    assert code == 2 and f"{out} exists already" in err and "--force" in err
+    assert out.read_text() == "mine\n"
+    code, text, _ = cli(capsys, "log", str(run_db), "--export-trace", str(out), "--force")
+    assert code == 0 and "wrote 718 messages" in text
     code, text, _ = cli(
         capsys,
         "evaluate",
@@ -272,6 +288,73 @@ def test_explain_json(run_db: Path, capsys: pytest.CaptureFixture[str]) -> None:
 def test_explain_an_unknown_goal(run_db: Path, capsys: pytest.CaptureFixture[str]) -> None:
     code, _, err = cli(capsys, "explain", str(run_db), "--at", "25", "--goal", "G99")
     assert code == 2 and "G99" in err and "G1" in err
+
+
+# -- one time base per log ----------------------------------------------------------------------
+EPOCH = 1_795_749_868.136  # a wall-clock run: Utu's times are seconds since the epoch
+
+
+@pytest.fixture(scope="module")
+def wall_db(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """The rover on the wall clock: inputs stamped as they arrive, each step 0.4 ms later."""
+    db = tmp_path_factory.mktemp("wall") / "run.db"
+    manager = AutonomicManager.from_config(parse_config(config(db)), actuator=RecordingActuator())
+    try:
+        for t, records in groupby(read_trace(ROVER / "trace.jsonl").records, lambda r: r.t):
+            for r in records:
+                manager.feed(r.topic, r.msg, t=EPOCH + t)
+            manager.step(EPOCH + t + 0.0004)
+    finally:
+        manager.close()
+    return db
+
+
+def test_a_wall_clock_log_reads_in_seconds_from_the_start(
+    wall_db: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Before: epoch times in ``log`` (deadlines too) and ``explain --at 25`` found no step."""
+    code, out, _ = cli(capsys, "log", str(wall_db))
+    assert code == 0 and "from t = 0.000 to 49.800 s after the start (2026-11-27" in out
+    assert [(r[0], r[1]) for r in rows(out) if r[1] in ("started", "run_stop")] == [
+        ("25.000", "started"),
+        ("30.000", "run_stop"),  # the rover here never switched: the fail-safe failed
+    ]
+    assert "deadline=30 " in out  # on the same base as t
+    code, out, _ = cli(capsys, "log", str(wall_db), "--since", "26", "--json")
+    assert (
+        code == 0 and [round(json.loads(line)["t"], 3) for line in out.splitlines()] == [30.0] * 3
+    )
+    code, out, _ = cli(capsys, "replay", str(wall_db), "--json")
+    report = json.loads(out)
+    assert report["identical"] and report["origin"] == pytest.approx(EPOCH)
+    kb = Knowledge(str(wall_db))  # what 'anunnaki run' prints as the run goes
+    started = next(d for d in kb.decisions() if d.kind == "started")
+    line = format_decision(started, t0=kb.time_origin())
+    kb.close()
+    assert line.split()[:2] == ["25.000", "started"] and "deadline=30.0 " in line
+
+
+def test_explain_at_a_printed_decision_time_explains_that_decision(
+    wall_db: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Before: at its own printed time a decision's step (0.4 ms later) was left out, its
+    inputs taken anyway, and the rebuilt state differed from the recorded verdicts."""
+    code, out, _ = cli(capsys, "log", str(wall_db))
+    printed = sorted({r[0] for r in rows(out)})
+    assert printed == ["25.000", "30.000"]
+    for at in printed:
+        code, out, _ = cli(capsys, "explain", str(wall_db), "--at", at, "--json")
+        obj = json.loads(out)
+        assert code == 0 and f"{obj['as_of']:.3f}" == at, at
+        assert obj["agrees_with_record"] is True, (at, obj["disagreements"])
+        assert {d["kind"] for d in obj["decisions"] if f"{d['t']:.3f}" == at}
+    code, out, _ = cli(capsys, "explain", str(wall_db), "--at", "25")
+    assert "as of the manager's step at t = 25.000 s" in out
+    assert "agrees with the recorded verdicts" in out
+    assert [r[1] for r in rows(out.replace("▶", "")) if r[0] == "25.000"][:2] == [
+        "selected",
+        "started",
+    ]
 
 
 # -- anunnaki replay -----------------------------------------------------------------------------

@@ -2,9 +2,12 @@
 
 from __future__ import annotations
 
+import importlib.util
 import os
+import shutil
 import signal
 import socket
+import stat
 import subprocess
 import sys
 import threading
@@ -15,8 +18,9 @@ from typing import Any
 
 import pytest
 
-from anunnaki.bus import open_bus
+from anunnaki.bus import BusConfig, TlsConfig, open_bus
 from anunnaki.cli.main import main
+from anunnaki.tokens import OPERATOR_TOKEN_ENV, default_token_file
 from anunnaki.utu import AutonomicManager, RecordingActuator, parse_config
 
 ROVER = Path(__file__).parents[2] / "examples" / "rover"
@@ -62,6 +66,21 @@ def test_reload_is_applied_or_refused_with_the_error(
     assert main(["reload", "--connect", endpoint]) == 2  # nothing to reload
 
 
+def test_reload_with_another_token_is_refused_and_says_where_its_token_came_from(
+    running: tuple[str, Any],
+    tmp_path: Path,
+    capsys: pytest.CaptureFixture[str],
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    endpoint, m = running  # started with the user's own token (none was given)
+    monkeypatch.setenv(OPERATOR_TOKEN_ENV, "Not-the-running-Utus-token-42")
+    assert main(["reload", "--connect", endpoint, "--tactics", str(ROVER / "tactics.yaml")]) == 1
+    out, err = capsys.readouterr()
+    assert out.startswith("refused: unauthorised: reload needs the operator token")
+    assert f"hint: this command sent the token in ${OPERATOR_TOKEN_ENV}" in err
+    assert not any(d.kind.startswith("reload") for d in m.knowledge.decisions())
+
+
 def test_reload_says_when_no_utu_answers(capsys: pytest.CaptureFixture[str]) -> None:
     pytest.importorskip("zenoh")
     with open_bus("zenoh") as bus:  # a bus with no Utu on it
@@ -72,10 +91,66 @@ def test_reload_says_when_no_utu_answers(capsys: pytest.CaptureFixture[str]) -> 
     assert "no running Utu answered" in capsys.readouterr().err
 
 
+def test_reload_over_tls_takes_the_operators_certificate(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Before: ``--connect tls/…`` ended in a pydantic traceback (no certificate options)."""
+    pytest.importorskip("zenoh")
+    if shutil.which("openssl") is None:
+        pytest.skip("the openssl command is needed to make test certificates")
+    helpers = sys.modules.get("bus_helpers")
+    if helpers is None:  # the bus tests' PKI (tests/bus/bus_helpers.py), loaded once
+        spec = importlib.util.spec_from_file_location(
+            "bus_helpers", Path(__file__).parents[1] / "bus" / "bus_helpers.py"
+        )
+        assert spec is not None and spec.loader is not None
+        helpers = sys.modules["bus_helpers"] = importlib.util.module_from_spec(spec)
+        spec.loader.exec_module(helpers)
+    pki = tmp_path / "pki"
+    pki.mkdir()
+    helpers.make_ca(pki, "ca")
+    for name in ("utu", "operator"):
+        helpers.make_leaf(pki, name, "ca")
+    endpoint = f"tls/127.0.0.1:{helpers.free_port()}"
+    tactics = ["--tactics", str(ROVER / "tactics.yaml")]
+    assert main(["reload", "--connect", endpoint, *tactics]) == 2
+    err = capsys.readouterr().err
+    assert f"{endpoint} is a TLS endpoint" in err and "--root-ca, --cert and --key" in err
+    assert "Traceback" not in err and "ValidationError" not in err
+    cfg = parse_config(
+        f"anunnaki: utu/1\nname: rover\ngoal_model: {ROVER}/goals.yaml\n"
+        f"binding: {ROVER}/binding.yaml\ntactics: {ROVER}/tactics.yaml\nfailsafe: fail-safe\n"
+    )
+    tls = {
+        "root_ca": str(pki / "ca.pem"),
+        "cert": str(pki / "utu.pem"),
+        "key": str(pki / "utu.key"),
+    }
+    with open_bus(BusConfig(kind="zenoh", listen=[endpoint], tls=TlsConfig(**tls))) as bus:
+        m = AutonomicManager.from_config(cfg, bus=bus, actuator=RecordingActuator())
+        stop = threading.Event()
+        spinner = threading.Thread(target=m.spin, args=(stop,), daemon=True)
+        spinner.start()
+        try:
+            certs = ["--root-ca", str(pki / "ca.pem"), "--cert", str(pki / "operator.pem")]
+            certs += ["--key", str(pki / "operator.key")]
+            code = main(["reload", "--connect", endpoint, *certs, *tactics, "--timeout", "10"])
+            assert (code, capsys.readouterr().out.strip()) == (0, f"applied: {ROVER}/tactics.yaml")
+        finally:
+            stop.set()
+            m.wake()
+            spinner.join(5.0)
+            m.close()
+
+
 @pytest.mark.slow
-def test_reload_reaches_every_node_of_a_launch_split_into_processes(tmp_path: Path) -> None:
+def test_reload_reaches_every_node_of_a_launch_split_into_processes(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
     """``anunnaki run --processes`` + ``anunnaki reload``: applied by all five node processes."""
     pytest.importorskip("zenoh")
+    monkeypatch.delenv(OPERATOR_TOKEN_ENV, raising=False)  # Utu makes its own, as for a user
+    monkeypatch.setenv("XDG_CONFIG_HOME", str(tmp_path / "config"))
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
         port = s.getsockname()[1]
@@ -113,6 +188,10 @@ def test_reload_reaches_every_node_of_a_launch_split_into_processes(tmp_path: Pa
         while not ready.wait(0.1) and proc.poll() is None and time.monotonic() < deadline:
             pass
         assert ready.is_set(), "".join(lines)
+        # No token configured: the run says where its own is; reload (below) reads it there.
+        where = default_token_file()
+        assert f"operator token: {where} (written now, " in "".join(lines)
+        assert stat.S_IMODE(where.stat().st_mode) == 0o600
         endpoint = f"tcp/127.0.0.1:{port}"
         good = tmp_path / "good.yaml"
         good.write_text(

@@ -166,7 +166,7 @@ def test_a_run_exports_to_a_bag_and_reads_back(
     assert any(d.tactic == "warn-pedestrians" for d in decisions)  # the near object
     out = tmp_path / "out.bag"
     assert main(["log", str(db), "--export-bag", str(out)]) == 0
-    assert "decisions) to" in capsys.readouterr().out
+    assert "decisions) to" in capsys.readouterr().out  # (no model texts recorded: no hint)
     with AnyReader([out]) as reader:
         got: dict[str, list[Any]] = {}
         for conn, _, raw in reader.messages():
@@ -177,4 +177,25 @@ def test_a_run_exports_to_a_bag_and_reads_back(
     assert got[DECISIONS_TOPIC][0]["kind"] == decisions[0].kind
     assert got["/ultrasonic/range"][:2] == [{"range": 3.0}, {"range": 3.0}]
     assert len(got["/rover/controller/state"]) == 80
-    assert main(["log", str(db), "--export-bag", str(out)]) == 2  # never overwritten
+    # Read back without a bridge file: its topics are the bus's, its messages their JSON.
+    back = read_bag(out)
+    kb = Knowledge(str(db))
+    recorded = [row for row in kb.inputs() if not row.topic.startswith("__")]
+    kb.close()
+
+    def rows(items: Any) -> list[tuple[float, str, str]]:
+        return sorted((round(r.t, 6), r.topic, json.dumps(r.msg, sort_keys=True)) for r in items)
+
+    assert rows(back) == rows(recorded)
+    goals, binding = str(ROVER / "goals.yaml"), str(ROVER / "binding-ros.yaml")
+    assert main(["evaluate", goals, "--binding", binding, "--trace", str(out)]) == 0
+    assert "G13" in capsys.readouterr().out
+    assert main(["log", str(db), "--export-bag", str(out)]) == 2  # not overwritten...
+    assert "--force" in capsys.readouterr().err
+    assert main(["log", str(db), "--export-bag", str(out), "--force"]) == 0  # ...unless asked
+    assert len(read_bag(out)) == len(back)
+
+
+def test_a_bag_of_a_robot_needs_its_bridge_file(tmp_path: Path) -> None:
+    with pytest.raises(ModelFileError, match=r"not a bag of an Anunnaki run.*--bridge"):
+        read_bag(write_ros1_bag(tmp_path / "robot.bag"))

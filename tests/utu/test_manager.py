@@ -15,6 +15,7 @@ from anunnaki.clock import ManualClock, SimClock, WallClock
 from anunnaki.goals import load_binding, parse_goal_model
 from anunnaki.managed import ScriptedSystem
 from anunnaki.tactics import load_tactics, parse_tactics_yaml
+from anunnaki.tokens import client_operator_token
 from anunnaki.trace import Record
 from anunnaki.utu import AutonomicManager, Knowledge, RecordingActuator, parse_config
 
@@ -271,9 +272,10 @@ def test_operator_services_on_the_bus(bus) -> None:  # type: ignore[no-untyped-d
     m = AutonomicManager(rover_model(), tactics, bus=bus, actuator=RecordingActuator())
     try:
         assert bus.request("/utu/ready", {}).to_body()["ready"] is True
-        reply = bus.request("/utu/pause", {"caller": "ops-console"}).to_body()
+        token = client_operator_token()  # Utu's own, as every client reads it
+        reply = bus.request("/utu/pause", {"caller": "ops-console", "token": token}).to_body()
         assert reply == {"ok": True, "queued": "pause", "caller": "ops-console"}
-        bad = bus.request("/utu/approve", {"caller": "x"}).to_body()
+        bad = bus.request("/utu/approve", {"caller": "x", "token": token}).to_body()
         assert bad["ok"] is False
         m.step(1.0)
         assert m.paused
@@ -458,18 +460,19 @@ def test_reload_service_swaps_tactics_while_spinning(bus, tmp_path: Path) -> Non
     spinner = threading.Thread(target=m.spin, args=(stop,), kwargs={"rate": 100})
     spinner.start()
     try:
+        ops = {"caller": "ops", "token": client_operator_token()}
         good = tmp_path / "good.yaml"
         good.write_text(
             TACTICS.format(cooldown=0, approval="false").replace("name: beep", "name: chirp")
         )
         bad = tmp_path / "bad.yaml"
         bad.write_text("anunnaki: tactics/1\ntactics: [{name: x}]\n")
-        refused = bus.request("/utu/reload", {"tactics": str(bad), "caller": "ops"}).to_body()
+        refused = bus.request("/utu/reload", {"tactics": str(bad), **ops}).to_body()
         assert refused["ok"] is False and refused["status"] == "refused"
         assert str(bad) in refused["error"]  # the reply names the file and what is wrong
-        accepted = bus.request("/utu/reload", {"tactics": str(good), "caller": "ops"}).to_body()
+        accepted = bus.request("/utu/reload", {"tactics": str(good), **ops}).to_body()
         assert accepted["ok"] is True and accepted["status"] == "accepted"
-        assert bus.request("/utu/reload", {"caller": "ops"}).to_body()["ok"] is False
+        assert bus.request("/utu/reload", ops).to_body()["ok"] is False
         deadline = time.monotonic() + 10
         while time.monotonic() < deadline and {t.name for t in m.tactics.tactics} != {
             "hand-over",
@@ -548,7 +551,8 @@ def test_a_reload_reads_only_small_regular_files_in_its_folders(
     act = RecordingActuator()
     m = AutonomicManager(rover_model(), tactics, bus=bus, actuator=act, reload_dirs=[allowed])
     try:
-        reply = bus.request("/utu/reload", {"tactics": str(path), "caller": "x"}).to_body()
+        body = {"tactics": str(path), "caller": "x", "token": client_operator_token()}
+        reply = bus.request("/utu/reload", body).to_body()
         m.step(1.0)
         assert reply["ok"] is False and reply["status"] == "refused"
         assert "refused:" in reply["error"]

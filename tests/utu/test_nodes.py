@@ -22,6 +22,7 @@ from anunnaki.bus import InprocHub, RunStop, open_bus
 from anunnaki.clock import ManualClock
 from anunnaki.errors import ModelFileError
 from anunnaki.managed import ScriptedSystem
+from anunnaki.tokens import client_operator_token
 from anunnaki.topics import DECISIONS as DECISIONS_TOPIC
 from anunnaki.topics import node_token, ready_service
 from anunnaki.utu import (
@@ -230,11 +231,15 @@ def test_operator_calls_enter_the_cycle(deploy, tmp_path) -> None:  # type: igno
         text.replace("    priority: 100\n", "    priority: 100\n    requires_approval: true\n", 1)
     )
     d = deploy(config(tactics))
+    token = client_operator_token()  # Utu's own token (docs/running.md), as clients read it
     calls = {
-        12.0: ("/utu/pause", {"caller": "op"}),
-        14.0: ("/utu/resume", {"caller": "op"}),
-        27.0: ("/utu/approve", {"caller": "op", "tactic": "fail-safe", "approve": True}),
-        28.0: ("/utu/approve", {"caller": "op", "tactic": "nope"}),
+        12.0: ("/utu/pause", {"caller": "op", "token": token}),
+        14.0: ("/utu/resume", {"caller": "op", "token": token}),
+        27.0: (
+            "/utu/approve",
+            {"caller": "op", "token": token, "tactic": "fail-safe", "approve": True},
+        ),
+        28.0: ("/utu/approve", {"caller": "op", "token": token, "tactic": "nope"}),
     }
     for t in d.instants(until=50.0):
         for at, (service, body) in calls.items():
@@ -245,14 +250,16 @@ def test_operator_calls_enter_the_cycle(deploy, tmp_path) -> None:  # type: igno
             # Heard on a subscriber thread: it must be queued before this step.
             assert wait_for(lambda: d.queued_ops() == 1)
         if t == 42.0:
-            d.bus.request("/utu/resume", {"caller": "op"}, timeout=2.0)
+            d.bus.request("/utu/resume", {"caller": "op", "token": token}, timeout=2.0)
         d.step(t)
     kinds = [x.kind for x in d.kb.decisions()]
     for kind in ("paused", "pending_approval", "approved", "operator_refused", "run_stop"):
         assert kind in kinds
     assert kinds.index("pending_approval") < kinds.index("approved") < kinds.index("started")
     refused = d.bus.request(
-        "/utu/approve", {"caller": "op", "tactic": "fail-safe", "approve": "false"}, timeout=2.0
+        "/utu/approve",
+        {"caller": "op", "token": token, "tactic": "fail-safe", "approve": "false"},
+        timeout=2.0,
     )
     assert refused.to_body()["ok"] is False  # not a boolean: refused, never read as true
     same_as_composed("operator", d, tmp_path)
@@ -278,6 +285,7 @@ def test_a_vanished_agent_node_makes_its_agent_unknown(deploy) -> None:  # type:
 
 def test_a_hot_reload_applies_in_the_cycle(deploy, tmp_path) -> None:  # type: ignore[no-untyped-def]
     d = deploy(config(reload_dirs=f"[{tmp_path}]"))
+    op = {"caller": "op", "token": client_operator_token()}
     bad = tmp_path / "bad.yaml"
     bad.write_text((ROVER / "tactics.yaml").read_text().replace("goal: G3", "goal: G33", 1))
     renamed = tmp_path / "renamed.yaml"
@@ -286,16 +294,16 @@ def test_a_hot_reload_applies_in_the_cycle(deploy, tmp_path) -> None:  # type: i
     good.write_text((ROVER / "tactics.yaml").read_text().replace("priority: 100", "priority: 90"))
     for t in d.instants(until=30.0):
         if t == 5.0:
-            reply = d.bus.request("/utu/reload", {"tactics": str(bad), "caller": "op"}).to_body()
+            reply = d.bus.request("/utu/reload", {"tactics": str(bad), **op}).to_body()
             assert reply["ok"] is False and reply["status"] == "refused"
             assert f"{bad}:" in reply["error"] and "G33" in reply["error"]
         if t == 6.0:
             # The configuration names the fail-safe: a tactics file without it is refused.
-            body = {"tactics": str(renamed), "caller": "op"}
+            body = {"tactics": str(renamed), **op}
             reply = d.bus.request("/utu/reload", body).to_body()
             assert reply["ok"] is False and "fail-safe tactic 'fail-safe'" in reply["error"]
         if t == 7.0:
-            reply = d.bus.request("/utu/reload", {"tactics": str(good), "caller": "op"}).to_body()
+            reply = d.bus.request("/utu/reload", {"tactics": str(good), **op}).to_body()
             assert reply == {"ok": True, "queued": "reload", "caller": "op", "status": "accepted"}
         d.step(t)
     kinds = [(x.t, x.kind) for x in d.kb.decisions()]
@@ -449,7 +457,9 @@ def test_nodes_spin_live_in_one_process(tmp_path) -> None:  # type: ignore[no-un
             for name in NODE_NAMES:
                 assert bus.request(ready_service(name), {}, timeout=2.0).to_body()["ready"]
             bus.publish("/utu/oracle/output", {"category": 1, "confidence": 0.9})
-            bus.request("/utu/pause", {"caller": "test"}, timeout=2.0)
+            bus.request(
+                "/utu/pause", {"caller": "test", "token": client_operator_token()}, timeout=2.0
+            )
             assert wait_for(lambda: any(d.kind == "paused" for d in kb.decisions()))
         finally:
             stop.set()

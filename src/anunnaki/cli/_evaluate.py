@@ -37,7 +37,7 @@ def add_parser(sub: Any) -> None:
         "--trace",
         "-t",
         required=True,
-        help="JSONL trace to replay, or a ROS 1/ROS 2 bag (with --bridge)",
+        help="JSONL trace to replay, or a ROS bag (with --bridge, unless anunnaki log wrote it)",
     )
     p.add_argument(
         "--bridge",
@@ -141,12 +141,9 @@ def _trace_items(args: argparse.Namespace) -> Any:
 
     if not is_bag(args.trace):
         return args.trace
-    if args.bridge is None:
-        raise AnunnakiError(
-            f"{args.trace} is a rosbag: give --bridge BRIDGE.yaml, which maps its topics and "
-            "fields to the goal model's (docs/ros.md)"
-        )
-    return read_bag(args.trace, load_bridge(args.bridge))
+    # Without a bridge file, a bag 'anunnaki log --export-bag' wrote (any other is refused,
+    # with the hint to give --bridge).
+    return read_bag(args.trace, None if args.bridge is None else load_bridge(args.bridge))
 
 
 class _Replay:

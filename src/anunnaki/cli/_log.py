@@ -14,12 +14,14 @@ See docs/decision-log.md.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import math
 import sqlite3
 import sys
 from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
+from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
@@ -102,6 +104,11 @@ def add_parser(sub: Any) -> None:
         "bag (std_msgs/String JSON; decisions on /utu/decisions) and exit (anunnaki[ros])",
     )
     p.add_argument(
+        "--force",
+        action="store_true",
+        help="with --export-trace or --export-bag: replace an existing file",
+    )
+    p.add_argument(
         "--mark-ticks",
         action="store_true",
         help="with --export-trace: mark steps where only time passed as 'tick' phases",
@@ -154,6 +161,11 @@ def add_parser(sub: Any) -> None:
         help="absolute tolerance for floats (default 1e-6)",
     )
     r.set_defaults(run=run_replay)
+
+
+def _utc(t: float) -> str:
+    """An epoch instant as a UTC date and time (what a wall-clock log's times count from)."""
+    return datetime.fromtimestamp(t, tz=UTC).strftime("%Y-%m-%d %H:%M:%S UTC")
 
 
 def _seconds(text: str) -> float:
@@ -283,12 +295,14 @@ def run_log(args: argparse.Namespace) -> int:
     console = _console()
     with _run(path) as knowledge:
         counts = knowledge.counts()
+        origin = knowledge.time_origin()
         span = run_span(path)
+        since, until = (None if x is None else x + origin for x in (args.since, args.until))
         if args.export_trace is not None:
-            return _export(console, knowledge, path, args)
+            return _export(console, knowledge, path, args, (since, until))
         if getattr(args, "export_bag", None) is not None:
-            return _export_bag(console, knowledge, args)
-        decisions = knowledge.decisions(args.since, args.until)
+            return _export_bag(console, knowledge, args, (since, until))
+        decisions = [d.shifted(origin) for d in knowledge.decisions(since, until)]
         kinds = _kinds(args.kind, {d.kind for d in decisions})
         shown = [
             d
@@ -296,7 +310,11 @@ def run_log(args: argparse.Namespace) -> int:
             if (kinds is None or d.kind in kinds)
             and (args.tactic is None or args.tactic in (d.tactic, d.data.get("to")))
         ]
-        verdicts = knowledge.verdicts(args.since, args.until) if args.verdicts else []
+        verdicts = (
+            [dataclasses.replace(v, t=v.t - origin) for v in knowledge.verdicts(since, until)]
+            if args.verdicts
+            else []
+        )
     rows = _merge(shown, verdicts)
     if args.json:
         if counts["inputs"] == 0 and counts["decisions"] == 0:
@@ -306,7 +324,9 @@ def run_log(args: argparse.Namespace) -> int:
     if counts["inputs"] == 0 and counts["decisions"] == 0:
         console.print(Text(f"{path}: empty run: nothing was recorded (no inputs, no decisions)"))
         return 0
-    when = f" from t = {span[0]:.3f} to {span[1]:.3f} s" if span else ""
+    when = f" from t = {span[0] - origin:.3f} to {span[1] - origin:.3f} s" if span else ""
+    if origin:
+        when += f" after the start ({_utc(origin)})"
     console.print(
         Text(
             f"{path}: {counts['inputs']} inputs, {counts['decisions']} decisions, "
@@ -325,27 +345,59 @@ def run_log(args: argparse.Namespace) -> int:
     return 0
 
 
-def _export_bag(console: Console, knowledge: Knowledge, args: argparse.Namespace) -> int:
-    """Write the run's inputs and decisions to a ROS 1 bag (issue #14)."""
+def _export_bag(
+    console: Console,
+    knowledge: Knowledge,
+    args: argparse.Namespace,
+    span: tuple[float | None, float | None],
+) -> int:
+    """Write the run's inputs and decisions to a ROS 1 bag (issue #14), at their own times."""
     from anunnaki.ros1 import write_bag
     from anunnaki.trace import Record
 
     inputs = [
         Record(row.t, row.topic, row.msg)
-        for row in knowledge.inputs(args.since, args.until)
+        for row in knowledge.inputs(*span)
         if not row.topic.startswith("__")  # the tick and operator markers are no messages
     ]
     decisions = [
-        (d.t, {"kind": d.kind, "tactic": d.tactic, **d.data})
-        for d in knowledge.decisions(args.since, args.until)
+        (d.t, {"kind": d.kind, "tactic": d.tactic, **d.data}) for d in knowledge.decisions(*span)
     ]
-    n = write_bag(args.export_bag, inputs, decisions)
-    console.print(Text(f"wrote {n} messages ({len(decisions)} decisions) to {args.export_bag}"))
+    n = write_bag(args.export_bag, inputs, decisions, overwrite=args.force)
+    hint = _evaluate_hint(args.db, args.export_bag)
+    console.print(
+        Text(f"wrote {n} messages ({len(decisions)} decisions) to {args.export_bag}{hint}"),
+        soft_wrap=True,
+    )
     return 0
 
 
-def _export(console: Console, knowledge: Knowledge, path: str, args: argparse.Namespace) -> int:
+def _evaluate_hint(path: str, out: str) -> str:
+    """``; replay it: anunnaki evaluate …`` for an exported trace or bag ('' if unknown)."""
+    try:
+        models = run_models(path).initial
+    except RunLogError:
+        return ""
+    gm, bd = models.get("goal_model", (None, ""))[0], models.get("binding", (None, ""))[0]
+    if not gm:
+        return ""
+    return (
+        f"; replay it: anunnaki evaluate {gm}"
+        + (f" --binding {bd}" if bd else "")
+        + (f" --trace {out}")
+    )
+
+
+def _export(
+    console: Console,
+    knowledge: Knowledge,
+    path: str,
+    args: argparse.Namespace,
+    span: tuple[float | None, float | None],
+) -> int:
     out: str = args.export_trace
+    if Path(out).exists() and not args.force:
+        raise AnunnakiError(f"{out} exists already; give another name, or --force")
     header = {
         "name": Path(path).stem,
         "description": f"inputs recorded in the decision log {path}",
@@ -355,24 +407,15 @@ def _export(console: Console, knowledge: Knowledge, path: str, args: argparse.Na
         n = export_trace(
             knowledge,
             out,
-            since=args.since,
-            until=args.until,
+            since=span[0],
+            until=span[1],
             header=header,
             mark_ticks=args.mark_ticks,
         )
     except OSError as exc:
         raise AnunnakiError(f"{out}: cannot write the trace: {exc.strerror}") from None
-    hint = ""
-    try:
-        models = run_models(path).initial
-        gm, bd = models.get("goal_model", (None, ""))[0], models.get("binding", (None, ""))[0]
-        if gm:
-            hint = f"; replay it: anunnaki evaluate {gm}" + (f" --binding {bd}" if bd else "")
-            hint += f" --trace {out}"
-    except RunLogError:
-        pass
     what = "empty run: wrote no messages" if n == 0 else f"wrote {n} messages"
-    console.print(Text(f"{what} from {path} to {out}{hint}"), soft_wrap=True)
+    console.print(Text(f"{what} from {path} to {out}{_evaluate_hint(path, out)}"), soft_wrap=True)
     return 0
 
 
@@ -381,11 +424,14 @@ def run_explain(args: argparse.Namespace) -> int:
     from anunnaki.cli._evaluate import render_tree
 
     path: str = args.db
-    at: float = args.at
+    at: float = args.at  # on the log's time base, as printed
     with _run(path) as knowledge:
-        state = rebuild_goal_state(knowledge, path, at)
-        around = knowledge.decisions(at - args.window, at + args.window)
+        origin = knowledge.time_origin()
+        state = rebuild_goal_state(knowledge, path, at + origin)
+        lo, hi = at - args.window, at + args.window
+        around = [d.shifted(origin) for d in knowledge.decisions(lo + origin, hi + origin)]
         span = run_span(path)
+    as_of = None if state.as_of is None else state.as_of - origin
     ev = state.evaluator
     goal = args.goal or ev.model.root
     if goal not in ev.index:
@@ -399,7 +445,8 @@ def run_explain(args: argparse.Namespace) -> int:
         out = {
             "path": path,
             "at": at,
-            "as_of": state.as_of,
+            "as_of": as_of,
+            "origin": origin,
             "inputs": state.inputs,
             "nodes": {
                 n: {"utility": s.utility, "status": s.status_name} for n, s in ev.states().items()
@@ -416,12 +463,12 @@ def run_explain(args: argparse.Namespace) -> int:
     console = _console()
     if span is None:
         console.print(Text(f"{path}: empty run: nothing was recorded (no inputs)"))
-    if state.as_of is None:
-        first = f" (the first at t = {span[0]:.3f} s)" if span else ""
+    if as_of is None:
+        first = f" (the first at t = {span[0] - origin:.3f} s)" if span else ""
         where = f"no step had run by t = {at:.3f} s{first}: every goal is unknown"
     else:
         where = (
-            f"as of the manager's step at t = {state.as_of:.3f} s, rebuilt from "
+            f"as of the manager's step at t = {as_of:.3f} s, rebuilt from "
             f"{state.inputs} recorded messages"
         )
     console.print(Text.assemble((f"{path} at t = {at:.3f} s", "bold"), f": {where}"))
@@ -443,10 +490,9 @@ def run_explain(args: argparse.Namespace) -> int:
         )
     elif state.recorded:
         console.print(Text("the rebuilt state agrees with the recorded verdicts", style="dim"))
-    lo, hi = at - args.window, at + args.window
     if around:
         console.print(Text(f"decisions from t = {lo:.3f} to {hi:.3f} s:", style="bold"))
-        _show(console, _table(console, around, at))
+        _show(console, _table(console, around, as_of))
     else:
         console.print(Text(f"no decisions from t = {lo:.3f} to {hi:.3f} s"))
     return 0

@@ -16,9 +16,11 @@ import time
 from pathlib import Path
 from typing import Any
 
+from pydantic import ValidationError
+
 from anunnaki import topics
 from anunnaki.bus import BusConfig, BusError, open_bus
-from anunnaki.tokens import OPERATOR_TOKEN_ENV
+from anunnaki.tokens import OPERATOR_TOKEN_ENV, client_operator_token, default_token_file
 
 __all__ = ["add_parser", "run"]
 
@@ -40,6 +42,12 @@ def add_parser(sub: Any) -> None:
         default=None,
         help="zenoh endpoint of the running Utu's bus (default tcp/127.0.0.1:7447)",
     )
+    tls = p.add_argument_group(
+        "TLS (for tls/ or quic/ endpoints: the operator's certificate, CN operator; bus.md)"
+    )
+    tls.add_argument("--root-ca", type=Path, metavar="PEM", help="the CA that signed the router")
+    tls.add_argument("--cert", type=Path, metavar="PEM", help="this operator's certificate")
+    tls.add_argument("--key", type=Path, metavar="PEM", help="the private key of --cert")
     p.add_argument("--namespace", default="anunnaki", help="the bus namespace (default anunnaki)")
     p.add_argument("--caller", default="cli", help="who asks (recorded in the decision log)")
     p.add_argument(
@@ -58,21 +66,16 @@ def run(args: argparse.Namespace) -> int:
     request: dict[str, Any] = {
         k: str(v.resolve()) for k, v in files.items() if v is not None
     }  # the running Utu resolves paths against its own folder: send absolute ones
-    if (token := os.environ.get(OPERATOR_TOKEN_ENV)) is not None:
+    if (token := client_operator_token()) is not None:
         request["token"] = token
     if not request or set(request) == {"token"}:
         print("error: give --goal-model, --binding and/or --tactics", file=sys.stderr)
         return 2
     request["caller"] = args.caller
-    config = BusConfig.model_validate(
-        {
-            "kind": "zenoh",
-            "mode": "client",
-            "connect": args.connect or ["tcp/127.0.0.1:7447"],
-            "listen": [],
-            "namespace": args.namespace,
-        }
-    )
+    config = _bus_config(args)
+    if isinstance(config, str):
+        print(f"error: {config}", file=sys.stderr)
+        return 2
     with open_bus(config) as bus:
         try:
             last = bus.request(
@@ -83,6 +86,8 @@ def run(args: argparse.Namespace) -> int:
             reply = bus.request(topics.RELOAD, request, timeout=args.timeout).to_body()
             if not reply.get("ok"):
                 print(f"refused: {reply.get('error', 'no reason given')}")
+                if reply.get("status") == "unauthorised":
+                    print(f"hint: {_token_hint(token)}", file=sys.stderr)
                 return 1
             outcome = _wait_outcome(bus, after, args.timeout)
         except BusError as exc:
@@ -97,6 +102,50 @@ def run(args: argparse.Namespace) -> int:
         return 0
     print(f"refused: {data.get('error', 'no reason given')}")
     return 1
+
+
+def _token_hint(sent: str | None) -> str:
+    """Where this command's operator token came from, and how to give the right one."""
+    where = (
+        f"${OPERATOR_TOKEN_ENV}"
+        if os.environ.get(OPERATOR_TOKEN_ENV) is not None
+        else str(default_token_file())
+    )
+    said = f"the token in {where}" if sent is not None else f"no token (no {where})"
+    return (
+        f"this command sent {said}; set ${OPERATOR_TOKEN_ENV} to the running Utu's token "
+        "(its operator_token_file, or the file its 'anunnaki run' named)"
+    )
+
+
+def _bus_config(args: argparse.Namespace) -> BusConfig | str:
+    """The client session this command opens, or what is wrong with the options."""
+    connect = args.connect or ["tcp/127.0.0.1:7447"]
+    given = {k: getattr(args, k) for k in ("root_ca", "cert", "key")}
+    over_tls = [ep for ep in connect if ep.startswith(("tls/", "quic/"))]
+    if over_tls and not all(given.values()):
+        missing = ", ".join(f"--{k.replace('_', '-')}" for k, v in given.items() if v is None)
+        return (
+            f"{over_tls[0]} is a TLS endpoint: give the operator's certificate with --root-ca, "
+            f"--cert and --key (missing: {missing}; docs/bus.md makes them, CN operator)"
+        )
+    if any(given.values()) and not over_tls:
+        return "--root-ca, --cert and --key are for tls/ or quic/ endpoints (give --connect tls/…)"
+    if missing_files := [str(v) for v in given.values() if v is not None and not v.is_file()]:
+        return f"no such file: {', '.join(missing_files)}"
+    try:
+        return BusConfig.model_validate(
+            {
+                "kind": "zenoh",
+                "mode": "client",
+                "connect": connect,
+                "listen": [],
+                "namespace": args.namespace,
+                "tls": {k: str(v.resolve()) for k, v in given.items()} if over_tls else None,
+            }
+        )
+    except ValidationError as exc:
+        return "; ".join(f"{'.'.join(map(str, e['loc']))}: {e['msg']}" for e in exc.errors())
 
 
 def _wait_outcome(bus: Any, after: int, timeout: float) -> tuple[str, dict[str, Any]] | None:

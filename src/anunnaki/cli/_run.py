@@ -21,6 +21,7 @@ from anunnaki.bus import BusConfig, open_bus
 from anunnaki.cli import _dashboard
 from anunnaki.launch import load_launch, run_launch, signals_to
 from anunnaki.managed import WritesReports
+from anunnaki.tokens import OPERATOR_TOKEN_ENV, user_operator_token
 from anunnaki.utu import NODE_NAMES, NodeConfigError, PeerWatch, build_node
 
 __all__ = ["add_parser", "run", "run_node"]
@@ -136,6 +137,15 @@ def run(args: argparse.Namespace) -> int:
         launch.managed.with_reports(
             report=str(Path(args.report).resolve()) if args.report else None,
             plot=str(Path(args.plot).resolve()) if args.plot else None,
+        )
+    if os.environ.get(OPERATOR_TOKEN_ENV) is None and launch.utu.operator_token_file is None:
+        # Never open by accident: the user's own token, made now if missing (every node
+        # process started below reads the same file).
+        _, where, generated = user_operator_token()
+        print(
+            f"operator token: {where} ({'written now, ' if generated else ''}readable by you "
+            f"alone); anunnaki reload and the dashboard read it there, other clients send it",
+            flush=True,
         )
     dashboard = None
     if getattr(args, "dashboard", False):

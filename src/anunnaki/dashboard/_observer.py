@@ -32,7 +32,6 @@ from __future__ import annotations
 import bisect
 import itertools
 import logging
-import os
 import threading
 import time
 from collections import deque
@@ -55,7 +54,7 @@ from anunnaki.bus import (
 )
 from anunnaki.dashboard._state import DashboardState, Frame
 from anunnaki.errors import AnunnakiError
-from anunnaki.tokens import OPERATOR_TOKEN_ENV
+from anunnaki.tokens import client_operator_token
 
 __all__ = ["OPERATIONS", "BusObserver", "ObserverConfig", "OperatorError", "SimTime"]
 
@@ -443,8 +442,12 @@ class BusObserver(Closing):
         if service is None:
             raise OperatorError(f"unknown action {op!r}; the actions are {', '.join(OPERATIONS)}")
         payload: dict[str, Any] = {"caller": caller}
-        if (token := os.environ.get(OPERATOR_TOKEN_ENV)) is not None:
-            payload["token"] = token  # Utu's operator token, not the dashboard's own
+        try:
+            token = client_operator_token()  # Utu's operator token, not the dashboard's own
+        except AnunnakiError as exc:  # the user's token file is unreadable or open to others
+            raise OperatorError(str(exc)) from None
+        if token is not None:
+            payload["token"] = token
         if op in ("approve", "reject"):
             if not tactic:
                 raise OperatorError(f"{op} needs the name of a pending tactic")

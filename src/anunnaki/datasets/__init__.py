@@ -28,15 +28,8 @@ image id; YOLO: ``file:line``) and the fix. See ``docs/detector.md``.
 Needs the ``vision`` extra (numpy, OpenCV; generation also pybullet).
 """
 
-from anunnaki.datasets._coco import coco_dict, read_coco, write_coco
-from anunnaki.datasets._dataset import (
-    Dataset,
-    DatasetError,
-    Record,
-    Sample,
-    read_image,
-    write_image,
-)
+from anunnaki.datasets._coco import coco_dict, write_coco
+from anunnaki.datasets._dataset import Dataset, read_coco, read_yolo
 from anunnaki.datasets._make import (
     DEFAULT_LAYOUTS,
     SPLITS,
@@ -45,7 +38,8 @@ from anunnaki.datasets._make import (
     load_split,
     make_dataset,
 )
-from anunnaki.datasets._yolo import IMAGE_SUFFIXES, read_yolo, write_yolo
+from anunnaki.datasets._record import DatasetError, Record, Sample, read_image, write_image
+from anunnaki.datasets._yolo import IMAGE_SUFFIXES, write_yolo
 
 __all__ = [
     "DEFAULT_LAYOUTS",

@@ -15,16 +15,16 @@ from __future__ import annotations
 import json
 import math
 import shutil
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from anunnaki.datasets._dataset import Dataset, DatasetError, Record, write_image
+from anunnaki.datasets._record import DatasetError, Labelled, Record, write_image
 
-__all__ = ["coco_dict", "read_coco", "write_coco"]
+__all__ = ["coco_dict", "coco_records", "write_coco"]
 
 _MAX_JSON_BYTES = 512 * 1024 * 1024
 _BBOX_HINT = "bbox is [x, y, width, height] in pixels with width and height above 0"
@@ -56,22 +56,16 @@ def _load_json(path: Path) -> Any:
         raise DatasetError("not UTF-8 text", path=path, hint="save it as UTF-8 JSON") from None
 
 
-def read_coco(
-    path: str | Path, *, images_dir: str | Path | None = None, cache: bool = False
-) -> Dataset:
-    """Read a COCO detection file into a :class:`Dataset`.
+def coco_records(
+    path: str | Path, *, images_dir: str | Path | None = None
+) -> tuple[list[str], list[Record]]:
+    """The classes and image records of a COCO detection file.
 
-    Args:
-        path: The JSON file.
-        images_dir: Folder the ``file_name`` s are relative to; by default ``images/`` next to
-            the JSON file when it exists, else the JSON file's folder.
-        cache: Keep decoded images in memory.
+    :func:`~anunnaki.datasets.read_coco` makes them a dataset; its docstring says what is
+    checked.
 
     Raises:
-        DatasetError: The file is not JSON, a required element is missing or of the wrong
-            type, an id is duplicated, an annotation refers to an unknown image or category,
-            a bbox is not four finite numbers with positive size, or an image file is
-            missing. The message names the file and the element (``annotations[id=17].bbox``).
+        DatasetError: Naming the file and the element (``annotations[id=17].bbox``).
 
     """
     p = Path(path)
@@ -95,7 +89,7 @@ def read_coco(
     records = [
         _record(image_id, img, root, boxes[image_id], fail) for image_id, img in images.items()
     ]
-    return Dataset(classes, records, name=str(p), cache=cache)
+    return classes, records
 
 
 _Fail = Callable[[str, str, str], DatasetError]
@@ -243,15 +237,21 @@ def _record(image_id: int, img: dict[str, Any], root: Path, boxes: _Boxes, fail:
     )
 
 
-def coco_dict(ds: Dataset, *, info: Mapping[str, Any] | None = None) -> dict[str, Any]:
+def coco_dict(ds: Labelled, *, info: Mapping[str, Any] | None = None) -> dict[str, Any]:
     """The COCO JSON object of *ds* (category ids are label + 1, annotation ids from 1).
 
     Each image's labelled boxes come first (``iscrowd: 0``), then its ignore boxes
     (``iscrowd: 1``).
     """
+    return _coco_json(ds.classes, ds.records, info)
+
+
+def _coco_json(
+    classes: Sequence[str], records: Sequence[Record], info: Mapping[str, Any] | None
+) -> dict[str, Any]:
     images, annotations = [], []
     ann_id = 1
-    for k, r in enumerate(ds.records):
+    for k, r in enumerate(records):
         image_id = r.image_id if r.image_id else k + 1
         images.append(
             {
@@ -281,7 +281,7 @@ def coco_dict(ds: Dataset, *, info: Mapping[str, Any] | None = None) -> dict[str
                 }
             )
             ann_id += 1
-    categories = [{"id": i + 1, "name": n} for i, n in enumerate(ds.classes)]
+    categories = [{"id": i + 1, "name": n} for i, n in enumerate(classes)]
     out: dict[str, Any] = {"info": dict(info or {}), "categories": categories}
     out["images"] = images
     out["annotations"] = annotations
@@ -289,7 +289,7 @@ def coco_dict(ds: Dataset, *, info: Mapping[str, Any] | None = None) -> dict[str
 
 
 def write_coco(
-    ds: Dataset,
+    ds: Labelled,
     path: str | Path,
     *,
     images_dir: str | Path | None = None,
@@ -312,14 +312,11 @@ def write_coco(
     p = Path(path)
     root = Path(images_dir) if images_dir is not None else p.parent / "images"
     root.mkdir(parents=True, exist_ok=True)
-    ids = [r.image_id for r in ds.records]
+    records = list(ds.records)
+    ids = [r.image_id for r in records]
     if len(set(ids)) != len(ids) or 0 in ids:
-        ds = Dataset(
-            ds.classes,
-            [replace(r, image_id=k + 1) for k, r in enumerate(ds.records)],
-            name=ds.name,
-        )
-    for i, r in enumerate(ds.records):
+        records = [replace(r, image_id=k + 1) for k, r in enumerate(records)]
+    for i, r in enumerate(records):
         target = root / r.file_name
         if r.path is not None and target.exists() and target.resolve() == r.path.resolve():
             continue
@@ -329,5 +326,5 @@ def write_coco(
         else:
             write_image(target, ds.image(i))
     p.parent.mkdir(parents=True, exist_ok=True)
-    p.write_text(json.dumps(coco_dict(ds, info=info)) + "\n", encoding="utf-8")
+    p.write_text(json.dumps(_coco_json(ds.classes, records, info)) + "\n", encoding="utf-8")
     return p

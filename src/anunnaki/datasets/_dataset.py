@@ -4,115 +4,26 @@ Why one small class: a dataset generated from the simulator, a COCO export of a 
 robot's images and a YOLO folder all become the same thing — a list of images with boxes
 and class labels — so training, evaluation, Enlil and Enki never care where data came from.
 Images are read lazily from disk (``cv2``), or held in memory for datasets made in code.
+The formats (``_coco``, ``_yolo``) read records and write any :class:`Labelled`; this module
+makes them a :class:`Dataset`.
 """
 
 from __future__ import annotations
 
 from collections.abc import Iterator, Mapping, Sequence
-from dataclasses import dataclass, field, replace
+from dataclasses import replace
 from pathlib import Path
-from typing import Any, NamedTuple, overload
+from typing import Any, overload
 
 import numpy as np
 import numpy.typing as npt
 
-from anunnaki.errors import AnunnakiError, ModelFileError
+from anunnaki.datasets._coco import coco_records, write_coco
+from anunnaki.datasets._record import DatasetError, Record, Sample, read_image
+from anunnaki.datasets._yolo import write_yolo, yolo_records
+from anunnaki.errors import AnunnakiError
 
-__all__ = ["Dataset", "DatasetError", "Record", "Sample", "read_image", "write_image"]
-
-
-class DatasetError(ModelFileError):
-    """A dataset file (COCO JSON, YOLO label file, classes list, image) is missing or invalid.
-
-    Renders as ``file:line: element: message (hint: …)``; COCO errors name the element by
-    id (``annotations[id=17].bbox``), YOLO errors by ``file:line``.
-    """
-
-
-class Sample(NamedTuple):
-    """One labelled image.
-
-    Attributes:
-        image: ``(H, W, 3)`` ``uint8`` RGB.
-        boxes: ``[N, 4]`` ``float32`` ``x1, y1, x2, y2`` in pixels.
-        labels: ``[N]`` ``int64`` indices into the dataset's ``classes``.
-
-    """
-
-    image: npt.NDArray[np.uint8]
-    boxes: npt.NDArray[np.float32]
-    labels: npt.NDArray[np.int64]
-
-
-@dataclass(frozen=True)
-class Record:
-    """One image of a dataset without its pixels.
-
-    Attributes:
-        file_name: Name of the image relative to the dataset's image folder (the COCO
-            ``file_name``).
-        width: Image width in pixels.
-        height: Image height in pixels.
-        boxes: ``[N, 4]`` ``float32`` xyxy pixels.
-        labels: ``[N]`` ``int64`` class indices.
-        image_id: The COCO image id (unique within a dataset).
-        path: Where the image is on disk, or ``None`` for an in-memory image.
-        array: The image itself when held in memory.
-        meta: Extra fields (``layout``, ``seed``, ``t`` … for generated data).
-        ignore: ``[K, 4]`` ``float32`` xyxy *ignore boxes*: objects in the image that are
-            not labelled (too small, mostly occluded or cut by the frame; COCO ``iscrowd``
-            regions). A prediction lying mostly inside one counts neither as right nor as
-            wrong, and training puts no background loss there. Empty by default.
-        ignore_labels: ``[K]`` ``int64`` class of each ignore box.
-
-    """
-
-    file_name: str
-    width: int
-    height: int
-    boxes: npt.NDArray[np.float32]
-    labels: npt.NDArray[np.int64]
-    image_id: int = 0
-    path: Path | None = None
-    array: npt.NDArray[np.uint8] | None = field(default=None, repr=False)
-    meta: Mapping[str, Any] = field(default_factory=dict)
-    ignore: npt.NDArray[np.float32] = field(
-        default_factory=lambda: np.zeros((0, 4), np.float32), repr=False
-    )
-    ignore_labels: npt.NDArray[np.int64] = field(
-        default_factory=lambda: np.zeros(0, np.int64), repr=False
-    )
-
-
-def read_image(path: str | Path) -> npt.NDArray[np.uint8]:
-    """Read an image file as ``(H, W, 3)`` ``uint8`` RGB.
-
-    Raises:
-        DatasetError: The file is missing or not an image OpenCV can decode.
-
-    """
-    import cv2
-
-    p = Path(path)
-    data = np.fromfile(p, dtype=np.uint8) if p.is_file() else None
-    if data is None:
-        raise DatasetError("image file not found", path=p, hint="check the image folder")
-    image = cv2.imdecode(data, cv2.IMREAD_COLOR) if data.size else None
-    if image is None:
-        raise DatasetError("not an image OpenCV can read", path=p, hint="use PNG or JPEG files")
-    out: npt.NDArray[np.uint8] = np.ascontiguousarray(image[:, :, ::-1])
-    return out
-
-
-def write_image(path: str | Path, image: npt.NDArray[np.uint8]) -> None:
-    """Write an ``(H, W, 3)`` ``uint8`` RGB image; the suffix picks the format (``.png``)."""
-    import cv2
-
-    p = Path(path)
-    ok, buf = cv2.imencode(p.suffix or ".png", np.ascontiguousarray(image[:, :, ::-1]))
-    if not ok:  # pragma: no cover - OpenCV refuses only unknown suffixes
-        raise AnunnakiError(f"{p}: OpenCV cannot encode {p.suffix!r} images")
-    p.write_bytes(buf.tobytes())
+__all__ = ["Dataset", "read_coco", "read_yolo"]
 
 
 class Dataset:
@@ -338,16 +249,12 @@ class Dataset:
         cls, path: str | Path, *, images_dir: str | Path | None = None, cache: bool = False
     ) -> Dataset:
         """Read a COCO detection JSON (see :func:`anunnaki.datasets.read_coco`)."""
-        from anunnaki.datasets._coco import read_coco
-
         return read_coco(path, images_dir=images_dir, cache=cache)
 
     def to_coco(
         self, path: str | Path, *, images_dir: str | Path | None = None, info: Any = None
     ) -> Path:
         """Write COCO JSON and the images (see :func:`anunnaki.datasets.write_coco`)."""
-        from anunnaki.datasets._coco import write_coco
-
         return write_coco(self, path, images_dir=images_dir, info=info)
 
     @classmethod
@@ -360,12 +267,59 @@ class Dataset:
         cache: bool = False,
     ) -> Dataset:
         """Read a YOLO folder (see :func:`anunnaki.datasets.read_yolo`)."""
-        from anunnaki.datasets._yolo import read_yolo
-
         return read_yolo(images_dir, labels_dir=labels_dir, classes=classes, cache=cache)
 
     def to_yolo(self, out_dir: str | Path) -> Path:
         """Write a YOLO folder (see :func:`anunnaki.datasets.write_yolo`)."""
-        from anunnaki.datasets._yolo import write_yolo
-
         return write_yolo(self, out_dir)
+
+
+def read_coco(
+    path: str | Path, *, images_dir: str | Path | None = None, cache: bool = False
+) -> Dataset:
+    """Read a COCO detection file into a :class:`Dataset`.
+
+    Args:
+        path: The JSON file.
+        images_dir: Folder the ``file_name`` s are relative to; by default ``images/`` next to
+            the JSON file when it exists, else the JSON file's folder.
+        cache: Keep decoded images in memory.
+
+    Raises:
+        DatasetError: The file is not JSON, a required element is missing or of the wrong
+            type, an id is duplicated, an annotation refers to an unknown image or category,
+            a bbox is not four finite numbers with positive size, or an image file is
+            missing. The message names the file and the element (``annotations[id=17].bbox``).
+
+    """
+    classes, records = coco_records(path, images_dir=images_dir)
+    return Dataset(classes, records, name=str(Path(path)), cache=cache)
+
+
+def read_yolo(
+    images_dir: str | Path,
+    *,
+    labels_dir: str | Path | None = None,
+    classes: Sequence[str] | str | Path | None = None,
+    cache: bool = False,
+) -> Dataset:
+    """Read a YOLO-format folder into a :class:`Dataset`.
+
+    Args:
+        images_dir: The folder of images (``DIR/images``).
+        labels_dir: The folder of ``.txt`` label files; by default ``labels/`` beside
+            ``images/`` (``DIR/labels``), else *images_dir* itself.
+        classes: Class names, or a ``classes.txt``/``obj.names``/``data.yaml`` path; by
+            default found next to the folders.
+        cache: Keep decoded images in memory.
+
+    Raises:
+        DatasetError: A label line is malformed (``file:line``, the field and the fix), a
+            class index is out of range, the classes list is missing, or an image is
+            unreadable.
+
+    """
+    names, records = yolo_records(
+        images_dir, labels_dir=labels_dir, classes=classes, keep_pixels=cache
+    )
+    return Dataset(names, records, name=str(Path(images_dir)), cache=cache)

@@ -20,7 +20,8 @@ from typing import Any, Protocol
 import numpy as np
 
 from anunnaki.datasets._coco import write_coco
-from anunnaki.datasets._dataset import Dataset, DatasetError, Record, write_image
+from anunnaki.datasets._dataset import Dataset, read_yolo
+from anunnaki.datasets._record import DatasetError, Record, write_image
 from anunnaki.errors import AnunnakiError
 
 __all__ = [
@@ -349,8 +350,6 @@ def load_split(data: str | Path, split: str = "test", *, cache: bool = False) ->
         DatasetError: None of these exists, or the files found are invalid.
 
     """
-    from anunnaki.datasets._yolo import read_yolo
-
     root = Path(data)
     if root.suffix == ".json":
         return Dataset.from_coco(root, cache=cache)

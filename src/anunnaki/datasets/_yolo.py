@@ -19,9 +19,9 @@ from typing import Any
 
 import numpy as np
 
-from anunnaki.datasets._dataset import Dataset, DatasetError, Record, read_image, write_image
+from anunnaki.datasets._record import DatasetError, Labelled, Record, read_image, write_image
 
-__all__ = ["IMAGE_SUFFIXES", "read_yolo", "write_yolo"]
+__all__ = ["IMAGE_SUFFIXES", "write_yolo", "yolo_records"]
 
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp")
 _LINE_HINT = "each line is: class_index cx cy width height, the last four normalised to 0..1"
@@ -122,27 +122,21 @@ def _parse_labels(
     return boxes, labels
 
 
-def read_yolo(
+def yolo_records(
     images_dir: str | Path,
     *,
     labels_dir: str | Path | None = None,
     classes: Sequence[str] | str | Path | None = None,
-    cache: bool = False,
-) -> Dataset:
-    """Read a YOLO-format folder into a :class:`Dataset`.
+    keep_pixels: bool = False,
+) -> tuple[list[str], list[Record]]:
+    """The class names and image records of a YOLO folder.
 
-    Args:
-        images_dir: The folder of images (``DIR/images``).
-        labels_dir: The folder of ``.txt`` label files; by default ``labels/`` beside
-            ``images/`` (``DIR/labels``), else *images_dir* itself.
-        classes: Class names, or a ``classes.txt``/``obj.names``/``data.yaml`` path; by
-            default found next to the folders.
-        cache: Keep decoded images in memory.
+    :func:`~anunnaki.datasets.read_yolo` makes them a dataset; its docstring says where the
+    labels and the classes are looked for.
 
     Raises:
-        DatasetError: A label line is malformed (``file:line``, the field and the fix), a
-            class index is out of range, the classes list is missing, or an image is
-            unreadable.
+        DatasetError: A label line is malformed (``file:line``), a class index is out of
+            range, the classes list is missing, or an image is unreadable.
 
     """
     idir = Path(images_dir)
@@ -178,13 +172,13 @@ def read_yolo(
                 labels=np.asarray(labels, np.int64),
                 image_id=k + 1,
                 path=file,
-                array=image if cache else None,
+                array=image if keep_pixels else None,
             )
         )
-    return Dataset(names, records, name=str(idir), cache=cache)
+    return names, records
 
 
-def write_yolo(ds: Dataset, out_dir: str | Path) -> Path:
+def write_yolo(ds: Labelled, out_dir: str | Path) -> Path:
     """Write *ds* as ``out_dir/images``, ``out_dir/labels`` and ``out_dir/classes.txt``.
 
     Images are written as PNG under their ``file_name`` stem; coordinates get 6 decimals.

@@ -63,21 +63,24 @@ _AS_FAST_AS_POSSIBLE = 10_000.0
 
 # -- printing ----------------------------------------------------------------------------------
 def _short(value: Any, width: int = 40) -> str:
+    if isinstance(value, float):  # a time or a utility: to the millisecond, as 'log' shows it
+        value = round(value, 3)
     text = value if isinstance(value, str) else json.dumps(value, separators=(",", ":"))
     return text if len(text) <= width else text[: width - 1] + "…"
 
 
 def format_decision(d: Decision, *, t0: float = 0.0) -> str:
-    """One line for a decision: time, kind, tactic, detail."""
+    """One line for a decision: time, kind, tactic, detail (times ``t0`` on: the log's base)."""
+    d = d.shifted(t0)
     detail = " ".join(f"{k}={_short(v)}" for k, v in d.data.items() if v is not None)
-    return f"{d.t - t0:9.3f}  {d.kind:<20} {d.tactic or '-':<18} {detail}".rstrip()
+    return f"{d.t:9.3f}  {d.kind:<20} {d.tactic or '-':<18} {detail}".rstrip()
 
 
 class _Printer:
-    def __init__(self, out: TextIO, tail: DecisionTail, t0: float) -> None:
+    def __init__(self, out: TextIO, tail: DecisionTail) -> None:
         self.out = out
         self.tail = tail
-        self.t0 = t0
+        self.t0: float | None = None  # the log's time origin, once it has a record
         self.decisions: list[Decision] = []
 
     def say(self, text: str) -> None:
@@ -87,9 +90,11 @@ class _Printer:
 
     def poll(self) -> None:
         rows = self.tail.read()
+        if rows and self.t0 is None:  # the times 'anunnaki log' and 'explain' show
+            self.t0 = self.tail.knowledge.time_origin()
         self.decisions += rows
         for d in rows:
-            self.say(format_decision(d, t0=self.t0))
+            self.say(format_decision(d, t0=self.t0 or 0.0))
 
 
 # -- lockstep ----------------------------------------------------------------------------------
@@ -437,7 +442,6 @@ class _Runner:
     # -- one process
     def _run_here(self) -> RunResult:
         launch = self.launch
-        clock_t0 = 0.0
         bus = open_bus(launch.bus, name=f"{launch.name}-launch")
         if self.on_bus is not None:
             self.on_bus(bus)
@@ -468,9 +472,7 @@ class _Runner:
             peers = self._watch_peers(bus)
             ready_after = time.monotonic() - self.t_start
             self.say(f"ready: {', '.join(launch.nodes)} after {ready_after:.2f} s")
-            if self.utu.clock == "wall":
-                clock_t0 = time.time()
-            printer = _Printer(self.out, tail, clock_t0)
+            printer = _Printer(self.out, tail)
             t_run = time.monotonic()
             managed = self._start_managed(
                 bus, sim.update if sim is not None else None, _taken_here(nodes)
@@ -600,8 +602,7 @@ class _Runner:
             peers = self._watch_peers(bus)
             ready_after = time.monotonic() - self.t_start
             self.say(f"ready: {', '.join(launch.nodes)} after {ready_after:.2f} s")
-            clock_t0 = time.time() if self.utu.clock == "wall" else 0.0
-            printer = _Printer(self.out, tail, clock_t0)
+            printer = _Printer(self.out, tail)
             t_run = time.monotonic()
             managed = self._start_managed(bus, self._clock_publisher(bus), taken)
 

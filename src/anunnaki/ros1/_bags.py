@@ -7,12 +7,13 @@ each message of a bridged topic into a trace :class:`~anunnaki.trace.Record` thr
 topics into one bus topic). Camera frames are left out (guideline P1: traces hold what is
 derived from frames, never the frames); an image entry with ``fields`` (its header, its
 size) is kept. ``anunnaki evaluate MODEL -b BINDING -t run.bag --bridge bridge.yaml`` then
-replays the robot's recording against the goal model. A ROS 2 bag goes through the same
+replays the robot's recording against the goal model; a bag :func:`write_bag` wrote needs no
+bridge file (its topics are the bus's, its messages their JSON). A ROS 2 bag goes through the same
 ROS 1 bridge file; a mapped field its type lacks (ROS 2's Header has no ``seq``) is left out.
 
 **Out.** :func:`write_bag` writes a run's inputs (one ``std_msgs/String`` topic per input
 topic, the message as JSON) and its decisions (``/utu/decisions``, JSON) to a ROS 1 bag,
-what ROS users open with ``rosbag``/``rqt_bag``; ``anunnaki export-bag RUN.db OUT.bag``.
+what ROS users open with ``rosbag``/``rqt_bag``; ``anunnaki log RUN.db --export-bag OUT.bag``.
 """
 
 from __future__ import annotations
@@ -84,15 +85,22 @@ def _ros1_type(msgtype: str) -> str:
     return msgtype.replace("/msg/", "/")
 
 
-def read_bag(path: str | Path, spec: BridgeSpec) -> list[Record]:
+def read_bag(path: str | Path, spec: BridgeSpec | None = None) -> list[Record]:
     """The bridged topics of a bag as trace records, in time order (seconds since the epoch).
 
+    Without ``spec`` the bag must be one :func:`write_bag` wrote (every topic a
+    ``std_msgs/String`` holding a bus message as JSON): its inputs come back on their own
+    topics, as they were recorded, and its decisions (:data:`DECISIONS_TOPIC`) are left out.
+
     Raises:
-        ModelFileError: The bag cannot be read, or a bridged topic has another type in it.
+        ModelFileError: The bag cannot be read, a bridged topic has another type in it, or
+            (without ``spec``) it is not a bag of a run.
         MissingExtraError: ``rosbags`` is not installed.
 
     """
     rb = _rosbags()
+    if spec is None:
+        return _read_run_bag(rb, Path(path))
     entries: dict[str, list[TopicBridge]] = {}
     for t in spec.topics:
         if t.direction == "to_bus" and not t.as_image:
@@ -113,6 +121,44 @@ def read_bag(path: str | Path, spec: BridgeSpec) -> list[Record]:
                         merged.setdefault(t.bus_topic, {}).update(fields)
                         fields = dict(merged[t.bus_topic])
                     records.append(Record(stamp / 1e9, t.bus_topic, fields))
+    except (rb.highlevel.AnyReaderError, OSError) as exc:
+        raise ModelFileError(f"cannot read the bag: {exc}", path=str(path)) from None
+    return records
+
+
+def _read_run_bag(rb: Any, path: Path) -> list[Record]:
+    """The inputs of a bag :func:`write_bag` wrote, as it recorded them."""
+    records: list[Record] = []
+    try:
+        with rb.highlevel.AnyReader([path]) as reader:
+            foreign = sorted(
+                f"{c.topic} ({_ros1_type(c.msgtype)})"
+                for c in reader.connections
+                if c.msgtype != "std_msgs/msg/String"
+            )
+            if foreign:
+                raise ModelFileError(
+                    f"not a bag of an Anunnaki run: {', '.join(foreign[:3])} "
+                    "is no std_msgs/String of JSON",
+                    path=str(path),
+                    hint="give --bridge BRIDGE.yaml, which maps its topics and fields to the "
+                    "bus's (docs/ros.md)",
+                )
+            wanted = [c for c in reader.connections if c.topic != DECISIONS_TOPIC]
+            for connection, stamp, raw in reader.messages(connections=wanted):
+                text = reader.deserialize(raw, connection.msgtype).data
+                try:
+                    msg = json.loads(text)
+                except json.JSONDecodeError:
+                    msg = None
+                if not isinstance(msg, dict):
+                    raise ModelFileError(
+                        f"{connection.topic} holds a string that is no JSON object "
+                        f"({text[:40]!r}): not a bag of an Anunnaki run",
+                        path=str(path),
+                        hint="give --bridge BRIDGE.yaml, which maps its topics to the bus's",
+                    )
+                records.append(Record(stamp / 1e9, connection.topic, msg))
     except (rb.highlevel.AnyReaderError, OSError) as exc:
         raise ModelFileError(f"cannot read the bag: {exc}", path=str(path)) from None
     return records
@@ -141,14 +187,17 @@ def write_bag(
     path: str | Path,
     inputs: Iterable[Record],
     decisions: Iterable[tuple[float, Mapping[str, Any]]] = (),
+    *,
+    overwrite: bool = False,
 ) -> int:
     """Write a run to a ROS 1 bag: inputs on their topics, decisions on :data:`DECISIONS_TOPIC`.
 
     Every message is a ``std_msgs/String`` holding the JSON of the message (the bus's
-    messages have no fixed ROS type). Returns how many messages were written.
+    messages have no fixed ROS type), so :func:`read_bag` reads its inputs back without a
+    bridge file. Returns how many messages were written.
 
     Raises:
-        AnunnakiError: The bag exists already, or cannot be written.
+        AnunnakiError: The bag exists already (and not ``overwrite``), or cannot be written.
 
     """
     rb = _rosbags()
@@ -156,7 +205,9 @@ def write_bag(
     string = store.types["std_msgs/msg/String"]
     out = Path(path)
     if out.exists():
-        raise AnunnakiError(f"{out} exists already; give another name or remove it")
+        if not overwrite:
+            raise AnunnakiError(f"{out} exists already; give another name, or --force")
+        out.unlink()
     n = 0
     try:
         with rb.rosbag1.Writer(out) as writer:

@@ -15,9 +15,8 @@ from typing import Literal
 
 import numpy as np
 
-from anunnaki.sim._models import _DISTRACTORS
-
 __all__ = [
+    "DISTRACTOR_KINDS",
     "ROUTE_LENGTH",
     "ROVER_CLASSES",
     "UAV_AREA",
@@ -35,6 +34,10 @@ UAV_CLASSES: tuple[str, ...] = ("pedestrian", "vehicle")
 """Classes of the UAV's scenes; a label is an index into this tuple."""
 
 _PLATFORM_CODE = {"rover": 1, "uav": 2}
+
+#: The small objects a scene scatters to confuse a detector (how each looks is
+#: :mod:`anunnaki.sim._models`' business: this module only draws where they stand).
+DISTRACTOR_KINDS: tuple[str, ...] = ("ball", "cube", "duck", "mug", "sphere", "teddy")
 
 ROUTE_LENGTH = 44.0
 """Length of the rover's route along +x (m); objects are placed along it."""
@@ -136,7 +139,7 @@ def _rover_layout(rng: np.random.Generator) -> list[Placement]:
         pos = _spaced(rng, taken, 0.8, xr, yr)
         if pos is not None:
             out.append(_deer(rng, *pos))
-    kinds = sorted(_DISTRACTORS)
+    kinds = sorted(DISTRACTOR_KINDS)
     for _ in range(counts["distractor"]):
         kind = kinds[int(rng.integers(len(kinds)))]
         size = {"cube": (0.2, 0.6), "sphere": (0.2, 0.6), "duck": (0.2, 0.5)}.get(kind, (0.2, 0.35))

@@ -10,12 +10,10 @@ from __future__ import annotations
 
 import re
 from pathlib import Path
-from typing import TYPE_CHECKING
 
 import numpy as np
 
-if TYPE_CHECKING:
-    from anunnaki.sim._layout import Platform
+from anunnaki.sim._layout import Platform
 
 # Model files (pybullet_data), their scale per metre of "size", and the z-rotation that
 # stands them up / faces them along +x.
@@ -25,6 +23,7 @@ _DEER = "laikago/laikago_toes_zup_lores.urdf"  # low-poly quadruped, 0.71 m long
 _DEER_SCALE_PER_M = 1.0 / 0.71
 # Model scale per metre of size, from each model's bounding box at scale 1.
 _VEHICLES = (("racecar/racecar.urdf", 1.0 / 0.458), ("husky/husky.urdf", 1.0 / 1.009))
+# One model per kind of anunnaki.sim._layout.DISTRACTOR_KINDS (a Scene refuses a kind without).
 _DISTRACTORS = {
     "cube": ("cube.urdf", 1.0),
     "sphere": ("sphere2.urdf", 1.0),

@@ -20,6 +20,7 @@ file), the knowledge database, the bus, the clock and the policies of the MAPE-K
 
 from __future__ import annotations
 
+import logging
 import os
 from pathlib import Path
 from typing import Annotated, Any, Literal
@@ -29,9 +30,11 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError
 from anunnaki import topics
 from anunnaki._safeyaml import LineMap, load_yaml, validation_error
 from anunnaki.errors import ModelFileError
-from anunnaki.tokens import OPERATOR_TOKEN_ENV, token_weakness
+from anunnaki.tokens import OPERATOR_TOKEN_ENV, token_weakness, user_operator_token
 
 __all__ = ["RunStopConfig", "UtuConfig", "load_config", "parse_config"]
+
+log = logging.getLogger("anunnaki.utu")
 
 
 class _Strict(BaseModel):
@@ -88,8 +91,12 @@ class UtuConfig(_Strict):
     #: A file holding the operator token (``$ANUNNAKI_OPERATOR_TOKEN`` takes precedence).
     operator_token_file: str | None = None
 
-    def operator_token(self) -> str | None:
-        """The token pause, resume, approve and reload requests must carry (``None``: open).
+    def operator_token(self) -> str:
+        """The token pause, resume, approve and reload requests must carry.
+
+        ``$ANUNNAKI_OPERATOR_TOKEN``, else ``operator_token_file``, else the user's own token
+        file (:func:`anunnaki.tokens.user_operator_token`: written first if missing, and
+        logged where), so the operator services are never open by accident.
 
         Raises:
             ModelFileError: The token file is unreadable or the token too weak.
@@ -106,7 +113,14 @@ class UtuConfig(_Strict):
                     f"cannot read the operator token: {exc.strerror}", path=where
                 ) from None
         if token is None:
-            return None
+            token, path, generated = user_operator_token()
+            log.info(
+                "utu: operator token %s %s (mode 0600); anunnaki reload and the dashboard "
+                "read it there",
+                "written to" if generated else "read from",
+                path,
+            )
+            return token
         if (weak := token_weakness(token)) is not None:
             raise ModelFileError(
                 f"the operator token is too weak: {weak}",

@@ -24,6 +24,12 @@ Executor flushes before every action it dispatches (write-ahead: the tactic's st
 decisions that led to it are on disk before the managed system is touched), the manager at
 the end of every step that decided something, and any read flushes first. Inputs and
 verdicts are also flushed every ``batch`` rows.
+
+**One time base.** A run's times are Utu's clock: the simulation's seconds from its start
+(``clock: sim``), or seconds since the epoch (``clock: wall``). Whatever shows a log to
+people (``anunnaki run``'s lines, ``log``, ``explain``, ``replay``) shows it on one base,
+:meth:`Knowledge.time_origin` subtracted from every instant (a decision's ``t`` and its
+``deadline`` alike, :meth:`Decision.shifted`), and reads the times it is given on that base.
 """
 
 from __future__ import annotations
@@ -89,6 +95,13 @@ class VerdictRow:
     status: str
 
 
+#: A recorded instant past this (2001-09-09) is seconds since the epoch: a wall-clock run.
+EPOCH_AFTER = 1e9
+
+#: Fields of a decision's data that hold an instant (shown on the log's base, like ``t``).
+TIME_FIELDS = frozenset({"deadline"})
+
+
 @dataclass(frozen=True)
 class Decision:
     """One recorded decision."""
@@ -98,6 +111,18 @@ class Decision:
     kind: str
     tactic: str | None
     data: dict[str, Any]
+
+    def shifted(self, origin: float) -> Decision:
+        """A copy with ``origin`` subtracted from its time and from its time fields."""
+        if not origin:
+            return self
+        data = {
+            k: v - origin
+            if k in TIME_FIELDS and isinstance(v, int | float) and not isinstance(v, bool)
+            else v
+            for k, v in self.data.items()
+        }
+        return Decision(self.id, self.t - origin, self.kind, self.tactic, data)
 
 
 @dataclass(frozen=True)
@@ -369,6 +394,21 @@ class Knowledge(Closing):
         with self._lock:
             row = self._db.execute("SELECT t FROM inputs ORDER BY id LIMIT 1").fetchone()
         return None if row is None else float(row[0])
+
+    def time_origin(self) -> float:
+        """The instant, on Utu's clock, from which this log's times are shown to people.
+
+        ``0`` on simulated time (its times already count from the simulation's start); on
+        the wall clock (the first recorded instant is past :data:`EPOCH_AFTER`), the first
+        recorded input or decision, so a run's times read as seconds from its start.
+        """
+        self.flush()
+        with self._lock:
+            firsts = self._db.execute(
+                "SELECT (SELECT min(t) FROM inputs), (SELECT min(t) FROM decisions)"
+            ).fetchone()
+        first = min((float(t) for t in firsts if t is not None), default=0.0)
+        return first if first >= EPOCH_AFTER else 0.0
 
     def last_t(self) -> float:
         """The latest instant an input or a decision was recorded at (0 for an empty run)."""

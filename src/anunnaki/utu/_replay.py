@@ -319,12 +319,13 @@ def _describe_verdict(v: Mapping[str, Any]) -> str:
     return f"{v['node']} {v['status']} (utility {'?' if u is None else f'{u:.3f}'})"
 
 
-def _decision_entry(d: Decision) -> dict[str, Any]:
+def _decision_entry(d: Decision, origin: float) -> dict[str, Any]:
+    d = d.shifted(origin)
     return {"t": d.t, "kind": d.kind, "tactic": d.tactic, "data": decisive(d.kind, d.data)}
 
 
-def _verdict_entry(v: VerdictRow) -> dict[str, Any]:
-    return {"t": v.t, "node": v.node, "utility": v.utility, "status": v.status}
+def _verdict_entry(v: VerdictRow, origin: float) -> dict[str, Any]:
+    return {"t": v.t - origin, "node": v.node, "utility": v.utility, "status": v.status}
 
 
 @dataclass(frozen=True)
@@ -434,6 +435,8 @@ class ReplayReport:
         divergence: The first decision that differs, if any.
         verdict_divergence: The first verdict change that differs, if any.
         notes: What a reader should know (settings not recorded, reloads, restarts, …).
+        origin: The log's time origin (:meth:`Knowledge.time_origin`): every time in the
+            report is on the log's base, seconds after it.
 
     """
 
@@ -448,6 +451,7 @@ class ReplayReport:
     divergence: Divergence | None = None
     verdict_divergence: Divergence | None = None
     notes: tuple[str, ...] = field(default=())
+    origin: float = 0.0
 
     @property
     def identical(self) -> bool:
@@ -492,6 +496,7 @@ class ReplayReport:
                 None if self.verdict_divergence is None else self.verdict_divergence.to_dict()
             ),
             "notes": list(self.notes),
+            "origin": self.origin,
         }
 
 
@@ -633,12 +638,14 @@ class _Feeder:
                 self.pending = row.t
 
 
-def _restart_notes(rows: Sequence[InputRow], theirs: Sequence[Mapping[str, Any]]) -> list[str]:
+def _restart_notes(
+    rows: Sequence[InputRow], theirs: Sequence[Mapping[str, Any]], origin: float
+) -> list[str]:
     restarts = [r for r in rows if r.topic == RESTART]
     if restarts:
         return [
             "the run was restarted at t = "
-            + ", ".join(f"{r.t:.3f} ({r.msg.get('node', 'manager')})" for r in restarts)
+            + ", ".join(f"{r.t - origin:.3f} ({r.msg.get('node', 'manager')})" for r in restarts)
             + " s; the replay restarted the same parts there"
         ]
     if any(d["kind"] == "resumed" for d in theirs):
@@ -666,12 +673,13 @@ def _replay(
     counts = knowledge.counts()
     if counts["inputs"] == 0 and counts["decisions"] == 0:
         return ReplayReport(path, 0, 0, 0, counts["verdicts"], 0, 0, settings, notes=tuple(notes))
+    origin = knowledge.time_origin()
     models = run_models(path)
     model, tactics = _parse_models(path, models)
     if models.reloads:
         notes.append(
             "the run reloaded its models at t = "
-            + ", ".join(f"{t:.3f}" for t in models.reloads)
+            + ", ".join(f"{t - origin:.3f}" for t in models.reloads)
             + " s; the replay keeps the models it started with, so it may diverge from there"
         )
     actions = ReplayRunner(_action_outcomes(knowledge))
@@ -703,7 +711,8 @@ def _replay(
             analysed = knowledge.verdicts(since=at)
             finished = feeder.finish_step(analysed[-1].t if analysed else None)
             notes.append(
-                f"the log ends mid-step at t = {at:.3f} s (the run was killed?); the replay "
+                f"the log ends mid-step at t = {at - origin:.3f} s (the run was killed?); "
+                "the replay "
                 + (
                     "finished that step as far as the run went"
                     if finished
@@ -712,14 +721,16 @@ def _replay(
             )
         # The replay is over: only now read what the run decided.
         kb = feeder.manager.knowledge
-        mine = [_decision_entry(d) for d in kb.decisions() if d.kind not in ASYNC_KINDS]
-        mine_v = [_verdict_entry(v) for v in kb.verdicts()]
+        mine = [_decision_entry(d, origin) for d in kb.decisions() if d.kind not in ASYNC_KINDS]
+        mine_v = [_verdict_entry(v, origin) for v in kb.verdicts()]
     finally:
         feeder.manager.close()
     fed, steps = feeder.fed, feeder.steps
-    theirs = [_decision_entry(d) for d in knowledge.decisions() if d.kind not in ASYNC_KINDS]
-    theirs_v = [_verdict_entry(v) for v in knowledge.verdicts()]
-    notes.extend(_restart_notes(rows, theirs))
+    theirs = [
+        _decision_entry(d, origin) for d in knowledge.decisions() if d.kind not in ASYNC_KINDS
+    ]
+    theirs_v = [_verdict_entry(v, origin) for v in knowledge.verdicts()]
+    notes.extend(_restart_notes(rows, theirs, origin))
     return ReplayReport(
         path=path,
         inputs=fed,
@@ -732,10 +743,16 @@ def _replay(
         divergence=_first_divergence("decision", theirs, mine, tol),
         verdict_divergence=_first_divergence("verdict", theirs_v, mine_v, tol),
         notes=tuple(notes),
+        origin=origin,
     )
 
 
 # -- the goal model at an instant ------------------------------------------------------------
+#: How far past the instant asked for a step still counts as at it (s): times are printed to
+#: the millisecond, so a decision printed at 7.800 s may have been taken at 7.8004 s.
+PRINTED_RESOLUTION = 5e-4
+
+
 @dataclass
 class GoalState:
     """The goal model as the manager saw it at an instant, rebuilt from the recorded inputs.
@@ -773,17 +790,22 @@ class GoalState:
 def rebuild_goal_state(knowledge: Knowledge, path: str | Path, at: float) -> GoalState:
     """Evaluate the goal model at ``at`` from the recorded inputs (not the recorded verdicts).
 
-    The goal model is the one in force at ``at``. Every recorded message up to ``at`` is
-    observed at its recorded time and the passing of time applied at each recorded step,
-    as the manager did; an operator's ``node_lost`` (liveliness) expires the topics of the
-    node's agents. The result is the manager's view after its last step at or before ``at``.
+    The goal model is the one in force at ``at``. The recorded messages of every step that
+    ended by ``at`` are observed at their recorded times and the passing of time applied at
+    each step, as the manager did; an operator's ``node_lost`` (liveliness) expires the
+    topics of the node's agents. The messages of a step not ended by ``at`` are not taken
+    (the manager had not analysed them), so the result is the manager's view after its last
+    step at or before ``at`` and compares with the verdicts it recorded there. A step up to
+    :data:`PRINTED_RESOLUTION` after ``at`` counts as at ``at``: the time a decision is
+    printed with explains that decision.
 
     Raises:
         RunLogError: no goal-model text was recorded, or it does not parse.
 
     """
+    until = at + PRINTED_RESOLUTION
     models = run_models(path)
-    sources = knowledge.models_at(at) or models.initial
+    sources = knowledge.models_at(until) or models.initial
     try:
         model = models.model(sources)
     except AnunnakiError as exc:
@@ -792,8 +814,13 @@ def rebuild_goal_state(knowledge: Knowledge, path: str | Path, at: float) -> Goa
     as_of: float | None = None
     taken = 0
     ops: list[Mapping[str, Any]] = []
-    for row in knowledge.inputs(until=at):
+    messages: list[InputRow] = []  # taken by a step that has not ended yet
+    for row in knowledge.inputs(until=until):
         if row.topic == TICK:
+            for m in messages:
+                ev.observe(m.topic, m.msg, m.t)
+            taken += len(messages)
+            messages.clear()
             ev.tick(row.t)
             for op in ops:
                 _expire(ev, model, op, row.t)
@@ -802,9 +829,9 @@ def rebuild_goal_state(knowledge: Knowledge, path: str | Path, at: float) -> Goa
         elif row.topic == OPERATOR:
             ops.append(row.msg)
         else:
-            ev.observe(row.topic, row.msg, row.t)
-            taken += 1
-    return GoalState(ev, at, as_of, taken, knowledge.state_at(at))
+            messages.append(row)
+    recorded = knowledge.state_at(as_of) if as_of is not None else {}
+    return GoalState(ev, at, as_of, taken, recorded)
 
 
 def _expire(ev: Evaluator, model: GoalModel, op: Mapping[str, Any], t: float) -> None:
