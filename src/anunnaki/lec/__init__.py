@@ -89,20 +89,25 @@ from anunnaki.lec._registry import (
     ModelRegistryError,
     ModelSpec,
     OracleRef,
+    ResolvedModel,
     UnknownModelError,
     load_registry,
     parse_registry,
+    resolve_model,
 )
 
 if TYPE_CHECKING:
     from anunnaki.lec._centernet import CenterNet, CenterNetArchitecture, CenterNetDetector
     from anunnaki.lec._train import (
         Augmenter,
+        EpochHook,
+        SharedClassesDetector,
         TrainConfig,
         TrainResult,
         class_map,
         evaluate_detector,
         predict,
+        shared_classes,
         train_detector,
     )
 
@@ -124,6 +129,7 @@ __all__ = [
     "DetectorArchitecture",
     "DetectorError",
     "DetectorLoadError",
+    "EpochHook",
     "ImageBatch",
     "LecNode",
     "LecNodeStats",
@@ -136,6 +142,8 @@ __all__ = [
     "ModelSpec",
     "OracleRef",
     "ReadsFiles",
+    "ResolvedModel",
+    "SharedClassesDetector",
     "SwapResult",
     "TrainConfig",
     "TrainResult",
@@ -156,8 +164,10 @@ __all__ = [
     "parse_registry",
     "predict",
     "read_card",
+    "resolve_model",
     "save_detector",
     "sha256_file",
+    "shared_classes",
     "sidecar_path",
     "train_detector",
     "update_metrics",
@@ -169,6 +179,9 @@ _LAZY = {
     "CenterNetArchitecture": "anunnaki.lec._centernet",
     "CenterNetDetector": "anunnaki.lec._centernet",
     "Augmenter": "anunnaki.lec._train",
+    "EpochHook": "anunnaki.lec._train",
+    "SharedClassesDetector": "anunnaki.lec._train",
+    "shared_classes": "anunnaki.lec._train",
     "TrainConfig": "anunnaki.lec._train",
     "TrainResult": "anunnaki.lec._train",
     "class_map": "anunnaki.lec._train",
