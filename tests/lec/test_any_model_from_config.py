@@ -13,6 +13,7 @@ import hashlib
 import json
 import textwrap
 from collections.abc import Iterator
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -67,7 +68,9 @@ def setup(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path]:
     tmp = tmp_path_factory.mktemp("any-model")
     data = tmp / "data"
     for i, split in enumerate(("train", "val", "test")):
-        two_class_data(8, seed=i).to_coco(data / f"{split}.json", images_dir=data / "images")
+        drawn = two_class_data(8, seed=i)
+        named = [replace(r, file_name=f"{split}-{r.file_name}") for r in drawn.records]
+        Dataset(CLASSES, named).to_coco(data / f"{split}.json", images_dir=data / "images")
     models = tmp / "models"
     models.mkdir()
     person = models / "person.json"
@@ -174,6 +177,7 @@ def test_assess_oracle_train_and_evaluate_a_plugin_model(
     assert code == 0, err
     summary = json.loads(out)
     assert summary["evaluations"] == 6 and summary["model_id"] == "person"
+    assert summary["clean_f1"] == 1.0  # the deer left out, every pedestrian found
     assert summary["classes"] == ["pedestrian"] and summary["data_only"] == ["deer"]
     meta = read_archive(archive).meta
     assert (meta.model_id, meta.sha256) == ("person", sha(registry.parent / "person.json"))
