@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import re
 import textwrap
 from collections.abc import Iterator
 from dataclasses import replace
@@ -234,6 +235,7 @@ def test_oracle_train_shows_progress_a_table_and_warns_without_category_1(
     assert "hold no category-1 (degraded) context (categories 0/1/2: 3/0/0)" in err
     assert "the oracle cannot learn that category" in err and "--budget" in err
     assert "epochs 1/2" in err and "epochs 2/2" in err  # a line per epoch in a log
-    assert "oracle of fixed" in out and "3/0/0" in out and "macro-f1" in out
+    assert "oracle of fixed" in out and "3/0/0" in out and "macro-F1" in out
+    assert re.search(r"sha256: [0-9a-f]{64}}", out)  # one line to paste into the registry
     assert "classes counted: pedestrian, deer" in err
     assert not out.lstrip().startswith("{")  # the JSON only with --json

@@ -110,7 +110,7 @@ def run_train(args: argparse.Namespace) -> int:
     if args.json:
         print(json.dumps(report, indent=2))
         return 0
-    _print_train(report, console)
+    _print_train(report)
     return 0
 
 
@@ -169,7 +169,8 @@ def _no_degraded(sets: list[Any]) -> list[str]:
     ]
 
 
-def _print_train(report: dict[str, Any], console: Any) -> None:
+def _print_train(report: dict[str, Any]) -> None:
+    """The contexts per phenomenon, the val figures and the file to name in the registry."""
     from rich.console import Console
     from rich.table import Table
 
@@ -182,16 +183,19 @@ def _print_train(report: dict[str, Any], console: Any) -> None:
     out = Console(highlight=False)
     out.print(table)
     figures = Table(title="val frames (after temperature scaling)")
-    keys = [k for k in ("accuracy", "macro_f1", "ece", "head_macro_f1") if k in val]
+    names = {"accuracy": "accuracy", "macro_f1": "macro-F1", "ece": "ECE",
+             "head_macro_f1": "head alone: macro-F1"}  # fmt: skip
+    keys = [k for k in names if k in val]
     for k in keys:
-        figures.add_column(k.replace("_", "-"), justify="right")
+        figures.add_column(names[k], justify="right")
     figures.add_row(*(f"{val[k]:.3f}" for k in keys))
     out.print(figures)
     if "classes" in report:
         out.print(classes_line(report))
     out.print(
         f"saved {report['file']} (sha256 {report['sha256']}); name it in the registry "
-        f"entry: oracle: {{file: …, sha256: {report['sha256']}}}"
+        f"entry: oracle: {{file: …, sha256: {report['sha256']}}}",
+        soft_wrap=True,
     )
 
 
