@@ -26,6 +26,7 @@ from anunnaki.cli.main import main
 from anunnaki.datasets import Dataset
 from anunnaki.lec import (
     ARCHITECTURES,
+    DetectorError,
     ModelRegistryError,
     UnknownModelError,
     resolve_model,
@@ -137,6 +138,9 @@ def test_shared_classes_drop_the_other_boxes_and_detections() -> None:
     person, cut = shared_classes(RedPersonDetector("p", "default", 150), data)
     assert cut.classes == ("pedestrian",) and cut.num_boxes == 2  # the deer boxes are gone
     assert isinstance(person, RedPersonDetector)  # its classes are all shared: not wrapped
+    cats = Dataset.from_arrays([data.image(0)], [[]], [[]], ("cat",))
+    with pytest.raises(DetectorError, match=r"no class in common.*labelled with \(some of\)"):
+        shared_classes(person, cats)
 
 
 def test_evaluate_detector_measures_a_subset_detector_on_the_shared_classes(

@@ -18,6 +18,11 @@ never unpickles anything::
     results = det.detect(frames)                      # list[DetectionResult]
     m = f1_at_iou(results, truths, score_threshold=0.0)   # Metrics(precision, recall, f1, …)
 
+A model is named as the commands name it — a model file, or a registry and an id, whatever
+loader plugin the entry names — with :func:`resolve_model` (``.load()`` gives the detector);
+:func:`shared_classes` cuts a detector and a dataset to the class names both have, to measure
+e.g. a person detector on data that also labels deer.
+
 The F1 rule used everywhere (``docs/detector.md``): class-aware greedy matching in
 descending score order at IoU ≥ 0.5, each truth matched at most once, the score threshold
 chosen on the validation split (:func:`choose_threshold`) and F1 reported on the test split.

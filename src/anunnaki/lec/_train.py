@@ -466,7 +466,8 @@ def shared_classes(det: Detector, data: Dataset) -> tuple[Detector, Dataset]:
     if not shared:
         raise DetectorError(
             f"the detector's classes {list(det.classes)} and the dataset's "
-            f"{list(data.classes)} have no class in common; nothing can be measured"
+            f"{list(data.classes)} have no class in common; nothing can be measured: use a "
+            "dataset labelled with (some of) the model's class names"
         )
     kept = _keep_classes(data, shared)
     if mine <= set(shared):
