@@ -66,7 +66,7 @@ train() { # train MODEL PLATFORM REGISTRY BUDGET FRAMES EPOCHS PHENOMENON...
   timed "oracle train $model" "${ANUNNAKI[@]}" oracle train --models "$registry" \
     --model "$model" --data "$DATA/$platform" "${archives[@]}" \
     --out "$MODELS/$model.oracle" --frames "$frames" --epochs "$epochs" --seed "$SEED" \
-    --threads "$THREADS" "${EXTRA[@]}" > "$RUNS/$model.oracle.json"
+    --threads "$THREADS" "${EXTRA[@]}" --json > "$RUNS/$model.oracle.json"
   "$PY" scripts/pin-oracle.py "$registry" "$model" "$MODELS/$model.oracle.safetensors"
 }
 

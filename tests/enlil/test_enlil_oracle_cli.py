@@ -28,7 +28,7 @@ def trained(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path, dict[
     out = tmp / "o" / "rover-default.oracle"
     argv = ["oracle", "train", "--models", str(MODELS), "--model", "rover-default"]
     argv += ["--data", str(data), "--random", "3", "--phenomenon", "fog", "--out", str(out)]
-    argv += ["--frames", "32", "--val-frames", "16", "--epochs", "1", "--threads", "1"]
+    argv += ["--frames", "32", "--val-frames", "16", "--epochs", "1", "--threads", "1", "--json"]
     import contextlib
     import io
 

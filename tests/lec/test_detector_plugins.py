@@ -184,7 +184,7 @@ def test_evaluate_detector_measures_a_plugin_model_from_its_registry(
         "fixed-default", "default", 0.5)  # fmt: skip
     assert report["clean"]["f1"] == 1.0 and report["clean"]["tp"] == 1
     code, out, err = evaluate(
-        [str(registry), "--model-id", "fixed-default", "--data", str(data), "-p", "fog"], capsys
+        [str(registry), "--model", "fixed-default", "--data", str(data), "-p", "fog"], capsys
     )
     assert code == 0, err
     assert "fixed-default (default)" in out and "category" in out
@@ -199,7 +199,7 @@ def test_evaluate_detector_refuses_other_class_names_naming_both(
     assert code == 2
     assert "model 'fixed-default'" in err
     assert "['pedestrian', 'deer'] are not the dataset's ['pedestrian', 'car']" in err
-    code, _, err = evaluate([str(registry), "--model-id", "nope", "--data", str(data)], capsys)
+    code, _, err = evaluate([str(registry), "--model", "nope", "--data", str(data)], capsys)
     assert code == 2 and "unknown model 'nope'" in err and "fixed-default (default)" in err
     code, _, err = evaluate([str(registry), "--data", str(data), "--update-sidecar"], capsys)
     assert code == 2 and "is loaded by 'fixed_boxes'" in err

@@ -48,6 +48,7 @@ def test_train_detector(tiny: Path, tmp_path: Path, capsys: pytest.CaptureFixtur
     assert code == 0
     text = capsys.readouterr().out
     assert "score threshold" in text and "chosen on val" in text and "test" in text
+    assert re.search(r"epoch 1/1: loss \d+\.\d{3}, val F1 \d\.\d{3} \(\d+ s\)", text), text
     card = json.loads(text[text.index("{") :])
     assert card["domain"] == "fog" and card["model_id"] == "m"
     assert card["training"]["augment"] == ["fog", "raindrop"] and "test" in card["metrics"]
@@ -76,6 +77,8 @@ def test_train_detector_progress_bar(
     # shows them all done, in epoch 3.
     assert "3 epochs" in text
     assert re.search(r"epoch 3 .*\b6/6\b", text), text
+    assert re.search(r"epoch 3/3: loss .*, val F1 \d\.\d{3}", text), text  # one line each
+    assert re.search(r"val F1 \d\.\d{3}\s", text)  # and the bar shows the latest
     assert not re.search(r"\b[7-9]/6\b", text)  # never beyond the total
 
 

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+import torch
 from lec_helpers import Trained
 
 from anunnaki.datasets import Dataset, load_split
@@ -245,6 +246,23 @@ def test_the_progress_hook_reports_every_step() -> None:
     # The running loss at an epoch's last step is the epoch's mean loss in the history.
     assert calls[2][2]["loss"] == pytest.approx(result.history[0]["loss"])
     assert calls[5][2]["loss"] == pytest.approx(result.history[1]["loss"])
+
+
+def test_the_epoch_hook_reports_loss_and_val_f1_without_changing_the_training() -> None:
+    data = tiny_data(10)
+    config = TrainConfig(epochs=2, batch_size=4, width=8, seed=1)
+    epochs: list[dict[str, float]] = []
+    result = train_detector(data, data, config=config, on_epoch=epochs.append)
+    assert [(e["epoch"], e["epochs"]) for e in epochs] == [(1, 2), (2, 2)]
+    for info, record in zip(epochs, result.history, strict=True):
+        assert info["loss"] == record["loss"] and info["seconds"] > 0
+        assert 0.0 <= info["val_f1"] <= 1.0
+    # After the last epoch the val F1 is the one the threshold choice measures.
+    assert epochs[-1]["val_f1"] == pytest.approx(result.val.f1)
+    # Measuring val in eval mode between epochs leaves the weights as they were.
+    plain = train_detector(data, data, config=config)
+    for name, tensor in plain.detector.network.state_dict().items():
+        assert torch.equal(tensor, result.detector.network.state_dict()[name]), name
 
 
 def test_default_epochs_fit_the_training_budget() -> None:

@@ -229,6 +229,36 @@ def test_every_nth_frame_and_failures_are_contained(bus: Bus) -> None:
         assert node.stats().assessments == 2
 
 
+class Recorder:
+    """An oracle that records which model each frame was assessed for."""
+
+    name = "recorder"
+
+    def __init__(self) -> None:
+        self.models: list[str] = []
+
+    def assess(self, frame: np.ndarray, *, seq: int, model_id: str) -> Assessment | None:
+        self.models.append(model_id)
+        return Assessment(category=0, confidence=1.0, model_id=model_id, assessor=self.name,
+                          frame_seq=seq)  # fmt: skip
+
+
+def test_no_frame_is_assessed_before_a_model_is_known(bus: Bus) -> None:
+    """No model 'unknown' (the enlil oracle warned that no oracle covers it, issue 22)."""
+    oracle = Recorder()
+    outputs = Outputs(bus)
+    with OracleNode(bus, oracle, camera=CAMERA) as node:
+        for seq in range(3):
+            bus.publish(CAMERA, Image(encoding="png", width=32, height=32, data=CLEAR_PNG, seq=seq))
+        assert until(lambda: node.stats().withheld == 3)
+        assert oracle.models == [] and node.stats().assessments == 0
+        bus.publish("/lm_manager/active", {"lec": "detector", "model": "m1", "domain": "default"})
+        assert until(lambda: node.model_id == "m1")
+        bus.publish(CAMERA, Image(encoding="png", width=32, height=32, data=CLEAR_PNG, seq=3))
+        assert outputs.wait_for(3).model_id == "m1"
+        assert oracle.models == ["m1"]
+
+
 def test_bad_ground_truth_is_counted(bus: Bus) -> None:
     with OracleNode(bus, "ground_truth", camera=CAMERA, clean_f1=1.0) as node:
         bus.publish("/sim/ground_truth", {"seq": -1, "boxes": [], "labels": []})

@@ -17,6 +17,8 @@ from rich.console import Console
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
 from rich.table import Table
 
+from anunnaki.cli._detector import add_model_options, classes_line
+
 _CATEGORY = {0: "unaffected", 1: "degraded", 2: "compromised"}
 
 
@@ -32,12 +34,19 @@ def add_parser(sub: Any) -> None:
             "rerunning the same command resumes it (after Ctrl-C or kill -9)."
         ),
     )
-    p.add_argument("model", help="model file (NAME.safetensors)")
+    p.add_argument(
+        "model",
+        help="model file (NAME.safetensors), or a model registry (REG.yaml: its default model, "
+        "or --model ID; any loader plugin its entries name)",
+    )
+    add_model_options(p)
     p.add_argument("--data", "-d", required=True, help="dataset folder")
     p.add_argument("--phenomenon", "-p", required=True, help="e.g. fog, hsl, rain+brightness")
     p.add_argument("--budget", "-n", type=int, required=True, help="evaluations")
     p.add_argument("--search", default="enlil", help="enlil, random or sobol (enlil)")
-    p.add_argument("--out", "-o", help="archive folder (default: assess/MODEL-P-SEARCH-sSEED)")
+    p.add_argument(
+        "--out", "-o", help="archive folder (default: assess/MODEL-P-SEARCH-sSEED, MODEL the id)"
+    )
     p.add_argument("--seed", type=int, default=0, help="seed of the search and batch (0)")
     p.add_argument("--split", default="val", help="split of the fixed batch (val)")
     p.add_argument("--batch-images", type=int, default=32, help="images per evaluation (32)")
@@ -57,19 +66,21 @@ def add_parser(sub: Any) -> None:
     p.set_defaults(run=_run_assess)
 
 
-def _out(args: argparse.Namespace) -> Path:
+def _out(args: argparse.Namespace, model: Any) -> Path:
     if args.out:
         return Path(args.out)
-    stem = Path(args.model).stem
+    stem = model.model_id if model.spec is not None else Path(args.model).stem
     name = f"{stem}-{args.phenomenon.replace('+', '_')}-{args.search}-s{args.seed}"
     return Path("assess") / name
 
 
 def _run_assess(args: argparse.Namespace) -> int:
     from anunnaki.enlil import EnlilError, Job, run_search
+    from anunnaki.lec import resolve_model
 
     if args.budget < 1:
         raise EnlilError(f"--budget must be a positive number of evaluations, got {args.budget}")
+    model = resolve_model(args.model, args.model_id)  # a bad registry or id fails here
     job = Job(
         model=str(args.model),
         data=str(args.data),
@@ -78,8 +89,11 @@ def _run_assess(args: argparse.Namespace) -> int:
         batch_images=args.batch_images,
         seed=args.seed,
         thresholds=(float(args.thresholds[0]), float(args.thresholds[1])),
+        model_id=args.model_id,
+        shared_classes=args.shared_classes,
     )
-    out = _out(args)
+    counted = _counted(args, model)
+    out = _out(args, model)
     console = Console(stderr=True)
     columns = (
         TextColumn("{task.description}"),
@@ -99,8 +113,10 @@ def _run_assess(args: argparse.Namespace) -> int:
             workers=args.workers,
             dask=args.dask,
             progress=lambda done, total: bar.update(task, completed=done),
+            meta_extra={"classes": counted} if args.shared_classes else None,
         )
     summary = {**outcome.summary, "archive": str(out), "resumed": outcome.resumed}
+    summary |= {"model_id": model.model_id, **counted}
     if args.plot:
         from anunnaki.enlil import plot_archive
 
@@ -123,4 +139,21 @@ def _run_assess(args: argparse.Namespace) -> int:
         )
     Console().print(table)
     print(f"archive: {out} (clean F1 {summary['clean_f1']:.3f}; resumed {outcome.resumed})")
+    print(classes_line(counted))
     return 0
+
+
+def _counted(args: argparse.Namespace, model: Any) -> dict[str, list[str]]:
+    """Which classes the search counts; differing class lists fail here, before any worker."""
+    from anunnaki.cli._detector import classes_counted, shared_view
+    from anunnaki.datasets import load_split
+    from anunnaki.lec import DetectorError, class_map
+
+    det = model.load()
+    data = load_split(args.data, args.split)
+    try:
+        view, kept = shared_view(args, det, data)
+        class_map(view, kept)
+    except DetectorError as exc:
+        raise DetectorError(f"{args.model}: model {model.model_id!r}: {exc}") from None
+    return classes_counted(det, data)

@@ -121,6 +121,65 @@ def _console() -> Console:
     return console if console.is_terminal else Console(highlight=False, width=120)
 
 
+# -- the model a command measures: MODEL|REG.yaml --model ID [--shared-classes] -------------
+# assess, evaluate-detector, oracle train and oracle evaluate read them alike (issue 22 item 7).
+
+
+def add_model_options(p: argparse.ArgumentParser, *, dest: str = "model_id") -> None:
+    """``--model ID`` (a model of a registry) and ``--shared-classes``."""
+    p.add_argument(
+        "--model",
+        dest=dest,
+        metavar="ID",
+        help="with a registry: which of its models (default: its default-domain model)",
+    )
+    p.add_argument(
+        "--shared-classes",
+        action="store_true",
+        help="measure on the class names the model and the data both have, leaving the "
+        "others' boxes and detections out (default: refuse differing class lists)",
+    )
+
+
+def shared_view(args: argparse.Namespace, det: Any, *data: Any) -> tuple[Any, ...]:
+    """``(det, *data)`` cut to their shared classes with ``--shared-classes``, else as given.
+
+    Every dataset (``None`` passes through) is cut to the classes it shares with *det*.
+    """
+    if not args.shared_classes:
+        return (det, *data)
+    from anunnaki.lec import shared_classes
+
+    out: list[Any] = []
+    view = det
+    for ds in data:
+        kept = ds
+        if ds is not None:
+            view, kept = shared_classes(det, ds)
+        out.append(kept)
+    return (view, *out)
+
+
+def classes_counted(det: Any, data: Any) -> dict[str, list[str]]:
+    """Which classes a measurement counted, and which of the model's and the data's it left out."""
+    mine, theirs = list(det.classes), list(data.classes)
+    counted = [c for c in theirs if c in mine]
+    return {
+        "classes": counted,
+        "model_only": [c for c in mine if c not in counted],
+        "data_only": [c for c in theirs if c not in counted],
+    }
+
+
+def classes_line(counted: dict[str, list[str]]) -> str:
+    """``classes counted: pedestrian (left out: the data's deer)`` for a console."""
+    left = [f"the model's {', '.join(counted['model_only'])}"] if counted["model_only"] else []
+    left += [f"the data's {', '.join(counted['data_only'])}"] if counted["data_only"] else []
+    return f"classes counted: {', '.join(counted['classes'])}" + (
+        f" (left out: {'; '.join(left)})" if left else ""
+    )
+
+
 # -- make-dataset ----------------------------------------------------------------------------
 
 
@@ -325,20 +384,29 @@ def _run_train(args: argparse.Namespace) -> int:
         TextColumn("epoch {task.fields[epoch]}"),
         BarColumn(),
         MofNCompleteColumn(),
-        TextColumn("loss {task.fields[loss]:.3f}"),
+        TextColumn("loss {task.fields[loss]:.3f}  val F1 {task.fields[val_f1]}"),
         TimeElapsedColumn(),
         TimeRemainingColumn(),
         console=console,
         disable=not console.is_terminal,
     ) as bar:
-        task = bar.add_task("train", total=None, epoch=0, loss=float("nan"))
+        task = bar.add_task("train", total=None, epoch=0, loss=float("nan"), val_f1="-")
 
         def on_step(step: int, total: int, info: dict[str, float]) -> None:
             bar.update(
                 task, completed=step, total=total, epoch=int(info["epoch"]), loss=info["loss"]
             )
 
-        result = train_detector(train, val, config=config, test=test, on_step=on_step)
+        def on_epoch(info: dict[str, float]) -> None:
+            bar.update(task, val_f1=f"{info['val_f1']:.3f}")
+            console.print(
+                f"epoch {int(info['epoch'])}/{int(info['epochs'])}: loss {info['loss']:.3f}, "
+                f"val F1 {info['val_f1']:.3f} ({info['seconds']:.0f} s)"
+            )
+
+        result = train_detector(
+            train, val, config=config, test=test, on_step=on_step, on_epoch=on_epoch
+        )
     digest = save_detector(result.detector, out)
     table = Table(title=f"{config.model_id} ({config.domain}), trained in {result.seconds:.0f} s")
     for col in ("split", "precision", "recall", "F1", "tp", "fp", "fn"):
@@ -378,9 +446,9 @@ def _add_evaluate(sub: Any) -> None:
     p.add_argument(
         "model",
         help="model file (NAME.safetensors or NAME.json), or a model registry (REG.yaml: its "
-        "default model, or --model-id; any loader plugin its entries name)",
+        "default model, or --model ID; any loader plugin its entries name)",
     )
-    p.add_argument("--model-id", help="with a registry: which of its models (default: default)")
+    add_model_options(p)
     p.add_argument("--data", "-d", required=True, help="dataset folder or COCO JSON")
     p.add_argument("--split", default="test", help="train, val or test (test)")
     p.add_argument("--phenomenon", "-p", help="e.g. fog, raindrop, hsl, fog+raindrop")
@@ -443,22 +511,20 @@ def _report_head(
 
 def _load_evaluated(args: argparse.Namespace) -> tuple[Any, Path, str, str]:
     """The model ``evaluate-detector`` measures: ``(detector, file, model id, domain)``."""
-    from anunnaki.lec import load_detector, load_registry
+    from anunnaki.lec import resolve_model
 
-    registered = Path(args.model).suffix in (".yaml", ".yml")
-    if args.model_id is not None and not registered:
-        raise AnunnakiError("--model-id picks a model of a registry (REG.yaml); MODEL is a file")
-    if not registered:
-        det = load_detector(args.model)
-        return det, Path(args.model), det.model_id, det.domain
-    registry = load_registry(args.model)
-    spec = registry.resolve(model_id=args.model_id)
-    if args.update_sidecar and spec.loader is not None:
+    model = resolve_model(args.model, args.model_id)
+    if args.update_sidecar and model.spec is not None and model.spec.loader is not None:
         raise AnunnakiError(
-            f"--update-sidecar writes an anunnaki model file's sidecar; model {spec.id!r} "
-            f"is loaded by {spec.loader!r}: put its metrics in the registry instead"
+            f"--update-sidecar writes an anunnaki model file's sidecar; model "
+            f"{model.model_id!r} is loaded by {model.spec.loader!r}: put its metrics in the "
+            "registry instead"
         )
-    return registry.load(spec), spec.file, spec.id, spec.domain
+    if args.update_sidecar and args.shared_classes:
+        raise AnunnakiError(
+            "--update-sidecar records the model's own figures; drop --shared-classes"
+        )
+    return model.load(), model.file, model.model_id, model.domain
 
 
 def _check_evaluate_options(args: argparse.Namespace) -> None:
@@ -497,10 +563,13 @@ def _run_evaluate(args: argparse.Namespace) -> int:
     data = load_split(args.data, args.split)
     threshold = args.threshold
     try:
+        counted = classes_counted(det, data)
+        det, data = shared_view(args, det, data)
         clean = evaluate_detector(det, data, score_threshold=threshold)
     except DetectorError as exc:
         raise AnunnakiError(f"{args.model}: model {model_id!r}: {exc}") from None
     report = _report_head(args, det, model_id, domain, len(data))
+    report |= counted
     report["clean"] = clean.as_dict()
     rows = [("clean", clean)]
     if phen is not None:
@@ -536,6 +605,7 @@ def _run_evaluate(args: argparse.Namespace) -> int:
             str(m.tp), str(m.fp), str(m.fn),
         )  # fmt: skip
     console.print(table)
+    console.print(classes_line(counted))
     if args.update_sidecar:
         console.print(f"updated the metrics in {report['sidecar']}")
     if phen is not None:
@@ -558,7 +628,9 @@ def _run_contexts(args: argparse.Namespace, det: Any, model_id: str, domain: str
     phen = resolve_phenomenon(args.phenomenon)
     batch = fixed_batch(args.data, args.split, args.batch_images, seed=args.seed)
     thresholds = (float(args.thresholds[0]), float(args.thresholds[1]))
+    counted = classes_counted(det, batch)
     try:
+        det, batch = shared_view(args, det, batch)
         clean = evaluate_detector(det, batch, score_threshold=args.threshold)
         drawn = draw_contexts(
             det, batch, phen, args.contexts, clean_f1=clean.f1, thresholds=thresholds,
@@ -579,6 +651,7 @@ def _run_contexts(args: argparse.Namespace, det: Any, model_id: str, domain: str
     f1s = np.asarray([r.f1 for r in drawn.results])
     counts = drawn.counts()
     report = _report_head(args, det, model_id, domain, len(batch))
+    report |= counted
     report |= {
         "phenomenon": phen.name,
         "param_names": list(phen.param_names),
@@ -614,6 +687,7 @@ def _run_contexts(args: argparse.Namespace, det: Any, model_id: str, domain: str
         f"clean F1 {clean.f1:.3f}; mean F1 under {phen.name} {report['f1']:.3f} "
         f"(min {report['f1_min']:.3f}); categories 0/1/2: {counts[0]}/{counts[1]}/{counts[2]}"
     )
+    console.print(classes_line(counted))
     return 0
 
 

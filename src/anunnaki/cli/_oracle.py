@@ -6,6 +6,8 @@ import argparse
 import json
 from typing import Any
 
+from anunnaki.cli._detector import add_model_options, classes_counted, classes_line, shared_view
+
 __all__ = ["add_parser"]
 
 
@@ -20,12 +22,18 @@ def add_parser(sub: Any) -> None:
         "train",
         help="train a model's oracle on archive contexts (or random ones: the MC baseline)",
     )
-    t.add_argument("--models", required=True, help="model registry YAML")
-    t.add_argument("--model", required=True, help="model id whose behavior is predicted")
+    t.add_argument(
+        "--models",
+        required=True,
+        help="model registry YAML (any loader plugin its entries name), or a model file",
+    )
+    add_model_options(t, dest="model")
     t.add_argument("--data", required=True, help="dataset folder (train and val splits)")
     t.add_argument("--archive", action="append", default=[], help="Enlil archive (repeatable)")
     t.add_argument("--random", type=int, default=0, help="N uniformly random contexts instead")
-    t.add_argument("--phenomenon", action="append", default=[], help="with --random")
+    t.add_argument(
+        "--phenomenon", "-p", action="append", default=[], help="with --random (repeatable)"
+    )
     t.add_argument("--out", required=True, help="oracle file NAME (.safetensors + .json)")
     t.add_argument("--frames", type=int, default=3000)
     t.add_argument("--val-frames", type=int, default=600)
@@ -46,38 +54,28 @@ def add_parser(sub: Any) -> None:
         action="store_false",
         help="the category head alone: no perceived-context lookup over the archive",
     )
+    t.add_argument("--json", action="store_true", help="print the result as one JSON object")
     t.set_defaults(run=run_train)
     _add_evaluate(osub)
 
 
 def run_train(args: argparse.Namespace) -> int:
-    """Train, save, print the oracle's sha256 and val metrics as JSON."""
-    from anunnaki.enlil import (
-        EnlilError,
-        OracleTrainConfig,
-        contexts_from_archive,
-        fixed_batch,
-        random_contexts,
-        train_oracle,
-    )
-    from anunnaki.lec import evaluate_detector, load_registry
+    """Train and save the oracle; print its val figures (a table, or JSON with ``--json``)."""
+    from anunnaki.enlil import EnlilError, OracleTrainConfig, contexts_from_archive, train_oracle
+    from anunnaki.lec import resolve_model
 
     if bool(args.archive) == bool(args.random):
         raise EnlilError("oracle train: give --archive PATH (repeatable) or --random N")
-    registry = load_registry(args.models)
-    spec = registry.get(args.model)
-    digest = registry.verify(spec)
+    if args.random and not args.phenomenon:
+        raise EnlilError("oracle train --random N needs --phenomenon P (repeatable)")
+    model = resolve_model(args.models, args.model)
+    console = _console()
     sets = [contexts_from_archive(a) for a in args.archive]
+    counted = None
     if args.random:
-        if not args.phenomenon:
-            raise EnlilError("oracle train --random N needs --phenomenon P (repeatable)")
-        detector = registry.load(spec)
-        batch = fixed_batch(args.data, "val", 32, seed=args.seed)
-        clean = float(evaluate_detector(detector, batch).f1)
-        sets = [
-            random_contexts(detector, batch, p, args.random, clean_f1=clean, seed=args.seed)
-            for p in args.phenomenon
-        ]
+        sets, counted = _random_sets(args, model, console)
+    for warning in _no_degraded(sets):
+        console.print(warning, style="yellow", soft_wrap=True)
     config = OracleTrainConfig(
         frames=args.frames,
         val_frames=args.val_frames,
@@ -87,17 +85,118 @@ def run_train(args: argparse.Namespace) -> int:
         lookup=args.lookup,
         extra={"extra_data": list(args.extra_data)} if args.extra_data else {},
     )
-    oracle = train_oracle(
-        _joined(args.data, args.extra_data, "train"),
-        _joined(args.data, args.extra_data, "val"),
-        sets,
-        model_id=spec.id,
-        model_sha256=digest,
-        config=config,
-    )
+    with _bar(console) as bar:
+        task = bar.add_task("frames", total=None)
+
+        def progress(stage: str, done: int, total: int) -> None:
+            bar.update(task, description=stage, completed=done, total=total)
+            if not console.is_terminal and (stage == "epochs" or done == total):
+                console.print(f"{stage} {done}/{total}")  # a log gets a line per step
+
+        oracle = train_oracle(
+            _joined(args.data, args.extra_data, "train"),
+            _joined(args.data, args.extra_data, "val"),
+            sets,
+            model_id=model.model_id,
+            model_sha256=model.sha256,
+            config=config,
+            progress=progress,
+        )
     sha = oracle.save(args.out)
-    print(json.dumps({"file": str(args.out), "sha256": sha, **oracle.card.metrics}, indent=2))
+    report = {"file": str(args.out), "sha256": sha, "model_id": model.model_id}
+    report |= {"contexts": oracle.card.training["contexts"], **oracle.card.metrics}
+    if counted is not None:
+        report |= counted
+    if args.json:
+        print(json.dumps(report, indent=2))
+        return 0
+    _print_train(report)
     return 0
+
+
+def _console() -> Any:
+    """Progress and warnings go to stderr: stdout stays the table (or the JSON)."""
+    from rich.console import Console
+
+    return Console(stderr=True, highlight=False)
+
+
+def _bar(console: Any) -> Any:
+    from rich.progress import (
+        BarColumn,
+        MofNCompleteColumn,
+        Progress,
+        TextColumn,
+        TimeElapsedColumn,
+    )
+
+    columns = (TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn())
+    return Progress(*columns, TimeElapsedColumn(), console=console)
+
+
+def _random_sets(args: argparse.Namespace, model: Any, console: Any) -> tuple[list[Any], Any]:
+    """``--random N``: N uniform contexts per phenomenon measured on a val batch (MC baseline)."""
+    from anunnaki.enlil import fixed_batch, random_contexts
+    from anunnaki.lec import DetectorError, evaluate_detector
+
+    detector = model.load()
+    batch = fixed_batch(args.data, "val", 32, seed=args.seed)
+    counted = classes_counted(detector, batch)
+    try:
+        detector, batch = shared_view(args, detector, batch)
+        clean = float(evaluate_detector(detector, batch).f1)
+    except DetectorError as exc:
+        raise DetectorError(f"{args.models}: model {model.model_id!r}: {exc}") from None
+    console.print(classes_line(counted))
+    sets = [
+        random_contexts(detector, batch, p, args.random, clean_f1=clean, seed=args.seed)
+        for p in args.phenomenon
+    ]
+    return sets, counted
+
+
+def _no_degraded(sets: list[Any]) -> list[str]:
+    """A warning per phenomenon whose contexts hold no category-1 (degraded) context."""
+    return [
+        f"warning: the {s.phenomenon} contexts ({s.source}) hold no category-1 (degraded) "
+        f"context (categories 0/1/2: {'/'.join(map(str, s.counts()))}): the oracle cannot "
+        "learn that category and will call a degraded frame unaffected or compromised. "
+        "Give it contexts that reach the band: a longer search (anunnaki assess --budget N, "
+        "the enlil search looks for the category edges), another archive of the phenomenon "
+        "(--archive, repeatable), or more --random contexts."
+        for s in sets
+        if s.counts()[1] == 0
+    ]
+
+
+def _print_train(report: dict[str, Any]) -> None:
+    """The contexts per phenomenon, the val figures and the file to name in the registry."""
+    from rich.console import Console
+    from rich.table import Table
+
+    val = report.get("val", {})
+    table = Table(title=f"oracle of {report['model_id']}: {report['file']}")
+    table.add_column("contexts", justify="left")
+    table.add_column("categories 0/1/2", justify="right")
+    for c in report["contexts"]:
+        table.add_row(f"{c['phenomenon']} ({c['source']})", "/".join(map(str, c["counts"])))
+    out = Console(highlight=False)
+    out.print(table)
+    figures = Table(title="val frames (after temperature scaling)")
+    names = {"accuracy": "accuracy", "macro_f1": "macro-F1", "ece": "ECE",
+             "head_macro_f1": "head alone: macro-F1"}  # fmt: skip
+    keys = [k for k in names if k in val]
+    for k in keys:
+        figures.add_column(names[k], justify="right")
+    figures.add_row(*(f"{val[k]:.3f}" for k in keys))
+    out.print(figures)
+    if "classes" in report:
+        out.print(classes_line(report))
+    out.print(
+        f"saved {report['file']} (sha256 {report['sha256']}); name it in the registry "
+        f"entry: oracle: {{file: …, sha256: {report['sha256']}}}",
+        soft_wrap=True,
+    )
 
 
 def _joined(data: str, extra: list[str], split: str) -> Any:
@@ -133,8 +232,12 @@ def _add_evaluate(osub: Any) -> None:
             "fitted on the val split (docs/enlil.md)."
         ),
     )
-    e.add_argument("--models", required=True, help="model registry YAML")
-    e.add_argument("--model", required=True, help="model id whose behavior is predicted")
+    e.add_argument(
+        "--models",
+        required=True,
+        help="model registry YAML (any loader plugin its entries name), or a model file",
+    )
+    add_model_options(e, dest="model")
     e.add_argument("--data", required=True, help="dataset folder (the split; val for baselines)")
     e.add_argument("--split", default="test", help="split the figures come from (test)")
     e.add_argument("--phenomenon", "-p", required=True, help="e.g. fog, raindrop, hsl")
@@ -170,27 +273,28 @@ def _add_evaluate(osub: Any) -> None:
     e.set_defaults(run=run_evaluate)
 
 
-def _oracles(args: argparse.Namespace, spec: Any) -> dict[str, Any]:
+def _oracles(args: argparse.Namespace, model: Any) -> dict[str, Any]:
     """Name → loaded oracle: ``--oracle [NAME=]FILE`` or the registry's."""
     from anunnaki.enlil import EnlilError, load_oracle
 
+    ref = model.spec.oracle if model.spec is not None else None
     if not args.oracle:
-        if spec.oracle is None:
+        if ref is None:
             if args.baseline:
                 return {}
             raise EnlilError(
-                f"{args.models}: model {spec.id!r} names no oracle; give --oracle FILE "
-                "(or add oracle: {file, sha256} to its entry), or only --baseline"
+                f"{args.models}: model {model.model_id!r} names no oracle; give --oracle FILE "
+                "(or add oracle: {file, sha256} to its registry entry), or only --baseline"
             )
-        return {"oracle": load_oracle(spec.oracle.file, sha256=spec.oracle.sha256)}
+        return {"oracle": load_oracle(ref.file, sha256=ref.sha256)}
     out: dict[str, Any] = {}
     for i, text in enumerate(args.oracle):
         name, sep, path = text.partition("=")
         name, path = (name, path) if sep else (f"oracle{i}" if i else "oracle", text)
         oracle = load_oracle(path)
-        if oracle.model_id != spec.id:
+        if oracle.model_id != model.model_id:
             raise EnlilError(
-                f"--oracle {path}: it assesses model {oracle.model_id!r}, not {spec.id!r}"
+                f"--oracle {path}: it assesses model {oracle.model_id!r}, not {model.model_id!r}"
             )
         out[name] = oracle
     return out
@@ -200,7 +304,7 @@ def run_evaluate(args: argparse.Namespace) -> int:
     """Score the oracle(s) and baselines; print the figures (JSON with --json)."""
     from anunnaki.datasets import load_split
     from anunnaki.enlil import EnlilError, evaluate_oracles, parse_contexts
-    from anunnaki.lec import load_registry
+    from anunnaki.lec import resolve_model
 
     spec_contexts = parse_contexts(args.contexts)
     low, high = args.thresholds
@@ -210,19 +314,21 @@ def run_evaluate(args: argparse.Namespace) -> int:
         import torch
 
         torch.set_num_threads(args.threads)
-    registry = load_registry(args.models)
-    spec = registry.get(args.model)
-    registry.verify(spec)
-    oracles = _oracles(args, spec)
-    detector = registry.load(spec)
+    model = resolve_model(args.models, args.model)
+    oracles = _oracles(args, model)
+    detector = model.load()
+    data = load_split(args.data, args.split)
+    counted = classes_counted(detector, data)
+    val = load_split(args.data, "val") if args.baseline else None
+    detector, data, val = shared_view(args, detector, data, val)
     report = evaluate_oracles(
         detector,
-        load_split(args.data, args.split),
+        data,
         args.phenomenon,
         spec_contexts,
         oracles=oracles,
         baselines=tuple(args.baseline),
-        val=load_split(args.data, "val") if args.baseline else None,
+        val=val,
         fit_spec=parse_contexts(args.fit_contexts) if args.fit_contexts else None,
         per_context=args.frames_per_context,
         window=args.window,
@@ -231,11 +337,12 @@ def run_evaluate(args: argparse.Namespace) -> int:
         seed=args.seed,
     )
     report = {
-        "model_id": spec.id,
+        "model_id": model.model_id,
         "data": str(args.data),
         "split": args.split,
         "seed": args.seed,
         "thresholds": [low, high],
+        **counted,
         **report,
     }
     first = next(iter(report["predictors"].values()))
@@ -244,6 +351,7 @@ def run_evaluate(args: argparse.Namespace) -> int:
         print(json.dumps(report))
         return 0
     _print_table(report)
+    print(classes_line(counted))
     return 0
 
 

@@ -14,7 +14,7 @@ confidence.
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass, field
 from typing import Any
 
@@ -319,6 +319,7 @@ def _fit(
     data: LabelledFrames,
     config: OracleTrainConfig,
     soft: npt.NDArray[np.float32] | None = None,
+    progress: Callable[[str, int, int], None] | None = None,
 ) -> list[float]:
     torch = _torch()
     f = torch.nn.functional
@@ -363,6 +364,8 @@ def _fit(
             sched.step()
             total += float(loss.detach()) * len(idx)
         losses.append(total / len(x))
+        if progress is not None:
+            progress("epochs", len(losses), config.epochs)
     net.eval()  # left channels-last: OracleModel runs it so, and save() writes C order
     return losses
 
@@ -446,8 +449,12 @@ def train_oracle(
     model_sha256: str = "",
     thresholds: tuple[float, float] = (0.05, 0.10),
     config: OracleTrainConfig | None = None,
+    progress: Callable[[str, int, int], None] | None = None,
 ) -> OracleModel:
     """Train an oracle for *model_id* on *sets* (one per phenomenon); see the module docstring.
+
+    *progress* ``(stage, done, total)`` is called as the stages advance: ``frames`` (the
+    train and val frames perturbed, 0..2), ``epochs`` (after each one), ``calibrate`` (0..1).
 
     Returns:
         The oracle, its card holding val metrics (``val.accuracy``, ``val.macro_f1``,
@@ -473,14 +480,19 @@ def train_oracle(
         input_size=cfg.input_size,
     )
     net = build_network(card)
+    step = progress or (lambda stage, done, total: None)
     frac, bal = cfg.clean_fraction, cfg.balanced
+    step("frames", 0, 2)
     tr = perturbed_frames(train, sets, cfg.frames, clean_fraction=frac, balanced=bal, seed=cfg.seed)
+    step("frames", 1, 2)
     va = perturbed_frames(
         val, sets, cfg.val_frames, clean_fraction=frac, balanced=bal, seed=cfg.seed + 1_000_003
     )
+    step("frames", 2, 2)
     lookup = fit_lookup(sets, thresholds=thresholds) if cfg.lookup else None
     soft = soft_targets(lookup, sets, tr) if lookup is not None and cfg.soft_labels else None
-    losses = _fit(net, tr, cfg, soft)
+    losses = _fit(net, tr, cfg, soft, progress)
+    step("calibrate", 0, 1)
     oracle = OracleModel(card, net)
     chunks = [oracle.logits(va.frames[i : i + 256]) for i in range(0, len(va.frames), 256)]
     logits, params, phen = (np.concatenate([c[j] for c in chunks]) for j in range(3))
@@ -511,4 +523,5 @@ def train_oracle(
     oracle.card = oracle.card.model_copy(
         update={"metrics": {"val": val_metrics}, "training": training}
     )
+    step("calibrate", 1, 1)
     return oracle

@@ -7,7 +7,6 @@ Dask worker); each worker loads the model and the fixed batch once per job and c
 
 from __future__ import annotations
 
-import hashlib
 import json
 import multiprocessing
 from collections.abc import Callable, Iterator, Sequence
@@ -42,13 +41,17 @@ class Job:
     """What every evaluation of one search shares (picklable: it travels to the workers).
 
     Attributes:
-        model: A model file (loaded with :func:`anunnaki.lec.load_detector`) or a detector.
+        model: A model file or a registry (``REG.yaml``; read with
+            :func:`anunnaki.lec.resolve_model`), or a detector.
         data: A dataset folder or a loaded split.
         phenomenon: Phenomenon or composition name.
         split: The split of the fixed batch.
         batch_images: Images in the fixed batch.
         seed: Seed of the batch choice and of the phenomenon (the same for every context).
         thresholds: Category thresholds.
+        model_id: With a registry: which of its models (default: its default model).
+        shared_classes: Measure on the classes the model and the data share
+            (:func:`anunnaki.lec.shared_classes`) instead of refusing other class lists.
 
     """
 
@@ -59,12 +62,16 @@ class Job:
     batch_images: int = 32
     seed: int = 0
     thresholds: tuple[float, float] = (0.05, 0.10)
+    model_id: str | None = None
+    shared_classes: bool = False
 
     def key(self) -> str:
         """Cache key of the loaded model and batch in a worker."""
-        parts = [self.model if isinstance(self.model, str) else id(self.model)]
+        parts: list[str | int | bool | None] = [
+            self.model if isinstance(self.model, str) else id(self.model)
+        ]
         parts += [self.data if isinstance(self.data, str) else id(self.data)]
-        parts += [self.split, self.batch_images, self.seed]
+        parts += [self.split, self.batch_images, self.seed, self.model_id, self.shared_classes]
         return json.dumps(parts, default=str)
 
 
@@ -76,13 +83,15 @@ _LOADED: dict[str, tuple[Detector, Dataset, float, dict[Any, Any]]] = {}
 def _loaded(job: Job) -> tuple[Detector, Dataset, float, dict[Any, Any]]:
     key = job.key()
     if key not in _LOADED:
-        if isinstance(job.model, str):
-            from anunnaki.lec import load_detector
+        from anunnaki.lec import resolve_model, shared_classes
 
-            det = load_detector(job.model)
+        if isinstance(job.model, str):
+            det = resolve_model(job.model, job.model_id).load()
         else:
             det = job.model
         batch = fixed_batch(job.data, job.split, job.batch_images, job.seed)
+        if job.shared_classes:
+            det, batch = shared_classes(det, batch)
         _LOADED[key] = (det, batch, float(evaluate_detector(det, batch).f1), {})
     return _LOADED[key]
 
@@ -262,9 +271,10 @@ def run_search(
 
 def _identity(job: Job) -> tuple[str, str]:
     if isinstance(job.model, str):
-        det = _loaded(job)[0]
-        digest = hashlib.sha256(Path(job.model).read_bytes()).hexdigest()
-        return str(det.model_id), digest
+        from anunnaki.lec import resolve_model
+
+        model = resolve_model(job.model, job.model_id)
+        return model.model_id, model.sha256
     return str(getattr(job.model, "model_id", type(job.model).__name__)), ""
 
 

@@ -18,6 +18,11 @@ never unpickles anything::
     results = det.detect(frames)                      # list[DetectionResult]
     m = f1_at_iou(results, truths, score_threshold=0.0)   # Metrics(precision, recall, f1, …)
 
+A model is named as the commands name it — a model file, or a registry and an id, whatever
+loader plugin the entry names — with :func:`resolve_model` (``.load()`` gives the detector);
+:func:`shared_classes` cuts a detector and a dataset to the class names both have, to measure
+e.g. a person detector on data that also labels deer.
+
 The F1 rule used everywhere (``docs/detector.md``): class-aware greedy matching in
 descending score order at IoU ≥ 0.5, each truth matched at most once, the score threshold
 chosen on the validation split (:func:`choose_threshold`) and F1 reported on the test split.
@@ -89,20 +94,25 @@ from anunnaki.lec._registry import (
     ModelRegistryError,
     ModelSpec,
     OracleRef,
+    ResolvedModel,
     UnknownModelError,
     load_registry,
     parse_registry,
+    resolve_model,
 )
 
 if TYPE_CHECKING:
     from anunnaki.lec._centernet import CenterNet, CenterNetArchitecture, CenterNetDetector
     from anunnaki.lec._train import (
         Augmenter,
+        EpochHook,
+        SharedClassesDetector,
         TrainConfig,
         TrainResult,
         class_map,
         evaluate_detector,
         predict,
+        shared_classes,
         train_detector,
     )
 
@@ -124,6 +134,7 @@ __all__ = [
     "DetectorArchitecture",
     "DetectorError",
     "DetectorLoadError",
+    "EpochHook",
     "ImageBatch",
     "LecNode",
     "LecNodeStats",
@@ -136,6 +147,8 @@ __all__ = [
     "ModelSpec",
     "OracleRef",
     "ReadsFiles",
+    "ResolvedModel",
+    "SharedClassesDetector",
     "SwapResult",
     "TrainConfig",
     "TrainResult",
@@ -156,8 +169,10 @@ __all__ = [
     "parse_registry",
     "predict",
     "read_card",
+    "resolve_model",
     "save_detector",
     "sha256_file",
+    "shared_classes",
     "sidecar_path",
     "train_detector",
     "update_metrics",
@@ -169,6 +184,9 @@ _LAZY = {
     "CenterNetArchitecture": "anunnaki.lec._centernet",
     "CenterNetDetector": "anunnaki.lec._centernet",
     "Augmenter": "anunnaki.lec._train",
+    "EpochHook": "anunnaki.lec._train",
+    "SharedClassesDetector": "anunnaki.lec._train",
+    "shared_classes": "anunnaki.lec._train",
     "TrainConfig": "anunnaki.lec._train",
     "TrainResult": "anunnaki.lec._train",
     "class_map": "anunnaki.lec._train",

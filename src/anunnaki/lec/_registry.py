@@ -45,6 +45,7 @@ import math
 import re
 import threading
 from collections.abc import Callable, Iterable, Iterator, Mapping
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Annotated, Any, Literal
 
@@ -69,9 +70,11 @@ __all__ = [
     "ModelRegistryError",
     "ModelSpec",
     "OracleRef",
+    "ResolvedModel",
     "UnknownModelError",
     "load_registry",
     "parse_registry",
+    "resolve_model",
 ]
 
 log = logging.getLogger("anunnaki.lec")
@@ -839,3 +842,84 @@ def load_registry(path: str | Path, *, loader: Loader | None = None) -> ModelReg
     """
     data, lines = load_yaml(path)
     return _build(data, lines, str(path), Path(path).resolve().parent, loader)
+
+
+# -- one model, named on a command line ------------------------------------------------------
+
+#: The suffixes of a registry file; any other path is a model file.
+REGISTRY_SUFFIXES = (".yaml", ".yml")
+
+
+@dataclass(frozen=True)
+class ResolvedModel:
+    """One model named as a command line names it: a model file, or a registry and an id.
+
+    Attributes:
+        source: What was given (``NAME.safetensors``, ``NAME.json`` or ``REG.yaml``).
+        model_id: The registry's id of the model, or the model file's own.
+        domain: Its operating domain.
+        file: The model file.
+        sha256: Hex sha256 of ``file`` (checked against the registry's pins, if any).
+        spec: The registry entry (``None`` for a model file).
+        registry: The registry (``None`` for a model file).
+
+    Nothing is loaded until :meth:`load`: an oracle trained from an archive needs the
+    model's id and hash, not the model.
+
+    """
+
+    source: str
+    model_id: str
+    domain: str
+    file: Path
+    sha256: str
+    spec: ModelSpec | None = None
+    registry: ModelRegistry | None = None
+
+    def load(self) -> Detector:
+        """The detector: through the registry (its files verified again) or ``load_detector``.
+
+        Raises:
+            ModelIntegrityError: As :meth:`ModelRegistry.load`.
+            ModelLoadError: As :meth:`ModelRegistry.load`.
+            DetectorLoadError: A model file is not a valid anunnaki model.
+
+        """
+        if self.registry is not None and self.spec is not None:
+            return self.registry.load(self.spec)
+        return _default_loader(self.file)
+
+
+def resolve_model(source: str | Path, model_id: str | None = None) -> ResolvedModel:
+    """The model *source* names: a model file, or registry *source*'s model *model_id*.
+
+    This is how every command that measures a model (``assess``, ``evaluate-detector``,
+    ``oracle train``, ``oracle evaluate``) reads ``MODEL`` and ``--model ID``, so a model
+    served by a loader plugin (``loader: NAME`` in its registry entry) is measured like a
+    native one.
+
+    Args:
+        source: ``NAME.safetensors`` / ``NAME.json``, or a registry ``REG.yaml``.
+        model_id: With a registry: which model (default: its ``default``-domain model).
+
+    Raises:
+        ModelFileError: A bad registry file (naming the line).
+        UnknownModelError: No model has that id (listing those that exist).
+        ModelIntegrityError: A file's sha256 differs from the registry's.
+        ModelRegistryError: *model_id* given with a model file.
+        DetectorLoadError: A model file's sidecar is missing or invalid.
+
+    """
+    path = Path(source)
+    if path.suffix.lower() in REGISTRY_SUFFIXES:
+        registry = load_registry(path)
+        spec = registry.resolve(model_id=model_id)
+        digest = registry.verify(spec)
+        return ResolvedModel(str(source), spec.id, spec.domain, spec.file, digest, spec, registry)
+    if model_id is not None:
+        raise ModelRegistryError(
+            f"--model {model_id} picks a model of a registry (REG.yaml), and {source} is a "
+            "model file; drop --model, or name the registry"
+        )
+    card = read_card(path)
+    return ResolvedModel(str(source), card.model_id, card.domain, path, sha256_file(path))

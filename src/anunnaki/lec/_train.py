@@ -16,7 +16,7 @@ import math
 import random
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -39,10 +39,13 @@ from anunnaki.phenomena import Phenomenon, get_phenomenon
 
 __all__ = [
     "Augmenter",
+    "EpochHook",
+    "SharedClassesDetector",
     "TrainConfig",
     "TrainResult",
     "evaluate_detector",
     "predict",
+    "shared_classes",
     "train_detector",
 ]
 
@@ -195,6 +198,11 @@ class TrainResult:
 #: ``on_step(step, total_steps, info)`` — info has ``epoch`` and the running ``loss``.
 ProgressHook = Callable[[int, int, dict[str, float]], None]
 
+#: ``on_epoch(info)`` after every epoch — info has ``epoch``, ``epochs``, the epoch's mean
+#: ``loss`` (``heat``, ``box``), its ``seconds`` and ``val_f1``: F1 on the val split at the
+#: threshold that maximises it then (what the final threshold choice would pick).
+EpochHook = Callable[[dict[str, float]], None]
+
 
 def _zoom(
     image: Image,
@@ -309,7 +317,9 @@ def predict(
         for i in range(start, min(n, start + batch_size)):
             image = data.image(i) if isinstance(data, Dataset) else data[i]
             batch.append(transform(i, image) if transform is not None else image)
-        if isinstance(det, CenterNetDetector):
+        if isinstance(det, CenterNetDetector) or (
+            isinstance(det, SharedClassesDetector) and isinstance(det.inner, CenterNetDetector)
+        ):
             out.extend(det.detect(batch, score_threshold=score_floor))
         else:
             out.extend(det.detect(batch))
@@ -389,11 +399,100 @@ def class_map(det: Detector, data: Dataset) -> npt.NDArray[np.int64] | None:
     if mine == theirs:
         return None
     if sorted(mine) != sorted(theirs) or len(set(mine)) != len(mine):
+        shared = [c for c in theirs if c in mine]
         raise DetectorError(
             f"the detector's classes {list(mine)} are not the dataset's {list(theirs)}; "
             "evaluate on a dataset with the same class names (their order may differ)"
+            + (
+                f", or on the classes both have ({', '.join(shared)}: --shared-classes, "
+                "anunnaki.lec.shared_classes)"
+                if shared
+                else ""
+            )
         )
     return np.asarray([theirs.index(name) for name in mine], dtype=np.int64)
+
+
+class SharedClassesDetector:
+    """A detector that reports only some of its classes, renumbered (:func:`shared_classes`).
+
+    Args:
+        inner: The detector.
+        classes: The class names kept, in the order of the new label indices.
+
+    """
+
+    def __init__(self, inner: Detector, classes: Sequence[str]) -> None:
+        self.inner = inner
+        self.classes = tuple(classes)
+        self.model_id = inner.model_id
+        self.domain = inner.domain
+        own = tuple(inner.classes)
+        self._map = np.asarray([self.classes.index(c) if c in self.classes else -1 for c in own])
+
+    @property
+    def score_threshold(self) -> float:
+        """The inner detector's (0.0 when it has none)."""
+        return float(getattr(self.inner, "score_threshold", 0.0))
+
+    def detect(self, images: Any, **options: Any) -> list[DetectionResult]:
+        """The inner detector's detections of the kept classes (*options* passed on)."""
+        out = []
+        for r in self.inner.detect(images, **options):
+            labels = self._map[np.asarray(r.labels, np.int64)]
+            keep = labels >= 0
+            out.append(DetectionResult(r.boxes[keep], labels[keep], r.scores[keep]))
+        return out
+
+
+def shared_classes(det: Detector, data: Dataset) -> tuple[Detector, Dataset]:
+    """*det* and *data* cut to the class names both have, to measure a detector on those.
+
+    E.g. a third-party person detector (``pedestrian``) on a dataset of ``pedestrian`` and
+    ``deer``: the dataset's deer boxes (and ignore boxes) are dropped, and so are the
+    detector's detections of classes the dataset lacks. A detection of a kept class on a
+    dropped object (a "pedestrian" on a deer) still counts as a false positive.
+
+    Returns:
+        The detector (wrapped only if it has classes the dataset lacks) and the dataset,
+        whose ``classes`` are the shared names in the dataset's order.
+
+    Raises:
+        DetectorError: The two have no class name in common (naming both lists).
+
+    """
+    mine = set(det.classes)
+    shared = tuple(c for c in data.classes if c in mine)
+    if not shared:
+        raise DetectorError(
+            f"the detector's classes {list(det.classes)} and the dataset's "
+            f"{list(data.classes)} have no class in common; nothing can be measured: use a "
+            "dataset labelled with (some of) the model's class names"
+        )
+    kept = _keep_classes(data, shared)
+    if mine <= set(shared):
+        return det, kept
+    return SharedClassesDetector(det, shared), kept
+
+
+def _keep_classes(data: Dataset, names: tuple[str, ...]) -> Dataset:
+    """*data* with only the boxes (and ignore boxes) of *names*, relabelled into them."""
+    if names == data.classes:
+        return data
+    new = np.asarray([names.index(c) if c in names else -1 for c in data.classes], np.int64)
+    records = []
+    for r in data.records:
+        labels, ignore_labels = new[r.labels], new[r.ignore_labels]
+        records.append(
+            replace(
+                r,
+                boxes=r.boxes[labels >= 0],
+                labels=labels[labels >= 0],
+                ignore=r.ignore[ignore_labels >= 0],
+                ignore_labels=ignore_labels[ignore_labels >= 0],
+            )
+        )
+    return Dataset(names, records, name=f"{data.name} ({', '.join(names)})", cache=data.cache)
 
 
 def _initial(
@@ -423,6 +522,7 @@ def train_detector(
     config: TrainConfig | None = None,
     test: Dataset | None = None,
     on_step: ProgressHook | None = None,
+    on_epoch: EpochHook | None = None,
 ) -> TrainResult:
     """Train a :class:`CenterNetDetector` and measure it.
 
@@ -436,6 +536,9 @@ def train_detector(
         config: Settings (defaults: :class:`TrainConfig`).
         test: Test split for the reported figures (optional).
         on_step: Called after every optimiser step (progress bars).
+        on_epoch: Called after every epoch with its figures (:data:`EpochHook`); given
+            one, training also measures the val F1 after each epoch (one pass over *val*,
+            in eval mode: the weights and the random draws are the same as without it).
 
     Raises:
         DetectorError: The splits have different classes, or a split is empty.
@@ -497,6 +600,8 @@ def train_detector(
                 {"epoch": epoch + 1, **{k: v / steps_per_epoch for k, v in sums.items()}}
                 | {"seconds": time.perf_counter() - t0}
             )
+            if on_epoch is not None:
+                on_epoch(history[-1] | {"epochs": cfg.epochs, "val_f1": _val_f1(det, val)})
         seconds = time.perf_counter() - start
         net.eval()
         threshold, val_m, test_m = _measure(det, val, test)
@@ -534,6 +639,17 @@ def _new_detector(
     if start_from is not None:
         det.network.load_state_dict(start_from.network.state_dict())
     return det
+
+
+def _val_f1(det: CenterNetDetector, val: Dataset) -> float:
+    """F1 on *val* at its best threshold now; the network is left in training mode."""
+    det.network.eval()
+    try:
+        preds = predict(det, val)
+        truths = val.truths()
+        return float(f1_at_iou(preds, truths, score_threshold=choose_threshold(preds, truths)).f1)
+    finally:
+        det.network.train()
 
 
 def _measure(

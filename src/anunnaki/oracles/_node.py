@@ -15,6 +15,9 @@ It holds a liveliness token (``/oracle_<name>``), so a goal model can bind A4 to
 ``node: /oracle_ground_truth`` and Utu treats the oracle's values as unknown the moment the
 node dies. Calls into the oracle are serialised (one lock), so an oracle need not be
 thread-safe. A bad message or an oracle that raises is logged and counted; the node lives on.
+
+An assessment is about a model: until the model manager has announced the LEC's model (or
+its detections have named one), frames are withheld, not assessed for a model 'unknown'.
 """
 
 from __future__ import annotations
@@ -291,8 +294,10 @@ class OracleNode(Node):
         with self._lock:
             self._frames += 1
             due = (self._frames - 1) % self.every == 0
-            model_id = self._model_id or "unknown"
-        if not due:
+            model_id = self._model_id
+            if due and model_id is None:  # no model yet: nothing to assess it for
+                self._withheld += 1
+        if not due or model_id is None:
             return
         try:
             frame = decode_image(message)
