@@ -170,7 +170,7 @@ def _predict(data: str, calls: int) -> dict[str, Any]:
     from anunnaki.datasets import load_split
     from anunnaki.enlil import load_oracle
     from anunnaki.lec import load_registry
-    from anunnaki.phenomena import get_phenomenon
+    from anunnaki.phenomena import PHENOMENA
 
     spec = load_registry(ROOT / "examples" / "models" / "rover.yaml").get("rover-default")
     oracle = load_oracle(spec.oracle.file, sha256=spec.oracle.sha256)
@@ -181,7 +181,7 @@ def _predict(data: str, calls: int) -> dict[str, Any]:
         image = val.image(i % len(val))
         name = ("clear", "fog", "hsl", "raindrop")[i % 4]
         if name != "clear":
-            ph = get_phenomenon(name)
+            ph = PHENOMENA.create(name)
             low, high = np.asarray(ph.bounds(), np.float64).T
             vector = low + rng.random(len(low)) * (high - low)
             image = ph.apply(image, ph.from_vector(vector), seed=i)

@@ -16,7 +16,8 @@ from typing import Any
 import numpy as np
 import pytest
 
-from anunnaki.bus import Assessment, Detections, Sample, open_bus
+from anunnaki.bus import Sample, open_bus
+from anunnaki.messages import Assessment, Detections
 from anunnaki.oracles import (
     HOOKS,
     ObservesContext,
@@ -50,7 +51,7 @@ def _docs_example() -> type[Any]:
         exec(compile(code, "docs/oracles.md", "exec"), namespace)
     finally:
         registry_module._DEFAULT = saved
-    assert private.names() == ["darkness", "enlil", "ground_truth"]
+    assert private.names() == ["darkness", "ground_truth"]
     return namespace["DarknessOracle"]
 
 

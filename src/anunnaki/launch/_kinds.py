@@ -15,9 +15,9 @@ from typing import Annotated, Any, ClassVar
 
 from pydantic import BaseModel, ConfigDict, Field
 
-from anunnaki.bus import Clock
 from anunnaki.errors import AnunnakiError, ModelFileError
 from anunnaki.launch._managed import ManagedContext
+from anunnaki.messages import Clock
 from anunnaki.trace import Record, read_trace
 from anunnaki.utu import Decision, UtuConfig
 

@@ -20,7 +20,6 @@ from anunnaki.managed._scripted import ScriptedSystem
 
 if TYPE_CHECKING:
     from anunnaki.managed._sim import (
-        SCORER_TOPIC,
         PhaseScore,
         SimulatedSystem,
         format_phases,
@@ -29,7 +28,6 @@ if TYPE_CHECKING:
     )
 
 __all__ = [
-    "SCORER_TOPIC",
     "PhaseScore",
     "ScriptedSystem",
     "SimulatedSystem",
@@ -39,7 +37,6 @@ __all__ = [
 ]
 
 _LAZY = {
-    "SCORER_TOPIC",
     "PhaseScore",
     "SimulatedSystem",
     "format_phases",

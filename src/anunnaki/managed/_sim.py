@@ -34,7 +34,8 @@ import numpy as np
 
 from anunnaki import topics
 from anunnaki._closing import Closing
-from anunnaki.bus import Assessment, Detections, LivelinessGuard, Sample, body_of
+from anunnaki.bus import LivelinessGuard, Sample
+from anunnaki.messages import Assessment, Detections, body_of
 from anunnaki.sim import (
     FrameScore,
     RunReport,
@@ -44,12 +45,7 @@ from anunnaki.sim import (
     tactic_events,
 )
 
-GROUND_TRUTH_TOPIC = topics.GROUND_TRUTH
-#: Where a live scorer beside the oracle publishes (not Utu's input: no agent reads it).
-SCORER_TOPIC = "/sim/oracle/scorer"
-
 __all__ = [
-    "SCORER_TOPIC",
     "PhaseScore",
     "SimulatedSystem",
     "format_phases",
@@ -58,8 +54,6 @@ __all__ = [
 ]
 
 log = logging.getLogger("anunnaki.managed")
-
-_OUTPUT_TOPIC = topics.ORACLE_OUTPUT
 
 
 @dataclass
@@ -175,7 +169,7 @@ class SimulatedSystem(Closing):
             stops (rover) or lands (UAV) by itself (``None``: never).
         scorer: A second oracle's options, run beside the first as its live scorer (e.g.
             ``{"name": "ground_truth", "window": 30}`` beside a learned ``enlil`` oracle);
-            it publishes on :data:`SCORER_TOPIC` (node ``/scorer_<name>``), which Utu does
+            it publishes on :data:`topics.SCORER` (node ``/scorer_<name>``), which Utu does
             not read, and the report compares the two (:func:`~anunnaki.sim.compare_assessors`).
 
     An ``enlil`` oracle (or scorer) given no ``models`` uses the detector's registry.
@@ -255,14 +249,14 @@ class SimulatedSystem(Closing):
                 self.lec.detections_topic if self.lec is not None else topics.DETECTIONS
             )
             self.oracle: Any = self._oracle_node(oracle, camera)
-            self.scorer: Any = self._oracle_node(scorer, camera, output=SCORER_TOPIC)
+            self.scorer: Any = self._oracle_node(scorer, camera, output=topics.SCORER)
             self._subs = [
-                bus.subscribe(GROUND_TRUTH_TOPIC, self._on_truth, queue=256),
+                bus.subscribe(topics.GROUND_TRUTH, self._on_truth, queue=256),
                 bus.subscribe(self.detections_topic, self._on_detections, queue=256),
-                bus.subscribe(_OUTPUT_TOPIC, self._on_assessment, queue=256),
+                bus.subscribe(topics.ORACLE_OUTPUT, self._on_assessment, queue=256),
             ]
             if self.scorer is not None:
-                self._subs.append(bus.subscribe(SCORER_TOPIC, self._on_scorer, queue=256))
+                self._subs.append(bus.subscribe(topics.SCORER, self._on_scorer, queue=256))
         except BaseException:
             self.close()
             raise

@@ -4,7 +4,7 @@ An oracle runs beside the learning-enabled component on the same camera frames a
 each frame, which **behavior category** the LEC is in — 0: F1 drop under 5 %, 1: degraded
 (over 5 %), 2: compromised (over 10 %), relative to the model's F1 on clean data — and the
 **perceived context** (which phenomenon, how strong). Assessments are
-:class:`~anunnaki.bus.Assessment` messages on ``/utu/oracle/output``, the topic agent A4
+:class:`~anunnaki.messages.Assessment` messages on ``/utu/oracle/output``, the topic agent A4
 reads in the paper's goal models.
 
 Using one::
@@ -49,14 +49,7 @@ from anunnaki.oracles._ground_truth import (
     WindowMetrics,
     category_for_drop,
 )
-from anunnaki.oracles._node import (
-    GROUND_TRUTH_TOPIC,
-    OUTPUT_TOPIC,
-    PHENOMENA_TOPIC,
-    OracleNode,
-    OracleNodeStats,
-    truth_from_message,
-)
+from anunnaki.oracles._node import OracleNode, OracleNodeStats, truth_from_message
 from anunnaki.oracles._registry import (
     BUILTIN_ORACLES,
     ENTRY_POINT_GROUP,
@@ -71,10 +64,7 @@ __all__ = [
     "BUILTIN_ORACLES",
     "CLEAR",
     "ENTRY_POINT_GROUP",
-    "GROUND_TRUTH_TOPIC",
     "HOOKS",
-    "OUTPUT_TOPIC",
-    "PHENOMENA_TOPIC",
     "CleanF1",
     "Frame",
     "GroundTruthAssessor",

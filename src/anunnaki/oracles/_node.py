@@ -28,9 +28,10 @@ from typing import Any
 import numpy as np
 
 from anunnaki import topics
-from anunnaki.bus import Assessment, Bus, Detections, Image, Node, Publisher, Sample
+from anunnaki.bus import Bus, Node, Publisher, Sample
 from anunnaki.errors import AnunnakiError
-from anunnaki.lec import ACTIVE_TOPIC, decode_image, detections_topic
+from anunnaki.lec import decode_image, detections_topic
+from anunnaki.messages import Assessment, Detections, Image
 from anunnaki.oracles._base import (
     ObservesContext,
     ObservesDetections,
@@ -42,22 +43,12 @@ from anunnaki.oracles._base import (
 from anunnaki.oracles._registry import OracleRegistry, get_oracle
 
 __all__ = [
-    "GROUND_TRUTH_TOPIC",
-    "OUTPUT_TOPIC",
-    "PHENOMENA_TOPIC",
     "OracleNode",
     "OracleNodeStats",
     "truth_from_message",
 ]
 
 log = logging.getLogger("anunnaki.oracles")
-
-#: Where assessments go (agent A4 in the paper's goal models).
-OUTPUT_TOPIC = topics.ORACLE_OUTPUT
-#: The simulator's per-frame ground truth: ``{seq, boxes, labels}``.
-GROUND_TRUTH_TOPIC = topics.GROUND_TRUTH
-#: The simulator's active phenomena (see :func:`~anunnaki.oracles.context_from_phenomena`).
-PHENOMENA_TOPIC = topics.PHENOMENA
 
 
 @dataclass(frozen=True)
@@ -156,10 +147,10 @@ class OracleNode(Node):
         camera: str = "/rover/camera/image",
         lec: str = "detector",
         detections: str | None = None,
-        ground_truth: str = GROUND_TRUTH_TOPIC,
-        phenomena: str = PHENOMENA_TOPIC,
-        active: str = ACTIVE_TOPIC,
-        output: str = OUTPUT_TOPIC,
+        ground_truth: str = topics.GROUND_TRUTH,
+        phenomena: str = topics.PHENOMENA,
+        active: str = topics.ACTIVE_MODEL,
+        output: str = topics.ORACLE_OUTPUT,
         node: str | None = None,
         classes: Sequence[str] | None = None,
         every: int = 1,

@@ -12,12 +12,11 @@ from __future__ import annotations
 
 import inspect
 import logging
-import re
 from typing import Any, TypeVar
 
 from anunnaki.oracles._base import Oracle, OracleError
 from anunnaki.oracles._ground_truth import GroundTruthAssessor
-from anunnaki.plugins import Registry
+from anunnaki.plugins import Registry, check_name
 
 __all__ = [
     "BUILTIN_ORACLES",
@@ -37,11 +36,9 @@ ENTRY_POINT_GROUP = "anunnaki.oracles"
 #: The oracles that ship with Anunnaki.
 BUILTIN_ORACLES: tuple[type[Any], ...] = (GroundTruthAssessor,)
 
-#: Built-ins of the packages above this one (Enlil's learned oracles need torch), imported
-#: on first use.
-LAZY_ORACLES: dict[str, str] = {"enlil": "anunnaki.enlil._oracle_plugin:EnlilOracle"}
-
-_NAME_RE = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
+# The oracles of the packages above this one (Enlil's learned oracle ``enlil``, the ROS
+# bridge's ``light``) are not named here: they register by the entry-point group, in
+# pyproject.toml, by their public names (tests/test_layers.py checks both).
 
 C = TypeVar("C", bound=type[Any])
 
@@ -57,11 +54,7 @@ def _check_class(cls: object) -> type[Any]:
         raise OracleError(
             f"{cls.__name__} is not an oracle: it has no assess(frame, *, seq, model_id) method"
         )
-    name = getattr(cls, "name", None)
-    if not isinstance(name, str) or not _NAME_RE.match(name):
-        raise OracleError(
-            f"{cls.__name__}.name must be an identifier such as 'ground_truth', got {name!r}"
-        )
+    check_name(getattr(cls, "name", None), what="oracle", error=OracleError)
     return cls
 
 
@@ -89,8 +82,6 @@ class OracleRegistry(Registry[Oracle]):
         if builtins:
             for cls in BUILTIN_ORACLES:
                 self.register(cls)
-            for name, ref in LAZY_ORACLES.items():
-                self.register_lazy(name, ref)
 
     def get(self, name_or_instance: str | Oracle, **options: Any) -> Oracle:
         """Return an oracle for a name (built with ``options``); pass instances through.

@@ -23,7 +23,7 @@ key expressions of zenoh-bridge-ros2dds or rmw_zenoh (:func:`ros2_key`).
 
 from __future__ import annotations
 
-from anunnaki.ros1._bags import DECISIONS_TOPIC, bag_message_to_dict, is_bag, read_bag, write_bag
+from anunnaki.ros1._bags import bag_message_to_dict, is_bag, read_bag, write_bag
 from anunnaki.ros1._convert import (
     ConversionError,
     bus_image_to_compressed,
@@ -36,6 +36,7 @@ from anunnaki.ros1._convert import (
     to_bus_fields,
     to_ros_fields,
 )
+from anunnaki.ros1._light import LightOracle
 from anunnaki.ros1._ros2 import (
     Ros2ZenohBridge,
     dds_type_name,
@@ -55,7 +56,6 @@ from anunnaki.ros1._schema import (
 from anunnaki.ros1._types import IMAGE_TYPES, MESSAGE_TYPES, SERVICE_TYPES, SET_STRING_SRV
 
 __all__ = [
-    "DECISIONS_TOPIC",
     "FORMAT_TAG",
     "IMAGE_TYPES",
     "MESSAGE_TYPES",
@@ -64,6 +64,7 @@ __all__ = [
     "SET_STRING_SRV",
     "BridgeSpec",
     "ConversionError",
+    "LightOracle",
     "Ros2ZenohBridge",
     "RosUnavailable",
     "ServiceBridge",

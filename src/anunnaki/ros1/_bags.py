@@ -23,15 +23,19 @@ from collections.abc import Iterable, Iterator, Mapping
 from pathlib import Path
 from typing import Any
 
+from anunnaki import topics
 from anunnaki.errors import AnunnakiError, MissingExtraError, ModelFileError
 from anunnaki.ros1._convert import to_bus_fields
 from anunnaki.ros1._schema import BridgeSpec, TopicBridge
 from anunnaki.trace import Record
 
-__all__ = ["DECISIONS_TOPIC", "bag_message_to_dict", "is_bag", "read_bag", "write_bag"]
+__all__ = [
+    "bag_message_to_dict",
+    "is_bag",
+    "read_bag",
+    "write_bag",
+]
 
-#: The topic a run's decisions are written on in an exported bag.
-DECISIONS_TOPIC = "/utu/decisions"
 
 _TIME_TYPES = {"builtin_interfaces/msg/Time", "builtin_interfaces/msg/Duration"}
 
@@ -142,7 +146,7 @@ def write_bag(
     inputs: Iterable[Record],
     decisions: Iterable[tuple[float, Mapping[str, Any]]] = (),
 ) -> int:
-    """Write a run to a ROS 1 bag: inputs on their topics, decisions on :data:`DECISIONS_TOPIC`.
+    """Write a run to a ROS 1 bag: inputs on their topics, decisions on ``topics.BAG_DECISIONS``.
 
     Every message is a ``std_msgs/String`` holding the JSON of the message (the bus's
     messages have no fixed ROS type). Returns how many messages were written.
@@ -178,6 +182,6 @@ def _in_time_order(
     inputs: Iterable[Record], decisions: Iterable[tuple[float, Mapping[str, Any]]]
 ) -> Iterator[tuple[float, str, Any]]:
     rows = [(r.t, r.topic, r.msg) for r in inputs]
-    rows += [(t, DECISIONS_TOPIC, dict(d)) for t, d in decisions]
+    rows += [(t, topics.BAG_DECISIONS, dict(d)) for t, d in decisions]
     rows.sort(key=lambda row: row[0])
     return iter(rows)
