@@ -105,10 +105,10 @@ def test_every_slot_is_a_registry_with_the_one_name_rule() -> None:
     from anunnaki.launch import MANAGED
     from anunnaki.lec import ARCHITECTURES
     from anunnaki.messages import MESSAGES
-    from anunnaki.oracles import default_registry
+    from anunnaki.oracles import ORACLES
     from anunnaki.phenomena import PHENOMENA
 
-    slots = [BUS_KINDS, SEARCHES, MANAGED, ARCHITECTURES, MESSAGES, default_registry(), PHENOMENA]
+    slots = [BUS_KINDS, SEARCHES, MANAGED, ARCHITECTURES, MESSAGES, ORACLES, PHENOMENA]
     for slot in slots:
         assert isinstance(slot, Registry)
         for name in slot.names():

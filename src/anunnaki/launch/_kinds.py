@@ -323,15 +323,15 @@ class SimKind:
             from anunnaki.lec import load_registry
 
             load_registry(sim.models)
-        from anunnaki.oracles import available_oracles
+        from anunnaki.oracles import ORACLES
 
         for key, options in (("oracle", sim.oracle), ("scorer", sim.scorer)):
             name = (options or {}).get("name", "ground_truth")
-            if options is not None and name not in available_oracles():
+            if options is not None and name not in ORACLES.names():
                 raise ModelFileError(
                     f"unknown oracle {name!r}",
                     element=f"managed.sim.{key}.name",
-                    hint=f"known oracles: {', '.join(available_oracles())}",
+                    hint=f"known oracles: {', '.join(ORACLES.names())}",
                 )
 
     def notes(self, utu: UtuConfig, speed: float) -> list[str]:

@@ -64,14 +64,14 @@ def check_camera_nodes(options: _CameraNodes) -> None:
 
         load_registry(options.models)
     if options.oracle is not None:
-        from anunnaki.oracles import available_oracles
+        from anunnaki.oracles import ORACLES
 
         name = options.oracle.get("name")
-        if name not in available_oracles():
+        if name not in ORACLES.names():
             raise ModelFileError(
                 f"unknown oracle {name!r}",
                 element="managed.oracle.name",
-                hint=f"known oracles: {', '.join(available_oracles())}",
+                hint=f"known oracles: {', '.join(ORACLES.names())}",
             )
 
 

@@ -40,7 +40,8 @@ from anunnaki.oracles._base import (
     Oracle,
     context_from_phenomena,
 )
-from anunnaki.oracles._registry import OracleRegistry, get_oracle
+from anunnaki.oracles._registry import ORACLES
+from anunnaki.plugins import Registry
 
 __all__ = [
     "OracleNode",
@@ -134,7 +135,7 @@ class OracleNode(Node):
         classes: Class names for ground truth given as indices.
         every: Assess every n-th frame (guideline C5: a configurable rate).
         frame_queue: Frames that may wait; the oldest are dropped beyond it.
-        registry: Where a name is looked up (default: the process-wide registry).
+        registry: Where a name is looked up (default: :data:`~anunnaki.oracles.ORACLES`).
         **options: The oracle's options when it is given by name (e.g. ``window=30``).
 
     """
@@ -155,12 +156,12 @@ class OracleNode(Node):
         classes: Sequence[str] | None = None,
         every: int = 1,
         frame_queue: int = 16,
-        registry: OracleRegistry | None = None,
+        registry: Registry[Oracle] | None = None,
         **options: Any,
     ) -> None:
         if not isinstance(every, int) or every < 1:
             raise ValueError(f"every must be a whole number >= 1, got {every!r}")
-        self.oracle: Oracle = get_oracle(oracle, registry=registry, **options)
+        self.oracle: Oracle = (registry or ORACLES).create(oracle, **options)
         self.bus = bus
         self.lec = lec
         self.every = every
