@@ -308,6 +308,9 @@ class Registry(Generic[T]):
         if not isinstance(name, str):
             raise self.error(f"expected a {self.what} name, got {type(name).__name__}")
         key = name.strip()
+        found = self._factories.get(key)  # the hot path (a decoder per message): no lock
+        if found is not None:
+            return found
         if not self._registered(key):
             self.load_entry_points()
         with self._lock:
