@@ -4,12 +4,15 @@ private modules (``anunnaki.<package>._<module>``); each package's ``__init__`` 
 from __future__ import annotations
 
 import ast
+import importlib
+import pkgutil
 import re
 import shutil
 import subprocess
 import sys
 import tomllib
 from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -100,17 +103,18 @@ def test_entry_points_name_public_names_of_the_package_above_the_slot() -> None:
 
 
 def test_every_slot_is_a_registry_with_the_one_name_rule() -> None:
-    from anunnaki.bus import BUS_KINDS
-    from anunnaki.enlil import SEARCHES
-    from anunnaki.launch import MANAGED
-    from anunnaki.lec import ARCHITECTURES
-    from anunnaki.messages import MESSAGES
-    from anunnaki.oracles import ORACLES
-    from anunnaki.phenomena import PHENOMENA
-
-    slots = [BUS_KINDS, SEARCHES, MANAGED, ARCHITECTURES, MESSAGES, ORACLES, PHENOMENA]
-    for slot in slots:
-        assert isinstance(slot, Registry)
+    """Every package's public slots (module-level registries) follow one form and one rule."""
+    slots: dict[int, Registry[Any]] = {}
+    for info in pkgutil.iter_modules([str(SRC)]):
+        if info.name.startswith("_") or info.name == "__main__":
+            continue
+        module = importlib.import_module(f"anunnaki.{info.name}")
+        for value in vars(module).values():
+            if isinstance(value, Registry):
+                slots[id(value)] = value
+    whats = {slot.what for slot in slots.values()}
+    assert {"message type", "bus kind", "phenomenon", "oracle", "managed system"} <= whats
+    for slot in slots.values():
         for name in slot.names():
             assert check_name(name, what=slot.what) == name
         with pytest.raises(AnunnakiError, match=re.escape(NAME_RULE)):
