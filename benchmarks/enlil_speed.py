@@ -170,6 +170,7 @@ def _predict(data: str, calls: int) -> dict[str, Any]:
     from anunnaki.datasets import load_split
     from anunnaki.enlil import load_oracle
     from anunnaki.lec import load_registry
+
     spec = load_registry(ROOT / "examples" / "models" / "rover.yaml").get("rover-default")
     oracle = load_oracle(spec.oracle.file, sha256=spec.oracle.sha256)
     val = load_split(data, "val")
