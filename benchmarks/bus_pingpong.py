@@ -29,7 +29,8 @@ import time
 from collections.abc import Callable
 from pathlib import Path
 
-from anunnaki.bus import Bus, BusTimeout, InprocHub, Message, Sample, open_bus
+from anunnaki.bus import Bus, BusTimeout, InprocHub, Sample, open_bus
+from anunnaki.messages import Message
 
 RESULTS = Path(__file__).parent / "results" / "bus.json"
 

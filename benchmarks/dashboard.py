@@ -45,9 +45,10 @@ from typing import Any
 
 from playwright.sync_api import sync_playwright
 
-from anunnaki.bus import Detections, Image, InprocHub, open_bus
+from anunnaki.bus import InprocHub, open_bus
 from anunnaki.dashboard import Dashboard
 from anunnaki.goals import parse_goal_model
+from anunnaki.messages import Detections, Image
 from anunnaki.tactics import TacticSet
 
 ROOT = Path(__file__).resolve().parent.parent

@@ -170,7 +170,6 @@ def _predict(data: str, calls: int) -> dict[str, Any]:
     from anunnaki.datasets import load_split
     from anunnaki.enlil import load_oracle
     from anunnaki.lec import load_registry
-    from anunnaki.phenomena import get_phenomenon
 
     spec = load_registry(ROOT / "examples" / "models" / "rover.yaml").get("rover-default")
     oracle = load_oracle(spec.oracle.file, sha256=spec.oracle.sha256)
@@ -181,7 +180,7 @@ def _predict(data: str, calls: int) -> dict[str, Any]:
         image = val.image(i % len(val))
         name = ("clear", "fog", "hsl", "raindrop")[i % 4]
         if name != "clear":
-            ph = get_phenomenon(name)
+            ph = _phenomenon(name)
             low, high = np.asarray(ph.bounds(), np.float64).T
             vector = low + rng.random(len(low)) * (high - low)
             image = ph.apply(image, ph.from_vector(vector), seed=i)
@@ -203,6 +202,14 @@ def _predict(data: str, calls: int) -> dict[str, Any]:
         "p90_ms": 1000 * float(np.percentile(times, 90)),
         "probs": probs,
     }
+
+
+def _phenomenon(name: str) -> Any:
+    """A phenomenon by name, in this tree or a baseline's (the slot or the old function)."""
+    import anunnaki.phenomena as phenomena
+
+    slot = getattr(phenomena, "PHENOMENA", None)  # the baseline may predate the slot
+    return slot.create(name) if slot is not None else phenomena.get_phenomenon(name)
 
 
 def run_step(step: str, args: argparse.Namespace) -> dict[str, Any]:

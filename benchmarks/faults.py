@@ -103,9 +103,10 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "src"))
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests" / "utu"))
 
 from anunnaki import topics
-from anunnaki.bus import Bus, BusTimeout, Generic, InprocHub, LivelinessGuard, open_bus
+from anunnaki.bus import Bus, BusTimeout, InprocHub, LivelinessGuard, open_bus
 from anunnaki.bus._zenoh import free_port
 from anunnaki.managed import ScriptedSystem
+from anunnaki.messages import Generic
 from anunnaki.trace import Record
 from anunnaki.utu import (
     NODE_NAMES,

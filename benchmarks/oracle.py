@@ -115,7 +115,7 @@ def inference_shipped(frames: int) -> dict[str, Any]:
     """
     from anunnaki.enlil import load_oracle
     from anunnaki.lec import load_registry
-    from anunnaki.phenomena import get_phenomenon
+    from anunnaki.phenomena import PHENOMENA
 
     torch.set_num_threads(1)
     spec = load_registry(MODELS / "rover.yaml").get("rover-default")
@@ -126,7 +126,7 @@ def inference_shipped(frames: int) -> dict[str, Any]:
     base = np.full((128, 128, 3), 90, np.uint8)
     base[64:] = (60, 120, 40)  # ground
     base += rng.integers(0, 30, base.shape, dtype=np.uint8)
-    fog = get_phenomenon("fog")
+    fog = PHENOMENA.create("fog")
     images = [base, fog.apply(base, fog.from_vector(np.asarray([5.0, 0.3])), seed=0)]
     return _time_predict(oracle, images * 8, frames) | {"lookup": oracle.card.lookup is not None}
 

@@ -51,12 +51,13 @@ import numpy as np
 import torch
 
 from anunnaki import topics
-from anunnaki.bus import Assessment, body_of, open_bus
+from anunnaki.bus import open_bus
 from anunnaki.enlil import evaluate_context, fixed_batch, normalise
 from anunnaki.launch import load_launch, run_launch
 from anunnaki.lec import evaluate_detector, load_registry
 from anunnaki.managed import SimKind, SimulatedSystem
-from anunnaki.phenomena import get_phenomenon
+from anunnaki.messages import Assessment, body_of
+from anunnaki.phenomena import PHENOMENA
 
 ROOT = Path(__file__).parents[1]
 MODELS = ROOT / "examples" / "models" / "rover.yaml"
@@ -123,7 +124,7 @@ class Truth:
             return 0
         (name, params), *rest = phenomena
         assert not rest, "one phenomenon per ramp"
-        phen = get_phenomenon(name)
+        phen = PHENOMENA.create(name)
         unit = normalise(phen, phen.to_vector(params))
         self.evaluations += 1
         return evaluate_context(

@@ -28,7 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
-from anunnaki.phenomena import available_phenomena, get_phenomenon, synthetic_scene
+from anunnaki.phenomena import PHENOMENA, synthetic_scene
 
 SIZES = {"128x128": (128, 128), "320x240": (240, 320)}  # label (W x H): (height, width)
 EXTRA = ["fog+raindrop", "raindrop+raindrop+raindrop"]
@@ -41,7 +41,7 @@ def measure(names: list[str], runs: int, warmup: int, strength: float) -> dict:
     cases = []
     for name in names:
         for label, (height, width) in SIZES.items():
-            phenomenon = get_phenomenon(name)
+            phenomenon = PHENOMENA.create(name)
             params = phenomenon.strength_params(strength)
             cases.append((name, label, phenomenon, synthetic_scene(height, width), params))
     times: dict[tuple[str, str], list[float]] = {(c[0], c[1]): [] for c in cases}
@@ -74,7 +74,7 @@ def main(argv: list[str] | None = None) -> dict:
     import cv2
 
     cv2.setNumThreads(1)
-    results = measure([*available_phenomena(), *EXTRA], args.runs, args.warmup, args.strength)
+    results = measure([*PHENOMENA.names(), *EXTRA], args.runs, args.warmup, args.strength)
     for name, sizes in results.items():
         for label, entry in sizes.items():
             print(f"{name:28s} {label:8s} {entry['median_ms']:8.3f} ms/frame")

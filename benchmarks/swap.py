@@ -36,11 +36,12 @@ import cv2
 import numpy as np
 import torch
 
-from anunnaki.bus import Detections, Image, Sample, open_bus
+from anunnaki.bus import Sample, open_bus
 from anunnaki.lec._centernet import CenterNetDetector
 from anunnaki.lec._detector import save_detector, sha256_file
 from anunnaki.lec._node import LecNode, detections_topic
 from anunnaki.lec._registry import ModelRegistry
+from anunnaki.messages import Detections, Image
 from anunnaki.phenomena import synthetic_scene
 from anunnaki.sim import UAV_CLASSES
 

@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-from anunnaki.phenomena import available_phenomena, get_phenomenon, synthetic_scene
+from anunnaki.phenomena import PHENOMENA, synthetic_scene
 
 STRENGTHS = (0.0, 0.25, 0.5, 0.75, 1.0)
 EXTRA = ("fog+raindrop",)
@@ -37,7 +37,7 @@ def render(names: list[str], strengths: tuple[float, ...] = STRENGTHS) -> np.nda
         x = LABEL_W + column * (TILE_W + GAP)
         cv2.putText(figure, f"s = {strength:g}", (x + 50, 16), font, 0.45, black, 1, cv2.LINE_AA)
     for row, name in enumerate(names):
-        phenomenon = get_phenomenon(name)
+        phenomenon = PHENOMENA.create(name)
         y = HEADER_H + row * (TILE_H + GAP)
         cv2.putText(figure, name, (4, y + TILE_H // 2), font, 0.45, black, 1, cv2.LINE_AA)
         for column, strength in enumerate(strengths):
@@ -54,7 +54,7 @@ def main(argv: list[str] | None = None) -> Path:
     args = parser.parse_args(argv)
     import cv2
 
-    figure = render([*available_phenomena(), *EXTRA])
+    figure = render([*PHENOMENA.names(), *EXTRA])
     args.output.parent.mkdir(parents=True, exist_ok=True)
     bgr = cv2.cvtColor(figure, cv2.COLOR_RGB2BGR)
     if not cv2.imwrite(str(args.output), bgr, [cv2.IMWRITE_PNG_COMPRESSION, 9]):

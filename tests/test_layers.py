@@ -4,12 +4,20 @@ private modules (``anunnaki.<package>._<module>``); each package's ``__init__`` 
 from __future__ import annotations
 
 import ast
+import importlib
+import pkgutil
+import re
 import shutil
 import subprocess
 import sys
+import tomllib
 from pathlib import Path
+from typing import Any
 
 import pytest
+
+from anunnaki.errors import AnunnakiError
+from anunnaki.plugins import NAME_RULE, Registry, check_name
 
 ROOT = Path(__file__).resolve().parents[1]
 SRC = ROOT / "src" / "anunnaki"
@@ -81,3 +89,72 @@ def test_no_cycle_between_a_packages_modules(package: str) -> None:
     """Issue 21 item 6: ``datasets`` ``_dataset↔_coco/_yolo`` and ``sim`` ``_layout↔_models``
     were cycles dodged by function-local and TYPE_CHECKING imports."""
     assert _module_cycle(package) == []
+
+
+#: A whole string that names ``module:attribute`` (a lazy reference, an entry point).
+_REF = re.compile(r"^anunnaki(\.\w+)+:\w+(\.\w+)*$")
+
+
+def test_no_string_names_a_module_of_another_package() -> None:
+    """A lazy ``"module:attr"`` names its own package only; import-linter cannot see strings.
+
+    Plugins of a package above a slot (Enlil's oracle) register by an entry point in
+    pyproject.toml instead (the next test).
+    """
+    offenders = []
+    for path in sorted(SRC.rglob("*.py")):
+        mine = _package_of(path) or path.stem
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            ref = node.value if isinstance(node, ast.Constant) else None
+            if isinstance(ref, str) and _REF.match(ref) and ref.split(".")[1].split(":")[0] != mine:
+                offenders.append(f"{path.relative_to(SRC)}:{node.lineno}: {ref!r}")
+    assert offenders == []
+
+
+def _public_names(module: str) -> set[str]:
+    """``__all__`` of a module of this source tree, read without importing it."""
+    parts = module.split(".")[1:]
+    path = SRC.joinpath(*parts, "__init__.py")
+    if not path.exists():
+        path = SRC.joinpath(*parts[:-1], f"{parts[-1]}.py")
+    for node in ast.parse(path.read_text(encoding="utf-8")).body:
+        if isinstance(node, ast.Assign) and any(
+            isinstance(t, ast.Name) and t.id == "__all__" for t in node.targets
+        ):
+            return {e.value for e in node.value.elts if isinstance(e, ast.Constant)}  # type: ignore[attr-defined]
+    return set()
+
+
+def test_entry_points_name_public_names_of_the_package_above_the_slot() -> None:
+    project = tomllib.loads((ROOT / "pyproject.toml").read_text(encoding="utf-8"))["project"]
+    groups = project.get("entry-points", {})
+    assert "enlil" in groups["anunnaki.oracles"]  # Enlil's oracle: here, not in oracles/
+    for group, entries in groups.items():
+        for name, ref in entries.items():
+            assert check_name(name, what=group) == name
+            module, _, attr = ref.partition(":")
+            where = f"[project.entry-points.{group!r}] {name} = {ref!r}"
+            assert module.startswith("anunnaki."), where
+            assert not any(p.startswith("_") for p in module.split(".")), (
+                f"{where} names a private module; export the name from the package"
+            )
+            assert attr in _public_names(module), f"{where}: {attr} is not in {module}.__all__"
+
+
+def test_every_slot_is_a_registry_with_the_one_name_rule() -> None:
+    """Every package's public slots (module-level registries) follow one form and one rule."""
+    slots: dict[int, Registry[Any]] = {}
+    for info in pkgutil.iter_modules([str(SRC)]):
+        if info.name.startswith("_") or info.name == "__main__":
+            continue
+        module = importlib.import_module(f"anunnaki.{info.name}")
+        for value in vars(module).values():
+            if isinstance(value, Registry):
+                slots[id(value)] = value
+    whats = {slot.what for slot in slots.values()}
+    assert {"message type", "bus kind", "phenomenon", "oracle", "managed system"} <= whats
+    for slot in slots.values():
+        for name in slot.names():
+            assert check_name(name, what=slot.what) == name
+        with pytest.raises(AnunnakiError, match=re.escape(NAME_RULE)):
+            slot.register_lazy("not a name", "collections:OrderedDict")

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import abc
 import logging
+import re
 from importlib.metadata import EntryPoint
 from typing import Any, Protocol, runtime_checkable
 
@@ -11,7 +12,7 @@ import pytest
 
 from anunnaki import plugins
 from anunnaki.errors import AnunnakiError
-from anunnaki.plugins import PluginError, Registry
+from anunnaki.plugins import NAME_RULE, PluginError, Registry, check_name
 
 
 class Widget:
@@ -135,6 +136,8 @@ def test_entry_points_load_lazily_and_broken_ones_are_skipped(
     reg: Registry[Widget] = Registry("widget", group="anunnaki.test", kind=Widget)
     reg.register(Builtin)
     assert calls == []  # nothing loaded before the first lookup
+    assert reg.factory("widget") is Builtin and "widget" in reg
+    assert calls == []  # nor by looking up a built-in: no plugin is imported for it
     with caplog.at_level(logging.WARNING, logger="anunnaki.plugins"):
         assert reg.names() == ["gadget", "widget"]
     assert calls == ["anunnaki.test"]
@@ -148,9 +151,9 @@ def test_entry_points_load_lazily_and_broken_ones_are_skipped(
 def test_combined_names_use_the_slots_combine_hook() -> None:
     built: list[list[str]] = []
 
-    def combine(parts: list[str]) -> Widget:
-        built.append(parts)
-        return Widget(size=sum(reg.create(p).size for p in parts))
+    def combine(parts: list[Widget]) -> Widget:  # the plugins the parts name, built
+        built.append([p.name for p in parts])
+        return Widget(size=sum(p.size for p in parts))
 
     reg: Registry[Widget] = Registry("widget", kind=Widget, combine=combine, separator="+")
     reg.register(Widget)
@@ -197,3 +200,30 @@ def test_a_class_is_not_an_instance_of_a_protocol_kind() -> None:
         PluginError, match="expected a sized thing name or a Sized instance, got the class Box"
     ):
         reg.create(Box)  # type: ignore[arg-type]
+
+
+@pytest.mark.parametrize(
+    "bad", ["two words", "fog.dense", "fog+rain", "heavy-fog", "1st", "", None]
+)
+def test_one_name_rule_for_every_slot_and_the_error_says_it(bad: object) -> None:
+    with pytest.raises(SlotError, match="widget name must be an identifier") as info:
+        check_name(bad, what="widget", error=SlotError)
+    assert NAME_RULE in str(info.value) and repr(bad) in str(info.value)
+    reg: Registry[Widget] = Registry("widget", error=SlotError)
+    if isinstance(bad, str):
+        with pytest.raises(SlotError, match=re.escape(NAME_RULE)):
+            reg.register(Widget, name=bad)
+        with pytest.raises(SlotError, match=re.escape(NAME_RULE)):
+            reg.register_lazy(bad, "collections:OrderedDict")
+    for good in ("fog", "ground_truth", "ModeRequest", "_private", "ros1"):
+        assert check_name(good, what="widget") == good
+
+
+def test_key_names_a_factory_and_copy_is_private() -> None:
+    reg: Registry[Widget] = Registry("widget", key=lambda cls: cls.__name__.lower() + "_kind")
+    reg.register(Gadget)
+    assert reg.names() == ["gadget_kind"]
+    private = reg.copy()
+    private.register(Widget)
+    assert private.names() == ["gadget_kind", "widget_kind"]
+    assert reg.names() == ["gadget_kind"]  # the copy's registrations stay in the copy

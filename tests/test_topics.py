@@ -45,3 +45,22 @@ def test_no_module_spells_a_catalogued_utu_name_literally() -> None:
             ):
                 offenders.append(f"{path.relative_to(SRC)}:{node.lineno}: {node.value}")
     assert offenders == []
+
+
+def test_no_module_keeps_an_alias_of_a_catalogued_name() -> None:
+    """Every name is defined once: users write ``topics.GROUND_TRUTH``, not a copy of it."""
+    catalogued = {v for k, v in vars(topics).items() if k.isupper() and isinstance(v, str)}
+    offenders = []
+    for path in SRC.rglob("*.py"):
+        if path.name == "topics.py":
+            continue
+        for node in ast.parse(path.read_text(encoding="utf-8")).body:
+            value = node.value if isinstance(node, ast.Assign | ast.AnnAssign) else None
+            aliased = (
+                isinstance(value, ast.Attribute)
+                and isinstance(value.value, ast.Name)
+                and value.value.id == "topics"
+            ) or (isinstance(value, ast.Constant) and value.value in catalogued)
+            if aliased:
+                offenders.append(f"{path.relative_to(SRC)}:{node.lineno}: {ast.unparse(node)}")
+    assert offenders == []

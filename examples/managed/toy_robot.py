@@ -19,8 +19,8 @@ from typing import Any, ClassVar
 
 from pydantic import BaseModel, ConfigDict, Field
 
-from anunnaki.bus import body_of
 from anunnaki.managed import ManagedContext
+from anunnaki.messages import body_of
 
 
 class ToyOptions(BaseModel):

@@ -10,15 +10,29 @@ the same code serves every slot and one contract holds everywhere:
   (``sim`` needs pybullet, a detector needs torch) costs nothing until one is asked for;
 * **third parties** add plugins through an ``importlib.metadata`` entry-point group
   (``anunnaki.phenomena``, ``anunnaki.oracles``, ``anunnaki.detectors``,
-  ``anunnaki.managed``, …), loaded lazily on the first lookup; one that fails to import or
-  fails the slot's check is logged and skipped, so a broken plugin never takes the others
+  ``anunnaki.managed``, …), loaded on the first lookup of a name that is not registered
+  otherwise (or when the names are listed), so looking up a built-in imports no plugin;
+  so do Anunnaki's own packages above a slot (Enlil's learned oracle registers in
+  ``anunnaki.oracles`` by an entry point in ``pyproject.toml``: a slot never names a
+  module of a package above it). One that fails to import or fails the slot's check is
+  logged and skipped, so a broken plugin never takes the others
   down, and none can shadow a built-in or an explicitly registered name;
 * **an unknown name** raises the slot's error type with the valid names listed.
 
 A slot's *check* validates a factory when it is registered (for a class: abstract
-methods, a ``name`` that is an identifier, required hooks); optional hooks are typed
-:class:`~typing.Protocol` classes that the caller tests with ``isinstance``, never found by
-signature inspection.
+methods, required hooks); optional hooks are typed :class:`~typing.Protocol` classes that
+the caller tests with ``isinstance``, never found by signature inspection.
+
+**One rule for names**, in every slot (:data:`NAME_RULE`, :func:`check_name`): a name is
+an ASCII identifier, a letter or ``_`` followed by letters, digits or ``_`` (``fog``,
+``ground_truth``, ``ModeRequest``). No ``.`` (compositions prefix parameters with
+``fog.``), no ``+`` (it combines names), no ``-`` or spaces. A factory's name is its
+``name`` attribute unless the slot says otherwise (``key``; message types use their type
+name).
+
+A slot is a module-level constant, ``SLOT: Registry[Kind] = Registry(...)``; callers use
+its methods (``create``, ``factory``, ``names``, ``register``), there are no per-slot
+``get_``/``register_``/``available_`` functions.
 
 Example::
 
@@ -41,14 +55,17 @@ from typing import Any, Generic, TypeVar, cast
 
 from anunnaki.errors import AnunnakiError
 
-__all__ = ["PluginError", "Registry", "check_name"]
+__all__ = ["NAME_RULE", "PluginError", "Registry", "check_name"]
 
 log = logging.getLogger("anunnaki.plugins")
 
 T = TypeVar("T")
 F = TypeVar("F", bound=Callable[..., Any])
 
-_NAME_RE = re.compile(r"^[A-Za-z_][A-Za-z0-9_.-]*$")
+#: The one rule every plugin name follows, in every slot (as written in error messages).
+NAME_RULE = "a letter or '_', then letters, digits or '_' (an identifier such as 'fog')"
+
+_NAME_RE = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
 
 
 class PluginError(AnunnakiError):
@@ -56,9 +73,9 @@ class PluginError(AnunnakiError):
 
 
 def check_name(name: object, *, what: str, error: type[AnunnakiError] = PluginError) -> str:
-    """Return ``name`` if it can name a plugin (an identifier, ``.``/``-`` allowed inside)."""
+    """Return ``name`` if it follows :data:`NAME_RULE`, else raise ``error`` saying the rule."""
     if not isinstance(name, str) or not _NAME_RE.match(name):
-        raise error(f"a {what} name must be an identifier such as 'fog', got {name!r}")
+        raise error(f"a {what} name must be an identifier: {NAME_RULE}; got {name!r}")
     return name
 
 
@@ -85,8 +102,11 @@ class Registry(Generic[T]):
         hint: Appended to the unknown-name message (e.g. how to combine names).
         logger: Where skipped entry points are reported (the slot's own logger).
         combine: For slots whose names combine (``"fog+raindrop"``): builds one plugin from
-            the parts of a name that contains ``separator``; each part is a name of the slot.
+            the plugins the parts of a name that contains ``separator`` name (each part a
+            name of this registry, built by it).
         separator: What joins the parts of a combined name (``"+"``).
+        key: The name a factory registers under when none is given (default: its ``name``
+            attribute, or a function's ``__name__``); e.g. message types use their type name.
 
     """
 
@@ -100,8 +120,9 @@ class Registry(Generic[T]):
         error: type[AnunnakiError] = PluginError,
         hint: str | None = None,
         logger: str = "anunnaki.plugins",
-        combine: Callable[[list[str]], T] | None = None,
+        combine: Callable[[list[T]], T] | None = None,
         separator: str = "+",
+        key: Callable[[Any], object] | None = None,
     ) -> None:
         self.what = what
         self._log = logging.getLogger(logger)
@@ -112,18 +133,23 @@ class Registry(Generic[T]):
         self._check = check
         self._combine = combine
         self.separator = separator
+        self._key = key
         self._factories: dict[str, Callable[..., T]] = {}
         self._lazy: dict[str, str] = {}
+        self._plugins: set[str] = set()  # the names that came from entry points
         self._plugins_loaded = group is None
         self._lock = threading.RLock()
 
     # -- registration -----------------------------------------------------------------------
     def _name_of(self, factory: Any, name: str | None) -> str:
-        if name is None:
-            name = getattr(factory, "name", None)
-            if not isinstance(name, str) and not inspect.isclass(factory):
-                name = getattr(factory, "__name__", None)
-        return check_name(name, what=self.what, error=self.error)
+        found: object = name
+        if found is None and self._key is not None:
+            found = self._key(factory)
+        elif found is None:
+            found = getattr(factory, "name", None)
+            if not isinstance(found, str) and not inspect.isclass(factory):
+                found = getattr(factory, "__name__", None)
+        return check_name(found, what=self.what, error=self.error)
 
     def _validate(self, factory: Any) -> Callable[..., T]:
         if self._check is not None:  # the slot's own rules first: it knows what it needs
@@ -167,11 +193,37 @@ class Registry(Generic[T]):
                 raise self.error(f"{key!r} is already registered as a {self.what}")
             self._lazy[key] = ref
 
+    def copy(self, *, entry_points: bool = True) -> Registry[T]:
+        """A private registry of the same slot, as a fresh process would have it.
+
+        It has the same rules and what was registered explicitly (built-ins included);
+        later registrations in either do not reach the other. Entry points are loaded anew
+        on its first need (``entry_points=False``: never, for tests that must not see
+        installed plugins).
+        """
+        other: Registry[T] = Registry(
+            self.what,
+            group=self.group if entry_points else None,
+            kind=self.kind,
+            check=self._check,
+            error=self.error,
+            hint=self.hint,
+            logger=self._log.name,
+            combine=self._combine,
+            separator=self.separator,
+            key=self._key,
+        )
+        with self._lock:
+            other._factories = {k: f for k, f in self._factories.items() if k not in self._plugins}
+            other._lazy = dict(self._lazy)
+        return other
+
     def unregister(self, name: str) -> None:
         """Forget ``name`` (tests, or a plugin withdrawn at run time)."""
         with self._lock:
             self._factories.pop(name, None)
             self._lazy.pop(name, None)
+            self._plugins.discard(name)
 
     def load_entry_points(self, *, force: bool = False) -> None:
         """Load the entry-point group's plugins (once, unless ``force``); skip broken ones."""
@@ -212,6 +264,7 @@ class Registry(Generic[T]):
                         key,
                     )
                 self._factories[key] = factory
+                self._plugins.add(key)
 
     # -- lookup -----------------------------------------------------------------------------
     def names(self) -> list[str]:
@@ -220,13 +273,21 @@ class Registry(Generic[T]):
         with self._lock:
             return sorted({*self._factories, *self._lazy})
 
+    def _registered(self, key: str) -> bool:
+        with self._lock:
+            return key in self._factories or key in self._lazy
+
     def __contains__(self, name: object) -> bool:
         if not isinstance(name, str):
             return False
-        names = self.names()
+        parts = [name]
         if self._combine is not None and self.separator in name:
-            return all(part.strip() in names for part in name.split(self.separator))
-        return name.strip() in names
+            parts = name.split(self.separator)
+        keys = [part.strip() for part in parts]
+        if all(self._registered(key) for key in keys):  # no entry point is loaded for these
+            return True
+        names = self.names()
+        return all(key in names for key in keys)
 
     def unknown(self, name: object) -> AnunnakiError:
         """The error for an unknown name: it lists the valid ones."""
@@ -241,12 +302,17 @@ class Registry(Generic[T]):
 
         Raises the slot's error for an unknown name (listing the valid ones) or a lazy
         built-in that cannot be imported (naming the extra to install when the import
-        error says so).
+        error says so). The entry points are loaded only for a name not registered
+        otherwise: looking up a built-in imports no plugin.
         """
         if not isinstance(name, str):
             raise self.error(f"expected a {self.what} name, got {type(name).__name__}")
         key = name.strip()
-        self.load_entry_points()
+        found = self._factories.get(key)  # the hot path (a decoder per message): no lock
+        if found is not None:
+            return found
+        if not self._registered(key):
+            self.load_entry_points()
         with self._lock:
             found = self._factories.get(key)
             ref = self._lazy.get(key)
@@ -281,7 +347,8 @@ class Registry(Generic[T]):
                         f"options {sorted(kwargs)} apply to a single {self.what}, "
                         f"not to the combination {spec.strip()!r}"
                     )
-                return self._combine([part.strip() for part in spec.split(self.separator)])
+                parts = [self.create(part.strip()) for part in spec.split(self.separator)]
+                return self._combine(parts)
             factory = self.factory(spec)
             if not kwargs:
                 return factory()

@@ -1,7 +1,10 @@
 """The well-known topics, services and node names, in one place.
 
-Every name that two parts of Anunnaki must agree on lives here, in the ROS-style form the
-files use (``/utu/oracle/output``); the bus maps it to a key (``anunnaki/utu/oracle/output``,
+Every name that two parts of Anunnaki must agree on is defined here, once, and used from
+here (``topics.GROUND_TRUTH``): no module keeps an alias of its own. The messages that
+travel on these names are :mod:`anunnaki.messages`; the transport is :mod:`anunnaki.bus`.
+Names are in the ROS-style form the files use
+(``/utu/oracle/output``); the bus maps them to keys (``anunnaki/utu/oracle/output``,
 :func:`anunnaki.bus.ros_to_key`). A managed system's own topics (``/rover/status``) are not
 here: they belong to its binding file, so that a goal model moves to another platform by
 swapping the binding.
@@ -17,13 +20,13 @@ Utu's services and topics (paper §4.1.4, Fig. 13)
     ``/utu/ready``                    readiness of the manager (guideline C9)
     ``/utu/<node>/ready``             readiness of one node (:func:`ready_service`)
     ``/utu/knowledge/query``          decisions, queue, state
-    ``/utu/monitor/input``            monitor → analyze: a :class:`~anunnaki.bus.MonitorBatch`
-    ``/utu/analyze/state``            the analysis (:class:`~anunnaki.bus.AnalysisState`)
-    ``/utu/execute/status``           execute → plan (:class:`~anunnaki.bus.ExecuteStatus`)
-    ``/utu/plan/start``               plan → execute (:class:`~anunnaki.bus.PlanStart`)
+    ``/utu/monitor/input``            monitor → analyze: a :class:`~anunnaki.messages.MonitorBatch`
+    ``/utu/analyze/state``            the analysis (:class:`~anunnaki.messages.AnalysisState`)
+    ``/utu/execute/status``           execute → plan (:class:`~anunnaki.messages.ExecuteStatus`)
+    ``/utu/plan/start``               plan → execute (:class:`~anunnaki.messages.PlanStart`)
     ``/utu/execute/done``             execute → analyze, a cycle finished
     ``/utu/knowledge/decisions``      new decisions, for displays and logs
-    ``/utu/oracle/output``            behavior assessments (:class:`~anunnaki.bus.Assessment`)
+    ``/utu/oracle/output``            behavior assessments (:class:`~anunnaki.messages.Assessment`)
     ================================  ==========================================================
 """
 
@@ -35,6 +38,7 @@ __all__ = [
     "ACTIVE_MODEL",
     "ANALYSIS",
     "APPROVE",
+    "BAG_DECISIONS",
     "CLOCK",
     "CYCLE_DONE",
     "DECISIONS",
@@ -53,8 +57,10 @@ __all__ = [
     "RELOAD",
     "RESUME",
     "RUN_STOP",
+    "SCORER",
     "SWAP",
     "UTU_NODES",
+    "UTU_NODE_PREFIX",
     "UtuNodeName",
     "node_token",
     "operator_service",
@@ -62,7 +68,7 @@ __all__ = [
 ]
 
 # -- time ------------------------------------------------------------------------------------
-#: Simulation time (:class:`~anunnaki.bus.Clock`), published by simulators and trace players.
+#: Simulation time (:class:`~anunnaki.messages.Clock`), from simulators and trace players.
 CLOCK: Final = "/clock"
 
 # -- Utu: operator services ------------------------------------------------------------------
@@ -91,12 +97,21 @@ PLAN_START: Final = "/utu/plan/start"
 CYCLE_DONE: Final = "/utu/execute/done"
 DECISIONS: Final = "/utu/knowledge/decisions"
 
+#: An exported ROS bag carries a run's decisions on this topic (``anunnaki log --export-bag``).
+BAG_DECISIONS: Final = "/utu/decisions"
+
 UtuNodeName = Literal["monitor", "analyze", "plan", "execute", "knowledge"]
 #: The five Utu nodes, in the order a cycle visits them (knowledge last).
 UTU_NODES: Final[tuple[UtuNodeName, ...]] = ("monitor", "analyze", "plan", "execute", "knowledge")
 
+#: Utu's nodes hold liveliness tokens ``/utu_<node>`` (:func:`node_token`): while one is
+#: alive, Utu runs.
+UTU_NODE_PREFIX: Final = "/utu_"
+
 # -- behavior oracles --------------------------------------------------------------------------
 ORACLE_OUTPUT: Final = "/utu/oracle/output"
+#: Where a live scorer beside the oracle publishes (not Utu's input: no agent reads it).
+SCORER: Final = "/sim/oracle/scorer"
 
 # -- the learning model manager ----------------------------------------------------------------
 LM_MANAGER: Final = "/lm_manager"
@@ -105,7 +120,9 @@ SWAP: Final = "/lm_manager/swap"
 DETECTIONS: Final = "/lec/detector/detections"
 
 # -- simulation ground truth (never seen by a real robot's oracle) ----------------------------
+#: Ground truth of each frame: ``{seq, t, width, height, boxes, labels}`` (scoring only).
 GROUND_TRUTH: Final = "/sim/ground_truth"
+#: What the scenario applied to each frame: ``{t, seq, phenomena: [{name, params}], faults}``.
 PHENOMENA: Final = "/sim/phenomena"
 
 
@@ -116,7 +133,7 @@ def ready_service(node: str) -> str:
 
 def node_token(node: str) -> str:
     """The liveliness token of a Utu node: ``/utu_<node>``."""
-    return f"/utu_{node}"
+    return f"{UTU_NODE_PREFIX}{node}"
 
 
 def operator_service(op: str) -> str:

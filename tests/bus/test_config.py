@@ -3,11 +3,13 @@
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
 
 import pytest
 from pydantic import ValidationError
 
 from anunnaki.bus import (
+    BUS_KINDS,
     AccessControl,
     AccessRule,
     BusConfig,
@@ -157,8 +159,8 @@ def test_invalid_configs(fields: dict, message: str) -> None:
 
 
 def test_open_bus_kinds_and_options() -> None:
-    with pytest.raises(BusConfigError, match="bus kind must be"):
-        open_bus("mqtt")  # type: ignore[arg-type]
+    with pytest.raises(BusConfigError, match="unknown bus kind 'mqtt'; valid names: inproc, zenoh"):
+        open_bus("mqtt")
     with pytest.raises(BusConfigError, match="hub only applies"):
         open_bus("zenoh", hub=InprocHub())
     hub = InprocHub()
@@ -169,6 +171,28 @@ def test_open_bus_kinds_and_options() -> None:
         assert "InprocBus 'n'" in repr(bus)
     with open_bus(BusConfig(namespace="lab"), namespace="other") as bus:
         assert bus.namespace == "other"
+
+
+def test_a_bus_kind_is_a_plugin_of_the_bus_kinds_slot() -> None:
+    opened: list[BusConfig] = []
+
+    def recording(
+        config: BusConfig, *, clock: Any = None, hub: InprocHub | None = None
+    ) -> InprocBus:
+        opened.append(config)
+        return InprocBus(hub=hub, namespace=config.namespace, name=config.name, clock=clock)
+
+    assert BUS_KINDS.names() == ["inproc", "zenoh"]
+    BUS_KINDS.register(recording)
+    try:
+        with open_bus("recording", namespace="lab") as bus:
+            assert isinstance(bus, InprocBus) and bus.namespace == "lab"
+        assert [c.kind for c in opened] == ["recording"]
+        assert BusConfig.model_validate({"kind": "recording"}).kind == "recording"
+    finally:
+        BUS_KINDS.unregister("recording")
+    with pytest.raises(BusConfigError, match="unknown bus kind 'recording'"):
+        open_bus("recording")
 
 
 def test_from_file(tmp_path: Path) -> None:

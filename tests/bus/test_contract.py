@@ -19,6 +19,11 @@ from anunnaki.bus import (
     BusClosedError,
     BusConfigError,
     BusTimeout,
+    Sample,
+    ServiceError,
+    TopicNameError,
+)
+from anunnaki.messages import (
     Clock,
     Generic,
     Image,
@@ -27,10 +32,7 @@ from anunnaki.bus import (
     ModeReply,
     ModeRequest,
     RunStop,
-    Sample,
-    ServiceError,
     ServiceReply,
-    TopicNameError,
 )
 
 PNG = b"\x89PNG\r\n\x1a\n" + bytes(range(256)) * 4

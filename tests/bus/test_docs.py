@@ -10,7 +10,8 @@ import pytest
 import yaml
 from bus_helpers import Collector, Pki, free_port
 
-from anunnaki.bus import Bus, BusConfig, BusTimeout, ModeReply, ModeRequest, RunStop, open_bus
+from anunnaki.bus import Bus, BusConfig, BusTimeout, open_bus
+from anunnaki.messages import ModeReply, ModeRequest, RunStop
 
 DOC = Path(__file__).resolve().parents[2] / "docs" / "bus.md"
 

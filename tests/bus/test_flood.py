@@ -20,7 +20,8 @@ from typing import Any
 import pytest
 from bus_helpers import BusFactory, wait_for
 
-from anunnaki.bus import Image, Sample
+from anunnaki.bus import Sample
+from anunnaki.messages import Image
 
 PNG = b"\x89PNG\r\n\x1a\n" + bytes(64)
 FRAMES = 10_000

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import re
 import struct
 from typing import ClassVar
 
@@ -12,24 +13,24 @@ from hypothesis import strategies as st
 from pydantic import ValidationError
 
 from anunnaki.bus import (
-    Clock,
     Envelope,
+    MalformedMessage,
+    decode_envelope,
+    encode_envelope,
+)
+from anunnaki.messages import (
+    MESSAGES,
+    Clock,
     Generic,
     Image,
-    MalformedMessage,
     Message,
     MessageError,
     ModeReply,
     ModeRequest,
     RunStop,
     ServiceReply,
-    UnknownMessageType,
-    decode_envelope,
-    encode_envelope,
-    message_type,
-    message_types,
-    register_message,
 )
+from anunnaki.plugins import NAME_RULE
 
 PNG = b"\x89PNG\r\n\x1a\n" + bytes(range(256))
 
@@ -176,42 +177,55 @@ def test_schemas_validate_on_construction() -> None:
 
 
 def test_encoding_errors() -> None:
-    with pytest.raises(MessageError, match=r"expected an anunnaki\.bus\.Message"):
+    with pytest.raises(MessageError, match=r"expected an anunnaki\.messages\.Message"):
         encode_envelope(Envelope({"a": 1}, 0, 0, "s"))  # type: ignore[arg-type]
 
 
 def test_registry() -> None:
-    assert message_type("Image") is Image
-    assert set(message_types()) >= {
-        "Generic", "Image", "Clock", "ModeRequest", "ModeReply", "ServiceReply", "RunStop"
+    assert MESSAGES.factory("Image") is Image
+    assert set(MESSAGES.names()) >= {
+        "Generic", "Image", "Clock", "ModeRequest", "ModeReply", "ServiceReply", "RunStop",
+        "Assessment", "Detections", "MonitorBatch", "AnalysisState", "ExecuteStatus",
+        "PlanStart", "CycleDone",
     }  # fmt: skip
-    with pytest.raises(UnknownMessageType) as info:
-        message_type("Imag")
+    with pytest.raises(MessageError) as info:
+        MESSAGES.factory("Imag")
     assert "'Imag'" in str(info.value)
     assert "Image" in str(info.value)  # lists the known names
-    assert register_message(Image) is Image  # idempotent
+    assert MESSAGES.register(Image) is Image  # idempotent
 
     class Image2(Message):
         TYPE_NAME: ClassVar[str | None] = "Image"
         x: int
 
     with pytest.raises(MessageError, match="already registered"):
-        register_message(Image2)
+        MESSAGES.register(Image2)
     with pytest.raises(MessageError, match="not a subclass"):
-        register_message(dict)  # type: ignore[type-var]
+        MESSAGES.register(dict)
+
+
+def test_a_type_name_follows_the_one_name_rule_and_the_error_says_it() -> None:
+    class Dotted(Message):
+        TYPE_NAME: ClassVar[str | None] = "my.Dotted"
+
+    with pytest.raises(MessageError, match=re.escape(NAME_RULE)) as info:
+        MESSAGES.register(Dotted)
+    assert "message type name must be an identifier" in str(info.value)
+    assert "'my.Dotted'" in str(info.value)
+    assert "my.Dotted" not in MESSAGES.names()
 
 
 def test_a_new_registered_type_travels_and_versions_are_checked() -> None:
-    @register_message
+    @MESSAGES.register
     class Detection(Message):
         VERSION: ClassVar[int] = 2
-        TYPE_NAME: ClassVar[str | None] = "test.Detection"
+        TYPE_NAME: ClassVar[str | None] = "TestDetection"
         label: str
         score: float
 
     raw = encode_envelope(Envelope(Detection(label="person", score=0.9), 0, 0, "lec"))
     assert json.loads(raw)["v"] == 2
-    assert json.loads(raw)["type"] == "test.Detection"
+    assert json.loads(raw)["type"] == "TestDetection"
     assert decode_envelope(raw).message == Detection(label="person", score=0.9)
     old = raw.replace(b'"v":2', b'"v":1')
     with pytest.raises(MalformedMessage, match="version 1 is not the known version 2"):
@@ -219,7 +233,7 @@ def test_a_new_registered_type_travels_and_versions_are_checked() -> None:
 
 
 def test_body_of_reads_messages_and_mappings_alike() -> None:
-    from anunnaki.bus import Generic, RunStop, body_of
+    from anunnaki.messages import Generic, RunStop, body_of
 
     assert body_of(Generic(data={"mode": "manual"})) == {"mode": "manual"}
     assert body_of({"a": 1}) == {"a": 1}
@@ -230,7 +244,7 @@ def test_body_of_reads_messages_and_mappings_alike() -> None:
 @pytest.mark.parametrize("encoding", ["png", "jpeg"])
 def test_image_from_array_round_trips(encoding: str) -> None:
     np = pytest.importorskip("numpy")
-    from anunnaki.bus import Image
+    from anunnaki.messages import Image
 
     rgb = np.zeros((24, 32, 3), dtype=np.uint8)
     rgb[:, :16] = (200, 30, 10)

@@ -7,7 +7,8 @@ from typing import Any
 
 import pytest
 
-from anunnaki.bus import Generic, InprocHub, Node, open_bus
+from anunnaki.bus import InprocHub, Node, open_bus
+from anunnaki.messages import Generic
 
 
 class Echo(Node):

@@ -11,16 +11,8 @@ from collections.abc import Iterator
 import pytest
 from bus_helpers import Collector, Pki, free_port
 
-from anunnaki.bus import (
-    AccessControl,
-    AccessRule,
-    Bus,
-    BusConnectError,
-    ModeReply,
-    ModeRequest,
-    TlsConfig,
-    open_bus,
-)
+from anunnaki.bus import AccessControl, AccessRule, Bus, BusConnectError, TlsConfig, open_bus
+from anunnaki.messages import ModeReply, ModeRequest
 
 pytest.importorskip("zenoh")
 pytestmark = pytest.mark.slow

@@ -17,17 +17,8 @@ from typing import Any
 import pytest
 from bus_helpers import Collector, free_port, run_python, wait_for
 
-from anunnaki.bus import (
-    Bus,
-    BusConfigError,
-    BusConnectError,
-    BusTimeout,
-    Generic,
-    Image,
-    RunStop,
-    TlsConfig,
-    open_bus,
-)
+from anunnaki.bus import Bus, BusConfigError, BusConnectError, BusTimeout, TlsConfig, open_bus
+from anunnaki.messages import Generic, Image, RunStop
 
 zenoh = pytest.importorskip("zenoh")
 
@@ -159,7 +150,8 @@ def test_import_does_not_load_zenoh_and_missing_extra_is_explained() -> None:
 
 CHILD = """
 import sys, threading
-from anunnaki.bus import ModeReply, open_bus
+from anunnaki.bus import open_bus
+from anunnaki.messages import ModeReply
 bus = open_bus("zenoh", connect=[sys.argv[1]], name="child")
 bus.service("/child/set_mode", lambda r: ModeReply(mode=r.mode, accepted=True))
 bus.liveliness_token("/child")
@@ -172,7 +164,7 @@ threading.Event().wait()  # hold everything until killed
 def test_sigkilled_process_vanishes_from_liveliness(bus: Bus) -> None:
     events = Collector()
     bus.watch_liveliness(lambda node, alive: events((node, alive)))
-    from anunnaki.bus import ModeReply, ModeRequest
+    from anunnaki.messages import ModeReply, ModeRequest
 
     with subprocess.Popen(
         [sys.executable, "-c", CHILD, bus.endpoints[0]], stdout=subprocess.PIPE, text=True

@@ -36,7 +36,7 @@ from dashboard_helpers import (
     wait_for,
 )
 
-from anunnaki.bus import BusConfigError, Clock, Detections, Image, body_of, open_bus
+from anunnaki.bus import BusConfigError, open_bus
 from anunnaki.cli import _dashboard
 from anunnaki.dashboard import (
     Dashboard,
@@ -50,6 +50,7 @@ from anunnaki.dashboard._token import Throttle
 from anunnaki.errors import MissingExtraError, ModelFileError
 from anunnaki.goals import load_goal_model
 from anunnaki.launch import load_launch
+from anunnaki.messages import Clock, Detections, Image, body_of
 from anunnaki.tactics import load_tactics
 from anunnaki.tokens import token_weakness
 from anunnaki.topics import DECISIONS as DECISIONS_TOPIC

@@ -29,8 +29,8 @@ from dashboard_helpers import (
     wait_for,
 )
 
-from anunnaki.bus import Assessment, Detections, Image
 from anunnaki.dashboard import Dashboard, ObserverConfig
+from anunnaki.messages import Assessment, Detections, Image
 
 pytestmark = pytest.mark.slow
 
@@ -495,8 +495,9 @@ def test_header_time_live_badge_and_frame_rate(chromium: Any) -> None:
     it is withdrawn; the camera's fps is frames drawn over their stamps' span (9.6 frames per
     simulated second, however fast they arrive). Frames are published one at a time, each
     once the page has drawn the previous one."""
-    from anunnaki.bus import Clock, InprocHub, open_bus
+    from anunnaki.bus import InprocHub, open_bus
     from anunnaki.goals import load_goal_model
+    from anunnaki.messages import Clock
     from anunnaki.tactics import load_tactics
 
     rover = HERE.parents[1] / "examples" / "rover"

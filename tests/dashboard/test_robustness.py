@@ -16,11 +16,12 @@ from typing import Any
 import pytest
 from dashboard_helpers import ROVER, Web, png, wait_for
 
-from anunnaki.bus import Bus, Clock, Detections, Image, InprocHub, body_of, open_bus
+from anunnaki.bus import Bus, InprocHub, open_bus
 from anunnaki.dashboard import Dashboard, DashboardState
 from anunnaki.dashboard._app import dumps
 from anunnaki.dashboard._checks import MAX_ACTIONS, MAX_ASSESSORS, _num
 from anunnaki.goals import load_goal_model
+from anunnaki.messages import Clock, Detections, Image, body_of
 from anunnaki.tactics import load_tactics
 from anunnaki.topics import DECISIONS as DECISIONS_TOPIC
 

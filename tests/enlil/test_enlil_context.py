@@ -17,17 +17,17 @@ from anunnaki.enlil import (
     to_phenomenon_vector,
 )
 from anunnaki.lec import evaluate_detector
-from anunnaki.phenomena import get_phenomenon
+from anunnaki.phenomena import PHENOMENA
 
 
 def test_vectors_round_trip_through_the_bounds() -> None:
-    fog = get_phenomenon("fog")
+    fog = PHENOMENA.create("fog")
     unit = np.linspace(0.0, 1.0, len(fog.param_names))
     raw = to_phenomenon_vector("fog", unit)
     low, high = np.asarray(fog.bounds()).T
     assert np.allclose(raw, low + unit * (high - low))
     assert np.allclose(normalise("fog", raw), unit)
-    comp = get_phenomenon("rain+brightness")
+    comp = PHENOMENA.create("rain+brightness")
     assert to_phenomenon_vector(comp, np.zeros(len(comp.param_names))).shape == (
         len(comp.param_names),
     )
@@ -66,7 +66,7 @@ def test_darkness_is_category_two_and_identity_is_zero() -> None:
     det, batch = ColourDetector(), tiny_data(8)
     clean = evaluate_detector(det, batch).f1
     assert clean == 1.0
-    bright = get_phenomenon("brightness")
+    bright = PHENOMENA.create("brightness")
     dark = evaluate_context(det, batch, bright, [0.0, 0.5], clean_f1=clean, seed=0)
     assert dark.f1 < 0.5 and dark.category == 2 and dark.drop == pytest.approx(1 - dark.f1)
     ident = normalise(bright, bright.to_vector(bright.identity_params()))

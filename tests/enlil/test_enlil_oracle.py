@@ -16,7 +16,7 @@ from anunnaki.enlil import (
     train_oracle,
 )
 from anunnaki.errors import ModelFileError
-from anunnaki.oracles import get_oracle
+from anunnaki.oracles import ORACLES
 
 
 def _fog_contexts() -> ContextSet:
@@ -81,7 +81,7 @@ def test_uint8_frames_are_the_float_frames_exactly() -> None:
 
 def test_enlil_plugin_is_per_model(oracle_file, caplog) -> None:  # type: ignore[no-untyped-def]
     path, _, _ = oracle_file
-    plugin = get_oracle("enlil", oracles={"colour": path})
+    plugin = ORACLES.create("enlil", oracles={"colour": path})
     assert isinstance(plugin, EnlilOracle)
     frame = tiny_data(1).image(0)
     first = plugin.assess(frame, seq=3, model_id="colour")

@@ -28,17 +28,10 @@ from typing import Any
 import pytest
 import yaml
 
-from anunnaki.bus import (
-    AnalysisState,
-    Bus,
-    BusConfig,
-    BusConnectError,
-    BusTimeout,
-    MonitorBatch,
-    open_bus,
-)
+from anunnaki.bus import Bus, BusConfig, BusConnectError, BusTimeout, open_bus
 from anunnaki.bus._zenoh import free_port as bus_free_port
 from anunnaki.launch import load_launch, run_launch
+from anunnaki.messages import AnalysisState, MonitorBatch
 from anunnaki.topics import ready_service
 
 pytest.importorskip("zenoh")

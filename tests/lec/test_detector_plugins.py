@@ -21,7 +21,7 @@ import numpy as np
 import pytest
 from fixed_boxes_plugin import FixedBoxes, FixedBoxesDetector, write_model
 
-from anunnaki.bus import Detections, Image, Sample, open_bus
+from anunnaki.bus import Sample, open_bus
 from anunnaki.cli.main import main
 from anunnaki.errors import ModelFileError
 from anunnaki.lec import (
@@ -33,6 +33,7 @@ from anunnaki.lec import (
     ModelRegistryError,
     load_registry,
 )
+from anunnaki.messages import Detections, Image
 
 
 def sha(path: Path) -> str:

@@ -14,20 +14,12 @@ import cv2
 import numpy as np
 import pytest
 
-from anunnaki.bus import (
-    Assessment,
-    Bus,
-    Detections,
-    Generic,
-    Image,
-    Sample,
-    ServiceError,
-    open_bus,
-)
+from anunnaki.bus import Bus, Sample, ServiceError, open_bus
 from anunnaki.goals import parse_binding, parse_goal_model
 from anunnaki.lec._detector import DetectionResult
 from anunnaki.lec._node import LecNode, LecNodeStats, SwapResult, decode_image, detections_topic
 from anunnaki.lec._registry import ModelRegistry, ModelRegistryError, parse_registry
+from anunnaki.messages import Assessment, Detections, Generic, Image
 from anunnaki.tactics import parse_tactics_yaml
 from anunnaki.utu import AutonomicManager, Knowledge
 

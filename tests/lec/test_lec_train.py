@@ -21,7 +21,7 @@ from anunnaki.lec import (
 )
 from anunnaki.lec._centernet import centernet_loss, encode_targets
 from anunnaki.lec._train import _zoom
-from anunnaki.phenomena import get_phenomenon
+from anunnaki.phenomena import PHENOMENA
 
 #: Measured with ignore boxes (the rover's minimum labelled height, ignore-aware loss and F1):
 #: the session model (300 training images of 96 x 96 with 435 boxes and 892 ignore boxes,
@@ -96,10 +96,10 @@ def test_training_repeats_exactly_with_a_seed() -> None:
 def test_augmenter_samples_within_bounds() -> None:
     aug = Augmenter(["raindrop", "fog"], probability=1.0)
     rng = np.random.default_rng(0)
-    drop = get_phenomenon("raindrop")
+    drop = PHENOMENA.create("raindrop")
     xs = [aug.sample_params(drop, rng)["x"] for _ in range(200)]
     assert min(xs) < 0.2 and max(xs) > 0.8  # free parameters roam the image
-    fog = get_phenomenon("fog")
+    fog = PHENOMENA.create("fog")
     for _ in range(50):
         p = aug.sample_params(fog, rng)
         assert 1 <= p["density"] <= 10 and 0 <= p["intensity"] <= 0.3

@@ -12,10 +12,11 @@ from typing import Any, ClassVar
 
 import pytest
 
+from anunnaki import topics
 from anunnaki.bus import open_bus
 from anunnaki.errors import ModelFileError
-from anunnaki.managed import SCORER_TOPIC, CameraChain, TakesModels, check_camera_chain
-from anunnaki.oracles import GroundTruthAssessor, default_registry
+from anunnaki.managed import CameraChain, TakesModels, check_camera_chain
+from anunnaki.oracles import ORACLES, GroundTruthAssessor
 
 ROOT = Path(__file__).parents[2]
 MODELS = ROOT / "examples" / "models" / "rover.yaml"
@@ -45,7 +46,7 @@ class _Taker(_Plain):
 
 @pytest.fixture
 def oracles() -> Iterator[None]:
-    registry = default_registry()
+    registry = ORACLES
     registry.register(_Plain)
     registry.register(_Taker)
     try:
@@ -78,7 +79,7 @@ def test_an_oracle_takes_from_the_registry_by_its_hook_and_the_file_wins(oracles
             assert chain.lec is not None and chain.detections_topic == chain.lec.detections_topic
             assert "on /toy/camera/image" in chain.describe()
             assert "scored live by chain_plain" in chain.describe()
-        assert SCORER_TOPIC == "/sim/oracle/scorer"
+        assert topics.SCORER == "/sim/oracle/scorer"
 
 
 def test_the_ground_truth_oracle_gets_the_clean_f1_without_a_branch_on_its_name() -> None:

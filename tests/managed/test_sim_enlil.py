@@ -18,8 +18,8 @@ import pytest
 import yaml
 
 from anunnaki import topics
-from anunnaki.bus import Assessment
 from anunnaki.launch import parse_launch, run_launch
+from anunnaki.messages import Assessment
 from anunnaki.sim import load_report
 
 ROOT = Path(__file__).parents[2]

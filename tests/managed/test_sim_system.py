@@ -16,11 +16,11 @@ from typing import Any
 
 import pytest
 
-from anunnaki.bus import Detections
 from anunnaki.errors import ModelFileError
 from anunnaki.launch import parse_launch, run_launch
 from anunnaki.lec import load_registry, sha256_file
 from anunnaki.managed import SimulatedSystem, format_phases, scenario_phases
+from anunnaki.messages import Detections
 from anunnaki.sim import load_report, load_scenario
 
 ROOT = Path(__file__).parents[2]

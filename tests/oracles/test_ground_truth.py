@@ -10,8 +10,8 @@ from typing import Any
 import numpy as np
 import pytest
 
-from anunnaki.bus import Detections
 from anunnaki.lec._registry import ModelRegistry
+from anunnaki.messages import Detections
 from anunnaki.oracles import (
     GroundTruthAssessor,
     OracleError,

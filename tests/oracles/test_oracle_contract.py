@@ -16,19 +16,17 @@ from typing import Any
 import numpy as np
 import pytest
 
-from anunnaki.bus import Assessment, Detections, Sample, open_bus
+from anunnaki.bus import Sample, open_bus
+from anunnaki.messages import Assessment, Detections
 from anunnaki.oracles import (
     HOOKS,
+    ORACLES,
     ObservesContext,
     ObservesDetections,
     ObservesGroundTruth,
     Oracle,
-    OracleRegistry,
-    available_oracles,
     context_from_phenomena,
-    get_oracle,
 )
-from anunnaki.oracles import _registry as registry_module
 from anunnaki.phenomena import synthetic_scene
 
 DOC = (Path(__file__).parents[2] / "docs" / "oracles.md").read_text(encoding="utf-8")
@@ -36,21 +34,18 @@ BUILTINS = {"ground_truth"}
 
 
 def _docs_example() -> type[Any]:
-    """Run the third-party example of docs/oracles.md; it registers into a private registry."""
+    """Run the third-party example of docs/oracles.md; it registers in the slot, for a while."""
     (code,) = [
         body
         for lang, body in re.findall(r"^```(\w*)\n(.*?)^```", DOC, re.MULTILINE | re.DOTALL)
-        if lang == "python" and "register_oracle" in body
+        if lang == "python" and "ORACLES.register" in body
     ]
-    private = OracleRegistry(entry_point_group=None)
-    saved = registry_module._DEFAULT
-    registry_module._DEFAULT = private
+    namespace: dict[str, Any] = {"__name__": "docs_oracles_example"}
     try:
-        namespace: dict[str, Any] = {"__name__": "docs_oracles_example"}
         exec(compile(code, "docs/oracles.md", "exec"), namespace)
+        assert isinstance(ORACLES.create("darkness"), namespace["DarknessOracle"])
     finally:
-        registry_module._DEFAULT = saved
-    assert private.names() == ["darkness", "enlil", "ground_truth"]
+        ORACLES.unregister("darkness")  # the other tests see the slot as installed
     return namespace["DarknessOracle"]
 
 
@@ -79,8 +74,8 @@ OPTIONS: dict[str, Callable[[], dict[str, Any]]] = {
 }
 
 CASES: dict[str, Callable[[], Oracle]] = {
-    name: (lambda name=name: get_oracle(name, **OPTIONS.get(name, dict)()))
-    for name in available_oracles()
+    name: (lambda name=name: ORACLES.create(name, **OPTIONS.get(name, dict)()))
+    for name in ORACLES.names()
 }
 CASES["darkness (docs example)"] = DARKNESS
 CASES["darkness, options"] = lambda: DARKNESS(dim=120.0, dark=40.0)
@@ -156,7 +151,7 @@ def test_is_an_oracle_with_a_valid_name(make: Callable[[], Oracle]) -> None:
     oracle = make()
     assert isinstance(oracle, Oracle)
     assert re.fullmatch(r"[A-Za-z_][A-Za-z0-9_]*", oracle.name)
-    assert get_oracle(oracle) is oracle  # a slot takes the object as it is
+    assert ORACLES.create(oracle) is oracle  # a slot takes the object as it is
     # Every observe_* method it has is a hook of HOOKS (a misspelt one would never be fed).
     fed = {name for hook in HOOKS if isinstance(oracle, hook) for name in _methods(hook)}
     defined = {name for name in dir(oracle) if name.startswith("observe_")}

@@ -13,10 +13,11 @@ import cv2
 import numpy as np
 import pytest
 
-from anunnaki.bus import Assessment, Bus, Detections, Image, Sample, open_bus
+from anunnaki.bus import Bus, Sample, open_bus
 from anunnaki.lec._detector import DetectionResult
 from anunnaki.lec._node import LecNode
 from anunnaki.lec._registry import ModelRegistry
+from anunnaki.messages import Assessment, Detections, Image
 from anunnaki.oracles import GroundTruthAssessor, OracleError, OracleNode
 
 CAMERA = "/uav/camera/image"

@@ -11,18 +11,13 @@ from typing import Any
 import numpy as np
 import pytest
 
-from anunnaki.bus import Assessment
 from anunnaki.errors import AnunnakiError
+from anunnaki.messages import Assessment
 from anunnaki.oracles import (
-    ENTRY_POINT_GROUP,
+    ORACLES,
     GroundTruthAssessor,
     Oracle,
     OracleError,
-    OracleRegistry,
-    available_oracles,
-    default_registry,
-    get_oracle,
-    register_oracle,
 )
 
 
@@ -40,24 +35,25 @@ class Constant:
 
 
 def test_builtins_by_name_with_options() -> None:
-    assert "ground_truth" in available_oracles()
-    assert OracleRegistry(entry_point_group=None).names() == ["enlil", "ground_truth"]
-    oracle = get_oracle("ground_truth", window=12, clean_f1=0.9)
+    assert "ground_truth" in ORACLES.names()
+    assert ORACLES.copy(entry_points=False).names() == ["ground_truth"]
+    assert {"enlil", "light"} <= set(ORACLES.names())  # pyproject.toml's entry points
+    oracle = ORACLES.create("ground_truth", window=12, clean_f1=0.9)
     assert isinstance(oracle, GroundTruthAssessor) and oracle.window == 12
-    assert isinstance(get_oracle(" ground_truth "), GroundTruthAssessor)
+    assert isinstance(ORACLES.create(" ground_truth "), GroundTruthAssessor)
 
 
 def test_instances_pass_through() -> None:
     mine = Constant(2)
-    assert get_oracle(mine) is mine
+    assert ORACLES.create(mine) is mine
     assert isinstance(mine, Oracle)
     with pytest.raises(OracleError, match="apply when an oracle is built by name"):
-        get_oracle(mine, window=3)
+        ORACLES.create(mine, window=3)
 
 
 def test_unknown_names_list_the_valid_ones() -> None:
     with pytest.raises(OracleError, match="unknown oracle 'enlil_fog'; valid names: ") as info:
-        get_oracle("enlil_fog")
+        ORACLES.create("enlil_fog")
     assert "ground_truth" in str(info.value)
     assert isinstance(info.value, AnunnakiError) and isinstance(info.value, ValueError)
 
@@ -65,22 +61,21 @@ def test_unknown_names_list_the_valid_ones() -> None:
 @pytest.mark.parametrize("bad", [None, 3, Constant, ["ground_truth"], object()])
 def test_other_arguments_are_refused(bad: Any) -> None:
     with pytest.raises(OracleError, match="expected an oracle name or an Oracle instance"):
-        get_oracle(bad)
+        ORACLES.create(bad)
 
 
 def test_bad_options_name_the_oracle() -> None:
     with pytest.raises(OracleError, match="oracle 'ground_truth': bad options \\['colour'\\]"):
-        get_oracle("ground_truth", colour="red")
+        ORACLES.create("ground_truth", colour="red")
 
 
-def test_register_in_code(monkeypatch: pytest.MonkeyPatch) -> None:
-    registry = OracleRegistry(entry_point_group=None)
-    monkeypatch.setattr("anunnaki.oracles._registry._DEFAULT", registry)
-    assert register_oracle(Constant) is Constant
-    assert default_registry() is registry
-    oracle = get_oracle("constant", category=1)
+def test_register_in_code() -> None:
+    registry = ORACLES.copy(entry_points=False)
+    assert registry.register(Constant) is Constant
+    oracle = registry.create("constant", category=1)
     assert isinstance(oracle, Constant) and oracle.category == 1
-    register_oracle(Constant)  # the same class again: harmless
+    registry.register(Constant)  # the same class again: harmless
+    assert "constant" not in ORACLES.names()  # the copy is private
 
     class Other(Constant):
         pass
@@ -88,7 +83,19 @@ def test_register_in_code(monkeypatch: pytest.MonkeyPatch) -> None:
     with pytest.raises(OracleError, match="already registered as 'constant'"):
         registry.register(Other)
     registry.register(Other, replace=True)
-    assert type(get_oracle("constant")) is Other
+    assert type(registry.create("constant")) is Other
+
+
+def test_the_slot_registers_by_decorator() -> None:
+    @ORACLES.register
+    class Steady(Constant):
+        name = "steady"
+
+    try:
+        assert isinstance(ORACLES.create("steady"), Steady)
+    finally:
+        ORACLES.unregister("steady")
+    assert "steady" not in ORACLES.names()
 
 
 @pytest.mark.parametrize(
@@ -102,12 +109,12 @@ def test_register_in_code(monkeypatch: pytest.MonkeyPatch) -> None:
 )
 def test_malformed_classes_are_refused(cls: Any, message: str) -> None:
     with pytest.raises(OracleError, match=message):
-        OracleRegistry().register(cls)
+        ORACLES.copy().register(cls)
 
 
 PLUGIN = '''
 """A fake third-party oracle package."""
-from anunnaki.bus import Assessment
+from anunnaki.messages import Assessment
 
 
 class Haze:
@@ -144,7 +151,7 @@ def install_fake_plugin(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None
     (dist / "entry_points.txt").write_text(
         textwrap.dedent(
             f"""\
-            [{ENTRY_POINT_GROUP}]
+            [{ORACLES.group}]
             haze = fake_oracle_plugin:Haze
             broken = fake_no_such_oracle_module:Nope
             answer = fake_oracle_plugin:NOT_AN_ORACLE
@@ -160,11 +167,11 @@ def install_fake_plugin(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None
 def test_entry_point_plugins(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch, caplog: pytest.LogCaptureFixture
 ) -> None:
-    registry = OracleRegistry()  # created before the plugin is installed: lookups are lazy
+    registry = ORACLES.copy()  # created before the plugin is installed: lookups are lazy
     install_fake_plugin(tmp_path, monkeypatch)
     with caplog.at_level(logging.WARNING, logger="anunnaki.oracles"):
         assert registry.names() == ["enlil", "ground_truth", "haze", "light", "renamed_haze"]
-    haze = registry.get("haze", level=2)
+    haze = registry.create("haze", level=2)
     assert type(haze).__name__ == "Haze"
     result = haze.assess(np.zeros((2, 2, 3), np.uint8), seq=4, model_id="m")
     assert result is not None and result.category == 2 and result.assessor == "haze"
@@ -173,5 +180,5 @@ def test_entry_point_plugins(
     assert "'answer'" in log and "is not a class" in log
     assert "'ground_truth'" in log and "already taken" in log
     assert "'other_name'" in log and "registers as 'renamed_haze'" in log
-    assert isinstance(registry.get("ground_truth"), GroundTruthAssessor)  # no shadowing
-    assert "haze" not in OracleRegistry(entry_point_group=None).names()
+    assert isinstance(registry.create("ground_truth"), GroundTruthAssessor)  # no shadowing
+    assert "haze" not in ORACLES.copy(entry_points=False).names()

@@ -16,19 +16,12 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from anunnaki.errors import AnunnakiError
-from anunnaki.phenomena import (
-    Phenomenon,
-    PhenomenonError,
-    available_phenomena,
-    compose,
-    get_phenomenon,
-    synthetic_scene,
-)
+from anunnaki.phenomena import PHENOMENA, Phenomenon, PhenomenonError, compose, synthetic_scene
 
 CASES: dict[str, Callable[[], Phenomenon]] = {
-    name: functools.partial(get_phenomenon, name) for name in available_phenomena()
+    name: functools.partial(PHENOMENA.create, name) for name in PHENOMENA.names()
 }
-CASES["fog+raindrop"] = lambda: get_phenomenon("fog+raindrop")
+CASES["fog+raindrop"] = lambda: PHENOMENA.create("fog+raindrop")
 CASES["raindrop*2+noise"] = lambda: compose("raindrop", "raindrop", "noise")
 CASES["rain(pinned)+hsl"] = lambda: compose(("rain", {"slant": 20.0, "blur": 1}), "hsl")
 

@@ -12,13 +12,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from anunnaki.phenomena import (
-    Phenomenon,
-    PhenomenonRegistry,
-    available_phenomena,
-    get_phenomenon,
-    synthetic_scene,
-)
+from anunnaki.phenomena import PHENOMENA, Phenomenon, synthetic_scene
 
 ROOT = Path(__file__).resolve().parents[2]
 DOC = ROOT / "docs" / "phenomena.md"
@@ -36,11 +30,11 @@ def code_block_after(marker: str) -> str:
     raise AssertionError(f"no python block with {marker!r} in {DOC}")
 
 
-@pytest.mark.parametrize("name", available_phenomena())
+@pytest.mark.parametrize("name", PHENOMENA.names())
 def test_parameter_tables_match_the_code(name: str) -> None:
     text = doc_text()
     assert f"### `{name}`" in text
-    for spec in get_phenomenon(name).params:
+    for spec in PHENOMENA.create(name).params:
         default = "required" if spec.default is None else f"{spec.default:g}"
         integer = " (integer)" if spec.integer else ""
         row = (
@@ -68,9 +62,9 @@ def test_usage_example_runs_as_documented() -> None:
 def test_plugin_example_is_complete_and_passes_basic_checks() -> None:
     module = types.ModuleType("anunnaki_sepia")
     exec(code_block_after("class Sepia(Phenomenon)"), module.__dict__)
-    registry = PhenomenonRegistry(entry_point_group=None)
+    registry = PHENOMENA.copy(entry_points=False)
     registry.register(module.Sepia)
-    sepia = registry.get("sepia")
+    sepia = registry.create("sepia")
     image = synthetic_scene(64, 64)
     np.testing.assert_array_equal(sepia.apply(image, sepia.identity_params(), seed=0), image)
     strong = sepia.strength_params(1.0)
@@ -111,7 +105,7 @@ def test_benchmark_script_writes_json(tmp_path: Path) -> None:
         capture_output=True,
     )
     report = json.loads(output.read_text())
-    assert set(available_phenomena()) <= set(report["results"])
+    assert set(PHENOMENA.names()) <= set(report["results"])
     for sizes in report["results"].values():
         assert set(sizes) == {"128x128", "320x240"}
         assert all(entry["median_ms"] > 0 for entry in sizes.values())

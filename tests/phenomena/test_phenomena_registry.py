@@ -14,20 +14,15 @@ import pytest
 
 from anunnaki.errors import AnunnakiError, MissingExtraError
 from anunnaki.phenomena import (
-    ENTRY_POINT_GROUP,
+    PHENOMENA,
     Composition,
     Fog,
     Image,
     ParamSpec,
     Phenomenon,
     PhenomenonError,
-    PhenomenonRegistry,
     Raindrop,
-    available_phenomena,
     compose,
-    default_registry,
-    get_phenomenon,
-    register_phenomenon,
     synthetic_scene,
 )
 
@@ -52,64 +47,64 @@ class Invert(Phenomenon):
 
 
 def test_builtins_are_available_sorted() -> None:
-    names = available_phenomena()  # installed plugins may add more
+    names = PHENOMENA.names()  # installed plugins may add more
     assert names == sorted(names) and set(BUILTINS) <= set(names)
-    assert PhenomenonRegistry(entry_point_group=None).names() == BUILTINS
+    assert PHENOMENA.copy(entry_points=False).names() == BUILTINS
 
 
 def test_lookup_by_name_or_instance() -> None:
-    assert isinstance(get_phenomenon("fog"), Fog)
-    assert isinstance(get_phenomenon(" raindrop "), Raindrop)
+    assert isinstance(PHENOMENA.create("fog"), Fog)
+    assert isinstance(PHENOMENA.create(" raindrop "), Raindrop)
     fog = Fog()
-    assert get_phenomenon(fog) is fog
-    both = get_phenomenon("fog+raindrop")
+    assert PHENOMENA.create(fog) is fog
+    both = PHENOMENA.create("fog+raindrop")
     assert isinstance(both, Composition)
     assert both.name == "fog+raindrop"
 
 
 def test_unknown_name_lists_the_valid_names() -> None:
     with pytest.raises(PhenomenonError, match="unknown phenomenon 'smog'") as info:
-        get_phenomenon("smog")
+        PHENOMENA.create("smog")
     for name in BUILTINS:
         assert name in str(info.value)
     with pytest.raises(PhenomenonError, match="unknown phenomenon 'smog'"):
-        get_phenomenon("fog+smog")
+        PHENOMENA.create("fog+smog")
 
 
 @pytest.mark.parametrize("bad", [None, 3, Fog, ["fog"]])
 def test_lookup_rejects_other_types(bad: object) -> None:
     with pytest.raises(PhenomenonError, match="name or a Phenomenon instance"):
-        get_phenomenon(bad)  # type: ignore[arg-type]
+        PHENOMENA.create(bad)  # type: ignore[arg-type]
 
 
 def test_register_in_a_private_registry() -> None:
-    registry = PhenomenonRegistry(entry_point_group=None)
+    registry = PHENOMENA.copy(entry_points=False)
     assert registry.register(Invert) is Invert
     assert registry.register(Invert) is Invert  # idempotent
     assert "invert" in registry.names()
-    ph = get_phenomenon("invert", registry=registry)
-    assert "invert" in available_phenomena(registry=registry)
+    ph = registry.create("invert")
+    assert "invert" in registry.names()
+    assert registry.create("fog+invert").param_names[-1] == "invert.amount"  # combines too
     out = ph.apply(np.zeros((4, 4, 3), np.uint8), {"amount": 1.0}, seed=0)
     assert out.min() == 255
-    assert "invert" not in available_phenomena()  # the default registry is untouched
+    assert "invert" not in PHENOMENA.names()  # the default registry is untouched
 
 
-def test_register_phenomenon_decorates_the_default_registry(
-    monkeypatch: pytest.MonkeyPatch,
-) -> None:
-    registry = PhenomenonRegistry(entry_point_group=None)
-    monkeypatch.setattr("anunnaki.phenomena._registry._DEFAULT", registry)
-    assert default_registry() is registry
-
-    @register_phenomenon
+def test_the_slot_registers_by_decorator() -> None:
+    @PHENOMENA.register
     class Grey(Invert):
         name = "grey_out"
 
-    assert isinstance(get_phenomenon("grey_out"), Grey)
+    try:
+        assert isinstance(PHENOMENA.create("grey_out"), Grey)
+        assert isinstance(compose("grey_out", "fog").steps[0].phenomenon, Grey)
+    finally:
+        PHENOMENA.unregister("grey_out")
+    assert "grey_out" not in PHENOMENA.names()
 
 
 def test_name_clash_needs_replace() -> None:
-    registry = PhenomenonRegistry(entry_point_group=None)
+    registry = PHENOMENA.copy(entry_points=False)
 
     class OtherFog(Invert):
         name = "fog"
@@ -117,11 +112,12 @@ def test_name_clash_needs_replace() -> None:
     with pytest.raises(PhenomenonError, match="already registered as 'fog'"):
         registry.register(OtherFog)
     registry.register(OtherFog, replace=True)
-    assert isinstance(registry.get("fog"), OtherFog)
+    assert isinstance(registry.create("fog"), OtherFog)
+    assert isinstance(PHENOMENA.create("fog"), Fog)  # the copy was private
 
 
 def test_register_rejects_bad_classes() -> None:
-    registry = PhenomenonRegistry(entry_point_group=None)
+    registry = PHENOMENA.copy(entry_points=False)
 
     class Abstract(Phenomenon):
         name = "abstract"
@@ -205,7 +201,7 @@ def install_fake_plugin(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Path
     (dist / "entry_points.txt").write_text(
         textwrap.dedent(
             f"""\
-            [{ENTRY_POINT_GROUP}]
+            [{PHENOMENA.group}]
             sepia = fake_anunnaki_plugin:Sepia
             broken = fake_no_such_module:Nope
             answer = fake_anunnaki_plugin:NOT_A_PHENOMENON
@@ -226,32 +222,33 @@ def plugin_path(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Path:
 def test_entry_point_plugins_are_found_by_name(
     plugin_path: Path, caplog: pytest.LogCaptureFixture, scene64: np.ndarray
 ) -> None:
-    registry = PhenomenonRegistry()
+    registry = PHENOMENA.copy()
     with caplog.at_level(logging.WARNING, logger="anunnaki.phenomena"):
-        sepia = registry.get("sepia")
+        sepia = registry.create("sepia")
     assert type(sepia).__name__ == "Sepia"
     assert {*BUILTINS, "sepia"} <= set(registry.names())
     out = sepia.apply(scene64, sepia.strength_params(1.0), seed=0)
     assert out.shape == scene64.shape and not np.array_equal(out, scene64)
     # Plugins take part in compositions like built-ins.
-    assert registry.get("sepia+fog").param_names[0] == "sepia.amount"
+    assert registry.create("sepia+fog").param_names[0] == "sepia.amount"
     # Broken ones are logged and skipped; a plugin cannot shadow a built-in.
     log = caplog.text
     assert "'broken'" in log and "fake_no_such_module" in log
     assert "'answer'" in log and "not a subclass" in log
     assert "'fog'" in log and "already taken" in log
-    assert isinstance(registry.get("fog"), Fog)
+    assert isinstance(registry.create("fog"), Fog)
 
 
 def test_entry_points_load_lazily_on_first_lookup(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch, caplog: pytest.LogCaptureFixture
 ) -> None:
-    registry = PhenomenonRegistry()  # created before the plugin is installed
+    registry = PHENOMENA.copy()  # created before the plugin is installed
     install_fake_plugin(tmp_path, monkeypatch)
+    assert isinstance(registry.create("fog"), Fog)  # a built-in: no entry point is loaded
+    assert "fake_anunnaki_plugin" not in sys.modules
     with caplog.at_level(logging.WARNING, logger="anunnaki.phenomena"):
         assert "sepia" in registry.names()
-    assert "sepia" not in PhenomenonRegistry(entry_point_group=None).names()
-    assert "sepia" in PhenomenonRegistry(entry_point_group=ENTRY_POINT_GROUP).names()
+    assert "sepia" not in PHENOMENA.copy(entry_points=False).names()
 
 
 # -- compositions --------------------------------------------------------------------------
@@ -285,7 +282,7 @@ def test_composition_equals_sequential_application_with_spawned_seeds(
 
 
 def test_name_with_plus_equals_compose(scene64: np.ndarray) -> None:
-    by_name = get_phenomenon("fog+raindrop")
+    by_name = PHENOMENA.create("fog+raindrop")
     by_call = compose("fog", "raindrop")
     params = by_call.strength_params(0.8)
     np.testing.assert_array_equal(
@@ -371,7 +368,7 @@ def test_synthetic_scene_is_deterministic() -> None:
 
 def test_importing_phenomena_does_not_import_cv2_or_albumentations() -> None:
     code = (
-        "import sys, anunnaki.phenomena as p; p.get_phenomenon('fog+rain'); "
+        "import sys, anunnaki.phenomena as p; p.PHENOMENA.create('fog+rain'); "
         "bad = sorted(m for m in sys.modules if m.split('.')[0] in ('cv2', 'albumentations')); "
         "assert not bad, bad"
     )
@@ -385,7 +382,7 @@ def test_missing_opencv_names_the_extra(
     with pytest.raises(MissingExtraError, match=r"opencv-python-headless.*anunnaki\[phenomena\]"):
         Fog().apply(scene64, {"density": 2, "intensity": 0.5}, seed=0)
     # Phenomena that need only numpy keep working.
-    get_phenomenon("brightness").apply(scene64, {"gain": 0.5}, seed=0)
+    PHENOMENA.create("brightness").apply(scene64, {"gain": 0.5}, seed=0)
 
 
 def test_missing_albumentations_names_the_extra(
@@ -399,4 +396,4 @@ def test_missing_albumentations_names_the_extra(
     ):
         monkeypatch.setitem(sys.modules, module, None)
     with pytest.raises(MissingExtraError, match=r"albumentations.*anunnaki\[phenomena\]"):
-        get_phenomenon("snow").apply(scene64, {"snow_point": 0.5}, seed=0)
+        PHENOMENA.create("snow").apply(scene64, {"snow_point": 0.5}, seed=0)

@@ -8,6 +8,8 @@ from typing import Any
 
 import pytest
 
+from anunnaki import topics
+
 pytest.importorskip("rosbags")
 import numpy as np
 from rosbags.highlevel import AnyReader
@@ -18,7 +20,7 @@ from rosbags.typesys import Stores, get_typestore
 from anunnaki.cli.main import main
 from anunnaki.errors import ModelFileError
 from anunnaki.goals import Evaluator, load_goal_model
-from anunnaki.ros1 import DECISIONS_TOPIC, load_bridge, parse_bridge, read_bag
+from anunnaki.ros1 import load_bridge, parse_bridge, read_bag
 from anunnaki.tactics import load_tactics
 from anunnaki.utu import AutonomicManager, Knowledge
 
@@ -173,8 +175,8 @@ def test_a_run_exports_to_a_bag_and_reads_back(
             got.setdefault(conn.topic, []).append(
                 json.loads(reader.deserialize(raw, conn.msgtype).data)
             )
-    assert len(got[DECISIONS_TOPIC]) == len(decisions)
-    assert got[DECISIONS_TOPIC][0]["kind"] == decisions[0].kind
+    assert len(got[topics.BAG_DECISIONS]) == len(decisions)
+    assert got[topics.BAG_DECISIONS][0]["kind"] == decisions[0].kind
     assert got["/ultrasonic/range"][:2] == [{"range": 3.0}, {"range": 3.0}]
     assert len(got["/rover/controller/state"]) == 80
     # Read back without a bridge file: its topics are the bus's, its messages their JSON.

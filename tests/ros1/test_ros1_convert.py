@@ -8,7 +8,7 @@ from typing import Any
 
 import pytest
 
-from anunnaki.bus import Image
+from anunnaki.messages import Image
 from anunnaki.ros1 import (
     MESSAGE_TYPES,
     ConversionError,

@@ -7,8 +7,9 @@ import math
 import pytest
 from sim_helpers import rover_scenario
 
-from anunnaki.bus import Detections, ModeRequest
-from anunnaki.sim import CAMERA_FOV, GROUND_TRUTH_TOPIC, RoverSim, StopRule
+from anunnaki import topics
+from anunnaki.messages import Detections, ModeRequest
+from anunnaki.sim import CAMERA_FOV, RoverSim, StopRule
 
 NO_ULTRASONIC = [{"at": 0, "fault": "dropout", "sensor": "ultrasonic", "duration": 1e6}]
 
@@ -179,7 +180,7 @@ def test_ground_truth_alone_never_stops_it(bus) -> None:
         camera={"rate": 10, "width": 128, "height": 96},
     )
     with RoverSim(bus, sc, clear_layout=True) as rover:
-        truth = bus.subscribe(GROUND_TRUTH_TOPIC, queue=256)
+        truth = bus.subscribe(topics.GROUND_TRUTH, queue=256)
         rover.step(4.0)
         labels = []
         while (sample := truth.try_recv()) is not None:

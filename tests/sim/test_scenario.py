@@ -8,9 +8,10 @@ import numpy as np
 import pytest
 from sim_helpers import rover_scenario
 
+from anunnaki import topics
 from anunnaki.errors import ModelFileError
-from anunnaki.phenomena import get_phenomenon
-from anunnaki.sim import PHENOMENA_TOPIC, RoverSim, Timeline, load_scenario, parse_scenario
+from anunnaki.phenomena import PHENOMENA
+from anunnaki.sim import RoverSim, Timeline, load_scenario, parse_scenario
 
 EXAMPLES = Path(__file__).parents[2] / "examples"
 
@@ -31,7 +32,7 @@ def test_ramps_give_the_right_params_at_the_right_times() -> None:
         )
     )
     tl = Timeline(sc)
-    bright = get_phenomenon("brightness")
+    bright = PHENOMENA.create("brightness")
     assert tl.phenomena(1.9) == []
     assert tl.phenomena(2.0) == [("brightness", bright.identity_params())]
     assert tl.phenomena(4.0) == [("brightness", bright.strength_params(0.4))]  # half-way
@@ -75,7 +76,7 @@ def test_the_rover_applies_and_reports_the_phenomena(bus) -> None:
         ],
     )
     with RoverSim(bus, sc, clear_layout=True) as rover:
-        truth = bus.subscribe(PHENOMENA_TOPIC, queue=256)
+        truth = bus.subscribe(topics.PHENOMENA, queue=256)
         ranges = bus.subscribe("/rover/ultrasonic", queue=256)
         means: dict[float, float] = {}
         rover.frame_hook = lambda sim, frame, image: means.__setitem__(
@@ -92,7 +93,7 @@ def test_the_rover_applies_and_reports_the_phenomena(bus) -> None:
             msgs.append(sample.message.data)
         by_t = {round(m["t"], 3): m for m in msgs}
         assert by_t[0.5]["phenomena"] == []
-        bright = get_phenomenon("brightness")
+        bright = PHENOMENA.create("brightness")
         half = by_t[1.5]["phenomena"]
         assert half == [{"name": "brightness", "params": bright.strength_params(0.5)}]
         assert by_t[2.5]["phenomena"][0]["params"] == bright.strength_params(1.0)

@@ -11,7 +11,7 @@ from __future__ import annotations
 from typing import Any
 
 from anunnaki import topics
-from anunnaki.bus import (
+from anunnaki.messages import (
     AnalysisState,
     CycleDone,
     ExecuteStatus,

@@ -36,7 +36,8 @@ from helpers_procs import (
     wait_until,
 )
 
-from anunnaki.bus import Bus, Generic, InprocHub, ModeRequest, Publisher, open_bus
+from anunnaki.bus import Bus, InprocHub, Publisher, open_bus
+from anunnaki.messages import Generic, ModeRequest
 from anunnaki.utu import AutonomicManager, UtuConfig, load_config
 
 ORACLE = "/utu/oracle/output"

@@ -12,7 +12,8 @@ from pathlib import Path
 
 import pytest
 
-from anunnaki.bus import Generic, Sample, open_bus
+from anunnaki.bus import Sample, open_bus
+from anunnaki.messages import Generic
 from anunnaki.utu import AutonomicManager, RecordingActuator, parse_config
 from anunnaki.utu._intake import FIRST, FLOOR, IntakeBudget
 

@@ -280,7 +280,7 @@ def test_operator_services_on_the_bus(bus) -> None:  # type: ignore[no-untyped-d
         m.step(1.0)
         assert m.paused
         # run-stop announced by another node on the topic
-        from anunnaki.bus import RunStop
+        from anunnaki.messages import RunStop
 
         bus.publish("/utu/run_stop", RunStop(reason="e-stop pressed", caller="teleop-node"))
         deadline = time.monotonic() + 5
@@ -435,7 +435,7 @@ def test_slow_simulation_on_sim_time_has_no_spurious_violations(use_sim_time: bo
 
 
 def test_bus_actuator_sees_refusals_in_generic_and_service_replies(bus) -> None:  # type: ignore[no-untyped-def]
-    from anunnaki.bus import ServiceReply
+    from anunnaki.messages import ServiceReply
     from anunnaki.utu import BusActuator
 
     bus.service("/a/generic", lambda m: {"ok": False, "error": "unknown mode 'x'"})
@@ -493,7 +493,7 @@ def test_reload_service_swaps_tactics_while_spinning(bus, tmp_path: Path) -> Non
 @pytest.mark.parametrize("forged", ["/clock", "batch"])
 def test_one_forged_time_neither_freezes_nor_steers_utu(forged: str, tmp_path: Path) -> None:
     """A /clock (or a monitor batch) stamped 1e12 is refused; the run's times go on."""
-    from anunnaki.bus import Clock, MonitorBatch
+    from anunnaki.messages import Clock, MonitorBatch
 
     cfg = tmp_path / "utu.yaml"
     cfg.write_text(
@@ -565,7 +565,8 @@ def test_a_reload_reads_only_small_regular_files_in_its_folders(
 def test_a_flood_does_not_hold_a_step(tmp_path: Path) -> None:
     """The intake kept pulling while messages arrived: 4 cycles in 10 s under a flood
     (issue #12). A step now takes at most one queue's worth per topic, so it returns."""
-    from anunnaki.bus import Generic, Sample
+    from anunnaki.bus import Sample
+    from anunnaki.messages import Generic
 
     class Endless:
         """A monitored topic whose producers refill it as fast as it is emptied."""
@@ -622,7 +623,7 @@ def test_the_watchdog_run_stops_a_stuck_loop(tmp_path: Path) -> None:
     from the watchdog's thread; the loop records it once it moves again (issue #12)."""
     from helpers_procs import wait_until
 
-    from anunnaki.bus import RunStop
+    from anunnaki.messages import RunStop
 
     cfg = parse_config(
         f"anunnaki: utu/1\ngoal_model: {ROVER}/goals.yaml\nbinding: {ROVER}/binding.yaml\n"

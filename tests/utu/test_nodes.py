@@ -18,10 +18,11 @@ from typing import Any
 
 import pytest
 
-from anunnaki.bus import InprocHub, RunStop, open_bus
+from anunnaki.bus import InprocHub, open_bus
 from anunnaki.clock import ManualClock
 from anunnaki.errors import ModelFileError
 from anunnaki.managed import ScriptedSystem
+from anunnaki.messages import RunStop
 from anunnaki.tokens import client_operator_token
 from anunnaki.topics import DECISIONS as DECISIONS_TOPIC
 from anunnaki.topics import node_token, ready_service
@@ -476,7 +477,7 @@ def test_nodes_spin_live_in_one_process(tmp_path) -> None:  # type: ignore[no-un
 def test_a_forged_batch_time_is_refused_alone_by_the_analyze_node(tmp_path) -> None:  # type: ignore[no-untyped-def]
     """A /utu/monitor/input stamped 1e12 is dropped; a real batch beside it is analysed."""
     from anunnaki import topics
-    from anunnaki.bus import MonitorBatch, MonitorInput
+    from anunnaki.messages import MonitorBatch, MonitorInput
 
     cfg = config(knowledge=str(tmp_path / "kb.db"))
     with open_bus("inproc") as bus:

@@ -15,9 +15,10 @@ from typing import Any
 
 import pytest
 
-from anunnaki.bus import AnalysisState, MonitorBatch, open_bus
+from anunnaki.bus import open_bus
 from anunnaki.clock import WallClock
 from anunnaki.goals import load_binding, parse_goal_model
+from anunnaki.messages import AnalysisState, MonitorBatch
 from anunnaki.tactics import load_tactics
 from anunnaki.utu import (
     NODE_NAMES,

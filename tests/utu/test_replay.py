@@ -18,10 +18,11 @@ from typing import Any
 import pytest
 from helpers_procs import wait_until
 
-from anunnaki.bus import RunStop, open_bus
+from anunnaki.bus import open_bus
 from anunnaki.clock import ManualClock
 from anunnaki.errors import AnunnakiError
 from anunnaki.managed import ScriptedSystem
+from anunnaki.messages import RunStop
 from anunnaki.topics import UTU_NODES
 from anunnaki.trace import read_trace
 from anunnaki.utu import (

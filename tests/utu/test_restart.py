@@ -35,7 +35,8 @@ from helpers_procs import (
     wait_until,
 )
 
-from anunnaki.bus import Bus, Generic, open_bus
+from anunnaki.bus import Bus, open_bus
+from anunnaki.messages import Generic
 from anunnaki.utu import replay
 
 pytest.importorskip("zenoh")

@@ -1,4 +1,4 @@
-"""The message bus: topics, services and liveliness, in one process or across machines.
+"""The message bus (transport): topics, services and liveliness, in a process or across hosts.
 
 Every Anunnaki node (oracles, the LEC, the model manager, Utu's MAPE-K services, the
 dashboard) talks through one small interface, modelled on zenoh: open a bus, declare
@@ -6,7 +6,8 @@ everything else from it, close it (or use ``with``). Two implementations share t
 interface and one contract suite: ``"inproc"`` (in-process, for tests and single-process
 runs) and ``"zenoh"`` (eclipse-zenoh; ``pip install 'anunnaki[bus]'``)::
 
-    from anunnaki.bus import ModeRequest, ModeReply, open_bus
+    from anunnaki.bus import open_bus
+    from anunnaki.messages import ModeReply, ModeRequest
 
     with open_bus("zenoh") as bus:                      # peer on tcp/127.0.0.1:<free port>
         bus.subscribe("/utu/oracle/**", lambda s: print(s.topic, s.message))
@@ -31,12 +32,18 @@ Names and keys
     tokens under ``<namespace>/node/`` (:func:`ros_to_key`, :func:`key_to_ros`).
 
 Messages
-    Typed, versioned pydantic models (:class:`Generic`, :class:`Image`, :class:`Clock`,
-    :class:`ModeRequest`, :class:`ModeReply`, :class:`ServiceReply`, :class:`RunStop`; add
-    yours with :func:`register_message`) in an envelope ``{"v", "type", "t", "seq",
-    "sender", "body"}``: compact JSON, or a binary frame for images. Malformed messages are
-    dropped, counted (``stats().malformed``) and logged (logger ``anunnaki.bus``); they
-    never reach a node.
+    What travels is not defined here: the typed, versioned message types are
+    :mod:`anunnaki.messages` (``MESSAGES``, a plugin slot) and the well-known names
+    :mod:`anunnaki.topics`. The bus carries any registered message in an envelope ``{"v",
+    "type", "t", "seq", "sender", "body"}`` (:class:`Envelope`, :func:`encode_envelope`,
+    :func:`decode_envelope`): compact JSON, or a binary frame for a type with a
+    ``BINARY_FIELD`` (images). Malformed messages are dropped, counted
+    (``stats().malformed``) and logged (logger ``anunnaki.bus``); they never reach a node.
+
+Kinds
+    :data:`BUS_KINDS` is the slot of transports (a :class:`~anunnaki.plugins.Registry`):
+    ``"inproc"`` and ``"zenoh"`` built in, others by the entry-point group
+    ``anunnaki.buses``.
 
 Robustness (guidelines S1, S2, S4)
     Subscribers have bounded queues (latest-value: the oldest, least urgent message goes
@@ -51,7 +58,7 @@ measured latencies.
 from __future__ import annotations
 
 from collections.abc import Callable
-from typing import Any, Literal
+from typing import Any
 
 from pydantic import ValidationError
 
@@ -65,16 +72,8 @@ from anunnaki.bus._api import (
     Service,
     Subscriber,
 )
+from anunnaki.bus._codec import Envelope, decode_envelope, encode_envelope
 from anunnaki.bus._config import AccessControl, AccessRule, BusConfig, TlsConfig, on_loopback
-from anunnaki.bus._cycle import (
-    MAX_BATCH,
-    AnalysisState,
-    CycleDone,
-    ExecuteStatus,
-    MonitorBatch,
-    MonitorInput,
-    PlanStart,
-)
 from anunnaki.bus._errors import (
     BusClosedError,
     BusConfigError,
@@ -82,10 +81,8 @@ from anunnaki.bus._errors import (
     BusError,
     BusTimeout,
     MalformedMessage,
-    MessageError,
     ServiceError,
     TopicNameError,
-    UnknownMessageType,
 )
 from anunnaki.bus._guard import LivelinessGuard
 from anunnaki.bus._inproc import InprocBus, InprocHub
@@ -99,37 +96,17 @@ from anunnaki.bus._keys import (
     validate_name,
     validate_pattern,
 )
-from anunnaki.bus._messages import (
-    Assessment,
-    Clock,
-    Detections,
-    Envelope,
-    Generic,
-    Image,
-    Message,
-    ModeReply,
-    ModeRequest,
-    RunStop,
-    ServiceReply,
-    body_of,
-    decode_envelope,
-    encode_envelope,
-    message_type,
-    message_types,
-    register_message,
-)
+from anunnaki.bus._kinds import BUS_KINDS
 from anunnaki.bus._node import Node
 from anunnaki.bus._qos import PRIORITIES, QOS_TABLE, QoS, TopicClass, qos_for
 
 __all__ = [
+    "BUS_KINDS",
     "DEFAULT_NAMESPACE",
-    "MAX_BATCH",
     "PRIORITIES",
     "QOS_TABLE",
     "AccessControl",
     "AccessRule",
-    "AnalysisState",
-    "Assessment",
     "Bus",
     "BusClosedError",
     "BusConfig",
@@ -138,51 +115,31 @@ __all__ = [
     "BusError",
     "BusStats",
     "BusTimeout",
-    "Clock",
-    "CycleDone",
-    "Detections",
     "Envelope",
-    "ExecuteStatus",
-    "Generic",
-    "Image",
     "InprocBus",
     "InprocHub",
     "LivelinessGuard",
     "LivelinessToken",
     "LivelinessWatch",
     "MalformedMessage",
-    "Message",
-    "MessageError",
-    "ModeReply",
-    "ModeRequest",
-    "MonitorBatch",
-    "MonitorInput",
     "Node",
-    "PlanStart",
     "Publisher",
     "QoS",
-    "RunStop",
     "Sample",
     "Service",
     "ServiceError",
-    "ServiceReply",
     "Subscriber",
     "TlsConfig",
     "TopicClass",
     "TopicNameError",
-    "UnknownMessageType",
-    "body_of",
     "decode_envelope",
     "encode_envelope",
     "key_matches",
     "key_to_ros",
-    "message_type",
-    "message_types",
     "node_key",
     "on_loopback",
     "open_bus",
     "qos_for",
-    "register_message",
     "ros_to_key",
     "service_key",
     "validate_name",
@@ -191,7 +148,7 @@ __all__ = [
 
 
 def open_bus(
-    kind: Literal["inproc", "zenoh"] | BusConfig = "inproc",
+    kind: str | BusConfig = "inproc",
     /,
     *,
     clock: Callable[[], float] | None = None,
@@ -201,8 +158,8 @@ def open_bus(
     """Open a bus.
 
     Args:
-        kind: ``"inproc"``, ``"zenoh"``, or a whole :class:`BusConfig` (e.g. from
-            :meth:`BusConfig.from_file`).
+        kind: A name in :data:`BUS_KINDS` (``"inproc"``, ``"zenoh"``, a plugin's), or a
+            whole :class:`BusConfig` (e.g. from :meth:`BusConfig.from_file`).
         clock: Returns the time written into envelopes (default ``time.time``).
         hub: For ``"inproc"``: the :class:`InprocHub` to join (buses on one hub meet);
             default a new private hub.
@@ -214,7 +171,8 @@ def open_bus(
         The open bus; close it, or use it as a context manager.
 
     Raises:
-        BusConfigError: An invalid option, naming the field.
+        BusConfigError: An invalid option, naming the field (an unknown kind lists the
+            valid ones).
         MissingExtraError: ``"zenoh"`` without eclipse-zenoh installed.
         BusConnectError: The zenoh session could not be opened.
 
@@ -223,20 +181,12 @@ def open_bus(
         if isinstance(kind, BusConfig):
             base = kind.model_dump(exclude_unset=True)
             config = BusConfig.model_validate({**base, **options})
-        elif kind in ("inproc", "zenoh"):
-            config = BusConfig.model_validate({**options, "kind": kind})
         else:
-            raise BusConfigError(f"bus kind must be 'inproc' or 'zenoh', got {kind!r}")
+            config = BusConfig.model_validate({**options, "kind": kind})
     except ValidationError as exc:
         first = exc.errors(include_url=False)[0]
         where = ".".join(str(p) for p in first["loc"]) or "config"
         more = len(exc.errors()) - 1
         extra = f" (and {more} more problem{'s' if more > 1 else ''})" if more else ""
         raise BusConfigError(f"bus option {where}: {first['msg']}{extra}") from None
-    if config.kind == "inproc":
-        return InprocBus(hub=hub, namespace=config.namespace, name=config.name, clock=clock)
-    if hub is not None:
-        raise BusConfigError("hub only applies to the inproc bus")
-    from anunnaki.bus._zenoh import ZenohBus
-
-    return ZenohBus(config, clock=clock)
+    return BUS_KINDS.factory(config.kind)(config, clock=clock, hub=hub)

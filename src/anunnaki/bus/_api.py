@@ -34,13 +34,13 @@ from typing import Any, ClassVar, Literal, Protocol
 from pydantic import ValidationError
 
 from anunnaki._closing import Closing
+from anunnaki.bus._codec import Envelope, decode_envelope, encode_envelope
 from anunnaki.bus._errors import (
     BusClosedError,
     BusConfigError,
     BusError,
     BusTimeout,
     MalformedMessage,
-    MessageError,
     ServiceError,
 )
 from anunnaki.bus._keys import (
@@ -52,16 +52,9 @@ from anunnaki.bus._keys import (
     validate_namespace,
     validate_pattern,
 )
-from anunnaki.bus._messages import (
-    Envelope,
-    Generic,
-    Message,
-    ServiceReply,
-    decode_envelope,
-    encode_envelope,
-)
 from anunnaki.bus._qos import Priority, QoS, qos_for
 from anunnaki.bus._queue import DropPolicy, PriorityQueue
+from anunnaki.messages import Generic, Message, MessageError, ServiceReply
 
 __all__ = [
     "Bus",
@@ -116,7 +109,9 @@ def as_message(obj: object) -> Message:
             first = exc.errors(include_url=False)[0]
             where = ".".join(str(p) for p in first["loc"][1:]) or "data"
             raise MessageError(f"not a JSON object: {where}: {first['msg']}") from None
-    raise MessageError(f"expected an anunnaki.bus.Message or a mapping, got {type(obj).__name__}")
+    raise MessageError(
+        f"expected an anunnaki.messages.Message or a mapping, got {type(obj).__name__}"
+    )
 
 
 class _RateLimitedLog:

@@ -20,6 +20,7 @@ from anunnaki.bus._keys import (
     validate_namespace,
     validate_pattern,
 )
+from anunnaki.bus._kinds import BUS_KINDS
 
 __all__ = ["AccessControl", "AccessRule", "BusConfig", "TlsConfig", "on_loopback"]
 
@@ -210,7 +211,8 @@ class BusConfig(_Strict):
     """Which bus to open, and how a zenoh session joins the network.
 
     Attributes:
-        kind: ``"inproc"`` (one process, tests) or ``"zenoh"``.
+        kind: A name in :data:`~anunnaki.bus.BUS_KINDS`: ``"inproc"`` (one process, tests),
+            ``"zenoh"``, or a plugin's.
         mode: zenoh mode: ``"peer"`` (default), ``"client"`` (connects to a router) or
             ``"router"``.
         listen: Endpoints to listen on, e.g. ``tcp/127.0.0.1:7447``, ``tls/0.0.0.0:7447``.
@@ -227,7 +229,7 @@ class BusConfig(_Strict):
 
     """
 
-    kind: Literal["inproc", "zenoh"] = "inproc"
+    kind: str = "inproc"
     mode: Literal["peer", "client", "router"] = "peer"
     listen: list[str] = Field(default_factory=list)
     connect: list[str] = Field(default_factory=list)
@@ -237,6 +239,13 @@ class BusConfig(_Strict):
     namespace: str = DEFAULT_NAMESPACE
     name: str | None = None
     zenoh: dict[str, Any] = Field(default_factory=dict)
+
+    @field_validator("kind")
+    @classmethod
+    def _kind(cls, value: str) -> str:
+        if value not in BUS_KINDS:
+            raise ValueError(str(BUS_KINDS.unknown(value)))
+        return value
 
     @field_validator("namespace")
     @classmethod

@@ -16,10 +16,8 @@ __all__ = [
     "BusError",
     "BusTimeout",
     "MalformedMessage",
-    "MessageError",
     "ServiceError",
     "TopicNameError",
-    "UnknownMessageType",
 ]
 
 
@@ -64,18 +62,6 @@ class TopicNameError(BusError, ValueError):
     The message names the offending name and the rule, e.g.
     ``invalid topic name '/a//b': empty segment (rule: …)``.
     """
-
-
-class MessageError(BusError, ValueError):
-    """A message cannot be built or encoded (not a Message, not JSON-serialisable, …)."""
-
-
-class UnknownMessageType(BusError, KeyError):
-    """No message type is registered under that name; the message lists the known ones."""
-
-    def __str__(self) -> str:
-        # KeyError would quote the whole message; show it as written.
-        return str(self.args[0]) if self.args else ""
 
 
 class MalformedMessage(BusError, ValueError):

@@ -13,6 +13,7 @@ import logging
 import threading
 from collections.abc import Callable
 
+from anunnaki import topics
 from anunnaki.bus._api import Bus
 
 __all__ = ["LivelinessGuard"]
@@ -37,7 +38,7 @@ class LivelinessGuard:
         on_lost: Callable[[str], object],
         *,
         timeout: float = 0.5,
-        prefix: str = "/utu_",
+        prefix: str = topics.UTU_NODE_PREFIX,
     ) -> None:
         if not timeout > 0:
             raise ValueError(f"timeout must be > 0 seconds, got {timeout!r}")

@@ -40,7 +40,7 @@ from typing import Any, Protocol, cast
 
 from anunnaki._closing import Closing
 from anunnaki.bus._api import Bus, Subscriber
-from anunnaki.bus._messages import Message
+from anunnaki.messages import Message
 
 __all__ = ["Node"]
 

@@ -342,10 +342,10 @@ def _run_train(args: argparse.Namespace) -> int:
 
     from anunnaki.datasets import load_split
     from anunnaki.lec import TrainConfig, read_card, save_detector, train_detector
-    from anunnaki.phenomena import get_phenomenon
+    from anunnaki.phenomena import PHENOMENA
 
     for name in args.augment:
-        get_phenomenon(name)  # unknown names fail now, listing the valid ones
+        PHENOMENA.create(name)  # unknown names fail now, listing the valid ones
     out = Path(args.out)
     if out.suffix != ".safetensors":
         raise AnunnakiError(f"--out {out}: a model file ends in .safetensors")
@@ -548,10 +548,10 @@ def _check_evaluate_options(args: argparse.Namespace) -> None:
 def _run_evaluate(args: argparse.Namespace) -> int:
     from anunnaki.datasets import load_split
     from anunnaki.lec import DetectorError, evaluate_detector  # before torch: OMP policy
-    from anunnaki.phenomena import get_phenomenon
+    from anunnaki.phenomena import PHENOMENA
 
     _check_evaluate_options(args)
-    phen = get_phenomenon(args.phenomenon) if args.phenomenon else None
+    phen = PHENOMENA.create(args.phenomenon) if args.phenomenon else None
     params = phen.validate(args.params) if phen is not None and args.params else None
     if importlib.util.find_spec("torch") is not None:  # a plugin's model may not need it
         import torch

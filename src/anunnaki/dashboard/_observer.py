@@ -40,28 +40,16 @@ from typing import Any, Literal
 
 from anunnaki import topics
 from anunnaki._closing import Closing
-from anunnaki.bus import (
-    Assessment,
-    Bus,
-    BusError,
-    Clock,
-    Detections,
-    Generic,
-    Image,
-    Sample,
-    ServiceError,
-    body_of,
-)
+from anunnaki.bus import Bus, BusError, Sample, ServiceError
 from anunnaki.dashboard._state import DashboardState, Frame
 from anunnaki.errors import AnunnakiError
+from anunnaki.messages import Assessment, Clock, Detections, Generic, Image, body_of
 from anunnaki.tokens import client_operator_token
 
 __all__ = ["OPERATIONS", "BusObserver", "ObserverConfig", "OperatorError", "SimTime"]
 
 log = logging.getLogger("anunnaki.dashboard")
 
-#: Utu's nodes hold liveliness tokens ``/utu_<node>``: while one is alive, Utu runs.
-UTU_NODE_PREFIX = topics.node_token("")
 
 Operation = Literal["pause", "resume", "approve", "reject", "run_stop"]
 #: The operator's actions and the Utu service each calls.
@@ -275,7 +263,7 @@ class BusObserver(Closing):
 
     # -- callbacks (one thread per subscriber) ---------------------------------------------
     def _on_liveliness(self, node: str, alive: bool) -> None:
-        if node.startswith(UTU_NODE_PREFIX):
+        if node.startswith(topics.UTU_NODE_PREFIX):
             self.state.utu_node(node, alive)
 
     def _on_clock(self, sample: Sample) -> None:

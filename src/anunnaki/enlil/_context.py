@@ -20,7 +20,7 @@ from anunnaki.datasets import Dataset, load_split
 from anunnaki.errors import AnunnakiError
 from anunnaki.lec import Detector, evaluate_detector
 from anunnaki.oracles import category_for_drop
-from anunnaki.phenomena import Phenomenon, get_phenomenon
+from anunnaki.phenomena import PHENOMENA, Phenomenon
 
 __all__ = [
     "ContextResult",
@@ -58,7 +58,7 @@ class ContextResult:
 
 def resolve_phenomenon(phenomenon: str | Phenomenon) -> Phenomenon:
     """Return the phenomenon for a registry name or composition (``rain+brightness``)."""
-    return get_phenomenon(phenomenon) if isinstance(phenomenon, str) else phenomenon
+    return PHENOMENA.create(phenomenon) if isinstance(phenomenon, str) else phenomenon
 
 
 def _bounds(phen: Phenomenon) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]:

@@ -26,9 +26,9 @@ from typing import Any
 
 import numpy as np
 
-from anunnaki.bus import Assessment
 from anunnaki.enlil._oracle_net import CLEAR, OracleModel, load_oracle
 from anunnaki.lec import ModelRegistry
+from anunnaki.messages import Assessment
 from anunnaki.oracles import Frame, OracleError
 
 __all__ = ["EnlilOracle"]

@@ -279,9 +279,9 @@ def _identity(job: Job) -> tuple[str, str]:
 
 
 def _param_names(phenomenon: str) -> tuple[str, ...]:
-    from anunnaki.phenomena import get_phenomenon
+    from anunnaki.phenomena import PHENOMENA
 
-    return tuple(get_phenomenon(phenomenon).param_names)
+    return tuple(PHENOMENA.create(phenomenon).param_names)
 
 
 def _cvt_centroids(dim: int, k: int = 256) -> npt.NDArray[np.float64]:

@@ -13,8 +13,9 @@ from typing import Any
 
 from pydantic import BaseModel
 
-from anunnaki.bus import Bus, Clock
+from anunnaki.bus import Bus
 from anunnaki.managed import MANAGED, ManagedKind
+from anunnaki.messages import Clock
 
 __all__ = ["clock_publisher", "resolve_kind", "split_managed"]
 

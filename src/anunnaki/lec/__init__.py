@@ -75,16 +75,7 @@ from anunnaki.lec._metrics import (
     f1_at_iou,
     match_image,
 )
-from anunnaki.lec._node import (
-    ACTIVE_TOPIC,
-    NODE_NAME,
-    SWAP_SERVICE,
-    LecNode,
-    LecNodeStats,
-    SwapResult,
-    decode_image,
-    detections_topic,
-)
+from anunnaki.lec._node import LecNode, LecNodeStats, SwapResult, decode_image, detections_topic
 from anunnaki.lec._registry import (
     DEFAULT_DOMAIN,
     REGISTRY_FORMAT,
@@ -117,13 +108,10 @@ if TYPE_CHECKING:
     )
 
 __all__ = [
-    "ACTIVE_TOPIC",
     "ARCHITECTURES",
     "DEFAULT_DOMAIN",
-    "NODE_NAME",
     "REGISTRY_FORMAT",
     "SIDECAR_FORMAT",
-    "SWAP_SERVICE",
     "Augmenter",
     "BuildsFromCard",
     "CenterNet",

@@ -43,24 +43,13 @@ import numpy as np
 import numpy.typing as npt
 
 from anunnaki import topics
-from anunnaki.bus import (
-    Bus,
-    Detections,
-    Image,
-    Node,
-    Publisher,
-    Sample,
-    ServiceReply,
-    body_of,
-)
+from anunnaki.bus import Bus, Node, Publisher, Sample
 from anunnaki.errors import AnunnakiError, MissingExtraError
 from anunnaki.lec._detector import Detector
 from anunnaki.lec._registry import ModelRegistry, ModelRegistryError, ModelSpec
+from anunnaki.messages import Detections, Image, ServiceReply, body_of
 
 __all__ = [
-    "ACTIVE_TOPIC",
-    "NODE_NAME",
-    "SWAP_SERVICE",
     "LecNode",
     "LecNodeStats",
     "SwapResult",
@@ -70,13 +59,6 @@ __all__ = [
 
 log = logging.getLogger("anunnaki.lec")
 
-#: Where the node announces its active model: ``{lec, model, domain}``.
-ACTIVE_TOPIC = topics.ACTIVE_MODEL
-#: The swap service: request ``{lec, model}`` or ``{lec, domain}``.
-SWAP_SERVICE = topics.SWAP
-#: The node's liveliness token (bind an agent to it with ``node: /lm_manager``).
-NODE_NAME = topics.LM_MANAGER
-
 
 def detections_topic(lec: str) -> str:
     """The topic an LEC's detections are published on: ``/lec/<lec>/detections``."""
@@ -84,7 +66,7 @@ def detections_topic(lec: str) -> str:
 
 
 def decode_image(message: Image) -> npt.NDArray[np.uint8]:
-    """Decode an :class:`~anunnaki.bus.Image` into ``(H, W, 3)`` RGB uint8 (:meth:`Image.to_array`).
+    """Decode an :class:`~anunnaki.messages.Image` into ``(H, W, 3)`` RGB uint8 (``to_array``).
 
     Raises:
         ValueError: The bytes do not decode.
@@ -219,9 +201,9 @@ class LecNode(Node):
         lec: str | None = None,
         camera: str = "/rover/camera/image",
         detections: str | None = None,
-        active_topic: str = ACTIVE_TOPIC,
-        swap_service: str = SWAP_SERVICE,
-        node: str = NODE_NAME,
+        active_topic: str = topics.ACTIVE_MODEL,
+        swap_service: str = topics.SWAP,
+        node: str = topics.LM_MANAGER,
         initial: str | None = None,
         active_period: float | None = 1.0,
         frame_queue: int = 64,

@@ -35,7 +35,7 @@ from anunnaki.lec._centernet import (
 )
 from anunnaki.lec._detector import DetectionResult, Detector, DetectorError
 from anunnaki.lec._metrics import Metrics, choose_threshold, f1_at_iou
-from anunnaki.phenomena import Phenomenon, get_phenomenon
+from anunnaki.phenomena import PHENOMENA, Phenomenon
 
 __all__ = [
     "Augmenter",
@@ -86,7 +86,7 @@ class Augmenter:
             raise DetectorError(f"augment probability must be in [0, 1], got {probability}")
         if not 0.0 <= max_strength <= 1.0:
             raise DetectorError(f"augment max_strength must be in [0, 1], got {max_strength}")
-        self.phenomena = [get_phenomenon(p) if isinstance(p, str) else p for p in phenomena]
+        self.phenomena = [PHENOMENA.create(p) if isinstance(p, str) else p for p in phenomena]
         self.probability = probability
         self.max_strength = max_strength
 
@@ -363,7 +363,7 @@ def evaluate_detector(
     """
     transform: Callable[[int, Image], Image] | None = None
     if phenomenon is not None:
-        phen = get_phenomenon(phenomenon) if isinstance(phenomenon, str) else phenomenon
+        phen = PHENOMENA.create(phenomenon) if isinstance(phenomenon, str) else phenomenon
         if params is not None and strength is not None:
             raise DetectorError("give the phenomenon's params or a strength, not both")
         chosen = (

@@ -35,7 +35,7 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING, Any
 
-from anunnaki.managed._camera import SCORER_TOPIC, CameraChain, TakesModels, check_camera_chain
+from anunnaki.managed._camera import CameraChain, TakesModels, check_camera_chain
 from anunnaki.managed._kinds import ScriptedKind, SimKind
 from anunnaki.managed._robot import Link, RobotConfig, RobotKind
 from anunnaki.managed._scripted import ScriptedSystem
@@ -60,7 +60,6 @@ if TYPE_CHECKING:
 
 __all__ = [
     "MANAGED",
-    "SCORER_TOPIC",
     "CameraChain",
     "DecisionLike",
     "Link",

@@ -29,10 +29,11 @@ from anunnaki import topics
 from anunnaki._closing import Closing
 from anunnaki.errors import ModelFileError
 
-__all__ = ["SCORER_TOPIC", "CameraChain", "TakesModels", "check_camera_chain"]
-
-#: Where a live scorer beside the oracle publishes (not Utu's input: no agent reads it).
-SCORER_TOPIC = "/sim/oracle/scorer"
+__all__ = [
+    "CameraChain",
+    "TakesModels",
+    "check_camera_chain",
+]
 
 
 @runtime_checkable
@@ -81,14 +82,14 @@ def check_camera_chain(
     for key, options in (("oracle", oracle), ("scorer", scorer)):
         if options is None:
             continue
-        from anunnaki.oracles import available_oracles
+        from anunnaki.oracles import ORACLES
 
         name = _oracle_name(options, default_oracle, f"{where}.{key}")
-        if name not in available_oracles():
+        if name not in ORACLES.names():
             raise ModelFileError(
                 f"unknown oracle {name!r}",
                 element=f"{where}.{key}.name",
-                hint=f"known oracles: {', '.join(available_oracles())}",
+                hint=f"known oracles: {', '.join(ORACLES.names())}",
             )
 
 
@@ -102,7 +103,7 @@ class CameraChain(Closing):
             ``None`` runs no detector.
         oracle: The oracle node's options (``name`` and the oracle's own); ``None``: none.
         scorer: A second oracle's options, run beside the first as its live scorer; it
-            publishes on :data:`SCORER_TOPIC` as node ``/scorer_<name>``; ``None``: none.
+            publishes on ``topics.SCORER`` as node ``/scorer_<name>``; ``None``: none.
         classes: Class names, for ground truth that gives labels as indices.
         default_oracle: The oracle's name when its options give none (``None``: required).
 
@@ -144,7 +145,7 @@ class CameraChain(Closing):
                 self.lec = self._own(LecNode(bus, self.registry, camera=camera))
                 self.detections_topic = self.lec.detections_topic
             self.oracle = self._oracle(oracle, classes, default_oracle)
-            self.scorer = self._oracle(scorer, classes, default_oracle, output=SCORER_TOPIC)
+            self.scorer = self._oracle(scorer, classes, default_oracle, output=topics.SCORER)
         except BaseException:
             self.close()
             raise
@@ -164,12 +165,12 @@ class CameraChain(Closing):
         """An oracle node from its options, or ``None``."""
         if options is None:
             return None
-        from anunnaki.oracles import OracleNode, default_registry
+        from anunnaki.oracles import ORACLES, OracleNode
 
         opts = dict(options)
         name = _oracle_name(opts, default, "oracle")
         opts.pop("name", None)
-        factory = default_registry().factory(name)
+        factory = ORACLES.factory(name)
         if self.registry is not None and isinstance(factory, TakesModels):
             for key, value in factory.options_from_models(self.registry).items():
                 opts.setdefault(key, value)

@@ -26,7 +26,8 @@ from typing import Any
 
 from anunnaki import topics
 from anunnaki._closing import Closing
-from anunnaki.bus import Clock, LivelinessGuard, body_of
+from anunnaki.bus import LivelinessGuard
+from anunnaki.messages import Clock, body_of
 from anunnaki.trace import Record, read_trace
 
 __all__ = ["ScriptedSystem"]

@@ -34,8 +34,9 @@ import numpy as np
 
 from anunnaki import topics
 from anunnaki._closing import Closing
-from anunnaki.bus import Assessment, Detections, LivelinessGuard, Sample, body_of
-from anunnaki.managed._camera import SCORER_TOPIC, CameraChain
+from anunnaki.bus import LivelinessGuard, Sample
+from anunnaki.managed._camera import CameraChain
+from anunnaki.messages import Assessment, Detections, body_of
 from anunnaki.sim import (
     FrameScore,
     RunReport,
@@ -44,8 +45,6 @@ from anunnaki.sim import (
     compare_assessors,
     tactic_events,
 )
-
-GROUND_TRUTH_TOPIC = topics.GROUND_TRUTH
 
 __all__ = [
     "PhaseScore",
@@ -56,8 +55,6 @@ __all__ = [
 ]
 
 log = logging.getLogger("anunnaki.managed")
-
-_OUTPUT_TOPIC = topics.ORACLE_OUTPUT
 
 
 @dataclass
@@ -173,7 +170,7 @@ class SimulatedSystem(Closing):
             stops (rover) or lands (UAV) by itself (``None``: never).
         scorer: A second oracle's options, run beside the first as its live scorer (e.g.
             ``{"name": "ground_truth", "window": 30}`` beside a learned ``enlil`` oracle);
-            it publishes on :data:`SCORER_TOPIC` (node ``/scorer_<name>``), which Utu does
+            it publishes on ``topics.SCORER`` (node ``/scorer_<name>``), which Utu does
             not read, and the report compares the two (:func:`~anunnaki.sim.compare_assessors`).
 
     The detector, the oracle and the scorer are the camera chain every kind shares
@@ -257,12 +254,12 @@ class SimulatedSystem(Closing):
             self.scorer: Any = chain.scorer
             self.detections_topic = chain.detections_topic
             self._subs = [
-                bus.subscribe(GROUND_TRUTH_TOPIC, self._on_truth, queue=256),
+                bus.subscribe(topics.GROUND_TRUTH, self._on_truth, queue=256),
                 bus.subscribe(self.detections_topic, self._on_detections, queue=256),
-                bus.subscribe(_OUTPUT_TOPIC, self._on_assessment, queue=256),
+                bus.subscribe(topics.ORACLE_OUTPUT, self._on_assessment, queue=256),
             ]
             if self.scorer is not None:
-                self._subs.append(bus.subscribe(SCORER_TOPIC, self._on_scorer, queue=256))
+                self._subs.append(bus.subscribe(topics.SCORER, self._on_scorer, queue=256))
         except BaseException:
             self.close()
             raise

@@ -4,7 +4,7 @@ An oracle runs beside the learning-enabled component on the same camera frames a
 each frame, which **behavior category** the LEC is in — 0: F1 drop under 5 %, 1: degraded
 (over 5 %), 2: compromised (over 10 %), relative to the model's F1 on clean data — and the
 **perceived context** (which phenomenon, how strong). Assessments are
-:class:`~anunnaki.bus.Assessment` messages on ``/utu/oracle/output``, the topic agent A4
+:class:`~anunnaki.messages.Assessment` messages on ``/utu/oracle/output``, the topic agent A4
 reads in the paper's goal models.
 
 Using one::
@@ -22,9 +22,11 @@ The plugin slot (:class:`Oracle`): anything with a ``name`` and
 ``assess(frame, *, seq, model_id) -> Assessment | None``; optional hooks
 ``observe_ground_truth(seq, boxes, labels)``, ``observe_detections(detections)`` and
 ``observe_context(context)`` are fed by the node when an oracle defines them. Every slot takes
-a name or an object: :func:`get_oracle` (``"ground_truth"`` or an instance). Third parties
-register a class with :func:`register_oracle` or through an entry point in the
-``anunnaki.oracles`` group (see ``docs/oracles.md``).
+a name or an object: the slot :data:`ORACLES` (a :class:`~anunnaki.plugins.Registry`;
+``ORACLES.create("ground_truth")`` or an instance). Third parties register a class with
+``@ORACLES.register`` or through an entry point in the ``anunnaki.oracles`` group (see
+``docs/oracles.md``); so do Enlil's learned oracle (``enlil``) and the ROS bridge's
+``light``, from ``pyproject.toml``.
 
 Built-in: ``ground_truth`` (:class:`GroundTruthAssessor`) — sliding-window F1 of the active
 model's detections against the simulator's ground truth, turned into a category by the
@@ -49,32 +51,14 @@ from anunnaki.oracles._ground_truth import (
     WindowMetrics,
     category_for_drop,
 )
-from anunnaki.oracles._node import (
-    GROUND_TRUTH_TOPIC,
-    OUTPUT_TOPIC,
-    PHENOMENA_TOPIC,
-    OracleNode,
-    OracleNodeStats,
-    truth_from_message,
-)
-from anunnaki.oracles._registry import (
-    BUILTIN_ORACLES,
-    ENTRY_POINT_GROUP,
-    OracleRegistry,
-    available_oracles,
-    default_registry,
-    get_oracle,
-    register_oracle,
-)
+from anunnaki.oracles._node import OracleNode, OracleNodeStats, truth_from_message
+from anunnaki.oracles._registry import BUILTIN_ORACLES, ORACLES
 
 __all__ = [
     "BUILTIN_ORACLES",
     "CLEAR",
-    "ENTRY_POINT_GROUP",
-    "GROUND_TRUTH_TOPIC",
     "HOOKS",
-    "OUTPUT_TOPIC",
-    "PHENOMENA_TOPIC",
+    "ORACLES",
     "CleanF1",
     "Frame",
     "GroundTruthAssessor",
@@ -86,13 +70,8 @@ __all__ = [
     "OracleError",
     "OracleNode",
     "OracleNodeStats",
-    "OracleRegistry",
     "WindowMetrics",
-    "available_oracles",
     "category_for_drop",
     "context_from_phenomena",
-    "default_registry",
-    "get_oracle",
-    "register_oracle",
     "truth_from_message",
 ]

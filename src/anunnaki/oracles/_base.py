@@ -22,8 +22,8 @@ import numpy as np
 import numpy.typing as npt
 from pydantic import JsonValue
 
-from anunnaki.bus import Assessment
 from anunnaki.errors import AnunnakiError
+from anunnaki.messages import Assessment
 
 __all__ = [
     "CLEAR",
@@ -84,7 +84,7 @@ class Oracle(Protocol):
             model_id: The LEC's active model; put it in ``model_id``.
 
         Returns:
-            An :class:`~anunnaki.bus.Assessment` whose ``assessor`` is the oracle's name, or
+            An :class:`~anunnaki.messages.Assessment` whose ``assessor`` is the oracle's name, or
             ``None`` when there is not enough evidence yet (nothing is published).
 
         """
@@ -132,7 +132,7 @@ class ObservesDetections(Protocol):
     """Optional hook: what the LEC published for each frame."""
 
     def observe_detections(self, detections: Any) -> None:
-        """``detections``: a :class:`~anunnaki.bus.Detections` (frame, model, boxes, names)."""
+        """``detections``: a :class:`~anunnaki.messages.Detections` (frame, model, boxes, names)."""
         ...
 
 

@@ -36,8 +36,8 @@ import numpy as np
 import numpy.typing as npt
 from pydantic import JsonValue
 
-from anunnaki.bus import Assessment, Detections
 from anunnaki.lec import DetectionResult, ModelRegistry, match_image
+from anunnaki.messages import Assessment, Detections
 from anunnaki.oracles._base import Frame, OracleError
 
 __all__ = ["CleanF1", "GroundTruthAssessor", "WindowMetrics", "category_for_drop"]

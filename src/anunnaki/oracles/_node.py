@@ -31,9 +31,10 @@ from typing import Any
 import numpy as np
 
 from anunnaki import topics
-from anunnaki.bus import Assessment, Bus, Detections, Image, Node, Publisher, Sample
+from anunnaki.bus import Bus, Node, Publisher, Sample
 from anunnaki.errors import AnunnakiError
-from anunnaki.lec import ACTIVE_TOPIC, decode_image, detections_topic
+from anunnaki.lec import decode_image, detections_topic
+from anunnaki.messages import Assessment, Detections, Image
 from anunnaki.oracles._base import (
     ObservesContext,
     ObservesDetections,
@@ -42,25 +43,16 @@ from anunnaki.oracles._base import (
     Oracle,
     context_from_phenomena,
 )
-from anunnaki.oracles._registry import OracleRegistry, get_oracle
+from anunnaki.oracles._registry import ORACLES
+from anunnaki.plugins import Registry
 
 __all__ = [
-    "GROUND_TRUTH_TOPIC",
-    "OUTPUT_TOPIC",
-    "PHENOMENA_TOPIC",
     "OracleNode",
     "OracleNodeStats",
     "truth_from_message",
 ]
 
 log = logging.getLogger("anunnaki.oracles")
-
-#: Where assessments go (agent A4 in the paper's goal models).
-OUTPUT_TOPIC = topics.ORACLE_OUTPUT
-#: The simulator's per-frame ground truth: ``{seq, boxes, labels}``.
-GROUND_TRUTH_TOPIC = topics.GROUND_TRUTH
-#: The simulator's active phenomena (see :func:`~anunnaki.oracles.context_from_phenomena`).
-PHENOMENA_TOPIC = topics.PHENOMENA
 
 
 @dataclass(frozen=True)
@@ -146,7 +138,7 @@ class OracleNode(Node):
         classes: Class names for ground truth given as indices.
         every: Assess every n-th frame (guideline C5: a configurable rate).
         frame_queue: Frames that may wait; the oldest are dropped beyond it.
-        registry: Where a name is looked up (default: the process-wide registry).
+        registry: Where a name is looked up (default: :data:`~anunnaki.oracles.ORACLES`).
         **options: The oracle's options when it is given by name (e.g. ``window=30``).
 
     """
@@ -159,20 +151,20 @@ class OracleNode(Node):
         camera: str = "/rover/camera/image",
         lec: str = "detector",
         detections: str | None = None,
-        ground_truth: str = GROUND_TRUTH_TOPIC,
-        phenomena: str = PHENOMENA_TOPIC,
-        active: str = ACTIVE_TOPIC,
-        output: str = OUTPUT_TOPIC,
+        ground_truth: str = topics.GROUND_TRUTH,
+        phenomena: str = topics.PHENOMENA,
+        active: str = topics.ACTIVE_MODEL,
+        output: str = topics.ORACLE_OUTPUT,
         node: str | None = None,
         classes: Sequence[str] | None = None,
         every: int = 1,
         frame_queue: int = 16,
-        registry: OracleRegistry | None = None,
+        registry: Registry[Oracle] | None = None,
         **options: Any,
     ) -> None:
         if not isinstance(every, int) or every < 1:
             raise ValueError(f"every must be a whole number >= 1, got {every!r}")
-        self.oracle: Oracle = get_oracle(oracle, registry=registry, **options)
+        self.oracle: Oracle = (registry or ORACLES).create(oracle, **options)
         self.bus = bus
         self.lec = lec
         self.every = every

@@ -1,9 +1,10 @@
-"""The oracle registry: built-ins, runtime registration and entry-point plugins.
+"""The oracle slot, :data:`ORACLES`: built-ins, runtime registration, entry-point plugins.
 
-Every plugin slot in Anunnaki takes a name or an object: ``"ground_truth"`` or an oracle
-instance. Third-party packages add oracles through the ``anunnaki.oracles`` entry-point
-group (the entry point names a class); entry points are loaded lazily on the first lookup,
-and one that fails to import or is not an oracle class is logged and skipped, so a broken
+Every plugin slot in Anunnaki takes a name or an object:
+``ORACLES.create("ground_truth", window=30)`` or an oracle instance. Third-party packages
+add oracles through the ``anunnaki.oracles`` entry-point group (the entry point names a
+class); entry points are loaded on the first lookup of a name that is not a built-in, and
+one that fails to import or is not an oracle class is logged and skipped, so a broken
 plugin never takes the others down. A plugin cannot shadow a built-in or an explicitly
 registered oracle.
 """
@@ -12,38 +13,22 @@ from __future__ import annotations
 
 import inspect
 import logging
-import re
-from typing import Any, TypeVar
+from typing import Any
 
 from anunnaki.oracles._base import Oracle, OracleError
 from anunnaki.oracles._ground_truth import GroundTruthAssessor
-from anunnaki.plugins import Registry
+from anunnaki.plugins import Registry, check_name
 
-__all__ = [
-    "BUILTIN_ORACLES",
-    "ENTRY_POINT_GROUP",
-    "OracleRegistry",
-    "available_oracles",
-    "default_registry",
-    "get_oracle",
-    "register_oracle",
-]
+__all__ = ["BUILTIN_ORACLES", "ORACLES"]
 
 logger = logging.getLogger("anunnaki.oracles")
-
-#: The entry-point group third-party oracles register under.
-ENTRY_POINT_GROUP = "anunnaki.oracles"
 
 #: The oracles that ship with Anunnaki.
 BUILTIN_ORACLES: tuple[type[Any], ...] = (GroundTruthAssessor,)
 
-#: Built-ins of the packages above this one (Enlil's learned oracles need torch), imported
-#: on first use.
-LAZY_ORACLES: dict[str, str] = {"enlil": "anunnaki.enlil._oracle_plugin:EnlilOracle"}
-
-_NAME_RE = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
-
-C = TypeVar("C", bound=type[Any])
+# The oracles of the packages above this one (Enlil's learned oracle ``enlil``, the ROS
+# bridge's ``light``) are not named here: they register by the entry-point group, in
+# pyproject.toml, by their public names (tests/test_layers.py checks both).
 
 
 def _check_class(cls: object) -> type[Any]:
@@ -57,76 +42,21 @@ def _check_class(cls: object) -> type[Any]:
         raise OracleError(
             f"{cls.__name__} is not an oracle: it has no assess(frame, *, seq, model_id) method"
         )
-    name = getattr(cls, "name", None)
-    if not isinstance(name, str) or not _NAME_RE.match(name):
-        raise OracleError(
-            f"{cls.__name__}.name must be an identifier such as 'ground_truth', got {name!r}"
-        )
+    check_name(getattr(cls, "name", None), what="oracle", error=OracleError)
     return cls
 
 
-class OracleRegistry(Registry[Oracle]):
-    """Maps names to oracle classes: the generic :class:`~anunnaki.plugins.Registry`.
-
-    Args:
-        builtins: Register :data:`BUILTIN_ORACLES` (default ``True``).
-        entry_point_group: Entry-point group to load plugins from on the first lookup;
-            ``None`` disables plugins.
-
-    """
-
-    def __init__(
-        self, *, builtins: bool = True, entry_point_group: str | None = ENTRY_POINT_GROUP
-    ) -> None:
-        super().__init__(
-            "oracle",
-            group=entry_point_group,
-            kind=Oracle,
-            check=_check_class,
-            error=OracleError,
-            logger="anunnaki.oracles",
-        )
-        if builtins:
-            for cls in BUILTIN_ORACLES:
-                self.register(cls)
-            for name, ref in LAZY_ORACLES.items():
-                self.register_lazy(name, ref)
-
-    def get(self, name_or_instance: str | Oracle, **options: Any) -> Oracle:
-        """Return an oracle for a name (built with ``options``); pass instances through.
-
-        Raises:
-            OracleError: Unknown name (the message lists the valid names), options given
-                with an instance, options the class does not take, or an argument that is
-                neither a name nor an oracle.
-
-        """
-        oracle = self.create(name_or_instance, **options)
-        if not isinstance(oracle, Oracle):  # pragma: no cover - _check_class makes this hold
-            raise OracleError(f"oracle {name_or_instance!r} built an object without name/assess")
-        return oracle
-
-
-_DEFAULT = OracleRegistry()
-
-
-def default_registry() -> OracleRegistry:
-    """Return the process-wide registry used by the module-level functions."""
-    return _DEFAULT
-
-
-def register_oracle(cls: C, *, replace: bool = False) -> C:
-    """Register *cls* in the default registry (also works as a class decorator)."""
-    return _DEFAULT.register(cls, replace=replace)
-
-
-def get_oracle(
-    name_or_instance: str | Oracle, *, registry: OracleRegistry | None = None, **options: Any
-) -> Oracle:
-    """Return an oracle for a name or an instance; see :meth:`OracleRegistry.get`."""
-    return (registry or _DEFAULT).get(name_or_instance, **options)
-
-
-def available_oracles(*, registry: OracleRegistry | None = None) -> list[str]:
-    """Return the sorted names of the registered oracles (built-ins and plugins)."""
-    return (registry or _DEFAULT).names()
+#: The oracles: names -> classes (a :class:`~anunnaki.plugins.Registry`).
+#: ``create("ground_truth", window=30)`` builds one (an instance passes through),
+#: ``names()`` lists them, ``register`` (a class decorator) adds one; third parties and the
+#: packages above this one by the entry-point group ``anunnaki.oracles``.
+ORACLES: Registry[Oracle] = Registry(
+    "oracle",
+    group="anunnaki.oracles",
+    kind=Oracle,
+    check=_check_class,
+    error=OracleError,
+    logger="anunnaki.oracles",
+)
+for _cls in BUILTIN_ORACLES:
+    ORACLES.register(_cls)

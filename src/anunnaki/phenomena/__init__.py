@@ -8,9 +8,9 @@ arrays; anything else is rejected with a :class:`PhenomenonError` that says how 
 
 Using one::
 
-    from anunnaki.phenomena import get_phenomenon, synthetic_scene
+    from anunnaki.phenomena import PHENOMENA, synthetic_scene
 
-    fog = get_phenomenon("fog")                 # or pass a Phenomenon instance anywhere
+    fog = PHENOMENA.create("fog")               # or pass a Phenomenon instance anywhere
     frame = synthetic_scene(128, 128)
     foggy = fog.apply(frame, {"density": 4, "intensity": 0.3}, seed=7)
 
@@ -28,7 +28,7 @@ The contract (:class:`Phenomenon`), shared by every built-in and plugin:
   the same bytes; the only randomness is ``numpy.random.default_rng(seed)``. The input is
   never modified. ``stochastic`` says whether the seed matters at all.
 
-Built-ins (``available_phenomena()``): ``brightness``, ``fog``, ``hsl``, ``motion_blur``,
+Built-ins (``PHENOMENA.names()``): ``brightness``, ``fog``, ``hsl``, ``motion_blur``,
 ``noise``, ``rain``, ``raindrop``, ``snow``. ``compose("fog", "raindrop")`` (or the name
 ``"fog+raindrop"``) chains phenomena into one :class:`Composition` whose parameters are
 prefixed with the step label (``fog.density``, ``raindrop.x``; repeats become ``raindrop_2``)
@@ -37,8 +37,9 @@ and whose steps get seeds spawned from the one seed.
 ``with reuse_fog_noise(store):`` keeps a fog's noise layers for the seeds it sees, for work
 that applies many contexts to the same images with the same seeds (Enlil's search).
 
-Plugins: subclass :class:`Phenomenon`, then either call :func:`register_phenomenon` or
-declare an entry point in the ``anunnaki.phenomena`` group of your package (see
+Plugins: subclass :class:`Phenomenon`, then either register it in the slot
+(``@PHENOMENA.register``, a :class:`~anunnaki.plugins.Registry` like every slot) or declare
+an entry point in the ``anunnaki.phenomena`` group of your package (see
 ``docs/phenomena.md``). Importing this package needs only numpy; OpenCV and albumentations
 (the ``vision`` extra) are imported when a phenomenon that needs them is first applied, and a
 missing one raises :class:`~anunnaki.errors.MissingExtraError` naming ``anunnaki[phenomena]``.
@@ -46,24 +47,17 @@ missing one raises :class:`~anunnaki.errors.MissingExtraError` naming ``anunnaki
 
 from anunnaki.phenomena._base import Image, ParamSpec, Phenomenon, PhenomenonError
 from anunnaki.phenomena._color import HSL, Brightness
-from anunnaki.phenomena._composition import Composition, CompositionStep, StepLike, compose
+from anunnaki.phenomena._composition import Composition, CompositionStep
 from anunnaki.phenomena._fog import Fog, reuse_fog_noise
 from anunnaki.phenomena._raindrop import Raindrop
-from anunnaki.phenomena._registry import (
-    ENTRY_POINT_GROUP,
-    PhenomenonRegistry,
-    available_phenomena,
-    default_registry,
-    get_phenomenon,
-    register_phenomenon,
-)
+from anunnaki.phenomena._registry import PHENOMENA, StepLike, compose
 from anunnaki.phenomena._scene import synthetic_scene
 from anunnaki.phenomena._sensor import MotionBlur, Noise, motion_kernel
 from anunnaki.phenomena._weather import Rain, Snow
 
 __all__ = [
-    "ENTRY_POINT_GROUP",
     "HSL",
+    "PHENOMENA",
     "Brightness",
     "Composition",
     "CompositionStep",
@@ -74,17 +68,12 @@ __all__ = [
     "ParamSpec",
     "Phenomenon",
     "PhenomenonError",
-    "PhenomenonRegistry",
     "Rain",
     "Raindrop",
     "Snow",
     "StepLike",
-    "available_phenomena",
     "compose",
-    "default_registry",
-    "get_phenomenon",
     "motion_kernel",
-    "register_phenomenon",
     "reuse_fog_noise",
     "synthetic_scene",
 ]

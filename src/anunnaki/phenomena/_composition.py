@@ -8,6 +8,10 @@ raindrops in fog" is just ``compose("fog", "raindrop", "raindrop", "raindrop")``
 A step may pin some of its parameters: ``compose(("rain", {"slant": 20}), "fog")`` keeps the
 slant at 20 degrees and leaves it out of the search space.
 
+A :class:`Composition` is built from phenomena (instances); names are resolved before, by
+:func:`~anunnaki.phenomena.compose` and the ``+`` names of
+:data:`~anunnaki.phenomena.PHENOMENA`, so that this module does not know the slot.
+
 Each step gets its own seed, ``SeedSequence(seed).spawn(len(steps))[i]``, so adding or
 changing a step never changes the randomness of the others.
 """
@@ -17,19 +21,16 @@ from __future__ import annotations
 import re
 from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any, TypeAlias
+from typing import Any, TypeAlias
 
 import numpy as np
 
 from anunnaki.phenomena._base import Image, Phenomenon, PhenomenonError
 
-if TYPE_CHECKING:
-    from anunnaki.phenomena._registry import PhenomenonRegistry
+__all__ = ["Composition", "CompositionStep", "Step"]
 
-__all__ = ["Composition", "CompositionStep", "StepLike", "compose"]
-
-#: What a composition step may be given as: a name, an instance, or either with pinned params.
-StepLike: TypeAlias = "str | Phenomenon | tuple[str | Phenomenon, Mapping[str, float]]"
+#: What a composition step is given as: a phenomenon, or one with pinned parameters.
+Step: TypeAlias = "Phenomenon | tuple[Phenomenon, Mapping[str, float]]"
 
 
 @dataclass(frozen=True)
@@ -54,20 +55,16 @@ class Composition(Phenomenon):
     """An ordered sequence of phenomena, itself a :class:`Phenomenon`.
 
     Args:
-        *steps: Each a registered name, a :class:`Phenomenon` instance, or a
-            ``(name_or_instance, pinned_params)`` pair.
-        registry: Where names are looked up (default: the global registry).
+        *steps: Each a :class:`Phenomenon` instance or a ``(phenomenon, pinned_params)``
+            pair (by name: :func:`~anunnaki.phenomena.compose`).
 
     Raises:
-        PhenomenonError: No steps, an unknown name, or invalid pinned parameters.
+        PhenomenonError: No steps, a step that is no phenomenon, or invalid pinned
+            parameters.
 
     """
 
-    def __init__(self, *steps: StepLike, registry: PhenomenonRegistry | None = None) -> None:
-        if registry is None:
-            from anunnaki.phenomena._registry import default_registry
-
-            registry = default_registry()
+    def __init__(self, *steps: Step) -> None:
         if not steps:
             raise PhenomenonError("a composition needs at least one step", phenomenon="compose")
         resolved: list[CompositionStep] = []
@@ -85,7 +82,13 @@ class Composition(Phenomenon):
                 target, fixed_raw = step
             else:
                 target, fixed_raw = step, {}
-            phenomenon = registry.get(target)
+            if not isinstance(target, Phenomenon):
+                raise PhenomenonError(
+                    f"a composition step must be a phenomenon, got {type(target).__name__} "
+                    "(compose() and the 'a+b' names take registered names)",
+                    phenomenon="compose",
+                )
+            phenomenon = target
             fixed = _pin(phenomenon, fixed_raw)
             base = re.sub(r"\W", "_", phenomenon.name)
             used[base] = used.get(base, 0) + 1
@@ -144,8 +147,3 @@ def _pin(phenomenon: Phenomenon, fixed: Mapping[str, Any]) -> dict[str, float]:
         spec = phenomenon.spec(key)  # raises for an unknown name, listing the valid ones
         pinned[key] = phenomenon._check_value(spec, value)
     return pinned
-
-
-def compose(*steps: StepLike, registry: PhenomenonRegistry | None = None) -> Composition:
-    """Return a :class:`Composition` of *steps*, e.g. ``compose("fog", "raindrop")``."""
-    return Composition(*steps, registry=registry)

@@ -24,7 +24,7 @@ files; the launch kinds ``ros1`` and ``ros2`` are in :mod:`anunnaki.managed`.
 
 from __future__ import annotations
 
-from anunnaki.ros1._bags import DECISIONS_TOPIC, bag_message_to_dict, is_bag, read_bag, write_bag
+from anunnaki.ros1._bags import bag_message_to_dict, is_bag, read_bag, write_bag
 from anunnaki.ros1._convert import (
     ConversionError,
     bus_image_to_compressed,
@@ -37,6 +37,7 @@ from anunnaki.ros1._convert import (
     to_bus_fields,
     to_ros_fields,
 )
+from anunnaki.ros1._light import LightOracle
 from anunnaki.ros1._rospy import ROS_DIST_PACKAGES, RosUnavailable, import_rospy
 from anunnaki.ros1._schema import (
     FORMAT_TAG,
@@ -49,7 +50,6 @@ from anunnaki.ros1._schema import (
 from anunnaki.ros1._types import IMAGE_TYPES, MESSAGE_TYPES, SERVICE_TYPES, SET_STRING_SRV
 
 __all__ = [
-    "DECISIONS_TOPIC",
     "FORMAT_TAG",
     "IMAGE_TYPES",
     "MESSAGE_TYPES",
@@ -58,6 +58,7 @@ __all__ = [
     "SET_STRING_SRV",
     "BridgeSpec",
     "ConversionError",
+    "LightOracle",
     "RosUnavailable",
     "ServiceBridge",
     "TopicBridge",

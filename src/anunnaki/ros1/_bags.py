@@ -24,15 +24,19 @@ from collections.abc import Iterable, Iterator, Mapping
 from pathlib import Path
 from typing import Any
 
+from anunnaki import topics
 from anunnaki.errors import AnunnakiError, MissingExtraError, ModelFileError
 from anunnaki.ros1._convert import to_bus_fields
 from anunnaki.ros1._schema import BridgeSpec, TopicBridge
 from anunnaki.trace import Record
 
-__all__ = ["DECISIONS_TOPIC", "bag_message_to_dict", "is_bag", "read_bag", "write_bag"]
+__all__ = [
+    "bag_message_to_dict",
+    "is_bag",
+    "read_bag",
+    "write_bag",
+]
 
-#: The topic a run's decisions are written on in an exported bag.
-DECISIONS_TOPIC = "/utu/decisions"
 
 _TIME_TYPES = {"builtin_interfaces/msg/Time", "builtin_interfaces/msg/Duration"}
 
@@ -90,7 +94,7 @@ def read_bag(path: str | Path, spec: BridgeSpec | None = None) -> list[Record]:
 
     Without ``spec`` the bag must be one :func:`write_bag` wrote (every topic a
     ``std_msgs/String`` holding a bus message as JSON): its inputs come back on their own
-    topics, as they were recorded, and its decisions (:data:`DECISIONS_TOPIC`) are left out.
+    topics, as they were recorded, and its decisions (``topics.BAG_DECISIONS``) are left out.
 
     Raises:
         ModelFileError: The bag cannot be read, a bridged topic has another type in it, or
@@ -144,7 +148,7 @@ def _read_run_bag(rb: Any, path: Path) -> list[Record]:
                     hint="give --bridge BRIDGE.yaml, which maps its topics and fields to the "
                     "bus's (docs/ros.md)",
                 )
-            wanted = [c for c in reader.connections if c.topic != DECISIONS_TOPIC]
+            wanted = [c for c in reader.connections if c.topic != topics.BAG_DECISIONS]
             for connection, stamp, raw in reader.messages(connections=wanted):
                 text = reader.deserialize(raw, connection.msgtype).data
                 try:
@@ -190,7 +194,7 @@ def write_bag(
     *,
     overwrite: bool = False,
 ) -> int:
-    """Write a run to a ROS 1 bag: inputs on their topics, decisions on :data:`DECISIONS_TOPIC`.
+    """Write a run to a ROS 1 bag: inputs on their topics, decisions on ``topics.BAG_DECISIONS``.
 
     Every message is a ``std_msgs/String`` holding the JSON of the message (the bus's
     messages have no fixed ROS type), so :func:`read_bag` reads its inputs back without a
@@ -229,6 +233,6 @@ def _in_time_order(
     inputs: Iterable[Record], decisions: Iterable[tuple[float, Mapping[str, Any]]]
 ) -> Iterator[tuple[float, str, Any]]:
     rows = [(r.t, r.topic, r.msg) for r in inputs]
-    rows += [(t, DECISIONS_TOPIC, dict(d)) for t, d in decisions]
+    rows += [(t, topics.BAG_DECISIONS, dict(d)) for t, d in decisions]
     rows.sort(key=lambda row: row[0])
     return iter(rows)

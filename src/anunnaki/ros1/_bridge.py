@@ -24,7 +24,8 @@ from types import ModuleType
 from typing import Any
 
 from anunnaki._closing import Closing
-from anunnaki.bus import Bus, Image, ServiceReply, body_of
+from anunnaki.bus import Bus
+from anunnaki.messages import Image, ServiceReply, body_of
 from anunnaki.ros1._convert import (
     ConversionError,
     bus_image_to_compressed,

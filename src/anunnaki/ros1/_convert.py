@@ -5,7 +5,7 @@ A ROS message becomes a dict of its fields (nested messages as dicts, ``time`` a
 picks and renames (:func:`to_bus_fields`, :func:`to_ros_fields`). Camera frames are the
 exception: ``sensor_msgs/Image`` (``rgb8``, ``bgr8``, ``rgba8``, ``bgra8``, ``mono8``) is
 written as a PNG (zlib, no OpenCV) and ``sensor_msgs/CompressedImage`` keeps its JPEG/PNG
-bytes, both as the bus's :class:`~anunnaki.bus.Image`; the other way a bus frame becomes a
+bytes, both as the bus's :class:`~anunnaki.messages.Image`; the other way a bus frame becomes a
 ``CompressedImage`` as it is (a raw ``Image`` needs OpenCV to decode it).
 
 Nothing here imports rospy: message objects are read through genpy's ``__slots__`` and
@@ -19,7 +19,7 @@ import zlib
 from collections.abc import Mapping
 from typing import Any
 
-from anunnaki.bus import Image
+from anunnaki.messages import Image
 
 __all__ = [
     "bus_image_to_compressed",

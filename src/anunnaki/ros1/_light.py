@@ -12,7 +12,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from anunnaki.bus import Assessment
+from anunnaki.messages import Assessment
 from anunnaki.oracles import OracleError
 
 __all__ = ["LightOracle"]

@@ -27,8 +27,9 @@ from collections.abc import Callable, Mapping
 from typing import Any, Literal
 
 from anunnaki._closing import Closing
-from anunnaki.bus import Bus, Image, body_of
+from anunnaki.bus import Bus
 from anunnaki.errors import MissingExtraError
+from anunnaki.messages import Image, body_of
 from anunnaki.ros1 import (
     BridgeSpec,
     ConversionError,

@@ -49,7 +49,7 @@ from anunnaki.sim._groundtruth import (
     boxes_from_mask,
 )
 from anunnaki.sim._layout import ROVER_CLASSES, UAV_CLASSES, Placement, Platform, layout_placements
-from anunnaki.sim._platform import GROUND_TRUTH_TOPIC, PHENOMENA_TOPIC, SimPlatform
+from anunnaki.sim._platform import SimPlatform
 from anunnaki.sim._report import (
     FrameScore,
     RunReport,
@@ -62,14 +62,7 @@ from anunnaki.sim._report import (
     save_run,
     tactic_events,
 )
-from anunnaki.sim._rover import (
-    CAMERA_FOV,
-    CAMERA_HEIGHT,
-    DETECTIONS_TOPIC,
-    RoverMode,
-    RoverSim,
-    StopRule,
-)
+from anunnaki.sim._rover import CAMERA_FOV, CAMERA_HEIGHT, RoverMode, RoverSim, StopRule
 from anunnaki.sim._scenario import (
     CameraConfig,
     FaultEvent,
@@ -89,13 +82,10 @@ from anunnaki.sim._world import Camera, Light
 __all__ = [
     "CAMERA_FOV",
     "CAMERA_HEIGHT",
-    "DETECTIONS_TOPIC",
-    "GROUND_TRUTH_TOPIC",
     "MIN_BOX_SIZE",
     "MIN_IN_FRAME",
     "MIN_LABEL_HEIGHT",
     "MIN_VISIBLE",
-    "PHENOMENA_TOPIC",
     "ROVER_CLASSES",
     "UAV_CAMERA_FOV",
     "UAV_CLASSES",

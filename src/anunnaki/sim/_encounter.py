@@ -23,10 +23,12 @@ from typing import Any
 
 import numpy as np
 
-from anunnaki.bus import Detections, open_bus
+from anunnaki import topics
+from anunnaki.bus import open_bus
+from anunnaki.messages import Detections
 from anunnaki.sim._groundtruth import Frame
 from anunnaki.sim._layout import ROVER_CLASSES
-from anunnaki.sim._rover import DETECTIONS_TOPIC, RoverSim, StopRule
+from anunnaki.sim._rover import RoverSim, StopRule
 
 __all__ = ["EncounterResult", "run_pedestrian_encounter", "to_detections"]
 
@@ -169,7 +171,7 @@ def run_pedestrian_encounter(
         if "pedestrian" in det.labels:
             detected += 1
         sim.observe_detections(det)
-        sim.bus.publish(DETECTIONS_TOPIC, det)
+        sim.bus.publish(topics.DETECTIONS, det)
 
     limit = max_time if max_time is not None else distance / max(speed, 0.05) + 6.0
     with open_bus("inproc") as bus:

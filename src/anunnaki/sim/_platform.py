@@ -30,20 +30,20 @@ import numpy as np
 
 from anunnaki import topics
 from anunnaki._closing import Closing
-from anunnaki.bus import Clock, Detections, Image
+from anunnaki.messages import Clock, Detections, Image
 from anunnaki.sim._groundtruth import Frame
 from anunnaki.sim._scenario import Scenario, Timeline, load_scenario
 from anunnaki.sim._scene import Scene
 from anunnaki.sim._world import Camera, Light
 
-__all__ = ["GROUND_TRUTH_TOPIC", "PHENOMENA_TOPIC", "FrameHook", "SimPlatform", "as_scenario"]
+__all__ = [
+    "FrameHook",
+    "SimPlatform",
+    "as_scenario",
+]
 
 log = logging.getLogger("anunnaki.sim")
 
-GROUND_TRUTH_TOPIC = topics.GROUND_TRUTH
-"""Ground truth of each frame: ``{seq, t, width, height, boxes, labels}`` (scoring only)."""
-PHENOMENA_TOPIC = topics.PHENOMENA
-"""What the scenario applied to each frame: ``{t, seq, phenomena: [{name, params}], faults}``."""
 
 FrameHook = Callable[["SimPlatform", Frame, np.ndarray], None]
 """Called after each camera frame with the clean frame and the perturbed image."""
@@ -131,9 +131,9 @@ class SimPlatform(Closing):
         self._light = Light()
         self._declared: list[Any] = []
         self._closed = False
-        from anunnaki.phenomena import get_phenomenon
+        from anunnaki.phenomena import PHENOMENA
 
-        self._get_phenomenon = get_phenomenon
+        self._get_phenomenon = PHENOMENA.create
 
     # -- time -----------------------------------------------------------------------------
     @property
@@ -251,7 +251,7 @@ class SimPlatform(Closing):
         self.last_frame, self.last_image, self.last_phenomena = frame, image, applied
         cam = self.scenario.camera
         self._publish(
-            PHENOMENA_TOPIC,
+            topics.PHENOMENA,
             {
                 "t": t,
                 "seq": seq,
@@ -276,7 +276,7 @@ class SimPlatform(Closing):
             )
             if self.publish_ground_truth:
                 self._publish(
-                    GROUND_TRUTH_TOPIC,
+                    topics.GROUND_TRUTH,
                     {
                         "seq": seq,
                         "t": t,

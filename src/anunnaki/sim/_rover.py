@@ -33,7 +33,7 @@ from typing import Any, Literal
 import numpy as np
 
 from anunnaki import topics
-from anunnaki.bus import Detections
+from anunnaki.messages import Detections
 from anunnaki.sim._layout import Placement, layout_placements
 from anunnaki.sim._models import _lite_urdf
 from anunnaki.sim._platform import SimPlatform, as_scenario, body_of
@@ -41,13 +41,17 @@ from anunnaki.sim._scenario import ObjectSpec, Scenario
 from anunnaki.sim._scene import ROBOT_GROUP, Scene
 from anunnaki.sim._world import Camera, pybullet
 
-__all__ = ["CAMERA_FOV", "CAMERA_HEIGHT", "DETECTIONS_TOPIC", "RoverMode", "RoverSim", "StopRule"]
+__all__ = [
+    "CAMERA_FOV",
+    "CAMERA_HEIGHT",
+    "RoverMode",
+    "RoverSim",
+    "StopRule",
+]
 
 log = logging.getLogger("anunnaki.sim")
 
 RoverMode = Literal["autonomous", "manual", "stopped"]
-DETECTIONS_TOPIC = topics.DETECTIONS
-"""Where the rover listens for the detector's output."""
 CAMERA_HEIGHT = 0.3
 """Height of the rover's camera above ground (m)."""
 CAMERA_FOV = 60.0
@@ -174,7 +178,7 @@ class RoverSim(SimPlatform):
         physics_hz: float = 240.0,
         clock_rate: float = 40.0,
         status_rate: float = 10.0,
-        detections_topic: str = DETECTIONS_TOPIC,
+        detections_topic: str = topics.DETECTIONS,
         publish_ground_truth: bool = True,
         frame_hook: Any = None,
     ) -> None:

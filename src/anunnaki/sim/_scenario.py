@@ -99,16 +99,16 @@ class PhenomenonEvent(_Strict):
 
     @model_validator(mode="after")
     def _check(self) -> PhenomenonEvent:
-        from anunnaki.phenomena import PhenomenonError, available_phenomena, get_phenomenon
+        from anunnaki.phenomena import PHENOMENA, PhenomenonError
 
         if (self.strength is None) == (self.params is None):
             raise ValueError("give exactly one of 'strength' (0..1) or 'params'")
         if self.until is not None and self.until <= self.at:
             raise ValueError(f"'until' ({self.until}) must be after 'at' ({self.at})")
         try:
-            phenomenon = get_phenomenon(self.phenomenon)
+            phenomenon = PHENOMENA.create(self.phenomenon)
         except Exception:
-            names = ", ".join(available_phenomena())
+            names = ", ".join(PHENOMENA.names())
             raise ValueError(f"unknown phenomenon {self.phenomenon!r}; known: {names}") from None
         if self.params is not None:
             try:
@@ -264,11 +264,11 @@ class Timeline:
     """Evaluates a scenario's phenomena and faults at a simulation time (pure, cached)."""
 
     def __init__(self, scenario: Scenario) -> None:
-        from anunnaki.phenomena import get_phenomenon
+        from anunnaki.phenomena import PHENOMENA
 
         self.scenario = scenario
         self._events = sorted(enumerate(scenario.phenomena), key=lambda item: (item[1].at, item[0]))
-        self._phenomena = {e.phenomenon: get_phenomenon(e.phenomenon) for e in scenario.phenomena}
+        self._phenomena = {e.phenomenon: PHENOMENA.create(e.phenomenon) for e in scenario.phenomena}
         self._faults = sorted(scenario.faults, key=lambda f: f.at)
 
     def _target(self, event: PhenomenonEvent) -> dict[str, float]:

@@ -8,8 +8,8 @@ from collections.abc import Callable, Mapping, Sequence
 from typing import Any
 
 from anunnaki import topics
-from anunnaki.bus import RunStop, body_of
 from anunnaki.errors import AnunnakiError
+from anunnaki.messages import RunStop, body_of
 from anunnaki.tactics import NotifyAction
 from anunnaki.utu._config import UtuConfig
 from anunnaki.utu._mape import ActionOutcome
@@ -141,7 +141,7 @@ def stop_platform(
     """Run-stop the platform from outside the loop (a watchdog, a launch whose node died).
 
     Asks the configured run-stop service once (a service that is not up fails at once) and
-    publishes a :class:`~anunnaki.bus.RunStop` on ``/utu/run_stop`` for every other part of
+    publishes a :class:`~anunnaki.messages.RunStop` on ``/utu/run_stop`` for every other part of
     Utu (the monitor records it) and any dashboard.
 
     Returns:

@@ -42,10 +42,11 @@ from typing import Any
 
 from anunnaki import topics
 from anunnaki._closing import Closing
-from anunnaki.bus import AnalysisState, InprocBus, RunStop, body_of
+from anunnaki.bus import InprocBus
 from anunnaki.clock import Clock, SimClock, WallClock
 from anunnaki.errors import AnunnakiError
 from anunnaki.goals import GoalModel
+from anunnaki.messages import AnalysisState, RunStop, body_of
 from anunnaki.tactics import TacticSet
 from anunnaki.utu._actions import ActionRunner, ThreadRunner
 from anunnaki.utu._actuators import BusActuator, RecordingActuator

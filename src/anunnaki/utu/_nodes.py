@@ -50,22 +50,19 @@ from collections.abc import Callable, Mapping, Sequence
 from typing import Any, ClassVar, cast
 
 from anunnaki import topics
-from anunnaki.bus import (
+from anunnaki.bus import Bus, Node, Sample, Subscriber
+from anunnaki.clock import Clock, SimClock, WallClock
+from anunnaki.errors import AnunnakiError
+from anunnaki.messages import (
     MAX_BATCH,
     AnalysisState,
-    Bus,
     CycleDone,
     ExecuteStatus,
     MonitorBatch,
-    Node,
     PlanStart,
     RunStop,
-    Sample,
-    Subscriber,
     body_of,
 )
-from anunnaki.clock import Clock, SimClock, WallClock
-from anunnaki.errors import AnunnakiError
 from anunnaki.topics import UTU_NODES as NODE_NAMES
 from anunnaki.topics import UtuNodeName as NodeName
 from anunnaki.topics import node_token, ready_service
@@ -328,7 +325,7 @@ class MonitorNode(UtuNode):
     """``/utu_monitor``: takes the managed system's messages and operator calls.
 
     It subscribes the topics the goal model's binding names (bounded queues, guideline S1)
-    and publishes what arrived as one :class:`~anunnaki.bus.MonitorBatch` on
+    and publishes what arrived as one :class:`~anunnaki.messages.MonitorBatch` on
     ``/utu/monitor/input`` the moment it can. When nothing arrives it still publishes an
     empty batch whenever its clock has moved on by ``1/rate``: a watermark that tells the
     analyze node how far time has passed *with no input*.
@@ -442,7 +439,7 @@ class AnalyzeNode(UtuNode):
 
     Each cycle takes the monitor's batches, records inputs, verdicts and step ends in the
     knowledge base (exactly the rows the composed manager writes) and publishes the
-    :class:`~anunnaki.bus.AnalysisState` on ``/utu/analyze/state``. Its time comes from the
+    :class:`~anunnaki.messages.AnalysisState` on ``/utu/analyze/state``. Its time comes from the
     monitor's batches (watermarks included) while ``/utu_monitor`` is alive; without a
     monitor it cycles ``rate`` times a second of its own clock, so inputs going stale are
     noticed even when the monitor is gone.
@@ -622,9 +619,9 @@ class AnalyzeNode(UtuNode):
 class PlanNode(UtuNode):
     """``/utu_plan``: the priority-sorted queue of tactics (:class:`~anunnaki.utu.Planner`).
 
-    For each :class:`~anunnaki.bus.ExecuteStatus` on ``/utu/execute/status`` it updates the
+    For each :class:`~anunnaki.messages.ExecuteStatus` on ``/utu/execute/status`` it updates the
     queue (dwell, cooldown, conflicts, approval) and publishes a
-    :class:`~anunnaki.bus.PlanStart` on ``/utu/plan/start``.
+    :class:`~anunnaki.messages.PlanStart` on ``/utu/plan/start``.
     """
 
     name = "plan"

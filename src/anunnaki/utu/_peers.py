@@ -31,8 +31,9 @@ import threading
 from collections.abc import Callable, Iterable
 
 from anunnaki import topics
-from anunnaki.bus import Bus, RunStop
+from anunnaki.bus import Bus
 from anunnaki.errors import AnunnakiError
+from anunnaki.messages import RunStop
 from anunnaki.topics import UTU_NODES
 from anunnaki.utu._actuators import stop_platform
 from anunnaki.utu._config import UtuConfig

@@ -39,7 +39,9 @@ from pathlib import Path
 from typing import Any, cast
 
 from anunnaki._safeyaml import read_text_limited
-from anunnaki.bus import (
+from anunnaki.errors import AnunnakiError, ModelFileError
+from anunnaki.goals import GoalModel, parse_binding, parse_goal_model, status_name
+from anunnaki.messages import (
     AnalysisState,
     CycleDone,
     ExecuteStatus,
@@ -48,8 +50,6 @@ from anunnaki.bus import (
     PlanStart,
     body_of,
 )
-from anunnaki.errors import AnunnakiError, ModelFileError
-from anunnaki.goals import GoalModel, parse_binding, parse_goal_model, status_name
 from anunnaki.tactics import TacticSet
 from anunnaki.tokens import OPERATOR_TOKEN_ENV, token_matches
 from anunnaki.utu._actions import ActionRunner

@@ -25,9 +25,10 @@ from typing import Any, ClassVar, Self
 
 from pydantic import Field, JsonValue, field_validator
 
-from anunnaki.bus._messages import Message, register_message
+from anunnaki.messages._base import MESSAGES, Message
 
 __all__ = [
+    "MAX_BATCH",
     "AnalysisState",
     "CycleDone",
     "ExecuteStatus",
@@ -95,7 +96,7 @@ class _Timed(_CycleMessage):
         return _finite(value)
 
 
-@register_message
+@MESSAGES.register
 class MonitorInput(_CycleMessage):
     """One message the Monitor took: its topic, its arrival time and its JSON body."""
 
@@ -109,7 +110,7 @@ class MonitorInput(_CycleMessage):
         return _finite(value)
 
 
-@register_message
+@MESSAGES.register
 class MonitorBatch(_Timed):
     """Monitor → analyze: what arrived since the last batch, up to time ``t``.
 
@@ -128,7 +129,7 @@ class MonitorBatch(_Timed):
     ops: list[_Op] = Field(default_factory=list, max_length=MAX_BATCH)
 
 
-@register_message
+@MESSAGES.register
 class AnalysisState(_CycleMessage):
     """The analysis (``/utu/analyze/state``): what displays show and what execute acts on.
 
@@ -173,7 +174,7 @@ class AnalysisState(_CycleMessage):
         return self.seq is not None and self.t is not None and self.eligible is not None
 
 
-@register_message
+@MESSAGES.register
 class ExecuteStatus(_Timed):
     """Execute → plan: the in-flight state of every tactic after checking postconditions.
 
@@ -197,7 +198,7 @@ class ExecuteStatus(_Timed):
     run_stopped: bool = False
 
 
-@register_message
+@MESSAGES.register
 class PlanStart(_Timed):
     """Plan → execute: the tactics to start now, each tactic's selection state, the queue.
 
@@ -217,7 +218,7 @@ class PlanStart(_Timed):
     decisions: int = Field(default=0, ge=0)
 
 
-@register_message
+@MESSAGES.register
 class CycleDone(_Timed):
     """Execute → analyze: the cycle is finished (``started`` tactics, decisions written)."""
 
