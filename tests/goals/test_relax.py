@@ -1,4 +1,4 @@
-"""Tests of the RELAX operators (anunnaki.goals._relax*) and of the examples in docs/relax.md."""
+"""Tests of the RELAX operators (through anunnaki.goals) and of the examples in docs/relax.md."""
 
 from __future__ import annotations
 
@@ -14,24 +14,14 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from pydantic import TypeAdapter, ValidationError
 
-from anunnaki.goals import History, RelaxOperator, RelaxSpec, build_operator
-from anunnaki.goals._relax import (
-    AfterSpec,
-    AsCloseAsPossibleToFrequencySpec,
-    AsCloseAsPossibleToQuantitySpec,
-    AsEarlyAsPossibleSpec,
-    AsFewAsPossibleSpec,
-    AsLateAsPossibleSpec,
-    AsManyAsPossibleSpec,
+from anunnaki.goals import (
     AtemporalOperator,
-    BeforeSpec,
-    EventuallySpec,
+    History,
     MayOrOperator,
-    MayOrSpec,
-    RelaxSpecBase,
-    ShallSpec,
+    RelaxOperator,
+    RelaxSpec,
     TemporalOperator,
-    UntilSpec,
+    build_operator,
 )
 
 SPEC = TypeAdapter(RelaxSpec)
@@ -45,13 +35,18 @@ def parse(data: dict[str, Any]) -> RelaxOperator:
     return build_operator(SPEC.validate_python(data))
 
 
+def relax(operator: str, **fields: Any) -> RelaxSpec:
+    """The spec of ``operator`` with ``fields``, as a goal model's ``relax:`` mapping gives it."""
+    return SPEC.validate_python({"operator": operator, **fields})
+
+
 def atemporal(data: dict[str, Any]) -> AtemporalOperator:
     op = parse(data)
     assert isinstance(op, AtemporalOperator)
     return op
 
 
-def temporal(spec: RelaxSpecBase) -> TemporalOperator:
+def temporal(spec: RelaxSpec) -> TemporalOperator:
     op = build_operator(spec)
     assert isinstance(op, TemporalOperator)
     return op
@@ -90,7 +85,7 @@ def test_g6_sample_rate(f: float, u: float) -> None:
 
 def test_g6_spec_fields() -> None:
     spec = SPEC.validate_python(G6)
-    assert isinstance(spec, AsCloseAsPossibleToFrequencySpec)
+    assert spec.operator == "as_close_as_possible_to_frequency"
     assert (spec.target, spec.tolerance, spec.side, spec.unit) == (5.0, 0.5, "at_least", "Hz")
     assert build_operator(spec).operator == "as_close_as_possible_to_frequency"
 
@@ -288,7 +283,7 @@ def test_membership_is_monotone(data: dict[str, Any], a: float, b: float) -> Non
 
 
 # ---------------------------------------------------------------------------------------
-# Spec validation
+# RelaxSpec validation
 # ---------------------------------------------------------------------------------------
 
 VALID_SPECS: list[tuple[dict[str, Any], str]] = [
@@ -307,28 +302,11 @@ VALID_SPECS: list[tuple[dict[str, Any], str]] = [
 ]
 
 
-SPEC_CLASSES: dict[str, type[RelaxSpecBase]] = {
-    "shall": ShallSpec,
-    "may_or": MayOrSpec,
-    FREQ: AsCloseAsPossibleToFrequencySpec,
-    QTY: AsCloseAsPossibleToQuantitySpec,
-    "as_few_as_possible": AsFewAsPossibleSpec,
-    "as_many_as_possible": AsManyAsPossibleSpec,
-    "eventually": EventuallySpec,
-    "until": UntilSpec,
-    "before": BeforeSpec,
-    "after": AfterSpec,
-    "as_early_as_possible": AsEarlyAsPossibleSpec,
-    "as_late_as_possible": AsLateAsPossibleSpec,
-}
-
-
 @pytest.mark.parametrize(("data", "kind"), VALID_SPECS)
 def test_every_spec_builds(data: dict[str, Any], kind: str) -> None:
     spec = SPEC.validate_python(data)
-    assert type(spec) is SPEC_CLASSES[data["operator"]]
-    assert SPEC_CLASSES[data["operator"]](**data) == spec
-    assert spec.operator == data["operator"]
+    assert spec.operator == data["operator"]  # the union picked the operator's own spec
+    assert type(spec)(**data) == spec  # which also validates when built directly
     op = build_operator(spec)
     assert op.kind == kind
     assert op.operator == data["operator"]
@@ -475,7 +453,7 @@ def test_history_queries() -> None:
 
 
 def test_eventually() -> None:
-    op = temporal(EventuallySpec(within=10, tolerance=5))
+    op = temporal(relax("eventually", within=10, tolerance=5))
     assert op.horizon == 15.0
     p = [(0, T), (2, F)]  # last held at 2
     for now, u in [(1, 1.0), (2, 1.0), (12, 1.0), (14.5, 0.5), (16, 0.2), (17, 0.0), (30, 0.0)]:
@@ -486,13 +464,13 @@ def test_eventually() -> None:
 
 
 def test_eventually_order_matters() -> None:
-    op = temporal(EventuallySpec(within=10, tolerance=5))
+    op = temporal(relax("eventually", within=10, tolerance=5))
     assert close(at(op, [(0, F), (6, T)], 18), 1.0)  # holds now
     assert close(at(op, [(0, T), (6, F)], 18), 0.6)  # last held 12 s ago
 
 
 def test_until() -> None:
-    op = temporal(UntilSpec(event="E", tolerance=4))
+    op = temporal(relax("until", event="E", tolerance=4))
     assert op.horizon == math.inf
     assert op.needs_event
     assert op.event == "E"
@@ -509,7 +487,7 @@ def test_until() -> None:
 
 
 def test_until_with_window() -> None:
-    op = temporal(UntilSpec(event="E", tolerance=4, window=3))
+    op = temporal(relax("until", event="E", tolerance=4, window=3))
     assert op.horizon == 3.0
     p = [(0, T), (2, F), (4, T), (7, F)]
     e = [(0, F), (5, T), (6, F)]
@@ -520,7 +498,7 @@ def test_until_with_window() -> None:
 
 
 def test_until_order_matters() -> None:
-    op = temporal(UntilSpec(event="E", tolerance=2))
+    op = temporal(relax("until", event="E", tolerance=2))
     # P lapses during [1, 2], then E at 3: the lapse came before E.
     assert close(at(op, [(0, T), (1, F), (2, T)], 4, [(0, F), (3, T)]), 0.5)
     # E at 1, then P lapses during [2, 3]: the obligation was already discharged.
@@ -528,7 +506,7 @@ def test_until_order_matters() -> None:
 
 
 def test_before() -> None:
-    op = temporal(BeforeSpec(event="E", tolerance=4))
+    op = temporal(relax("before", event="E", tolerance=4))
     e = [(0, F), (5, T)]
     assert close(at(op, [(0, F), (3, T), (4, F)], 6, e), 1.0)  # P held at 3, before E at 5
     late = [(0, F), (7, T)]
@@ -542,20 +520,20 @@ def test_before() -> None:
 
 
 def test_before_with_window_forgets_old_events() -> None:
-    op = temporal(BeforeSpec(event="E", tolerance=4, window=10))
+    op = temporal(relax("before", event="E", tolerance=4, window=10))
     e = [(0, F), (5, T), (6, F)]
     assert close(at(op, [(0, F)], 8, e), 0.25)
     assert close(at(op, [(0, F)], 16, e), 1.0)  # E at 5 left the window [6, 16]
 
 
 def test_before_order_matters() -> None:
-    op = temporal(BeforeSpec(event="E", tolerance=4))
+    op = temporal(relax("before", event="E", tolerance=4))
     assert close(at(op, [(0, F), (3, T), (4, F)], 8, [(0, F), (5, T)]), 1.0)
     assert close(at(op, [(0, F), (5, T), (6, F)], 8, [(0, F), (3, T)]), 0.5)
 
 
 def test_after() -> None:
-    op = temporal(AfterSpec(event="E", within=1, tolerance=2))
+    op = temporal(relax("after", event="E", within=1, tolerance=2))
     e = [(0, F), (3, T)]
     p = [(0, F), (5, T)]  # responds 2 s after E
     for now, u in [(2, 1.0), (3.5, 1.0), (4, 1.0), (4.5, 0.75), (5, 0.5), (9, 0.5)]:
@@ -565,7 +543,7 @@ def test_after() -> None:
 
 
 def test_after_order_matters() -> None:
-    op = temporal(AfterSpec(event="E", within=1, tolerance=2))
+    op = temporal(relax("after", event="E", within=1, tolerance=2))
     # E at 3, P at 5: P came 2 s after E.
     assert close(at(op, [(0, F), (5, T), (6, F)], 8, [(0, F), (3, T)]), 0.5)
     # P at 3, E at 5: P has not held since E, 3 s ago.
@@ -574,7 +552,7 @@ def test_after_order_matters() -> None:
 
 
 def test_after_with_window_forgets_old_events() -> None:
-    op = temporal(AfterSpec(event="E", within=1, tolerance=2, window=5))
+    op = temporal(relax("after", event="E", within=1, tolerance=2, window=5))
     assert op.horizon == 5.0
     e = [(0, F), (3, T), (3.5, F)]
     assert close(at(op, [(0, F)], 7, e), 0.0)
@@ -582,7 +560,7 @@ def test_after_with_window_forgets_old_events() -> None:
 
 
 def test_as_early_as_possible() -> None:
-    op = temporal(AsEarlyAsPossibleSpec(tolerance=4))
+    op = temporal(relax("as_early_as_possible", tolerance=4))
     assert op.horizon == 4.0
     p = [(0, T), (2, F), (7, T)]
     for now, u in [(1, 1.0), (2, 1.0), (3, 0.75), (4, 0.5), (6, 0.0), (7, 1.0)]:
@@ -591,13 +569,13 @@ def test_as_early_as_possible() -> None:
 
 
 def test_as_early_as_possible_order_matters() -> None:
-    op = temporal(AsEarlyAsPossibleSpec(tolerance=4))
+    op = temporal(relax("as_early_as_possible", tolerance=4))
     assert close(at(op, [(0, F), (2, T)], 3), 1.0)
     assert close(at(op, [(0, T), (2, F)], 3), 0.75)
 
 
 def test_as_late_as_possible() -> None:
-    op = temporal(AsLateAsPossibleSpec(target=10))
+    op = temporal(relax("as_late_as_possible", target=10))
     assert op.horizon == math.inf
     assert close(at(op, [(0, T), (2, F), (7, T)], 8), 0.5)  # 5 s between two holdings
     assert close(at(op, [(0, T), (2, F), (20, T)], 21), 1.0)
@@ -607,7 +585,7 @@ def test_as_late_as_possible() -> None:
 
 
 def test_as_late_as_possible_order_matters() -> None:
-    op = temporal(AsLateAsPossibleSpec(target=10))
+    op = temporal(relax("as_late_as_possible", target=10))
     # The same stretches (F 1 s, T 1 s, F 8 s, then T) in two orders.
     assert close(at(op, [(0, F), (1, T), (2, F), (10, T)], 11), 0.8)
     assert close(at(op, [(0, F), (8, T), (9, F), (10, T)], 11), 0.1)
@@ -618,17 +596,17 @@ def test_as_late_as_possible_order_matters() -> None:
 # ---------------------------------------------------------------------------------------
 
 TEMPORAL_SPECS = [
-    EventuallySpec(within=10, tolerance=5),
-    UntilSpec(event="E", tolerance=2),
-    BeforeSpec(event="E", tolerance=4),
-    AfterSpec(event="E", within=1, tolerance=2),
-    AsEarlyAsPossibleSpec(tolerance=4),
-    AsLateAsPossibleSpec(target=10),
+    relax("eventually", within=10, tolerance=5),
+    relax("until", event="E", tolerance=2),
+    relax("before", event="E", tolerance=4),
+    relax("after", event="E", within=1, tolerance=2),
+    relax("as_early_as_possible", tolerance=4),
+    relax("as_late_as_possible", target=10),
 ]
 
 
 @pytest.mark.parametrize("spec", TEMPORAL_SPECS, ids=lambda s: s.operator)
-def test_nothing_known_is_unknown(spec: RelaxSpecBase) -> None:
+def test_nothing_known_is_unknown(spec: RelaxSpec) -> None:
     op = temporal(spec)
     e = [(0, F)]
     assert at(op, [], 5, e) is None
@@ -644,26 +622,26 @@ def test_nothing_known_is_unknown(spec: RelaxSpecBase) -> None:
 
 
 def test_unknown_current_state_is_unknown_only_when_it_matters() -> None:
-    op = temporal(EventuallySpec(within=10, tolerance=5))
+    op = temporal(relax("eventually", within=10, tolerance=5))
     p = [(0, T), (2, U)]
     assert close(at(op, p, 12), 1.0)  # held or not, P held within the last 10 s
     assert close(at(op, p, 14.5), None)  # 1.0 if P holds, 0.5 if not
-    op = temporal(AfterSpec(event="E", within=1, tolerance=2))
+    op = temporal(relax("after", event="E", within=1, tolerance=2))
     assert close(at(op, [(0, T)], 5, [(0, F), (3, U)]), 1.0)  # P holds either way
     assert close(at(op, [(0, F)], 5, [(0, F), (3, U)]), None)
 
 
 def test_unknown_past_stretch_is_neither_holding_nor_not() -> None:
-    op = temporal(UntilSpec(event="E", tolerance=2))
+    op = temporal(relax("until", event="E", tolerance=2))
     e = [(0, F)]
     assert close(at(op, [(0, T), (1, U), (3, T)], 4, e), 1.0)  # unknown: no violation
     assert close(at(op, [(0, T), (1, F), (3, T)], 4, e), 0.0)
-    op = temporal(EventuallySpec(within=1, tolerance=4))
+    op = temporal(relax("eventually", within=1, tolerance=4))
     assert close(at(op, [(0, T), (1, U), (3, F)], 5, e), 0.25)  # last known holding at 1
 
 
 def test_future_samples_are_ignored() -> None:
-    op = temporal(EventuallySpec(within=10, tolerance=5))
+    op = temporal(relax("eventually", within=10, tolerance=5))
     assert close(at(op, [(0, T), (2, F), (20, T)], 14.5), 0.5)
 
 
@@ -689,26 +667,28 @@ positive = st.integers(1, 160).map(lambda n: n / 8)
 
 
 @st.composite
-def temporal_specs(draw: st.DrawFn, windows: bool = True) -> RelaxSpecBase:
+def temporal_specs(draw: st.DrawFn, windows: bool = True) -> RelaxSpec:
     kind = draw(st.sampled_from(["eventually", "until", "before", "after", "early", "late"]))
     tol = draw(positive)
     within = draw(eighths)
     window = draw(st.none() | positive) if windows else None
     if kind == "eventually":
-        return EventuallySpec(within=within, tolerance=tol)
+        return relax("eventually", within=within, tolerance=tol)
     if kind == "until":
-        return UntilSpec(event="E", tolerance=tol, window=window)
+        return relax("until", event="E", tolerance=tol, window=window)
     if kind == "before":
-        return BeforeSpec(event="E", tolerance=tol, window=None if window is None else tol + window)
+        return relax(
+            "before", event="E", tolerance=tol, window=None if window is None else tol + window
+        )
     if kind == "after":
         w = None if window is None else within + tol + window
-        return AfterSpec(event="E", within=within, tolerance=tol, window=w)
+        return relax("after", event="E", within=within, tolerance=tol, window=w)
     if kind == "early":
-        return AsEarlyAsPossibleSpec(tolerance=tol)
-    return AsLateAsPossibleSpec(target=tol)
+        return relax("as_early_as_possible", tolerance=tol)
+    return relax("as_late_as_possible", target=tol)
 
 
-def temporal_scale(spec: RelaxSpecBase) -> float:
+def temporal_scale(spec: RelaxSpec) -> float:
     return float(getattr(spec, "tolerance", getattr(spec, "target", 1.0)))
 
 
@@ -719,7 +699,7 @@ def last_time(p: Samples, e: Samples) -> float:
 @settings(max_examples=150, deadline=None)
 @given(temporal_specs(), histories(), histories(), st.integers(-40, 200).map(lambda n: n / 8))
 def test_temporal_results_are_unit_or_none_and_pruning_keeps_them(
-    spec: RelaxSpecBase, p: Samples, e: Samples, dt: float
+    spec: RelaxSpec, p: Samples, e: Samples, dt: float
 ) -> None:
     op = temporal(spec)
     now = last_time(p, e) + dt
@@ -734,7 +714,7 @@ def test_temporal_results_are_unit_or_none_and_pruning_keeps_them(
 @settings(max_examples=100, deadline=None)
 @given(temporal_specs(), histories(), histories(), eighths, st.integers(-10, 10))
 def test_temporal_results_do_not_depend_on_the_clock_origin(
-    spec: RelaxSpecBase, p: Samples, e: Samples, dt: float, shift: int
+    spec: RelaxSpec, p: Samples, e: Samples, dt: float, shift: int
 ) -> None:
     op = temporal(spec)
     now = last_time(p, e) + dt
@@ -746,7 +726,7 @@ def test_temporal_results_do_not_depend_on_the_clock_origin(
 @settings(max_examples=150, deadline=None)
 @given(temporal_specs(windows=False), histories(), histories(), eighths, eighths)
 def test_temporal_results_are_continuous_and_monotone_in_time(
-    spec: RelaxSpecBase, p: Samples, e: Samples, dt: float, step: float
+    spec: RelaxSpec, p: Samples, e: Samples, dt: float, step: float
 ) -> None:
     # Between samples, time passing changes a utility by at most step / tolerance, and
     # (no window) never raises it: a violation only grows until the next sample.
@@ -761,7 +741,7 @@ def test_temporal_results_are_continuous_and_monotone_in_time(
 @settings(max_examples=100, deadline=None)
 @given(temporal_specs(), histories(), histories(), eighths)
 def test_known_histories_give_known_utilities(
-    spec: RelaxSpecBase, p: Samples, e: Samples, dt: float
+    spec: RelaxSpec, p: Samples, e: Samples, dt: float
 ) -> None:
     # Unknown only comes from unknown samples, except an unobserved onset (as_late).
     p = [(t, bool(v)) for t, v in p]
@@ -777,7 +757,7 @@ def test_known_histories_give_known_utilities(
 @settings(max_examples=100, deadline=None)
 @given(temporal_specs(), histories(), histories(), eighths, histories())
 def test_later_samples_do_not_change_the_past(
-    spec: RelaxSpecBase, p: Samples, e: Samples, dt: float, extra: Samples
+    spec: RelaxSpec, p: Samples, e: Samples, dt: float, extra: Samples
 ) -> None:
     op = temporal(spec)
     now = last_time(p, e) + dt

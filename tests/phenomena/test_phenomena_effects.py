@@ -119,8 +119,6 @@ def test_fog_density_rounds_and_layers_accumulate(scene64: np.ndarray) -> None:
 
 
 def test_fog_noise_is_drawn_once_per_seed_and_layer_when_reused(scene64: np.ndarray) -> None:
-    from anunnaki.phenomena._fog import _smooth_noise
-
     fog = Fog()
     with reuse_fog_noise() as store:
         thin = fog.apply(scene64, {"density": 4, "intensity": 0.2}, seed=11)
@@ -130,16 +128,13 @@ def test_fog_noise_is_drawn_once_per_seed_and_layer_when_reused(scene64: np.ndar
         assert len(store) == 6 and store[11, 0, 64, 64] is kept  # drawn once, not per context
         with pytest.raises(ValueError, match="read-only"):
             kept[0, 0] = 0.0
-    # nothing is kept outside the block, and the pixels are the same without it
-    np.testing.assert_array_equal(thin, fog.apply(scene64, {"density": 4, "intensity": 0.2}, 11))
-    for (layers, intensity), reused in (((4, 0.2), thin), ((6, 0.7), thick)):
-        clear = np.ones((64, 64), np.float32)
-        for i, child in enumerate(np.random.SeedSequence(11).spawn(10)[:layers]):
-            noise = _smooth_noise(np.random.default_rng(child), 64, 64, cells=3 + i % 4)
-            clear *= np.float32(1.0 - 0.6 * intensity) - np.float32(0.4 * intensity) * noise
-        colour = np.array([214.0, 218.0, 224.0], np.float32)
-        fresh = np.rint((scene64.astype(np.float32) - colour) * clear[..., None] + colour)
-        np.testing.assert_array_equal(reused, fresh.astype(np.uint8))
+    # nothing is kept outside the block, and the pixels are the same without it (the thick
+    # fog's first four layers came from the store, drawn for the thin one)
+    for params, reused in (
+        ({"density": 4, "intensity": 0.2}, thin),
+        ({"density": 6, "intensity": 0.7}, thick),
+    ):
+        np.testing.assert_array_equal(reused, fog.apply(scene64, params, 11))
 
 
 def test_fog_ten_opaque_layers_hide_the_scene(scene64: np.ndarray) -> None:

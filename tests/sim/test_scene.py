@@ -146,16 +146,14 @@ def test_min_distance_brings_the_rover_camera_closer() -> None:
     """Aimed cameras come as close as min_distance to their object (1.5 m by default)."""
     import math
 
-    from anunnaki.sim._camera import random_camera
-    from anunnaki.sim._layout import Placement
+    with Scene("rover", 0, placements=[Placement("pedestrian", 10.0, 0.0)]) as scene:
 
-    target = [Placement("pedestrian", 10.0, 0.0)]
+        def close(**kwargs: float) -> int:  # cameras within 1.2 m of the object, of 300
+            rng = np.random.default_rng(0)
+            cams = [scene.random_camera(rng, **kwargs) for _ in range(300)]
+            return sum(math.hypot(c.eye[0] - 10.0, c.eye[1]) < 1.2 for c in cams)
 
-    def close(**kwargs: float) -> int:  # cameras within 1.2 m of the object, of 300
-        rng = np.random.default_rng(0)
-        cams = [random_camera("rover", target, rng, **kwargs) for _ in range(300)]
-        return sum(math.hypot(c.eye[0] - 10.0, c.eye[1]) < 1.2 for c in cams)
-
-    # by default only the unaimed cameras (three in ten, anywhere near the route) are so close
-    assert close() < 15
-    assert close(min_distance=0.4) > 40
+        # by default only the unaimed cameras (three in ten, anywhere near the route) are
+        # so close
+        assert close() < 15
+        assert close(min_distance=0.4) > 40

@@ -29,6 +29,12 @@ __all__ = ["add_parser", "run", "run_node"]
 
 def add_parser(sub: Any) -> None:
     """Register the ``run`` and ``node`` sub-commands."""
+    _add_run_parser(sub)
+    _add_node_parser(sub)
+
+
+def _add_run_parser(sub: Any) -> None:
+    """``anunnaki run CONFIG``: a launch file's nodes and managed system."""
     p: argparse.ArgumentParser = sub.add_parser(
         "run",
         help="run Utu's nodes (and a scripted managed system) from a launch file",
@@ -76,6 +82,9 @@ def add_parser(sub: Any) -> None:
     _dashboard.add_run_options(p)
     p.set_defaults(run=run)
 
+
+def _add_node_parser(sub: Any) -> None:
+    """``anunnaki node NAME --config CONFIG``: one Utu node on its own."""
     n: argparse.ArgumentParser = sub.add_parser(
         "node",
         help="run one Utu node (monitor, analyze, plan, execute, knowledge) on its own",

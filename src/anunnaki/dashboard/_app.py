@@ -127,10 +127,23 @@ def create_app(
         raise ValueError(f"max_rate must be > 0, got {max_rate!r}")
     if token is not None and (weak := token_weakness(token)) is not None:
         raise ValueError(f"the operator token is too weak: {weak}")
-    throttle = Throttle()
-    stop = stopping or threading.Event()
     app = FastAPI(title=f"Anunnaki dashboard: {state.name}", docs_url=None, redoc_url=None)
     app.state.dashboard = state
+    _add_page(app)
+    _add_views(
+        app,
+        state,
+        operator_enabled=token is not None,
+        stop=stopping or threading.Event(),
+        interval=1.0 / max_rate,
+        heartbeat=heartbeat,
+    )
+    _add_operator(app, operator, token)
+    return app
+
+
+def _add_page(app: FastAPI) -> None:
+    """``GET /`` (the page, with its security headers) and ``/static``."""
     folder = static_dir()
     app.mount("/static", StaticFiles(directory=str(folder)), name="static")
 
@@ -147,13 +160,25 @@ def create_app(
             },
         )
 
+
+def _add_views(
+    app: FastAPI,
+    state: DashboardState,
+    *,
+    operator_enabled: bool,
+    stop: threading.Event,
+    interval: float,
+    heartbeat: float,
+) -> None:
+    """The read-only routes: health, snapshot, explain, frames and the event stream."""
+
     @app.get("/api/health")
     def health() -> Response:
         return _json(
             {
                 "ok": True,
                 "version": state.version,
-                "operator": token is not None,
+                "operator": operator_enabled,
                 "name": state.name,
             }
         )
@@ -176,10 +201,15 @@ def create_app(
     @app.get("/api/events")
     async def events() -> StreamingResponse:
         return StreamingResponse(
-            _stream(state, stop, 1.0 / max_rate, heartbeat),
+            _stream(state, stop, interval, heartbeat),
             media_type="text/event-stream",
             headers={"Cache-Control": "no-store", "X-Accel-Buffering": "no"},
         )
+
+
+def _add_operator(app: FastAPI, operator: Operator | None, token: str | None) -> None:
+    """``POST /api/operator/{action}``: authorized by ``token``, failed attempts throttled."""
+    throttle = Throttle()
 
     @app.post("/api/operator/{action}")
     def operate(
@@ -201,8 +231,6 @@ def create_app(
         except OperatorError as exc:
             raise HTTPException(502, str(exc)) from None
         return _json({"ok": True, "action": action, "caller": caller, "reply": reply})
-
-    return app
 
 
 def _frame_response(state: DashboardState, seq: str) -> Response:

@@ -16,6 +16,10 @@ Typical use::
     ev.tick(now=13.0)
     print(ev.root.status_name, ev.explain("G1").render())
 
+RELAX operators from Python: :func:`build_operator` turns a :data:`RelaxSpec` into an
+:class:`AtemporalOperator` (``utility(value)``), a :class:`MayOrOperator` or a
+:class:`TemporalOperator` (``utility_at(p, e, now)`` over :class:`History` samples).
+
 Formats: docs/goal-models.md; RELAX operators: docs/relax.md.
 """
 
@@ -32,7 +36,15 @@ from anunnaki.goals._model import (
     parse_goal_model,
 )
 from anunnaki.goals._model import _did_you_mean as did_you_mean
-from anunnaki.goals._relax import History, RelaxOperator, RelaxSpec, build_operator
+from anunnaki.goals._relax import (
+    AtemporalOperator,
+    History,
+    MayOrOperator,
+    RelaxOperator,
+    RelaxSpec,
+    TemporalOperator,
+    build_operator,
+)
 from anunnaki.goals._schema import (
     AgentSpec,
     BindingSpec,
@@ -49,6 +61,7 @@ __all__ = [
     "ABSENT",
     "Agent",
     "AgentSpec",
+    "AtemporalOperator",
     "AttrRef",
     "Binding",
     "BindingSpec",
@@ -61,6 +74,7 @@ __all__ = [
     "GoalModelSpec",
     "GoalSpec",
     "History",
+    "MayOrOperator",
     "NodeState",
     "ObstacleSpec",
     "PayloadField",
@@ -68,6 +82,7 @@ __all__ = [
     "RelaxOperator",
     "RelaxSpec",
     "Status",
+    "TemporalOperator",
     "TopicBinding",
     "TopicFreshness",
     "build_operator",

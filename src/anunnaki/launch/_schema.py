@@ -191,14 +191,41 @@ def load_launch(path: str | Path, *, read_records: bool = True) -> Launch:
 def parse_launch(
     text: str, *, source: str = "<launch>", base: Path | None = None, read_records: bool = True
 ) -> Launch:
-    """Parse a launch file from text; paths resolve against ``base`` (default: cwd)."""
+    """Parse a launch file from text; paths resolve against ``base`` (default: cwd).
+
+    Args:
+        text: The launch file's text (``anunnaki: launch/1``).
+        source: What errors name as the file (e.g. the file the text came from).
+        base: The folder relative paths in the text resolve against (default: cwd).
+        read_records: As for :func:`load_launch`.
+
+    Raises:
+        ModelFileError: The text or a file it names is invalid; names ``source`` (or that
+            file) and the line.
+
+    """
     data, lines = load_yaml(source, text=text)
-    launch = _resolve(data, lines, (base or Path.cwd()) / "<launch>", read_records=read_records)
+    tag = data.get("anunnaki") if isinstance(data, dict) else None
+    if tag == "utu/1":  # a Utu configuration names no file of its own to run
+        raise ModelFileError(
+            "a Utu configuration (utu/1) given as text",
+            path=source,
+            line=lines.line(("anunnaki",)),
+            element="anunnaki",
+            hint="load it from its file with load_launch, or write a launch file "
+            "('anunnaki: launch/1') with the configuration inline under 'utu:'",
+        )
+    launch = _resolve(
+        data, lines, (base or Path.cwd()) / "<launch>", read_records=read_records, where=source
+    )
     return dataclasses.replace(launch, path=None)
 
 
-def _resolve(data: Any, lines: LineMap, path: Path, *, read_records: bool) -> Launch:
-    where = str(path)
+def _resolve(
+    data: Any, lines: LineMap, path: Path, *, read_records: bool, where: str | None = None
+) -> Launch:
+    """The launch read from ``path`` (or text named ``where``), checked and resolved."""
+    where = str(path) if where is None else where
     tag = data.get("anunnaki") if isinstance(data, dict) else None
     if tag == "utu/1":
         data = {"anunnaki": "launch/1", "utu": str(path.resolve())}

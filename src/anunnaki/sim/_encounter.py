@@ -16,6 +16,7 @@ define ``observe_truth(frame)``: it is called with the clean frame's ground trut
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
@@ -138,41 +139,19 @@ def run_pedestrian_encounter(
         An :class:`EncounterResult`.
 
     """
-    phenomena: list[dict[str, Any]] = []
-    if phenomenon is not None:
-        event: dict[str, Any] = {"at": 0.0, "phenomenon": phenomenon}
-        if params is not None:
-            event["params"] = dict(params)
-        else:
-            event["strength"] = strength
-        phenomena.append(event)
-    scenario = {
-        "platform": "rover",
-        "layout": layout,
-        "seed": seed,
-        "camera": {"rate": camera_rate, "width": width, "height": height, "encoding": "jpeg"},
-        "route": [(0.0, 0.0), (distance + 20.0, 0.0)],
-        "cruise_speed": speed,
-        "objects": [{"kind": "pedestrian", "x": distance + 0.55, "y": lateral, "yaw": math.pi / 2}],
-        "phenomena": phenomena,
-        "faults": []
-        if ultrasonic
-        else [{"at": 0.0, "fault": "dropout", "sensor": "ultrasonic", "duration": 1e9}],
-    }
-    detected = 0
-
-    def hook(sim: Any, frame: Frame, image: np.ndarray) -> None:
-        nonlocal detected
-        observe = getattr(detector, "observe_truth", None)
-        if callable(observe):
-            observe(frame)
-        results = detector.detect([image])
-        det = to_detections(results[0], frame_seq=frame.seq, width=width, height=height)
-        if "pedestrian" in det.labels:
-            detected += 1
-        sim.observe_detections(det)
-        sim.bus.publish(topics.DETECTIONS, det)
-
+    scenario = _encounter_scenario(
+        phenomenon,
+        strength=strength,
+        params=params,
+        distance=distance,
+        lateral=lateral,
+        speed=speed,
+        layout=layout,
+        seed=seed,
+        camera={"rate": camera_rate, "width": width, "height": height, "encoding": "jpeg"},
+        ultrasonic=ultrasonic,
+    )
+    hook = _DetectorHook(detector, width, height)
     limit = max_time if max_time is not None else distance / max(speed, 0.05) + 6.0
     with open_bus("inproc") as bus:
         sim = RoverSim(
@@ -186,30 +165,92 @@ def run_pedestrian_encounter(
             publish_ground_truth=False,
         )
         try:
-            (pedestrian,) = list(sim.scene.objects)
-            min_distance = math.inf
-            rest = 0.0
-            reason: str | None = None
-            dt = 0.05
-            while sim.t < limit:
-                sim.step(dt)
-                min_distance = min(min_distance, sim.distance_to(pedestrian))
-                if sim.obstacle is not None:
-                    reason = sim.obstacle
-                if sim.collisions or sim.position[0] > distance + 3.0:
-                    break
-                rest = rest + dt if abs(sim.speed) < 0.02 and sim.warning else 0.0
-                if rest >= 1.0:
-                    break
-            stopped = sim.collisions == 0 and rest >= 1.0
-            return EncounterResult(
-                stopped=stopped,
-                collisions=sim.collisions,
-                min_distance=float(max(min_distance, 0.0)),
-                reason=reason,
-                frames=sim.frames,
-                detected_frames=detected,
-                t=sim.t,
-            )
+            result = _drive(sim, distance=distance, limit=limit)
         finally:
             sim.close()
+    return dataclasses.replace(result, detected_frames=hook.detected)
+
+
+def _encounter_scenario(
+    phenomenon: str | None,
+    *,
+    strength: float,
+    params: Mapping[str, float] | None,
+    distance: float,
+    lateral: float,
+    speed: float,
+    layout: int,
+    seed: int,
+    camera: dict[str, Any],
+    ultrasonic: bool,
+) -> dict[str, Any]:
+    """The scenario of :func:`run_pedestrian_encounter` (its arguments, as a scenario)."""
+    phenomena: list[dict[str, Any]] = []
+    if phenomenon is not None:
+        event: dict[str, Any] = {"at": 0.0, "phenomenon": phenomenon}
+        if params is not None:
+            event["params"] = dict(params)
+        else:
+            event["strength"] = strength
+        phenomena.append(event)
+    return {
+        "platform": "rover",
+        "layout": layout,
+        "seed": seed,
+        "camera": camera,
+        "route": [(0.0, 0.0), (distance + 20.0, 0.0)],
+        "cruise_speed": speed,
+        "objects": [{"kind": "pedestrian", "x": distance + 0.55, "y": lateral, "yaw": math.pi / 2}],
+        "phenomena": phenomena,
+        "faults": []
+        if ultrasonic
+        else [{"at": 0.0, "fault": "dropout", "sensor": "ultrasonic", "duration": 1e9}],
+    }
+
+
+class _DetectorHook:
+    """The rover's frame hook: the detector's view of each frame, handed to the stop rule."""
+
+    def __init__(self, detector: Any, width: int, height: int) -> None:
+        self.detector = detector
+        self.width = width
+        self.height = height
+        self.detected = 0  # frames in which the detector reported a pedestrian
+
+    def __call__(self, sim: Any, frame: Frame, image: np.ndarray) -> None:
+        observe = getattr(self.detector, "observe_truth", None)
+        if callable(observe):
+            observe(frame)
+        results = self.detector.detect([image])
+        det = to_detections(results[0], frame_seq=frame.seq, width=self.width, height=self.height)
+        if "pedestrian" in det.labels:
+            self.detected += 1
+        sim.observe_detections(det)
+        sim.bus.publish(topics.DETECTIONS, det)
+
+
+def _drive(sim: RoverSim, *, distance: float, limit: float) -> EncounterResult:
+    """Step ``sim`` until it rests 1 s warning, hits or passes the pedestrian, or ``limit``."""
+    (pedestrian,) = list(sim.scene.objects)
+    min_distance = math.inf
+    rest = 0.0
+    reason: str | None = None
+    dt = 0.05
+    while sim.t < limit:
+        sim.step(dt)
+        min_distance = min(min_distance, sim.distance_to(pedestrian))
+        if sim.obstacle is not None:
+            reason = sim.obstacle
+        if sim.collisions or sim.position[0] > distance + 3.0:
+            break
+        rest = rest + dt if abs(sim.speed) < 0.02 and sim.warning else 0.0
+        if rest >= 1.0:
+            break
+    return EncounterResult(
+        stopped=sim.collisions == 0 and rest >= 1.0,
+        collisions=sim.collisions,
+        min_distance=float(max(min_distance, 0.0)),
+        reason=reason,
+        frames=sim.frames,
+        t=sim.t,
+    )

@@ -144,29 +144,12 @@ def annotate_mask(
         if body not in present:
             continue
         label, aabb = instances[body]
-        pix = objects == body
-        cols = np.flatnonzero(pix.any(axis=0))
-        rows = np.flatnonzero(pix.any(axis=1))
-        x1, x2 = float(cols[0]), float(cols[-1] + 1)
-        y1, y2 = float(rows[0]), float(rows[-1] + 1)
-        box = [x1, y1, x2, y2]
+        box = _visible_box(objects == body)
+        x1, y1, x2, y2 = box
         out = ignored
         if x2 - x1 >= min_size and y2 - y1 >= max(min_size, min_height):
-            lo, hi = aabb()
-            corners = np.array(
-                [[a, b, c] for a in (lo[0], hi[0]) for b in (lo[1], hi[1]) for c in (lo[2], hi[2])]
-            )
-            uv = camera.project(corners, w, h)
-            px1, py1 = uv.min(axis=0)
-            px2, py2 = uv.max(axis=0)
-            full = max((px2 - px1) * (py2 - py1), 1e-9)
-            cx1, cy1 = max(px1, 0.0), max(py1, 0.0)
-            cx2, cy2 = min(px2, float(w)), min(py2, float(h))
-            inside = max(cx2 - cx1, 0.0) * max(cy2 - cy1, 0.0)
-            if (
-                inside / full >= min_in_frame
-                and (x2 - x1) * (y2 - y1) / max(inside, 1e-9) >= min_visible
-            ):
+            in_frame, visible = _in_frame_and_visible(box, aabb(), camera, w, h)
+            if in_frame >= min_in_frame and visible >= min_visible:
                 out = kept
         out[0].append(box)
         out[1].append(label)
@@ -176,6 +159,38 @@ def annotate_mask(
         np.asarray(ignored[0], dtype=np.float32).reshape(-1, 4),
         np.asarray(ignored[1], dtype=np.int64),
     )
+
+
+def _visible_box(pix: np.ndarray) -> list[float]:
+    """``[x1, y1, x2, y2]`` tight around the true pixels of ``pix`` (``x2``/``y2`` exclusive)."""
+    cols = np.flatnonzero(pix.any(axis=0))
+    rows = np.flatnonzero(pix.any(axis=1))
+    return [float(cols[0]), float(rows[0]), float(cols[-1] + 1), float(rows[-1] + 1)]
+
+
+def _in_frame_and_visible(
+    box: list[float], aabb: tuple[np.ndarray, np.ndarray], camera: Camera, w: int, h: int
+) -> tuple[float, float]:
+    """How much of an object the image shows, from its world AABB projected by ``camera``.
+
+    Returns:
+        The fraction of the projected box's area inside the ``w`` × ``h`` image, and the
+        fraction of that in-frame part the visible ``box`` covers (occlusion).
+
+    """
+    lo, hi = aabb
+    corners = np.array(
+        [[a, b, c] for a in (lo[0], hi[0]) for b in (lo[1], hi[1]) for c in (lo[2], hi[2])]
+    )
+    uv = camera.project(corners, w, h)
+    px1, py1 = uv.min(axis=0)
+    px2, py2 = uv.max(axis=0)
+    full = max((px2 - px1) * (py2 - py1), 1e-9)
+    cx1, cy1 = max(px1, 0.0), max(py1, 0.0)
+    cx2, cy2 = min(px2, float(w)), min(py2, float(h))
+    inside = max(cx2 - cx1, 0.0) * max(cy2 - cy1, 0.0)
+    x1, y1, x2, y2 = box
+    return float(inside / full), float((x2 - x1) * (y2 - y1) / max(inside, 1e-9))
 
 
 def boxes_from_mask(

@@ -28,9 +28,12 @@ import statistics
 from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from anunnaki.errors import AnunnakiError, MissingExtraError
+
+if TYPE_CHECKING:
+    from matplotlib.axes import Axes
 
 __all__ = [
     "FrameScore",
@@ -312,7 +315,6 @@ def plot_report(
 
         matplotlib.use("Agg")
         import matplotlib.pyplot as plt
-        from matplotlib.lines import Line2D
     except ImportError:
         raise MissingExtraError("matplotlib", "plot") from None
 
@@ -324,11 +326,28 @@ def plot_report(
         gridspec_kw={"height_ratios": [3.2, 1.2, max(1.0, 0.45 * len(report.tactics) + 0.4)]},
     )
     end = max(report.duration, 1e-3)
+    _draw_phases(report, ax_f1, (ax_f1, ax_cat, ax_tac))
+    _draw_f1(report, ax_f1, window)
+    _draw_categories(report, ax_cat, end)
+    _draw_tactics(report, ax_tac, end)
+    ax_tac.set_xlim(0, end)
+    ax_tac.set_xlabel("simulated time (s)")
+    fig.suptitle(title or f"{report.platform} — {report.name}", fontsize=11)
+    fig.tight_layout()
+    out = Path(path)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(out, dpi=110)
+    plt.close(fig)
+    return out
+
+
+def _draw_phases(report: RunReport, labelled: Axes, axes: Sequence[Axes]) -> None:
+    """Shade the scenario's phases on every panel; label them above ``labelled``."""
     shades = ("#f4f4f4", "#ffffff")
     for k, phase in enumerate(report.phases):
-        for ax in (ax_f1, ax_cat, ax_tac):
+        for ax in axes:
             ax.axvspan(phase["start"], phase["end"], color=shades[k % 2], zorder=0, lw=0)
-        ax_f1.text(
+        labelled.text(
             (phase["start"] + phase["end"]) / 2,
             1.01,
             phase["label"],
@@ -336,10 +355,15 @@ def plot_report(
             va="bottom",
             fontsize=8,
             color="#555555",
-            transform=ax_f1.get_xaxis_transform(),
+            transform=labelled.get_xaxis_transform(),
         )
 
-    # 1: windowed F1, one colour per model.
+
+def _draw_f1(report: RunReport, ax: Axes, window: float) -> None:
+    """Panel 1: the detector's F1 over a ``window``-second window, one colour per model."""
+    import matplotlib.pyplot as plt
+    from matplotlib.lines import Line2D
+
     colours = plt.get_cmap("tab10")
     models = list(dict.fromkeys(f.model for f in report.frames))
     colour = {m: colours(i % 10) for i, m in enumerate(models)}
@@ -350,37 +374,41 @@ def plot_report(
             (v if v is not None and f.model == model else math.nan)
             for f, v in zip(report.frames, f1, strict=True)
         ]
-        ax_f1.plot(xs, ys, color=colour[model], lw=1.8, label=model)
+        ax.plot(xs, ys, color=colour[model], lw=1.8, label=model)
     for t in report.collisions:
-        ax_f1.axvline(t, color="black", lw=1.0, ls=":")
-    ax_f1.set_ylim(-0.03, 1.05)
-    ax_f1.set_ylabel(f"detector F1\n({window:g} s window)")
+        ax.axvline(t, color="black", lw=1.0, ls=":")
+    ax.set_ylim(-0.03, 1.05)
+    ax.set_ylabel(f"detector F1\n({window:g} s window)")
     handles = [Line2D([], [], color=colour[m], lw=2, label=m) for m in models]
     if report.collisions:
         handles.append(Line2D([], [], color="black", ls=":", label="collision"))
     if handles:
-        ax_f1.legend(handles=handles, loc="lower left", fontsize=8, framealpha=0.9)
-    ax_f1.grid(axis="y", color="#dddddd", lw=0.6)
+        ax.legend(handles=handles, loc="lower left", fontsize=8, framealpha=0.9)
+    ax.grid(axis="y", color="#dddddd", lw=0.6)
 
-    # 2: the oracle's category, as the step function it is.
+
+def _draw_categories(report: RunReport, ax: Axes, end: float) -> None:
+    """Panel 2: the oracle's category, as the step function it is."""
     if report.assessments:
         ts = [t for t, _ in report.assessments] + [end]
         cs = [c for _, c in report.assessments]
-        ax_cat.step(ts, [*cs, cs[-1]], where="post", color="#b03a2e", lw=1.5)
-    ax_cat.set_ylim(-0.4, 2.4)
-    ax_cat.set_yticks([0, 1, 2], [f"{k} {v}" for k, v in CATEGORY_NAMES.items()], fontsize=8)
-    ax_cat.set_ylabel("oracle")
+        ax.step(ts, [*cs, cs[-1]], where="post", color="#b03a2e", lw=1.5)
+    ax.set_ylim(-0.4, 2.4)
+    ax.set_yticks([0, 1, 2], [f"{k} {v}" for k, v in CATEGORY_NAMES.items()], fontsize=8)
+    ax.set_ylabel("oracle")
 
-    # 3: tactics, one row each, from start to outcome.
+
+def _draw_tactics(report: RunReport, ax: Axes, end: float) -> None:
+    """Panel 3: the tactics, one row each, from start to outcome."""
     marks = {"ok": ("#1e8449", "o"), "done": ("#1e8449", "o"), "failed": ("#b03a2e", "X")}
     for row, event in enumerate(report.tactics):
         stop = event.ended if event.ended is not None else end
-        ax_tac.plot([event.t, stop], [row, row], color="#2e4053", lw=3, solid_capstyle="butt")
-        ax_tac.plot([event.t], [row], marker="|", color="#2e4053", ms=12)
+        ax.plot([event.t, stop], [row, row], color="#2e4053", lw=3, solid_capstyle="butt")
+        ax.plot([event.t], [row], marker="|", color="#2e4053", ms=12)
         if event.outcome is not None:
             c, m = marks.get(event.outcome, ("#7f8c8d", "s"))
-            ax_tac.plot([stop], [row], marker=m, color=c, ms=6)
-        ax_tac.text(
+            ax.plot([stop], [row], marker=m, color=c, ms=6)
+        ax.text(
             event.t,
             row + 0.28,
             f"{event.tactic}" + (f" ({event.outcome})" if event.outcome else ""),
@@ -388,15 +416,6 @@ def plot_report(
             va="bottom",
             clip_on=True,
         )
-    ax_tac.set_ylim(-0.6, max(len(report.tactics), 1) - 0.1)
-    ax_tac.set_yticks([])
-    ax_tac.set_ylabel("tactics")
-    ax_tac.set_xlim(0, end)
-    ax_tac.set_xlabel("simulated time (s)")
-    fig.suptitle(title or f"{report.platform} — {report.name}", fontsize=11)
-    fig.tight_layout()
-    out = Path(path)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(out, dpi=110)
-    plt.close(fig)
-    return out
+    ax.set_ylim(-0.6, max(len(report.tactics), 1) - 0.1)
+    ax.set_yticks([])
+    ax.set_ylabel("tactics")

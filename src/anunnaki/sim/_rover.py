@@ -137,6 +137,28 @@ def _placement(spec: ObjectSpec) -> Placement:
     return Placement(spec.kind, spec.x, spec.y, yaw=spec.yaw, size=size, color=color)
 
 
+def _background(sc: Scenario, route: Sequence[tuple[float, float]]) -> list[Placement]:
+    """The layout's objects the scenario keeps: off the route and ahead of its start."""
+    if not sc.background:
+        return []
+    return [
+        p
+        for p in layout_placements("rover", sc.layout)
+        if _route_distance(route, p.x, p.y) > 1.3 and p.x > route[0][0] + 1.5
+    ]
+
+
+def _walkers(scene: Scene, sc: Scenario, n_layout: int) -> list[tuple[int, ObjectSpec]]:
+    """(body, spec) of the scenario's objects that walk (placed after the layout's)."""
+    placed = scene.placements[n_layout:]
+    bodies = scene.bodies[n_layout:]
+    return [
+        (body, spec)
+        for body, spec, pl in zip(bodies, sc.objects, placed, strict=True)
+        if spec.walk_to is not None and spec.speed > 0 and pl.kind == spec.kind
+    ]
+
+
 class RoverSim(SimPlatform):
     """The simulated rover on the bus (same topics and services as the scripted rover).
 
@@ -184,15 +206,7 @@ class RoverSim(SimPlatform):
     ) -> None:
         sc = as_scenario(scenario, "rover")
         route = [(float(x), float(y)) for x, y in sc.route]
-        background = (
-            []
-            if clear_layout or not sc.background
-            else [
-                p
-                for p in layout_placements("rover", sc.layout)
-                if _route_distance(route, p.x, p.y) > 1.3 and p.x > route[0][0] + 1.5
-            ]
-        )
+        background = [] if clear_layout else _background(sc, route)
         scene = Scene(
             "rover",
             sc.layout,
@@ -216,49 +230,50 @@ class RoverSim(SimPlatform):
             self.route = route
             self._waypoint = 1
             self._build_rover()
-            n_layout = len(background)
-            placed = scene.placements[n_layout:]
-            bodies = scene.bodies[n_layout:]
-            self._walkers = [
-                (body, spec)
-                for body, spec, pl in zip(bodies, sc.objects, placed, strict=True)
-                if spec.walk_to is not None and spec.speed > 0 and pl.kind == spec.kind
-            ]
+            self._walkers = _walkers(scene, sc, len(background))
             self._class_bodies = set(scene.objects)
-            self.mode: RoverMode = mode
-            self.buzzer_cmd = False
-            self.lights_cmd = False
-            self.warning = False
-            self.obstacle: str | None = None
-            self.bumper = False
-            self.collisions = 0
-            self.collided_with: list[int] = []
-            self.arrived = False
-            self.speed = 0.0
-            self.teleop_count = 0
-            self.teleop_received = 0
-            self.detections_received = 0
-            self.malformed = 0
-            self._touching: set[int] = set()
-            self._last_touch: dict[int, float] = {}
-            self._teleop: tuple[float, float, float] | None = None  # (t, linear, angular)
-            self._detections: tuple[float, Detections] | None = None
-            self._range: tuple[float, float] | None = None  # (t, metres)
-            self._hold_until = -math.inf
-            self._drive_cmd = (math.nan, math.nan)
-            self.commands: list[tuple[float, str, dict[str, Any]]] = []
-            self._declared = [
-                bus.service(f"{self.prefix}/set_mode", self._srv_set_mode),
-                bus.service(f"{self.prefix}/stop", self._srv_stop),
-                bus.subscribe(f"{self.prefix}/buzzer", self._on_buzzer, queue=16),
-                bus.subscribe(f"{self.prefix}/lights", self._on_lights, queue=16),
-                bus.subscribe(f"{self.prefix}/teleop", self._on_teleop, queue=64),
-                bus.subscribe(topics.RUN_STOP, self._on_run_stop, queue=4),
-                bus.subscribe(detections_topic, self._on_detections, queue=8),
-            ]
+            self._init_state(mode)
+            self._declared = self._declare(bus, detections_topic)
         except BaseException:
             scene.close()
             raise
+
+    def _init_state(self, mode: RoverMode) -> None:
+        """The rover's state at start: commands, sensors, contacts and counters."""
+        self.mode: RoverMode = mode
+        self.buzzer_cmd = False
+        self.lights_cmd = False
+        self.warning = False
+        self.obstacle: str | None = None
+        self.bumper = False
+        self.collisions = 0
+        self.collided_with: list[int] = []
+        self.arrived = False
+        self.speed = 0.0
+        self.teleop_count = 0
+        self.teleop_received = 0
+        self.detections_received = 0
+        self.malformed = 0
+        self._touching: set[int] = set()
+        self._last_touch: dict[int, float] = {}
+        self._teleop: tuple[float, float, float] | None = None  # (t, linear, angular)
+        self._detections: tuple[float, Detections] | None = None
+        self._range: tuple[float, float] | None = None  # (t, metres)
+        self._hold_until = -math.inf
+        self._drive_cmd = (math.nan, math.nan)
+        self.commands: list[tuple[float, str, dict[str, Any]]] = []
+
+    def _declare(self, bus: Any, detections_topic: str) -> list[Any]:
+        """The rover's services and subscriptions (closed with the platform)."""
+        return [
+            bus.service(f"{self.prefix}/set_mode", self._srv_set_mode),
+            bus.service(f"{self.prefix}/stop", self._srv_stop),
+            bus.subscribe(f"{self.prefix}/buzzer", self._on_buzzer, queue=16),
+            bus.subscribe(f"{self.prefix}/lights", self._on_lights, queue=16),
+            bus.subscribe(f"{self.prefix}/teleop", self._on_teleop, queue=64),
+            bus.subscribe(topics.RUN_STOP, self._on_run_stop, queue=4),
+            bus.subscribe(detections_topic, self._on_detections, queue=8),
+        ]
 
     # -- building ---------------------------------------------------------------------------
     def _build_rover(self) -> None:
