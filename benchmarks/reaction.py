@@ -1204,7 +1204,7 @@ def per_node_mode() -> bool:
     return (
         all(
             importlib.util.find_spec(m) is not None
-            for m in ("anunnaki.utu._nodes", "anunnaki.cli._run")
+            for m in ("anunnaki.utu.host._nodes", "anunnaki.cli._run")
         )
         and (ROVER / "utu.yaml").is_file()
     )

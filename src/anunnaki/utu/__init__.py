@@ -16,41 +16,7 @@ Five parts, composed by :class:`AutonomicManager`:
 ``manager.spin()`` runs live. See docs/utu.md.
 """
 
-from anunnaki.utu._actions import ActionRunner, RecordedOutcome, ReplayRunner, ThreadRunner
-from anunnaki.utu._actuators import BusActuator, RecordingActuator, stop_platform
 from anunnaki.utu._config import RunStopConfig, UtuConfig, load_config, parse_config
-from anunnaki.utu._knowledge import Decision, InputRow, Knowledge, TacticRow, VerdictRow
-from anunnaki.utu._manager import AutonomicManager
-from anunnaki.utu._mape import (
-    ActionOutcome,
-    Actuator,
-    Analyzer,
-    Executor,
-    Monitor,
-    Planner,
-    TacticRuntime,
-)
-from anunnaki.utu._nodes import (
-    NODE_NAMES,
-    AnalyzeNode,
-    ComposedUtu,
-    ExecuteNode,
-    KnowledgeNode,
-    MonitorNode,
-    NodeName,
-    PlanNode,
-    UtuNode,
-    build_node,
-    step_nodes,
-)
-from anunnaki.utu._parts import (
-    NodeConfigError,
-    UtuParts,
-    load_parts,
-    load_tactics_text,
-    open_knowledge,
-)
-from anunnaki.utu._peers import ACT_ORDER, PeerWatch
 from anunnaki.utu._replay import (
     KINDS,
     ReplayReport,
@@ -64,7 +30,29 @@ from anunnaki.utu._replay import (
     run_models,
     run_span,
 )
-from anunnaki.utu._stages import (
+from anunnaki.utu.cycle._actions import (
+    ActionOutcome,
+    ActionRunner,
+    Actuator,
+    RecordedOutcome,
+    ReplayRunner,
+)
+from anunnaki.utu.cycle._knowledge import Decision, InputRow, Knowledge, TacticRow, VerdictRow
+from anunnaki.utu.cycle._mape import (
+    Analyzer,
+    Executor,
+    Monitor,
+    Planner,
+    TacticRuntime,
+)
+from anunnaki.utu.cycle._parts import (
+    NodeConfigError,
+    UtuParts,
+    load_parts,
+    load_tactics_text,
+    open_knowledge,
+)
+from anunnaki.utu.cycle._stages import (
     AnalyzeStage,
     DecisionTail,
     ExecuteStage,
@@ -72,6 +60,23 @@ from anunnaki.utu._stages import (
     MonitorStage,
     PlanStage,
 )
+from anunnaki.utu.host._actuators import BusActuator, RecordingActuator, stop_platform
+from anunnaki.utu.host._manager import AutonomicManager
+from anunnaki.utu.host._nodes import (
+    NODE_NAMES,
+    AnalyzeNode,
+    ComposedUtu,
+    ExecuteNode,
+    KnowledgeNode,
+    MonitorNode,
+    NodeName,
+    PlanNode,
+    UtuNode,
+    build_node,
+    step_nodes,
+)
+from anunnaki.utu.host._peers import ACT_ORDER, PeerWatch
+from anunnaki.utu.host._threads import ThreadRunner
 
 __all__ = [
     "ACT_ORDER",

@@ -1,4 +1,4 @@
-"""Actions off the loop's path: service requests run on worker threads with their own deadline.
+"""How an action's outcome comes back to the cycle, and the actions it performs through.
 
 A live loop must never wait on the managed system: a mode change to a robot that is alive
 but does not answer held every cycle for its 2 s timeout, and monitoring and analysis
@@ -8,9 +8,7 @@ tactic stays ``running`` while its action is in flight, and the next cycle that 
 outcome records it (``action`` decision) and continues with the tactic's next action — or
 fails the tactic and escalates when the action was refused, timed out or met a dead service.
 
-* :class:`ThreadRunner` (live): a few worker threads; an action whose thread has not come
-  back by its timeout plus a grace period is reported failed ("no reply within …") and its
-  thread abandoned, so even an actuator that ignores its own timeout cannot hold the loop.
+* ``ThreadRunner`` (live, in :mod:`anunnaki.utu.host`): a few worker threads;
 * :class:`ReplayRunner` (:func:`~anunnaki.utu.replay`): gives each action the outcome the run
   recorded, at the instant the run took it, so a replay takes the same decisions at the
   same times.
@@ -21,27 +19,46 @@ background already) and stay on the loop.
 
 from __future__ import annotations
 
-import concurrent.futures as cf
-import logging
-import threading
-import time
 from collections import deque
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass
-from typing import Protocol
+from typing import Any, Protocol
 
-from anunnaki.utu._mape import ActionOutcome
+from anunnaki.tactics import NotifyAction
 
-__all__ = ["ActionRunner", "Finished", "RecordedOutcome", "ReplayRunner", "ThreadRunner"]
+__all__ = [
+    "ActionOutcome",
+    "ActionRunner",
+    "Actuator",
+    "Finished",
+    "RecordedOutcome",
+    "ReplayRunner",
+]
 
-log = logging.getLogger("anunnaki.utu")
 
-#: Seconds a worker thread may overrun its action's timeout before the action is failed.
-GRACE = 0.5
-#: Seconds :meth:`ThreadRunner.submit` waits for an outcome by default (sim time, by hand):
-#: ``None``, up to the action's own timeout — a run on sim time repeats itself however loaded
-#: the machine is, and a dead or hung service still cannot hold it longer than that.
-SETTLE: float | None = None
+@dataclass(frozen=True)
+class ActionOutcome:
+    """The result of one action."""
+
+    ok: bool
+    detail: str = ""
+    reply: dict[str, Any] | None = None
+
+
+class Actuator(Protocol):
+    """How actions reach the managed system."""
+
+    def publish(self, topic: str, payload: Mapping[str, Any]) -> ActionOutcome:
+        """Publish a message on a topic."""
+        ...
+
+    def request(self, service: str, payload: Mapping[str, Any], timeout: float) -> ActionOutcome:
+        """Request a service and wait for the reply."""
+        ...
+
+    def notify(self, action: NotifyAction, tactic: str, now: float) -> ActionOutcome:
+        """Send a notification (may complete in the background)."""
+        ...
 
 
 @dataclass(frozen=True)
@@ -76,126 +93,6 @@ class ActionRunner(Protocol):
     def close(self) -> None:
         """Stop taking work; in-flight actions are abandoned."""
         ...
-
-
-@dataclass
-class _Flight:
-    tactic: str
-    index: int
-    future: cf.Future[ActionOutcome]
-    deadline: float  # time.monotonic()
-    timeout: float
-
-
-class ThreadRunner:
-    """Live actions on worker threads (``anunnaki-action``), each with a wall-clock deadline.
-
-    Args:
-        workers: Threads (an action holds one until its request returns or times out).
-        on_done: Called from the worker thread when an action came back (e.g. the loop's
-            ``wake``), so the loop takes the outcome without waiting for its period.
-        grace: Seconds past an action's timeout before it is reported failed regardless.
-        settle: Seconds :meth:`submit` waits for the outcome before leaving the action in
-            flight (``None``: up to the action's timeout): a service that answers at once
-            has its outcome recorded in the cycle that started it (as a run on sim time
-            needs to repeat itself), a slow one holds the loop no longer than this.
-
-    """
-
-    def __init__(
-        self,
-        *,
-        workers: int = 4,
-        on_done: Callable[[], object] | None = None,
-        grace: float = GRACE,
-        settle: float | None = SETTLE,
-    ) -> None:
-        self._pool = cf.ThreadPoolExecutor(
-            max_workers=workers, thread_name_prefix="anunnaki-action"
-        )
-        self._flights: list[_Flight] = []
-        self._lock = threading.Lock()
-        self.on_done = on_done
-        self.grace = grace
-        self.settle = settle
-        self._closed = False
-
-    def submit(
-        self,
-        tactic: str,
-        index: int,
-        call: Callable[[], ActionOutcome],
-        timeout: float,
-        now: float,
-        *,
-        attempt: int = 0,
-    ) -> ActionOutcome | None:
-        """Start ``call`` on a worker thread; its outcome if back within ``settle`` seconds."""
-        if self._closed:
-            return ActionOutcome(False, "the loop is closing; action not performed")
-        future = self._pool.submit(call)
-        wait = timeout if self.settle is None else min(self.settle, timeout)
-        if wait > 0:
-            cf.wait([future], timeout=wait)
-            if future.done():
-                return _result(future)
-        flight = _Flight(tactic, index, future, time.monotonic() + timeout + self.grace, timeout)
-        with self._lock:
-            self._flights.append(flight)
-        if self.on_done is not None:
-            callback = self.on_done
-            future.add_done_callback(lambda _f: callback())
-        return None
-
-    def finished(self, now: float) -> list[Finished]:
-        """Outcomes of the actions that returned, and failures of those past their deadline."""
-        clock = time.monotonic()
-        out: list[Finished] = []
-        with self._lock:
-            keep: list[_Flight] = []
-            for f in self._flights:
-                if f.future.done():
-                    out.append(Finished(f.tactic, f.index, _result(f.future)))
-                elif clock >= f.deadline:
-                    log.warning(
-                        "action %d of %s did not come back within %.1f s; failed",
-                        f.index,
-                        f.tactic,
-                        f.timeout,
-                    )
-                    detail = f"no reply within {f.timeout:g} s (abandoned)"
-                    out.append(Finished(f.tactic, f.index, ActionOutcome(False, detail)))
-                else:
-                    keep.append(f)
-            self._flights = keep
-        return out
-
-    @property
-    def has_outcomes(self) -> bool:
-        """Whether :meth:`finished` would hand something back now."""
-        clock = time.monotonic()
-        with self._lock:
-            return any(f.future.done() or clock >= f.deadline for f in self._flights)
-
-    @property
-    def in_flight(self) -> int:
-        """Actions submitted and not yet handed back."""
-        with self._lock:
-            return len(self._flights)
-
-    def close(self) -> None:
-        """Abandon in-flight actions; do not wait for their threads."""
-        self._closed = True
-        self._pool.shutdown(wait=False, cancel_futures=True)
-
-
-def _result(future: cf.Future[ActionOutcome]) -> ActionOutcome:
-    try:
-        return future.result()
-    except cf.CancelledError:
-        return ActionOutcome(False, "cancelled")
-    except Exception as exc:  # an actuator must never kill the loop
-        return ActionOutcome(False, f"{type(exc).__name__}: {exc}")
 
 
 @dataclass(frozen=True)

@@ -18,7 +18,7 @@ from anunnaki.errors import AnunnakiError, ModelFileError
 from anunnaki.goals import GoalModel, parse_binding, parse_goal_model
 from anunnaki.tactics import TacticSet, parse_tactics_xml, parse_tactics_yaml
 from anunnaki.utu._config import UtuConfig
-from anunnaki.utu._knowledge import Knowledge
+from anunnaki.utu.cycle._knowledge import Knowledge
 
 __all__ = [
     "NodeConfigError",

@@ -8,7 +8,7 @@ returns its own (the typed messages of :mod:`anunnaki.bus`)::
     ExecuteStage.complete ─CycleDone─▶ AnalyzeStage.finish
 
 :class:`~anunnaki.utu.AutonomicManager` calls them directly, one after the other, in one
-thread (no hop, no copy through the bus); the nodes of :mod:`anunnaki.utu._nodes` run one
+thread (no hop, no copy through the bus); the nodes of :mod:`anunnaki.utu.host._nodes` run one
 stage each and carry the messages over the bus. Because the logic exists only here, both
 deployments decide alike by construction.
 
@@ -52,10 +52,10 @@ from anunnaki.errors import AnunnakiError, ModelFileError
 from anunnaki.goals import GoalModel, parse_binding, parse_goal_model, status_name
 from anunnaki.tactics import TacticSet
 from anunnaki.tokens import OPERATOR_TOKEN_ENV, token_matches
-from anunnaki.utu._actions import ActionRunner
-from anunnaki.utu._knowledge import Decision, Knowledge
-from anunnaki.utu._mape import Actuator, Analyzer, Executor, Monitor, Planner, TacticRuntime
-from anunnaki.utu._parts import UtuParts, check_parts, load_tactics_text, parts_from_sources
+from anunnaki.utu.cycle._actions import ActionRunner, Actuator
+from anunnaki.utu.cycle._knowledge import Decision, Knowledge
+from anunnaki.utu.cycle._mape import Analyzer, Executor, Monitor, Planner, TacticRuntime
+from anunnaki.utu.cycle._parts import UtuParts, check_parts, load_tactics_text, parts_from_sources
 
 __all__ = [
     "OPERATOR",

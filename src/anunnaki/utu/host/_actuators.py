@@ -12,7 +12,7 @@ from anunnaki.bus import RunStop, body_of
 from anunnaki.errors import AnunnakiError
 from anunnaki.tactics import NotifyAction
 from anunnaki.utu._config import UtuConfig
-from anunnaki.utu._mape import ActionOutcome
+from anunnaki.utu.cycle._actions import ActionOutcome
 
 __all__ = ["BusActuator", "RecordingActuator", "stop_platform"]
 
@@ -114,7 +114,7 @@ class BusActuator:
                 action.message,
             )
             return ActionOutcome(True, "logged (no notifier configured)")
-        from anunnaki.utu._notify import Notification
+        from anunnaki.utu.host._notify import Notification
 
         note = Notification(
             channel=action.channel,

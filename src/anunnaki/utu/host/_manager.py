@@ -1,7 +1,7 @@
 """The autonomic manager: Monitor → Analyze → Plan → Execute over Knowledge (paper Fig. 8).
 
 :class:`AutonomicManager` is Utu in one process: the five stages of
-:mod:`anunnaki.utu._stages` called one after the other — the same code the per-node
+:mod:`anunnaki.utu.cycle._stages` called one after the other — the same code the per-node
 deployment runs, here with direct calls instead of bus hops. ``step(now)`` runs one
 deterministic cycle — tests, simulation and replay drive it — and ``spin()`` runs it live.
 
@@ -47,14 +47,12 @@ from anunnaki.clock import Clock, SimClock, WallClock
 from anunnaki.errors import AnunnakiError
 from anunnaki.goals import GoalModel
 from anunnaki.tactics import TacticSet
-from anunnaki.utu._actions import ActionRunner, ThreadRunner
-from anunnaki.utu._actuators import BusActuator, RecordingActuator
 from anunnaki.utu._config import RunStopConfig, UtuConfig
-from anunnaki.utu._intake import IntakeBudget
-from anunnaki.utu._knowledge import Knowledge
-from anunnaki.utu._mape import Actuator, Analyzer, Executor, Monitor, Planner
-from anunnaki.utu._parts import UtuParts, load_parts, load_tactics_text
-from anunnaki.utu._stages import (
+from anunnaki.utu.cycle._actions import ActionRunner
+from anunnaki.utu.cycle._knowledge import Knowledge
+from anunnaki.utu.cycle._mape import Actuator, Analyzer, Executor, Monitor, Planner
+from anunnaki.utu.cycle._parts import UtuParts, load_parts, load_tactics_text
+from anunnaki.utu.cycle._stages import (
     OPERATOR,
     TICK,
     AnalyzeStage,
@@ -65,6 +63,9 @@ from anunnaki.utu._stages import (
     mark_restart,
     resuming,
 )
+from anunnaki.utu.host._actuators import BusActuator, RecordingActuator
+from anunnaki.utu.host._intake import IntakeBudget
+from anunnaki.utu.host._threads import ThreadRunner
 
 __all__ = [
     "OPERATOR",
@@ -252,7 +253,7 @@ class AutonomicManager(Closing):
         if actuator is None and bus is not None:
             notifier = None
             if cfg.notify:
-                from anunnaki.utu._notify import Notifier, NotifyConfig
+                from anunnaki.utu.host._notify import Notifier, NotifyConfig
 
                 notifier = Notifier(NotifyConfig.model_validate(cfg.notify))
             actuator = BusActuator(bus, notifier)
@@ -377,7 +378,7 @@ class AutonomicManager(Closing):
 
         Under a flood the producers refill a queue as fast as it is emptied: a step takes
         at most ``intake`` from each topic — a spinning loop on the wall clock only what
-        fits in half a period (:class:`~anunnaki.utu._intake.IntakeBudget`) — and the rest
+        fits in half a period (:class:`~anunnaki.utu.host._intake.IntakeBudget`) — and the rest
         waits for the next step (or is dropped and counted by the bus when the queue is
         full), so a step stays short and time-driven checks keep their rate.
         """

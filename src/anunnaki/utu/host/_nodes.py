@@ -2,7 +2,7 @@
 
 The paper runs Utu as ROS nodes (§4.1.4, Fig. 13): ``/utu_monitor``, ``/utu_analyze``,
 ``/utu_plan``, ``/utu_execute`` and ``/utu_knowledge``. Each node here hosts one stage of
-:mod:`anunnaki.utu._stages` — the very code :class:`~anunnaki.utu.AutonomicManager` calls
+:mod:`anunnaki.utu.cycle._stages` — the very code :class:`~anunnaki.utu.AutonomicManager` calls
 directly — and carries the stage's typed messages over the bus, so a node runs alone
 (``anunnaki node plan``), with others in one process, or each in its own process over
 zenoh, and every grouping decides as the manager does.
@@ -69,14 +69,11 @@ from anunnaki.errors import AnunnakiError
 from anunnaki.topics import UTU_NODES as NODE_NAMES
 from anunnaki.topics import UtuNodeName as NodeName
 from anunnaki.topics import node_token, ready_service
-from anunnaki.utu._actions import ThreadRunner
-from anunnaki.utu._actuators import BusActuator, stop_platform
 from anunnaki.utu._config import UtuConfig
-from anunnaki.utu._knowledge import Knowledge
-from anunnaki.utu._manager import AutonomicManager, Watchdog
-from anunnaki.utu._mape import Actuator
-from anunnaki.utu._parts import NodeConfigError, UtuParts, load_parts, open_knowledge
-from anunnaki.utu._stages import (
+from anunnaki.utu.cycle._knowledge import Knowledge
+from anunnaki.utu.cycle._mape import Actuator
+from anunnaki.utu.cycle._parts import NodeConfigError, UtuParts, load_parts, open_knowledge
+from anunnaki.utu.cycle._stages import (
     AnalyzeStage,
     DecisionTail,
     ExecuteStage,
@@ -87,6 +84,9 @@ from anunnaki.utu._stages import (
     mark_restart,
     resuming,
 )
+from anunnaki.utu.host._actuators import BusActuator, stop_platform
+from anunnaki.utu.host._manager import AutonomicManager, Watchdog
+from anunnaki.utu.host._threads import ThreadRunner
 
 __all__ = [
     "NODE_NAMES",
@@ -705,7 +705,7 @@ class ExecuteNode(UtuNode):
         actuator = self._actuator_arg
         if actuator is None:
             if self.config.notify:
-                from anunnaki.utu._notify import Notifier, NotifyConfig
+                from anunnaki.utu.host._notify import Notifier, NotifyConfig
 
                 self._notifier = Notifier(NotifyConfig.model_validate(self.config.notify))
             actuator = BusActuator(self.bus, self._notifier, on_notified=self._notified)

@@ -34,9 +34,9 @@ from anunnaki import topics
 from anunnaki.bus import Bus, RunStop
 from anunnaki.errors import AnunnakiError
 from anunnaki.topics import UTU_NODES
-from anunnaki.utu._actuators import stop_platform
 from anunnaki.utu._config import UtuConfig
-from anunnaki.utu._parts import open_knowledge
+from anunnaki.utu.cycle._parts import open_knowledge
+from anunnaki.utu.host._actuators import stop_platform
 
 __all__ = ["ACT_ORDER", "PeerWatch"]
 
