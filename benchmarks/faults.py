@@ -939,12 +939,14 @@ class _Live:
 
 def _bring_up(deployment: str, bus: Bus) -> _Live:
     parts = load_parts(parse_config(UTU_CONFIG.format(rover=ROVER)))
-    from anunnaki.utu import ComposedUtu, Knowledge
+    from anunnaki.utu import AutonomicManager, Knowledge
 
     kb = Knowledge()
     halt = threading.Event()
     if deployment == "one-process":
-        nodes: list[Any] = [ComposedUtu(parts, bus=bus, knowledge=kb, rates=NODE_RATES)]
+        nodes: list[Any] = [
+            AutonomicManager.from_config(parts, bus=bus, knowledge=kb, nodes=NODE_RATES)
+        ]
     else:
         nodes = [
             build_node(name, parts, bus=bus, knowledge=kb, rate=rate)

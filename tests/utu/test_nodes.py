@@ -127,8 +127,8 @@ class Deployment:
     def queued_ops(self) -> int:
         """Operator calls waiting for the next step."""
         if self.manager is not None:
-            return len(self.manager._ops)
-        return len(self.nodes["monitor"]._ops)  # type: ignore[attr-defined]
+            return len(self.manager.desk)
+        return len(self.nodes["monitor"].desk)  # type: ignore[attr-defined]
 
     def halted(self) -> bool:
         if self.manager is not None:
@@ -344,7 +344,8 @@ def test_bad_configuration_fails_at_bring_up_with_file_and_line(tmp_path) -> Non
             )
         )
     with open_bus("inproc") as bus:
-        with pytest.raises(NodeConfigError, match="monitor, analyze, plan, execute, knowledge"):
+        names = "valid names: analyze, execute, knowledge, monitor, plan"
+        with pytest.raises(NodeConfigError, match=names):
             build_node("planner", config(), bus=bus)
         with pytest.raises(NodeConfigError, match="':memory:'"):
             build_node("analyze", config(), bus=bus)

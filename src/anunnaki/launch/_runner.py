@@ -40,7 +40,7 @@ from anunnaki.launch._supervisor import (
 from anunnaki.utu import (
     ACT_ORDER,
     NODE_NAMES,
-    ComposedUtu,
+    AutonomicManager,
     Decision,
     DecisionTail,
     Knowledge,
@@ -93,11 +93,11 @@ class _Printer:
 
 
 # -- lockstep ----------------------------------------------------------------------------------
-def _taken_here(nodes: Sequence[UtuNode | ComposedUtu]) -> Callable[[int], bool] | None:
+def _taken_here(nodes: Sequence[UtuNode | AutonomicManager]) -> Callable[[int], bool] | None:
     """In one process: Utu has taken its inputs when its input queues are empty."""
     subs: list[Any] = []
     for node in nodes:
-        if isinstance(node, ComposedUtu | MonitorNode):
+        if isinstance(node, AutonomicManager | MonitorNode):
             subs += node.input_queues()
     if not subs:
         return None
@@ -441,7 +441,7 @@ class _Runner:
         bus = open_bus(launch.bus, name=f"{launch.name}-launch")
         if self.on_bus is not None:
             self.on_bus(bus)
-        nodes: list[UtuNode | ComposedUtu] = []
+        nodes: list[UtuNode | AutonomicManager] = []
         threads: list[threading.Thread] = []
         halt = threading.Event()
         crashed: list[str] = []
@@ -519,11 +519,15 @@ class _Runner:
 
     def _build_nodes(
         self, bus: Bus, kb: Knowledge, sim: SimClock | None, *, composed: bool
-    ) -> list[UtuNode | ComposedUtu]:
+    ) -> list[UtuNode | AutonomicManager]:
         """The launch's Utu nodes on ``bus``: the composed manager when all five are here."""
         launch = self.launch
         if composed:
-            return [ComposedUtu(self.parts, bus=bus, knowledge=kb, clock=sim, rates=launch.nodes)]
+            return [
+                AutonomicManager.from_config(
+                    self.parts, bus=bus, knowledge=kb, clock=sim, nodes=launch.nodes
+                )
+            ]
         return [
             build_node(name, self.parts, bus=bus, knowledge=kb, clock=sim, rate=rate)
             for name, rate in launch.nodes.items()
@@ -639,13 +643,13 @@ class _Runner:
 
 
 def _spin(
-    nodes: list[UtuNode | ComposedUtu], halt: threading.Event, crashed: list[str]
+    nodes: list[UtuNode | AutonomicManager], halt: threading.Event, crashed: list[str]
 ) -> list[threading.Thread]:
     """Spin each node on a thread of its own until ``halt``; failures go to ``crashed``."""
     threads = []
     for node in nodes:
 
-        def spin(node: UtuNode | ComposedUtu = node) -> None:
+        def spin(node: UtuNode | AutonomicManager = node) -> None:
             try:
                 node.spin(halt)
             except Exception as exc:
@@ -659,7 +663,7 @@ def _spin(
 
 
 def _halt(
-    halt: threading.Event, nodes: list[UtuNode | ComposedUtu], threads: list[threading.Thread]
+    halt: threading.Event, nodes: list[UtuNode | AutonomicManager], threads: list[threading.Thread]
 ) -> None:
     """Stop the nodes' spinning and wait (5 s each) for their threads."""
     halt.set()

@@ -65,7 +65,6 @@ from anunnaki.utu.host._manager import AutonomicManager
 from anunnaki.utu.host._nodes import (
     NODE_NAMES,
     AnalyzeNode,
-    ComposedUtu,
     ExecuteNode,
     KnowledgeNode,
     MonitorNode,
@@ -90,7 +89,6 @@ __all__ = [
     "Analyzer",
     "AutonomicManager",
     "BusActuator",
-    "ComposedUtu",
     "Decision",
     "DecisionTail",
     "ExecuteNode",

@@ -509,7 +509,7 @@ def _operator(manager: AutonomicManager, op: Mapping[str, Any]) -> None:
     elif kind == "run_stop" and keys == {"op", "caller", "reason"}:
         manager.run_stop(caller=caller, reason=str(op["reason"]))
     else:  # node_lost (liveliness) and anything else: the queued entry exactly as recorded
-        manager._enqueue_op(dict(op))
+        manager.desk.enqueue(dict(op))
 
 
 def _action_outcomes(knowledge: Knowledge) -> list[RecordedOutcome]:
