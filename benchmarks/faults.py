@@ -107,16 +107,9 @@ from anunnaki.bus import Bus, BusTimeout, Generic, InprocHub, LivelinessGuard, o
 from anunnaki.bus._zenoh import free_port
 from anunnaki.managed import ScriptedSystem
 from anunnaki.trace import Record
-from anunnaki.utu import (
-    NODE_NAMES,
-    AutonomicManager,
-    RunLogError,
-    build_node,
-    load_parts,
-    open_run,
-    parse_config,
-    replay,
-)
+from anunnaki.utu import NODE_NAMES, AutonomicManager, RunLogError, build_node, parse_config, replay
+from anunnaki.utu.cycle import load_parts
+from anunnaki.utu.runlog import open_run
 
 ROOT = Path(__file__).resolve().parents[1]
 ROVER = ROOT / "examples" / "rover"

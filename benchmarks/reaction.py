@@ -1202,10 +1202,7 @@ def _report_log(path: Path, what: str) -> None:
 def per_node_mode() -> bool:
     """Whether ``anunnaki node`` (one process per Utu node) exists in this tree."""
     return (
-        all(
-            importlib.util.find_spec(m) is not None
-            for m in ("anunnaki.utu.host._nodes", "anunnaki.cli._run")
-        )
+        all(importlib.util.find_spec(m) is not None for m in ("anunnaki.utu.host", "anunnaki.cli"))
         and (ROVER / "utu.yaml").is_file()
     )
 

@@ -26,18 +26,15 @@ from anunnaki.topics import DECISIONS as DECISIONS_TOPIC
 from anunnaki.topics import node_token, ready_service
 from anunnaki.utu import (
     NODE_NAMES,
-    AnalyzeNode,
     AutonomicManager,
-    ExecuteNode,
     Knowledge,
     NodeConfigError,
-    PlanNode,
     UtuNode,
     build_node,
-    load_parts,
     parse_config,
-    step_nodes,
 )
+from anunnaki.utu.cycle import load_parts
+from anunnaki.utu.host import AnalyzeNode, ExecuteNode, PlanNode, step_nodes
 
 ROVER = Path(__file__).parents[2] / "examples" / "rover"
 

@@ -26,19 +26,18 @@ from anunnaki.topics import UTU_NODES
 from anunnaki.trace import read_trace
 from anunnaki.utu import (
     ActionOutcome,
-    AnalyzeNode,
     AutonomicManager,
     BusActuator,
     Knowledge,
     UtuNode,
     build_node,
     parse_config,
-    step_nodes,
 )
-from anunnaki.utu._replay import (
+from anunnaki.utu._replay import decisive
+from anunnaki.utu.host import AnalyzeNode, step_nodes
+from anunnaki.utu.runlog import (
     KINDS,
     RunLogError,
-    decisive,
     export_trace,
     open_run,
     rebuild_goal_state,

@@ -20,7 +20,8 @@ from typing import Any
 from anunnaki.bus import BusConfig, open_bus
 from anunnaki.cli import _dashboard
 from anunnaki.launch import WritesReports, load_launch, run_launch, signals_to
-from anunnaki.utu import NODE_NAMES, NodeConfigError, PeerWatch, build_node
+from anunnaki.utu import NODE_NAMES, NodeConfigError, build_node
+from anunnaki.utu.host import PeerWatch
 
 __all__ = ["add_parser", "run", "run_node"]
 

@@ -37,21 +37,9 @@ from anunnaki.launch._supervisor import (
     signals_to,
     wait_ready,
 )
-from anunnaki.utu import (
-    ACT_ORDER,
-    NODE_NAMES,
-    AutonomicManager,
-    Decision,
-    DecisionTail,
-    Knowledge,
-    MonitorNode,
-    PeerWatch,
-    UtuNode,
-    UtuParts,
-    build_node,
-    open_knowledge,
-    stop_platform,
-)
+from anunnaki.utu import NODE_NAMES, AutonomicManager, Decision, Knowledge, UtuNode, build_node
+from anunnaki.utu.cycle import DecisionTail, UtuParts, open_knowledge
+from anunnaki.utu.host import ACT_ORDER, MonitorNode, PeerWatch, stop_platform
 
 __all__ = ["RunResult", "format_decision", "run_launch"]
 

@@ -43,7 +43,9 @@ from anunnaki._safeyaml import LineMap, describe_path, load_yaml, validation_err
 from anunnaki.bus import BusConfig
 from anunnaki.errors import AnunnakiError, ModelFileError
 from anunnaki.launch._managed import MANAGED, ManagedKind, resolve_kind, split_managed
-from anunnaki.utu import NODE_NAMES, NodeName, UtuConfig, UtuParts, load_config, load_parts
+from anunnaki.utu import NODE_NAMES, UtuConfig, load_config
+from anunnaki.utu.cycle import UtuParts, load_parts
+from anunnaki.utu.host import NodeName
 
 __all__ = ["Launch", "LaunchConfig", "LaunchError", "NodeSettings", "load_launch", "parse_launch"]
 

@@ -20,3 +20,59 @@ bus). Import-linter keeps it so: the host imports the cycle, never the other way
 
 The public names are re-exported by :mod:`anunnaki.utu`.
 """
+
+from anunnaki.utu.cycle._actions import (
+    ActionOutcome,
+    ActionRunner,
+    Actuator,
+    Finished,
+    RecordedOutcome,
+    ReplayRunner,
+)
+from anunnaki.utu.cycle._knowledge import Decision, InputRow, Knowledge, TacticRow, VerdictRow
+from anunnaki.utu.cycle._mape import Analyzer, Executor, Monitor, Planner, TacticRuntime
+from anunnaki.utu.cycle._parts import (
+    NodeConfigError,
+    UtuParts,
+    load_parts,
+    load_tactics_text,
+    open_knowledge,
+)
+from anunnaki.utu.cycle._stages import (
+    AnalyzeStage,
+    DecisionTail,
+    ExecuteStage,
+    KnowledgeStage,
+    MonitorStage,
+    PlanStage,
+)
+
+__all__ = [
+    "ActionOutcome",
+    "ActionRunner",
+    "Actuator",
+    "AnalyzeStage",
+    "Analyzer",
+    "Decision",
+    "DecisionTail",
+    "ExecuteStage",
+    "Executor",
+    "Finished",
+    "InputRow",
+    "Knowledge",
+    "KnowledgeStage",
+    "Monitor",
+    "MonitorStage",
+    "NodeConfigError",
+    "PlanStage",
+    "Planner",
+    "RecordedOutcome",
+    "ReplayRunner",
+    "TacticRow",
+    "TacticRuntime",
+    "UtuParts",
+    "VerdictRow",
+    "load_parts",
+    "load_tactics_text",
+    "open_knowledge",
+]

@@ -12,3 +12,45 @@
 
 The public names are re-exported by :mod:`anunnaki.utu`.
 """
+
+from anunnaki.topics import UTU_NODES as NODE_NAMES
+from anunnaki.topics import UtuNodeName as NodeName
+from anunnaki.utu.host._actuators import BusActuator, RecordingActuator, stop_platform
+from anunnaki.utu.host._desk import OperatorDesk, Watchdog
+from anunnaki.utu.host._manager import AutonomicManager
+from anunnaki.utu.host._nodes import (
+    NODE_KINDS,
+    AnalyzeNode,
+    ExecuteNode,
+    KnowledgeNode,
+    MonitorNode,
+    PlanNode,
+    UtuNode,
+    build_node,
+    step_nodes,
+)
+from anunnaki.utu.host._peers import ACT_ORDER, PeerWatch
+from anunnaki.utu.host._threads import ThreadRunner
+
+__all__ = [
+    "ACT_ORDER",
+    "NODE_KINDS",
+    "NODE_NAMES",
+    "AnalyzeNode",
+    "AutonomicManager",
+    "BusActuator",
+    "ExecuteNode",
+    "KnowledgeNode",
+    "MonitorNode",
+    "NodeName",
+    "OperatorDesk",
+    "PeerWatch",
+    "PlanNode",
+    "RecordingActuator",
+    "ThreadRunner",
+    "UtuNode",
+    "Watchdog",
+    "build_node",
+    "step_nodes",
+    "stop_platform",
+]
