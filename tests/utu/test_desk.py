@@ -89,3 +89,32 @@ def test_the_node_kinds_are_one_registry() -> None:
     assert NODE_KINDS.names() == sorted(NODE_NAMES)
     with pytest.raises(NodeConfigError, match="valid names: analyze, execute, knowledge"):
         NODE_KINDS.factory("planner")
+
+
+def test_a_node_on_sim_time_never_lets_its_clock_queue_fill(tmp_path: Path) -> None:
+    """Issue 21: every per-node run logged ``subscriber /clock: queue of 64 full``: the
+    analyze node subscribed ``/clock`` but read it only while no monitor was up, so with a
+    monitor its queue filled and the bus dropped (and logged) every further tick."""
+    from anunnaki.bus import Clock
+
+    cfg = parse_config(CONFIG + f"knowledge: {tmp_path / 'kb.db'}\nclock: sim\n")
+    hub = InprocHub()
+    with open_bus("inproc", hub=hub) as bus, open_bus("inproc", hub=hub) as sim:
+        kb = Knowledge(tmp_path / "kb.db")
+        nodes = {
+            name: build_node(name, cfg, bus=bus, knowledge=kb, rate=20.0)
+            for name in ("monitor", "analyze", "plan", "execute")
+        }
+        try:
+            t = 0.0
+            for _ in range(10):  # 10 rounds of 20 ticks: 200 in all, more than a queue
+                for _ in range(20):
+                    t += 0.01
+                    sim.publish("/clock", Clock(time=t))
+                for node in nodes.values():
+                    node.spin_once()
+            assert bus.stats().dropped == {}
+        finally:
+            for node in reversed(nodes.values()):
+                node.close()
+            kb.close()

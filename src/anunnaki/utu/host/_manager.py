@@ -54,7 +54,7 @@ from anunnaki.utu._config import RunStopConfig, UtuConfig
 from anunnaki.utu.cycle._actions import ActionRunner
 from anunnaki.utu.cycle._knowledge import Knowledge
 from anunnaki.utu.cycle._mape import Actuator, Analyzer, Executor, Monitor, Planner
-from anunnaki.utu.cycle._parts import UtuParts, load_parts, load_tactics_text
+from anunnaki.utu.cycle._parts import UtuParts, load_parts, load_tactics_text, record_run
 from anunnaki.utu.cycle._stages import (
     OPERATOR,
     TICK,
@@ -214,19 +214,7 @@ class AutonomicManager(Closing):
         self._state_cache: AnalysisState | None = None
         if isinstance(self.actuator, BusActuator) and self.actuator.on_notified is None:
             self.actuator.on_notified = self._notified
-        self.knowledge.set_meta(
-            "settings",
-            {
-                "dwell": config.dwell,
-                "warmup": config.warmup,
-                "failsafe": config.failsafe,
-                "escalate_to_run_stop": config.escalate_to_run_stop,
-                "run_stop_service": config.run_stop.service,
-            },
-        )
-        if not self.knowledge.models_at() and parts.sources:
-            for kind, (path, text) in parts.sources.items():
-                self.knowledge.record_model(0.0, kind, path, text)
+        record_run(self.knowledge, parts)
         restarted = resuming(self.knowledge)
         self.monitor_stage = MonitorStage(parts)
         #: Operator calls, run-stops heard and lost nodes, queued for the next step.

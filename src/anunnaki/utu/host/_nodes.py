@@ -71,7 +71,13 @@ from anunnaki.topics import node_token, ready_service
 from anunnaki.utu._config import UtuConfig
 from anunnaki.utu.cycle._knowledge import Knowledge
 from anunnaki.utu.cycle._mape import Actuator
-from anunnaki.utu.cycle._parts import NodeConfigError, UtuParts, load_parts, open_knowledge
+from anunnaki.utu.cycle._parts import (
+    NodeConfigError,
+    UtuParts,
+    load_parts,
+    open_knowledge,
+    record_run,
+)
 from anunnaki.utu.cycle._stages import (
     AnalyzeStage,
     DecisionTail,
@@ -592,7 +598,12 @@ class AnalyzeNode(UtuNode):
         return self.stage.started_at is None or self.clock.now() >= self.stage.now + 1.0 / self.rate
 
     def spin_once(self) -> float:
-        """A cycle as soon as a batch arrives and the last cycle is done."""
+        """A cycle as soon as a batch arrives and the last cycle is done.
+
+        The simulation time is taken every round, with a monitor up or not: its queue must
+        not fill (the bus would drop and log every further tick).
+        """
+        self._take_clock()
         self.settle()
         if not self._loop_complete():
             return self._period()  # woken when a node comes up (the presence watch)
@@ -833,20 +844,8 @@ class KnowledgeNode(UtuNode):
 
     def bring_up(self) -> None:
         """Record settings and model texts; follow the cycle's messages; offer queries."""
-        kb, config = self.knowledge, self.config
-        kb.set_meta(
-            "settings",
-            {
-                "dwell": config.dwell,
-                "warmup": config.warmup,
-                "failsafe": config.failsafe,
-                "escalate_to_run_stop": config.escalate_to_run_stop,
-                "run_stop_service": config.run_stop.service,
-            },
-        )
-        if not kb.models_at():
-            for kind, (path, text) in self.parts.sources.items():
-                kb.record_model(0.0, kind, path, text)
+        kb = self.knowledge
+        record_run(kb, self.parts)
         self.tail = DecisionTail(kb)
         self.stage = KnowledgeStage(self.parts, kb)
         self._next_publish = 0.0
