@@ -384,6 +384,8 @@ class AnalyzeStage:
         self.seq = 0
         self.eligible: list[str] = []
         self.refused = 0  # batches refused as implausible (see _plausible)
+        #: A reaction took inputs and decided nothing: the next cycle ends that step.
+        self.reacted = False
         self._marked: dict[int, tuple[float, bool]] = {}
         if resuming(knowledge):
             self._restore()
@@ -459,13 +461,15 @@ class AnalyzeStage:
             out_ops.append(self._apply_op(dict(op), t, changed))
         eligible = a.eligible()
         if unless_idle is not None and not changed and not out_ops and eligible == unless_idle:
+            self.reacted = self.reacted or bool(inputs)
             return None
         self.eligible = eligible
         self.seq += 1
         self._marked[self.seq] = (
             t,
-            bool(not self.cycles or inputs or ticked or changed or batch.ops),
+            bool(not self.cycles or inputs or ticked or changed or batch.ops or self.reacted),
         )
+        self.reacted = False
         tactics = self.parts.tactics.tactics
         post_goals = {
             c.goal: status_name(a.evaluator.state(c.goal).status)

@@ -21,6 +21,7 @@ from typing import Any
 
 from anunnaki import topics
 from anunnaki.bus import Bus, RunStop, Sample, body_of
+from anunnaki.clock import Clock, SimClock
 from anunnaki.errors import AnunnakiError
 from anunnaki.utu._config import UtuConfig
 from anunnaki.utu.cycle._stages import DecisionTail, MonitorStage, decision_dict
@@ -30,6 +31,7 @@ __all__ = [
     "OperatorDesk",
     "Watchdog",
     "announce_run_stop",
+    "idle_wait",
     "publish_decisions",
     "run_stop_listener",
     "watchdog_run_stop",
@@ -166,6 +168,17 @@ def watchdog_run_stop(
     reason = f"watchdog: {what} has not finished a round for {stalled:.1f} s"
     log.error("utu: %s; run-stop", reason)
     stop_platform(bus, config, reason=reason, caller=caller)
+
+
+def idle_wait(clock: Clock, period: float) -> float:
+    """Seconds of wall time an idle loop waits for work.
+
+    ``period`` on the wall clock; on a simulation clock the period scaled by its speed (at
+    most 0.5 s).
+    """
+    if isinstance(clock, SimClock) and clock.speed > 0:
+        return min(period / max(clock.speed, 0.05), 0.5)
+    return period
 
 
 def announce_run_stop(bus: Bus, utu: str, caller: str, reason: str) -> None:

@@ -72,6 +72,7 @@ from anunnaki.utu.host._desk import (
     OperatorDesk,
     Watchdog,
     announce_run_stop,
+    idle_wait,
     publish_decisions,
     run_stop_listener,
     watchdog_run_stop,
@@ -676,16 +677,18 @@ class AutonomicManager(Closing):
                 if until is not None and self.clock.now() >= until:
                     break
                 if not self._inputs and not self.desk.pending and not self._pending():
-                    wait = period
-                    if isinstance(self.clock, SimClock) and self.clock.speed > 0:
-                        wait = min(period / max(self.clock.speed, 0.05), 0.5)
-                    self._wake.wait(wait)
+                    self._wake.wait(self._idle_wait(period))
+            if self.analyze_stage.reacted and not self._closed:
+                self.step()  # a normal end ends the step its last reactions began
         finally:
             self._live = False
             if dog is not None:
                 dog.close()
 
     _inline = False
+
+    def _idle_wait(self, period: float) -> float:
+        return idle_wait(self.clock, period)
 
     def _watchdog_fired(self, stalled: float) -> None:
         assert self.bus is not None

@@ -93,6 +93,7 @@ from anunnaki.utu.host._desk import (
     OperatorDesk,
     Watchdog,
     announce_run_stop,
+    idle_wait,
     publish_decisions,
     run_stop_listener,
     watchdog_run_stop,
@@ -268,10 +269,7 @@ class UtuNode(Node):
 
     def _period(self) -> float:
         """Seconds of wall time between two time-driven rounds (scaled by the sim speed)."""
-        period = 1.0 / self.rate
-        if isinstance(self.clock, SimClock) and self.clock.speed > 0:
-            return min(period / max(self.clock.speed, 0.05), 0.5)
-        return period
+        return idle_wait(self.clock, 1.0 / self.rate)
 
     def _flush(self) -> None:
         if self._kb is not None:
