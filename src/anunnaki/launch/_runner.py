@@ -496,8 +496,8 @@ class _Runner:
         """Watch the Utu nodes this launch does not run (started by hand elsewhere).
 
         The launch run-stops the platform when one of its own nodes dies; when one of the
-        others does, the launch's first node in :data:`~anunnaki.utu.ACT_ORDER` acts, as the
-        survivors started by hand do for one another (:class:`~anunnaki.utu.PeerWatch`).
+        others does, the launch's first node in :data:`~anunnaki.utu.host.ACT_ORDER` acts, as the
+        survivors started by hand do for one another (:class:`~anunnaki.utu.host.PeerWatch`).
         ``None`` when the launch runs all five.
         """
         ours = [n for n in ACT_ORDER if n in self.launch.nodes]

@@ -469,7 +469,7 @@ class Executor:
     def run_actions(self, rt: TacticRuntime, now: float) -> None:
         """Run the remaining actions of a running tactic (none while one is in flight).
 
-        A request goes to the :class:`~anunnaki.utu.ActionRunner` when there is one: the
+        A request goes to the :class:`~anunnaki.utu.cycle.ActionRunner` when there is one: the
         tactic stays ``running`` and :meth:`collect` continues it when the outcome is back.
         """
         if rt.name in self.waiting:

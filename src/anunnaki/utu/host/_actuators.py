@@ -66,7 +66,7 @@ class BusActuator:
     """Actions over the bus: publish on topics, request services, notify through a Notifier.
 
     ``blocking``: a request waits for the managed system, so a loop runs requests through
-    an :class:`~anunnaki.utu.ThreadRunner` (off its path).
+    an :class:`~anunnaki.utu.host.ThreadRunner` (off its path).
     """
 
     blocking = True

@@ -1,6 +1,6 @@
 """Actions off the loop's path: service requests run on worker threads with their own deadline.
 
-:class:`ThreadRunner` is the live :class:`~anunnaki.utu.ActionRunner` (see
+:class:`ThreadRunner` is the live :class:`~anunnaki.utu.cycle.ActionRunner` (see
 :mod:`anunnaki.utu.cycle._actions` for why actions leave the loop): a few worker threads; an
 action whose thread has not come back by its timeout plus a grace period is reported failed
 ("no reply within …") and its thread abandoned, so even an actuator that ignores its own
