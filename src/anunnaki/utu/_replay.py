@@ -42,14 +42,14 @@ from anunnaki.goals import Evaluator, GoalModel
 from anunnaki.tactics import TacticSet
 from anunnaki.trace import Phase, Record, TraceWriter
 from anunnaki.utu.cycle._actions import RecordedOutcome, ReplayRunner
-from anunnaki.utu.cycle._knowledge import SCHEMA_VERSION, Decision, InputRow, Knowledge, VerdictRow
-from anunnaki.utu.cycle._stages import (
+from anunnaki.utu.cycle._entries import (
     OPERATOR,
     RESTART,
     TICK,
     model_from_sources,
     tactics_from_sources,
 )
+from anunnaki.utu.cycle._knowledge import SCHEMA_VERSION, Decision, InputRow, Knowledge, VerdictRow
 from anunnaki.utu.host._actuators import RecordingActuator
 from anunnaki.utu.host._manager import AutonomicManager
 

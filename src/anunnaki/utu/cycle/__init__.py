@@ -8,15 +8,33 @@ inputs come from (a bus, :meth:`~anunnaki.utu.AutonomicManager.feed`, a replay),
 runs and how a stage's output reaches the next stage (a direct call, or a message on the
 bus). Import-linter keeps it so: the host imports the cycle, never the other way round.
 
-* ``_mape``: the parts — :class:`Monitor`, :class:`Analyzer`, :class:`Planner`,
-  :class:`Executor` (and the :class:`Actuator` they act through);
-* ``_actions``: how an action's outcome comes back (:class:`ActionRunner`, the replay's
-  :class:`ReplayRunner`);
-* ``_stages``: the five stages a host runs — one cycle's work of each part, exchanging the
-  typed cycle messages (``MonitorBatch``, ``AnalysisState``, ``ExecuteStatus``,
-  ``PlanStart``, ``CycleDone``), and the operator entries they apply;
-* ``_knowledge``: the store (SQLite, WAL) every stage writes;
-* ``_parts``: loading and checking the files a cycle runs on.
+A cycle visits the stages in a fixed order; each takes the previous one's message and
+returns its own (the typed cycle messages of :mod:`anunnaki.bus`)::
+
+    MonitorStage.batch ─MonitorBatch─▶ AnalyzeStage.analyze ─AnalysisState─▶
+    ExecuteStage.begin ─ExecuteStatus─▶ PlanStage.plan ─PlanStart─▶
+    ExecuteStage.complete ─CycleDone─▶ AnalyzeStage.finish
+
+Who owns what, one module each:
+
+* ``_monitor``: which topics are watched; the time of the cycle; each input's arrival time
+  (clamped into the cycle's interval, so a burst keeps its spacing);
+* ``_analyze``: the goal model's evaluation, inputs/verdicts/step ends in Knowledge, node
+  losses (an agent's topics expire), the warm-up, the analysis of reloaded files;
+* ``_plan``: selection — when a tactic became eligible, queued/pending/rejected, the
+  ``deferred`` reasons, once-per-episode firing;
+* ``_execute``: everything once a tactic starts — actions, deadlines, cooldowns, attempts,
+  postconditions, escalation (next tactic → fail-safe → run-stop) — and the operator flags
+  (pause, run-stop);
+* ``_knowledge_stage``: queries, and the decisions written since the last publication;
+* ``_entries``: what they share — the markers in Knowledge, operator entries, restarts,
+  reloads, and which fields of a tactic's runtime plan or execute owns;
+* ``_mape``: the parts the stages run — :class:`Monitor`, :class:`Analyzer`,
+  :class:`Planner`, :class:`Executor`;
+* ``_actions``: the :class:`Actuator` actions go through and how an outcome comes back
+  (:class:`ActionRunner`, the replay's :class:`ReplayRunner`);
+* ``_knowledge``: the store (SQLite, WAL) every stage writes, the single source of truth
+  (guideline N8); ``_parts``: loading and checking the files a cycle runs on.
 
 The public names are re-exported by :mod:`anunnaki.utu`.
 """
@@ -29,8 +47,12 @@ from anunnaki.utu.cycle._actions import (
     RecordedOutcome,
     ReplayRunner,
 )
+from anunnaki.utu.cycle._analyze import AnalyzeStage
+from anunnaki.utu.cycle._execute import ExecuteStage
 from anunnaki.utu.cycle._knowledge import Decision, InputRow, Knowledge, TacticRow, VerdictRow
+from anunnaki.utu.cycle._knowledge_stage import DecisionTail, KnowledgeStage
 from anunnaki.utu.cycle._mape import Analyzer, Executor, Monitor, Planner, TacticRuntime
+from anunnaki.utu.cycle._monitor import MonitorStage
 from anunnaki.utu.cycle._parts import (
     NodeConfigError,
     UtuParts,
@@ -38,14 +60,7 @@ from anunnaki.utu.cycle._parts import (
     load_tactics_text,
     open_knowledge,
 )
-from anunnaki.utu.cycle._stages import (
-    AnalyzeStage,
-    DecisionTail,
-    ExecuteStage,
-    KnowledgeStage,
-    MonitorStage,
-    PlanStage,
-)
+from anunnaki.utu.cycle._plan import PlanStage
 
 __all__ = [
     "ActionOutcome",

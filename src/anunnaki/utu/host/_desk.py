@@ -24,7 +24,8 @@ from anunnaki.bus import Bus, RunStop, Sample, body_of
 from anunnaki.clock import Clock, SimClock
 from anunnaki.errors import AnunnakiError
 from anunnaki.utu._config import UtuConfig
-from anunnaki.utu.cycle._stages import DecisionTail, MonitorStage, decision_dict
+from anunnaki.utu.cycle._knowledge_stage import DecisionTail, decision_dict
+from anunnaki.utu.cycle._monitor import MonitorStage
 from anunnaki.utu.host._actuators import stop_platform
 
 __all__ = [

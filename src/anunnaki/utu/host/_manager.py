@@ -1,7 +1,7 @@
 """The autonomic manager: Monitor → Analyze → Plan → Execute over Knowledge (paper Fig. 8).
 
 :class:`AutonomicManager` is Utu in one process: the five stages of
-:mod:`anunnaki.utu.cycle._stages` called one after the other — the same code the per-node
+:mod:`anunnaki.utu.cycle` called one after the other — the same code the per-node
 deployment runs, here with direct calls instead of bus hops. ``step(now)`` runs one
 deterministic cycle — tests, simulation and replay drive it — and ``spin()`` runs it live.
 
@@ -52,21 +52,15 @@ from anunnaki.topics import UTU_NODES as NODE_NAMES
 from anunnaki.topics import node_token, ready_service
 from anunnaki.utu._config import RunStopConfig, UtuConfig
 from anunnaki.utu.cycle._actions import ActionRunner
+from anunnaki.utu.cycle._analyze import AnalyzeStage
+from anunnaki.utu.cycle._entries import OPERATOR, TICK, mark_restart, resuming
+from anunnaki.utu.cycle._execute import ExecuteStage
 from anunnaki.utu.cycle._knowledge import Knowledge
+from anunnaki.utu.cycle._knowledge_stage import DecisionTail, KnowledgeStage
 from anunnaki.utu.cycle._mape import Actuator, Analyzer, Executor, Monitor, Planner
+from anunnaki.utu.cycle._monitor import MonitorStage
 from anunnaki.utu.cycle._parts import UtuParts, load_parts, load_tactics_text, record_run
-from anunnaki.utu.cycle._stages import (
-    OPERATOR,
-    TICK,
-    AnalyzeStage,
-    DecisionTail,
-    ExecuteStage,
-    KnowledgeStage,
-    MonitorStage,
-    PlanStage,
-    mark_restart,
-    resuming,
-)
+from anunnaki.utu.cycle._plan import PlanStage
 from anunnaki.utu.host._actuators import BusActuator, RecordingActuator
 from anunnaki.utu.host._desk import (
     OperatorDesk,

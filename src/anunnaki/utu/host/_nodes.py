@@ -2,7 +2,7 @@
 
 The paper runs Utu as ROS nodes (§4.1.4, Fig. 13): ``/utu_monitor``, ``/utu_analyze``,
 ``/utu_plan``, ``/utu_execute`` and ``/utu_knowledge``. Each node here hosts one stage of
-:mod:`anunnaki.utu.cycle._stages` — the very code :class:`~anunnaki.utu.AutonomicManager` calls
+:mod:`anunnaki.utu.cycle` — the very code :class:`~anunnaki.utu.AutonomicManager` calls
 directly — and carries the stage's typed messages over the bus, so a node runs alone
 (``anunnaki node plan``), with others in one process, or each in its own process over
 zenoh, and every grouping decides as the manager does.
@@ -69,8 +69,13 @@ from anunnaki.topics import UTU_NODES as NODE_NAMES
 from anunnaki.topics import UtuNodeName as NodeName
 from anunnaki.topics import node_token, ready_service
 from anunnaki.utu._config import UtuConfig
+from anunnaki.utu.cycle._analyze import AnalyzeStage
+from anunnaki.utu.cycle._entries import mark_restart, resuming
+from anunnaki.utu.cycle._execute import ExecuteStage
 from anunnaki.utu.cycle._knowledge import Knowledge
+from anunnaki.utu.cycle._knowledge_stage import DecisionTail, KnowledgeStage
 from anunnaki.utu.cycle._mape import Actuator
+from anunnaki.utu.cycle._monitor import MonitorStage
 from anunnaki.utu.cycle._parts import (
     NodeConfigError,
     UtuParts,
@@ -78,16 +83,7 @@ from anunnaki.utu.cycle._parts import (
     open_knowledge,
     record_run,
 )
-from anunnaki.utu.cycle._stages import (
-    AnalyzeStage,
-    DecisionTail,
-    ExecuteStage,
-    KnowledgeStage,
-    MonitorStage,
-    PlanStage,
-    mark_restart,
-    resuming,
-)
+from anunnaki.utu.cycle._plan import PlanStage
 from anunnaki.utu.host._actuators import BusActuator
 from anunnaki.utu.host._desk import (
     OperatorDesk,
