@@ -108,16 +108,9 @@ from anunnaki.bus._zenoh import free_port
 from anunnaki.managed import ScriptedSystem
 from anunnaki.messages import Generic
 from anunnaki.trace import Record
-from anunnaki.utu import (
-    NODE_NAMES,
-    AutonomicManager,
-    RunLogError,
-    build_node,
-    load_parts,
-    open_run,
-    parse_config,
-    replay,
-)
+from anunnaki.utu import NODE_NAMES, AutonomicManager, RunLogError, build_node, parse_config, replay
+from anunnaki.utu.cycle import load_parts
+from anunnaki.utu.runlog import open_run
 
 ROOT = Path(__file__).resolve().parents[1]
 ROVER = ROOT / "examples" / "rover"
@@ -940,12 +933,14 @@ class _Live:
 
 def _bring_up(deployment: str, bus: Bus) -> _Live:
     parts = load_parts(parse_config(UTU_CONFIG.format(rover=ROVER)))
-    from anunnaki.utu import ComposedUtu, Knowledge
+    from anunnaki.utu import AutonomicManager, Knowledge
 
     kb = Knowledge()
     halt = threading.Event()
     if deployment == "one-process":
-        nodes: list[Any] = [ComposedUtu(parts, bus=bus, knowledge=kb, rates=NODE_RATES)]
+        nodes: list[Any] = [
+            AutonomicManager.from_config(parts, bus=bus, knowledge=kb, nodes=NODE_RATES)
+        ]
     else:
         nodes = [
             build_node(name, parts, bus=bus, knowledge=kb, rate=rate)

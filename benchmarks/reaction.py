@@ -70,6 +70,7 @@ import pstats
 import random
 import re
 import shutil
+import sqlite3
 import subprocess
 import sys
 import tempfile
@@ -87,6 +88,7 @@ import bus_pingpong  # benchmarks/bus_pingpong.py: the bus's own round trips
 import yaml
 
 from anunnaki.bus import Bus, BusConfig, BusError, BusTimeout, InprocHub, Sample, open_bus
+from anunnaki.clock import Clock, WallClock
 from anunnaki.utu import (
     AutonomicManager,
     BusActuator,
@@ -404,14 +406,17 @@ class InprocSetup:
         self,
         config_path: Path,
         *,
-        manager_cls: type[AutonomicManager] = AutonomicManager,
+        clock: Clock | None = None,
         actuator: Callable[[Bus], Any] | None = None,
     ) -> None:
         self.config = load_config(config_path)
         self.bus = open_bus("inproc", name="bench-a")
         self.rover = FakeRover(self.bus, "a")
-        self.manager = manager_cls.from_config(
-            self.config, bus=self.bus, actuator=None if actuator is None else actuator(self.bus)
+        self.manager = AutonomicManager.from_config(
+            self.config,
+            bus=self.bus,
+            clock=clock,
+            actuator=None if actuator is None else actuator(self.bus),
         )
         self._stop = threading.Event()
         self._thread = threading.Thread(
@@ -495,6 +500,7 @@ class NodesSetup:
         Knowledge(tmp / "utu-c.db").close()  # created before the nodes open it together
         self.rover = FakeRover(self.bus, "c")
         self.log_path = tmp / "utu-c.log"
+        self._poll = threading.Event()  # never set: paces the readiness polls
         self._log = self.log_path.open("w")
         env = dict(os.environ)
         env["PYTHONPATH"] = os.pathsep.join(
@@ -545,7 +551,7 @@ class NodesSetup:
                 reply = self.bus.request(f"/utu/{name}/ready", {}, timeout=min(remaining, 5.0))
                 if reply.to_body().get("ready"):
                     return
-            self.bus._closed.wait(0.05)
+            self._poll.wait(0.05)
 
     def close(self) -> None:
         with contextlib.suppress(Exception):
@@ -682,6 +688,7 @@ def run_latency(
     *,
     nodes: Mapping[str, float] | None,
     c_every: int,
+    back_to_back: int = BACK_TO_BACK,
 ) -> tuple[Samples, dict[str, Any]]:
     """Setups (a), (b) and, with ``nodes`` (rates), (c), and the bus baselines, interleaved:
     every round runs (a) and (b), every ``c_every``-th round (c) too, in a shuffled order,
@@ -734,13 +741,13 @@ def run_latency(
             one_round(i, record=True)
         seconds = time.perf_counter() - started
         # bus_pingpong's own measurement, back to back, over the same sessions.
-        back_to_back = {
-            "zenoh": b.probe.back_to_back(BACK_TO_BACK, BACK_TO_BACK // 10),
-            "inproc": base.probe.back_to_back(BACK_TO_BACK, BACK_TO_BACK // 10),
+        rounds = {
+            "zenoh": b.probe.back_to_back(back_to_back, back_to_back // 10),
+            "inproc": base.probe.back_to_back(back_to_back, back_to_back // 10),
         }
         info |= {
             "seconds": round(seconds, 2),
-            "back_to_back_us": back_to_back,
+            "back_to_back_us": rounds,
             "set_mode_requests": {s.label: len(s.rover.set_mode_ns) for s in setups},
             "stop_requests": {s.label: s.rover.stops for s in setups},
             "resettled_after_trial": samples.resettles,
@@ -778,50 +785,52 @@ def run_nodes_fast(trials: int, tmp: Path, tactics: Path, seed: int, rate: float
 
 
 # -- breakdown of setup (a): where the time goes -----------------------------------------------
-class _StampedActuator(BusActuator):
-    """The bus actuator, stamping when the fail-safe's request leaves the step."""
+class _StampedClock(WallClock):
+    """The wall clock, stamping each reading: a step reads its clock once, at its start
+    (after taking its inputs), so the last reading before an action is that step's start."""
 
-    def __init__(self, bus: Bus, manager: list[_StampedManager]) -> None:
+    def __init__(self) -> None:
+        self.read_ns = 0
+
+    def now(self) -> float:
+        self.read_ns = time.perf_counter_ns()
+        return super().now()
+
+
+class _StampedActuator(BusActuator):
+    """The bus actuator, stamping (step start, request) when the fail-safe's request leaves
+    the step, while armed."""
+
+    def __init__(self, bus: Bus, clock: _StampedClock) -> None:
         super().__init__(bus)
-        self._manager = manager
+        self.clock = clock
+        self.armed = False
+        self.stamps: list[tuple[int, int]] = []
 
     def request(self, service: str, payload: Mapping[str, Any], timeout: float) -> Any:
-        m = self._manager[0] if self._manager else None  # None while starting up
-        if m is not None and m.armed and service == "/rover/set_mode":
-            m.stamps.append((m.step_started, time.perf_counter_ns()))
+        if self.armed and service == "/rover/set_mode":
+            self.stamps.append((self.clock.read_ns, time.perf_counter_ns()))
         return super().request(service, payload, timeout)
-
-
-class _StampedManager(AutonomicManager):
-    """The manager, stamping the start of each step."""
-
-    def _init(self, *args: Any, **kwargs: Any) -> None:
-        self.armed = False
-        self.step_started = 0
-        self.stamps: list[tuple[int, int]] = []
-        super()._init(*args, **kwargs)
-
-    def _step(self, now: float | None, *, react: bool) -> None:
-        self.step_started = time.perf_counter_ns()
-        super()._step(now, react=react)
 
 
 def run_breakdown(trials: int, tmp: Path, tactics: Path, seed: int) -> dict[str, Any]:
     """Stamp each stage of the in-process path (instrumented, so not the headline figures).
 
-    Stages: publish -> the step that takes the message starts -> the step hands the
-    fail-safe's request to the actuator (``actuator.request``) -> the rover's handler runs.
+    Stages: publish -> the step that takes the message starts (its clock reading) -> the
+    step hands the fail-safe's request to the actuator (``actuator.request``) -> the rover's
+    handler runs. Stamped through the manager's public hooks: the clock and the actuator it
+    is built with.
     """
     config = write_config(tmp, "utu-prof", tactics, bus={"kind": "inproc"})
-    holder: list[_StampedManager] = []
-    setup = InprocSetup(
-        config,
-        manager_cls=_StampedManager,
-        actuator=lambda bus: _StampedActuator(bus, holder),
-    )
-    m = setup.manager
-    assert isinstance(m, _StampedManager)
-    holder.append(m)
+    clock = _StampedClock()
+    stamped: list[_StampedActuator] = []
+
+    def actuator(bus: Bus) -> _StampedActuator:
+        stamped.append(_StampedActuator(bus, clock))
+        return stamped[0]
+
+    setup = InprocSetup(config, clock=clock, actuator=actuator)
+    act = stamped[0]
     rover = setup.rover
     rng = random.Random(seed)
     gate = threading.Event()
@@ -829,13 +838,13 @@ def run_breakdown(trials: int, tmp: Path, tactics: Path, seed: int) -> dict[str,
     try:
         rover.settle(gate)
         for i in range(10 + trials):
-            m.stamps.clear()
-            m.armed = True
+            act.stamps.clear()
+            act.armed = True
             t0, k = rover.violate()
             ok = rover.wait(lambda k=k: len(rover.set_mode_ns) > k)  # type: ignore[misc]
-            m.armed = False
-            if ok and i >= 10 and m.stamps:
-                step_t, action_t = m.stamps[0]
+            act.armed = False
+            if ok and i >= 10 and act.stamps:
+                step_t, action_t = act.stamps[0]
                 rows.append((t0, step_t, action_t, rover.set_mode_ns[k]))
             if not (ok and rover.wait_state(_handed_over) and rover.reset()):
                 rover.settle(gate)
@@ -973,7 +982,8 @@ def throughput_feed(
     its own arrival time (as the bus's sender stamps do live)."""
     config = _fresh_config(tmp, f"feed-{batch}", tactics, bus={"kind": "inproc"})
     knowledge = Knowledge(config.knowledge)
-    mode = knowledge._db.execute("PRAGMA journal_mode").fetchone()[0]
+    with contextlib.closing(sqlite3.connect(config.knowledge)) as db:  # WAL is the file's
+        mode = db.execute("PRAGMA journal_mode").fetchone()[0]
     manager = AutonomicManager.from_config(config, knowledge=knowledge)  # no bus: recorded
     t = 0.0
     # Nominal first, with rates defined (one message per topic 50 ms apart).
@@ -1192,10 +1202,7 @@ def _report_log(path: Path, what: str) -> None:
 def per_node_mode() -> bool:
     """Whether ``anunnaki node`` (one process per Utu node) exists in this tree."""
     return (
-        all(
-            importlib.util.find_spec(m) is not None
-            for m in ("anunnaki.utu._nodes", "anunnaki.cli._run")
-        )
+        all(importlib.util.find_spec(m) is not None for m in ("anunnaki.utu.host", "anunnaki.cli"))
         and (ROVER / "utu.yaml").is_file()
     )
 
@@ -1260,11 +1267,20 @@ def main(argv: list[str] | None = None) -> int:
         "--fast-trials", type=int, default=100, help="trials of (c) at 1000 Hz (0: skip)"
     )
     parser.add_argument("--seed", type=int, default=7)
+    parser.add_argument(
+        "--quick",
+        action="store_true",
+        help="a few trials and messages of everything (the suite runs this; figures are "
+        "not meaningful)",
+    )
     parser.add_argument("--output", type=Path, default=DEFAULT_OUTPUT)
     parser.add_argument("--serve-manager", metavar="CONFIG", help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
     if args.serve_manager:
         return serve_manager(args.serve_manager)
+    if args.quick:
+        args.trials, args.warmup, args.messages = 4, 1, 2000
+        args.breakdown, args.c_every, args.fast_trials = 4, 4, 0
     logging.basicConfig(level=logging.WARNING, format="%(levelname)s %(name)s: %(message)s")
     began = time.perf_counter()
     tmp = Path(tempfile.mkdtemp(prefix="anunnaki-reaction-"))
@@ -1281,6 +1297,7 @@ def main(argv: list[str] | None = None) -> int:
             args.seed,
             nodes=nodes,
             c_every=args.c_every,
+            back_to_back=50 if args.quick else BACK_TO_BACK,
         )
         c_fast = None
         if nodes is not None and args.fast_trials > 0 and "c_failed" not in info:

@@ -434,7 +434,7 @@ DOC = (Path(__file__).resolve().parents[2] / "docs" / "decision-log.md").read_te
 
 
 def test_the_doc_lists_every_kind_of_decision() -> None:
-    from anunnaki.utu._replay import KINDS
+    from anunnaki.utu.runlog import KINDS
 
     table = DOC[DOC.index("### Kinds of decisions") : DOC.index("## `anunnaki log`")]
     documented = {

@@ -29,7 +29,8 @@ import pytest
 from anunnaki.bus import InprocHub, open_bus
 from anunnaki.managed import ScriptedSystem
 from anunnaki.topics import DECISIONS as DECISIONS_TOPIC
-from anunnaki.utu import AutonomicManager, DecisionTail, load_config
+from anunnaki.utu import AutonomicManager, load_config
+from anunnaki.utu.cycle import DecisionTail
 
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent.parent

@@ -28,7 +28,8 @@ from typing import IO, Any, Self, TypeVar
 
 from anunnaki.managed import ScriptedSystem
 from anunnaki.trace import Record
-from anunnaki.utu import Decision, TacticRow
+from anunnaki.utu import Decision
+from anunnaki.utu.cycle import TacticRow
 
 ROOT = Path(__file__).resolve().parents[2]
 DATA = ROOT / "tests" / "data" / "utu"

@@ -10,10 +10,9 @@ from helpers_procs import wait_until
 
 from anunnaki.bus import open_bus
 from anunnaki.managed import ScriptedSystem
-from anunnaki.utu import AutonomicManager, Knowledge, parse_config
-from anunnaki.utu._actions import RecordedOutcome, ReplayRunner, ThreadRunner
-from anunnaki.utu._mape import ActionOutcome
-from anunnaki.utu._replay import replay
+from anunnaki.utu import ActionOutcome, AutonomicManager, Knowledge, parse_config, replay
+from anunnaki.utu.cycle import RecordedOutcome, ReplayRunner
+from anunnaki.utu.host import ThreadRunner
 
 ROVER = Path(__file__).resolve().parents[2] / "examples" / "rover"
 

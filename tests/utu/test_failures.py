@@ -337,7 +337,7 @@ def test_a_dead_detector_starts_the_fail_safe_in_the_step_that_sees_it() -> None
             assert of(manager.knowledge.decisions(), "started") == []
             detector.close()  # as kill -9 withdraws it
             # Heard on the bus's liveliness thread: queued before the next step.
-            wait_until(lambda: len(manager._ops) == 1, 10, "the loss of /lm_manager queued")
+            wait_until(lambda: len(manager.desk) == 1, 10, "the loss of /lm_manager queued")
             lm_bus.publish(ORACLE, assessment)  # the oracle lives on and sees nothing wrong
             t_kill = after(3.0)
             rover.step(t_kill)

@@ -15,7 +15,7 @@ import pytest
 from anunnaki.bus import Sample, open_bus
 from anunnaki.messages import Generic
 from anunnaki.utu import AutonomicManager, RecordingActuator, parse_config
-from anunnaki.utu._intake import FIRST, FLOOR, IntakeBudget
+from anunnaki.utu.host._intake import FIRST, FLOOR, IntakeBudget
 
 ROVER = Path(__file__).parents[2] / "examples" / "rover"
 

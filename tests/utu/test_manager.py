@@ -284,7 +284,7 @@ def test_operator_services_on_the_bus(bus) -> None:  # type: ignore[no-untyped-d
 
         bus.publish("/utu/run_stop", RunStop(reason="e-stop pressed", caller="teleop-node"))
         deadline = time.monotonic() + 5
-        while not m._ops and time.monotonic() < deadline:
+        while not m.desk.pending and time.monotonic() < deadline:
             time.sleep(0.005)
         m.step(2.0)
         rs = next(d for d in m.knowledge.decisions() if d.kind == "run_stop")
@@ -620,7 +620,12 @@ def test_a_flood_does_not_hold_a_step(tmp_path: Path) -> None:
 
 def test_the_watchdog_run_stops_a_stuck_loop(tmp_path: Path) -> None:
     """A loop that has not finished a step within ``watchdog`` s run-stops the platform
-    from the watchdog's thread; the loop records it once it moves again (issue #12)."""
+    from the watchdog's thread; the loop records it once it moves again (issue #12).
+
+    As a node's watchdog does (one behaviour, ``host/_desk.py``): through the run-stop
+    service on the bus, not the actuator (which may be what hangs), announced on
+    ``/utu/run_stop`` with caller ``watchdog:<name>``.
+    """
     from helpers_procs import wait_until
 
     from anunnaki.messages import RunStop
@@ -640,17 +645,21 @@ def test_the_watchdog_run_stops_a_stuck_loop(tmp_path: Path) -> None:
 
     with open_bus("inproc") as bus:
         heard: list[RunStop] = []
+        stops: list[dict[str, object]] = []
         bus.subscribe("/utu/run_stop", lambda s: heard.append(s.message), queue=8)
+        bus.service("/rover/stop", lambda m: stops.append(m.to_body()) or {"ok": True})
         act = RecordingActuator()
         m = AutonomicManager.from_config(cfg, bus=bus, actuator=act)
         stop = threading.Event()
         spinner = threading.Thread(target=m.spin, args=(stop,), kwargs={"on_step": on_step})
         spinner.start()
         try:
-            asked = ("request", "/rover/stop", {"reason": "run-stop"})
-            wait_until(lambda: asked in act.calls, 10, "the watchdog's run-stop request")
+            wait_until(lambda: bool(stops), 10, "the watchdog's run-stop request")
             assert len(rounds) == 3  # still stuck: the platform was told from outside the loop
+            assert stops == [{"reason": "run-stop"}]
+            assert act.calls == []  # not through the actuator
             wait_until(lambda: any("watchdog" in r.reason for r in heard), 10, "its announcement")
+            assert heard[0].caller == "watchdog:utu"
             release.set()
             wait_until(lambda: m.run_stopped, 10, "the loop recording the run-stop")
         finally:
@@ -659,4 +668,4 @@ def test_the_watchdog_run_stops_a_stuck_loop(tmp_path: Path) -> None:
             spinner.join(10)
             made = [(d.kind, d.data.get("caller")) for d in m.knowledge.decisions()]
             m.close()
-    assert ("run_stop", "watchdog") in made
+    assert ("run_stop", "watchdog:utu") in made

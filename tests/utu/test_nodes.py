@@ -28,18 +28,15 @@ from anunnaki.topics import DECISIONS as DECISIONS_TOPIC
 from anunnaki.topics import node_token, ready_service
 from anunnaki.utu import (
     NODE_NAMES,
-    AnalyzeNode,
     AutonomicManager,
-    ExecuteNode,
     Knowledge,
     NodeConfigError,
-    PlanNode,
     UtuNode,
     build_node,
-    load_parts,
     parse_config,
-    step_nodes,
 )
+from anunnaki.utu.cycle import load_parts
+from anunnaki.utu.host import AnalyzeNode, ExecuteNode, PlanNode, step_nodes
 
 ROVER = Path(__file__).parents[2] / "examples" / "rover"
 
@@ -129,8 +126,8 @@ class Deployment:
     def queued_ops(self) -> int:
         """Operator calls waiting for the next step."""
         if self.manager is not None:
-            return len(self.manager._ops)
-        return len(self.nodes["monitor"]._ops)  # type: ignore[attr-defined]
+            return len(self.manager.desk)
+        return len(self.nodes["monitor"].desk)  # type: ignore[attr-defined]
 
     def halted(self) -> bool:
         if self.manager is not None:
@@ -353,7 +350,8 @@ def test_bad_configuration_fails_at_bring_up_with_file_and_line(tmp_path) -> Non
             )
         )
     with open_bus("inproc") as bus:
-        with pytest.raises(NodeConfigError, match="monitor, analyze, plan, execute, knowledge"):
+        names = "valid names: analyze, execute, knowledge, monitor, plan"
+        with pytest.raises(NodeConfigError, match=names):
             build_node("planner", config(), bus=bus)
         with pytest.raises(NodeConfigError, match="':memory:'"):
             build_node("analyze", config(), bus=bus)

@@ -36,7 +36,7 @@ from aiosmtpd.controller import Controller
 from aiosmtpd.smtp import SMTP, AuthResult, Envelope, LoginPassword, Session
 
 from anunnaki.tactics import NotifyAction
-from anunnaki.utu._notify import (
+from anunnaki.utu.host._notify import (
     LOGGER_NAME,
     Notification,
     Notifier,
@@ -864,7 +864,7 @@ def _disconnected_by_timeout() -> smtplib.SMTPServerDisconnected:
     ],
 )
 def test_every_smtp_failure_is_explained(exc: OSError, stage: str, expected: str) -> None:
-    from anunnaki.utu._notify import _Smtp, _smtp_failure
+    from anunnaki.utu.host._notify import _Smtp, _smtp_failure
 
     cfg = SmtpConfig(host="mail.example.com", from_addr="utu@example.com", timeout=3)
     error = _smtp_failure(exc, _Smtp("SMTP server mail.example.com:25", stage, cfg, "op@x.org"))  # type: ignore[arg-type]

@@ -25,7 +25,8 @@ from anunnaki.bus import open_bus
 from anunnaki.bus._zenoh import free_port
 from anunnaki.managed import ScriptedSystem
 from anunnaki.topics import UTU_NODES
-from anunnaki.utu import ACT_ORDER, PeerWatch, parse_config, replay
+from anunnaki.utu import parse_config, replay
+from anunnaki.utu.host import ACT_ORDER, PeerWatch
 
 LAUNCH = """\
 anunnaki: launch/1

@@ -237,3 +237,33 @@ def test_a_service_handler_that_publishes_does_not_react_inline(live) -> None:  
     assert bus.request("/test/trigger", {}, timeout=2.0).to_body()["ok"] is True
     assert wait_for(lambda: bool(actuator.threads))
     assert actuator.threads[0] not in (handler_threads[0], threading.get_ident())
+
+
+def test_a_live_run_that_ends_normally_replays_without_a_cut_step(tmp_path: Path) -> None:
+    """Issue 21: ``anunnaki replay`` of a run that ended normally said ``the log ends
+    mid-step … (the run was killed?)``: the inputs of the last reactions (which decide
+    nothing and leave the step's end to the next time-driven step) had no step end after
+    them when the loop stopped. A loop that stops normally ends its step."""
+    from anunnaki.utu import replay
+
+    db = tmp_path / "run.db"
+    cfg = parse_config(
+        f"anunnaki: utu/1\ngoal_model: {ROVER}/goals.yaml\nbinding: {ROVER}/binding.yaml\n"
+        f"tactics: {ROVER}/tactics.xml\nknowledge: {db}\nrate: 0.5\nwarmup: 2.0\n"
+    )
+    with open_bus("inproc") as bus:
+        m = AutonomicManager.from_config(cfg, bus=bus, actuator=RecordingActuator())
+        stop = threading.Event()
+        spinner = threading.Thread(target=m.spin, args=(stop,), daemon=True)
+        spinner.start()
+        try:
+            nominal(bus, n=4, period=0.02)  # reactions; the time-driven step is 2 s away
+            assert wait_for(lambda: not any(q.pending for q in m.input_queues()))
+        finally:
+            stop.set()
+            m.wake()
+            spinner.join(5.0)
+            m.close()
+    report = replay(db)
+    assert not [n for n in report.notes if "mid-step" in n], report.notes
+    assert report.identical, report.notes

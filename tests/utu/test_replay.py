@@ -27,19 +27,18 @@ from anunnaki.topics import UTU_NODES
 from anunnaki.trace import read_trace
 from anunnaki.utu import (
     ActionOutcome,
-    AnalyzeNode,
     AutonomicManager,
     BusActuator,
     Knowledge,
     UtuNode,
     build_node,
     parse_config,
-    step_nodes,
 )
-from anunnaki.utu._replay import (
+from anunnaki.utu._replay import decisive
+from anunnaki.utu.host import AnalyzeNode, step_nodes
+from anunnaki.utu.runlog import (
     KINDS,
     RunLogError,
-    decisive,
     export_trace,
     open_run,
     rebuild_goal_state,
@@ -333,7 +332,7 @@ def test_operator_calls_and_time_only_steps_replay_identically(tmp_path: Path) -
             if t == 32.0:
                 manager.resume("alice")
             if t == 40.0:
-                manager._enqueue_op({"op": "node_lost", "node": "/oracle", "caller": "liveliness"})
+                manager.desk.enqueue({"op": "node_lost", "node": "/oracle", "caller": "liveliness"})
             if t == 52.0:
                 manager.run_stop(caller="alice", reason="end of the test")
             manager.step(t)
@@ -580,8 +579,8 @@ def test_a_run_stop_that_execute_never_acted_on_is_not_acted_on_in_replay(
             nodes.pop("execute").close()  # as kill -9 withdraws its token
             wait_until(lambda: not alive(), 10.0, "the analyze node to see execute gone")
             bus.publish("/utu/run_stop", RunStop(reason="node plan died", caller="launch:rover"))
-            ops = nodes["monitor"]._ops  # type: ignore[attr-defined]
-            wait_until(lambda: ops, 10.0, "the monitor to queue the run-stop")
+            desk = nodes["monitor"].desk  # type: ignore[attr-defined]
+            wait_until(lambda: desk.pending, 10.0, "the monitor to queue the run-stop")
             step_nodes(nodes, 27.05)
         finally:
             for node in nodes.values():

@@ -31,18 +31,15 @@ from rich.table import Table
 from rich.text import Text
 
 from anunnaki.errors import AnunnakiError
-from anunnaki.utu import (
+from anunnaki.utu import Decision, Knowledge, RunLogError, replay
+from anunnaki.utu.cycle import VerdictRow
+from anunnaki.utu.runlog import (
     KINDS,
-    Decision,
-    Knowledge,
-    RunLogError,
-    VerdictRow,
     export_trace,
     format_data,
     open_run,
     reading,
     rebuild_goal_state,
-    replay,
     run_models,
     run_span,
 )

@@ -22,7 +22,8 @@ from anunnaki.cli import _dashboard
 from anunnaki.launch import load_launch, run_launch, signals_to
 from anunnaki.managed import WritesReports
 from anunnaki.tokens import OPERATOR_TOKEN_ENV, user_operator_token
-from anunnaki.utu import NODE_NAMES, NodeConfigError, PeerWatch, build_node
+from anunnaki.utu import NODE_NAMES, NodeConfigError, build_node
+from anunnaki.utu.host import PeerWatch
 
 __all__ = ["add_parser", "run", "run_node"]
 

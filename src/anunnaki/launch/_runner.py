@@ -37,21 +37,9 @@ from anunnaki.launch._supervisor import (
     wait_ready,
 )
 from anunnaki.managed import ManagedContext, ManagedRun
-from anunnaki.utu import (
-    ACT_ORDER,
-    NODE_NAMES,
-    ComposedUtu,
-    Decision,
-    DecisionTail,
-    Knowledge,
-    MonitorNode,
-    PeerWatch,
-    UtuNode,
-    UtuParts,
-    build_node,
-    open_knowledge,
-    stop_platform,
-)
+from anunnaki.utu import NODE_NAMES, AutonomicManager, Decision, Knowledge, UtuNode, build_node
+from anunnaki.utu.cycle import DecisionTail, UtuParts, open_knowledge
+from anunnaki.utu.host import ACT_ORDER, MonitorNode, PeerWatch, stop_platform
 
 __all__ = ["RunResult", "format_decision", "run_launch"]
 
@@ -98,11 +86,11 @@ class _Printer:
 
 
 # -- lockstep ----------------------------------------------------------------------------------
-def _taken_here(nodes: Sequence[UtuNode | ComposedUtu]) -> Callable[[int], bool] | None:
+def _taken_here(nodes: Sequence[UtuNode | AutonomicManager]) -> Callable[[int], bool] | None:
     """In one process: Utu has taken its inputs when its input queues are empty."""
     subs: list[Any] = []
     for node in nodes:
-        if isinstance(node, ComposedUtu | MonitorNode):
+        if isinstance(node, AutonomicManager | MonitorNode):
             subs += node.input_queues()
     if not subs:
         return None
@@ -445,7 +433,7 @@ class _Runner:
         bus = open_bus(launch.bus, name=f"{launch.name}-launch")
         if self.on_bus is not None:
             self.on_bus(bus)
-        nodes: list[UtuNode | ComposedUtu] = []
+        nodes: list[UtuNode | AutonomicManager] = []
         threads: list[threading.Thread] = []
         halt = threading.Event()
         crashed: list[str] = []
@@ -510,8 +498,8 @@ class _Runner:
         """Watch the Utu nodes this launch does not run (started by hand elsewhere).
 
         The launch run-stops the platform when one of its own nodes dies; when one of the
-        others does, the launch's first node in :data:`~anunnaki.utu.ACT_ORDER` acts, as the
-        survivors started by hand do for one another (:class:`~anunnaki.utu.PeerWatch`).
+        others does, the launch's first node in :data:`~anunnaki.utu.host.ACT_ORDER` acts, as the
+        survivors started by hand do for one another (:class:`~anunnaki.utu.host.PeerWatch`).
         ``None`` when the launch runs all five.
         """
         ours = [n for n in ACT_ORDER if n in self.launch.nodes]
@@ -521,11 +509,15 @@ class _Runner:
 
     def _build_nodes(
         self, bus: Bus, kb: Knowledge, sim: SimClock | None, *, composed: bool
-    ) -> list[UtuNode | ComposedUtu]:
+    ) -> list[UtuNode | AutonomicManager]:
         """The launch's Utu nodes on ``bus``: the composed manager when all five are here."""
         launch = self.launch
         if composed:
-            return [ComposedUtu(self.parts, bus=bus, knowledge=kb, clock=sim, rates=launch.nodes)]
+            return [
+                AutonomicManager.from_config(
+                    self.parts, bus=bus, knowledge=kb, clock=sim, nodes=launch.nodes
+                )
+            ]
         return [
             build_node(name, self.parts, bus=bus, knowledge=kb, clock=sim, rate=rate)
             for name, rate in launch.nodes.items()
@@ -640,13 +632,13 @@ class _Runner:
 
 
 def _spin(
-    nodes: list[UtuNode | ComposedUtu], halt: threading.Event, crashed: list[str]
+    nodes: list[UtuNode | AutonomicManager], halt: threading.Event, crashed: list[str]
 ) -> list[threading.Thread]:
     """Spin each node on a thread of its own until ``halt``; failures go to ``crashed``."""
     threads = []
     for node in nodes:
 
-        def spin(node: UtuNode | ComposedUtu = node) -> None:
+        def spin(node: UtuNode | AutonomicManager = node) -> None:
             try:
                 node.spin(halt)
             except Exception as exc:
@@ -660,7 +652,7 @@ def _spin(
 
 
 def _halt(
-    halt: threading.Event, nodes: list[UtuNode | ComposedUtu], threads: list[threading.Thread]
+    halt: threading.Event, nodes: list[UtuNode | AutonomicManager], threads: list[threading.Thread]
 ) -> None:
     """Stop the nodes' spinning and wait (5 s each) for their threads."""
     halt.set()

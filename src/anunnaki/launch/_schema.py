@@ -44,7 +44,9 @@ from anunnaki.bus import BusConfig
 from anunnaki.errors import AnunnakiError, ModelFileError
 from anunnaki.launch._managed import resolve_kind, split_managed
 from anunnaki.managed import MANAGED, ManagedKind
-from anunnaki.utu import NODE_NAMES, NodeName, UtuConfig, UtuParts, load_config, load_parts
+from anunnaki.utu import NODE_NAMES, UtuConfig, load_config
+from anunnaki.utu.cycle import UtuParts, load_parts
+from anunnaki.utu.host import NodeName
 
 __all__ = ["Launch", "LaunchConfig", "LaunchError", "NodeSettings", "load_launch", "parse_launch"]
 

@@ -14,123 +14,64 @@ Five parts, composed by :class:`AutonomicManager`:
 
 ``manager.step(now)`` is one deterministic cycle (tests, simulation, replay);
 ``manager.spin()`` runs live. See docs/utu.md.
+
+Configuration: :class:`UtuConfig` (``anunnaki: utu/1``), read by :func:`load_config` or
+:func:`parse_config`. Actions reach the managed system through an :class:`Actuator`
+(:class:`BusActuator` live, :class:`RecordingActuator` in tests and replay), each giving
+an :class:`ActionOutcome`. One process per part: :func:`build_node` brings up the node
+:class:`UtuNode` called one of :data:`NODE_NAMES`; bad configuration raises
+:class:`NodeConfigError`. After a run, :func:`replay` repeats its decision log
+(:class:`ReplayReport`; an unreadable log raises :class:`RunLogError`).
+
+Two rooms below this face, each with its own: :mod:`anunnaki.utu.cycle` (the cycle once:
+parts, stages, knowledge rows, loading the files) and :mod:`anunnaki.utu.host` (where it
+meets the bus: the nodes, the inline manager, the operator desk, the watchdog); reading a
+run's log is :mod:`anunnaki.utu.runlog`.
 """
 
-from anunnaki.utu._actions import ActionRunner, RecordedOutcome, ReplayRunner, ThreadRunner
-from anunnaki.utu._actuators import BusActuator, RecordingActuator, stop_platform
 from anunnaki.utu._config import RunStopConfig, UtuConfig, load_config, parse_config
-from anunnaki.utu._knowledge import Decision, InputRow, Knowledge, TacticRow, VerdictRow
-from anunnaki.utu._manager import AutonomicManager
-from anunnaki.utu._mape import (
+from anunnaki.utu._replay import ReplayReport, RunLogError, replay
+from anunnaki.utu.cycle import (
     ActionOutcome,
     Actuator,
     Analyzer,
+    Decision,
     Executor,
+    Knowledge,
     Monitor,
+    NodeConfigError,
     Planner,
-    TacticRuntime,
 )
-from anunnaki.utu._nodes import (
+from anunnaki.utu.host import (
     NODE_NAMES,
-    AnalyzeNode,
-    ComposedUtu,
-    ExecuteNode,
-    KnowledgeNode,
-    MonitorNode,
-    NodeName,
-    PlanNode,
+    AutonomicManager,
+    BusActuator,
+    RecordingActuator,
     UtuNode,
     build_node,
-    step_nodes,
-)
-from anunnaki.utu._parts import (
-    NodeConfigError,
-    UtuParts,
-    load_parts,
-    load_tactics_text,
-    open_knowledge,
-)
-from anunnaki.utu._peers import ACT_ORDER, PeerWatch
-from anunnaki.utu._replay import (
-    KINDS,
-    ReplayReport,
-    RunLogError,
-    export_trace,
-    format_data,
-    open_run,
-    reading,
-    rebuild_goal_state,
-    replay,
-    run_models,
-    run_span,
-)
-from anunnaki.utu._stages import (
-    AnalyzeStage,
-    DecisionTail,
-    ExecuteStage,
-    KnowledgeStage,
-    MonitorStage,
-    PlanStage,
 )
 
 __all__ = [
-    "ACT_ORDER",
-    "KINDS",
     "NODE_NAMES",
     "ActionOutcome",
-    "ActionRunner",
     "Actuator",
-    "AnalyzeNode",
-    "AnalyzeStage",
     "Analyzer",
     "AutonomicManager",
     "BusActuator",
-    "ComposedUtu",
     "Decision",
-    "DecisionTail",
-    "ExecuteNode",
-    "ExecuteStage",
     "Executor",
-    "InputRow",
     "Knowledge",
-    "KnowledgeNode",
-    "KnowledgeStage",
     "Monitor",
-    "MonitorNode",
-    "MonitorStage",
     "NodeConfigError",
-    "NodeName",
-    "PeerWatch",
-    "PlanNode",
-    "PlanStage",
     "Planner",
-    "RecordedOutcome",
     "RecordingActuator",
     "ReplayReport",
-    "ReplayRunner",
     "RunLogError",
     "RunStopConfig",
-    "TacticRow",
-    "TacticRuntime",
-    "ThreadRunner",
     "UtuConfig",
     "UtuNode",
-    "UtuParts",
-    "VerdictRow",
     "build_node",
-    "export_trace",
-    "format_data",
     "load_config",
-    "load_parts",
-    "load_tactics_text",
-    "open_knowledge",
-    "open_run",
     "parse_config",
-    "reading",
-    "rebuild_goal_state",
     "replay",
-    "run_models",
-    "run_span",
-    "step_nodes",
-    "stop_platform",
 ]

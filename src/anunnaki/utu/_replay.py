@@ -41,17 +41,17 @@ from anunnaki.errors import AnunnakiError, ModelFileError
 from anunnaki.goals import Evaluator, GoalModel
 from anunnaki.tactics import TacticSet
 from anunnaki.trace import Phase, Record, TraceWriter
-from anunnaki.utu._actions import RecordedOutcome, ReplayRunner
-from anunnaki.utu._actuators import RecordingActuator
-from anunnaki.utu._knowledge import SCHEMA_VERSION, Decision, InputRow, Knowledge, VerdictRow
-from anunnaki.utu._manager import AutonomicManager
-from anunnaki.utu._stages import (
+from anunnaki.utu.cycle._actions import RecordedOutcome, ReplayRunner
+from anunnaki.utu.cycle._entries import (
     OPERATOR,
     RESTART,
     TICK,
     model_from_sources,
     tactics_from_sources,
 )
+from anunnaki.utu.cycle._knowledge import SCHEMA_VERSION, Decision, InputRow, Knowledge, VerdictRow
+from anunnaki.utu.host._actuators import RecordingActuator
+from anunnaki.utu.host._manager import AutonomicManager
 
 __all__ = [
     "ASYNC_KINDS",
@@ -514,7 +514,7 @@ def _operator(manager: AutonomicManager, op: Mapping[str, Any]) -> None:
     elif kind == "run_stop" and keys == {"op", "caller", "reason"}:
         manager.run_stop(caller=caller, reason=str(op["reason"]))
     else:  # node_lost (liveliness) and anything else: the queued entry exactly as recorded
-        manager._enqueue_op(dict(op))
+        manager.desk.enqueue(dict(op))
 
 
 def _action_outcomes(knowledge: Knowledge) -> list[RecordedOutcome]:

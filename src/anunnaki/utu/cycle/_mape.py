@@ -11,7 +11,7 @@ import logging
 from collections import deque
 from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any, Literal, Protocol
+from typing import Any, Literal
 
 from anunnaki.goals import (
     Evaluator,
@@ -32,10 +32,8 @@ from anunnaki.tactics import (
     Tactic,
     TacticSet,
 )
-from anunnaki.utu._knowledge import Knowledge, TacticRow
-
-if TYPE_CHECKING:
-    from anunnaki.utu._actions import ActionRunner
+from anunnaki.utu.cycle._actions import ActionOutcome, ActionRunner, Actuator
+from anunnaki.utu.cycle._knowledge import Knowledge, TacticRow
 
 __all__ = [
     "ActionOutcome",
@@ -422,31 +420,6 @@ class Planner:
 
 
 # -- Executor ------------------------------------------------------------------------------
-@dataclass(frozen=True)
-class ActionOutcome:
-    """The result of one action."""
-
-    ok: bool
-    detail: str = ""
-    reply: dict[str, Any] | None = None
-
-
-class Actuator(Protocol):
-    """How actions reach the managed system."""
-
-    def publish(self, topic: str, payload: Mapping[str, Any]) -> ActionOutcome:
-        """Publish a message on a topic."""
-        ...
-
-    def request(self, service: str, payload: Mapping[str, Any], timeout: float) -> ActionOutcome:
-        """Request a service and wait for the reply."""
-        ...
-
-    def notify(self, action: NotifyAction, tactic: str, now: float) -> ActionOutcome:
-        """Send a notification (may complete in the background)."""
-        ...
-
-
 class Executor:
     """Performs a tactic's actions in order, then checks its postconditions by the deadline.
 
@@ -496,7 +469,7 @@ class Executor:
     def run_actions(self, rt: TacticRuntime, now: float) -> None:
         """Run the remaining actions of a running tactic (none while one is in flight).
 
-        A request goes to the :class:`~anunnaki.utu.ActionRunner` when there is one: the
+        A request goes to the :class:`~anunnaki.utu.cycle.ActionRunner` when there is one: the
         tactic stays ``running`` and :meth:`collect` continues it when the outcome is back.
         """
         if rt.name in self.waiting:

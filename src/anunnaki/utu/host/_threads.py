@@ -1,22 +1,10 @@
 """Actions off the loop's path: service requests run on worker threads with their own deadline.
 
-A live loop must never wait on the managed system: a mode change to a robot that is alive
-but does not answer held every cycle for its 2 s timeout, and monitoring and analysis
-stopped with it. The :class:`~anunnaki.utu.Executor` hands each request (a ``request``,
-``change_mode`` or ``swap_model`` action) to an :class:`ActionRunner` and goes on; the
-tactic stays ``running`` while its action is in flight, and the next cycle that finds the
-outcome records it (``action`` decision) and continues with the tactic's next action — or
-fails the tactic and escalates when the action was refused, timed out or met a dead service.
-
-* :class:`ThreadRunner` (live): a few worker threads; an action whose thread has not come
-  back by its timeout plus a grace period is reported failed ("no reply within …") and its
-  thread abandoned, so even an actuator that ignores its own timeout cannot hold the loop.
-* :class:`ReplayRunner` (:func:`~anunnaki.utu.replay`): gives each action the outcome the run
-  recorded, at the instant the run took it, so a replay takes the same decisions at the
-  same times.
-
-Publications and notifications do not wait on anyone (a notification is sent in the
-background already) and stay on the loop.
+:class:`ThreadRunner` is the live :class:`~anunnaki.utu.cycle.ActionRunner` (see
+:mod:`anunnaki.utu.cycle._actions` for why actions leave the loop): a few worker threads; an
+action whose thread has not come back by its timeout plus a grace period is reported failed
+("no reply within …") and its thread abandoned, so even an actuator that ignores its own
+timeout cannot hold the loop.
 """
 
 from __future__ import annotations
@@ -25,14 +13,12 @@ import concurrent.futures as cf
 import logging
 import threading
 import time
-from collections import deque
-from collections.abc import Callable, Iterable
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Protocol
 
-from anunnaki.utu._mape import ActionOutcome
+from anunnaki.utu.cycle._actions import ActionOutcome, Finished
 
-__all__ = ["ActionRunner", "Finished", "RecordedOutcome", "ReplayRunner", "ThreadRunner"]
+__all__ = ["ThreadRunner"]
 
 log = logging.getLogger("anunnaki.utu")
 
@@ -42,40 +28,6 @@ GRACE = 0.5
 #: ``None``, up to the action's own timeout — a run on sim time repeats itself however loaded
 #: the machine is, and a dead or hung service still cannot hold it longer than that.
 SETTLE: float | None = None
-
-
-@dataclass(frozen=True)
-class Finished:
-    """An action that came back: which tactic, which of its actions, and how it went."""
-
-    tactic: str
-    index: int
-    outcome: ActionOutcome
-
-
-class ActionRunner(Protocol):
-    """Runs actions off the loop and hands back their outcomes when a cycle asks."""
-
-    def submit(
-        self,
-        tactic: str,
-        index: int,
-        call: Callable[[], ActionOutcome],
-        timeout: float,
-        now: float,
-        *,
-        attempt: int = 0,
-    ) -> ActionOutcome | None:
-        """Start one action; its outcome now, or ``None`` while it is in flight."""
-        ...
-
-    def finished(self, now: float) -> list[Finished]:
-        """The actions that came back (or overran their deadline), in submission order."""
-        ...
-
-    def close(self) -> None:
-        """Stop taking work; in-flight actions are abandoned."""
-        ...
 
 
 @dataclass
@@ -196,66 +148,3 @@ def _result(future: cf.Future[ActionOutcome]) -> ActionOutcome:
         return ActionOutcome(False, "cancelled")
     except Exception as exc:  # an actuator must never kill the loop
         return ActionOutcome(False, f"{type(exc).__name__}: {exc}")
-
-
-@dataclass(frozen=True)
-class RecordedOutcome:
-    """One action's outcome as a run recorded it (its ``action`` decision)."""
-
-    t: float
-    tactic: str
-    index: int
-    ok: bool
-    detail: str
-    attempt: int | None = None  # which start of the tactic (None: an older log)
-
-
-class ReplayRunner:
-    """Each action gets its recorded outcome, at the instant the run took it.
-
-    An action is matched with the recorded outcome of the same tactic, start (attempt) and
-    action index — an action in flight when the run was killed has none, and a restarted
-    run goes on with the next one. Recorded at the instant it was started (a run whose
-    actions ran on the loop, or that came back within the step), the outcome is given at
-    once; recorded later, it is handed back by the first cycle at or after that instant —
-    the cycle the run took it in.
-    An action the run never recorded (the log ends first) succeeds at once.
-    """
-
-    def __init__(self, recorded: Iterable[RecordedOutcome], *, tolerance: float = 1e-9) -> None:
-        self._recorded: dict[tuple[str, int | None, int], deque[RecordedOutcome]] = {}
-        for r in recorded:
-            self._recorded.setdefault((r.tactic, r.attempt, r.index), deque()).append(r)
-        self._pending: list[RecordedOutcome] = []
-        self.tolerance = tolerance
-
-    def submit(
-        self,
-        tactic: str,
-        index: int,
-        call: Callable[[], ActionOutcome],
-        timeout: float,
-        now: float,
-        *,
-        attempt: int = 0,
-    ) -> ActionOutcome | None:
-        """The recorded outcome now, or ``None`` until the instant the run took it."""
-        queue = self._recorded.get((tactic, attempt, index)) or self._recorded.get(
-            (tactic, None, index)
-        )
-        if not queue:
-            return ActionOutcome(True, "not recorded (the log ends first)")
-        rec = queue.popleft()
-        if rec.t <= now + self.tolerance:
-            return ActionOutcome(rec.ok, rec.detail)
-        self._pending.append(rec)
-        return None
-
-    def finished(self, now: float) -> list[Finished]:
-        """The recorded outcomes due by ``now``."""
-        due = [r for r in self._pending if r.t <= now + self.tolerance]
-        self._pending = [r for r in self._pending if r.t > now + self.tolerance]
-        return [Finished(r.tactic, r.index, ActionOutcome(r.ok, r.detail)) for r in due]
-
-    def close(self) -> None:
-        """Nothing runs: nothing to stop."""

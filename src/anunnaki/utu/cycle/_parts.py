@@ -18,7 +18,7 @@ from anunnaki.errors import AnunnakiError, ModelFileError
 from anunnaki.goals import GoalModel, parse_binding, parse_goal_model
 from anunnaki.tactics import TacticSet, parse_tactics_xml, parse_tactics_yaml
 from anunnaki.utu._config import UtuConfig
-from anunnaki.utu._knowledge import Knowledge
+from anunnaki.utu.cycle._knowledge import Knowledge
 
 __all__ = [
     "NodeConfigError",
@@ -28,6 +28,7 @@ __all__ = [
     "load_tactics_text",
     "open_knowledge",
     "parts_from_sources",
+    "record_run",
 ]
 
 
@@ -120,6 +121,28 @@ def load_parts(config: UtuConfig) -> UtuParts:
                 hint="check the path in the Utu configuration (relative to its file)",
             ) from exc
     return parts_from_sources(config, sources)
+
+
+def record_run(knowledge: Knowledge, parts: UtuParts) -> None:
+    """Record the run's settings and, on a fresh knowledge base, the files' texts in force.
+
+    What ``replay`` and ``reload`` start from; whoever opens the run's knowledge base first
+    (the manager, or the knowledge node) records them.
+    """
+    config = parts.config
+    knowledge.set_meta(
+        "settings",
+        {
+            "dwell": config.dwell,
+            "warmup": config.warmup,
+            "failsafe": config.failsafe,
+            "escalate_to_run_stop": config.escalate_to_run_stop,
+            "run_stop_service": config.run_stop.service,
+        },
+    )
+    if not knowledge.models_at():
+        for kind, (path, text) in parts.sources.items():
+            knowledge.record_model(0.0, kind, path, text)
 
 
 def open_knowledge(path: str) -> Knowledge:

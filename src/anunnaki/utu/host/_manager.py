@@ -1,7 +1,7 @@
 """The autonomic manager: Monitor → Analyze → Plan → Execute over Knowledge (paper Fig. 8).
 
 :class:`AutonomicManager` is Utu in one process: the five stages of
-:mod:`anunnaki.utu._stages` called one after the other — the same code the per-node
+:mod:`anunnaki.utu.cycle` called one after the other — the same code the per-node
 deployment runs, here with direct calls instead of bus hops. ``step(now)`` runs one
 deterministic cycle — tests, simulation and replay drive it — and ``spin()`` runs it live.
 
@@ -33,6 +33,7 @@ the decision log with their caller):
 from __future__ import annotations
 
 import logging
+import os
 import threading
 import time
 from collections import deque
@@ -46,26 +47,33 @@ from anunnaki.bus import InprocBus
 from anunnaki.clock import Clock, SimClock, WallClock
 from anunnaki.errors import AnunnakiError
 from anunnaki.goals import GoalModel
-from anunnaki.messages import AnalysisState, RunStop, body_of
+from anunnaki.messages import AnalysisState, body_of
 from anunnaki.tactics import TacticSet
-from anunnaki.utu._actions import ActionRunner, ThreadRunner
-from anunnaki.utu._actuators import BusActuator, RecordingActuator
+from anunnaki.topics import UTU_NODES as NODE_NAMES
+from anunnaki.topics import node_token, ready_service
 from anunnaki.utu._config import RunStopConfig, UtuConfig
-from anunnaki.utu._intake import IntakeBudget
-from anunnaki.utu._knowledge import Knowledge
-from anunnaki.utu._mape import Actuator, Analyzer, Executor, Monitor, Planner
-from anunnaki.utu._parts import UtuParts, load_parts, load_tactics_text
-from anunnaki.utu._stages import (
-    OPERATOR,
-    TICK,
-    AnalyzeStage,
-    ExecuteStage,
-    KnowledgeStage,
-    MonitorStage,
-    PlanStage,
-    mark_restart,
-    resuming,
+from anunnaki.utu.cycle._actions import ActionRunner
+from anunnaki.utu.cycle._analyze import AnalyzeStage
+from anunnaki.utu.cycle._entries import OPERATOR, TICK, mark_restart, resuming
+from anunnaki.utu.cycle._execute import ExecuteStage
+from anunnaki.utu.cycle._knowledge import Knowledge
+from anunnaki.utu.cycle._knowledge_stage import DecisionTail, KnowledgeStage
+from anunnaki.utu.cycle._mape import Actuator, Analyzer, Executor, Monitor, Planner
+from anunnaki.utu.cycle._monitor import MonitorStage
+from anunnaki.utu.cycle._parts import UtuParts, load_parts, load_tactics_text, record_run
+from anunnaki.utu.cycle._plan import PlanStage
+from anunnaki.utu.host._actuators import BusActuator, RecordingActuator
+from anunnaki.utu.host._desk import (
+    OperatorDesk,
+    Watchdog,
+    announce_run_stop,
+    idle_wait,
+    publish_decisions,
+    run_stop_listener,
+    watchdog_run_stop,
 )
+from anunnaki.utu.host._intake import IntakeBudget
+from anunnaki.utu.host._threads import ThreadRunner
 
 __all__ = [
     "OPERATOR",
@@ -168,6 +176,7 @@ class AutonomicManager(Closing):
         clock: Clock | None,
         *,
         actions: ActionRunner | None = None,
+        nodes: Mapping[str, float] | None = None,
     ) -> None:
         config = parts.config
         self.parts = parts
@@ -179,14 +188,16 @@ class AutonomicManager(Closing):
             BusActuator(bus) if bus is not None else RecordingActuator()
         )
         self.publish_state = config.publish_state and bus is not None
-        self.rate = config.rate
+        self._nodes = dict(nodes or {}) if bus is not None else {}
+        self.rate = max(self._nodes.values(), default=config.rate)
+        self._kb_period = 1.0 / self._nodes.get("knowledge", config.rate)
+        self._next_publish = 0.0
         self._closed = False
         self._live = False
         # (topic, message, arrival time or None for "now"): a step takes inputs at their own
         # times, so a burst taken by one step keeps its spacing (rates, temporal goals).
         self._inputs: deque[tuple[str, dict[str, Any], float | None]] = deque()
-        self._ops: deque[dict[str, Any]] = deque()
-        self._lock = threading.Lock()  # guards the two queues above
+        self._lock = threading.Lock()  # guards the queue above
         self._step_lock = threading.Lock()  # one step at a time (spin, inline reactions)
         self._step_wanted = False  # the spinning thread waits for the lock: no inline step
         self._budget: IntakeBudget | None = None  # live on the wall clock (spin)
@@ -199,21 +210,11 @@ class AutonomicManager(Closing):
         self._state_cache: AnalysisState | None = None
         if isinstance(self.actuator, BusActuator) and self.actuator.on_notified is None:
             self.actuator.on_notified = self._notified
-        self.knowledge.set_meta(
-            "settings",
-            {
-                "dwell": config.dwell,
-                "warmup": config.warmup,
-                "failsafe": config.failsafe,
-                "escalate_to_run_stop": config.escalate_to_run_stop,
-                "run_stop_service": config.run_stop.service,
-            },
-        )
-        if not self.knowledge.models_at() and parts.sources:
-            for kind, (path, text) in parts.sources.items():
-                self.knowledge.record_model(0.0, kind, path, text)
+        record_run(self.knowledge, parts)
         restarted = resuming(self.knowledge)
         self.monitor_stage = MonitorStage(parts)
+        #: Operator calls, run-stops heard and lost nodes, queued for the next step.
+        self.desk = OperatorDesk(self.monitor_stage, wake=self.wake, watch=self._watch_topics)
         self.analyze_stage = AnalyzeStage(parts, self.knowledge)
         self.plan_stage = PlanStage(parts, self.knowledge)
         if actions is None and getattr(self.actuator, "blocking", False):
@@ -227,6 +228,7 @@ class AutonomicManager(Closing):
             runner=actions,
         )
         self.knowledge_stage = KnowledgeStage(parts, self.knowledge)
+        self._tail = DecisionTail(self.knowledge)
         if restarted:
             mark_restart(self.knowledge, "manager")
         self.now = self.analyze_stage.now
@@ -244,8 +246,16 @@ class AutonomicManager(Closing):
         actuator: Actuator | None = None,
         clock: Clock | None = None,
         knowledge: Knowledge | None = None,
+        nodes: Mapping[str, float] | None = None,
     ) -> AutonomicManager:
-        """Build a manager from a :class:`UtuConfig` (files loaded and checked) or its parts."""
+        """Build a manager from a :class:`UtuConfig` (files loaded and checked) or its parts.
+
+        With ``nodes`` (Utu node name → rate, Hz) and a bus, the manager stands for the five
+        nodes of a per-node run, as a launch file's ``nodes:`` has them in one process: a
+        liveliness token ``/utu_<name>`` and a readiness service ``/utu/<name>/ready`` for
+        each, new decisions on ``/utu/knowledge/decisions`` at the knowledge node's rate,
+        and time-driven steps at the highest rate.
+        """
         parts = config if isinstance(config, UtuParts) else load_parts(config)
         cfg = parts.config
         if clock is None:
@@ -253,12 +263,14 @@ class AutonomicManager(Closing):
         if actuator is None and bus is not None:
             notifier = None
             if cfg.notify:
-                from anunnaki.utu._notify import Notifier, NotifyConfig
+                from anunnaki.utu.host._notify import Notifier, NotifyConfig
 
                 notifier = Notifier(NotifyConfig.model_validate(cfg.notify))
             actuator = BusActuator(bus, notifier)
         manager = cls.__new__(cls)
-        manager._init(parts, knowledge or Knowledge(cfg.knowledge), bus, actuator, clock)
+        manager._init(
+            parts, knowledge or Knowledge(cfg.knowledge), bus, actuator, clock, nodes=nodes
+        )
         return manager
 
     def _connect(self, bus: Any) -> None:
@@ -269,16 +281,39 @@ class AutonomicManager(Closing):
             # after its instant's /clock is never stamped with an earlier time.
             self._clock_sub = bus.subscribe(self.parts.config.clock_topic, queue=64)
             self._declared.append(self._clock_sub)
-        self._declared.append(bus.subscribe(topics.RUN_STOP, self._on_run_stop_topic, queue=16))
-        if any(a.node for a in self.parts.model.agents.values()):
-            self._declared.append(bus.watch_liveliness(self._on_liveliness))
+        heard = run_stop_listener(self.name, f"utu:{self.name}", self.desk.heard_run_stop)
+        self._declared.append(bus.subscribe(topics.RUN_STOP, heard, queue=16))
+        self._declared += self.desk.declare(bus)
         services: dict[str, Callable[[Any], Any]] = {
-            service: self._op_handler(op) for op, service in topics.OPERATOR_SERVICES.items()
+            topics.READY: lambda m: {"ready": not self._closed, "node": self.name},
+            topics.QUERY: self._query,
         }
-        services[topics.READY] = lambda m: {"ready": not self._closed, "node": self.name}
-        services[topics.QUERY] = self._query
         for name, handler in services.items():
             self._declared.append(bus.service(name, handler))
+        if self._nodes:  # standing for the five nodes: their tokens, then (last) readiness
+            for node in NODE_NAMES:
+                self._declared.append(bus.liveliness_token(node_token(node)))
+            for node in NODE_NAMES:
+                self._declared.append(bus.service(ready_service(node), self._ready_handler(node)))
+
+    def _ready_handler(self, node: str) -> Callable[[Any], dict[str, Any]]:
+        return lambda message: {
+            "ready": not self._closed,
+            "node": node_token(node),
+            "utu": self.name,
+            "pid": os.getpid(),
+            "rate": self.rate,
+            "composed": True,
+            "run_stopped": self.run_stopped or self.desk.run_stop_asked,
+        }
+
+    def _watch_topics(self, watched: list[str]) -> None:
+        """Subscribe the topics a reload added (a manager with a bus)."""
+        if self.bus is None:
+            return
+        for topic in watched:
+            if topic not in self._pull:
+                self._subscribe_topic(topic)
 
     def _subscribe_topic(self, topic: str) -> None:
         # A pull subscriber holds the inputs (bounded: a flood on one topic cannot starve
@@ -378,7 +413,7 @@ class AutonomicManager(Closing):
 
         Under a flood the producers refill a queue as fast as it is emptied: a step takes
         at most ``intake`` from each topic — a spinning loop on the wall clock only what
-        fits in half a period (:class:`~anunnaki.utu._intake.IntakeBudget`) — and the rest
+        fits in half a period (:class:`~anunnaki.utu.host._intake.IntakeBudget`) — and the rest
         waits for the next step (or is dropped and counted by the bus when the queue is
         full), so a step stays short and time-driven checks keep their rate.
         """
@@ -403,39 +438,15 @@ class AutonomicManager(Closing):
                 if isinstance(t, int | float):
                     self.clock.update(float(t))
 
-    def _on_run_stop_topic(self, sample: Any) -> None:
-        body = body_of(sample.message)
-        caller = str(body.get("caller") or sample.sender)
-        if caller.startswith(f"utu:{self.name}"):
-            return  # our own announcement
-        self._enqueue_op(
-            {
-                "op": "run_stop",
-                "caller": caller,
-                "reason": str(body.get("reason", "run-stop topic")),
-            }
-        )
-
     def _announce_run_stop(self, caller: str, reason: str) -> None:
-        if self.bus is None:
-            return
-        try:
-            self.bus.publish(
-                topics.RUN_STOP,
-                RunStop(reason=f"{reason} (asked by {caller})", caller=f"utu:{self.name}"),
-            )
-        except AnunnakiError as exc:  # pragma: no cover - closed bus at shutdown
-            log.warning("could not announce run-stop: %s", exc)
+        if self.bus is not None:
+            announce_run_stop(self.bus, self.name, caller, reason)
 
     def _notified(self, tactic: str, result: Any) -> None:
         # Called from the notifier's worker thread; Knowledge is thread-safe. Delivery
         # results arrive asynchronously, so replay does not compare them.
         if not self._closed:
             self.execute_stage.notified(tactic, result)
-
-    def _on_liveliness(self, node: str, alive: bool) -> None:
-        if not alive:
-            self._enqueue_op({"op": "node_lost", "node": node, "caller": "liveliness"})
 
     def feed(self, topic: str, msg: Mapping[str, Any], *, t: float | None = None) -> None:
         """Queue one input message (what the bus subscription does); processed by ``step``.
@@ -448,36 +459,17 @@ class AutonomicManager(Closing):
         if not self._wake.is_set():
             self._wake.set()
 
-    def _enqueue_op(self, op: dict[str, Any]) -> None:
-        with self._lock:
-            self._ops.append(op)
-        self._wake.set()
-
-    def _op_handler(self, op: str) -> Callable[[Any], dict[str, Any]]:
-        return lambda message: self._op_service(op, message)
-
-    def _op_service(self, op: str, message: Any) -> dict[str, Any]:
-        entry, reply = self.monitor_stage.request(op, message)
-        if entry is None:
-            return reply
-        if self.bus is not None:  # a reload may watch new topics
-            for topic in self.monitor_stage.topics:
-                if topic not in self._pull:
-                    self._subscribe_topic(topic)
-        self._enqueue_op(entry)
-        return reply
-
     def pause(self, caller: str = "api") -> None:
         """Suspend adaptation (applied at the next step)."""
-        self._enqueue_op({"op": "pause", "caller": caller})
+        self.desk.enqueue({"op": "pause", "caller": caller})
 
     def resume(self, caller: str = "api") -> None:
         """Resume adaptation, clearing a run-stop (applied at the next step)."""
-        self._enqueue_op({"op": "resume", "caller": caller})
+        self.desk.enqueue({"op": "resume", "caller": caller})
 
     def approve(self, tactic: str, *, approve: bool = True, caller: str = "api") -> None:
         """Approve (or reject) a pending tactic (applied at the next step)."""
-        self._enqueue_op({"op": "approve", "caller": caller, "tactic": tactic, "approve": approve})
+        self.desk.enqueue({"op": "approve", "caller": caller, "tactic": tactic, "approve": approve})
 
     def request_reload(
         self,
@@ -492,11 +484,11 @@ class AutonomicManager(Closing):
         for key, value in (("goal_model", goal_model), ("binding", binding), ("tactics", tactics)):
             if value is not None:
                 op[key] = value
-        self._enqueue_op(op)
+        self.desk.enqueue(op)
 
     def run_stop(self, *, caller: str = "api", reason: str = "operator") -> None:
         """Halt adaptation and stop the managed system (applied at the next step)."""
-        self._enqueue_op({"op": "run_stop", "caller": caller, "reason": reason})
+        self.desk.enqueue({"op": "run_stop", "caller": caller, "reason": reason})
 
     # -- the step -----------------------------------------------------------------------------
     def step(self, now: float | None = None, *, execute: bool = True) -> None:
@@ -525,8 +517,7 @@ class AutonomicManager(Closing):
             self._drain()
             inputs = list(self._inputs)
             self._inputs.clear()
-            ops = list(self._ops)
-            self._ops.clear()
+        ops = self.desk.take()
         self._wake.clear()
         # The clock is read after draining, so no input taken here arrived after ``t``.
         t = self.clock.now() if now is None else float(now)
@@ -608,15 +599,9 @@ class AutonomicManager(Closing):
         request = {"caller": "api", **{k: v for k, v in files.items() if v}}
         if self.monitor_stage.operator_token is not None:  # a call in this process is trusted
             request["token"] = self.monitor_stage.operator_token
-        entry, reply = self.monitor_stage.request("reload", request)
-        if entry is None:
-            return [str(reply["error"])]
-        self._enqueue_op(entry)
-        self.step(self.now if now is None else now)
-        if self.bus is not None:
-            for topic in self.monitor_stage.topics:
-                if topic not in self._pull:
-                    self._subscribe_topic(topic)
+        reply = self.desk.call("reload", request)
+        if self.desk.pending:  # queued (accepted, or refused and recorded): its own cycle
+            self.step(self.now if now is None else now)
         return [] if reply["ok"] else [str(reply["error"])]
 
     def restart_part(self, node: str) -> None:
@@ -672,21 +657,24 @@ class AutonomicManager(Closing):
         if isinstance(self.actions, ThreadRunner) and not isinstance(self.clock, SimClock):
             self.actions.settle = self.parts.config.action_settle  # live: hold the loop briefly
         limit = self.parts.config.watchdog
-        dog = Watchdog(self._watchdog_fired, max(limit, 2 * period)) if limit is not None else None
+        dog = None
+        if limit is not None and self.bus is not None:  # it stops the platform over the bus
+            dog = Watchdog(self._watchdog_fired, max(limit, 2 * period))
         try:
             while not stop.is_set() and not self._closed:
                 if dog is not None:
                     dog.beat()
                 self.step()
+                if self._nodes:
+                    self._publish_decisions()
                 if on_step is not None:
                     on_step(self)
                 if until is not None and self.clock.now() >= until:
                     break
-                if not self._inputs and not self._ops and not self._pending():
-                    wait = period
-                    if isinstance(self.clock, SimClock) and self.clock.speed > 0:
-                        wait = min(period / max(self.clock.speed, 0.05), 0.5)
-                    self._wake.wait(wait)
+                if not self._inputs and not self.desk.pending and not self._pending():
+                    self._wake.wait(self._idle_wait(period))
+            if self.analyze_stage.reacted and not self._closed:
+                self.step()  # a normal end ends the step its last reactions began
         finally:
             self._live = False
             if dog is not None:
@@ -694,22 +682,24 @@ class AutonomicManager(Closing):
 
     _inline = False
 
-    def _watchdog_fired(self, stalled: float) -> None:
-        """The watchdog's run-stop, from its own thread while the loop is stuck.
+    def _idle_wait(self, period: float) -> float:
+        return idle_wait(self.clock, period)
 
-        The platform is told at once (its run-stop service, and ``/utu/run_stop`` for every
-        other part); the loop, once it moves again, records the run-stop through the usual
-        operator path, so the decision log and a replay have it.
-        """
-        reason = f"watchdog: the loop has not finished a step for {stalled:.1f} s"
-        log.error("utu: %s; run-stop", reason)
-        service = self.parts.config.run_stop.service
-        if service is not None:
-            outcome = self.actuator.request(service, self.parts.config.run_stop.payload, 2.0)
-            if not outcome.ok:
-                log.error("utu: the watchdog's run-stop failed: %s", outcome.detail)
-        self._announce_run_stop("watchdog", reason)
-        self._enqueue_op({"op": "run_stop", "caller": "watchdog", "reason": reason})
+    def _watchdog_fired(self, stalled: float) -> None:
+        assert self.bus is not None
+        watchdog_run_stop(
+            self.bus,
+            self.parts.config,
+            what=f"the manager {self.name}",
+            caller=f"watchdog:{self.name}",
+            stalled=stalled,
+        )
+
+    def _publish_decisions(self) -> None:
+        now = time.monotonic()
+        if self.bus is not None and now >= self._next_publish:
+            self._next_publish = now + self._kb_period
+            publish_decisions(self.bus, self._tail)
 
     def _pending(self) -> bool:
         if isinstance(self.actions, ThreadRunner) and self.actions.has_outcomes:
@@ -748,41 +738,3 @@ class AutonomicManager(Closing):
             notifier.close()
         with self._step_lock:
             self.knowledge.close()
-
-
-class Watchdog:
-    """Calls ``on_fire(stalled)`` once when a loop has not beaten for ``limit`` seconds.
-
-    The loop calls :meth:`beat` before each step (or round); the watchdog's own thread
-    checks four times per ``limit`` (at least every 0.25 s). It fires again only after
-    the loop has beaten once more.
-    """
-
-    def __init__(self, on_fire: Callable[[float], None], limit: float) -> None:
-        self.on_fire = on_fire
-        self.limit = limit
-        self._last = time.monotonic()
-        self._fired = False
-        self._stop = threading.Event()
-        self._thread = threading.Thread(target=self._watch, name="utu-watchdog", daemon=True)
-        self._thread.start()
-
-    def beat(self) -> None:
-        """The loop is about to step: it is alive."""
-        self._last = time.monotonic()
-        self._fired = False
-
-    def _watch(self) -> None:
-        while not self._stop.wait(min(self.limit / 4, 0.25)):
-            stalled = time.monotonic() - self._last
-            if stalled > self.limit and not self._fired:
-                self._fired = True
-                try:
-                    self.on_fire(stalled)
-                except Exception:  # the watchdog must outlive what it calls
-                    log.exception("utu: the watchdog's run-stop raised")
-
-    def close(self) -> None:
-        """Stop watching."""
-        self._stop.set()
-        self._thread.join(timeout=2.0)

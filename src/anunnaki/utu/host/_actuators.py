@@ -12,7 +12,7 @@ from anunnaki.errors import AnunnakiError
 from anunnaki.messages import RunStop, body_of
 from anunnaki.tactics import NotifyAction
 from anunnaki.utu._config import UtuConfig
-from anunnaki.utu._mape import ActionOutcome
+from anunnaki.utu.cycle._actions import ActionOutcome
 
 __all__ = ["BusActuator", "RecordingActuator", "stop_platform"]
 
@@ -66,7 +66,7 @@ class BusActuator:
     """Actions over the bus: publish on topics, request services, notify through a Notifier.
 
     ``blocking``: a request waits for the managed system, so a loop runs requests through
-    an :class:`~anunnaki.utu.ThreadRunner` (off its path).
+    an :class:`~anunnaki.utu.host.ThreadRunner` (off its path).
     """
 
     blocking = True
@@ -114,7 +114,7 @@ class BusActuator:
                 action.message,
             )
             return ActionOutcome(True, "logged (no notifier configured)")
-        from anunnaki.utu._notify import Notification
+        from anunnaki.utu.host._notify import Notification
 
         note = Notification(
             channel=action.channel,

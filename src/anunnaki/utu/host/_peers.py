@@ -14,7 +14,7 @@ How it acts depends on whether the loop can still act itself:
   performs it in the loop — one request to the run-stop service, recorded as a ``run_stop``
   decision that a replay repeats.
 * **otherwise** the loop cannot: it asks the run-stop service itself and announces it
-  (:func:`~anunnaki.utu.stop_platform`, as the launch and the watchdog do).
+  (:func:`~anunnaki.utu.host.stop_platform`, as the launch and the watchdog do).
 
 Either way it records a ``node_died`` decision (``by``: the node that acted) in the
 knowledge base, which ``anunnaki log`` and ``explain`` show; a replay neither makes nor
@@ -35,9 +35,9 @@ from anunnaki.bus import Bus
 from anunnaki.errors import AnunnakiError
 from anunnaki.messages import RunStop
 from anunnaki.topics import UTU_NODES
-from anunnaki.utu._actuators import stop_platform
 from anunnaki.utu._config import UtuConfig
-from anunnaki.utu._parts import open_knowledge
+from anunnaki.utu.cycle._parts import open_knowledge
+from anunnaki.utu.host._actuators import stop_platform
 
 __all__ = ["ACT_ORDER", "PeerWatch"]
 

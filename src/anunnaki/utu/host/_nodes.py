@@ -2,7 +2,7 @@
 
 The paper runs Utu as ROS nodes (§4.1.4, Fig. 13): ``/utu_monitor``, ``/utu_analyze``,
 ``/utu_plan``, ``/utu_execute`` and ``/utu_knowledge``. Each node here hosts one stage of
-:mod:`anunnaki.utu._stages` — the very code :class:`~anunnaki.utu.AutonomicManager` calls
+:mod:`anunnaki.utu.cycle` — the very code :class:`~anunnaki.utu.AutonomicManager` calls
 directly — and carries the stage's typed messages over the bus, so a node runs alone
 (``anunnaki node plan``), with others in one process, or each in its own process over
 zenoh, and every grouping decides as the manager does.
@@ -42,7 +42,6 @@ What every node has (the node kit, :class:`anunnaki.bus.Node`)
 from __future__ import annotations
 
 import logging
-import os
 import secrets
 import threading
 import time
@@ -60,35 +59,43 @@ from anunnaki.messages import (
     ExecuteStatus,
     MonitorBatch,
     PlanStart,
-    RunStop,
     body_of,
 )
+from anunnaki.plugins import Registry
 from anunnaki.topics import UTU_NODES as NODE_NAMES
 from anunnaki.topics import UtuNodeName as NodeName
 from anunnaki.topics import node_token, ready_service
-from anunnaki.utu._actions import ThreadRunner
-from anunnaki.utu._actuators import BusActuator, stop_platform
 from anunnaki.utu._config import UtuConfig
-from anunnaki.utu._knowledge import Knowledge
-from anunnaki.utu._manager import AutonomicManager, Watchdog
-from anunnaki.utu._mape import Actuator
-from anunnaki.utu._parts import NodeConfigError, UtuParts, load_parts, open_knowledge
-from anunnaki.utu._stages import (
-    AnalyzeStage,
-    DecisionTail,
-    ExecuteStage,
-    KnowledgeStage,
-    MonitorStage,
-    PlanStage,
-    decision_dict,
-    mark_restart,
-    resuming,
+from anunnaki.utu.cycle._analyze import AnalyzeStage
+from anunnaki.utu.cycle._entries import mark_restart, resuming
+from anunnaki.utu.cycle._execute import ExecuteStage
+from anunnaki.utu.cycle._knowledge import Knowledge
+from anunnaki.utu.cycle._knowledge_stage import DecisionTail, KnowledgeStage
+from anunnaki.utu.cycle._mape import Actuator
+from anunnaki.utu.cycle._monitor import MonitorStage
+from anunnaki.utu.cycle._parts import (
+    NodeConfigError,
+    UtuParts,
+    load_parts,
+    open_knowledge,
+    record_run,
 )
+from anunnaki.utu.cycle._plan import PlanStage
+from anunnaki.utu.host._actuators import BusActuator
+from anunnaki.utu.host._desk import (
+    OperatorDesk,
+    Watchdog,
+    announce_run_stop,
+    idle_wait,
+    publish_decisions,
+    run_stop_listener,
+    watchdog_run_stop,
+)
+from anunnaki.utu.host._threads import ThreadRunner
 
 __all__ = [
     "NODE_NAMES",
     "AnalyzeNode",
-    "ComposedUtu",
     "DecisionTail",
     "ExecuteNode",
     "KnowledgeNode",
@@ -179,7 +186,8 @@ class UtuNode(Node):
         """Declare the run-stop subscription, the clock, then the node's own (:meth:`bring_up`)."""
         if isinstance(self.clock, SimClock) and self.uses_clock:
             self._clock_sub = self.pull(self.config.clock_topic, queue=64)
-        self.own(self.bus.subscribe(topics.RUN_STOP, self._on_run_stop_sample, queue=16))
+        heard = run_stop_listener(self.config.name, self.name, self._heard_run_stop)
+        self.own(self.bus.subscribe(topics.RUN_STOP, heard, queue=16))
         self.bring_up()
 
     def bring_up(self) -> None:
@@ -204,14 +212,9 @@ class UtuNode(Node):
             if isinstance(t, int | float):
                 self.clock.update(float(t))
 
-    def _on_run_stop_sample(self, sample: Sample) -> None:
-        body = body_of(sample.message)
-        caller = str(body.get("caller") or sample.sender)
-        if caller.startswith(f"utu:{self.config.name}"):
-            return  # Utu's own announcement of a run-stop it already performs
-        log.warning("%s: run-stop from %s: %s", self.name, caller, body.get("reason"))
+    def _heard_run_stop(self, caller: str, reason: str) -> None:
         self.run_stopped = True
-        self.on_run_stop(caller, str(body.get("reason", "run-stop topic")))
+        self.on_run_stop(caller, reason)
         self.wake()
 
     def on_run_stop(self, caller: str, reason: str) -> None:
@@ -259,10 +262,7 @@ class UtuNode(Node):
 
     def _period(self) -> float:
         """Seconds of wall time between two time-driven rounds (scaled by the sim speed)."""
-        period = 1.0 / self.rate
-        if isinstance(self.clock, SimClock) and self.clock.speed > 0:
-            return min(period / max(self.clock.speed, 0.05), 0.5)
-        return period
+        return idle_wait(self.clock, 1.0 / self.rate)
 
     def _flush(self) -> None:
         if self._kb is not None:
@@ -284,11 +284,14 @@ class UtuNode(Node):
             dog.close()
 
     def _watchdog_fired(self, stalled: float) -> None:
-        """From the watchdog's thread: run-stop the platform and tell every part of Utu."""
-        reason = f"watchdog: node {self.name} has not finished a round for {stalled:.1f} s"
-        log.error("utu: %s; run-stop", reason)
         # The monitor node records it as an operator's run-stop (caller: the watchdog).
-        stop_platform(self.bus, self.config, reason=reason, caller=f"watchdog:{self.name}")
+        watchdog_run_stop(
+            self.bus,
+            self.config,
+            what=f"node {self.name}",
+            caller=f"watchdog:{self.name}",
+            stalled=stalled,
+        )
 
     def release(self) -> None:
         """Close the knowledge base the node opened itself."""
@@ -345,11 +348,15 @@ class MonitorNode(UtuNode):
         self.stage = MonitorStage(self.parts, origin=secrets.token_hex(4))
         self._subs = {t: self.pull(t, queue=self.config.queue) for t in self.stage.topics}
         self._fed: list[tuple[str, dict[str, Any], float | None]] = []
-        self._ops: list[dict[str, Any]] = []
-        for op, service in topics.OPERATOR_SERVICES.items():
-            self.own(self.bus.service(service, self._op_handler(op)))
-        if any(a.node for a in self.parts.model.agents.values()):
-            self.own(self.bus.watch_liveliness(self._on_liveliness))
+        #: Operator calls, run-stops heard and lost nodes, queued for the next batch.
+        self.desk = OperatorDesk(self.stage, wake=self.wake, watch=self._watch_topics)
+        for declared in self.desk.declare(self.bus):
+            self.own(declared)
+
+    def _watch_topics(self, watched: list[str]) -> None:
+        for topic in watched:  # a reload may watch new topics
+            if topic not in self._subs:
+                self._subs[topic] = self.pull(topic, queue=self.config.queue)
 
     def feed(self, topic: str, msg: Mapping[str, Any]) -> None:
         """Queue one input as if it had arrived on ``topic`` (tests, replay)."""
@@ -357,35 +364,15 @@ class MonitorNode(UtuNode):
             self._fed.append((topic, dict(msg), None))
         self.wake()
 
-    def _enqueue_op(self, op: dict[str, Any]) -> None:
-        with self._lock:
-            self._ops.append(op)
-        self.wake()
-
-    def _op_handler(self, op: str) -> Callable[[Any], dict[str, Any]]:
-        return lambda message: self._op_service(op, message)
-
-    def _op_service(self, op: str, message: Any) -> dict[str, Any]:
-        entry, reply = self.stage.request(op, message)
-        if entry is None:
-            return reply
-        for topic in self.stage.topics:  # a reload may watch new topics
-            if topic not in self._subs:
-                self._subs[topic] = self.pull(topic, queue=self.config.queue)
-        if op == "run_stop" and reply["ok"]:
-            self.run_stopped = True
-        elif op == "resume":
-            self.run_stopped = False
-        self._enqueue_op(entry)
-        return reply
-
     def on_run_stop(self, caller: str, reason: str) -> None:
         """A run-stop heard on the topic enters the cycle as an operator call."""
-        self._enqueue_op({"op": "run_stop", "caller": caller, "reason": reason})
+        self.desk.heard_run_stop(caller, reason)
 
-    def _on_liveliness(self, node: str, alive: bool) -> None:
-        if not alive:
-            self._enqueue_op({"op": "node_lost", "node": node, "caller": "liveliness"})
+    def ready_info(self) -> dict[str, Any]:
+        """Readiness, with whether a run-stop was asked (before the cycle applies it)."""
+        info = super().ready_info()
+        info["run_stopped"] = info["run_stopped"] or self.desk.run_stop_asked
+        return info
 
     def input_queues(self) -> list[Subscriber]:
         """The bounded queues of the monitored topics (empty: everything was taken)."""
@@ -416,7 +403,7 @@ class MonitorNode(UtuNode):
                     inputs.append(
                         (topic, body_of(sample.message), sample.sent_at if wall else None)
                     )
-            ops, self._ops = self._ops, []
+        ops = self.desk.take()
         if now is None:
             self._take_clock()
         t = self.clock.now() if now is None else float(now)
@@ -602,7 +589,12 @@ class AnalyzeNode(UtuNode):
         return self.stage.started_at is None or self.clock.now() >= self.stage.now + 1.0 / self.rate
 
     def spin_once(self) -> float:
-        """A cycle as soon as a batch arrives and the last cycle is done."""
+        """A cycle as soon as a batch arrives and the last cycle is done.
+
+        The simulation time is taken every round, with a monitor up or not: its queue must
+        not fill (the bus would drop and log every further tick).
+        """
+        self._take_clock()
         self.settle()
         if not self._loop_complete():
             return self._period()  # woken when a node comes up (the presence watch)
@@ -702,7 +694,7 @@ class ExecuteNode(UtuNode):
         actuator = self._actuator_arg
         if actuator is None:
             if self.config.notify:
-                from anunnaki.utu._notify import Notifier, NotifyConfig
+                from anunnaki.utu.host._notify import Notifier, NotifyConfig
 
                 self._notifier = Notifier(NotifyConfig.model_validate(self.config.notify))
             actuator = BusActuator(self.bus, self._notifier, on_notified=self._notified)
@@ -747,13 +739,7 @@ class ExecuteNode(UtuNode):
             self._flush()
 
     def _announce_run_stop(self, caller: str, reason: str) -> None:
-        try:
-            self.bus.publish(
-                topics.RUN_STOP,
-                RunStop(reason=f"{reason} (asked by {caller})", caller=f"utu:{self.config.name}"),
-            )
-        except AnunnakiError as exc:  # pragma: no cover - closed bus at shutdown
-            log.warning("could not announce run-stop: %s", exc)
+        announce_run_stop(self.bus, self.config.name, caller, reason)
 
     def on_run_stop(self, caller: str, reason: str) -> None:
         """Stop starting tactics at once (guideline S4); the monitor's op records it."""
@@ -849,20 +835,8 @@ class KnowledgeNode(UtuNode):
 
     def bring_up(self) -> None:
         """Record settings and model texts; follow the cycle's messages; offer queries."""
-        kb, config = self.knowledge, self.config
-        kb.set_meta(
-            "settings",
-            {
-                "dwell": config.dwell,
-                "warmup": config.warmup,
-                "failsafe": config.failsafe,
-                "escalate_to_run_stop": config.escalate_to_run_stop,
-                "run_stop_service": config.run_stop.service,
-            },
-        )
-        if not kb.models_at():
-            for kind, (path, text) in self.parts.sources.items():
-                kb.record_model(0.0, kind, path, text)
+        kb = self.knowledge
+        record_run(kb, self.parts)
         self.tail = DecisionTail(kb)
         self.stage = KnowledgeStage(self.parts, kb)
         self._next_publish = 0.0
@@ -895,11 +869,9 @@ class KnowledgeNode(UtuNode):
 
     def step(self) -> bool:
         """Publish the decisions written since the last step; returns whether there were any."""
-        rows = self.tail.read()
-        if rows:
-            self.bus.publish(topics.DECISIONS, {"decisions": [decision_dict(d) for d in rows]})
+        published = publish_decisions(self.bus, self.tail)
         self.cycles += 1
-        return bool(rows)
+        return published
 
     def spin_once(self) -> float:
         """Publish new decisions at most ``rate`` times a second (it only tails the file)."""
@@ -911,13 +883,10 @@ class KnowledgeNode(UtuNode):
 
 
 # -- composition -------------------------------------------------------------------------------
-_NODE_CLASSES: dict[str, type[UtuNode]] = {
-    "monitor": MonitorNode,
-    "analyze": AnalyzeNode,
-    "plan": PlanNode,
-    "execute": ExecuteNode,
-    "knowledge": KnowledgeNode,
-}
+#: The Utu node kinds, by name (``monitor``, ``analyze``, ``plan``, ``execute``, ``knowledge``).
+NODE_KINDS: Registry[UtuNode] = Registry("Utu node", error=NodeConfigError)
+for _kind in (MonitorNode, AnalyzeNode, PlanNode, ExecuteNode, KnowledgeNode):
+    NODE_KINDS.register(_kind)
 
 
 def build_node(name: str, utu: UtuConfig | UtuParts, **kwargs: Any) -> UtuNode:
@@ -929,10 +898,7 @@ def build_node(name: str, utu: UtuConfig | UtuParts, **kwargs: Any) -> UtuNode:
         NodeConfigError: An unknown name (the message lists the valid ones).
 
     """
-    cls = _NODE_CLASSES.get(name)
-    if cls is None:
-        raise NodeConfigError(f"unknown Utu node {name!r}; the nodes are: {', '.join(NODE_NAMES)}")
-    return cls(utu, **kwargs)
+    return NODE_KINDS.factory(name)(utu, **kwargs)
 
 
 def step_nodes(nodes: Mapping[str, UtuNode], now: float) -> None:
@@ -960,113 +926,3 @@ def step_nodes(nodes: Mapping[str, UtuNode], now: float) -> None:
         analyze.settle()
     if knowledge is not None:
         knowledge.step()
-
-
-class ComposedUtu:
-    """All five services in one process: the :class:`AutonomicManager`, seen as five nodes.
-
-    The manager runs the five stages with no bus hops in between (guideline C12: one
-    process when the traffic between nodes is high). On the bus it looks like the separate
-    nodes: a token ``/utu_<name>`` and a readiness service ``/utu/<name>/ready`` for each,
-    the operator services and ``/utu/knowledge/query`` of the manager, and new decisions on
-    ``/utu/knowledge/decisions``.
-
-    Args:
-        utu: The configuration or its loaded parts.
-        bus: The bus.
-        knowledge: The knowledge base (default: the configuration's file or memory);
-            closed with the manager.
-        clock: The clock (default as the configuration says).
-        rates: Per-node rates; the manager's time-driven steps run at the highest,
-            decisions are published at the knowledge node's.
-        actuator: How actions reach the managed system (default: over the bus).
-
-    """
-
-    def __init__(
-        self,
-        utu: UtuConfig | UtuParts,
-        *,
-        bus: Bus,
-        knowledge: Knowledge | None = None,
-        clock: Clock | None = None,
-        rates: Mapping[str, float] | None = None,
-        actuator: Actuator | None = None,
-    ) -> None:
-        self.parts = utu if isinstance(utu, UtuParts) else load_parts(utu)
-        config = self.parts.config
-        self.bus = bus
-        rates = dict(rates or {})
-        self.rate = max(rates.values(), default=config.rate)
-        self._kb_period = 1.0 / rates.get("knowledge", config.rate)
-        self.manager = AutonomicManager.from_config(
-            self.parts, bus=bus, clock=clock, knowledge=knowledge, actuator=actuator
-        )
-        self.knowledge = self.manager.knowledge
-        self.tail = DecisionTail(self.knowledge)
-        self._next_publish = 0.0
-        self._declared: list[Any] = []
-        self._closed = False
-        try:
-            for name in NODE_NAMES:
-                self._declared.append(bus.liveliness_token(node_token(name)))
-            for name in NODE_NAMES:
-                self._declared.append(bus.service(ready_service(name), self._ready_handler(name)))
-        except BaseException:
-            self.close()
-            raise
-
-    @property
-    def run_stopped(self) -> bool:
-        """Whether a run-stop is in force."""
-        return self.manager.run_stopped
-
-    def _ready_handler(self, name: str) -> Callable[[Any], dict[str, Any]]:
-        return lambda message: self._ready(name)
-
-    def _ready(self, name: str) -> dict[str, Any]:
-        m = self.manager
-        return {
-            "ready": not self._closed,
-            "node": node_token(name),
-            "utu": m.name,
-            "pid": os.getpid(),
-            "rate": self.rate,
-            "composed": True,
-            "run_stopped": m.run_stopped,
-        }
-
-    def _on_step(self, manager: AutonomicManager) -> None:
-        now = time.monotonic()
-        if now < self._next_publish:
-            return
-        self._next_publish = now + self._kb_period
-        rows = self.tail.read()
-        if rows:
-            self.bus.publish(topics.DECISIONS, {"decisions": [decision_dict(d) for d in rows]})
-
-    def wake(self) -> None:
-        """Wake ``spin`` (e.g. after setting its stop event)."""
-        self.manager.wake()
-
-    def input_queues(self) -> list[Subscriber]:
-        """The manager's bounded input queues (empty: every input was taken)."""
-        return self.manager.input_queues()
-
-    def spin(self, stop: threading.Event | None = None) -> None:
-        """Run the manager live until ``stop`` is set."""
-        self.manager.spin(stop, rate=self.rate, on_step=self._on_step)
-
-    def close(self) -> None:
-        """Withdraw the tokens and services, close the manager (and its knowledge base)."""
-        if self._closed:
-            return
-        self._closed = True
-        for obj in reversed(self._declared):
-            try:
-                obj.close()
-            except Exception as exc:  # best effort at shutdown
-                log.debug("closing %r: %r", obj, exc)
-        self._declared.clear()
-        if hasattr(self, "manager"):
-            self.manager.close()

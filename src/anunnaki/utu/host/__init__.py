@@ -1,0 +1,56 @@
+"""Utu's host: where the cycle (:mod:`anunnaki.utu.cycle`) meets the bus, threads and clocks.
+
+* ``_nodes``: :class:`UtuNode` on :class:`anunnaki.bus.Node` — the operator desk, run-stop,
+  liveliness and watchdog, written once — and the five stage nodes (one process each, or
+  several in one process);
+* ``_manager``: :class:`AutonomicManager`, the five stages run inline on one thread, handing
+  each other their messages by direct call;
+* ``_actuators``: how actions reach the managed system (over the bus, or recorded);
+* ``_threads``: actions off the loop's path (worker threads);
+* ``_intake``, ``_peers``, ``_notify``: a live step's intake budget, the watch over the
+  nodes of other processes, notifications.
+
+The public names are re-exported by :mod:`anunnaki.utu`.
+"""
+
+from anunnaki.topics import UTU_NODES as NODE_NAMES
+from anunnaki.topics import UtuNodeName as NodeName
+from anunnaki.utu.host._actuators import BusActuator, RecordingActuator, stop_platform
+from anunnaki.utu.host._desk import OperatorDesk, Watchdog
+from anunnaki.utu.host._manager import AutonomicManager
+from anunnaki.utu.host._nodes import (
+    NODE_KINDS,
+    AnalyzeNode,
+    ExecuteNode,
+    KnowledgeNode,
+    MonitorNode,
+    PlanNode,
+    UtuNode,
+    build_node,
+    step_nodes,
+)
+from anunnaki.utu.host._peers import ACT_ORDER, PeerWatch
+from anunnaki.utu.host._threads import ThreadRunner
+
+__all__ = [
+    "ACT_ORDER",
+    "NODE_KINDS",
+    "NODE_NAMES",
+    "AnalyzeNode",
+    "AutonomicManager",
+    "BusActuator",
+    "ExecuteNode",
+    "KnowledgeNode",
+    "MonitorNode",
+    "NodeName",
+    "OperatorDesk",
+    "PeerWatch",
+    "PlanNode",
+    "RecordingActuator",
+    "ThreadRunner",
+    "UtuNode",
+    "Watchdog",
+    "build_node",
+    "step_nodes",
+    "stop_platform",
+]
