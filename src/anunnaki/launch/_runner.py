@@ -159,11 +159,12 @@ def _counter(bus: Bus, nodes: Iterable[str]) -> Callable[[int], bool] | None:
 def _taken_here(nodes: Sequence[UtuNode | ComposedUtu], bus: Bus) -> Callable[[int], bool] | None:
     """In one process: whether Utu's analysis has taken ``n`` inputs so far (lockstep).
 
-    Counted, never read off empty input queues: a queue is empty while a message is still
-    on its way (a network bus delivers after ``publish`` returns), and once a step has
-    drained it but not yet read the clock, which the next instant would move on under it.
-    The composed manager counts in its analysis; separate nodes report on the bus, as
-    across processes.
+    Counted, never read off empty input queues: a step drains the queues first and reads
+    the clock after, and in between the next instant would move the clock on and the
+    inputs be stamped one instant late (whenever the step runs on a thread of its own:
+    the nodes, or the composed manager on a bus other than the in-process one). The
+    composed manager counts in its analysis; separate nodes report on the bus, as across
+    processes.
     """
     for node in nodes:
         if isinstance(node, ComposedUtu):
