@@ -23,7 +23,7 @@ test: setup
 	$(PY) -m ruff format --check src tests benchmarks examples
 	$(PY) -m mypy
 	.venv/bin/lint-imports
-	$(PY) -m pytest -q
+	$(PY) -m pytest -q -n 2 --dist loadfile --durations=30
 
 bench: setup
 	$(PY) benchmarks/goals.py

@@ -37,10 +37,14 @@ import numpy as np
 import torch
 
 from anunnaki.bus import Sample, open_bus
-from anunnaki.lec._centernet import CenterNetDetector
-from anunnaki.lec._detector import save_detector, sha256_file
-from anunnaki.lec._node import LecNode, detections_topic
-from anunnaki.lec._registry import ModelRegistry
+from anunnaki.lec import (
+    CenterNetDetector,
+    LecNode,
+    ModelRegistry,
+    detections_topic,
+    save_detector,
+    sha256_file,
+)
 from anunnaki.messages import Detections, Image
 from anunnaki.phenomena import synthetic_scene
 from anunnaki.sim import UAV_CLASSES

@@ -125,19 +125,26 @@ def test_oracle_benchmark_inference_part(tmp_path: Path) -> None:
     assert again["inference_ms_per_frame_128_shipped_rover_default"] == kept
 
 
-@pytest.mark.slow
-@pytest.mark.timeout(900)
-def test_enlil_speed_benchmark(tmp_path: Path) -> None:
+@pytest.fixture(scope="module")
+def tiny_rover(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A rendered rover dataset of 4 frames per split, for the Enlil benchmarks."""
     pytest.importorskip("pybullet")
-    data = tmp_path / "rover"
+    data = tmp_path_factory.mktemp("rover") / "data"
     subprocess.run(
         [
             sys.executable, "-m", "anunnaki", "make-dataset", "rover", "--out", str(data),
             "--train-layouts", "0", "--val-layouts", "1", "--test-layouts", "2",
             "--per-layout", "4", "--workers", "1",
         ],
-        check=True, capture_output=True, cwd=ROOT,
+        check=True, capture_output=True, cwd=ROOT, timeout=300,
     )  # fmt: skip
+    return data
+
+
+@pytest.mark.slow
+@pytest.mark.timeout(900)
+def test_enlil_speed_benchmark(tmp_path: Path, tiny_rover: Path) -> None:
+    data = tiny_rover
     out = tmp_path / "enlil_speed.json"
     args = ["--quick", "--data", str(data), "--output", str(out), "--evals", "2"]
     args += ["--frames", "32", "--fit-frames", "64"]
@@ -153,3 +160,30 @@ def test_enlil_speed_benchmark(tmp_path: Path) -> None:
     assert doc["steps"]["assess_fog"]["identical"] and doc["steps"]["oracle_frames"]["identical"]
     assert doc["steps"]["oracle_fit"]["fit_loss_max_rel_diff"] < 1e-3
     assert all(s["baseline_cpu_s"] > 0 and s["current_cpu_s"] > 0 for s in doc["steps"].values())
+
+
+def test_goals_benchmark(tmp_path: Path) -> None:
+    out = tmp_path / "goals.json"
+    run("goals.py", "--updates", "200", "--messages", "50", "--repeat", "1", "--output", str(out))
+    doc = load(out)
+    assert doc["benchmark"] == "goals"
+    assert doc["model"]["goals"] > 1000 and doc["model"]["depth"] == 5
+    assert doc["runs"] == {"updates": 200, "messages": 50, "repeat": 1}
+    rates = ("incremental_updates_per_s", "messages_per_s", "baseline_bare_minmax_updates_per_s")
+    assert all(doc[key] > 0 for key in rates)
+    assert doc["incremental_over_baseline"] > 0 and doc["aim_over_baseline"] == 0.6
+    assert 0 < doc["full_evaluation_ms"]["min"] <= doc["full_evaluation_ms"]["median"]
+
+
+@pytest.mark.slow
+def test_enlil_search_benchmark(tmp_path: Path, tiny_rover: Path) -> None:
+    out = tmp_path / "enlil_search.json"
+    args = ["--data", str(tiny_rover), "--budget", "6", "--checkpoints", "3,6"]
+    run("enlil_search.py", *args, "--batch-images", "2", "--workers", "1", "--out", str(out))
+    doc = load(out)
+    assert doc["budget"] == 6 and doc["phenomenon"] == "hsl" and doc["aim"] == 1.5
+    assert set(doc["searches"]) == {"enlil", "random", "sobol"}
+    for search in doc["searches"].values():
+        assert set(search["cells"]) == {"3", "6"}
+        assert sum(search["counts"].values()) == 6  # every evaluation has a category
+    assert set(doc["enlil_over_random_category1_cells"]) == {"3", "6"}

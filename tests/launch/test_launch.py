@@ -479,7 +479,9 @@ def test_a_launch_run_stops_the_platform_when_a_node_started_by_hand_dies(
     text = text.replace("  monitor: {rate: 50}\n", "").replace("sync: true", "sync: false")
     p = launch_file(tmp_path, text)
     db = tmp_path / "run.db"
-    launch = Lines(_anunnaki("run", str(p), "--knowledge", str(db)))
+    # --speed 5: the loop decides within seconds, not 25 (a fail-safe: the dim light at trace
+    # time 25, or the inputs still unknown when the warm-up ends if the monitor is slow to come)
+    launch = Lines(_anunnaki("run", str(p), "--knowledge", str(db), "--speed", "5"))
     monitor = None
     try:
         assert launch.wait(r"^ready: ", timeout=60), launch.text

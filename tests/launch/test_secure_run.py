@@ -288,10 +288,9 @@ def test_documented_secure_run_decides_as_a_plain_one_and_denies_forgeries(
     assert result.exit_code == 0, f"{result.reason}\n{log}"
     assert not attacked.error, attacked.error
     decisions = [(d.t, d.kind, d.tactic or "") for d in result.decisions]
-    # The same decisions in the same order; a postcondition may be verified one trace
-    # instant (0.5 s) apart: the buzzer command reaches the scripted rover on its subscriber
-    # thread, before or after it publishes its next instant (a race of lockstep on a loaded
-    # machine, with or without the router).
+    # The same decisions in the same order; a postcondition may be verified one status
+    # instant (0.5 s) apart: the buzzer command reaches the scripted rover as the execute
+    # part publishes it, after or (through the router) just before its next instant.
     assert [d[1:] for d in decisions] == [d[1:] for d in plain_decisions], log
     for (t, kind, _), (t_plain, _, _) in zip(decisions, plain_decisions, strict=True):
         assert abs(t - t_plain) <= (0.5 if kind == "postcondition_ok" else 1e-9), log

@@ -2,10 +2,13 @@
 
 See ``lec_helpers.py``: the model is cached under pytest's cache directory keyed by a hash of
 the settings and of the source of ``anunnaki.lec``, ``anunnaki.datasets`` and ``anunnaki.sim``.
+The cache is locked while it is checked and filled: with ``make test``'s two xdist workers the
+first trains and the second waits, then reads its model.
 """
 
 from __future__ import annotations
 
+import fcntl
 import json
 import shutil
 from pathlib import Path
@@ -20,13 +23,18 @@ def trained(request: pytest.FixtureRequest, tmp_path_factory: pytest.TempPathFac
     key = cache_key()
     cache = getattr(request.config, "cache", None)
     if cache is None:
-        root = tmp_path_factory.mktemp("lec-model")
-    else:
-        base = Path(cache.mkdir("anunnaki-lec"))
+        return _trained(tmp_path_factory.mktemp("lec-model"))
+    base = Path(cache.mkdir("anunnaki-lec"))
+    with (base / ".lock").open("w") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)  # released when the file closes
         for old in base.iterdir():
-            if old.name != key:
+            if old.name not in (key, ".lock"):
                 shutil.rmtree(old, ignore_errors=True)
-        root = base / key
+        return _trained(base / key)
+
+
+def _trained(root: Path) -> Trained:
+    """The model in ``root``: read when it is done there, otherwise trained there now."""
     done = root / "done.json"
     if done.is_file():
         info = json.loads(done.read_text())

@@ -176,6 +176,12 @@ class Evaluator:
         self._height = [0] * n
         for pos, i in enumerate(self._order):
             self._height[i] = pos
+        # What computes each node: its kind's own computation when nothing obstructs it
+        # (one call per node on the hot path), the general one otherwise.
+        self._calc: list[Callable[[int], tuple[float | None, Status]]] = [
+            self._calculator(i) for i in range(n)
+        ]
+        self._thresh_eps = [t - _EPS for t in self._thresh]
         self._reader_tuples = [tuple(sorted(set(r))) for r in self._slot_readers]
         self._deps_t = [tuple(sorted(set(d))) for d in self._deps]
         self._build_topics()
@@ -350,38 +356,52 @@ class Evaluator:
             u = 1.0 - u
         return u
 
+    def _calculator(self, i: int) -> Callable[[int], tuple[float | None, Status]]:
+        if self._obstr[i]:
+            return self._compute
+        k = self._kind[i]
+        if k == _AND:
+            return self._compute_and
+        if k == _OR:
+            return self._compute_or
+        if k == _OBSTACLE or (self._relax[i] is None and not self._avoid[i]):
+            return self._compute_crisp
+        return self._compute_relaxed
+
     def _compute(self, i: int) -> tuple[float | None, Status]:
         k = self._kind[i]
         u: float | None
         s: Status
-        if k in (_LEAF, _OBSTACLE):
-            u, s = self._compute_leaf(i, k)
-        elif k == _AND:
+        if k == _AND:
             u, s = self._compute_and(i)
-        else:
+        elif k == _OR:
             u, s = self._compute_or(i)
+        elif k == _OBSTACLE or (self._relax[i] is None and not self._avoid[i]):
+            u, s = self._compute_crisp(i)
+        else:
+            u, s = self._compute_relaxed(i)
         obstr = self._obstr[i]
         if obstr:
             u, s = self._obstruct(u, s, obstr)
         return u, s
 
-    def _compute_leaf(self, i: int, k: int) -> tuple[float | None, Status]:
-        u: float | None
-        if k == _OBSTACLE or (self._relax[i] is None and not self._avoid[i]):
-            # The common case, inlined: a crisp expression mapped to [0, 1].
-            fn = self._fn[i]
-            v = fn(self.slots) if fn is not None else None
-            if v is True:
-                u = 1.0
-            elif v is False:
-                u = 0.0
-            elif v is None:
-                u = None
-            else:
-                u = truth(v)
-        else:
-            u = self._leaf_utility(i)
-        return u, None if u is None else u >= self._thresh[i] - _EPS
+    def _compute_crisp(self, i: int) -> tuple[float | None, Status]:
+        """The common leaf: a crisp expression (or an obstacle's condition) mapped to [0, 1]."""
+        fn = self._fn[i]
+        if fn is None:
+            return None, None
+        v = fn(self.slots)
+        if v is True:
+            return 1.0, self._thresh_eps[i] <= 1.0
+        if v is False:
+            return 0.0, self._thresh_eps[i] <= 0.0
+        u = None if v is None else truth(v)
+        return u, None if u is None else u >= self._thresh_eps[i]
+
+    def _compute_relaxed(self, i: int) -> tuple[float | None, Status]:
+        """A leaf through its RELAX operator, or an ``avoid`` goal."""
+        u = self._leaf_utility(i)
+        return u, None if u is None else u >= self._thresh_eps[i]
 
     def _compute_and(self, i: int) -> tuple[float | None, Status]:
         util, stat = self.util, self.stat
@@ -457,23 +477,26 @@ class Evaluator:
     def _propagate(self, dirty: Iterable[int]) -> None:
         """Re-evaluate ``dirty`` nodes, then their dependents while results change.
 
-        Nodes are processed in topological order (a heap keyed by position), so each node is
-        computed after every changed input it reads; a node whose result is unchanged stops
-        the propagation along that path.
+        Nodes are processed in topological order (a heap of their positions in it), so each
+        node is computed after every changed input it reads; a node whose result is
+        unchanged stops the propagation along that path. A node is queued again for each
+        input that changed; its copies come off the heap together and it is computed once.
         """
-        height = self._height
-        heap = [(height[i], i) for i in set(dirty)]
-        if len(heap) > 1:
-            heapq.heapify(heap)
-        queued = {i for _, i in heap}
+        height, order = self._height, self._order
+        heap = [height[i] for i in dirty]
+        heapq.heapify(heap)
         util, stat, deps, changed = self.util, self.stat, self._deps_t, self._changed
-        compute = self._compute
+        calc = self._calc
         pop, push = heapq.heappop, heapq.heappush
+        last = -1
         while heap:
-            i = pop(heap)[1]
-            queued.discard(i)
+            h = pop(heap)
+            if h == last:
+                continue
+            last = h
+            i = order[h]
             try:
-                u, s = compute(i)
+                u, s = calc[i](i)
             except Exception as exc:  # a misbehaving operator must not kill the loop
                 if self._on_error is not None:
                     self._on_error(self.ids[i], exc)
@@ -483,9 +506,7 @@ class Evaluator:
                 stat[i] = s
                 changed.add(i)
                 for j in deps[i]:
-                    if j not in queued:
-                        queued.add(j)
-                        push(heap, (height[j], j))
+                    push(heap, height[j])
 
     # -- inputs -------------------------------------------------------------------------
     def observe(self, topic: str, message: Mapping[str, Any], now: float) -> None:
@@ -536,12 +557,12 @@ class Evaluator:
         if slot is None:
             return
         self.slots[slot] = value
-        dirty = list(self._reader_tuples[slot])
+        dirty = self._reader_tuples[slot]
         if self._temporal:
             self._sample_temporal(dirty)
         self._propagate(dirty)
 
-    def _sample_temporal(self, dirty: list[int]) -> None:
+    def _sample_temporal(self, dirty: Iterable[int]) -> None:
         wanted = set(dirty)
         for i in self._temporal:
             if i not in wanted:

@@ -19,7 +19,7 @@ import sys
 import tempfile
 import threading
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, TextIO
@@ -39,7 +39,7 @@ from anunnaki.launch._supervisor import (
 from anunnaki.managed import ManagedContext, ManagedRun
 from anunnaki.utu import NODE_NAMES, AutonomicManager, Decision, Knowledge, UtuNode, build_node
 from anunnaki.utu.cycle import DecisionTail, UtuParts, open_knowledge
-from anunnaki.utu.host import ACT_ORDER, MonitorNode, PeerWatch, stop_platform
+from anunnaki.utu.host import ACT_ORDER, PeerWatch, stop_platform
 
 __all__ = ["RunResult", "format_decision", "run_launch"]
 
@@ -86,17 +86,6 @@ class _Printer:
 
 
 # -- lockstep ----------------------------------------------------------------------------------
-def _taken_here(nodes: Sequence[UtuNode | AutonomicManager]) -> Callable[[int], bool] | None:
-    """In one process: Utu has taken its inputs when its input queues are empty."""
-    subs: list[Any] = []
-    for node in nodes:
-        if isinstance(node, AutonomicManager | MonitorNode):
-            subs += node.input_queues()
-    if not subs:
-        return None
-    return lambda n: all(s.pending == 0 for s in subs)
-
-
 class _InputCounter:
     """Across processes: count the inputs the monitor node has republished."""
 
@@ -149,6 +138,35 @@ class _CycleCounter:
         with self._lock:
             seq = next((s for s, taken in self._cycles if taken >= n), None)
             return seq is not None and (not self._wait_done or self._done >= seq)
+
+
+def _counter(bus: Bus, nodes: Iterable[str]) -> Callable[[int], bool] | None:
+    """Whether Utu has taken ``n`` inputs so far, from what its nodes report on the bus."""
+    names = set(nodes)
+    if "analyze" in names:
+        return _CycleCounter(bus, wait_done="execute" in names)
+    if "monitor" in names:
+        return _InputCounter(bus)
+    return None
+
+
+def _taken_here(
+    nodes: Sequence[UtuNode | AutonomicManager], bus: Bus
+) -> Callable[[int], bool] | None:
+    """In one process: whether Utu's analysis has taken ``n`` inputs so far (lockstep).
+
+    Counted, never read off empty input queues: a step drains the queues first and reads
+    the clock after, and in between the next instant would move the clock on and the
+    inputs be stamped one instant late (whenever the step runs on a thread of its own:
+    the nodes, or the composed manager on a bus other than the in-process one). The
+    composed manager counts in its analysis; separate nodes report on the bus, as across
+    processes.
+    """
+    for node in nodes:
+        if isinstance(node, AutonomicManager):
+            manager = node
+            return lambda n: manager.analyze_stage.taken >= n
+    return _counter(bus, (node.name for node in nodes if isinstance(node, UtuNode)))
 
 
 @dataclass
@@ -463,7 +481,7 @@ class _Runner:
             printer = _Printer(self.out, tail)
             t_run = time.monotonic()
             managed = self._start_managed(
-                bus, sim.update if sim is not None else None, _taken_here(nodes)
+                bus, sim.update if sim is not None else None, _taken_here(nodes, bus)
             )
             code, reason = self._watch(
                 printer, managed.thread if managed else None, lambda: crashed[0] if crashed else ""
@@ -553,11 +571,7 @@ class _Runner:
 
     def _taken_counter(self, bus: Bus) -> Callable[[int], bool] | None:
         """How the managed system learns that Utu took an instant (lockstep), if it can."""
-        if "analyze" in self.launch.nodes:
-            return _CycleCounter(bus, wait_done="execute" in self.launch.nodes)
-        if "monitor" in self.launch.nodes:
-            return _InputCounter(bus)
-        return None
+        return _counter(bus, self.launch.nodes)
 
     def _run_processes(self) -> RunResult:
         launch = self.launch

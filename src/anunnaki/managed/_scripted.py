@@ -77,12 +77,19 @@ class ScriptedSystem(Closing):
         self.t = float("-inf")
         self._next = 0
         self._lock = threading.Lock()
+        self._intake = threading.Lock()  # buzzer commands are applied one caller at a time
+        # Buzzer commands are applied where they arrive (in-process: in the publisher's
+        # thread, before its publish returns), not on a subscriber thread of their own: one
+        # that ran late let the next instants' status miss a command Utu had sent, and the
+        # postcondition failed under load.
+        self._buzzers: Any = None
         self._declared = [
             bus.service(f"{prefix}/set_mode", self._set_mode),
             bus.service(f"{prefix}/stop", self._stop),
-            bus.subscribe(f"{prefix}/buzzer", self._buzzer, queue=16),
             bus.subscribe(f"{prefix}/teleop", self._teleop, queue=64),
         ]
+        self._buzzers = bus.subscribe(f"{prefix}/buzzer", queue=16, on_ready=self._take_buzzers)
+        self._declared.append(self._buzzers)
         if stop_without_utu is not None:
             self._declared.append(
                 LivelinessGuard(
@@ -121,6 +128,13 @@ class ScriptedSystem(Closing):
             self.overrides["buzzer"] = bool(body.get("on", False))
             self.commands.append((self.t, "buzzer", body))
 
+    def _take_buzzers(self) -> None:
+        """Apply the buzzer commands queued so far, in their order."""
+        with self._intake:
+            sub = self._buzzers
+            while sub is not None and (sample := sub.try_recv()) is not None:
+                self._buzzer(sample)
+
     def _teleop(self, sample: Any) -> None:
         with self._lock:
             if self.overrides.get("mode") == "manual":
@@ -137,6 +151,7 @@ class ScriptedSystem(Closing):
 
     def step(self, until: float) -> int:
         """Publish every record with ``t <= until``; returns how many."""
+        self._take_buzzers()
         n = 0
         while self._next < len(self.records) and self.records[self._next].t <= until:
             rec = self.records[self._next]
