@@ -23,6 +23,16 @@
    default are written beside the default's (``accuracy_other_label_batches``), and
    ``--cache`` keeps each size's frames apart.
 
+4. **Issue 22.** Every set also gets a ``ceiling`` (the labels' own Cohen's kappa and
+   macro-F1 between the two label batches, :func:`anunnaki.enlil.label_ceiling`) and every
+   predictor its ``of_ceiling`` and ``drop`` figures (RMSE and Spearman of the predicted
+   relative F1 drop against the measured one; the baselines now include ``box-stability``);
+   a third set, ``interior``, is balanced with every context's drop farther from a band
+   edge than the balanced set's measured drop noise. ``--train-archive DIR`` (repeatable)
+   trains one oracle per ``--architectures`` and ``--train-seeds`` with equal budgets
+   (``--train-frames``, ``--train-epochs``) on those archives and scores them beside the
+   others as ``ARCH-sSEED``; ``seeds`` gives each architecture's mean and spread.
+
 Writes ``benchmarks/results/oracle.json``. Data: ``anunnaki make-dataset rover --out D`` and
 ``anunnaki make-dataset uav --out D --width 320 --height 240`` (docs/enlil.md).
 
