@@ -384,25 +384,6 @@ class Predictions:
     info: dict[str, Any] | None = None
     drop: npt.NDArray[np.float64] | None = None
 
-    def only(self, held: HeldOut, keep: npt.NDArray[np.bool_], window: int) -> Predictions:
-        """The predictions on the frames of *held*'s contexts where *keep* is true."""
-        frames = keep[held.context_index]
-        windows = keep[held.context_index[held.windows(window)[:, 0]]]
-
-        def cut(v: Any, mask: npt.NDArray[np.bool_]) -> Any:
-            return None if v is None else v[mask]
-
-        return replace(
-            self,
-            category=self.category[frames],
-            window_category=self.window_category[windows],
-            probs=cut(self.probs, frames),
-            window_probs=cut(self.window_probs, windows),
-            params=cut(self.params, frames),
-            phenomenon_hit=cut(self.phenomenon_hit, frames),
-            drop=cut(self.drop, frames),
-        )
-
 
 def oracle_predictions(
     oracle: OracleModel, held: HeldOut, *, window: int = 5, batch_size: int = 256
