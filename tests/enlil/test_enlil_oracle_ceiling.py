@@ -285,3 +285,12 @@ def test_several_seeds_give_mean_and_spread() -> None:
     assert set(figures) == {"accuracy", "macro_f1", "ece", "drop_rmse"}
     values = [o.card.metrics["val"]["macro_f1"] for o in oracles]
     assert figures["macro_f1"]["spread"] == pytest.approx(max(values) - min(values))
+
+
+def test_a_margin_of_half_the_band_leaves_category_1_short() -> None:
+    det, data = ColourDetector(), tiny_data(12, seed=5)
+    clean = evaluate_detector(det, data).f1
+    spec = ContextSpec("interior", 6)
+    drawn = draw_contexts(det, data, FOG, spec, clean_f1=clean, seed=2, margin=0.03)
+    assert drawn.counts()[1] == 0 and drawn.short[1] == 2
+    assert drawn.evaluations <= 3 * 6 + (6 + 2) * 8

@@ -162,7 +162,9 @@ def draw_contexts(
         evaluations += 1
     identity = normalise(phen, phen.to_vector(phen.identity_params()))
     tries = 0
-    while any(len(pools[c]) < quota[c] for c in (0, 1)) and tries < spec.n + 2:
+    # a margin of half the band or more leaves category 1 no interior: do not search for it
+    wanted = (0, 1) if 2 * edge < thresholds[1] - thresholds[0] else (0,)
+    while any(len(pools[c]) < quota[c] for c in wanted) and tries < spec.n + 2:
         tries += 1
         end = seen2[int(rng.integers(len(seen2)))].params if seen2 else rng.random(d)
         evaluations += _bisect(measure, keep, identity, end, band=thresholds, margin=edge)
