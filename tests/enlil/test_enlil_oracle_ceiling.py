@@ -98,10 +98,16 @@ def test_the_retest_measures_each_context_on_a_disjoint_batch() -> None:
     again = retest_contexts(det, data, held, batch_images=6, seed=1)
     assert again.retest is not None and again.retest.batch_images == 6
     ceiling = label_ceiling(again)
-    first = np.asarray([r.drop for r in held.contexts])
-    noise = math.sqrt(float(np.mean((first - again.retest.drops) ** 2)) / 2)
+    first, second = np.asarray([r.drop for r in held.contexts]), again.retest.drops
+    noise_all = math.sqrt(float(np.mean((first - second) ** 2)) / 2)
+    assert ceiling["drop_noise_all"] == pytest.approx(noise_all)
+    assert ceiling["drop"]["rmse"] == pytest.approx(noise_all * math.sqrt(2))
+    # the noise that decides the interior: contexts near the band (mean drop <= 0.2)
+    near = (first + second) / 2 <= 0.2
+    use = near if near.sum() >= 2 else np.ones_like(near)
+    noise = math.sqrt(float(np.mean((first[use] - second[use]) ** 2)) / 2)
     assert ceiling["drop_noise"] == pytest.approx(noise)
-    assert ceiling["drop"]["rmse"] == pytest.approx(noise * math.sqrt(2))
+    assert ceiling["drop_noise_contexts"] == int(use.sum())
     assert ceiling["kappa"] == pytest.approx(
         cohen_kappa([r.category for r in held.contexts], again.retest.categories)
     )

@@ -300,20 +300,38 @@ def fixed_batch_indices(size: int, n: int, seed: int) -> set[int]:
     return {int(i) for i in np.random.default_rng(seed).choice(size, size=n, replace=False)}
 
 
-def drop_noise(held: HeldOut) -> float:
-    """The standard deviation of one measurement of a drop, from the retest's differences."""
+def drop_noise(
+    held: HeldOut, thresholds: tuple[float, float] | None = (0.05, 0.10)
+) -> tuple[float, int]:
+    """The standard deviation of one measurement of a drop near the band, and its contexts.
+
+    From the retest's differences, ``sqrt(mean((d1 - d2)^2) / 2)``, over the contexts whose
+    mean drop is at most twice the upper threshold (a drop's noise grows with the drop: a
+    context that loses 60 % of its F1 varies by far more than one at the band, and only
+    the band's edges matter); over all contexts when fewer than two are that near, or when
+    *thresholds* is ``None``.
+    """
     if held.retest is None or not held.contexts:
-        return math.nan
+        return math.nan, 0
     first = np.asarray([r.drop for r in held.contexts], np.float64)
-    return float(np.sqrt(np.mean((first - held.retest.drops) ** 2) / 2.0))
+    second = held.retest.drops
+    use = np.ones(len(first), bool)
+    if thresholds is not None:
+        near = (first + second) / 2.0 <= 2.0 * thresholds[1]
+        if near.sum() >= 2:
+            use = near
+    noise = float(np.sqrt(np.mean((first[use] - second[use]) ** 2) / 2.0))
+    return noise, int(use.sum())
 
 
-def label_ceiling(held: HeldOut) -> dict[str, Any]:
+def label_ceiling(held: HeldOut, thresholds: tuple[float, float] = (0.05, 0.10)) -> dict[str, Any]:
     """How far *held*'s labels reproduce: the retest scored against them (per context).
 
     ``kappa`` (Cohen's) and ``macro_f1``, ``accuracy`` and ``confusion`` of the retest's
     categories against the labels, ``drop`` (``rmse``, ``spearman`` of the retest's drops
-    against the first ones), ``drop_noise`` (:func:`drop_noise`), and the retest's
+    against the first ones), ``drop_noise`` near the band (:func:`drop_noise`, over
+    ``drop_noise_contexts`` contexts) and ``drop_noise_all`` (over every context), and the
+    retest's
     ``batch_images`` and ``clean_f1``. Per frame the figures are the same (every context
     has as many frames).
     """
@@ -322,13 +340,16 @@ def label_ceiling(held: HeldOut) -> dict[str, Any]:
     labels = np.asarray([r.category for r in held.contexts], np.int64)
     metrics = classification_metrics(held.retest.categories, labels)
     first = np.asarray([r.drop for r in held.contexts], np.float64)
+    noise, near = drop_noise(held, thresholds)
     return {
         "drop": regression_metrics(held.retest.drops, first),
         "kappa": cohen_kappa(labels, held.retest.categories),
         "macro_f1": metrics["macro_f1"],
         "accuracy": metrics["accuracy"],
         "confusion": metrics["confusion"],
-        "drop_noise": drop_noise(held),
+        "drop_noise": noise,
+        "drop_noise_contexts": near,
+        "drop_noise_all": drop_noise(held, None)[0],
         "contexts": len(labels),
         "batch_images": held.retest.batch_images,
         "clean_f1": held.retest.clean_f1,
@@ -881,7 +902,7 @@ def score_all(
         }
     }
     if held.retest is not None:
-        out["ceiling"] = ceiling = label_ceiling(held)
+        out["ceiling"] = ceiling = label_ceiling(held, thresholds)
         for figures in out["predictors"].values():
             figures["of_ceiling"] = of_ceiling(figures, ceiling)
     return out
