@@ -66,3 +66,53 @@ def test_nothing_measured_keeps_every_figure(bench: Any) -> None:
     out = bench.merge_accuracy(previous, {}, None, keep_others=True)
     assert out == {k: previous[k] for k in ("accuracy", "accuracy_other_label_batches")}
     assert bench.merge_accuracy({}, {}, None, keep_others=True) == {}
+
+
+def _figures(f1: float, acc: float, rmse: float | None, ece: float | None = None) -> Any:
+    return {
+        "macro_f1": f1,
+        "accuracy": acc,
+        "ece": ece,
+        "drop": None if rmse is None else {"rmse": rmse, "spearman": 0.5},
+        "of_ceiling": {"macro_f1": f1 / 0.8, "kappa": None},
+    }
+
+
+def test_aims_read_the_interior_set_and_the_drop(bench: Any) -> None:
+    runs = {
+        kind: {
+            "predictors": {
+                "enlil": _figures(0.86, 0.95, 0.05, 0.04),
+                "max-score": _figures(0.5, 0.6, 0.08),
+                "box-stability": _figures(0.4, 0.5, 0.04),
+            },
+            "ceiling": {"macro_f1": 0.9},
+        }
+        for kind in ("random", "balanced", "interior")
+    }
+    aims = bench._aims(runs)
+    assert aims["accuracy_random"]["met"] and aims["macro_f1_interior"]["met"]
+    assert aims["interior_of_ceiling"]["value"] == pytest.approx(0.86 / 0.9)
+    assert aims["interior_of_ceiling"]["met"]  # 0.86 >= 0.9 * 0.9
+    # box-stability's drop RMSE (0.04) is below the oracle's (0.05): missed
+    assert not aims["drop_rmse_below_baselines"]["met"]
+    assert aims["ece_balanced"]["met"]
+    assert bench._aims({k: {"predictors": {}} for k in runs})["measured"] is False
+
+
+def test_seed_groups_give_mean_and_spread_per_architecture(bench: Any) -> None:
+    predictors = {
+        "patch_cnn-s0": _figures(0.6, 0.9, 0.05),
+        "patch_cnn-s1": _figures(0.8, 0.7, 0.07),
+        "small_cnn-s0": _figures(0.5, 0.8, 0.06),
+        "enlil": _figures(0.1, 0.1, None),
+    }
+    runs = {k: {"predictors": predictors} for k in ("random", "balanced", "interior")}
+    groups = bench._seed_groups(runs)
+    assert set(groups) == {"patch_cnn", "small_cnn"}
+    patch = groups["patch_cnn"]
+    assert patch["seeds"] == 2
+    assert patch["balanced_macro_f1"]["mean"] == pytest.approx(0.7)
+    assert patch["balanced_macro_f1"]["spread"] == pytest.approx(0.2)
+    assert patch["balanced_drop_rmse"]["mean"] == pytest.approx(0.06)
+    assert patch["balanced_of_ceiling"]["mean"] == pytest.approx(0.7 / 0.8)

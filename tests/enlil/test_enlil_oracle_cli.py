@@ -60,10 +60,18 @@ def test_oracle_evaluate_scores_the_oracle_and_baselines(
     argv = ["oracle", "evaluate", "--models", str(MODELS), "--model", "rover-default"]
     argv += ["--data", str(data), "-p", "fog", "--contexts", "random:2", "--seed", "1"]
     argv += ["--oracle", f"enlil={out}", "--baseline", "max-score", "--fit-contexts", "random:2"]
-    argv += ["--frames-per-context", "5"]
+    argv += ["--frames-per-context", "5", "--batch-images", "3"]
     assert main([*argv, "--threads", "1", "--json"]) == 0
     report = json.loads(capsys.readouterr().out)
     assert set(report["predictors"]) == {"enlil", "max-score"}
+    # every figure beside the labels' own agreement, measured on a second batch of 3
+    ceiling = report["ceiling"]
+    assert ceiling["batch_images"] == 3 and ceiling["contexts"] == 2
+    assert {"kappa", "macro_f1", "drop_noise", "drop"} <= set(ceiling)
+    for figures in report["predictors"].values():
+        assert set(figures["of_ceiling"]) == {"macro_f1", "kappa"} and "kappa" in figures
+    # the drop predicted by the baseline's curve (fitted on val) against the measured drop
+    assert set(report["predictors"]["max-score"]["drop"]) >= {"rmse", "spearman"}
     assert report["model_id"] == "rover-default" and report["split"] == "test"
     assert report["test"]["contexts"] == 2 and report["test"]["frames"] == 10
     # the first predictor's figures are also the top level (the oracle's)

@@ -147,7 +147,7 @@ def test_evaluate_oracles_scores_everyone_on_the_same_frames(oracle) -> None:  #
     report = evaluate_oracles(
         ColourDetector(), tiny_data(10, seed=3), FOG, ContextSpec("random", 2),
         oracles={"enlil": oracle}, baselines=("max-score",), val=tiny_data(10, seed=4),
-        fit_spec=ContextSpec("random", 2), per_context=5, batch_images=10,
+        fit_spec=ContextSpec("random", 2), per_context=5, batch_images=5,
     )  # fmt: skip
     assert set(report["predictors"]) == {"enlil", "max-score"}
     assert report["test"]["frames"] == 10 and report["fit"]["contexts"] == 2

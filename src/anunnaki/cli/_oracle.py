@@ -228,8 +228,11 @@ def _add_evaluate(osub: Any) -> None:
             "per category), measure each one's true category on a fixed batch of the split, "
             "perturb --frames-per-context other frames of the split with it and compare the "
             "oracle's per-frame prediction, and its mean over windows of --window frames. "
-            "--baseline atc|max-score scores the detector's own outputs on the same frames, "
-            "fitted on the val split (docs/enlil.md)."
+            "--baseline atc|max-score|box-stability scores the detector's own outputs on the "
+            "same frames, fitted on the val split. Every context is measured again on a "
+            "disjoint batch of as many images: the labels' own agreement (Cohen's kappa, "
+            "macro-F1) is the ceiling every figure is reported against; a balanced set is "
+            "also drawn from each category's interior (docs/enlil.md)."
         ),
     )
     e.add_argument(
@@ -241,7 +244,11 @@ def _add_evaluate(osub: Any) -> None:
     e.add_argument("--data", required=True, help="dataset folder (the split; val for baselines)")
     e.add_argument("--split", default="test", help="split the figures come from (test)")
     e.add_argument("--phenomenon", "-p", required=True, help="e.g. fog, raindrop, hsl")
-    e.add_argument("--contexts", default="random:60", help="random:N or balanced:N (random:60)")
+    e.add_argument(
+        "--contexts",
+        default="random:60",
+        help="random:N, balanced:N or interior:N (random:60)",
+    )
     e.add_argument(
         "--oracle",
         action="append",
@@ -253,8 +260,20 @@ def _add_evaluate(osub: Any) -> None:
         "--baseline",
         action="append",
         default=[],
-        choices=("atc", "max-score"),
+        choices=("atc", "max-score", "box-stability"),
         help="also score a detector-output baseline (repeatable)",
+    )
+    e.add_argument(
+        "--no-ceiling",
+        dest="ceiling",
+        action="store_false",
+        help="skip measuring the contexts again (no ceiling, no interior set)",
+    )
+    e.add_argument(
+        "--no-interior",
+        dest="interior",
+        action="store_false",
+        help="with balanced:N, skip the second set drawn from each category's interior",
     )
     e.add_argument(
         "--fit-contexts",
@@ -306,7 +325,7 @@ def run_evaluate(args: argparse.Namespace) -> int:
     from anunnaki.enlil import EnlilError, evaluate_oracles, parse_contexts
     from anunnaki.lec import resolve_model
 
-    spec_contexts = parse_contexts(args.contexts)
+    spec_contexts = parse_contexts(args.contexts, ("random", "balanced", "interior"))
     low, high = args.thresholds
     if not 0.0 <= low < high <= 1.0:
         raise EnlilError(f"--thresholds {low} {high}: need 0 <= DEG < COMP <= 1")
@@ -335,6 +354,8 @@ def run_evaluate(args: argparse.Namespace) -> int:
         batch_images=args.batch_images,
         thresholds=(low, high),
         seed=args.seed,
+        ceiling=args.ceiling,
+        interior=args.interior,
     )
     report = {
         "model_id": model.model_id,
@@ -357,24 +378,47 @@ def run_evaluate(args: argparse.Namespace) -> int:
 
 def _print_table(report: dict[str, Any]) -> None:
     from rich.console import Console
+
+    console = Console(highlight=False)
+    if not console.is_terminal:  # a pipe or a file: room for every column
+        console = Console(highlight=False, width=132)
+    console.print(_table(report, report["test"], report["split"], report["model_id"]))
+    if "interior" in report:
+        inner = report["interior"]
+        title = f"interior (drops over {inner['margin']:.3f} from a band edge)"
+        console.print(_table(inner | {"phenomenon": report["phenomenon"]}, inner["test"],
+                             report["split"], title))  # fmt: skip
+
+
+def _table(part: dict[str, Any], info: dict[str, Any], split: str, who: str) -> Any:
     from rich.table import Table
 
-    info = report["test"]
     table = Table(
-        title=f"{report['model_id']} under {report['phenomenon']}: {info['contexts']} contexts "
+        title=f"{who} under {part['phenomenon']}: {info['contexts']} contexts "
         f"({info['spec']}, categories {info['category_counts']}), {info['frames']} "
-        f"{report['split']} frames"
+        f"{split} frames"
     )
-    for col in ("predictor", "accuracy", "macro-F1", "ECE", "context err", "win acc", "win F1"):
+    cols = ("predictor", "accuracy", "macro-F1", "kappa", "F1/ceiling", "ECE", "drop RMSE",
+            "drop rho", "context err", "win acc", "win F1")  # fmt: skip
+    for col in cols:
         table.add_column(col, justify="left" if col == "predictor" else "right")
 
     def fmt(v: Any) -> str:
         return "-" if v is None else f"{v:.3f}"
 
-    for name, f in report["predictors"].items():
-        w = f["window"]
+    ceiling = part.get("ceiling")
+    if ceiling is not None:
         table.add_row(
-            name, fmt(f["accuracy"]), fmt(f["macro_f1"]), fmt(f["ece"]),
+            f"labels again ({ceiling['batch_images']} images)", fmt(ceiling["accuracy"]),
+            fmt(ceiling["macro_f1"]), fmt(ceiling["kappa"]), "1.000", "-",
+            fmt(ceiling["drop"]["rmse"]), fmt(ceiling["drop"]["spearman"]), "-", "-", "-",
+        )  # fmt: skip
+    for name, f in part["predictors"].items():
+        w, drop = f["window"], f.get("drop") or {}
+        table.add_row(
+            name, fmt(f["accuracy"]), fmt(f["macro_f1"]), fmt(f.get("kappa")),
+            fmt((f.get("of_ceiling") or {}).get("macro_f1")), fmt(f["ece"]),
+            fmt(drop.get("rmse")), fmt(drop.get("spearman")),
             fmt(f["context_error"]), fmt(w["accuracy"]), fmt(w["macro_f1"]),
         )  # fmt: skip
-    Console(highlight=False).print(table)
+    return table

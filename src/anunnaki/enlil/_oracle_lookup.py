@@ -36,6 +36,7 @@ import numpy.typing as npt
 from pydantic import BaseModel, ConfigDict, Field
 
 from anunnaki.enlil._context import EnlilError
+from anunnaki.enlil._oracle_metrics import classification_metrics
 from anunnaki.errors import MissingExtraError
 
 __all__ = [
@@ -507,8 +508,6 @@ def choose_mix(
     smaller boost.
 
     """
-    from anunnaki.enlil._oracle_net import classification_metrics
-
     y = np.asarray(labels, np.int64)
     best: tuple[float, float, float] = (-1.0, 1.0, 0.0)
     for w in weights:

@@ -17,9 +17,7 @@ when a network is built (the ``vision`` extra).
 
 from __future__ import annotations
 
-import itertools
 import json
-import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -46,12 +44,15 @@ __all__ = [
     "CLEAR",
     "ORACLE_ARCHITECTURES",
     "ORACLE_FORMAT",
+    "DropSpec",
+    "NetOutputs",
     "OracleCard",
     "OracleModel",
     "OraclePrediction",
     "PhenomenonSpec",
     "load_oracle",
     "oracle_paths",
+    "tempered",
 ]
 
 ORACLE_FORMAT = "anunnaki-oracle/1"
@@ -62,11 +63,13 @@ CLEAR = "clear"
 
 #: Oracle network architectures: name → ``build(n_params, n_phenomena, **options) -> nn.Module``
 #: whose ``forward(x)`` returns ``(category_logits [B, 3], params [B, d], phenomenon_logits
-#: [B, P])`` for ``x`` ``[B, 3, H, W]`` float in ``[0, 1]``.
+#: [B, P])`` for ``x`` ``[B, 3, H, W]`` float in ``[0, 1]``, and a fourth ``drop [B]`` (the
+#: predicted relative F1 drop, uncalibrated) when built with ``drop_head=True``.
 ORACLE_ARCHITECTURES: Registry[Any] = Registry(
     "oracle architecture", group="anunnaki.oracle_architectures", error=EnlilError
 )
 ORACLE_ARCHITECTURES.register_lazy("small_cnn", "anunnaki.enlil._oracle_net:build_small_cnn")
+ORACLE_ARCHITECTURES.register_lazy("patch_cnn", "anunnaki.enlil._oracle_net:build_patch_cnn")
 
 
 def _torch() -> Any:
@@ -77,39 +80,124 @@ def _torch() -> Any:
     return torch
 
 
-def build_small_cnn(n_params: int, n_phenomena: int, *, width: int = 16, hidden: int = 64) -> Any:
-    """The default oracle network (see the module's docstring)."""
+def build_small_cnn(
+    n_params: int, n_phenomena: int, *, width: int = 16, hidden: int = 64, drop_head: bool = False
+) -> Any:
+    """The default oracle network (see the module's docstring).
+
+    *drop_head*: a fourth output, the predicted relative F1 drop of the model (files
+    written before the head existed load without it).
+    """
     torch = _torch()
     nn = torch.nn
-
-    def block(cin: int, cout: int) -> Any:
-        return nn.Sequential(
-            nn.Conv2d(cin, cout, 3, stride=2, padding=1, bias=False),
-            nn.BatchNorm2d(cout),
-            nn.ReLU(inplace=True),
-        )
 
     class SmallOracleCNN(nn.Module):  # type: ignore[misc,name-defined]
         def __init__(self) -> None:
             super().__init__()
             w = width
             self.features = nn.Sequential(
-                block(3, w), block(w, 2 * w), block(2 * w, 3 * w), block(3 * w, 4 * w)
+                _block(3, w), _block(w, 2 * w), _block(2 * w, 3 * w), _block(3 * w, 4 * w)
             )
-            feats = 2 * 4 * w + 6
-            self.trunk = nn.Sequential(nn.Linear(feats, hidden), nn.ReLU(inplace=True))
-            self.category = nn.Linear(hidden, 3)
-            self.params = nn.Linear(hidden, max(n_params, 1))
-            self.phenomenon = nn.Linear(hidden, max(n_phenomena, 1))
+            _add_heads(
+                self, 2 * 4 * w + 6, hidden=hidden, n_params=n_params,
+                n_phenomena=n_phenomena, drop_head=drop_head,
+            )  # fmt: skip
 
-        def forward(self, x: Any) -> tuple[Any, Any, Any]:
+        def forward(self, x: Any) -> tuple[Any, ...]:
             stats = torch.cat(_mean_std(x), dim=1)
             f = self.features(x)
             pooled = torch.cat([*_mean_std(f), stats], dim=1)
-            h = self.trunk(pooled)
-            return self.category(h), torch.sigmoid(self.params(h)), self.phenomenon(h)
+            return _run_heads(self, pooled)
 
     return SmallOracleCNN()
+
+
+def build_patch_cnn(
+    n_params: int,
+    n_phenomena: int,
+    *,
+    width: int = 16,
+    hidden: int = 64,
+    pool: str = "max+attention",
+    drop_head: bool = False,
+) -> Any:
+    """An oracle network that keeps spatial resolution and pools over patches.
+
+    Three strided convolutions (1/8 of the input: a 16 x 16 map of patches for a 128 x 128
+    frame, each seeing about 30 x 30 pixels), one more convolution at that resolution and a
+    1 x 1 patch embedding; then, besides the global mean and standard deviation of
+    :func:`build_small_cnn`, the **maximum** over patches and/or an **attention** pool (a
+    softmax over per-patch scores weighting the patch features). One patch that shows a
+    raindrop or a smudge decides the max and takes the attention's weight wherever it is on
+    the lens; a global mean dilutes it over the whole frame.
+
+    *pool*: ``max``, ``attention`` or ``max+attention``.
+    """
+    torch = _torch()
+    nn = torch.nn
+    kinds = pool.split("+")
+    if not kinds or any(k not in ("max", "attention") for k in kinds):
+        raise EnlilError(
+            f"patch_cnn: pool {pool!r} is not one of 'max', 'attention', 'max+attention'"
+        )
+    use_max, use_attention = "max" in kinds, "attention" in kinds
+
+    class PatchOracleCNN(nn.Module):  # type: ignore[misc,name-defined]
+        def __init__(self) -> None:
+            super().__init__()
+            w = width
+            self.features = nn.Sequential(
+                _block(3, w), _block(w, 2 * w), _block(2 * w, 3 * w), _block(3 * w, 3 * w, 1)
+            )
+            self.embed = nn.Sequential(nn.Conv2d(3 * w, hidden, 1), nn.ReLU(inplace=True))
+            self.score = nn.Conv2d(hidden, 1, 1) if use_attention else None
+            feats = 2 * hidden + hidden * (int(use_max) + int(use_attention)) + 6
+            _add_heads(
+                self, feats, hidden=hidden, n_params=n_params, n_phenomena=n_phenomena,
+                drop_head=drop_head,
+            )  # fmt: skip
+
+        def forward(self, x: Any) -> tuple[Any, ...]:
+            stats = torch.cat(_mean_std(x), dim=1)
+            patches = self.embed(self.features(x))  # [B, hidden, h, w]
+            parts = [*_mean_std(patches), stats]
+            flat = patches.flatten(2)  # [B, hidden, h*w]
+            if use_max:
+                parts.append(flat.amax(dim=2))
+            if self.score is not None:
+                weights = torch.softmax(self.score(patches).flatten(2), dim=2)  # [B, 1, h*w]
+                parts.append((flat * weights).sum(dim=2))
+            return _run_heads(self, torch.cat(parts, dim=1))
+
+    return PatchOracleCNN()
+
+
+def _block(cin: int, cout: int, stride: int = 2) -> Any:
+    nn = _torch().nn
+    return nn.Sequential(
+        nn.Conv2d(cin, cout, 3, stride=stride, padding=1, bias=False),
+        nn.BatchNorm2d(cout),
+        nn.ReLU(inplace=True),
+    )
+
+
+def _add_heads(
+    net: Any, feats: int, *, hidden: int, n_params: int, n_phenomena: int, drop_head: bool
+) -> None:
+    """The shared trunk and heads: category, context, phenomenon (and the drop)."""
+    nn = _torch().nn
+    net.trunk = nn.Sequential(nn.Linear(feats, hidden), nn.ReLU(inplace=True))
+    net.category = nn.Linear(hidden, 3)
+    net.params = nn.Linear(hidden, max(n_params, 1))
+    net.phenomenon = nn.Linear(hidden, max(n_phenomena, 1))
+    net.drop = nn.Linear(hidden, 1) if drop_head else None
+
+
+def _run_heads(net: Any, pooled: Any) -> tuple[Any, ...]:
+    torch = _torch()
+    h = net.trunk(pooled)
+    out = (net.category(h), torch.sigmoid(net.params(h)), net.phenomenon(h))
+    return out if net.drop is None else (*out, net.drop(h).squeeze(1))
 
 
 def _mean_std(x: Any) -> tuple[Any, Any]:
@@ -135,6 +223,20 @@ class PhenomenonSpec(BaseModel):
     param_names: list[str]
 
 
+class DropSpec(BaseModel):
+    """How the drop head's raw output becomes the predicted relative F1 drop.
+
+    ``drop = scale * raw + offset``, the line fitted on val frames (least squares against
+    each frame's measured drop); ``val`` holds its figures there (``rmse``, ``spearman``).
+    """
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+    scale: float = 1.0
+    offset: float = 0.0
+    val: dict[str, float] = Field(default_factory=dict)
+
+
 class OracleCard(BaseModel):
     """The JSON sidecar of an oracle file (``NAME.json`` next to ``NAME.safetensors``).
 
@@ -155,6 +257,10 @@ class OracleCard(BaseModel):
         lookup: The perceived context → category lookup mixed with the category head
             (:mod:`anunnaki.enlil._oracle_lookup`), or ``None`` (the head alone; every
             ``anunnaki-oracle/1`` file).
+        output_temperature: Temperature of the final category probabilities (after the
+            lookup's mix and category 1's boost), fitted on val so that the confidence
+            stays calibrated; 1 (none) in files written before it existed.
+        drop: The calibration of the drop head (:class:`DropSpec`), or ``None`` (no head).
 
     """
 
@@ -174,6 +280,8 @@ class OracleCard(BaseModel):
     metrics: dict[str, Any] = Field(default_factory=dict)
     training: dict[str, Any] = Field(default_factory=dict)
     lookup: LookupSpec | None = None
+    output_temperature: float = Field(default=1.0, gt=0.0)
+    drop: DropSpec | None = None
 
     @property
     def max_params(self) -> int:
@@ -206,6 +314,8 @@ class OraclePrediction:
         probs: Calibrated probabilities of categories 0, 1, 2.
         phenomenon: The perceived phenomenon (``clear`` when none).
         params: The perceived context of that phenomenon, normalised, by parameter name.
+        drop: The predicted relative F1 drop of the model (calibrated), or ``None`` for an
+            oracle without a drop head.
 
     """
 
@@ -214,6 +324,25 @@ class OraclePrediction:
     probs: tuple[float, float, float]
     phenomenon: str
     params: dict[str, float]
+    drop: float | None = None
+
+
+@dataclass(frozen=True)
+class NetOutputs:
+    """The network's raw outputs for a batch of frames.
+
+    Attributes:
+        category: ``[B, 3]`` category logits (untempered).
+        params: ``[B, D]`` perceived normalised contexts.
+        phenomenon: ``[B, 1 + P]`` phenomenon logits.
+        drop: ``[B]`` the drop head's raw output, or ``None`` without one.
+
+    """
+
+    category: np.ndarray
+    params: np.ndarray
+    phenomenon: np.ndarray
+    drop: np.ndarray | None = None
 
 
 def oracle_paths(path: str | Path) -> tuple[Path, Path]:
@@ -254,6 +383,14 @@ def frames_to_uint8(
     return nchw if channels_last else nchw.contiguous()
 
 
+def tempered(probs: np.ndarray, temperature: float) -> np.ndarray:
+    """*probs* ``[B, 3]`` sharpened (T < 1) or softened (T > 1): ``p^(1/T)``, renormalised."""
+    if temperature == 1.0:
+        return probs
+    logp = np.log(np.clip(probs, 1e-12, 1.0)) / temperature
+    return _softmax(logp)
+
+
 def _softmax(z: np.ndarray) -> np.ndarray:
     """Softmax over the last axis of float logits *z*."""
     e = np.exp(z - z.max(axis=-1, keepdims=True))
@@ -290,15 +427,29 @@ class OracleModel:
         """The assessed model's id."""
         return self.card.model_id
 
+    def outputs(self, frames: Sequence[npt.NDArray[np.uint8]]) -> NetOutputs:
+        """Every raw output of the network for *frames* (:class:`NetOutputs`)."""
+        torch = _torch()
+        x = frames_to_uint8(frames, self.card.input_size, channels_last=True).float() / 255.0
+        with torch.inference_mode():
+            out = self.net(x)
+        drop = out[3].numpy() if len(out) > 3 else None
+        return NetOutputs(out[0].numpy(), out[1].numpy(), out[2].numpy(), drop)
+
     def logits(
         self, frames: Sequence[npt.NDArray[np.uint8]]
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Raw outputs for *frames*: category logits (untempered), params, phenomenon logits."""
-        torch = _torch()
-        x = frames_to_uint8(frames, self.card.input_size, channels_last=True).float() / 255.0
-        with torch.inference_mode():
-            cat, params, phen = self.net(x)
-        return cat.numpy(), params.numpy(), phen.numpy()
+        out = self.outputs(frames)
+        return out.category, out.params, out.phenomenon
+
+    def predicted_drop(self, raw: np.ndarray | None) -> np.ndarray | None:
+        """The calibrated relative F1 drop from the drop head's raw output (``None``: no head)."""
+        spec = self.card.drop
+        if raw is None or spec is None:
+            return None
+        out: np.ndarray = np.minimum(spec.scale * np.asarray(raw, np.float64) + spec.offset, 1.0)
+        return out
 
     def probabilities(self, category_logits: np.ndarray) -> np.ndarray:
         """Calibrated category probabilities (softmax of the logits over the temperature)."""
@@ -316,21 +467,23 @@ class OracleModel:
         """
         probs = self.probabilities(category_logits)
         spec = self.card.lookup
-        if spec is None or self.lookup is None:
-            return probs
-        if spec.weight < 1.0:
-            names = [p.name for p in self.card.phenomena]
-            phenomena = _softmax(np.asarray(phenomenon_logits, np.float64))
-            looked = lookup_probabilities(self.lookup, names, params, phenomena)
-            probs = mixed_probabilities(probs, looked, spec.weight)
-        return boosted(probs, spec.boost)
+        if spec is not None and self.lookup is not None:
+            if spec.weight < 1.0:
+                names = [p.name for p in self.card.phenomena]
+                phenomena = _softmax(np.asarray(phenomenon_logits, np.float64))
+                looked = lookup_probabilities(self.lookup, names, params, phenomena)
+                probs = mixed_probabilities(probs, looked, spec.weight)
+            probs = boosted(probs, spec.boost)
+        return tempered(probs, self.card.output_temperature)
 
     def predict(self, frames: Sequence[npt.NDArray[np.uint8]]) -> list[OraclePrediction]:
         """Assess each frame; see :class:`OraclePrediction`."""
         if len(frames) == 0:
             return []
-        cat, params, phen = self.logits(frames)
+        raw = self.outputs(frames)
+        cat, params, phen = raw.category, raw.params, raw.phenomenon
         probs = self.category_probabilities(cat, params, phen)
+        drops = self.predicted_drop(raw.drop)
         names = self.card.phenomenon_classes
         out = []
         for i in range(len(frames)):
@@ -344,7 +497,12 @@ class OracleModel:
             p = tuple(float(v) for v in probs[i])
             out.append(
                 OraclePrediction(
-                    category, float(probs[i, category]), (p[0], p[1], p[2]), name, values
+                    category,
+                    float(probs[i, category]),
+                    (p[0], p[1], p[2]),
+                    name,
+                    values,
+                    None if drops is None else float(drops[i]),
                 )
             )
         return out
@@ -465,44 +623,3 @@ def load_oracle(path: str | Path, *, sha256: str | None = None) -> OracleModel:
             hint="the sidecar and the weights come from different trainings; copy both again",
         ) from None
     return OracleModel(card, net, lookup)
-
-
-def expected_calibration_error(probs: np.ndarray, labels: np.ndarray, bins: int = 10) -> float:
-    """ECE of the top-class confidence over *bins* equal-width bins."""
-    if len(labels) == 0:
-        return math.nan
-    conf = probs.max(axis=1)
-    correct = probs.argmax(axis=1) == labels
-    edges = np.linspace(0.0, 1.0, bins + 1)
-    ece = 0.0
-    for lo, hi in itertools.pairwise(edges):
-        mask = (conf > lo) & (conf <= hi)
-        if mask.any():
-            ece += mask.mean() * abs(float(correct[mask].mean()) - float(conf[mask].mean()))
-    return float(ece)
-
-
-def classification_metrics(
-    predicted: Sequence[int] | np.ndarray, truth: Sequence[int] | np.ndarray, n: int = 3
-) -> dict[str, Any]:
-    """Accuracy, macro-F1 (over the classes present in truth or predictions), recall, confusion."""
-    pred = np.asarray(predicted, np.int64)
-    true = np.asarray(truth, np.int64)
-    confusion = np.zeros((n, n), np.int64)
-    for t, p in zip(true, pred, strict=True):
-        confusion[t, p] += 1
-    f1s, recall = [], {}
-    for c in range(n):
-        tp = confusion[c, c]
-        support, predicted_c = confusion[c].sum(), confusion[:, c].sum()
-        if support:
-            recall[str(c)] = float(tp / support)
-        if support or predicted_c:
-            f1s.append(2 * tp / (support + predicted_c))
-    return {
-        "accuracy": float((pred == true).mean()) if len(true) else math.nan,
-        "macro_f1": float(np.mean(f1s)) if f1s else math.nan,
-        "per_category_recall": recall,
-        "confusion": confusion.tolist(),
-        "n": len(true),
-    }

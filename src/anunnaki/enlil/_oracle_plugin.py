@@ -139,9 +139,14 @@ class EnlilOracle:
         if model_id != self._last_model:
             self._history.clear()
             self._last_model = model_id
-        cat, params, phen = oracle.logits([frame])
-        self._history.append(oracle.category_probabilities(cat, params, phen)[0])
-        probs = np.mean(np.stack(self._history), axis=0)
+        out = oracle.outputs([frame])
+        cat, params, phen = out.category, out.params, out.phenomenon
+        drop = oracle.predicted_drop(out.drop)
+        row = oracle.category_probabilities(cat, params, phen)[0]
+        # the predicted drop rides along as a fourth column (nan without a drop head)
+        self._history.append(np.append(row, np.nan if drop is None else drop[0]))
+        mean = np.mean(np.stack(self._history), axis=0)
+        probs = mean[:3]
         category = int(np.argmax(probs))
         context = _context(oracle, params[0], phen[0], category)
         context["probs"] = [round(float(p), 4) for p in probs]
@@ -152,6 +157,7 @@ class EnlilOracle:
             model_id=model_id,
             assessor=self.name,
             frame_seq=seq,
+            drop=round(float(mean[3]), 4) if np.isfinite(mean[3]) else None,
         )
 
 

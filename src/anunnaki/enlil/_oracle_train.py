@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Sequence
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -35,14 +35,18 @@ from anunnaki.enlil._oracle_lookup import (
     kept_rows,
     lookup_probabilities,
 )
+from anunnaki.enlil._oracle_metrics import (
+    classification_metrics,
+    expected_calibration_error,
+    regression_metrics,
+)
 from anunnaki.enlil._oracle_net import (
+    DropSpec,
     OracleCard,
     OracleModel,
     PhenomenonSpec,
     _torch,
     build_network,
-    classification_metrics,
-    expected_calibration_error,
     frames_to_uint8,
 )
 from anunnaki.lec import Detector
@@ -51,15 +55,20 @@ __all__ = [
     "ContextSet",
     "LabelledFrames",
     "OracleTrainConfig",
+    "categories_for_drops",
+    "choice_split",
     "choose_lookup_mix",
     "contexts_from_archive",
+    "fit_drop_line",
     "fit_lookup",
     "fit_temperature",
     "merge_context_sets",
     "perturbed_frames",
     "random_contexts",
+    "seed_spread",
     "soft_targets",
     "train_oracle",
+    "train_oracle_seeds",
 ]
 
 
@@ -192,6 +201,20 @@ class LabelledFrames:
     params_mask: npt.NDArray[np.float32]
     phenomenon: npt.NDArray[np.int64]
     rows: npt.NDArray[np.int64] | None = None  # each frame's context row in its set, -1 clean
+    #: each frame's measured relative F1 drop (0 clean; nan where the set has no drops)
+    drop: npt.NDArray[np.float32] | None = None
+
+    def subset(self, index: npt.NDArray[np.int64]) -> LabelledFrames:
+        """The frames at *index*, with everything said about them."""
+        return LabelledFrames(
+            [self.frames[int(i)] for i in index],
+            self.category[index],
+            self.params[index],
+            self.params_mask[index],
+            self.phenomenon[index],
+            None if self.rows is None else self.rows[index],
+            None if self.drop is None else self.drop[index],
+        )
 
 
 def _pick_context(
@@ -241,6 +264,7 @@ def perturbed_frames(
         np.zeros(n, np.int64),
     )
     out.rows = rows = np.full(n, -1, np.int64)
+    out.drop = drops = np.zeros(n, np.float32)
     for i in range(n):
         image = data.image(int(rng.integers(len(data))))
         if rng.random() < clean_fraction:
@@ -248,6 +272,8 @@ def perturbed_frames(
             continue
         which = int(rng.integers(len(sets)))
         unit, cat, rows[i] = _pick_context(rng, sets[which], balanced)
+        measured = sets[which].drops
+        drops[i] = math.nan if measured is None else measured[rows[i]]
         phen = phens[which]
         params = phen.from_vector(to_phenomenon_vector(phen, unit))
         out.frames.append(phen.apply(image, params, seed=int(rng.integers(2**31))))
@@ -279,6 +305,13 @@ class OracleTrainConfig:
             as chosen on val; ``False``: the head alone, trained on the archive's categories.
         soft_labels: With the surrogate, train the category head on its probabilities of
             each context's category instead of the single measured category.
+        architecture: The :data:`anunnaki.enlil.ORACLE_ARCHITECTURES` name.
+        architecture_options: Its options besides ``width`` (e.g. ``{"pool": "max"}``).
+        drop_head: Train a head predicting the relative F1 drop (needs measured drops).
+        drop_weight: The weight of the drop head's squared error in the loss.
+        choice_fraction: Share of the val frames the calibration (temperatures, the
+            lookup's mix, category 1's boost, the drop's line) is chosen on; the card's val
+            figures come from the rest, which nothing was chosen on.
 
     """
 
@@ -295,6 +328,11 @@ class OracleTrainConfig:
     threads: int = 0
     lookup: bool = True
     soft_labels: bool = True
+    architecture: str = "small_cnn"
+    architecture_options: dict[str, int | float | str | bool] = field(default_factory=dict)
+    drop_head: bool = True
+    drop_weight: float = 4.0
+    choice_fraction: float = 0.5
     extra: dict[str, Any] = field(default_factory=dict)
 
 
@@ -312,6 +350,38 @@ def fit_temperature(logits: np.ndarray, labels: np.ndarray) -> float:
         if nll < best:
             best, best_t = nll, float(t)
     return best_t
+
+
+def choice_split(
+    n: int, fraction: float, *, seed: int = 0
+) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.int64]]:
+    """``(pick, rest)``: a random *fraction* of ``range(n)`` and the others, both sorted."""
+    if not 0.0 < fraction < 1.0:
+        raise EnlilError(
+            f"the val share calibration is chosen on must be in (0, 1), got {fraction}"
+        )
+    order = np.random.default_rng([seed, 11]).permutation(n)
+    k = min(max(1, round(fraction * n)), n - 1) if n > 1 else n
+    return np.sort(order[:k]), np.sort(order[k:])
+
+
+def fit_drop_line(raw: np.ndarray, measured: np.ndarray) -> DropSpec:
+    """The least-squares line from the drop head's *raw* output to the *measured* drops."""
+    known = np.isfinite(measured)
+    x, y = np.asarray(raw, np.float64)[known], np.asarray(measured, np.float64)[known]
+    if len(x) < 2 or float(np.var(x)) == 0.0:
+        return DropSpec(scale=1.0, offset=0.0)
+    scale, offset = np.polyfit(x, y, 1)
+    fitted = scale * x + offset
+    return DropSpec(scale=float(scale), offset=float(offset), val=regression_metrics(fitted, y))
+
+
+def categories_for_drops(
+    drops: np.ndarray, thresholds: tuple[float, float] = (0.05, 0.10)
+) -> npt.NDArray[np.int64]:
+    """The behavior category of each relative F1 drop (the rule of docs/oracles.md)."""
+    d = np.asarray(drops, np.float64)
+    return np.where(d > thresholds[1], 2, np.where(d > thresholds[0], 1, 0)).astype(np.int64)
 
 
 def _fit(
@@ -333,6 +403,10 @@ def _fit(
     y_par = torch.from_numpy(data.params)
     mask = torch.from_numpy(data.params_mask)
     y_phen = torch.from_numpy(data.phenomenon)
+    raw_drop = data.drop if data.drop is not None else np.full(len(x), np.nan, np.float32)
+    drop_mask = torch.from_numpy(np.isfinite(raw_drop).astype(np.float32))
+    # drops above 1 do not occur; a slightly negative drop (F1 up) is kept as measured
+    y_drop = torch.from_numpy(np.clip(np.nan_to_num(raw_drop), -0.2, 1.0).astype(np.float32))
     gen = torch.Generator().manual_seed(config.seed)
     opt = torch.optim.Adam(net.parameters(), lr=config.lr, weight_decay=1e-4)
     steps = config.epochs * max(1, math.ceil(len(x) / config.batch_size))
@@ -349,8 +423,13 @@ def _fit(
             xb = (x[idx].float() / 255.0).contiguous(memory_format=channels_last)
             if torch.rand(1, generator=gen).item() < 0.5:
                 xb = xb.flip(3)  # the phenomena are symmetric left-right; the labels too
-            cat, par, phen = net(xb)
+            out = net(xb)
+            cat, par, phen = out[0], out[1], out[2]
             loss = f.cross_entropy(cat, y_cat[idx])
+            if len(out) > 3:
+                dm = drop_mask[idx]
+                err = (out[3] - y_drop[idx]) ** 2 * dm
+                loss = loss + config.drop_weight * err.sum() / dm.sum().clamp(min=1.0)
             m = mask[idx]
             loss = loss + ((par[:, : m.shape[1]] - y_par[idx]) ** 2 * m).sum() / m.sum().clamp(
                 min=1.0
@@ -465,6 +544,7 @@ def train_oracle(
         raise EnlilError("train_oracle: give at least one set of contexts (an archive)")
     cfg = config or OracleTrainConfig()
     sets = merge_context_sets(sets)
+    drop_head = cfg.drop_head and all(s.drops is not None for s in sets)
     torch = _torch()
     if cfg.threads:
         torch.set_num_threads(cfg.threads)
@@ -476,7 +556,9 @@ def train_oracle(
             PhenomenonSpec(name=s.phenomenon, param_names=list(s.param_names)) for s in sets
         ],
         thresholds=thresholds,
-        options={"width": cfg.width},
+        architecture=cfg.architecture,
+        options={"width": cfg.width, **cfg.architecture_options}
+        | ({"drop_head": True} if drop_head else {}),
         input_size=cfg.input_size,
     )
     net = build_network(card)
@@ -494,20 +576,48 @@ def train_oracle(
     losses = _fit(net, tr, cfg, soft, progress)
     step("calibrate", 0, 1)
     oracle = OracleModel(card, net)
-    chunks = [oracle.logits(va.frames[i : i + 256]) for i in range(0, len(va.frames), 256)]
-    logits, params, phen = (np.concatenate([c[j] for c in chunks]) for j in range(3))
-    temperature = fit_temperature(logits, va.category)
+    outs = [oracle.outputs(va.frames[i : i + 256]) for i in range(0, len(va.frames), 256)]
+    logits, params, phen = (
+        np.concatenate([getattr(o, k) for o in outs]) for k in ("category", "params", "phenomenon")
+    )
+    raw_drop = np.concatenate([o.drop for o in outs if o.drop is not None]) if drop_head else None
+    # the calibration is chosen on one part of the val frames, the card's figures come from
+    # the other: no figure is measured on frames anything was chosen on
+    pick, rest = choice_split(len(va.category), cfg.choice_fraction, seed=cfg.seed)
+    va_pick = va.subset(pick)
+    temperature = fit_temperature(logits[pick], va.category[pick])
     oracle.card = card.model_copy(update={"temperature": temperature})
     head = oracle.probabilities(logits)
     if lookup is not None:
-        spec = choose_lookup_mix(lookup, sets, va, head=head, params=params, phenomenon_logits=phen)
+        spec = choose_lookup_mix(
+            lookup, sets, va_pick, head=head[pick], params=params[pick],
+            phenomenon_logits=phen[pick],
+        )  # fmt: skip
         oracle.lookup = lookup
         oracle.card = oracle.card.model_copy(update={"lookup": spec})
-    probs = oracle.category_probabilities(logits, params, phen)
-    val_metrics = classification_metrics(probs.argmax(axis=1), va.category)
-    val_metrics["ece"] = expected_calibration_error(probs, va.category)
     if lookup is not None:
-        head_metrics = classification_metrics(head.argmax(axis=1), va.category)
+        # the mix and category 1's boost move the confidence: a second temperature on the
+        # final probabilities keeps them calibrated
+        mixed = np.log(np.clip(oracle.category_probabilities(logits, params, phen), 1e-12, 1.0))
+        t_out = fit_temperature(mixed[pick], va.category[pick])
+        oracle.card = oracle.card.model_copy(update={"output_temperature": t_out})
+    probs = oracle.category_probabilities(logits, params, phen)
+    if raw_drop is not None and va.drop is not None:
+        oracle.card = oracle.card.model_copy(
+            update={"drop": fit_drop_line(raw_drop[pick], va.drop[pick])}
+        )
+    val_metrics = classification_metrics(probs[rest].argmax(axis=1), va.category[rest])
+    val_metrics["ece"] = expected_calibration_error(probs[rest], va.category[rest])
+    val_metrics["frames"] = len(rest)
+    predicted = oracle.predicted_drop(raw_drop)
+    if predicted is not None and va.drop is not None:
+        known = rest[np.isfinite(va.drop[rest])]
+        val_metrics["drop"] = regression_metrics(predicted[known], va.drop[known])
+        val_metrics["drop_category_macro_f1"] = classification_metrics(
+            categories_for_drops(predicted[rest], thresholds), va.category[rest]
+        )["macro_f1"]
+    if lookup is not None:
+        head_metrics = classification_metrics(head[rest].argmax(axis=1), va.category[rest])
         val_metrics["head_macro_f1"] = head_metrics["macro_f1"]
     training = {
         "contexts": [
@@ -516,6 +626,7 @@ def train_oracle(
         "config": {k: v for k, v in asdict(cfg).items() if k != "extra"} | cfg.extra,
         "train_frames": len(tr.frames),
         "val_frames": len(va.frames),
+        "val_choice_frames": len(pick),
         "loss": [round(v, 5) for v in losses],
         "phenomenon_head": True,
         "soft_labels": soft is not None,
@@ -525,3 +636,53 @@ def train_oracle(
     )
     step("calibrate", 1, 1)
     return oracle
+
+
+def seed_spread(values: Sequence[float]) -> dict[str, float]:
+    """``mean``, ``sd`` (sample), ``min``, ``max`` and ``spread`` (max - min) of one figure."""
+    v = np.asarray([x for x in values if x is not None and math.isfinite(x)], np.float64)
+    if len(v) == 0:
+        return {"mean": math.nan, "sd": math.nan, "min": math.nan, "max": math.nan, "spread": 0.0}
+    return {
+        "mean": float(v.mean()),
+        "sd": float(v.std(ddof=1)) if len(v) > 1 else 0.0,
+        "min": float(v.min()),
+        "max": float(v.max()),
+        "spread": float(v.max() - v.min()),
+        "n": float(len(v)),
+    }
+
+
+def train_oracle_seeds(
+    train: Dataset,
+    val: Dataset,
+    sets: Sequence[ContextSet],
+    seeds: Sequence[int],
+    *,
+    model_id: str,
+    model_sha256: str = "",
+    thresholds: tuple[float, float] = (0.05, 0.10),
+    config: OracleTrainConfig | None = None,
+) -> tuple[list[OracleModel], dict[str, dict[str, float]]]:
+    """One oracle per seed of one recipe, and the mean and spread of their val figures.
+
+    Returns:
+        The oracles (in *seeds*' order) and, per val figure (``accuracy``, ``macro_f1``,
+        ``ece``, ``drop_rmse``), :func:`seed_spread` over the seeds.
+
+    """
+    if not seeds:
+        raise EnlilError("train_oracle_seeds: give at least one seed")
+    base = config or OracleTrainConfig()
+    oracles = [
+        train_oracle(
+            train, val, sets, model_id=model_id, model_sha256=model_sha256,
+            thresholds=thresholds, config=replace(base, seed=int(seed)),
+        )
+        for seed in seeds
+    ]  # fmt: skip
+    vals = [o.card.metrics["val"] for o in oracles]
+    figures = {k: [float(v[k]) for v in vals] for k in ("accuracy", "macro_f1", "ece")}
+    if all("drop" in v for v in vals):
+        figures["drop_rmse"] = [float(v["drop"]["rmse"]) for v in vals]
+    return oracles, {k: seed_spread(v) for k, v in figures.items()}

@@ -28,6 +28,8 @@ class Assessment(Message):
         model_id: The id of the model whose behaviour is assessed.
         assessor: The assessor's name (an oracle, or ``ground_truth``).
         frame_seq: The camera frame the assessment is about, when there is one.
+        drop: The predicted relative F1 drop of the model, when the assessor predicts
+            one (an oracle with a drop head); ``None`` in older messages and files.
 
     """
 
@@ -37,6 +39,7 @@ class Assessment(Message):
     model_id: str
     assessor: str
     frame_seq: int | None = None
+    drop: float | None = None
 
 
 @MESSAGES.register
