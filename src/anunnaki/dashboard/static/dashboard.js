@@ -276,6 +276,12 @@
     }
   }
 
+  // An age to the tenth, rounded up: a stale age (over its limit) never reads as the limit
+  // itself (1.03 s past a 1.0 s limit shows 1.1 s, not "1.0 s" in red).
+  function fmtAge(age) {
+    return (Math.ceil(age * 10 - 1e-9) / 10).toFixed(1);
+  }
+
   function drawMonitor() {
     const body = $("monitor").tBodies[0];
     const rows = Object.values(S.monitor).map((r) => {
@@ -286,7 +292,7 @@
         el("td", { class: "value", title: JSON.stringify(r.last) }, r.last ? JSON.stringify(r.last) : "–"),
         el("td", { class: "num" }, r.rate === null ? "–" : r.rate.toFixed(1) + " Hz"),
         el("td", { class: "num age" + (stale ? " stale" : ""), title: `stale after ${r.staleness} s` },
-          age === null ? "never" : age.toFixed(1) + " s"),
+          age === null ? "never" : fmtAge(age) + " s"),
         el("td", { class: "num limit" }, Number(r.staleness).toFixed(1) + " s"));
     });
     body.replaceChildren(...rows);
