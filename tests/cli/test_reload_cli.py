@@ -77,6 +77,7 @@ def test_reload_with_another_token_is_refused_and_says_where_its_token_came_from
     assert main(["reload", "--connect", endpoint, "--tactics", str(ROVER / "tactics.yaml")]) == 1
     out, err = capsys.readouterr()
     assert out.startswith("refused: unauthorised: reload needs the operator token")
+    assert f"else from the user's {default_token_file()}" in out  # both places clients read
     assert f"hint: this command sent the token in ${OPERATOR_TOKEN_ENV}" in err
     assert not any(d.kind.startswith("reload") for d in m.knowledge.decisions())
 

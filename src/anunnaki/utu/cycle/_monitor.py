@@ -8,7 +8,7 @@ from typing import Any, cast
 
 from anunnaki.errors import AnunnakiError
 from anunnaki.messages import MonitorBatch, MonitorInput, body_of
-from anunnaki.tokens import OPERATOR_TOKEN_ENV, token_matches
+from anunnaki.tokens import OPERATOR_TOKEN_ENV, default_token_file, token_matches
 from anunnaki.utu.cycle._entries import (
     build_message,
     operator_entry,
@@ -93,7 +93,8 @@ class MonitorStage:
             )
         return (
             f"unauthorised: {op} needs the operator token ('token' in the request; clients "
-            f"read it from ${OPERATOR_TOKEN_ENV}); anyone may request a run-stop"
+            f"read it from ${OPERATOR_TOKEN_ENV}, else from the user's {default_token_file()}); "
+            "anyone may request a run-stop"
         )
 
     def batch(
