@@ -72,6 +72,19 @@ def looping_example(tmp_path: Path) -> Path:
     return launch_file(tmp_path, text)
 
 
+def node_launch_file(tmp_path: Path) -> tuple[Path, str]:
+    """A launch file for one node on its own: the rover's model, zenoh on a free port."""
+    from anunnaki.bus._zenoh import free_port
+
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    text = (
+        "anunnaki: launch/1\nutu:\n  goal_model: ROVER/goals.yaml\n"
+        "  binding: ROVER/binding.yaml\n  tactics: ROVER/tactics.yaml\n"
+        f"knowledge: kb.db\nbus: {{kind: zenoh, listen: ['{endpoint}']}}\n"
+    )
+    return launch_file(tmp_path, text), endpoint
+
+
 def run(launch_path: Path, **kw) -> tuple[RunResult, str]:  # type: ignore[no-untyped-def]
     out = io.StringIO()
     result = run_launch(load_launch(launch_path), out=out, handle_signals=False, **kw)
@@ -285,9 +298,10 @@ def test_cli_bad_config_exits_2_with_file_and_line(
     assert "invalid choice: 'planner'" in capsys.readouterr().err
 
 
-def _anunnaki(*args: str) -> subprocess.Popen[str]:
+def _anunnaki(*args: str, stdin: int | None = None) -> subprocess.Popen[str]:
     return subprocess.Popen(
         [sys.executable, "-m", "anunnaki.cli.main", *args],
+        stdin=stdin,
         stdout=subprocess.PIPE,
         stderr=subprocess.STDOUT,
         text=True,
@@ -354,15 +368,7 @@ def test_sigterm_stops_every_node_and_exits_0(tmp_path: Path) -> None:
 
 @pytest.mark.slow
 def test_a_node_alone_answers_readiness_and_stops_on_sigterm(tmp_path: Path) -> None:
-    from anunnaki.bus._zenoh import free_port
-
-    endpoint = f"tcp/127.0.0.1:{free_port()}"
-    p = launch_file(
-        tmp_path,
-        "anunnaki: launch/1\nutu:\n  goal_model: ROVER/goals.yaml\n"
-        "  binding: ROVER/binding.yaml\n  tactics: ROVER/tactics.yaml\n"
-        f"knowledge: kb.db\nbus: {{kind: zenoh, listen: ['{endpoint}']}}\n",
-    )
+    p, endpoint = node_launch_file(tmp_path)
     proc = _anunnaki("node", "knowledge", "--config", str(p))
     out = Lines(proc)
     try:
@@ -377,6 +383,29 @@ def test_a_node_alone_answers_readiness_and_stops_on_sigterm(tmp_path: Path) -> 
         assert proc.wait(timeout=15) == 0, out.text
         assert (tmp_path / "kb.db").exists()
     finally:
+        out.close()
+
+
+@pytest.mark.slow
+def test_a_node_watching_its_parent_exits_0_on_sigterm_while_its_stdin_is_open(
+    tmp_path: Path,
+) -> None:
+    # Issue 21: a launch SIGTERMs a node, then closes its stdin; a node that ended in between
+    # aborted at interpreter exit (code -6) because its parent watch, a daemon thread, held
+    # the lock of sys.stdin while blocked in a read.
+    p, _ = node_launch_file(tmp_path)
+    proc = _anunnaki(
+        "node", "execute", "--config", str(p), "--exit-with-parent", stdin=subprocess.PIPE
+    )
+    out = Lines(proc)
+    try:
+        assert out.wait(r"node execute ready", timeout=30), out.text
+        proc.send_signal(signal.SIGTERM)  # stdin stays open until the node has exited
+        assert proc.wait(timeout=15) == 0, out.text
+        assert "Fatal Python error" not in out.text, out.text
+    finally:
+        assert proc.stdin is not None
+        proc.stdin.close()
         out.close()
 
 
@@ -422,15 +451,7 @@ def test_speed_0_means_as_fast_as_possible_as_for_anunnaki_sim() -> None:
 @pytest.mark.slow
 def test_a_node_joins_a_running_launch_as_a_client(tmp_path: Path) -> None:
     """``anunnaki node NAME --config LAUNCH --mode client``: connects where the launch listens."""
-    from anunnaki.bus._zenoh import free_port
-
-    endpoint = f"tcp/127.0.0.1:{free_port()}"
-    p = launch_file(
-        tmp_path,
-        "anunnaki: launch/1\nutu:\n  goal_model: ROVER/goals.yaml\n"
-        "  binding: ROVER/binding.yaml\n  tactics: ROVER/tactics.yaml\n"
-        f"knowledge: kb.db\nbus: {{kind: zenoh, listen: ['{endpoint}']}}\n",
-    )
+    p, endpoint = node_launch_file(tmp_path)
     with open_bus("zenoh", listen=[endpoint]) as launch_session:  # the running launch's
         proc = _anunnaki("node", "knowledge", "--config", str(p), "--mode", "client")
         out = Lines(proc)
