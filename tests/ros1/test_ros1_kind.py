@@ -3,13 +3,15 @@
 from __future__ import annotations
 
 import os
+import signal
 import subprocess
 import sys
 import threading
+import time
 from pathlib import Path
 
 import pytest
-from ros1_support import free_port, need_ros
+from ros1_support import DEADLINE, Proc, RosSetup, free_port, need_ros, running
 
 from anunnaki.bus import open_bus
 from anunnaki.errors import ModelFileError
@@ -67,3 +69,37 @@ def test_the_bridge_says_when_no_master_answers() -> None:
     assert done.returncode == 2
     assert "waiting for the ROS master at" in done.stdout
     assert "no ROS master answers at" in done.stderr and "start roscore" in done.stderr
+
+
+PARENT = """
+import sys, threading
+from pathlib import Path
+from anunnaki.bus import open_bus
+from anunnaki.managed import MANAGED, ManagedContext
+
+cls = MANAGED.factory("ros1")
+kind = cls(cls.Options.model_validate({"bridge": "ros1/bridge.yaml"}), base=Path(sys.argv[1]))
+with open_bus("zenoh") as bus:
+    ctx = ManagedContext(bus=bus, stop=threading.Event(), speed=1.0, until=None, say=print,
+                         on_instant=None, taken=None, watched=frozenset())
+    link = kind.connect(ctx)
+    print(f"bridge pid {link.proc.pid}", flush=True)
+    threading.Event().wait()
+"""
+
+
+@pytest.mark.slow
+def test_the_bridge_process_ends_with_the_launch_that_started_it(ros: RosSetup) -> None:
+    # Issue 21: a launch killed under load (kill -9 after a test's deadline) left its bridge
+    # running. The bridge watches the pipe on its stdin that only the launch holds.
+    parent = Proc([sys.executable, "-c", PARENT, str(ROVER)], ros.env, "launch")
+    ros.procs.append(parent)
+    line = parent.wait_for("bridge pid ")
+    bridge = int(line.split()[-1])
+    assert running(bridge)
+    os.kill(parent.p.pid, signal.SIGKILL)
+    assert parent.p.wait(timeout=DEADLINE) == -signal.SIGKILL
+    end, pause = time.monotonic() + DEADLINE, threading.Event()
+    while running(bridge):  # polling a process state, with a deadline (no message to wait on)
+        assert time.monotonic() < end, f"the bridge (pid {bridge}) outlived its launch"
+        pause.wait(0.05)

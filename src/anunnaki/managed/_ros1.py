@@ -10,7 +10,8 @@ A launch file names it like the others::
       oracle: {name: light}             # optional: an oracle node on the same camera
 
 Starting it starts ``python -m anunnaki.ros1 BRIDGE --connect <the launch's zenoh
-endpoint>`` (rospy lives in that process only) and waits for it to say it is ready; the
+endpoint> --exit-with-parent`` (rospy lives in that process only; it stops once the launch
+is gone, even after a ``kill -9``) and waits for it to say it is ready; the
 rest (the camera chain on the bridged camera, the run) is every robot kind's
 (:mod:`anunnaki.managed._robot`). The run ends when the launch stops it, or when the bridge
 process exits. The launch's bus must be zenoh (the bridge is another process).
@@ -71,8 +72,9 @@ class _BridgeProcess:
             except subprocess.TimeoutExpired:
                 self.proc.kill()
                 self.proc.wait()
-        if self.proc.stdout is not None:
-            self.proc.stdout.close()
+        for stream in (self.proc.stdin, self.proc.stdout):
+            if stream is not None:
+                stream.close()
 
 
 class Ros1Kind(RobotKind):
@@ -110,8 +112,9 @@ class Ros1Kind(RobotKind):
     def _start_bridge(self, endpoint: str, say: Callable[[str], None]) -> subprocess.Popen[str]:
         args = [sys.executable, "-m", "anunnaki.ros1", self.options.bridge, "--connect", endpoint]
         proc = subprocess.Popen(
-            args,
+            [*args, "--exit-with-parent"],  # it stops once this process is gone (any way)
             env=self._env(),
+            stdin=subprocess.PIPE,  # its other end: only here; it closes when we end
             stdout=subprocess.PIPE,
             stderr=subprocess.STDOUT,
             text=True,
