@@ -7,6 +7,7 @@ three must take the same decisions. Everything waits on conditions with deadline
 
 from __future__ import annotations
 
+import contextlib
 import io
 import os
 import re
@@ -15,7 +16,7 @@ import subprocess
 import sys
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from pathlib import Path
 
 import pytest
@@ -349,21 +350,36 @@ class Lines:
         self.proc.stdout.close()
 
 
-@pytest.mark.slow
-def test_sigterm_stops_every_node_and_exits_0(tmp_path: Path) -> None:
-    p = looping_example(tmp_path)
-    proc = _anunnaki("run", str(p), "--processes", "--speed", "5")
+@contextlib.contextmanager
+def running_launch(tmp_path: Path) -> Iterator[tuple[subprocess.Popen[str], Lines, list[int]]]:
+    """The looping rover example with ``--processes``, once ready: process, output, node pids."""
+    proc = _anunnaki("run", str(looping_example(tmp_path)), "--processes", "--speed", "5")
     out = Lines(proc)
     try:
         assert out.wait(r"^ready: ", timeout=60), out.text
         pids = [int(m) for m in re.findall(r"node \w+: pid (\d+)", out.text)]
         assert len(pids) == 5
+        yield proc, out, pids
+    finally:
+        out.close()
+
+
+@pytest.mark.slow
+def test_sigterm_stops_every_node_and_exits_0(tmp_path: Path) -> None:
+    with running_launch(tmp_path) as (proc, out, pids):
         proc.send_signal(signal.SIGTERM)
         assert proc.wait(timeout=15) == 0, out.text
         assert wait_for(lambda: all(gone(p) for p in pids), timeout=10), out.text
         assert out.wait(r"stopped \(stopped by a signal\)", timeout=5), out.text
-    finally:
-        out.close()
+
+
+@pytest.mark.slow
+def test_the_nodes_of_a_launch_killed_with_sigkill_end_with_it(tmp_path: Path) -> None:
+    # Every node watches the pipe on its stdin that only the launch holds (no orphans).
+    with running_launch(tmp_path) as (proc, out, pids):
+        proc.kill()
+        assert proc.wait(timeout=15) == -signal.SIGKILL
+        assert wait_for(lambda: all(gone(p) for p in pids), timeout=30), out.text
 
 
 @pytest.mark.slow
