@@ -58,8 +58,9 @@ class _BridgeProcess:
 
     gone = "the bridge process exited"
 
-    def __init__(self, proc: subprocess.Popen[str]) -> None:
+    def __init__(self, proc: subprocess.Popen[str], reader: threading.Thread) -> None:
         self.proc = proc
+        self.reader = reader  # says its output lines; ends at the end of its output
 
     def alive(self) -> bool:
         return self.proc.poll() is None
@@ -72,6 +73,9 @@ class _BridgeProcess:
             except subprocess.TimeoutExpired:
                 self.proc.kill()
                 self.proc.wait()
+        # Its last lines ("ros1 bridge stopped: ...") are said before the pipe closes: the
+        # reader, late under load, read from a closed file and lost them.
+        self.reader.join(timeout=10)
         for stream in (self.proc.stdin, self.proc.stdout):
             if stream is not None:
                 stream.close()
@@ -93,7 +97,7 @@ class Ros1Kind(RobotKind):
                 element="bus",
                 hint="write bus: {kind: zenoh} in the launch file",
             )
-        return _BridgeProcess(self._start_bridge(endpoints[0], ctx.say))
+        return _BridgeProcess(*self._start_bridge(endpoints[0], ctx.say))
 
     def describe(self, ctx: ManagedContext) -> str:
         """``ROS 1 robot through BRIDGE (master URI)``."""
@@ -109,7 +113,9 @@ class Ros1Kind(RobotKind):
         env["PYTHONUNBUFFERED"] = "1"
         return env
 
-    def _start_bridge(self, endpoint: str, say: Callable[[str], None]) -> subprocess.Popen[str]:
+    def _start_bridge(
+        self, endpoint: str, say: Callable[[str], None]
+    ) -> tuple[subprocess.Popen[str], threading.Thread]:
         args = [sys.executable, "-m", "anunnaki.ros1", self.options.bridge, "--connect", endpoint]
         proc = subprocess.Popen(
             [*args, "--exit-with-parent"],  # it stops once this process is gone (any way)
@@ -134,12 +140,14 @@ class Ros1Kind(RobotKind):
                     say(f"ros1: {text}")
             ready.set()  # the process ended: stop waiting
 
-        threading.Thread(target=read, name="anunnaki-ros1-out", daemon=True).start()
+        reader = threading.Thread(target=read, name="anunnaki-ros1-out", daemon=True)
+        reader.start()
         ready.wait(self.options.ready_timeout)
         if proc.poll() is not None or not any("ros1 bridge ready" in x for x in lines):
             proc.kill()
             proc.wait()
+            reader.join(timeout=10)
             raise AnunnakiError(
                 "the ROS 1 bridge did not start: " + (" | ".join(lines[-5:]) or "no output")
             )
-        return proc
+        return proc, reader
