@@ -64,6 +64,16 @@ def free_port() -> int:
         return int(s.getsockname()[1])
 
 
+def running(pid: int) -> bool:
+    """Whether process ``pid`` still runs (a zombie, ended but not yet reaped, does not)."""
+    try:
+        status = Path(f"/proc/{pid}/status").read_text()
+    except FileNotFoundError:
+        return False
+    state = next(ln for ln in status.splitlines() if ln.startswith("State:"))
+    return state.split()[1] not in ("Z", "X")
+
+
 class Proc:
     """A child process whose output lines are kept and can be waited for."""
 

@@ -11,7 +11,7 @@ import re
 import shutil
 import sqlite3
 import threading
-from collections.abc import Iterator, Mapping
+from collections.abc import Callable, Iterator, Mapping
 from pathlib import Path
 from typing import Any
 
@@ -308,13 +308,13 @@ def test_what_if_overrides_and_unknown_settings(rover_run: Path) -> None:
         replay(rover_run, overrides={"speed": 2})
 
 
-def test_operator_calls_and_time_only_steps_replay_identically(tmp_path: Path) -> None:
-    """No bus: inputs fed directly; approval, pause, resume, liveliness and run-stop calls."""
-    tactics = tmp_path / "tactics.xml"
-    text = (ROVER / "tactics.xml").read_text(encoding="utf-8")
-    tactics.write_text(text.replace('requires_approval="false"', 'requires_approval="true"'))
-    db = tmp_path / "ops.db"
-    cfg = parse_config(config(db, tactics=tactics))
+def run_past_the_trace(
+    cfg: Any, at_instant: Callable[[AutonomicManager, float], None] | None = None
+) -> list[Any]:
+    """Step a manager at the rover trace's instants, then 6 s of time alone; the records.
+
+    ``at_instant(manager, t)`` runs before each step (operator calls).
+    """
     records = read_trace(ROVER / "trace.jsonl").records
     manager = AutonomicManager.from_config(cfg)
     try:
@@ -324,20 +324,35 @@ def test_operator_calls_and_time_only_steps_replay_identically(tmp_path: Path) -
             while i < len(records) and records[i].t <= t:
                 manager.feed(records[i].topic, records[i].msg)
                 i += 1
-            if t == 26.0:
-                manager.approve("fail-safe", caller="alice")
-                manager.approve("no-such-tactic", caller="bob")
-            if t == 30.0:
-                manager.pause("alice")
-            if t == 32.0:
-                manager.resume("alice")
-            if t == 40.0:
-                manager.desk.enqueue({"op": "node_lost", "node": "/oracle", "caller": "liveliness"})
-            if t == 52.0:
-                manager.run_stop(caller="alice", reason="end of the test")
+            if at_instant is not None:
+                at_instant(manager, t)
             manager.step(t)
     finally:
         manager.close()
+    return list(records)
+
+
+def test_operator_calls_and_time_only_steps_replay_identically(tmp_path: Path) -> None:
+    """No bus: inputs fed directly; approval, pause, resume, liveliness and run-stop calls."""
+    tactics = tmp_path / "tactics.xml"
+    text = (ROVER / "tactics.xml").read_text(encoding="utf-8")
+    tactics.write_text(text.replace('requires_approval="false"', 'requires_approval="true"'))
+    db = tmp_path / "ops.db"
+
+    def operator(manager: AutonomicManager, t: float) -> None:
+        if t == 26.0:
+            manager.approve("fail-safe", caller="alice")
+            manager.approve("no-such-tactic", caller="bob")
+        if t == 30.0:
+            manager.pause("alice")
+        if t == 32.0:
+            manager.resume("alice")
+        if t == 40.0:
+            manager.desk.enqueue({"op": "node_lost", "node": "/oracle", "caller": "liveliness"})
+        if t == 52.0:
+            manager.run_stop(caller="alice", reason="end of the test")
+
+    records = run_past_the_trace(parse_config(config(db, tactics=tactics)), operator)
     made = decisions(db)
     kinds = {k for _, k, _ in made}
     assert {"pending_approval", "approved", "operator_refused", "paused"} <= kinds
@@ -380,6 +395,38 @@ def test_a_log_cut_after_a_steps_analysis_replays_that_analysis(rover_copy: Path
     report = replay(rover_copy)
     assert report.identical, report.summary()
     assert any("finished that step as far as the run went" in n for n in report.notes)
+
+
+def test_a_log_cut_after_a_time_only_analysis_replays_that_analysis(tmp_path: Path) -> None:
+    # Issue 21: plan killed at trace time 34.6, the launch stopped the rest; the analyze node
+    # had recorded a verdict at 34.792 in a cycle of time alone (no input) whose end marker
+    # never came (execute never answered). No input followed the last marker, so the replay
+    # saw no step cut short, left the verdict out and diverged.
+    db = tmp_path / "cut.db"
+    records = run_past_the_trace(parse_config(config(db)))
+    last_record = max(r.t for r in records)
+    with sqlite3.connect(db) as con:
+        tick_id, at = next(
+            (i, t)
+            for i, t in con.execute(
+                "SELECT id, t FROM inputs WHERE topic='__tick__' AND t > ? ORDER BY id",
+                (last_record,),
+            )
+            if con.execute("SELECT COUNT(*) FROM verdicts WHERE t=?", (t,)).fetchone()[0]
+            and not con.execute("SELECT COUNT(*) FROM decisions WHERE t=?", (t,)).fetchone()[0]
+        )
+        assert not con.execute(  # a step of time alone: no input since the marker before it
+            "SELECT COUNT(*) FROM inputs WHERE topic NOT LIKE '\\_\\_%' ESCAPE '\\' AND t > ?",
+            (last_record,),
+        ).fetchone()[0]
+        con.execute("DELETE FROM inputs WHERE id>=?", (tick_id,))
+        con.execute("DELETE FROM verdicts WHERE t>?", (at,))
+        con.execute("DELETE FROM decisions WHERE t>?", (at,))
+    con.close()
+    report = replay(db)
+    assert report.identical, report.summary()
+    cut = f"a cycle of time alone at t = {at - report.origin:.3f} s"
+    assert any(cut in n for n in report.notes), report.notes
 
 
 # -- the goal model at an instant --------------------------------------------------------------

@@ -17,6 +17,7 @@ import threading
 from pathlib import Path
 from typing import Any
 
+from anunnaki._parent import stop_with_parent
 from anunnaki.bus import BusConfig, open_bus
 from anunnaki.cli import _dashboard
 from anunnaki.launch import load_launch, run_launch, signals_to
@@ -190,21 +191,6 @@ def run(args: argparse.Namespace) -> int:
     return result.exit_code
 
 
-def _watch_parent(stop: threading.Event, wake: Any) -> None:
-    """Stop when standard input closes: the launching process is gone (no orphans)."""
-
-    def watch() -> None:
-        try:
-            while sys.stdin.buffer.read(4096):
-                pass
-        except (OSError, ValueError):
-            pass
-        stop.set()
-        wake()
-
-    threading.Thread(target=watch, name="anunnaki-parent-watch", daemon=True).start()
-
-
 def _say(line: str) -> None:
     print(line, flush=True)
 
@@ -255,7 +241,12 @@ def run_node(args: argparse.Namespace) -> int:
         peers = None if args.supervised else PeerWatch(args.name, bus, utu, say=_say)
         try:
             if args.exit_with_parent:
-                _watch_parent(stop, node.wake)
+
+                def parent_gone() -> None:
+                    stop.set()
+                    node.wake()
+
+                stop_with_parent(parent_gone)
             where = ", ".join(bus.endpoints) or ", ".join(bus_config.connect)
             print(
                 f"node {args.name} ready: pid {os.getpid()}, rate {rate:g} Hz, "

@@ -624,6 +624,10 @@ class _Runner:
             self.stop.set()
             if managed is not None:
                 managed.thread.join(timeout=5.0)
+                # Down with the platform's liveliness guard before the nodes exit: their
+                # tokens going now is the end of the run, not a death (a real death was
+                # caught above, by ``failed`` or the guard, and the fail-safe sent).
+                managed.close()
             children.stop(launch.config.stop_timeout)
             ran = time.monotonic() - t_run
             bad = [(n, rc) for n, rc in children.died() if rc not in (0, -signal.SIGTERM)]

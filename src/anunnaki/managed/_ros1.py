@@ -10,7 +10,8 @@ A launch file names it like the others::
       oracle: {name: light}             # optional: an oracle node on the same camera
 
 Starting it starts ``python -m anunnaki.ros1 BRIDGE --connect <the launch's zenoh
-endpoint>`` (rospy lives in that process only) and waits for it to say it is ready; the
+endpoint> --exit-with-parent`` (rospy lives in that process only; it stops once the launch
+is gone, even after a ``kill -9``) and waits for it to say it is ready; the
 rest (the camera chain on the bridged camera, the run) is every robot kind's
 (:mod:`anunnaki.managed._robot`). The run ends when the launch stops it, or when the bridge
 process exits. The launch's bus must be zenoh (the bridge is another process).
@@ -57,8 +58,9 @@ class _BridgeProcess:
 
     gone = "the bridge process exited"
 
-    def __init__(self, proc: subprocess.Popen[str]) -> None:
+    def __init__(self, proc: subprocess.Popen[str], reader: threading.Thread) -> None:
         self.proc = proc
+        self.reader = reader  # says its output lines; ends at the end of its output
 
     def alive(self) -> bool:
         return self.proc.poll() is None
@@ -71,8 +73,12 @@ class _BridgeProcess:
             except subprocess.TimeoutExpired:
                 self.proc.kill()
                 self.proc.wait()
-        if self.proc.stdout is not None:
-            self.proc.stdout.close()
+        # Its last lines ("ros1 bridge stopped: ...") are said before the pipe closes: the
+        # reader, late under load, read from a closed file and lost them.
+        self.reader.join(timeout=10)
+        for stream in (self.proc.stdin, self.proc.stdout):
+            if stream is not None:
+                stream.close()
 
 
 class Ros1Kind(RobotKind):
@@ -91,7 +97,7 @@ class Ros1Kind(RobotKind):
                 element="bus",
                 hint="write bus: {kind: zenoh} in the launch file",
             )
-        return _BridgeProcess(self._start_bridge(endpoints[0], ctx.say))
+        return _BridgeProcess(*self._start_bridge(endpoints[0], ctx.say))
 
     def describe(self, ctx: ManagedContext) -> str:
         """``ROS 1 robot through BRIDGE (master URI)``."""
@@ -107,11 +113,14 @@ class Ros1Kind(RobotKind):
         env["PYTHONUNBUFFERED"] = "1"
         return env
 
-    def _start_bridge(self, endpoint: str, say: Callable[[str], None]) -> subprocess.Popen[str]:
+    def _start_bridge(
+        self, endpoint: str, say: Callable[[str], None]
+    ) -> tuple[subprocess.Popen[str], threading.Thread]:
         args = [sys.executable, "-m", "anunnaki.ros1", self.options.bridge, "--connect", endpoint]
         proc = subprocess.Popen(
-            args,
+            [*args, "--exit-with-parent"],  # it stops once this process is gone (any way)
             env=self._env(),
+            stdin=subprocess.PIPE,  # its other end: only here; it closes when we end
             stdout=subprocess.PIPE,
             stderr=subprocess.STDOUT,
             text=True,
@@ -131,12 +140,14 @@ class Ros1Kind(RobotKind):
                     say(f"ros1: {text}")
             ready.set()  # the process ended: stop waiting
 
-        threading.Thread(target=read, name="anunnaki-ros1-out", daemon=True).start()
+        reader = threading.Thread(target=read, name="anunnaki-ros1-out", daemon=True)
+        reader.start()
         ready.wait(self.options.ready_timeout)
         if proc.poll() is not None or not any("ros1 bridge ready" in x for x in lines):
             proc.kill()
             proc.wait()
+            reader.join(timeout=10)
             raise AnunnakiError(
                 "the ROS 1 bridge did not start: " + (" | ".join(lines[-5:]) or "no output")
             )
-        return proc
+        return proc, reader

@@ -4,7 +4,8 @@ The process joins the zenoh bus (``--connect`` the launch's or Utu's endpoint), 
 Debian's rospy (appending its folder to ``sys.path`` here, in this process only), becomes
 the ROS node named in the bridge file on ``$ROS_MASTER_URI`` (or ``--master-uri``), prints
 ``ros1 bridge ready`` once everything is declared, holds the bus liveliness token
-``/ros1_bridge_<name>``, and runs until SIGINT/SIGTERM.
+``/ros1_bridge_<name>``, and runs until SIGINT/SIGTERM (or, with ``--exit-with-parent``,
+until its standard input closes: a launch starts it so, and it never outlives the launch).
 """
 
 from __future__ import annotations
@@ -55,6 +56,11 @@ def _parser() -> argparse.ArgumentParser:
         metavar="SECONDS",
         help="how long to wait for the master to answer at start (default 30)",
     )
+    p.add_argument(
+        "--exit-with-parent",
+        action="store_true",
+        help="stop when standard input closes (the launch that started it is gone)",
+    )
     return p
 
 
@@ -81,6 +87,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     stop = threading.Event()
     for sig in (signal.SIGINT, signal.SIGTERM):
         signal.signal(sig, lambda *_: stop.set())
+    if args.exit_with_parent:
+        from anunnaki._parent import stop_with_parent
+
+        stop_with_parent(stop.set)
     options: dict[str, object] = {"mode": "peer", "name": spec.name}
     if args.connect:
         options["connect"] = args.connect

@@ -586,6 +586,24 @@ class _Feeder:
         self.manager = build(Knowledge(":memory:"))
         self.fed = self.steps = 0
         self.pending: float | None = None  # the time of inputs fed since the last step
+        self.stepped: float | None = None  # the time of the last recorded step end
+
+    def finish_time_steps(self, verdicts: Sequence[VerdictRow]) -> list[float]:
+        """Analyse the cycles of time alone the log ends with (their end markers never came).
+
+        A node stopped with a cycle unanswered (the analyze node had recorded its verdicts,
+        execute never reported it done) leaves verdicts after the last step end and no input
+        after it. Each instant of those verdicts is stepped, executed only if the run
+        recorded decisions then. Returns the instants stepped.
+        """
+        last = self.stepped
+        if self.pending is not None or last is None:
+            return []
+        instants = sorted({v.t for v in verdicts if v.t > last})
+        for t in instants:
+            self.manager.step(t, execute=t in self.decided_at)
+            self.steps += 1
+        return instants
 
     def finish_step(self, analysed_until: float | None = None) -> bool:
         """Step at the time of the inputs fed since the last step, if the run decided then.
@@ -615,6 +633,7 @@ class _Feeder:
         for row in rows:
             if row.topic == TICK:
                 self.pending = None
+                self.stepped = row.t
                 # A step execute never acted on (it had died) is analysed only, unless the
                 # run recorded decisions then (execute acted before it went).
                 unexecuted = row.msg.get("executed") is False and row.t not in self.decided_at
@@ -719,6 +738,14 @@ def _replay(
                     else "left it: the run decided nothing in it"
                 )
             )
+        elif feeder.stepped is not None:
+            cut = feeder.finish_time_steps(knowledge.verdicts(since=feeder.stepped))
+            if cut:
+                notes.append(
+                    f"the log ends with a cycle of time alone at t = {cut[-1] - origin:.3f} s "
+                    "whose end was never recorded (the run was stopped in it); the replay "
+                    "analysed it as far as the run went"
+                )
         # The replay is over: only now read what the run decided.
         kb = feeder.manager.knowledge
         mine = [_decision_entry(d, origin) for d in kb.decisions() if d.kind not in ASYNC_KINDS]
