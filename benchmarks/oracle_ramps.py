@@ -14,12 +14,16 @@ weather, then one scripted ramp, then ``--hold`` seconds at its end:
 * ``dusk``: the demo's dusk onset (examples/rover/demo-scenario.yaml): brightness falling
   to strength 0.8 over 2 s, on the demo's bare ground (``background: false``);
 
-and one case with no phenomenon at all:
+and two cases with no phenomenon at all:
 
-* ``close``: close pedestrians in clear weather, the demo's false alarm (docs/enlil.md, "In
-  the loop"): the rover creeps (1 cm/s) on bare ground while a pedestrian crosses its path
-  at a distance drawn per seed in [0.3, 1.0] m from the camera. Every frame is clean;
-  ``in_view_frames`` counts those in which the pedestrian stands in the camera's field.
+* ``close``: close pedestrians in clear weather, the view behind the demo's false alarm
+  (docs/enlil.md, "In the loop"): the rover creeps (1 cm/s) on bare ground while a
+  pedestrian crosses its path at a distance drawn per seed in [0.3, 1.0] m from the
+  camera. Every frame is clean; ``in_view_frames`` counts those in which the pedestrian
+  stands in the camera's field;
+* ``demo_close``: the demo's own clear-weather close-up, its first 8 s without a phenomenon
+  (the rover stops for a crossing pedestrian, who walks on half a metre in front of the
+  camera), on the demo's ground (seed 0) and others (layout 3 + seed).
 
 The ground-truth category of a frame is the assessment rule applied to the context in force
 at its time: the model's F1 on a fixed batch of 32 test-split images perturbed with exactly
@@ -29,7 +33,7 @@ a frame period). Per run:
 
 * **delay**: frames from that true change to the oracle's first category >= 1 at or after
   the ramp's start (negative: the oracle said so before the detector was measurably worse);
-* **false alarms**: clean frames (before the ramp, and every frame of a ``close`` run) the
+* **false alarms**: clean frames (before the ramp; every frame of the close cases) the
   oracle called category >= 1, reported per 1,000 clean frames over all runs
   (``false_alarms``: with and without the close pedestrians; ``onset_delay_frames``: the
   delays per phenomenon).
@@ -73,6 +77,7 @@ from anunnaki.lec import evaluate_detector, load_registry
 from anunnaki.managed import SimKind, SimulatedSystem
 from anunnaki.messages import Assessment, body_of
 from anunnaki.phenomena import PHENOMENA
+from anunnaki.sim import load_scenario
 
 ROOT = Path(__file__).parents[1]
 MODELS = ROOT / "examples" / "models" / "rover.yaml"
@@ -85,7 +90,9 @@ RATE = 10.0  # camera frames per second
 FAST = 1000.0  # simulated seconds per wall second asked for: as fast as the loop goes
 
 
-KINDS = ("fog", "raindrop", "hsl", "dusk", "close")
+KINDS = ("fog", "raindrop", "hsl", "dusk", "close", "demo_close")
+CLEAN = ("close", "demo_close")  # the cases with no phenomenon: every frame clean
+DEMO = ROOT / "examples" / "rover" / "demo-scenario.yaml"
 #: The phenomenon a ramp scripts (``close``: none).
 PHENOMENON = {"fog": "fog", "raindrop": "raindrop", "hsl": "hsl", "dusk": "brightness"}
 CAMERA_FORWARD = 0.55  # m: the rover's camera sits this far ahead of its base (anunnaki.sim)
@@ -118,6 +125,8 @@ def scenario(kind: str, seed: int, clean: float, ramp: float, hold: float) -> di
     """A rover scenario: ``clean`` s of clear weather, the ramp, ``hold`` s at its end."""
     if kind == "close":
         return close_scenario(seed)
+    if kind == "demo_close":
+        return demo_close_scenario(seed)
     event = ramp_event(kind, seed, clean, ramp)
     return {
         "anunnaki": "scenario/1",
@@ -171,6 +180,27 @@ def close_scenario(seed: int) -> dict[str, Any]:
             }
         ],
         "phenomena": [],
+    }
+
+
+def demo_close_scenario(seed: int) -> dict[str, Any]:
+    """The demo's first 8 s without a phenomenon: the rover stops close to a pedestrian.
+
+    examples/rover/demo-scenario.yaml's first pedestrian crosses 6 m ahead from 2 s; the
+    rover (0.8 m/s) stops for it and the pedestrian walks on about half a metre in front
+    of the camera at 6.5-7.6 s, where the shipped oracle's clear-weather alarm was seen
+    (docs/enlil.md, "In the loop"). Seed 0 is the demo's ground (layout 3), seed S layout
+    3 + S.
+    """
+    demo = load_scenario(DEMO).model_dump(mode="json")
+    return demo | {
+        "name": f"demo-close-s{seed}",
+        "layout": 3 + seed,
+        "seed": seed,
+        "duration": 8.0,
+        "objects": demo["objects"][:1],
+        "phenomena": [],
+        "faults": [],
     }
 
 
@@ -279,12 +309,13 @@ def run_ramp(
         "clean_frames": len(clean_frames),
         "false_alarms": len(alarms),
     }
+    if kind in CLEAN:
+        out["categories"] = [said[s] for s in seqs]
     if kind == "close":
         out |= {
             "distance_m": close_distance(seed),
             "in_view_frames": len(in_view),
             "false_alarms_in_view": sum(said[s] >= 1 for s in in_view),
-            "categories": [said[s] for s in seqs],
         }
     return out
 
@@ -356,7 +387,7 @@ def headline(runs: dict[str, list[dict[str, Any]]]) -> dict[str, Any]:
     their median, min and max, and the ramps the oracle missed or the detector coped with.
     """
     every = [r for rs in runs.values() for r in rs]
-    ramps = [r for r in every if r["ramp"] != "close"]
+    ramps = [r for r in every if r["ramp"] not in CLEAN]
 
     def alarms(rs: list[dict[str, Any]]) -> dict[str, Any]:
         clean, count = sum(r["clean_frames"] for r in rs), sum(r["false_alarms"] for r in rs)
@@ -364,7 +395,7 @@ def headline(runs: dict[str, list[dict[str, Any]]]) -> dict[str, Any]:
 
     onset: dict[str, Any] = {}
     for kind, rs in runs.items():
-        if kind == "close":
+        if kind in CLEAN:
             continue
         d = summarise(rs)
         delays = d["delays_frames"]
@@ -381,7 +412,7 @@ def headline(runs: dict[str, list[dict[str, Any]]]) -> dict[str, Any]:
         "false_alarms": {
             "with_close_pedestrians": alarms(every),
             "without_close_pedestrians": alarms(ramps),
-            "close_pedestrians_only": alarms([r for r in every if r["ramp"] == "close"]),
+            "close_pedestrians_only": alarms([r for r in every if r["ramp"] in CLEAN]),
         },
         "onset_delay_frames": onset,
     }
