@@ -10,7 +10,20 @@ weather, then one scripted ramp, then ``--hold`` seconds at its end:
 * ``raindrop``: a drop appearing on the lens, its radius growing to 0.3 of the image width
   over 1 s, at a position drawn per seed;
 * ``hsl``: an HSL sweep from the identity to poor light (saturation -0.6, lightness -0.8,
-  a hue shift drawn per seed in [-90, 90] degrees) over ``--ramp`` s.
+  a hue shift drawn per seed in [-90, 90] degrees) over ``--ramp`` s;
+* ``dusk``: the demo's dusk onset (examples/rover/demo-scenario.yaml): brightness falling
+  to strength 0.8 over 2 s, on the demo's bare ground (``background: false``);
+
+and two cases with no phenomenon at all:
+
+* ``close``: close pedestrians in clear weather, the view behind the demo's false alarm
+  (docs/enlil.md, "In the loop"): the rover creeps (1 cm/s) on bare ground while a
+  pedestrian crosses its path at a distance drawn per seed in [0.3, 1.0] m from the
+  camera. Every frame is clean; ``in_view_frames`` counts those in which the pedestrian
+  stands in the camera's field;
+* ``demo_close``: the demo's own clear-weather close-up, its first 8 s without a phenomenon
+  (the rover stops for a crossing pedestrian, who walks on half a metre in front of the
+  camera), on the demo's ground (seed 0) and others (layout 3 + seed).
 
 The ground-truth category of a frame is the assessment rule applied to the context in force
 at its time: the model's F1 on a fixed batch of 32 test-split images perturbed with exactly
@@ -20,8 +33,10 @@ a frame period). Per run:
 
 * **delay**: frames from that true change to the oracle's first category >= 1 at or after
   the ramp's start (negative: the oracle said so before the detector was measurably worse);
-* **false alarms**: clean frames (before the ramp) the oracle called category >= 1,
-  reported per 1,000 clean frames over all runs.
+* **false alarms**: clean frames (before the ramp; every frame of the close cases) the
+  oracle called category >= 1, reported per 1,000 clean frames over all runs
+  (``false_alarms``: with and without the close pedestrians; ``onset_delay_frames``: the
+  delays per phenomenon).
 
 Then the whole loop's rate with the oracle in place of ground truth:
 ``examples/rover/sim-enlil.yaml`` (Utu's five nodes, the enlil oracle as A4; its live
@@ -32,6 +47,9 @@ Writes ``benchmarks/results/oracle_ramps.json``::
 
     .venv/bin/python benchmarks/oracle_ramps.py --data data/rover          # 10 seeds
     .venv/bin/python benchmarks/oracle_ramps.py --data data/rover --quick  # 2 seeds, shorter
+
+Options given with ``--quick`` (``--seeds``, ``--clean``, ``--ramp``, ``--loop-seconds``)
+keep their value.
 """
 
 from __future__ import annotations
@@ -39,6 +57,7 @@ from __future__ import annotations
 import argparse
 import io
 import json
+import math
 import os
 import platform
 import statistics
@@ -58,6 +77,7 @@ from anunnaki.lec import evaluate_detector, load_registry
 from anunnaki.managed import SimKind, SimulatedSystem
 from anunnaki.messages import Assessment, body_of
 from anunnaki.phenomena import PHENOMENA
+from anunnaki.sim import load_scenario
 
 ROOT = Path(__file__).parents[1]
 MODELS = ROOT / "examples" / "models" / "rover.yaml"
@@ -68,6 +88,18 @@ LAUNCHES = {
 }
 RATE = 10.0  # camera frames per second
 FAST = 1000.0  # simulated seconds per wall second asked for: as fast as the loop goes
+
+
+KINDS = ("fog", "raindrop", "hsl", "dusk", "close", "demo_close")
+CLEAN = ("close", "demo_close")  # the cases with no phenomenon: every frame clean
+DEMO = ROOT / "examples" / "rover" / "demo-scenario.yaml"
+#: The phenomenon a ramp scripts (``close``: none).
+PHENOMENON = {"fog": "fog", "raindrop": "raindrop", "hsl": "hsl", "dusk": "brightness"}
+CAMERA_FORWARD = 0.55  # m: the rover's camera sits this far ahead of its base (anunnaki.sim)
+HALF_FOV = math.radians(30.0)  # the rover camera's half field of view (square frames)
+CLOSE_RANGE = (0.3, 1.0)  # m from the camera: where the close pedestrian crosses
+CLOSE_SPEED, CLOSE_HALF_PATH, CLOSE_START = 0.4, 1.2, 1.0  # m/s, m, s
+PERSON_HALF_WIDTH = 0.25  # m: a pedestrian's half width, for in_view_frames
 
 
 def ramp_event(kind: str, seed: int, at: float, ramp: float) -> dict[str, Any]:
@@ -84,17 +116,24 @@ def ramp_event(kind: str, seed: int, at: float, ramp: float) -> dict[str, Any]:
         hue = round(float(rng.uniform(-90.0, 90.0)), 1)
         params = {"hue": hue, "saturation": -0.6, "lightness": -0.8}
         return {"at": at, "phenomenon": "hsl", "params": params, "ramp": ramp}
-    raise ValueError(f"unknown ramp {kind!r}: fog, raindrop or hsl")
+    if kind == "dusk":  # as examples/rover/demo-scenario.yaml's dusk
+        return {"at": at, "phenomenon": "brightness", "strength": 0.8, "ramp": 2.0}
+    raise ValueError(f"unknown ramp {kind!r}: {', '.join(KINDS)}")
 
 
 def scenario(kind: str, seed: int, clean: float, ramp: float, hold: float) -> dict[str, Any]:
     """A rover scenario: ``clean`` s of clear weather, the ramp, ``hold`` s at its end."""
+    if kind == "close":
+        return close_scenario(seed)
+    if kind == "demo_close":
+        return demo_close_scenario(seed)
     event = ramp_event(kind, seed, clean, ramp)
     return {
         "anunnaki": "scenario/1",
         "platform": "rover",
         "name": f"ramp-{kind}-s{seed}",
         "layout": 44 + seed % 10,  # test layouts: never seen by the detector or the oracle
+        "background": kind != "dusk",  # the dusk on the demo's bare ground
         "seed": seed,
         "duration": clean + event["ramp"] + hold,
         "camera": {"rate": RATE, "width": 128, "height": 128},
@@ -106,6 +145,71 @@ def scenario(kind: str, seed: int, clean: float, ramp: float, hold: float) -> di
         ],
         "phenomena": [event],
     }
+
+
+def close_distance(seed: int) -> float:
+    """The close pedestrian's distance from the camera (m), drawn per seed."""
+    return round(float(np.random.default_rng([seed, 7]).uniform(*CLOSE_RANGE)), 3)
+
+
+def close_scenario(seed: int) -> dict[str, Any]:
+    """Clear weather, bare ground, a pedestrian crossing 0.3-1 m in front of the camera."""
+    d = close_distance(seed)
+    side = 1.0 if seed % 2 == 0 else -1.0  # from the left or the right
+    x = CAMERA_FORWARD + d
+    walk = 2 * CLOSE_HALF_PATH / CLOSE_SPEED
+    return {
+        "anunnaki": "scenario/1",
+        "platform": "rover",
+        "name": f"close-pedestrian-s{seed}",
+        "layout": 44 + seed % 10,
+        "background": False,  # the demo's ground, where the close-up alarm was seen
+        "seed": seed,
+        "duration": CLOSE_START + walk + 1.0,
+        "camera": {"rate": RATE, "width": 128, "height": 128},
+        "route": [[0, 0], [40, 0]],
+        "cruise_speed": 0.01,  # all but standing: the pedestrian stays at its distance
+        "objects": [
+            {
+                "kind": "pedestrian",
+                "x": x,
+                "y": -side * CLOSE_HALF_PATH,
+                "walk_to": [x, side * CLOSE_HALF_PATH],
+                "speed": CLOSE_SPEED,
+                "start": CLOSE_START,
+            }
+        ],
+        "phenomena": [],
+    }
+
+
+def demo_close_scenario(seed: int) -> dict[str, Any]:
+    """The demo's first 8 s without a phenomenon: the rover stops close to a pedestrian.
+
+    examples/rover/demo-scenario.yaml's first pedestrian crosses 6 m ahead from 2 s; the
+    rover (0.8 m/s) stops for it and the pedestrian walks on about half a metre in front
+    of the camera at 6.5-7.6 s, where the shipped oracle's clear-weather alarm was seen
+    (docs/enlil.md, "In the loop"). Seed 0 is the demo's ground (layout 3), seed S layout
+    3 + S.
+    """
+    demo = load_scenario(DEMO).model_dump(mode="json")
+    return demo | {
+        "name": f"demo-close-s{seed}",
+        "layout": 3 + seed,
+        "seed": seed,
+        "duration": 8.0,
+        "objects": demo["objects"][:1],
+        "phenomena": [],
+        "faults": [],
+    }
+
+
+def close_in_view(seed: int, t: float) -> bool:
+    """Whether the close pedestrian of *seed* stands in the camera's field at time *t*."""
+    d = close_distance(seed)
+    walked = min(max(t - CLOSE_START, 0.0) * CLOSE_SPEED, 2 * CLOSE_HALF_PATH)
+    y = -CLOSE_HALF_PATH + walked  # the side does not matter: the field is symmetric
+    return abs(y) < d * math.tan(HALF_FOV) + PERSON_HALF_WIDTH
 
 
 class Truth:
@@ -176,9 +280,11 @@ def run_ramp(
             wall = time.perf_counter() - t0
             frames = system.platform.frames
             timeline = system.platform.timeline
-    event = sc["phenomena"][0]
-    start, end = float(event["at"]), float(event["at"] + event["ramp"])
-    changed = truth.change_time(timeline, start, end)
+    event = sc["phenomena"][0] if sc["phenomena"] else None
+    start = math.inf if event is None else float(event["at"])  # close: every frame clean
+    changed = None
+    if event is not None:
+        changed = truth.change_time(timeline, start, float(event["at"] + event["ramp"]))
     with lock:
         seqs = sorted(set(said) & set(times))
         clean_frames = [s for s in seqs if times[s] < start]
@@ -187,8 +293,9 @@ def run_ramp(
         true_frame = None
         if changed is not None:
             true_frame = next((s for s in seqs if times[s] >= changed - 1e-9), None)
+        in_view = [s for s in seqs if kind == "close" and close_in_view(seed, times[s])]
     delay = None if first is None or true_frame is None else first - true_frame
-    return {
+    out = {
         "ramp": kind,
         "seed": seed,
         "event": event,
@@ -202,6 +309,15 @@ def run_ramp(
         "clean_frames": len(clean_frames),
         "false_alarms": len(alarms),
     }
+    if kind in CLEAN:
+        out["categories"] = [said[s] for s in seqs]
+    if kind == "close":
+        out |= {
+            "distance_m": close_distance(seed),
+            "in_view_frames": len(in_view),
+            "false_alarms_in_view": sum(said[s] >= 1 for s in in_view),
+        }
+    return out
 
 
 def loop_rate(name: str, seconds: float) -> dict[str, Any]:
@@ -227,23 +343,78 @@ def loop_rate(name: str, seconds: float) -> dict[str, Any]:
 def summarise(runs: list[dict[str, Any]]) -> dict[str, Any]:
     """Median delay, changes missed, false alarms per 1,000 clean frames."""
     delays = [r["delay_frames"] for r in runs if r["delay_frames"] is not None]
+    ramps = [r for r in runs if r["event"] is not None]  # close runs have no change
     clean = sum(r["clean_frames"] for r in runs)
     alarms = sum(r["false_alarms"] for r in runs)
-    return {
+    out = {
         "runs": len(runs),
         "median_delay_frames": statistics.median(delays) if delays else None,
         "delays_frames": delays,
-        "no_true_change": sum(r["true_change_frame"] is None for r in runs),
+        "no_true_change": sum(r["true_change_frame"] is None for r in ramps),
         # a ramp whose end the detector copes with, yet the oracle called it degraded
         "alarms_without_true_change": sum(
-            r["true_change_frame"] is None and r["oracle_change_frame"] is not None for r in runs
+            r["true_change_frame"] is None and r["oracle_change_frame"] is not None for r in ramps
         ),
         "missed": sum(
-            r["true_change_frame"] is not None and r["oracle_change_frame"] is None for r in runs
+            r["true_change_frame"] is not None and r["oracle_change_frame"] is None for r in ramps
         ),
         "clean_frames": clean,
         "false_alarms": alarms,
-        "false_alarms_per_1000": round(1000.0 * alarms / clean, 2) if clean else None,
+        "false_alarms_per_1000": per_1000(alarms, clean),
+    }
+    close = [r for r in runs if r["ramp"] == "close"]
+    if close:
+        in_view = sum(r["in_view_frames"] for r in close)
+        alarms_in_view = sum(r["false_alarms_in_view"] for r in close)
+        out |= {
+            "close_in_view_frames": in_view,
+            "close_false_alarms_in_view": alarms_in_view,
+            "close_false_alarms_per_1000_in_view": per_1000(alarms_in_view, in_view),
+        }
+    return out
+
+
+def per_1000(count: int, frames: int) -> float | None:
+    return round(1000.0 * count / frames, 2) if frames else None
+
+
+def headline(runs: dict[str, list[dict[str, Any]]]) -> dict[str, Any]:
+    """The issue's two figures: false alarms per 1,000 clean frames, onset delay per phenomenon.
+
+    ``false_alarms``: over every clean frame (``with_close_pedestrians``), and without the
+    ``close`` runs; ``onset_delay_frames``: per ramp (its phenomenon named), the delays
+    (frames from the true change to the oracle's first category >= 1; negative: early),
+    their median, min and max, and the ramps the oracle missed or the detector coped with.
+    """
+    every = [r for rs in runs.values() for r in rs]
+    ramps = [r for r in every if r["ramp"] not in CLEAN]
+
+    def alarms(rs: list[dict[str, Any]]) -> dict[str, Any]:
+        clean, count = sum(r["clean_frames"] for r in rs), sum(r["false_alarms"] for r in rs)
+        return {"clean_frames": clean, "false_alarms": count, "per_1000": per_1000(count, clean)}
+
+    onset: dict[str, Any] = {}
+    for kind, rs in runs.items():
+        if kind in CLEAN:
+            continue
+        d = summarise(rs)
+        delays = d["delays_frames"]
+        onset[kind] = {
+            "phenomenon": PHENOMENON[kind],
+            "median": d["median_delay_frames"],
+            "min": min(delays) if delays else None,
+            "max": max(delays) if delays else None,
+            "delays": delays,
+            "missed": d["missed"],
+            "no_true_change": d["no_true_change"],
+        }
+    return {
+        "false_alarms": {
+            "with_close_pedestrians": alarms(every),
+            "without_close_pedestrians": alarms(ramps),
+            "close_pedestrians_only": alarms([r for r in every if r["ramp"] in CLEAN]),
+        },
+        "onset_delay_frames": onset,
     }
 
 
@@ -255,19 +426,25 @@ def write(path: Path, results: dict[str, Any]) -> None:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--data", default="data/rover", help="the rover dataset (its test split)")
-    ap.add_argument("--seeds", type=int, default=10)
-    ap.add_argument("--ramps", default="fog,raindrop,hsl")
-    ap.add_argument("--clean", type=float, default=10.0, help="clear seconds before the ramp")
-    ap.add_argument("--ramp", type=float, default=10.0, help="fog and hsl ramp seconds")
+    ap.add_argument("--seeds", type=int, help="seeds per case (10; --quick: 2)")
+    ap.add_argument("--ramps", default=",".join(KINDS), help=f"cases ({','.join(KINDS)})")
+    ap.add_argument("--clean", type=float, help="clear seconds before the ramp (10; quick: 5)")
+    ap.add_argument("--ramp", type=float, help="fog and hsl ramp seconds (10; quick: 5)")
     ap.add_argument("--hold", type=float, default=3.0, help="seconds at the ramp's end")
     ap.add_argument("--window", type=int, default=3, help="the oracle's window (frames)")
-    ap.add_argument("--loop-seconds", type=float, default=20.0)
+    ap.add_argument("--loop-seconds", type=float, help="simulated s per loop run (20; quick: 10)")
     ap.add_argument("--quick", action="store_true", help="2 seeds, 5 s clean, 5 s ramps")
     ap.add_argument("--threads", type=int, default=2)
     ap.add_argument("--output", type=Path, default=RESULTS)
     args = ap.parse_args()
-    if args.quick:
-        args.seeds, args.clean, args.ramp, args.loop_seconds = 2, 5.0, 5.0, 10.0
+    defaults = (2, 5.0, 5.0, 10.0) if args.quick else (10, 10.0, 10.0, 20.0)
+    for name, value in zip(("seeds", "clean", "ramp", "loop_seconds"), defaults, strict=True):
+        if getattr(args, name) is None:
+            setattr(args, name, value)
+    kinds = args.ramps.split(",")
+    unknown = sorted(set(kinds) - set(KINDS))
+    if unknown:
+        ap.error(f"--ramps: unknown {', '.join(unknown)}; the cases are {', '.join(KINDS)}")
     torch.set_num_threads(args.threads)
     truth = Truth(args.data, "rover-default")
     results: dict[str, Any] = {
@@ -280,6 +457,7 @@ def main() -> None:
             "load_average_before": list(os.getloadavg()),
         },
         "model": "rover-default",
+        "oracle": oracle_file(),
         "settings": {
             k: getattr(args, k) for k in ("seeds", "clean", "ramp", "hold", "window", "quick")
         },
@@ -287,7 +465,6 @@ def main() -> None:
         "aims": {"median_delay_frames": 3, "false_alarms_per_1000": 1, "loop_hz": 10},
         "ramps": {},
     }
-    kinds = args.ramps.split(",")
     runs: dict[str, list[dict[str, Any]]] = {kind: [] for kind in kinds}
     for seed in range(args.seeds):  # seed-major: an interrupted run covers every ramp
         for kind in kinds:
@@ -309,6 +486,7 @@ def main() -> None:
             )
             results["ramps"][kind] = {"summary": summarise(runs[kind]), "runs": runs[kind]}
             results["all"] = summarise([x for k in kinds for x in runs[k]])
+            results |= headline(runs)
             write(args.output, results)  # after every run: an interrupted run keeps its figures
     results["truth_evaluations"] = truth.evaluations
     results["loop"] = {}
@@ -317,13 +495,23 @@ def main() -> None:
         write(args.output, results)
     results["machine"]["load_average_after"] = list(os.getloadavg())
     write(args.output, results)
-    a = results["all"]
+    a, onset = results["false_alarms"]["with_close_pedestrians"], results["onset_delay_frames"]
+    delays = ", ".join(f"{k} {v['median']}" for k, v in onset.items())
     print(
-        f"median delay {a['median_delay_frames']} frames (aim <= 3), false alarms "
-        f"{a['false_alarms_per_1000']} per 1,000 clean frames (aim <= 1), loop "
-        f"{results['loop']['enlil']['fps']} Hz with enlil (aim >= 10), "
-        f"{results['loop']['ground_truth']['fps']} Hz with ground truth; wrote {args.output}"
+        f"false alarms {a['per_1000']} per 1,000 clean frames, close pedestrians included "
+        f"({a['false_alarms']}/{a['clean_frames']}; aim <= 1); median onset delay (frames): "
+        f"{delays or '-'} (aim <= 3); loop {results['loop']['enlil']['fps']} Hz with enlil "
+        f"(aim >= 10), {results['loop']['ground_truth']['fps']} Hz with ground truth; "
+        f"wrote {args.output}"
     )
+
+
+def oracle_file() -> dict[str, Any]:
+    """The oracle the run assessed with: the registry's pin of rover-default's oracle."""
+    ref = load_registry(MODELS).get("rover-default").oracle
+    if ref is None:
+        return {}
+    return {"file": str(Path(ref.file).relative_to(ROOT)), "sha256": ref.sha256}
 
 
 if __name__ == "__main__":

@@ -7,7 +7,15 @@
 #                                            # rover-low_light, uav-default)
 #   scripts/train-oracles.sh rover-fog       # only the ones named
 #   BUDGET=300 FRAMES=2000 EPOCHS=8 scripts/train-oracles.sh   # quicker, weaker (all models)
+#   ARCH_hsl=patch_cnn ARCH_raindrop=patch_cnn scripts/train-oracles.sh rover-default
 #
+# The oracle network (`oracle train --architecture`, docs/enlil.md) is small_cnn unless
+# a variable names another: ARCH_<phenomenon> per phenomenon (ARCH_hsl, ARCH_raindrop …).
+# One oracle covers all of its model's phenomena, so the phenomena that name one decide
+# it (they must agree; the others follow them); ARCH_<model> (dashes as underscores:
+# ARCH_rover_default) overrides them for one model, ARCH for every model whose phenomena
+# name none. `scripts/train-oracles.sh --print-architectures` prints each model's choice
+# and trains nothing.
 # Without BUDGET/FRAMES/EPOCHS each model gets the settings its shipped oracle was made with
 # (the table at the end; docs/enlil.md): the shipped files are rebuilt with the same settings.
 # Every step's wall time goes to $RUNS/times.tsv. Assessments resume when re-run (the
@@ -24,9 +32,16 @@ SEED=${SEED:-0}
 MODELS=${MODELS:-examples/models} # a scratch copy keeps the shipped files (and their pins) as they are
 ANUNNAKI=("$PY" -m anunnaki.cli.main)
 
-mkdir -p "$RUNS"
+PRINT_ARCH=0
+if [[ ${1:-} == --print-architectures ]]; then
+  PRINT_ARCH=1
+  shift
+fi
 TIMES="$RUNS/times.tsv"
-[[ -f $TIMES ]] || printf 'step\tseconds\n' > "$TIMES"
+if [[ $PRINT_ARCH == 0 ]]; then
+  mkdir -p "$RUNS"
+  [[ -f $TIMES ]] || printf 'step\tseconds\n' > "$TIMES"
+fi
 
 timed() { # timed NAME COMMAND...: run it, append its wall seconds to $TIMES
   local name=$1 start=$SECONDS
@@ -39,7 +54,7 @@ timed() { # timed NAME COMMAND...: run it, append its wall seconds to $TIMES
 dataset() { # dataset NAME [make-dataset options]: NAME is the platform, or rover-open
   local name=$1
   shift
-  if [[ ! -f $DATA/$name/val.json ]]; then
+  if [[ $PRINT_ARCH == 0 && ! -f $DATA/$name/val.json ]]; then
     timed "make-dataset $name" "${ANUNNAKI[@]}" make-dataset "${name%-open}" \
       --out "$DATA/$name" --workers "$THREADS" "$@"
   fi
@@ -54,10 +69,35 @@ assess() { # assess MODEL PLATFORM PHENOMENON BUDGET: one Enlil archive
 
 EXTRA=() # more `oracle train` options for the next train (rover-default: --extra-data)
 
+architecture() { # architecture MODEL PHENOMENON...: the network of MODEL's oracle (above)
+  local model=$1 own="ARCH_${1//-/_}" chosen="" phenomenon var
+  shift
+  if [[ -n ${!own:-} ]]; then
+    echo "${!own}"
+    return
+  fi
+  for phenomenon in "$@"; do
+    var="ARCH_$phenomenon"
+    [[ -n ${!var:-} ]] || continue
+    if [[ -n $chosen && $chosen != "${!var}" ]]; then
+      echo "train-oracles.sh: $model's phenomena name different architectures ($chosen;" \
+        "$var=${!var}), but one oracle covers all of them: set $own to the one to train" >&2
+      return 1
+    fi
+    chosen=${!var}
+  done
+  echo "${chosen:-${ARCH:-small_cnn}}"
+}
+
 train() { # train MODEL PLATFORM REGISTRY BUDGET FRAMES EPOCHS PHENOMENON...
   local model=$1 platform=$2 registry=$3 budget=${BUDGET:-$4} frames=${FRAMES:-$5}
-  local epochs=${EPOCHS:-$6}
+  local epochs=${EPOCHS:-$6} arch
   shift 6
+  arch=$(architecture "$model" "$@") || exit 1
+  if [[ $PRINT_ARCH == 1 ]]; then
+    printf '%s\t%s\n' "$model" "$arch"
+    return
+  fi
   local archives=()
   for phenomenon in "$@"; do
     assess "$model" "$platform" "$phenomenon" "$budget"
@@ -66,7 +106,7 @@ train() { # train MODEL PLATFORM REGISTRY BUDGET FRAMES EPOCHS PHENOMENON...
   timed "oracle train $model" "${ANUNNAKI[@]}" oracle train --models "$registry" \
     --model "$model" --data "$DATA/$platform" "${archives[@]}" \
     --out "$MODELS/$model.oracle" --frames "$frames" --epochs "$epochs" --seed "$SEED" \
-    --threads "$THREADS" "${EXTRA[@]}" --json > "$RUNS/$model.oracle.json"
+    --architecture "$arch" --threads "$THREADS" "${EXTRA[@]}" --json > "$RUNS/$model.oracle.json"
   "$PY" scripts/pin-oracle.py "$registry" "$model" "$MODELS/$model.oracle.safetensors"
 }
 
@@ -91,4 +131,4 @@ pick rover-low_light && train rover-low_light rover "$MODELS/rover.yaml" 400 300
 pick uav-default && dataset uav --width 320 --height 240
 # 176 evaluations (11 rounds): the shipped one's search was stopped there for time
 pick uav-default && train uav-default uav "$MODELS/uav.yaml" 176 2000 10 fog
-echo "times: $TIMES" >&2
+[[ $PRINT_ARCH == 1 ]] || echo "times: $TIMES" >&2

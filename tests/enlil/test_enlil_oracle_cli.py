@@ -44,6 +44,9 @@ def test_oracle_train_random_contexts(trained: tuple[Path, Path, dict[str, Any]]
     assert oracle.model_id == "rover-default"
     assert oracle.card.model_sha256.startswith("5b47451b")
     assert oracle.card.training["contexts"][0]["source"] == "random"
+    # the architecture and the seed: in the report and in the card
+    assert printed["architecture"] == oracle.card.architecture == "small_cnn"
+    assert printed["seed"] == oracle.card.training["config"]["seed"] == 0
 
 
 def test_oracle_train_needs_contexts(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
@@ -101,3 +104,58 @@ def test_oracle_evaluate_needs_an_oracle(
     assert "write random:N or balanced:N" in capsys.readouterr().err
     assert main(argv) == 2
     assert "names no oracle; give --oracle FILE" in capsys.readouterr().err
+
+
+def _train_argv(data: Path, out: Path) -> list[str]:
+    argv = ["oracle", "train", "--models", str(MODELS), "--model", "rover-default"]
+    argv += ["--data", str(data), "--random", "3", "--phenomenon", "fog", "--out", str(out)]
+    return [*argv, "--frames", "32", "--val-frames", "16", "--epochs", "1", "--threads", "1"]
+
+
+def test_oracle_train_several_seeds_of_an_architecture(
+    trained: tuple[Path, Path, dict[str, Any]],
+    tmp_path: Path,
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    data = trained[0]
+    out = tmp_path / "rover-default.oracle"
+    argv = [*_train_argv(data, out), "--architecture", "patch_cnn", "--seeds", "3,5"]
+    capsys.readouterr()
+    assert main([*argv, "--json"]) == 0
+    report = json.loads(capsys.readouterr().out)
+    assert report["architecture"] == "patch_cnn" and "file" not in report
+    assert [s["seed"] for s in report["seeds"]] == [3, 5]
+    for entry in report["seeds"]:  # one file per seed, named so, its card saying both
+        assert entry["file"] == f"{out}.seed{entry['seed']}"
+        oracle = load_oracle(entry["file"], sha256=entry["sha256"])
+        assert oracle.card.architecture == "patch_cnn"
+        assert oracle.card.training["config"]["seed"] == entry["seed"]
+        assert oracle.card.metrics["val"] == entry["val"]
+    assert not out.with_name(out.name + ".safetensors").exists()
+    f1 = [s["val"]["macro_f1"] for s in report["seeds"]]
+    spread = report["spread"]["macro_f1"]
+    assert spread["mean"] == pytest.approx(sum(f1) / 2)
+    assert spread["spread"] == pytest.approx(abs(f1[0] - f1[1]))
+    assert spread["sd"] == pytest.approx(abs(f1[0] - f1[1]) / 2**0.5)
+    assert set(report["spread"]) >= {"accuracy", "macro_f1", "ece"}
+    # N seeds from --seed on, and the table: a row per seed, then mean, SD and spread
+    assert main([*_train_argv(data, out), "--seed", "7", "--seeds", "2"]) == 0
+    printed = capsys.readouterr()
+    table = printed.out
+    assert "seed 8: epochs 1/1" in printed.err  # the progress names the seed (a log's lines)
+    for row in ("seed 7", "seed 8", "mean", "SD", "spread (max - min)", "(small_cnn)"):
+        assert row in table
+    assert Path(f"{out}.seed8.safetensors").exists() and Path(f"{out}.seed8.json").exists()
+
+
+def test_oracle_train_bad_architecture_or_seeds(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    argv = _train_argv(tmp_path, tmp_path / "x")
+    assert main([*argv, "--architecture", "resnet"]) == 2
+    err = capsys.readouterr().err
+    assert "--architecture 'resnet': no such oracle architecture" in err
+    assert "patch_cnn, small_cnn" in err
+    for bad in ("0,0", "zero", "0", "-1,2"):
+        assert main([*argv, f"--seeds={bad}"]) == 2
+        assert "give a number of seeds" in capsys.readouterr().err

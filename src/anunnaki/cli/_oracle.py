@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 from typing import Any
 
 from anunnaki.cli._detector import add_model_options, classes_counted, classes_line, shared_view
@@ -38,7 +39,21 @@ def add_parser(sub: Any) -> None:
     t.add_argument("--frames", type=int, default=3000)
     t.add_argument("--val-frames", type=int, default=600)
     t.add_argument("--epochs", type=int, default=12)
-    t.add_argument("--seed", type=int, default=0)
+    t.add_argument("--seed", type=int, default=0, help="the seed (the first one, with --seeds N)")
+    t.add_argument(
+        "--seeds",
+        metavar="N|S,S,…",
+        help="train one oracle per seed: N seeds from --seed on, or the seeds listed "
+        "(comma-separated); writes NAME.seedS per seed and reports each one's val figures "
+        "with their mean, SD and spread (max - min)",
+    )
+    t.add_argument(
+        "--architecture",
+        default="small_cnn",
+        metavar="NAME",
+        help="the oracle network: a registered oracle architecture, e.g. small_cnn (default) "
+        "or patch_cnn (pools over patches: local phenomena such as a raindrop)",
+    )
     t.add_argument("--threads", type=int, default=0)
     t.add_argument(
         "--extra-data",
@@ -60,14 +75,21 @@ def add_parser(sub: Any) -> None:
 
 
 def run_train(args: argparse.Namespace) -> int:
-    """Train and save the oracle; print its val figures (a table, or JSON with ``--json``)."""
-    from anunnaki.enlil import EnlilError, OracleTrainConfig, contexts_from_archive, train_oracle
+    """Train and save the oracle(s); print their val figures (a table, or JSON with ``--json``)."""
+    from anunnaki.enlil import (
+        EnlilError,
+        OracleTrainConfig,
+        contexts_from_archive,
+        train_oracle_seeds,
+    )
     from anunnaki.lec import resolve_model
 
     if bool(args.archive) == bool(args.random):
         raise EnlilError("oracle train: give --archive PATH (repeatable) or --random N")
     if args.random and not args.phenomenon:
         raise EnlilError("oracle train --random N needs --phenomenon P (repeatable)")
+    seeds = _seeds(args.seeds, args.seed)
+    _check_architecture(args.architecture)
     model = resolve_model(args.models, args.model)
     console = _console()
     sets = [contexts_from_archive(a) for a in args.archive]
@@ -83,28 +105,44 @@ def run_train(args: argparse.Namespace) -> int:
         seed=args.seed,
         threads=args.threads,
         lookup=args.lookup,
+        architecture=args.architecture,
         extra={"extra_data": list(args.extra_data)} if args.extra_data else {},
     )
     with _bar(console) as bar:
         task = bar.add_task("frames", total=None)
 
-        def progress(stage: str, done: int, total: int) -> None:
-            bar.update(task, description=stage, completed=done, total=total)
+        def progress(seed: int, stage: str, done: int, total: int) -> None:
+            label = f"seed {seed}: {stage}" if len(seeds) > 1 else stage
+            bar.update(task, description=label, completed=done, total=total)
             if not console.is_terminal and (stage == "epochs" or done == total):
-                console.print(f"{stage} {done}/{total}")  # a log gets a line per step
+                console.print(f"{label} {done}/{total}")  # a log gets a line per step
 
-        oracle = train_oracle(
+        oracles, spread = train_oracle_seeds(
             _joined(args.data, args.extra_data, "train"),
             _joined(args.data, args.extra_data, "val"),
             sets,
+            seeds,
             model_id=model.model_id,
             model_sha256=model.sha256,
             config=config,
             progress=progress,
         )
-    sha = oracle.save(args.out)
-    report = {"file": str(args.out), "sha256": sha, "model_id": model.model_id}
-    report |= {"contexts": oracle.card.training["contexts"], **oracle.card.metrics}
+    report: dict[str, Any] = {"model_id": model.model_id, "architecture": args.architecture}
+    report["contexts"] = oracles[0].card.training["contexts"]
+    if len(seeds) == 1:
+        sha = oracles[0].save(args.out)
+        report |= {"file": str(args.out), "sha256": sha, "seed": seeds[0]}
+        report |= _metrics(oracles[0])
+    else:
+        report["seeds"] = [
+            {"seed": seed, "file": (path := seed_file(args.out, seed)), "sha256": o.save(path),
+             **_metrics(o)}
+            for seed, o in zip(seeds, oracles, strict=True)
+        ]  # fmt: skip
+        report["spread"] = {
+            figure: {k: None if math.isnan(v) else v for k, v in stats.items()}
+            for figure, stats in spread.items()
+        }  # JSON has no NaN: a figure no seed has is null
     if counted is not None:
         report |= counted
     if args.json:
@@ -112,6 +150,55 @@ def run_train(args: argparse.Namespace) -> int:
         return 0
     _print_train(report)
     return 0
+
+
+def _metrics(oracle: Any) -> dict[str, Any]:
+    """The card's metrics as its JSON file holds them (null where a figure is undefined)."""
+    metrics: dict[str, Any] = oracle.card.model_dump(mode="json")["metrics"]
+    return metrics
+
+
+def seed_file(out: str, seed: int) -> str:
+    """The oracle file of one seed of ``--seeds``: ``NAME.seedS`` (``.safetensors`` + ``.json``)."""
+    from pathlib import Path
+
+    path = Path(out)
+    base = path.with_suffix("") if path.suffix in (".safetensors", ".json") else path
+    return str(base.with_name(f"{base.name}.seed{seed}"))
+
+
+def _seeds(text: str | None, first: int) -> list[int]:
+    """``--seeds``: ``N`` (N seeds from *first* on) or ``S,S,…``; none: ``[first]``."""
+    from anunnaki.enlil import EnlilError
+
+    if text is None:
+        return [first]
+    try:
+        if "," in text:
+            seeds = [int(part) for part in text.split(",") if part.strip()]
+        else:
+            seeds = list(range(first, first + int(text)))
+    except ValueError:
+        seeds = []
+    if not seeds or len(set(seeds)) != len(seeds) or min(seeds) < 0:
+        raise EnlilError(
+            f"oracle train --seeds {text!r}: give a number of seeds (--seeds 3: --seed and the "
+            "next two) or distinct non-negative seeds separated by commas (--seeds 0,1,2)"
+        )
+    return seeds
+
+
+def _check_architecture(name: str) -> None:
+    """An unknown ``--architecture`` is an error that lists the registered ones."""
+    from anunnaki.enlil import ORACLE_ARCHITECTURES, EnlilError
+
+    names = ORACLE_ARCHITECTURES.names()
+    if name not in names:
+        raise EnlilError(
+            f"oracle train --architecture {name!r}: no such oracle architecture; the "
+            f"registered ones are {', '.join(names)} (plugins register more under the "
+            f"entry-point group {ORACLE_ARCHITECTURES.group})"
+        )
 
 
 def _console() -> Any:
@@ -169,34 +256,52 @@ def _no_degraded(sets: list[Any]) -> list[str]:
     ]
 
 
+_FIGURES = {"accuracy": "accuracy", "macro_f1": "macro-F1", "ece": "ECE",
+            "head_macro_f1": "head alone: macro-F1", "drop_rmse": "drop RMSE"}  # fmt: skip
+
+
+def _val_figures(val: dict[str, Any]) -> dict[str, float]:
+    """The figures of a card's val metrics the table shows (the drop's RMSE flattened)."""
+    out = {k: float(val[k]) for k in _FIGURES if k in val}
+    if "drop" in val:
+        out["drop_rmse"] = float(val["drop"]["rmse"])
+    return out
+
+
 def _print_train(report: dict[str, Any]) -> None:
-    """The contexts per phenomenon, the val figures and the file to name in the registry."""
-    from rich.console import Console
+    """The contexts per phenomenon, the val figures and the file(s) to name in the registry."""
     from rich.table import Table
 
-    val = report.get("val", {})
-    table = Table(title=f"oracle of {report['model_id']}: {report['file']}")
+    where = f": {report['file']}" if "file" in report else f", {len(report['seeds'])} seeds"
+    table = Table(title=f"oracle of {report['model_id']} ({report['architecture']}){where}")
     table.add_column("contexts", justify="left")
     table.add_column("categories 0/1/2", justify="right")
     for c in report["contexts"]:
         table.add_row(f"{c['phenomenon']} ({c['source']})", "/".join(map(str, c["counts"])))
-    out = Console(highlight=False)
+    out = _stdout()
     out.print(table)
+    seeds = report.get("seeds", [report])
+    rows = [(f"seed {s['seed']}", _val_figures(s.get("val", {}))) for s in seeds]
+    if "spread" in report:
+        spread = report["spread"]
+        for stat, label in (("mean", "mean"), ("sd", "SD"), ("spread", "spread (max - min)")):
+            rows.append((label, {k: v[stat] for k, v in spread.items()}))
     figures = Table(title="val frames (after temperature scaling)")
-    names = {"accuracy": "accuracy", "macro_f1": "macro-F1", "ece": "ECE",
-             "head_macro_f1": "head alone: macro-F1"}  # fmt: skip
-    keys = [k for k in names if k in val]
+    keys = [k for k in _FIGURES if any(k in row for _, row in rows)]
+    figures.add_column("", justify="left")
     for k in keys:
-        figures.add_column(names[k], justify="right")
-    figures.add_row(*(f"{val[k]:.3f}" for k in keys))
+        figures.add_column(_FIGURES[k], justify="right")
+    for label, row in rows:
+        figures.add_row(label, *(f"{row[k]:.3f}" if k in row else "-" for k in keys))
     out.print(figures)
     if "classes" in report:
         out.print(classes_line(report))
-    out.print(
-        f"saved {report['file']} (sha256 {report['sha256']}); name it in the registry "
-        f"entry: oracle: {{file: …, sha256: {report['sha256']}}}",
-        soft_wrap=True,
-    )
+    for s in seeds:
+        out.print(
+            f"saved {s['file']} (sha256 {s['sha256']}); name it in the registry entry: "
+            f"oracle: {{file: …, sha256: {s['sha256']}}}",
+            soft_wrap=True,
+        )
 
 
 def _joined(data: str, extra: list[str], split: str) -> Any:
@@ -376,12 +481,16 @@ def run_evaluate(args: argparse.Namespace) -> int:
     return 0
 
 
-def _print_table(report: dict[str, Any]) -> None:
+def _stdout() -> Any:
+    """The console tables go to (stdout); a pipe or a file gets room for every column."""
     from rich.console import Console
 
     console = Console(highlight=False)
-    if not console.is_terminal:  # a pipe or a file: room for every column
-        console = Console(highlight=False, width=132)
+    return console if console.is_terminal else Console(highlight=False, width=132)
+
+
+def _print_table(report: dict[str, Any]) -> None:
+    console = _stdout()
     console.print(_table(report, report["test"], report["split"], report["model_id"]))
     if "interior" in report:
         inner = report["interior"]

@@ -16,6 +16,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass, field, replace
+from functools import partial
 from typing import Any
 
 import numpy as np
@@ -663,8 +664,11 @@ def train_oracle_seeds(
     model_sha256: str = "",
     thresholds: tuple[float, float] = (0.05, 0.10),
     config: OracleTrainConfig | None = None,
+    progress: Callable[[int, str, int, int], None] | None = None,
 ) -> tuple[list[OracleModel], dict[str, dict[str, float]]]:
     """One oracle per seed of one recipe, and the mean and spread of their val figures.
+
+    *progress* ``(seed, stage, done, total)``: :func:`train_oracle`'s, with the seed first.
 
     Returns:
         The oracles (in *seeds*' order) and, per val figure (``accuracy``, ``macro_f1``,
@@ -678,6 +682,7 @@ def train_oracle_seeds(
         train_oracle(
             train, val, sets, model_id=model_id, model_sha256=model_sha256,
             thresholds=thresholds, config=replace(base, seed=int(seed)),
+            progress=None if progress is None else partial(progress, int(seed)),
         )
         for seed in seeds
     ]  # fmt: skip
