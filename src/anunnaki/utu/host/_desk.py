@@ -20,7 +20,7 @@ from collections.abc import Callable
 from typing import Any
 
 from anunnaki import topics
-from anunnaki.bus import Bus, Sample
+from anunnaki.bus import Bus, Sample, Subscriber
 from anunnaki.clock import Clock, SimClock
 from anunnaki.errors import AnunnakiError
 from anunnaki.messages import RunStop, body_of
@@ -31,11 +31,13 @@ from anunnaki.utu.host._actuators import stop_platform
 
 __all__ = [
     "OperatorDesk",
+    "Throttle",
     "Watchdog",
     "announce_run_stop",
     "idle_wait",
+    "listen_run_stop",
+    "loop_watchdog",
     "publish_decisions",
-    "run_stop_listener",
     "watchdog_run_stop",
 ]
 
@@ -136,13 +138,14 @@ class OperatorDesk:
         return lambda message: self.call(op, message)
 
 
-def run_stop_listener(
-    utu: str, who: str, on_heard: Callable[[str, str], None]
-) -> Callable[[Sample], None]:
-    """A ``/utu/run_stop`` subscriber's callback, calling ``on_heard(caller, reason)``.
+def listen_run_stop(
+    bus: Bus, utu: str, who: str, on_heard: Callable[[str, str], None]
+) -> Subscriber:
+    """Subscribe ``/utu/run_stop``, calling ``on_heard(caller, reason)`` for each run-stop.
 
     Every run-stop counts but the announcements of Utu ``utu`` itself (``caller``
-    ``utu:<utu>``), which it already performs. ``who`` names the host in the log.
+    ``utu:<utu>``), which it already performs. ``who`` names the host in the log. Returns
+    the subscription (the host closes it).
     """
 
     def heard(sample: Sample) -> None:
@@ -154,7 +157,7 @@ def run_stop_listener(
         log.warning("%s: run-stop from %s: %s", who, caller, reason)
         on_heard(caller, reason)
 
-    return heard
+    return bus.subscribe(topics.RUN_STOP, heard, queue=16)
 
 
 def watchdog_run_stop(
@@ -172,6 +175,24 @@ def watchdog_run_stop(
     stop_platform(bus, config, reason=reason, caller=caller)
 
 
+def loop_watchdog(
+    bus: Bus | None, config: UtuConfig, *, what: str, caller: str, floor: float
+) -> Watchdog | None:
+    """The watchdog of one host's loop, or ``None`` (no ``watchdog`` configured, no bus).
+
+    It fires after ``max(watchdog, floor)`` seconds without a beat (``floor``: what an idle
+    round of the loop may wait) and run-stops the platform (:func:`watchdog_run_stop`).
+    """
+    limit = config.watchdog
+    if limit is None or bus is None:  # it stops the platform over the bus
+        return None
+
+    def fire(stalled: float) -> None:
+        watchdog_run_stop(bus, config, what=what, caller=caller, stalled=stalled)
+
+    return Watchdog(fire, max(limit, floor))
+
+
 def idle_wait(clock: Clock, period: float) -> float:
     """Seconds of wall time an idle loop waits for work.
 
@@ -187,7 +208,7 @@ def announce_run_stop(bus: Bus, utu: str, caller: str, reason: str) -> None:
     """Tell every part of Utu ``utu`` and any dashboard that it performs a run-stop.
 
     Published on ``/utu/run_stop`` with caller ``utu:<utu>``, which Utu's own listeners
-    ignore (:func:`run_stop_listener`): they already perform it.
+    ignore (:func:`listen_run_stop`): they already perform it.
     """
     try:
         bus.publish(
@@ -206,6 +227,26 @@ def publish_decisions(bus: Bus, tail: DecisionTail) -> bool:
     if rows:
         bus.publish(topics.DECISIONS, {"decisions": [decision_dict(d) for d in rows]})
     return bool(rows)
+
+
+class Throttle:
+    """At most one go per ``period`` seconds of wall time (e.g. publishing decisions)."""
+
+    def __init__(self, period: float) -> None:
+        self.period = period
+        self._next = 0.0
+
+    def due(self) -> bool:
+        """Whether a go is due now; if so, the next is one period from now."""
+        now = time.monotonic()
+        if now < self._next:
+            return False
+        self._next = now + self.period
+        return True
+
+    def wait(self) -> float:
+        """Seconds until the next go is due."""
+        return max(0.0, self._next - time.monotonic())
 
 
 class Watchdog:
