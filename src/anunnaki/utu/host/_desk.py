@@ -7,8 +7,12 @@ at a defined point (the monitor stage's batch), recorded in the decision log wit
 caller, repeated by a replay. The inline manager and the monitor node hold one
 :class:`OperatorDesk` each; nothing of it is written twice.
 
-A stuck loop is the one thing that cannot wait for the next cycle: :class:`Watchdog` tells
-the platform from its own thread (:func:`watchdog_run_stop`), the same way in every host.
+Run-stop, written once too: every host listens on ``/utu/run_stop`` through
+:func:`listen_run_stop`, and the execute stage of every host announces the run-stops it
+performs (:func:`execute_stage`, :func:`announce_run_stop`). A stuck loop is the one thing
+that cannot wait for the next cycle: the watchdog of a host's loop (:func:`loop_watchdog`)
+tells the platform from its own thread (:func:`watchdog_run_stop`), the same way in every
+host. :class:`Throttle` paces the decisions publication (:func:`publish_decisions`).
 """
 
 from __future__ import annotations
@@ -25,8 +29,13 @@ from anunnaki.clock import Clock, SimClock
 from anunnaki.errors import AnunnakiError
 from anunnaki.messages import RunStop, body_of
 from anunnaki.utu._config import UtuConfig
+from anunnaki.utu.cycle._actions import ActionRunner
+from anunnaki.utu.cycle._execute import ExecuteStage
+from anunnaki.utu.cycle._knowledge import Knowledge
 from anunnaki.utu.cycle._knowledge_stage import DecisionTail, decision_dict
+from anunnaki.utu.cycle._mape import Actuator
 from anunnaki.utu.cycle._monitor import MonitorStage
+from anunnaki.utu.cycle._parts import UtuParts
 from anunnaki.utu.host._actuators import stop_platform
 
 __all__ = [
@@ -34,6 +43,7 @@ __all__ = [
     "Throttle",
     "Watchdog",
     "announce_run_stop",
+    "execute_stage",
     "idle_wait",
     "listen_run_stop",
     "loop_watchdog",
@@ -216,6 +226,28 @@ def announce_run_stop(bus: Bus, utu: str, caller: str, reason: str) -> None:
         )
     except AnunnakiError as exc:  # a closed bus at shutdown
         log.warning("could not announce run-stop: %s", exc)
+
+
+def execute_stage(
+    parts: UtuParts,
+    knowledge: Knowledge,
+    actuator: Actuator,
+    *,
+    bus: Bus | None,
+    runner: ActionRunner | None,
+) -> ExecuteStage:
+    """The execute stage as every host runs it: a run-stop it performs is announced.
+
+    The announcement goes on ``/utu/run_stop`` of ``bus`` (:func:`announce_run_stop`;
+    nothing without a bus); ``runner`` runs blocking requests off the loop.
+    """
+    utu = parts.config.name
+
+    def announce(caller: str, reason: str) -> None:
+        if bus is not None:
+            announce_run_stop(bus, utu, caller, reason)
+
+    return ExecuteStage(parts, knowledge, actuator, on_run_stop=announce, runner=runner)
 
 
 def publish_decisions(bus: Bus, tail: DecisionTail) -> bool:

@@ -66,7 +66,7 @@ from anunnaki.utu.host._actuators import BusActuator, RecordingActuator, bus_act
 from anunnaki.utu.host._desk import (
     OperatorDesk,
     Throttle,
-    announce_run_stop,
+    execute_stage,
     idle_wait,
     listen_run_stop,
     loop_watchdog,
@@ -412,17 +412,9 @@ class AutonomicManager(Closing):
         take_clock(self.clock, self._clock_sub)
 
     def _execute_stage(self) -> ExecuteStage:
-        return ExecuteStage(
-            self.parts,
-            self.knowledge,
-            self.actuator,
-            on_run_stop=self._announce_run_stop,
-            runner=self.actions,
+        return execute_stage(
+            self.parts, self.knowledge, self.actuator, bus=self.bus, runner=self.actions
         )
-
-    def _announce_run_stop(self, caller: str, reason: str) -> None:
-        if self.bus is not None:
-            announce_run_stop(self.bus, self.name, caller, reason)
 
     def _notified(self, tactic: str, result: Any) -> None:
         # Called from the notifier's worker thread; Knowledge is thread-safe. Delivery

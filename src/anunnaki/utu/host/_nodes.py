@@ -68,7 +68,6 @@ from anunnaki.topics import node_token, ready_service
 from anunnaki.utu._config import UtuConfig
 from anunnaki.utu.cycle._analyze import AnalyzeStage
 from anunnaki.utu.cycle._entries import mark_restart, resuming
-from anunnaki.utu.cycle._execute import ExecuteStage
 from anunnaki.utu.cycle._knowledge import Knowledge
 from anunnaki.utu.cycle._knowledge_stage import DecisionTail, KnowledgeStage
 from anunnaki.utu.cycle._mape import Actuator
@@ -85,7 +84,7 @@ from anunnaki.utu.host._actuators import bus_actuator
 from anunnaki.utu.host._desk import (
     OperatorDesk,
     Throttle,
-    announce_run_stop,
+    execute_stage,
     idle_wait,
     listen_run_stop,
     loop_watchdog,
@@ -682,12 +681,8 @@ class ExecuteNode(UtuNode):
         if self.actions is not None and not isinstance(self.clock, SimClock):
             self.actions.settle = self.config.action_settle
         restarted = resuming(self.knowledge, self.name)
-        self.stage = ExecuteStage(
-            self.parts,
-            self.knowledge,
-            self.actuator,
-            on_run_stop=self._announce_run_stop,
-            runner=self.actions,
+        self.stage = execute_stage(
+            self.parts, self.knowledge, self.actuator, bus=self.bus, runner=self.actions
         )
         if restarted:
             mark_restart(self.knowledge, self.name)
@@ -714,9 +709,6 @@ class ExecuteNode(UtuNode):
         if not self.closed:
             self.stage.notified(tactic, result)
             self._flush()
-
-    def _announce_run_stop(self, caller: str, reason: str) -> None:
-        announce_run_stop(self.bus, self.config.name, caller, reason)
 
     def on_run_stop(self, caller: str, reason: str) -> None:
         """Stop starting tactics at once (guideline S4); the monitor's op records it."""
