@@ -48,6 +48,7 @@ __all__ = [
     "listen_run_stop",
     "loop_watchdog",
     "publish_decisions",
+    "ready_fields",
     "watchdog_run_stop",
 ]
 
@@ -101,6 +102,10 @@ class OperatorDesk:
     def pending(self) -> bool:
         """Whether an entry waits for the next cycle."""
         return bool(self._ops)
+
+    def stopping(self, in_force: bool) -> bool:
+        """Whether readiness says ``run_stopped``: ``in_force`` (applied), or asked since."""
+        return in_force or self.run_stop_asked
 
     def call(self, op: str, message: Any) -> dict[str, Any]:
         """An operator request (a service handler): checked now, queued, answered.
@@ -248,6 +253,11 @@ def execute_stage(
             announce_run_stop(bus, utu, caller, reason)
 
     return ExecuteStage(parts, knowledge, actuator, on_run_stop=announce, runner=runner)
+
+
+def ready_fields(utu: str, rate: float, run_stopped: bool) -> dict[str, Any]:
+    """What every host's readiness reply (``/utu/<node>/ready``) says of Utu ``utu``."""
+    return {"utu": utu, "rate": rate, "run_stopped": run_stopped}
 
 
 def publish_decisions(bus: Bus, tail: DecisionTail) -> bool:

@@ -71,6 +71,7 @@ from anunnaki.utu.host._desk import (
     listen_run_stop,
     loop_watchdog,
     publish_decisions,
+    ready_fields,
 )
 from anunnaki.utu.host._intake import IntakeBudget, take_clock, take_inputs
 from anunnaki.utu.host._threads import ThreadRunner, action_runner
@@ -287,11 +288,9 @@ class AutonomicManager(Closing):
         return lambda message: {
             "ready": not self._closed,
             "node": node_token(node),
-            "utu": self.name,
             "pid": os.getpid(),
-            "rate": self.rate,
             "composed": True,
-            "run_stopped": self.run_stopped or self.desk.run_stop_asked,
+            **ready_fields(self.name, self.rate, self.desk.stopping(self.run_stopped)),
         }
 
     def _watch_topics(self, watched: list[str]) -> None:

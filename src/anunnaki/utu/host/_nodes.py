@@ -89,6 +89,7 @@ from anunnaki.utu.host._desk import (
     listen_run_stop,
     loop_watchdog,
     publish_decisions,
+    ready_fields,
 )
 from anunnaki.utu.host._intake import take_clock, take_inputs
 from anunnaki.utu.host._threads import ThreadRunner, action_runner
@@ -213,11 +214,7 @@ class UtuNode(Node):
 
     def ready_info(self) -> dict[str, Any]:
         """Readiness: the Utu's name, the rate, whether a run-stop is in force, its origin."""
-        info: dict[str, Any] = {
-            "utu": self.config.name,
-            "rate": self.rate,
-            "run_stopped": self.run_stopped,
-        }
+        info = ready_fields(self.config.name, self.rate, self.run_stopped)
         origin = getattr(getattr(self, "stage", None), "origin", None)
         if isinstance(origin, str):
             info["origin"] = origin  # what its cycle messages carry (see from_peer)
@@ -357,7 +354,7 @@ class MonitorNode(UtuNode):
     def ready_info(self) -> dict[str, Any]:
         """Readiness, with whether a run-stop was asked (before the cycle applies it)."""
         info = super().ready_info()
-        info["run_stopped"] = info["run_stopped"] or self.desk.run_stop_asked
+        info["run_stopped"] = self.desk.stopping(info["run_stopped"])
         return info
 
     def input_queues(self) -> list[Subscriber]:
