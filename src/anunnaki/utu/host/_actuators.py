@@ -14,7 +14,7 @@ from anunnaki.tactics import NotifyAction
 from anunnaki.utu._config import UtuConfig
 from anunnaki.utu.cycle._actions import ActionOutcome
 
-__all__ = ["BusActuator", "RecordingActuator", "stop_platform"]
+__all__ = ["BusActuator", "RecordingActuator", "bus_actuator", "stop_platform"]
 
 log = logging.getLogger("anunnaki.utu")
 
@@ -163,3 +163,15 @@ def stop_platform(
     except AnunnakiError as exc:
         log.error("utu: could not announce the run-stop: %s", exc)
     return ok, error
+
+
+def bus_actuator(
+    bus: Any, config: UtuConfig, *, on_notified: Callable[[str, Any], None] | None = None
+) -> BusActuator:
+    """The actuator of a host on ``bus``, with the configuration's notifier (if any)."""
+    notifier = None
+    if config.notify:
+        from anunnaki.utu.host._notify import Notifier, NotifyConfig
+
+        notifier = Notifier(NotifyConfig.model_validate(config.notify))
+    return BusActuator(bus, notifier, on_notified=on_notified)

@@ -7,8 +7,12 @@ at a defined point (the monitor stage's batch), recorded in the decision log wit
 caller, repeated by a replay. The inline manager and the monitor node hold one
 :class:`OperatorDesk` each; nothing of it is written twice.
 
-A stuck loop is the one thing that cannot wait for the next cycle: :class:`Watchdog` tells
-the platform from its own thread (:func:`watchdog_run_stop`), the same way in every host.
+Run-stop, written once too: every host listens on ``/utu/run_stop`` through
+:func:`listen_run_stop`, and the execute stage of every host announces the run-stops it
+performs (:func:`execute_stage`, :func:`announce_run_stop`). A stuck loop is the one thing
+that cannot wait for the next cycle: the watchdog of a host's loop (:func:`loop_watchdog`)
+tells the platform from its own thread (:func:`watchdog_run_stop`), the same way in every
+host. :class:`Throttle` paces the decisions publication (:func:`publish_decisions`).
 """
 
 from __future__ import annotations
@@ -20,22 +24,31 @@ from collections.abc import Callable
 from typing import Any
 
 from anunnaki import topics
-from anunnaki.bus import Bus, Sample
+from anunnaki.bus import Bus, Sample, Subscriber
 from anunnaki.clock import Clock, SimClock
 from anunnaki.errors import AnunnakiError
 from anunnaki.messages import RunStop, body_of
 from anunnaki.utu._config import UtuConfig
+from anunnaki.utu.cycle._actions import ActionRunner
+from anunnaki.utu.cycle._execute import ExecuteStage
+from anunnaki.utu.cycle._knowledge import Knowledge
 from anunnaki.utu.cycle._knowledge_stage import DecisionTail, decision_dict
+from anunnaki.utu.cycle._mape import Actuator
 from anunnaki.utu.cycle._monitor import MonitorStage
+from anunnaki.utu.cycle._parts import UtuParts
 from anunnaki.utu.host._actuators import stop_platform
 
 __all__ = [
     "OperatorDesk",
+    "Throttle",
     "Watchdog",
     "announce_run_stop",
+    "execute_stage",
     "idle_wait",
+    "listen_run_stop",
+    "loop_watchdog",
     "publish_decisions",
-    "run_stop_listener",
+    "ready_fields",
     "watchdog_run_stop",
 ]
 
@@ -90,6 +103,10 @@ class OperatorDesk:
         """Whether an entry waits for the next cycle."""
         return bool(self._ops)
 
+    def stopping(self, in_force: bool) -> bool:
+        """Whether readiness says ``run_stopped``: ``in_force`` (applied), or asked since."""
+        return in_force or self.run_stop_asked
+
     def call(self, op: str, message: Any) -> dict[str, Any]:
         """An operator request (a service handler): checked now, queued, answered.
 
@@ -136,13 +153,14 @@ class OperatorDesk:
         return lambda message: self.call(op, message)
 
 
-def run_stop_listener(
-    utu: str, who: str, on_heard: Callable[[str, str], None]
-) -> Callable[[Sample], None]:
-    """A ``/utu/run_stop`` subscriber's callback, calling ``on_heard(caller, reason)``.
+def listen_run_stop(
+    bus: Bus, utu: str, who: str, on_heard: Callable[[str, str], None]
+) -> Subscriber:
+    """Subscribe ``/utu/run_stop``, calling ``on_heard(caller, reason)`` for each run-stop.
 
     Every run-stop counts but the announcements of Utu ``utu`` itself (``caller``
-    ``utu:<utu>``), which it already performs. ``who`` names the host in the log.
+    ``utu:<utu>``), which it already performs. ``who`` names the host in the log. Returns
+    the subscription (the host closes it).
     """
 
     def heard(sample: Sample) -> None:
@@ -154,7 +172,7 @@ def run_stop_listener(
         log.warning("%s: run-stop from %s: %s", who, caller, reason)
         on_heard(caller, reason)
 
-    return heard
+    return bus.subscribe(topics.RUN_STOP, heard, queue=16)
 
 
 def watchdog_run_stop(
@@ -172,6 +190,24 @@ def watchdog_run_stop(
     stop_platform(bus, config, reason=reason, caller=caller)
 
 
+def loop_watchdog(
+    bus: Bus | None, config: UtuConfig, *, what: str, caller: str, floor: float
+) -> Watchdog | None:
+    """The watchdog of one host's loop, or ``None`` (no ``watchdog`` configured, no bus).
+
+    It fires after ``max(watchdog, floor)`` seconds without a beat (``floor``: what an idle
+    round of the loop may wait) and run-stops the platform (:func:`watchdog_run_stop`).
+    """
+    limit = config.watchdog
+    if limit is None or bus is None:  # it stops the platform over the bus
+        return None
+
+    def fire(stalled: float) -> None:
+        watchdog_run_stop(bus, config, what=what, caller=caller, stalled=stalled)
+
+    return Watchdog(fire, max(limit, floor))
+
+
 def idle_wait(clock: Clock, period: float) -> float:
     """Seconds of wall time an idle loop waits for work.
 
@@ -187,7 +223,7 @@ def announce_run_stop(bus: Bus, utu: str, caller: str, reason: str) -> None:
     """Tell every part of Utu ``utu`` and any dashboard that it performs a run-stop.
 
     Published on ``/utu/run_stop`` with caller ``utu:<utu>``, which Utu's own listeners
-    ignore (:func:`run_stop_listener`): they already perform it.
+    ignore (:func:`listen_run_stop`): they already perform it.
     """
     try:
         bus.publish(
@@ -195,6 +231,33 @@ def announce_run_stop(bus: Bus, utu: str, caller: str, reason: str) -> None:
         )
     except AnunnakiError as exc:  # a closed bus at shutdown
         log.warning("could not announce run-stop: %s", exc)
+
+
+def execute_stage(
+    parts: UtuParts,
+    knowledge: Knowledge,
+    actuator: Actuator,
+    *,
+    bus: Bus | None,
+    runner: ActionRunner | None,
+) -> ExecuteStage:
+    """The execute stage as every host runs it: a run-stop it performs is announced.
+
+    The announcement goes on ``/utu/run_stop`` of ``bus`` (:func:`announce_run_stop`;
+    nothing without a bus); ``runner`` runs blocking requests off the loop.
+    """
+    utu = parts.config.name
+
+    def announce(caller: str, reason: str) -> None:
+        if bus is not None:
+            announce_run_stop(bus, utu, caller, reason)
+
+    return ExecuteStage(parts, knowledge, actuator, on_run_stop=announce, runner=runner)
+
+
+def ready_fields(utu: str, rate: float, run_stopped: bool) -> dict[str, Any]:
+    """What every host's readiness reply (``/utu/<node>/ready``) says of Utu ``utu``."""
+    return {"utu": utu, "rate": rate, "run_stopped": run_stopped}
 
 
 def publish_decisions(bus: Bus, tail: DecisionTail) -> bool:
@@ -206,6 +269,26 @@ def publish_decisions(bus: Bus, tail: DecisionTail) -> bool:
     if rows:
         bus.publish(topics.DECISIONS, {"decisions": [decision_dict(d) for d in rows]})
     return bool(rows)
+
+
+class Throttle:
+    """At most one go per ``period`` seconds of wall time (e.g. publishing decisions)."""
+
+    def __init__(self, period: float) -> None:
+        self.period = period
+        self._next = 0.0
+
+    def due(self) -> bool:
+        """Whether a go is due now; if so, the next is one period from now."""
+        now = time.monotonic()
+        if now < self._next:
+            return False
+        self._next = now + self.period
+        return True
+
+    def wait(self) -> float:
+        """Seconds until the next go is due."""
+        return max(0.0, self._next - time.monotonic())
 
 
 class Watchdog:

@@ -14,7 +14,17 @@ simulation, replay) takes ``intake`` per topic, so it stays deterministic.
 
 from __future__ import annotations
 
-__all__ = ["FIRST", "FLOOR", "IntakeBudget"]
+from collections.abc import Mapping
+from typing import Any
+
+from anunnaki.bus import Subscriber
+from anunnaki.clock import Clock, SimClock
+from anunnaki.messages import body_of
+
+__all__ = ["FIRST", "FLOOR", "IntakeBudget", "take_clock", "take_inputs"]
+
+#: One input of a step: (topic, message body, arrival time or ``None`` for the step's time).
+Input = tuple[str, dict[str, Any], float | None]
 
 FLOOR = 16
 """Inputs per topic per step that a budget never cuts (a 20 Hz topic brings 1 per step)."""
@@ -54,3 +64,35 @@ class IntakeBudget:
             return
         cost = seconds / inputs
         self.cost = cost if self.cost <= 0 else self.cost + self.smoothing * (cost - self.cost)
+
+
+def take_inputs(subs: Mapping[str, Subscriber], limit: int, *, wall: bool) -> list[Input]:
+    """Take at most ``limit`` queued messages from each monitored topic's pull subscriber.
+
+    With ``wall``, an input keeps the sender's stamp (a simulation clock is another timebase:
+    the input then takes the step's time); the monitor stage clamps it into the step.
+    Every host (the inline manager, the monitor node) takes its inputs here.
+    """
+    inputs: list[Input] = []
+    for topic, sub in subs.items():
+        for _ in range(limit):
+            if (sample := sub.try_recv()) is None:
+                break
+            inputs.append((topic, body_of(sample.message), sample.sent_at if wall else None))
+    return inputs
+
+
+def take_clock(clock: Clock, sub: Subscriber | None) -> None:
+    """Apply the simulation times queued on ``sub`` (the ``/clock`` topic) to ``clock``.
+
+    At most 64 a call: a ``/clock`` flood must not hold the step. Nothing happens on a
+    wall clock or without a subscriber.
+    """
+    if sub is None or not isinstance(clock, SimClock):
+        return
+    for _ in range(64):
+        if (sample := sub.try_recv()) is None:
+            break
+        t = getattr(sample.message, "time", None)
+        if isinstance(t, int | float):
+            clock.update(float(t))

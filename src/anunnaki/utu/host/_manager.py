@@ -62,18 +62,19 @@ from anunnaki.utu.cycle._mape import Actuator, Analyzer, Executor, Monitor, Plan
 from anunnaki.utu.cycle._monitor import MonitorStage
 from anunnaki.utu.cycle._parts import UtuParts, load_parts, load_tactics_text, record_run
 from anunnaki.utu.cycle._plan import PlanStage
-from anunnaki.utu.host._actuators import BusActuator, RecordingActuator
+from anunnaki.utu.host._actuators import BusActuator, RecordingActuator, bus_actuator
 from anunnaki.utu.host._desk import (
     OperatorDesk,
-    Watchdog,
-    announce_run_stop,
+    Throttle,
+    execute_stage,
     idle_wait,
+    listen_run_stop,
+    loop_watchdog,
     publish_decisions,
-    run_stop_listener,
-    watchdog_run_stop,
+    ready_fields,
 )
-from anunnaki.utu.host._intake import IntakeBudget
-from anunnaki.utu.host._threads import ThreadRunner
+from anunnaki.utu.host._intake import IntakeBudget, take_clock, take_inputs
+from anunnaki.utu.host._threads import ThreadRunner, action_runner
 
 __all__ = [
     "OPERATOR",
@@ -190,8 +191,7 @@ class AutonomicManager(Closing):
         self.publish_state = config.publish_state and bus is not None
         self._nodes = dict(nodes or {}) if bus is not None else {}
         self.rate = max(self._nodes.values(), default=config.rate)
-        self._kb_period = 1.0 / self._nodes.get("knowledge", config.rate)
-        self._next_publish = 0.0
+        self._decisions_due = Throttle(1.0 / self._nodes.get("knowledge", config.rate))
         self._closed = False
         self._live = False
         # (topic, message, arrival time or None for "now"): a step takes inputs at their own
@@ -217,16 +217,9 @@ class AutonomicManager(Closing):
         self.desk = OperatorDesk(self.monitor_stage, wake=self.wake, watch=self._watch_topics)
         self.analyze_stage = AnalyzeStage(parts, self.knowledge)
         self.plan_stage = PlanStage(parts, self.knowledge)
-        if actions is None and getattr(self.actuator, "blocking", False):
-            actions = ThreadRunner(on_done=self.wake)  # requests never hold the loop
-        self.actions = actions
-        self.execute_stage = ExecuteStage(
-            parts,
-            self.knowledge,
-            self.actuator,
-            on_run_stop=self._announce_run_stop,
-            runner=actions,
-        )
+        # requests never hold the loop
+        self.actions = actions if actions is not None else action_runner(self.actuator, self.wake)
+        self.execute_stage = self._execute_stage()
         self.knowledge_stage = KnowledgeStage(parts, self.knowledge)
         self._tail = DecisionTail(self.knowledge)
         if restarted:
@@ -261,12 +254,7 @@ class AutonomicManager(Closing):
         if clock is None:
             clock = SimClock(max_jump=cfg.max_time_jump) if cfg.clock == "sim" else WallClock()
         if actuator is None and bus is not None:
-            notifier = None
-            if cfg.notify:
-                from anunnaki.utu.host._notify import Notifier, NotifyConfig
-
-                notifier = Notifier(NotifyConfig.model_validate(cfg.notify))
-            actuator = BusActuator(bus, notifier)
+            actuator = bus_actuator(bus, cfg)
         manager = cls.__new__(cls)
         manager._init(
             parts, knowledge or Knowledge(cfg.knowledge), bus, actuator, clock, nodes=nodes
@@ -281,8 +269,8 @@ class AutonomicManager(Closing):
             # after its instant's /clock is never stamped with an earlier time.
             self._clock_sub = bus.subscribe(self.parts.config.clock_topic, queue=64)
             self._declared.append(self._clock_sub)
-        heard = run_stop_listener(self.name, f"utu:{self.name}", self.desk.heard_run_stop)
-        self._declared.append(bus.subscribe(topics.RUN_STOP, heard, queue=16))
+        who = f"utu:{self.name}"
+        self._declared.append(listen_run_stop(bus, self.name, who, self.desk.heard_run_stop))
         self._declared += self.desk.declare(bus)
         services: dict[str, Callable[[Any], Any]] = {
             topics.READY: lambda m: {"ready": not self._closed, "node": self.name},
@@ -300,11 +288,9 @@ class AutonomicManager(Closing):
         return lambda message: {
             "ready": not self._closed,
             "node": node_token(node),
-            "utu": self.name,
             "pid": os.getpid(),
-            "rate": self.rate,
             "composed": True,
-            "run_stopped": self.run_stopped or self.desk.run_stop_asked,
+            **ready_fields(self.name, self.rate, self.desk.stopping(self.run_stopped)),
         }
 
     def _watch_topics(self, watched: list[str]) -> None:
@@ -421,26 +407,13 @@ class AutonomicManager(Closing):
         limit = min(self.parts.config.queue, self.parts.config.intake)
         if self._budget is not None and self._live:
             limit = min(limit, self._budget.limit())  # a live step's time budget
-        for topic, sub in self._pull.items():
-            for _ in range(limit):
-                sample = sub.try_recv()
-                if sample is None:
-                    break
-                # The sender's stamp, on the wall clock only (a sim clock is another
-                # timebase); the monitor clamps it into (previous step, this step].
-                t_in = sample.sent_at if wall else None
-                self._inputs.append((topic, body_of(sample.message), t_in))
-        if self._clock_sub is not None and isinstance(self.clock, SimClock):
-            for _ in range(64):  # the clock's queue: a /clock flood must not hold the step
-                if (sample := self._clock_sub.try_recv()) is None:
-                    break
-                t = getattr(sample.message, "time", None)
-                if isinstance(t, int | float):
-                    self.clock.update(float(t))
+        self._inputs.extend(take_inputs(self._pull, limit, wall=wall))
+        take_clock(self.clock, self._clock_sub)
 
-    def _announce_run_stop(self, caller: str, reason: str) -> None:
-        if self.bus is not None:
-            announce_run_stop(self.bus, self.name, caller, reason)
+    def _execute_stage(self) -> ExecuteStage:
+        return execute_stage(
+            self.parts, self.knowledge, self.actuator, bus=self.bus, runner=self.actions
+        )
 
     def _notified(self, tactic: str, result: Any) -> None:
         # Called from the notifier's worker thread; Knowledge is thread-safe. Delivery
@@ -623,13 +596,7 @@ class AutonomicManager(Closing):
             elif node == "plan":
                 self.plan_stage = PlanStage(self.parts, kb)
             elif node == "execute":
-                self.execute_stage = ExecuteStage(
-                    self.parts,
-                    kb,
-                    self.actuator,
-                    on_run_stop=self._announce_run_stop,
-                    runner=self.actions,
-                )
+                self.execute_stage = self._execute_stage()
             else:
                 raise ValueError(f"no part {node!r} to restart: analyze, plan or execute")
             mark_restart(kb, node)
@@ -656,10 +623,13 @@ class AutonomicManager(Closing):
         self._live = True
         if isinstance(self.actions, ThreadRunner) and not isinstance(self.clock, SimClock):
             self.actions.settle = self.parts.config.action_settle  # live: hold the loop briefly
-        limit = self.parts.config.watchdog
-        dog = None
-        if limit is not None and self.bus is not None:  # it stops the platform over the bus
-            dog = Watchdog(self._watchdog_fired, max(limit, 2 * period))
+        dog = loop_watchdog(
+            self.bus,
+            self.parts.config,
+            what=f"the manager {self.name}",
+            caller=f"watchdog:{self.name}",
+            floor=2 * period,
+        )
         try:
             while not stop.is_set() and not self._closed:
                 if dog is not None:
@@ -672,7 +642,7 @@ class AutonomicManager(Closing):
                 if until is not None and self.clock.now() >= until:
                     break
                 if not self._inputs and not self.desk.pending and not self._pending():
-                    self._wake.wait(self._idle_wait(period))
+                    self._wake.wait(idle_wait(self.clock, period))
             if self.analyze_stage.reacted and not self._closed:
                 self.step()  # a normal end ends the step its last reactions began
         finally:
@@ -682,23 +652,8 @@ class AutonomicManager(Closing):
 
     _inline = False
 
-    def _idle_wait(self, period: float) -> float:
-        return idle_wait(self.clock, period)
-
-    def _watchdog_fired(self, stalled: float) -> None:
-        assert self.bus is not None
-        watchdog_run_stop(
-            self.bus,
-            self.parts.config,
-            what=f"the manager {self.name}",
-            caller=f"watchdog:{self.name}",
-            stalled=stalled,
-        )
-
     def _publish_decisions(self) -> None:
-        now = time.monotonic()
-        if self.bus is not None and now >= self._next_publish:
-            self._next_publish = now + self._kb_period
+        if self.bus is not None and self._decisions_due.due():
             publish_decisions(self.bus, self._tail)
 
     def _pending(self) -> bool:

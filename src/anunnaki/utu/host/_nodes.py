@@ -68,7 +68,6 @@ from anunnaki.topics import node_token, ready_service
 from anunnaki.utu._config import UtuConfig
 from anunnaki.utu.cycle._analyze import AnalyzeStage
 from anunnaki.utu.cycle._entries import mark_restart, resuming
-from anunnaki.utu.cycle._execute import ExecuteStage
 from anunnaki.utu.cycle._knowledge import Knowledge
 from anunnaki.utu.cycle._knowledge_stage import DecisionTail, KnowledgeStage
 from anunnaki.utu.cycle._mape import Actuator
@@ -81,17 +80,19 @@ from anunnaki.utu.cycle._parts import (
     record_run,
 )
 from anunnaki.utu.cycle._plan import PlanStage
-from anunnaki.utu.host._actuators import BusActuator
+from anunnaki.utu.host._actuators import bus_actuator
 from anunnaki.utu.host._desk import (
     OperatorDesk,
-    Watchdog,
-    announce_run_stop,
+    Throttle,
+    execute_stage,
     idle_wait,
+    listen_run_stop,
+    loop_watchdog,
     publish_decisions,
-    run_stop_listener,
-    watchdog_run_stop,
+    ready_fields,
 )
-from anunnaki.utu.host._threads import ThreadRunner
+from anunnaki.utu.host._intake import take_clock, take_inputs
+from anunnaki.utu.host._threads import ThreadRunner, action_runner
 
 __all__ = [
     "NODE_NAMES",
@@ -186,8 +187,7 @@ class UtuNode(Node):
         """Declare the run-stop subscription, the clock, then the node's own (:meth:`bring_up`)."""
         if isinstance(self.clock, SimClock) and self.uses_clock:
             self._clock_sub = self.pull(self.config.clock_topic, queue=64)
-        heard = run_stop_listener(self.config.name, self.name, self._heard_run_stop)
-        self.own(self.bus.subscribe(topics.RUN_STOP, heard, queue=16))
+        self.own(listen_run_stop(self.bus, self.config.name, self.name, self._heard_run_stop))
         self.bring_up()
 
     def bring_up(self) -> None:
@@ -202,15 +202,7 @@ class UtuNode(Node):
 
     def _take_clock(self) -> None:
         """Apply the simulation times queued since the last call."""
-        sub = self._clock_sub
-        if sub is None or not isinstance(self.clock, SimClock):
-            return
-        for _ in range(64):  # the clock's queue: a /clock flood must not hold the step
-            if (sample := sub.try_recv()) is None:
-                break
-            t = getattr(sample.message, "time", None)
-            if isinstance(t, int | float):
-                self.clock.update(float(t))
+        take_clock(self.clock, self._clock_sub)
 
     def _heard_run_stop(self, caller: str, reason: str) -> None:
         self.run_stopped = True
@@ -222,11 +214,7 @@ class UtuNode(Node):
 
     def ready_info(self) -> dict[str, Any]:
         """Readiness: the Utu's name, the rate, whether a run-stop is in force, its origin."""
-        info: dict[str, Any] = {
-            "utu": self.config.name,
-            "rate": self.rate,
-            "run_stopped": self.run_stopped,
-        }
+        info = ready_fields(self.config.name, self.rate, self.run_stopped)
         origin = getattr(getattr(self, "stage", None), "origin", None)
         if isinstance(origin, str):
             info["origin"] = origin  # what its cycle messages carry (see from_peer)
@@ -270,28 +258,23 @@ class UtuNode(Node):
 
     def spin(self, stop: threading.Event | None = None) -> None:
         """Run live; a watchdog run-stops the platform if a round takes ``watchdog`` s."""
-        limit = self.config.watchdog
-        if limit is None:
+        # An idle node's round waits up to 0.5 s for work (Node.spin): never less than 1 s.
+        dog = loop_watchdog(
+            self.bus,
+            self.config,
+            what=f"node {self.name}",
+            caller=f"watchdog:{self.name}",
+            floor=max(2 * self._period(), 1.0),
+        )
+        if dog is None:
             super().spin(stop)
             return
-        # An idle node's round waits up to 0.5 s for work (Node.spin): never less than 1 s.
-        dog = Watchdog(self._watchdog_fired, max(limit, 2 * self._period(), 1.0))
         self.on_round = dog.beat
         try:
             super().spin(stop)
         finally:
             self.on_round = None
             dog.close()
-
-    def _watchdog_fired(self, stalled: float) -> None:
-        # The monitor node records it as an operator's run-stop (caller: the watchdog).
-        watchdog_run_stop(
-            self.bus,
-            self.config,
-            what=f"node {self.name}",
-            caller=f"watchdog:{self.name}",
-            stalled=stalled,
-        )
 
     def release(self) -> None:
         """Close the knowledge base the node opened itself."""
@@ -371,7 +354,7 @@ class MonitorNode(UtuNode):
     def ready_info(self) -> dict[str, Any]:
         """Readiness, with whether a run-stop was asked (before the cycle applies it)."""
         info = super().ready_info()
-        info["run_stopped"] = info["run_stopped"] or self.desk.run_stop_asked
+        info["run_stopped"] = self.desk.stopping(info["run_stopped"])
         return info
 
     def input_queues(self) -> list[Subscriber]:
@@ -396,13 +379,7 @@ class MonitorNode(UtuNode):
                 self.config.intake,
                 MAX_BATCH // max(1, len(self._subs) + 1),
             )
-            for topic, sub in self._subs.items():
-                for _ in range(limit):
-                    if (sample := sub.try_recv()) is None:
-                        break
-                    inputs.append(
-                        (topic, body_of(sample.message), sample.sent_at if wall else None)
-                    )
+            inputs += take_inputs(self._subs, limit, wall=wall)
         ops = self.desk.take()
         if now is None:
             self._take_clock()
@@ -693,24 +670,16 @@ class ExecuteNode(UtuNode):
         self._notifier: Any = None
         actuator = self._actuator_arg
         if actuator is None:
-            if self.config.notify:
-                from anunnaki.utu.host._notify import Notifier, NotifyConfig
-
-                self._notifier = Notifier(NotifyConfig.model_validate(self.config.notify))
-            actuator = BusActuator(self.bus, self._notifier, on_notified=self._notified)
+            actuator = bus_actuator(self.bus, self.config, on_notified=self._notified)
+            self._notifier = actuator.notifier
         self.actuator: Actuator = actuator
-        self.actions: ThreadRunner | None = None
-        if getattr(actuator, "blocking", False):
-            self.actions = ThreadRunner(on_done=self.wake)  # requests never hold a cycle
-            if not isinstance(self.clock, SimClock):
-                self.actions.settle = self.config.action_settle
+        # requests never hold a cycle
+        self.actions: ThreadRunner | None = action_runner(actuator, self.wake)
+        if self.actions is not None and not isinstance(self.clock, SimClock):
+            self.actions.settle = self.config.action_settle
         restarted = resuming(self.knowledge, self.name)
-        self.stage = ExecuteStage(
-            self.parts,
-            self.knowledge,
-            self.actuator,
-            on_run_stop=self._announce_run_stop,
-            runner=self.actions,
+        self.stage = execute_stage(
+            self.parts, self.knowledge, self.actuator, bus=self.bus, runner=self.actions
         )
         if restarted:
             mark_restart(self.knowledge, self.name)
@@ -737,9 +706,6 @@ class ExecuteNode(UtuNode):
         if not self.closed:
             self.stage.notified(tactic, result)
             self._flush()
-
-    def _announce_run_stop(self, caller: str, reason: str) -> None:
-        announce_run_stop(self.bus, self.config.name, caller, reason)
 
     def on_run_stop(self, caller: str, reason: str) -> None:
         """Stop starting tactics at once (guideline S4); the monitor's op records it."""
@@ -839,7 +805,7 @@ class KnowledgeNode(UtuNode):
         record_run(kb, self.parts)
         self.tail = DecisionTail(kb)
         self.stage = KnowledgeStage(self.parts, kb)
-        self._next_publish = 0.0
+        self._due = Throttle(1.0 / self.rate)
         sub = self.bus.subscribe
         self.own(sub(topics.ANALYSIS, self._on_state, queue=64, expect=AnalysisState))
         self.own(sub(topics.PLAN_START, self._on_start, queue=64, expect=PlanStart))
@@ -875,11 +841,9 @@ class KnowledgeNode(UtuNode):
 
     def spin_once(self) -> float:
         """Publish new decisions at most ``rate`` times a second (it only tails the file)."""
-        now = time.monotonic()
-        if now >= self._next_publish:
-            self._next_publish = now + 1.0 / self.rate
+        if self._due.due():
             self.step()
-        return max(0.0, self._next_publish - time.monotonic())
+        return self._due.wait()
 
 
 # -- composition -------------------------------------------------------------------------------

@@ -18,7 +18,7 @@ from dataclasses import dataclass
 
 from anunnaki.utu.cycle._actions import ActionOutcome, Finished
 
-__all__ = ["ThreadRunner"]
+__all__ = ["ThreadRunner", "action_runner"]
 
 log = logging.getLogger("anunnaki.utu")
 
@@ -148,3 +148,14 @@ def _result(future: cf.Future[ActionOutcome]) -> ActionOutcome:
         return ActionOutcome(False, "cancelled")
     except Exception as exc:  # an actuator must never kill the loop
         return ActionOutcome(False, f"{type(exc).__name__}: {exc}")
+
+
+def action_runner(actuator: object, on_done: Callable[[], object]) -> ThreadRunner | None:
+    """Worker threads for an actuator whose requests wait (``blocking``), else ``None``.
+
+    Every host runs such requests off its loop's path and is woken (``on_done``) when one
+    comes back.
+    """
+    if getattr(actuator, "blocking", False):
+        return ThreadRunner(on_done=on_done)
+    return None
