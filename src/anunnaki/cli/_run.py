@@ -256,6 +256,10 @@ def run_node(args: argparse.Namespace) -> int:
         try:
             if args.exit_with_parent:
                 _watch_parent(stop, node.wake)
+            # "ready" means the others see this node: a client's declarations leave in the
+            # background, and one killed just after declaring its token vanished unseen (no
+            # survivor acted on its death). A liveliness query answers after them: wait for it.
+            bus.alive_nodes(timeout=5.0)
             where = ", ".join(bus.endpoints) or ", ".join(bus_config.connect)
             print(
                 f"node {args.name} ready: pid {os.getpid()}, rate {rate:g} Hz, "
