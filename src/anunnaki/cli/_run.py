@@ -247,6 +247,10 @@ def run_node(args: argparse.Namespace) -> int:
                     node.wake()
 
                 stop_with_parent(parent_gone)
+            # "ready" means the others see this node: a client's declarations leave in the
+            # background, and one killed just after declaring its token vanished unseen (no
+            # survivor acted on its death). A liveliness query answers after them: wait for it.
+            bus.alive_nodes(timeout=5.0)
             where = ", ".join(bus.endpoints) or ", ".join(bus_config.connect)
             print(
                 f"node {args.name} ready: pid {os.getpid()}, rate {rate:g} Hz, "
