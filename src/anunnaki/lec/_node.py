@@ -24,6 +24,13 @@ Why the swap works the way it does
       is sent once the new model is the active one (the next frame uses it), so Utu's
       ``swap_model`` action succeeds only for a swap that happened.
 
+Models registered while it runs
+    ``/lm_manager/reload`` (an operator service: the request carries the operator token, as
+    Utu's do) re-reads the registry file, checks every model's and oracle's sha256 and loads
+    every new model once, then swaps pick from the new registry; a bad registry is refused
+    with the error and the old one kept. The model in use must stay listed, unchanged: a
+    reload never drops it (:meth:`LecNode.reload`, docs/model-manager.md).
+
 The active model is announced on ``/lm_manager/active`` on every change and once a
 ``active_period`` (1 s) otherwise, so Utu's agent for the model manager (A6 in the UAV model)
 never goes stale. Inactive models that were loaded stay in a small cache (``cache``), so
@@ -348,7 +355,7 @@ class LecNode(Node):
         self._swap_lock = threading.Lock()
         self._stop = threading.Event()
         self._frames = self._published = self._failed = self._swaps = self._refused = 0
-        self._reloads = self._reloads_refused = 0
+        self._reloads = self._reloads_refused = self._unauthorised = 0
         spec = registry.resolve(initial) if initial is not None else registry.default
         self._active = _Active(spec, registry.load(spec))
         self._frame_queue = frame_queue
@@ -580,6 +587,8 @@ class LecNode(Node):
                 change = self.registry.reread(path, keep=current.id)
             except AnunnakiError as exc:
                 return self._refuse_reload(current, caller, str(exc))
+            except Exception as exc:  # a loader bug must not take the node down
+                return self._refuse_reload(current, caller, f"{type(exc).__name__}: {exc}")
             with self._lock:
                 self.registry.replace(change)
                 spec = self.registry.get(current.id)
@@ -614,9 +623,13 @@ class LecNode(Node):
     def _refuse_reload(
         self, current: ModelSpec, caller: str, error: str, status: str = "refused"
     ) -> ReloadResult:
+        unauthorised = status == "unauthorised"
         with self._lock:
             self._reloads_refused += 1
-        log.warning(
+            # Like Utu: the first request without the token is logged, the rest counted.
+            quiet = unauthorised and self._unauthorised > 0
+            self._unauthorised += unauthorised
+        (log.debug if quiet else log.warning)(
             "lec %s: registry reload by %s refused, the registry %s is kept: %s",
             self.lec,
             caller,
