@@ -117,6 +117,7 @@ SCORER: Final = "/sim/oracle/scorer"
 LM_MANAGER: Final = "/lm_manager"
 ACTIVE_MODEL: Final = "/lm_manager/active"
 SWAP: Final = "/lm_manager/swap"
+RELOAD_MODELS: Final = "/lm_manager/reload"  # re-read the model registry (operator token)
 DETECTIONS: Final = "/lec/detector/detections"
 
 # -- simulation ground truth (never seen by a real robot's oracle) ----------------------------

@@ -228,3 +228,62 @@ def test_reload_reaches_every_node_of_a_launch_split_into_processes(
         reader.join(5.0)
         assert proc.stdout is not None
         proc.stdout.close()
+
+
+def test_reload_models_registers_a_model_into_a_running_model_manager(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """``anunnaki reload --models``: taken (a swap to the new model succeeds), or refused."""
+    pytest.importorskip("zenoh")
+    pytest.importorskip("torch")
+    from anunnaki.lec import LecNode, load_registry
+    from anunnaki.lec._centernet import CenterNetDetector
+    from anunnaki.lec._detector import save_detector, sha256_file
+    from anunnaki.topics import SWAP
+
+    monkeypatch.delenv(OPERATOR_TOKEN_ENV, raising=False)  # the node and the CLI: the user's
+    for model_id, domain in (("uav-default", "default"), ("uav-rain", "rain")):
+        det = CenterNetDetector.create(
+            ("person", "car"), input_size=(64, 64), width=8, model_id=model_id, domain=domain
+        )
+        save_detector(det, tmp_path / f"{model_id}.safetensors")
+    registry = tmp_path / "registry.yaml"
+    entry = "  - file: {0}.safetensors\n    sha256: {1}\n"
+    default = entry.format("uav-default", sha256_file(tmp_path / "uav-default.safetensors"))
+    registry.write_text("anunnaki: models/1\nmodels:\n" + default)
+    rain = entry.format("uav-rain", sha256_file(tmp_path / "uav-rain.safetensors"))
+    with (
+        open_bus("zenoh") as bus,
+        LecNode(bus, load_registry(registry), camera="/uav/camera/image", active_period=None),
+    ):
+        endpoint = bus.endpoints[0]
+        bad = tmp_path / "bad.yaml"
+        bad.write_text("anunnaki: models/1\nmodels:\n" + rain)  # no default model
+        assert main(["reload", "--connect", endpoint, "--models", str(bad)]) == 1
+        out = capsys.readouterr().out
+        assert out.startswith(f"refused: {bad}:2: models: no model for the domain 'default'")
+        registry.write_text("anunnaki: models/1\nmodels:\n" + default + rain)
+        assert main(["reload", "--connect", endpoint, "--models", "--caller", "ops"]) == 0
+        assert capsys.readouterr().out.strip() == (
+            f"applied: {registry}: models uav-default, uav-rain (added uav-rain; changed none; "
+            "removed none); uav-default keeps running"
+        )
+        assert bus.request(SWAP, {"lec": "detector", "domain": "rain"}).to_body()["ok"]
+        monkeypatch.setenv(OPERATOR_TOKEN_ENV, "Not-the-model-managers-token-42")
+        assert main(["reload", "--connect", endpoint, "--models"]) == 1
+        out, err = capsys.readouterr()
+        assert out.startswith("refused: unauthorised: reload needs the operator token")
+        assert f"hint: this command sent the token in ${OPERATOR_TOKEN_ENV}" in err
+        assert "model manager's token" in err
+        assert main(["reload", "--connect", endpoint, "--models", "--tactics", "t.yaml"]) == 2
+        assert "a request of its own" in capsys.readouterr().err
+
+
+def test_reload_models_says_when_no_model_manager_answers(
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    pytest.importorskip("zenoh")
+    with open_bus("zenoh") as bus:
+        code = main(["reload", "--connect", bus.endpoints[0], "--models", "--timeout", "0.5"])
+    assert code == 2
+    assert "no model manager answered" in capsys.readouterr().err

@@ -16,12 +16,19 @@ from __future__ import annotations
 
 import hashlib
 import json
+import threading
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import anunnaki
+from anunnaki.bus import Bus, Sample
+
+#: How long a test waits for something that should happen at once: a deadline against a
+#: hung test on a loaded machine, never a measurement.
+DEADLINE = 30.0
 
 #: Data and training settings of the session model (part of the cache key).
 SETTINGS: dict[str, Any] = {
@@ -98,3 +105,31 @@ def train_session_model(root: Path) -> tuple[dict[str, Any], float]:
     result = train_detector(splits[0], splits[1], config=config, test=splits[2])
     save_detector(result.detector, root / "model.safetensors")
     return result.detector.metrics, time.perf_counter() - start
+
+
+class Collector:
+    """Collects messages of a topic; ``wait(n)`` blocks (with a deadline) until n arrived."""
+
+    def __init__(self, bus: Bus, topic: str) -> None:
+        self.items: list[Any] = []
+        self._cond = threading.Condition()
+        self.sub = bus.subscribe(topic, self._on, queue=1024)
+
+    def _on(self, sample: Sample) -> None:
+        with self._cond:
+            self.items.append(sample.message)
+            self._cond.notify_all()
+
+    def wait(self, n: int, timeout: float = DEADLINE) -> list[Any]:
+        """Block until N messages arrived; return them all."""
+        return self.wait_until(lambda items: len(items) >= n, f"{n} messages", timeout)
+
+    def wait_until(
+        self, done: Callable[[list[Any]], bool], what: str, timeout: float = DEADLINE
+    ) -> list[Any]:
+        """Block until ``done(messages)``; return them all."""
+        with self._cond:
+            assert self._cond.wait_for(lambda: done(self.items), timeout), (
+                f"no {what} within {timeout} s ({len(self.items)} messages)"
+            )
+            return list(self.items)

@@ -6,15 +6,16 @@ import hashlib
 import json
 import re
 import threading
-from collections.abc import Callable, Iterator
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
 import cv2
 import numpy as np
 import pytest
+from lec_helpers import DEADLINE, Collector
 
-from anunnaki.bus import Bus, Sample, ServiceError, open_bus
+from anunnaki.bus import Bus, ServiceError, open_bus
 from anunnaki.goals import parse_binding, parse_goal_model
 from anunnaki.lec._detector import DetectionResult
 from anunnaki.lec._node import LecNode, LecNodeStats, SwapResult, decode_image, detections_topic
@@ -27,9 +28,6 @@ ROOT = Path(__file__).parents[2]
 DOC = (ROOT / "docs" / "model-manager.md").read_text(encoding="utf-8")
 CAMERA = "/uav/camera/image"
 DETS = detections_topic("detector")
-#: How long a test waits for something that should happen at once: a deadline against a
-#: hung test on a loaded machine, never a measurement.
-DEADLINE = 30.0
 
 
 # -- doubles ----------------------------------------------------------------------------------
@@ -128,34 +126,6 @@ _PNG = cv2.imencode(".png", np.full((24, 32, 3), 128, np.uint8))[1].tobytes()
 
 def frame(seq: int) -> Image:
     return Image(encoding="png", width=32, height=24, data=_PNG, seq=seq)
-
-
-class Collector:
-    """Collects messages of a topic; ``wait(n)`` blocks (with a deadline) until n arrived."""
-
-    def __init__(self, bus: Bus, topic: str) -> None:
-        self.items: list[Any] = []
-        self._cond = threading.Condition()
-        self.sub = bus.subscribe(topic, self._on, queue=1024)
-
-    def _on(self, sample: Sample) -> None:
-        with self._cond:
-            self.items.append(sample.message)
-            self._cond.notify_all()
-
-    def wait(self, n: int, timeout: float = DEADLINE) -> list[Any]:
-        """Block until N messages arrived; return them all."""
-        return self.wait_until(lambda items: len(items) >= n, f"{n} messages", timeout)
-
-    def wait_until(
-        self, done: Callable[[list[Any]], bool], what: str, timeout: float = DEADLINE
-    ) -> list[Any]:
-        """Block until ``done(messages)``; return them all."""
-        with self._cond:
-            assert self._cond.wait_for(lambda: done(self.items), timeout), (
-                f"no {what} within {timeout} s ({len(self.items)} messages)"
-            )
-            return list(self.items)
 
 
 # -- detections -------------------------------------------------------------------------------

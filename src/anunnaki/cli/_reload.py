@@ -4,6 +4,12 @@ The files are checked by the running Utu as ``anunnaki check`` does: a broken on
 at once (the reply carries the error, exit 1); a good one is accepted and applied at the
 next cycle, which this command waits for in the decision log (``reloaded``), in either
 deployment (one process, or one process per node).
+
+``--models [REGISTRY.yaml]`` asks the learning model manager (``/lm_manager/reload``)
+instead to re-read its model registry (the file it runs with, or REGISTRY.yaml): every
+model's and oracle's sha256 is checked and every new model loaded once before the new
+registry is taken; newly registered models can then be swapped in. Refused, the old
+registry stays (exit 1). The operator token is sent as for Utu.
 """
 
 from __future__ import annotations
@@ -19,7 +25,8 @@ from typing import Any
 from pydantic import ValidationError
 
 from anunnaki import topics
-from anunnaki.bus import BusConfig, BusError, open_bus
+from anunnaki.bus import BusConfig, BusError, ServiceError, open_bus
+from anunnaki.messages import ServiceReply
 from anunnaki.tokens import OPERATOR_TOKEN_ENV, client_operator_token, default_token_file
 
 __all__ = ["add_parser", "run"]
@@ -35,6 +42,15 @@ def add_parser(sub: Any) -> None:
     p.add_argument("--goal-model", type=Path, metavar="FILE", help="the new goal model")
     p.add_argument("--binding", type=Path, metavar="FILE", help="the new platform binding")
     p.add_argument("--tactics", type=Path, metavar="FILE", help="the new tactics (XML or YAML)")
+    p.add_argument(
+        "--models",
+        nargs="?",
+        const="",
+        default=None,
+        metavar="REGISTRY.yaml",
+        help="ask the model manager to re-read its model registry (the file it runs with, or "
+        "REGISTRY.yaml), instead of reloading Utu's files",
+    )
     p.add_argument(
         "--connect",
         action="append",
@@ -58,6 +74,8 @@ def add_parser(sub: Any) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Ask ``/utu/reload``; wait until the decision log says applied or refused."""
+    if args.models is not None:
+        return _reload_models(args)
     files = {
         "goal_model": args.goal_model,
         "binding": args.binding,
@@ -66,15 +84,12 @@ def run(args: argparse.Namespace) -> int:
     request: dict[str, Any] = {
         k: str(v.resolve()) for k, v in files.items() if v is not None
     }  # the running Utu resolves paths against its own folder: send absolute ones
-    if (token := client_operator_token()) is not None:
-        request["token"] = token
-    if not request or set(request) == {"token"}:
+    if not request:
         print("error: give --goal-model, --binding and/or --tactics", file=sys.stderr)
         return 2
     request["caller"] = args.caller
-    config = _bus_config(args)
-    if isinstance(config, str):
-        print(f"error: {config}", file=sys.stderr)
+    config = _client(args, request)
+    if config is None:
         return 2
     with open_bus(config) as bus:
         try:
@@ -87,7 +102,7 @@ def run(args: argparse.Namespace) -> int:
             if not reply.get("ok"):
                 print(f"refused: {reply.get('error', 'no reason given')}")
                 if reply.get("status") == "unauthorised":
-                    print(f"hint: {_token_hint(token)}", file=sys.stderr)
+                    print(f"hint: {_token_hint(request.get('token'), 'Utu')}", file=sys.stderr)
                 return 1
             outcome = _wait_outcome(bus, after, args.timeout)
         except BusError as exc:
@@ -104,17 +119,74 @@ def run(args: argparse.Namespace) -> int:
     return 1
 
 
-def _token_hint(sent: str | None) -> str:
-    """Where this command's operator token came from, and how to give the right one."""
+def _reload_models(args: argparse.Namespace) -> int:
+    """Ask ``/lm_manager/reload`` to re-read the model registry; print what it says."""
+    if any(getattr(args, k) is not None for k in ("goal_model", "binding", "tactics")):
+        print(
+            "error: --models reloads the model manager's registry, a request of its own; "
+            "reload Utu's files with another command",
+            file=sys.stderr,
+        )
+        return 2
+    request: dict[str, Any] = {"caller": args.caller}
+    if args.models:  # the running node resolves paths against its own folder: send absolute
+        request["registry"] = str(Path(args.models).resolve())
+    config = _client(args, request)
+    if config is None:
+        return 2
+    with open_bus(config) as bus:
+        try:
+            reply = bus.request(topics.RELOAD_MODELS, request, timeout=args.timeout)
+        except ServiceError as exc:
+            print(f"refused: {exc.error}")
+            if exc.error.startswith("unauthorised"):
+                print(
+                    f"hint: {_token_hint(request.get('token'), 'model manager')}", file=sys.stderr
+                )
+            return 1
+        except BusError as exc:
+            print(f"error: no model manager answered on {config.connect}: {exc}", file=sys.stderr)
+            return 2
+    body: dict[str, Any] = dict(reply.body if isinstance(reply, ServiceReply) else reply.to_body())
+
+    def ids(key: str) -> str:
+        listed = body.get(key)
+        return ", ".join(map(str, listed)) if isinstance(listed, list) and listed else "none"
+
+    print(
+        f"applied: {body.get('registry')}: models {ids('models')} "
+        f"(added {ids('added')}; changed {ids('changed')}; removed {ids('removed')}); "
+        f"{body.get('active')} keeps running"
+    )
+    return 0
+
+
+def _client(args: argparse.Namespace, request: dict[str, Any]) -> BusConfig | None:
+    """Put the operator token in ``request``; the session to open (``None``: error printed)."""
+    if (token := client_operator_token()) is not None:
+        request["token"] = token
+    config = _bus_config(args)
+    if isinstance(config, str):
+        print(f"error: {config}", file=sys.stderr)
+        return None
+    return config
+
+
+def _token_hint(sent: str | None, who: str) -> str:
+    """Where this command's operator token came from, and how to give the right one.
+
+    ``who`` is ``Utu`` or ``model manager``: the process whose token the request needs.
+    """
     where = (
         f"${OPERATOR_TOKEN_ENV}"
         if os.environ.get(OPERATOR_TOKEN_ENV) is not None
         else str(default_token_file())
     )
     said = f"the token in {where}" if sent is not None else f"no token (no {where})"
-    return (
-        f"this command sent {said}; set ${OPERATOR_TOKEN_ENV} to the running Utu's token "
+    return f"this command sent {said}; set ${OPERATOR_TOKEN_ENV} to the running {who}'s token " + (
         "(its operator_token_file, or the file its 'anunnaki run' named)"
+        if who == "Utu"
+        else f"(its ${OPERATOR_TOKEN_ENV}, else its user's {default_token_file().name} file)"
     )
 
 

@@ -24,6 +24,13 @@ Why the swap works the way it does
       is sent once the new model is the active one (the next frame uses it), so Utu's
       ``swap_model`` action succeeds only for a swap that happened.
 
+Models registered while it runs
+    ``/lm_manager/reload`` (an operator service: the request carries the operator token, as
+    Utu's do) re-reads the registry file, checks every model's and oracle's sha256 and loads
+    every new model once, then swaps pick from the new registry; a bad registry is refused
+    with the error and the old one kept. The model in use must stay listed, unchanged: a
+    reload never drops it (:meth:`LecNode.reload`, docs/model-manager.md).
+
 The active model is announced on ``/lm_manager/active`` on every change and once a
 ``active_period`` (1 s) otherwise, so Utu's agent for the model manager (A6 in the UAV model)
 never goes stale. Inactive models that were loaded stay in a small cache (``cache``), so
@@ -33,10 +40,13 @@ swapping back to the default model is instant.
 from __future__ import annotations
 
 import logging
+import os
 import threading
 import time
 from collections import OrderedDict
+from collections.abc import Sequence
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any, NamedTuple, cast
 
 import numpy as np
@@ -44,14 +54,22 @@ import numpy.typing as npt
 
 from anunnaki import topics
 from anunnaki.bus import Bus, Node, Publisher, Sample
-from anunnaki.errors import AnunnakiError, MissingExtraError
+from anunnaki.errors import AnunnakiError, MissingExtraError, ModelFileError
 from anunnaki.lec._detector import Detector
 from anunnaki.lec._registry import ModelRegistry, ModelRegistryError, ModelSpec
 from anunnaki.messages import Detections, Image, ServiceReply, body_of
+from anunnaki.tokens import (
+    OPERATOR_TOKEN_ENV,
+    default_token_file,
+    token_matches,
+    token_weakness,
+    user_operator_token,
+)
 
 __all__ = [
     "LecNode",
     "LecNodeStats",
+    "ReloadResult",
     "SwapResult",
     "decode_image",
     "detections_topic",
@@ -139,6 +157,8 @@ class LecNodeStats:
         failed: Frames that did not decode or whose inference raised (logged, skipped).
         swaps: Swaps that changed the active model.
         refused: Swap requests refused.
+        reloads: Registry reloads applied.
+        reloads_refused: Registry reloads refused (unauthorised ones included).
 
     """
 
@@ -147,6 +167,96 @@ class LecNodeStats:
     failed: int
     swaps: int
     refused: int
+    reloads: int = 0
+    reloads_refused: int = 0
+
+
+@dataclass(frozen=True)
+class ReloadResult:
+    """The outcome of a registry reload (:meth:`LecNode.reload`).
+
+    Attributes:
+        ok: Whether the new registry is now the one swaps pick from.
+        lec: The LEC's name.
+        registry: The registry file in force after the request (the old one if refused).
+        active: The model in use (a reload never changes it).
+        models: The ids the registry in force lists.
+        added: Ids the reload added.
+        changed: Ids whose entry changed.
+        removed: Ids it no longer lists.
+        caller: Who asked.
+        status: ``reloaded``, ``refused`` or ``unauthorised``.
+        error: Why it was refused.
+
+    """
+
+    ok: bool
+    lec: str
+    registry: str | None
+    active: str
+    models: tuple[str, ...] = ()
+    added: tuple[str, ...] = ()
+    changed: tuple[str, ...] = ()
+    removed: tuple[str, ...] = ()
+    caller: str = "api"
+    status: str = "reloaded"
+    error: str | None = None
+
+    def reply(self) -> ServiceReply:
+        """The service reply.
+
+        ``ServiceReply(ok=True, body={lec, registry, active, models, added, changed,
+        removed, caller})`` when reloaded; ``ServiceReply(ok=False, error, body={lec,
+        registry, active, status})`` when refused (a requester receives a
+        :class:`~anunnaki.bus.ServiceError`).
+        """
+        if not self.ok:
+            return ServiceReply(
+                ok=False,
+                error=self.error or "refused",
+                body={
+                    "lec": self.lec,
+                    "registry": self.registry,
+                    "active": self.active,
+                    "status": self.status,
+                },
+            )
+        return ServiceReply(
+            ok=True,
+            body={
+                "lec": self.lec,
+                "registry": self.registry,
+                "active": self.active,
+                "models": list(self.models),
+                "added": list(self.added),
+                "changed": list(self.changed),
+                "removed": list(self.removed),
+                "caller": self.caller,
+            },
+        )
+
+
+def _operator_token(given: str | None) -> str:
+    """The token reload requests must carry, found as Utu's operator services find theirs.
+
+    The one given, else ``$ANUNNAKI_OPERATOR_TOKEN``, else the user's own token file
+    (written first if missing).
+
+    Raises:
+        ModelFileError: The user's file is unreadable or open to others, or a token is too
+            weak.
+
+    """
+    token = given if given is not None else os.environ.get(OPERATOR_TOKEN_ENV)
+    if token is None:
+        return user_operator_token()[0]  # checked as it is read
+    if (weak := token_weakness(token)) is not None:
+        raise ModelFileError(
+            f"the operator token of the model manager is too weak: {weak}",
+            element="operator_token" if given is not None else f"${OPERATOR_TOKEN_ENV}",
+            hint="make one with: python -c 'import secrets; print(secrets.token_urlsafe(32))'",
+        )
+    return token
 
 
 class _Active(NamedTuple):
@@ -184,12 +294,20 @@ class LecNode(Node):
         frame_queue: Frames that may wait while one is processed; beyond it the oldest are
             dropped and counted by the bus (``bus.stats().dropped``).
         cache: How many inactive loaded models to keep in memory (0: none).
+        reload_service: The registry reload service's name (an operator service).
+        reload_dirs: Folders a reload may read a registry from, besides the folder of the
+            registry file the node started with.
+        operator_token: The token a reload request must carry; default
+            ``$ANUNNAKI_OPERATOR_TOKEN``, else the user's own token file
+            (:func:`anunnaki.tokens.user_operator_token`: written first if missing), as for
+            Utu's operator services, so the reload service is never open by accident.
 
     The initial model is loaded in the constructor; a bad one raises at once (guideline B5),
     before anything is declared on the bus.
 
     Raises:
         ModelRegistryError: The initial model is unknown, its file corrupt or its hash wrong.
+        ModelFileError: The operator token is too weak, or the user's token file unreadable.
 
     """
 
@@ -208,6 +326,9 @@ class LecNode(Node):
         active_period: float | None = 1.0,
         frame_queue: int = 64,
         cache: int = 2,
+        reload_service: str = topics.RELOAD_MODELS,
+        reload_dirs: Sequence[str | Path] = (),
+        operator_token: str | None = None,
     ) -> None:
         if active_period is not None and not active_period > 0:
             raise ValueError(f"active_period must be > 0 seconds or None, got {active_period}")
@@ -220,13 +341,21 @@ class LecNode(Node):
         self.detections_topic = detections or detections_topic(self.lec)
         self.active_topic = active_topic
         self.swap_service = swap_service
+        self.reload_service = reload_service
         self.node = node
+        started = Path(registry.source) if registry.source is not None else None
+        roots = [started.resolve().parent] if started is not None and started.is_file() else []
+        roots += [Path(d).resolve() for d in reload_dirs]
+        #: The folders a reload may read a registry from (symlinks resolved).
+        self.reload_roots: list[Path] = list(dict.fromkeys(roots))
+        self._operator_token = _operator_token(operator_token)
         self._cache_size = cache
         self._cache: OrderedDict[str, Detector] = OrderedDict()
         self._lock = threading.Lock()
         self._swap_lock = threading.Lock()
         self._stop = threading.Event()
         self._frames = self._published = self._failed = self._swaps = self._refused = 0
+        self._reloads = self._reloads_refused = self._unauthorised = 0
         spec = registry.resolve(initial) if initial is not None else registry.default
         self._active = _Active(spec, registry.load(spec))
         self._frame_queue = frame_queue
@@ -248,6 +377,7 @@ class LecNode(Node):
         """The detections publisher, the swap service and the camera subscription."""
         self._detections: Publisher = self.own(self.bus.publisher(self.detections_topic))
         self.own(self.bus.service(self.swap_service, self._on_swap))
+        self.own(self.bus.service(self.reload_service, self._on_reload))
         self.own(
             self.bus.subscribe(self.camera, self._on_frame, queue=self._frame_queue, expect=Image)
         )
@@ -266,7 +396,13 @@ class LecNode(Node):
         """The node's counters."""
         with self._lock:
             return LecNodeStats(
-                self._frames, self._published, self._failed, self._swaps, self._refused
+                self._frames,
+                self._published,
+                self._failed,
+                self._swaps,
+                self._refused,
+                self._reloads,
+                self._reloads_refused,
             )
 
     def active_message(self) -> dict[str, str]:
@@ -407,6 +543,133 @@ class LecNode(Node):
                 ).reply()
             fields[key] = value
         return self.swap(fields["model"], domain=fields["domain"], lec=fields["lec"]).reply()
+
+    # -- reloading the registry --------------------------------------------------------------
+    def reload(self, registry: str | Path | None = None, *, caller: str = "api") -> ReloadResult:
+        """Re-read the registry file (or ``registry``) and swap from the new one from now on.
+
+        The file must lie in :attr:`reload_roots`; it is read and checked by
+        :meth:`ModelRegistry.reread` (every model's and oracle's sha256, every new model
+        loaded once) while frames keep running; the model in use must stay listed with the
+        same files. Accepted, the registry object is updated in place (whoever holds it
+        sees the new models), cached models whose entry changed are dropped, the reload is
+        logged and the active model announced again. Refused, nothing changes. Serialised
+        with swaps.
+        """
+        with self._swap_lock:
+            current = self.active
+            path = Path(registry) if registry is not None else None
+            if path is None:
+                if self.registry.source is None or not Path(self.registry.source).is_file():
+                    return self._refuse_reload(
+                        current,
+                        caller,
+                        "this model manager's registry was not read from a file; name the "
+                        "registry file to read ('registry' in the request)",
+                    )
+                path = Path(self.registry.source)
+            real = path.resolve()
+            if not any(real.is_relative_to(root) for root in self.reload_roots):
+                return self._refuse_reload(
+                    current,
+                    caller,
+                    str(
+                        ModelFileError(
+                            "refused: the registry is outside the folders a reload may read",
+                            path=path,
+                            hint="put it next to the registry the model manager started with, "
+                            "or list its folder in reload_dirs (now: "
+                            f"{', '.join(map(str, self.reload_roots)) or 'none'})",
+                        )
+                    ),
+                )
+            try:
+                change = self.registry.reread(path, keep=current.id)
+            except AnunnakiError as exc:
+                return self._refuse_reload(current, caller, str(exc))
+            except Exception as exc:  # a loader bug must not take the node down
+                return self._refuse_reload(current, caller, f"{type(exc).__name__}: {exc}")
+            with self._lock:
+                self.registry.replace(change)
+                spec = self.registry.get(current.id)
+                self._active = _Active(spec, self._active.detector)
+                self._reloads += 1
+            for model_id in (*change.changed, *change.removed):
+                self._cache.pop(model_id, None)
+            log.info(
+                "lec %s: registry reloaded from %s by %s (added %s; changed %s; removed %s); "
+                "%s keeps running",
+                self.lec,
+                change.source,
+                caller,
+                ", ".join(change.added) or "none",
+                ", ".join(change.changed) or "none",
+                ", ".join(change.removed) or "none",
+                spec.id,
+            )
+            self.publish_active()
+            return ReloadResult(
+                True,
+                self.lec,
+                change.source,
+                spec.id,
+                tuple(self.registry.ids()),
+                change.added,
+                change.changed,
+                change.removed,
+                caller,
+            )
+
+    def _refuse_reload(
+        self, current: ModelSpec, caller: str, error: str, status: str = "refused"
+    ) -> ReloadResult:
+        unauthorised = status == "unauthorised"
+        with self._lock:
+            self._reloads_refused += 1
+            # Like Utu: the first request without the token is logged, the rest counted.
+            quiet = unauthorised and self._unauthorised > 0
+            self._unauthorised += unauthorised
+        (log.debug if quiet else log.warning)(
+            "lec %s: registry reload by %s refused, the registry %s is kept: %s",
+            self.lec,
+            caller,
+            self.registry.source,
+            error,
+        )
+        return ReloadResult(
+            False,
+            self.lec,
+            self.registry.source,
+            current.id,
+            tuple(self.registry.ids()),
+            caller=caller,
+            status=status,
+            error=error,
+        )
+
+    def _on_reload(self, request: Any) -> ServiceReply:
+        body = body_of(request)
+        caller = body.get("caller", "bus")
+        if not isinstance(caller, str):
+            caller = "bus"
+        current = self.active
+        if not token_matches(body.get("token"), self._operator_token):
+            return self._refuse_reload(
+                current,
+                caller,
+                "unauthorised: reload needs the operator token ('token' in the request; "
+                f"clients read it from ${OPERATOR_TOKEN_ENV}, else from the user's "
+                f"{default_token_file()})",
+                status="unauthorised",
+            ).reply()
+        registry = body.get("registry")
+        if registry is not None and not isinstance(registry, str):
+            return self._refuse_reload(
+                current,
+                caller,
+                f"'registry' must be a path (a string), got {type(registry).__name__}",
+            ).reply()
+        return self.reload(registry, caller=caller).reply()
 
     # -- life --------------------------------------------------------------------------------
     def close(self) -> None:
