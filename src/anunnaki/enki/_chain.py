@@ -142,21 +142,15 @@ class _Chain:
         work: WorkFolder,
         cfg: RobustifyConfig,
         *,
+        splits: tuple[Dataset, Dataset, Dataset | None],
         model_in_id: str | None,
         new_id: str,
         progress: Progress | None,
     ) -> None:
         self.model, self.model_in_id, self.data, self.work = model, model_in_id, data, work
-        self.cfg, self.new_id = cfg, new_id
+        self.cfg, self.new_id, self.splits = cfg, new_id, splits
         self._progress = progress
-        self._splits: tuple[Dataset, Dataset, Dataset | None] | None = None
         self.reused: list[str] = []
-
-    @property
-    def splits(self) -> tuple[Dataset, Dataset, Dataset | None]:
-        if self._splits is None:
-            self._splits = _splits(self.data)
-        return self._splits
 
     def progress(self, stage: str, done: int, total: int) -> None:
         if self._progress is not None:
@@ -397,7 +391,7 @@ def robustify(
     """
     _check_phenomenon(config.phenomenon)
     resolved = resolve_model(model, model_in_id)
-    _splits(data)  # a missing split fails before any work
+    splits = _splits(data)  # a missing split fails before any work
     new_id = config.model_id or new_model_id(resolved.model_id, config.domain)
     options = config.options() | {
         "model": resolved.model_id,
@@ -407,8 +401,8 @@ def robustify(
     }
     work = WorkFolder(out, options)
     chain = _Chain(
-        resolved, Path(data), work, config, model_in_id=model_in_id, new_id=new_id,
-        progress=progress,
+        resolved, Path(data), work, config, splits=splits, model_in_id=model_in_id,
+        new_id=new_id, progress=progress,
     )  # fmt: skip
     search = chain.stage("search", chain.search)
     picked = chain.stage("select", lambda: chain.select(search["path"]))
