@@ -28,6 +28,7 @@ def build_parser() -> argparse.ArgumentParser:
         _log,
         _oracle,
         _reload,
+        _robustify,
         _run,
         _sim,
     )
@@ -47,6 +48,7 @@ def build_parser() -> argparse.ArgumentParser:
     _log.add_parser(sub)
     _oracle.add_parser(sub)
     _reload.add_parser(sub)
+    _robustify.add_parser(sub)
     _run.add_parser(sub)
     _sim.add_parser(sub)
     return parser

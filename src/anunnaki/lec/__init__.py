@@ -76,6 +76,7 @@ from anunnaki.lec._metrics import (
     match_image,
 )
 from anunnaki.lec._node import LecNode, LecNodeStats, SwapResult, decode_image, detections_topic
+from anunnaki.lec._register import register_model as register_model
 from anunnaki.lec._registry import (
     DEFAULT_DOMAIN,
     REGISTRY_FORMAT,
@@ -97,9 +98,11 @@ if TYPE_CHECKING:
     from anunnaki.lec._train import (
         Augmenter,
         EpochHook,
+        Perturb,
         SharedClassesDetector,
         TrainConfig,
         TrainResult,
+        TrainState,
         class_map,
         evaluate_detector,
         predict,
@@ -134,12 +137,14 @@ __all__ = [
     "ModelRegistryError",
     "ModelSpec",
     "OracleRef",
+    "Perturb",
     "ReadsFiles",
     "ResolvedModel",
     "SharedClassesDetector",
     "SwapResult",
     "TrainConfig",
     "TrainResult",
+    "TrainState",
     "Truth",
     "UnknownModelError",
     "architecture_files",
@@ -177,6 +182,8 @@ _LAZY = {
     "shared_classes": "anunnaki.lec._train",
     "TrainConfig": "anunnaki.lec._train",
     "TrainResult": "anunnaki.lec._train",
+    "TrainState": "anunnaki.lec._train",
+    "Perturb": "anunnaki.lec._train",
     "class_map": "anunnaki.lec._train",
     "evaluate_detector": "anunnaki.lec._train",
     "predict": "anunnaki.lec._train",

@@ -40,9 +40,11 @@ from anunnaki.phenomena import PHENOMENA, Phenomenon
 __all__ = [
     "Augmenter",
     "EpochHook",
+    "Perturb",
     "SharedClassesDetector",
     "TrainConfig",
     "TrainResult",
+    "TrainState",
     "evaluate_detector",
     "predict",
     "shared_classes",
@@ -55,6 +57,10 @@ SCORE_FLOOR = 0.05
 Image = npt.NDArray[np.uint8]
 Boxes = npt.NDArray[np.float32]
 Labels = npt.NDArray[np.int64]
+
+#: ``perturb(image, rng) -> image`` (``TrainConfig.perturb``): ``uint8`` ``(H, W, 3)`` in and
+#: out, drawing only from *rng*.
+Perturb = Callable[[Image, np.random.Generator], Image]
 
 
 class Augmenter:
@@ -149,6 +155,10 @@ class TrainConfig:
         init: Start from this model's weights (a model file or a detector) instead of
             random ones — fine-tuning a domain model from the default one. Its classes,
             width and stride must match; ``width``/``stride`` are then taken from it.
+        perturb: ``perturb(image, rng) -> image`` (:data:`Perturb`) applied to every
+            training image last, after ``augment``, with a random stream of its own: two
+            trainings that differ only in it see the same images, zooms, flips and order
+            (Enki's context sources, ``anunnaki.enki``).
 
     """
 
@@ -170,6 +180,60 @@ class TrainConfig:
     domain: str = "default"
     ignore: bool = True
     init: str | Path | CenterNetDetector | None = None
+    perturb: Perturb | None = None
+
+
+@dataclass
+class TrainState:
+    """Where a training stands after an epoch: enough to continue it bit for bit.
+
+    ``train_detector(..., checkpoint=...)`` hands one over after every epoch;
+    ``train_detector(..., resume=state)`` continues from it with the same settings (the
+    caller checks that they are). :meth:`save`/:meth:`load` use ``torch.save`` and
+    ``torch.load(weights_only=True)``: tensors, numbers and strings only, nothing unpickled.
+
+    Attributes:
+        epoch: Epochs done.
+        step: Optimiser steps done.
+        network: The network's ``state_dict``.
+        optimizer: The optimiser's ``state_dict``.
+        rngs: The bit-generator states of the batch order, augmentation and perturbation
+            streams, and torch's generator state.
+        history: The per-epoch figures so far (as :attr:`TrainResult.history`).
+
+    """
+
+    epoch: int
+    step: int
+    network: dict[str, Any]
+    optimizer: dict[str, Any]
+    rngs: dict[str, Any]
+    history: list[dict[str, float]]
+
+    def save(self, path: str | Path) -> None:
+        """Write the state to *path* atomically (a temporary file renamed into place)."""
+        target = Path(path)
+        target.parent.mkdir(parents=True, exist_ok=True)
+        tmp = target.with_name(f".tmp-{target.name}")
+        torch.save(self.__dict__, tmp)
+        tmp.replace(target)
+
+    @classmethod
+    def load(cls, path: str | Path) -> TrainState:
+        """Read a state written by :meth:`save`.
+
+        Raises:
+            DetectorError: The file is not a readable training state.
+
+        """
+        try:
+            data = torch.load(path, map_location="cpu", weights_only=True)
+            return cls(**data)
+        except Exception as exc:  # torch raises several kinds for a damaged file
+            raise DetectorError(
+                f"{path}: not a readable training checkpoint ({exc}); delete it to restart "
+                "from the previous one"
+            ) from exc
 
 
 @dataclass
@@ -182,7 +246,8 @@ class TrainResult:
         threshold: The score threshold chosen on the validation split.
         val: Metrics on the validation split at that threshold.
         test: Metrics on the test split, when one was given.
-        seconds: Wall-clock training time (without the final evaluation).
+        seconds: Wall-clock time of the epochs (without any evaluation; a resumed training
+            counts the epochs done before too).
         history: Per epoch: ``epoch``, ``loss``, ``heat``, ``box`` (mean losses), ``seconds``.
 
     """
@@ -523,6 +588,8 @@ def train_detector(
     test: Dataset | None = None,
     on_step: ProgressHook | None = None,
     on_epoch: EpochHook | None = None,
+    checkpoint: Callable[[TrainState], None] | None = None,
+    resume: TrainState | None = None,
 ) -> TrainResult:
     """Train a :class:`CenterNetDetector` and measure it.
 
@@ -539,6 +606,10 @@ def train_detector(
         on_epoch: Called after every epoch with its figures (:data:`EpochHook`); given
             one, training also measures the val F1 after each epoch (one pass over *val*,
             in eval mode: the weights and the random draws are the same as without it).
+        checkpoint: Called after every epoch (before *on_epoch*) with the
+            :class:`TrainState` to save, so that a killed training can be resumed.
+        resume: A state from *checkpoint* of a training with the same data and *config*:
+            training continues after its epoch and ends as the uninterrupted run would.
 
     Raises:
         DetectorError: The splits have different classes, or a split is empty.
@@ -546,64 +617,36 @@ def train_detector(
     """
     cfg = config or TrainConfig()
     _check_splits(train, val, test, cfg)
-    seeds = np.random.SeedSequence(cfg.seed).spawn(3)
+    seeds = np.random.SeedSequence(cfg.seed).spawn(4)
     weight_seed = int(seeds[0].generate_state(1)[0])
-    order_rng = np.random.default_rng(seeds[1])
-    aug_rng = np.random.default_rng(seeds[2])
+    rngs = {
+        "order": np.random.default_rng(seeds[1]),
+        "aug": np.random.default_rng(seeds[2]),
+        "perturb": np.random.default_rng(seeds[3]),
+    }
     random.seed(cfg.seed)
     torch.manual_seed(cfg.seed)
     first = train.image(0)
     size = cfg.input_size or (int(first.shape[1]), int(first.shape[0]))
-    augmenter = Augmenter(cfg.augment, probability=cfg.augment_prob) if cfg.augment else None
     start_from = _initial(cfg.init, train.classes)
     det = _new_detector(cfg, train.classes, size, weight_seed, start_from)
-    net = det.network
     old_threads = torch.get_num_threads()
     if cfg.threads is not None:
         torch.set_num_threads(cfg.threads)
     try:
-        data = _fitted(train, size, cfg)
-        steps_per_epoch = math.ceil(len(data) / cfg.batch_size)
-        total = steps_per_epoch * cfg.epochs
-        lr_at = _lr_schedule(cfg.lr, min(steps_per_epoch, total // 4 + 1), total)
-        opt = torch.optim.AdamW(net.parameters(), lr=cfg.lr, weight_decay=cfg.weight_decay)
-        history: list[dict[str, float]] = []
-        start = time.perf_counter()
-        step = 0
-        for epoch in range(cfg.epochs):
-            net.train()
-            t0 = time.perf_counter()
-            sums = {"loss": 0.0, "heat": 0.0, "box": 0.0}
-            perm = order_rng.permutation(len(data))
-            for b in range(steps_per_epoch):
-                samples = [
-                    _augmented(data[int(idx)], cfg, size, aug_rng, augmenter)
-                    for idx in perm[b * cfg.batch_size : (b + 1) * cfg.batch_size]
-                ]
-                x, heat_t, box_t, weight = _batch_tensors(
-                    samples, size, len(train.classes), net.stride
-                )
-                for group in opt.param_groups:
-                    group["lr"] = lr_at(step)
-                loss, parts = centernet_loss(net(x), heat_t, box_t, weight)
-                opt.zero_grad(set_to_none=True)
-                loss.backward()  # type: ignore[no-untyped-call]
-                torch.nn.utils.clip_grad_norm_(net.parameters(), 10.0)
-                opt.step()
-                step += 1
-                sums["loss"] += float(loss.detach())
-                for k, v in parts.items():
-                    sums[k] += v
-                if on_step is not None:
-                    on_step(step, total, {"epoch": epoch + 1, "loss": sums["loss"] / (b + 1)})
-            history.append(
-                {"epoch": epoch + 1, **{k: v / steps_per_epoch for k, v in sums.items()}}
-                | {"seconds": time.perf_counter() - t0}
-            )
+        loop = _Loop(
+            cfg, det, _fitted(train, size, cfg), size, rngs=rngs, num_classes=len(train.classes)
+        )
+        if resume is not None:
+            loop.restore(resume)
+        for epoch in range(loop.epoch, cfg.epochs):
+            loop.run_epoch(epoch, on_step)
+            if checkpoint is not None:
+                checkpoint(loop.state())
             if on_epoch is not None:
-                on_epoch(history[-1] | {"epochs": cfg.epochs, "val_f1": _val_f1(det, val)})
-        seconds = time.perf_counter() - start
-        net.eval()
+                on_epoch(loop.history[-1] | {"epochs": cfg.epochs, "val_f1": _val_f1(det, val)})
+        seconds = loop.seconds
+        det.network.eval()
         threshold, val_m, test_m = _measure(det, val, test)
     finally:
         torch.set_num_threads(old_threads)
@@ -612,10 +655,118 @@ def train_detector(
     if test_m is not None:
         metrics["test"] = test_m.as_dict()
     det.metrics = metrics
+    history = loop.history
     det.training = _training_record(
         cfg, train, val=val, test=test, start_from=start_from, seconds=seconds, history=history
-    )
+    ) | {"steps": loop.step}
     return TrainResult(det, threshold, val_m, test_m, seconds, history)
+
+
+class _Loop:
+    """The optimiser loop of :func:`train_detector`, one epoch at a time (resumable)."""
+
+    def __init__(
+        self,
+        cfg: TrainConfig,
+        det: CenterNetDetector,
+        data: list[_Sample],
+        size: tuple[int, int],
+        *,
+        rngs: dict[str, np.random.Generator],
+        num_classes: int,
+    ) -> None:
+        self.cfg, self.det, self.data, self.size, self.rngs = cfg, det, data, size, rngs
+        self.num_classes = num_classes
+        self.augmenter = (
+            Augmenter(cfg.augment, probability=cfg.augment_prob) if cfg.augment else None
+        )
+        self.steps_per_epoch = math.ceil(len(data) / cfg.batch_size)
+        total = self.steps_per_epoch * cfg.epochs
+        self.total = total
+        self.lr_at = _lr_schedule(cfg.lr, min(self.steps_per_epoch, total // 4 + 1), total)
+        self.opt = torch.optim.AdamW(
+            det.network.parameters(), lr=cfg.lr, weight_decay=cfg.weight_decay
+        )
+        self.history: list[dict[str, float]] = []
+        self.epoch = 0
+        self.step = 0
+        self.seconds = 0.0
+
+    def state(self) -> TrainState:
+        """The state after the last epoch (see :class:`TrainState`)."""
+        rngs: dict[str, Any] = {k: g.bit_generator.state for k, g in self.rngs.items()}
+        rngs["torch"] = torch.get_rng_state()
+        rngs["seconds"] = self.seconds
+        return TrainState(
+            self.epoch,
+            self.step,
+            self.det.network.state_dict(),
+            self.opt.state_dict(),
+            rngs,
+            [dict(h) for h in self.history],
+        )
+
+    def restore(self, state: TrainState) -> None:
+        """Continue from *state* (weights, optimiser, random streams, counters)."""
+        if not 0 < state.epoch <= self.cfg.epochs or state.step != state.epoch * (
+            self.steps_per_epoch
+        ):
+            raise DetectorError(
+                f"the checkpoint is of epoch {state.epoch}, step {state.step}; this training "
+                f"has {self.cfg.epochs} epochs of {self.steps_per_epoch} steps: it was made "
+                "with other data or settings — delete it to start over"
+            )
+        self.det.network.load_state_dict(state.network)
+        self.opt.load_state_dict(state.optimizer)
+        for key, gen in self.rngs.items():
+            gen.bit_generator.state = state.rngs[key]
+        torch.set_rng_state(state.rngs["torch"])
+        self.seconds = float(state.rngs.get("seconds", 0.0))
+        self.epoch, self.step = state.epoch, state.step
+        self.history = [dict(h) for h in state.history]
+
+    def run_epoch(self, epoch: int, on_step: ProgressHook | None) -> None:
+        """One pass over the data in a fresh random order."""
+        cfg, net = self.cfg, self.det.network
+        net.train()
+        t0 = time.perf_counter()
+        sums = {"loss": 0.0, "heat": 0.0, "box": 0.0}
+        perm = self.rngs["order"].permutation(len(self.data))
+        for b in range(self.steps_per_epoch):
+            samples = [
+                self._sample(int(idx))
+                for idx in perm[b * cfg.batch_size : (b + 1) * cfg.batch_size]
+            ]
+            x, heat_t, box_t, weight = _batch_tensors(
+                samples, self.size, self.num_classes, net.stride
+            )
+            for group in self.opt.param_groups:
+                group["lr"] = self.lr_at(self.step)
+            loss, parts = centernet_loss(net(x), heat_t, box_t, weight)
+            self.opt.zero_grad(set_to_none=True)
+            loss.backward()  # type: ignore[no-untyped-call]
+            torch.nn.utils.clip_grad_norm_(net.parameters(), 10.0)
+            self.opt.step()
+            self.step += 1
+            sums["loss"] += float(loss.detach())
+            for k, v in parts.items():
+                sums[k] += v
+            if on_step is not None:
+                on_step(self.step, self.total, {"epoch": epoch + 1, "loss": sums["loss"] / (b + 1)})
+        seconds = time.perf_counter() - t0
+        self.seconds += seconds
+        self.history.append(
+            {"epoch": epoch + 1, **{k: v / self.steps_per_epoch for k, v in sums.items()}}
+            | {"seconds": seconds}
+        )
+        self.epoch = epoch + 1
+
+    def _sample(self, index: int) -> _Sample:
+        sample = _augmented(self.data[index], self.cfg, self.size, self.rngs["aug"], self.augmenter)
+        if self.cfg.perturb is None:
+            return sample
+        image, boxes, labels, ignore = sample
+        return self.cfg.perturb(image, self.rngs["perturb"]), boxes, labels, ignore
 
 
 def _new_detector(
@@ -748,6 +899,7 @@ def _training_record(
         "threads": cfg.threads,
         "augment": [a if isinstance(a, str) else a.name for a in cfg.augment],
         "augment_prob": cfg.augment_prob if cfg.augment else 0.0,
+        "perturb": None if cfg.perturb is None else type(cfg.perturb).__name__,
         "flip": cfg.flip,
         "zoom": cfg.zoom,
         "photometric": cfg.photometric,

@@ -1,0 +1,188 @@
+"""``anunnaki robustify MODEL --data DATA --phenomenon P --domain NAME``: Enki's chain.
+
+Search (or ``--archive``) → select contexts → fine-tune a copy of MODEL → measure → assess the
+new model → its oracle → ``--register``. Work goes to ``--out``; rerunning the same command
+continues it after Ctrl-C or kill -9. See docs/robustify.md.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from typing import Any
+
+from anunnaki.cli._detector import add_model_options
+
+__all__ = ["add_parser"]
+
+
+def add_parser(sub: Any) -> None:
+    """Register ``robustify``."""
+    p: argparse.ArgumentParser = sub.add_parser(
+        "robustify",
+        help="a robustified model for a domain, from the contexts where MODEL fails (Enki)",
+        description=__doc__,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    p.add_argument("model", help="model file (NAME.safetensors) or registry (REG.yaml)")
+    add_model_options(p)
+    p.add_argument("--data", "-d", required=True, help="dataset folder (train, val, test)")
+    p.add_argument("--phenomenon", "-p", required=True, help="e.g. hsl, raindrop, fog")
+    p.add_argument("--domain", required=True, help="the new model's domain, e.g. hsl")
+    p.add_argument("--out", "-o", help="work folder (default: robustify/ID)")
+    p.add_argument("--id", dest="new_id", help="the new model's id (default: rover-DOMAIN "
+                   "for rover-default, else MODEL_ID-DOMAIN)")  # fmt: skip
+    p.add_argument("--archive", help="reuse this Enlil archive of MODEL and P (no search)")
+    p.add_argument("--register", metavar="REG.yaml", help="add the model and its oracle here")
+    g = p.add_argument_group("search (as anunnaki assess)")
+    g.add_argument("--budget", "-n", type=int, default=400, help="evaluations per search (400)")
+    g.add_argument("--search", default="enlil", help="enlil, random or sobol (enlil)")
+    g.add_argument("--batch-images", type=int, default=32, help="images per evaluation (32)")
+    g.add_argument("--round", type=int, default=16, help="contexts per search round (16)")
+    g.add_argument("--workers", type=int, default=2, help="local processes (2)")
+    g.add_argument("--thresholds", nargs=2, type=float, default=(0.05, 0.10),
+                   metavar=("DEGRADED", "COMPROMISED"), help="(0.05 0.10)")  # fmt: skip
+    s = p.add_argument_group("selection (docs/robustify.md)")
+    s.add_argument("--contexts", type=int, default=64, help="training contexts (64)")
+    s.add_argument(
+        "--weights",
+        nargs=3,
+        type=float,
+        default=(1.0, 3.0, 3.0),
+        metavar=("W0", "W1", "W2"),
+        help="weights of categories 0 1 2 (1 3 3)",
+    )
+    f = p.add_argument_group("fine-tune")
+    f.add_argument("--clean", type=float, default=0.3, help="share of clean frames (0.3)")
+    f.add_argument("--epochs", type=int, default=8, help="(8)")
+    f.add_argument("--batch-size", type=int, default=32, help="(32)")
+    f.add_argument("--lr", type=float, default=2e-3, help="peak learning rate (2e-3)")
+    f.add_argument("--threads", type=int, default=2, help="torch threads (2)")
+    f.add_argument("--seed", type=int, default=0, help="the one seed of every stage (0)")
+    o = p.add_argument_group("measurement and oracle")
+    o.add_argument("--measure-contexts", type=int, default=32,
+                   help="archive contexts both models are measured on (32)")  # fmt: skip
+    o.add_argument("--oracle-frames", type=int, help="(oracle train's default)")
+    o.add_argument("--oracle-val-frames", type=int, help="(oracle train's default)")
+    o.add_argument("--oracle-epochs", type=int, help="(oracle train's default)")
+    o.add_argument("--oracle-threads", type=int, help="(oracle train's default)")
+    p.add_argument("--json", action="store_true", help="print the summary as one JSON object")
+    p.set_defaults(run=run_robustify)
+
+
+def _config(args: argparse.Namespace) -> Any:
+    from anunnaki.enki import Budget, RobustifyConfig, SelectionRule
+
+    oracle = {k: v for k, v in (("frames", args.oracle_frames),
+              ("val_frames", args.oracle_val_frames), ("epochs", args.oracle_epochs),
+              ("threads", args.oracle_threads)) if v is not None}  # fmt: skip
+    return RobustifyConfig(
+        phenomenon=args.phenomenon,
+        domain=args.domain,
+        archive=args.archive,
+        model_id=args.new_id,
+        budget=args.budget,
+        search=args.search,
+        batch_images=args.batch_images,
+        search_round=args.round,
+        workers=args.workers,
+        thresholds=(float(args.thresholds[0]), float(args.thresholds[1])),
+        rule=SelectionRule(contexts=args.contexts, weights=tuple(args.weights)),
+        clean=args.clean,
+        finetune=Budget(
+            epochs=args.epochs, batch_size=args.batch_size, lr=args.lr, threads=args.threads
+        ),
+        seed=args.seed,
+        measure_contexts=args.measure_contexts,
+        oracle=oracle,
+    )
+
+
+def run_robustify(args: argparse.Namespace) -> int:
+    """Run (or continue) the chain; print the summary table (or JSON)."""
+    from pathlib import Path
+
+    from rich.console import Console
+    from rich.progress import (
+        BarColumn,
+        MofNCompleteColumn,
+        Progress,
+        TextColumn,
+        TimeElapsedColumn,
+    )
+
+    from anunnaki.enki import EnkiError, new_model_id, robustify
+    from anunnaki.lec import resolve_model
+
+    if args.budget < 1:
+        raise EnkiError(f"--budget must be a positive number of evaluations, got {args.budget}")
+    config = _config(args)
+    out = args.out
+    if out is None:
+        model = resolve_model(args.model, args.model_id)
+        out = str(Path("robustify") / (args.new_id or new_model_id(model.model_id, args.domain)))
+    console = Console(stderr=True, highlight=False)
+    columns = (TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn())
+    with Progress(*columns, TimeElapsedColumn(), console=console, disable=args.json) as bar:
+        task = bar.add_task("robustify", total=None)
+        last = {"stage": ""}
+
+        def progress(stage: str, done: int, total: int) -> None:
+            bar.update(task, description=stage, completed=done, total=total or None)
+            if not console.is_terminal and not args.json and stage != last["stage"]:
+                console.print(stage)  # a log gets a line per stage
+            last["stage"] = stage
+
+        summary = robustify(
+            args.model, args.data, out, config, model_in_id=args.model_id,
+            register=args.register, progress=progress,
+        )  # fmt: skip
+    if args.json:
+        print(json.dumps(summary, indent=2, sort_keys=True))
+        return 0
+    _print(summary)
+    return 0
+
+
+def _print(summary: dict[str, Any]) -> None:
+    from rich.console import Console
+    from rich.table import Table
+
+    m, model = summary["metrics"], summary["model"]
+    table = Table(title=f"{model['model_id']} ({model['domain']}) from "
+                  f"{summary['input']['model_id']}, {summary['phenomenon']}")  # fmt: skip
+    for col in ("F1", summary["input"]["model_id"], model["model_id"]):
+        table.add_column(col, justify="left" if col == "F1" else "right")
+    clean, on = m["clean"], m["archive_contexts"]
+    table.add_row(f"clean ({clean['split']})", f"{clean['input']:.3f}", f"{clean['new']:.3f}")
+    table.add_row(
+        f"{on['contexts']} archive contexts (val batch)",
+        f"{on['input']['f1']:.3f}",
+        f"{on['new']['f1']:.3f}",
+    )
+    table.add_row(
+        "  categories 0/1/2",
+        "/".join(map(str, on["input"]["categories"])),
+        "/".join(map(str, on["new"]["categories"])),
+    )
+    console = Console(highlight=False)
+    console.print(table)
+    a, t, sel = summary["archive"], summary["finetune"], summary["selection"]
+    lines = [
+        f"archive: {a['path']} ({a['evaluations']} contexts, categories "
+        f"{'/'.join(map(str, a['counts']))}{', reused' if a['reused'] else ''})",
+        f"selection: {sum(sel['counts'])} contexts, categories {'/'.join(map(str, sel['counts']))}",
+        f"fine-tune: {t['epochs']} epochs, {t['steps']} optimizer steps on {t['images']} "
+        f"images, seed {summary['seed']}",
+        f"model: {model['file']} (sha256 {model['sha256'][:16]}…)",
+        f"oracle: {summary['oracle']['file']} (sha256 {summary['oracle']['sha256'][:16]}…)",
+        f"assessment: {summary['assessment']['path']} (categories "
+        f"{'/'.join(map(str, summary['assessment']['counts']))})",
+    ]
+    if summary.get("reused_stages"):
+        lines.append(f"continued: {', '.join(summary['reused_stages'])} done before")
+    if "registered" in summary:
+        r = summary["registered"]
+        lines.append(f"registered {r['model_id']} ({r['domain']}) in {r['registry']}")
+    for line in lines:
+        console.print(line, soft_wrap=True)

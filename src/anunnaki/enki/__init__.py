@@ -1,0 +1,48 @@
+"""Enki: a robustified model per domain, from the contexts where the model fails (paper §3.3).
+
+``anunnaki robustify MODEL --data DATA --phenomenon P --domain NAME`` runs the chain
+(:func:`robustify`, docs/robustify.md): Enlil's search of P's parameter space against MODEL
+(or a given archive) → a diverse training set of its contexts, weighted toward categories 1
+and 2 while covering the whole space (:func:`select_contexts`, :class:`SelectionRule`) → a
+fine-tuned copy of MODEL on train frames perturbed by them, mixed with clean frames
+(:func:`finetune`; MODEL's file is only read) → the new model measured, assessed by Enlil and
+given its behavior oracle → optionally registered (:func:`anunnaki.lec.register_model`).
+Every stage is recorded in a work folder; a rerun continues after Ctrl-C or ``kill -9``.
+
+The fine-tune takes its training contexts from a :class:`ContextSource`, so that a
+comparison runs every arm with the same images, epochs, optimiser steps and seed
+(:class:`Budget`)::
+
+    from anunnaki.enki import ArchiveContexts, Budget, UniformContexts, finetune
+
+    enki = finetune("rover-default.safetensors", train, val,
+                    ArchiveContexts("hsl", selection.params), budget=Budget(epochs=8), seed=1)
+    rand = finetune("rover-default.safetensors", train, val,
+                    UniformContexts("hsl"), budget=Budget(epochs=8), seed=1)
+
+:class:`CorruptionMix` is the third source: each frame a random phenomenon of the library at
+a random strength. Needs the ``vision`` and ``enlil`` extras.
+"""
+
+from anunnaki.enki._chain import RobustifyConfig, archive_sha256, new_model_id, robustify
+from anunnaki.enki._errors import EnkiError
+from anunnaki.enki._finetune import Budget, finetune
+from anunnaki.enki._select import Selection, SelectionRule, select_contexts
+from anunnaki.enki._sources import ArchiveContexts, ContextSource, CorruptionMix, UniformContexts
+
+__all__ = [
+    "ArchiveContexts",
+    "Budget",
+    "ContextSource",
+    "CorruptionMix",
+    "EnkiError",
+    "RobustifyConfig",
+    "Selection",
+    "SelectionRule",
+    "UniformContexts",
+    "archive_sha256",
+    "finetune",
+    "new_model_id",
+    "robustify",
+    "select_contexts",
+]

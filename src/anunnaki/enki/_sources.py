@@ -1,0 +1,160 @@
+"""Context sources: what perturbs each training frame of a fine-tune (``TrainConfig.perturb``).
+
+A source is called on every training image, after the zoom, flip and recolouring of the
+training loop, with a random stream of its own (:data:`anunnaki.lec.Perturb`): arms that
+differ only in their source train on the same images, in the same order, with the same
+geometric augmentation. With probability ``clean`` the image stays clean; otherwise:
+
+- :class:`ArchiveContexts` (Enki): one of the selected contexts, uniformly;
+- :class:`UniformContexts` (random-context augmentation): a context drawn uniformly over the
+  phenomenon's normalised parameter space ``[0, 1]^d``;
+- :class:`CorruptionMix` (AugMix-style): a phenomenon of the library drawn uniformly, at a
+  random strength (:class:`anunnaki.lec.Augmenter`'s rule).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+
+from anunnaki.enki._errors import EnkiError
+from anunnaki.enlil import resolve_phenomenon, to_phenomenon_vector
+from anunnaki.phenomena import PHENOMENA, Phenomenon
+
+__all__ = ["ArchiveContexts", "ContextSource", "CorruptionMix", "UniformContexts"]
+
+Image = npt.NDArray[np.uint8]
+
+
+class ContextSource:
+    """Base of the sources: the clean share, the call, a JSON description.
+
+    Args:
+        clean: Share of training frames left clean, in ``[0, 1)``.
+
+    """
+
+    kind = "source"
+
+    def __init__(self, *, clean: float = 0.3) -> None:
+        if not 0.0 <= clean < 1.0:
+            raise EnkiError(f"the clean share must be in [0, 1), got {clean}")
+        self.clean = clean
+
+    def perturb(self, image: Image, rng: np.random.Generator) -> Image:
+        """Return *image* under one context of this source (never clean)."""
+        raise NotImplementedError
+
+    def __call__(self, image: Image, rng: np.random.Generator) -> Image:
+        """The training loop's hook: clean with probability ``clean``, else :meth:`perturb`."""
+        if rng.random() < self.clean:
+            return image
+        return self.perturb(image, rng)
+
+    def describe(self) -> dict[str, Any]:
+        """What the sidecar records about the source."""
+        return {"kind": self.kind, "clean": self.clean}
+
+
+def _apply(phen: Phenomenon, unit: npt.NDArray[np.float64], image: Image, seed: int) -> Image:
+    params = phen.from_vector(to_phenomenon_vector(phen, unit))
+    return phen.apply(image, params, seed=seed)
+
+
+class ArchiveContexts(ContextSource):
+    """Enki's source: the contexts selected from an archive (:func:`select_contexts`).
+
+    Args:
+        phenomenon: The phenomenon (or composition) the contexts are of.
+        contexts: ``[n, d]`` normalised contexts.
+        clean: Share of clean frames.
+
+    """
+
+    kind = "archive"
+
+    def __init__(
+        self, phenomenon: str | Phenomenon, contexts: npt.ArrayLike, *, clean: float = 0.3
+    ) -> None:
+        super().__init__(clean=clean)
+        self.phenomenon = resolve_phenomenon(phenomenon)
+        self.contexts = np.asarray(contexts, np.float64)
+        d = len(self.phenomenon.param_names)
+        if self.contexts.ndim != 2 or self.contexts.shape[1] != d or len(self.contexts) == 0:
+            raise EnkiError(
+                f"{self.phenomenon.name}: give at least one context of {d} parameters "
+                f"{list(self.phenomenon.param_names)}, got shape {self.contexts.shape}"
+            )
+
+    def perturb(self, image: Image, rng: np.random.Generator) -> Image:
+        """One of the contexts, drawn uniformly."""
+        unit = self.contexts[int(rng.integers(len(self.contexts)))]
+        return _apply(self.phenomenon, unit, image, int(rng.integers(2**31 - 1)))
+
+    def describe(self) -> dict[str, Any]:
+        """Kind, clean share, phenomenon and number of contexts."""
+        return super().describe() | {
+            "phenomenon": self.phenomenon.name,
+            "contexts": len(self.contexts),
+        }
+
+
+class UniformContexts(ContextSource):
+    """Random-context augmentation: contexts uniform over ``[0, 1]^d`` of one phenomenon."""
+
+    kind = "uniform"
+
+    def __init__(self, phenomenon: str | Phenomenon, *, clean: float = 0.3) -> None:
+        super().__init__(clean=clean)
+        self.phenomenon = resolve_phenomenon(phenomenon)
+
+    def perturb(self, image: Image, rng: np.random.Generator) -> Image:
+        """A uniformly random context."""
+        unit = rng.random(len(self.phenomenon.param_names))
+        return _apply(self.phenomenon, unit, image, int(rng.integers(2**31 - 1)))
+
+    def describe(self) -> dict[str, Any]:
+        """Kind, clean share and phenomenon."""
+        return super().describe() | {"phenomenon": self.phenomenon.name}
+
+
+class CorruptionMix(ContextSource):
+    """A corruption mix: each frame a random phenomenon of the library at a random strength.
+
+    Args:
+        phenomena: The library (default: every registered phenomenon).
+        exclude: Names left out (a family held out from training).
+        clean: Share of clean frames.
+
+    """
+
+    kind = "corruption_mix"
+
+    def __init__(
+        self,
+        phenomena: Sequence[str | Phenomenon] | None = None,
+        *,
+        exclude: Sequence[str] = (),
+        clean: float = 0.3,
+    ) -> None:
+        super().__init__(clean=clean)
+        from anunnaki.lec import Augmenter
+
+        names = list(phenomena) if phenomena is not None else list(PHENOMENA.names())
+        for name in exclude:
+            PHENOMENA.create(name)  # an unknown name fails, listing the valid ones
+        kept = [p for p in names if (p if isinstance(p, str) else p.name) not in set(exclude)]
+        if not kept:
+            raise EnkiError(f"the corruption mix has no phenomenon left after excluding {exclude}")
+        self.augmenter = Augmenter(kept, probability=1.0)
+
+    def perturb(self, image: Image, rng: np.random.Generator) -> Image:
+        """A random phenomenon of the library at a random strength."""
+        return self.augmenter(image, rng)
+
+    def describe(self) -> dict[str, Any]:
+        """Kind, clean share and the library."""
+        return super().describe() | {"phenomena": self.augmenter.names}

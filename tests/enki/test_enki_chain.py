@@ -1,0 +1,181 @@
+"""``anunnaki robustify`` end to end on tiny data: JSON, sidecar, oracle, registry, resume."""
+
+from __future__ import annotations
+
+import contextlib
+import io
+import json
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+import pytest
+from enki_helpers import TINY as _TINY
+from enki_helpers import argv
+
+pytest.importorskip("torch")
+
+from anunnaki.cli.main import build_parser, main
+from anunnaki.enki import archive_sha256, robustify
+from anunnaki.enlil import load_oracle, read_archive
+from anunnaki.lec import (
+    ModelRegistryError,
+    load_detector,
+    load_registry,
+    read_card,
+    register_model,
+    sha256_file,
+)
+
+MODELS = Path(__file__).resolve().parents[2] / "examples" / "models"
+ALL_STAGES = ["search", "select", "finetune", "measure", "assess", "oracle"]
+
+
+def _run(args: list[str]) -> dict[str, Any]:
+    printed = io.StringIO()
+    with contextlib.redirect_stdout(printed):
+        assert main([*args, "--json"]) == 0
+    result: dict[str, Any] = json.loads(printed.getvalue())
+    return result
+
+
+@pytest.fixture(scope="module")
+def chain(rover_data: Path, tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
+    """One chain run with --register into a copy of examples/models; hashes before and after."""
+    tmp = tmp_path_factory.mktemp("chain")
+    models = tmp / "models"
+    shutil.copytree(MODELS, models)
+    model = models / "rover-default.safetensors"
+    before = {p.name: sha256_file(p) for p in (model, model.with_suffix(".json"))}
+    reg = models / "rover.yaml"
+    summary = _run(argv(model, rover_data, tmp / "work", "--register", str(reg)))
+    after = {p.name: sha256_file(p) for p in (model, model.with_suffix(".json"))}
+    return {"summary": summary, "before": before, "after": after, "tmp": tmp,
+            "model": model, "registry": reg, "data": rover_data}  # fmt: skip
+
+
+def test_the_chain_makes_a_model_its_sidecar_and_its_oracle(chain: dict[str, Any]) -> None:
+    s = chain["summary"]
+    assert s["model"]["model_id"] == "rover-enki" and s["model"]["domain"] == "low_light"
+    assert s["reused_stages"] == []
+    file = Path(s["model"]["file"])
+    assert sha256_file(file) == s["model"]["sha256"]
+    det = load_detector(file)
+    assert det.domain == "low_light" and det.model_id == "rover-enki"
+    card = read_card(file)
+    enki = card.training["enki"]
+    assert enki["phenomenon"] == "brightness" and enki["domain"] == "low_light"
+    assert enki["archive"]["sha256"] == archive_sha256(s["archive"]["path"])
+    assert enki["from"]["sha256"] == chain["before"]["rover-default.safetensors"]
+    # the budget: 8 train images in batches of 4, 2 epochs
+    assert enki["budget"]["epochs"] == 2 and enki["budget"]["steps"] == 4 == s["finetune"]["steps"]
+    assert set(enki["seeds"]) == {"search", "finetune", "measure", "assess", "oracle"}
+    assert sum(enki["selection"]["counts"]) == 4
+    measured = card.metrics["enki"]
+    assert measured["clean"]["split"] == "test" and 0.0 <= measured["clean"]["new"] <= 1.0
+    # 3 of the 6 contexts: the 2 not trained on, and 1 trained on
+    assert measured["archive_contexts"]["contexts"] == 3
+    assert measured["archive_contexts"]["used_in_training"] == 1
+    assert measured == s["metrics"]
+    # Enlil assessed the new model, and its oracle is of the new model's weights
+    assessed = read_archive(s["assessment"]["path"])
+    assert assessed.meta.model_id == "rover-enki" and assessed.meta.sha256 == s["model"]["sha256"]
+    oracle = load_oracle(s["oracle"]["file"], sha256=s["oracle"]["sha256"])
+    assert oracle.model_id == "rover-enki"
+    assert oracle.card.model_sha256 == s["model"]["sha256"]
+
+
+def test_the_input_model_is_never_modified(chain: dict[str, Any]) -> None:
+    assert chain["after"] == chain["before"]
+
+
+def test_register_adds_entries_a_registry_loads(chain: dict[str, Any]) -> None:
+    s, reg = chain["summary"], chain["registry"]
+    registry = load_registry(reg)
+    assert registry.verify("rover-enki") == s["model"]["sha256"]
+    spec = registry.get("rover-enki")
+    assert spec.domain == "low_light" and spec.oracle is not None
+    assert spec.oracle.sha256 == s["oracle"]["sha256"]
+    load_oracle(spec.oracle.file, sha256=spec.oracle.sha256)
+    text = reg.read_text()
+    original = (MODELS / "rover.yaml").read_text()
+    assert text.startswith(original.rstrip("\n"))  # other entries and comments kept
+    assert {"rover-default", "rover-fog", "rover-low_light"} <= set(registry.ids())
+    with pytest.raises(ModelRegistryError, match="registered already"):
+        register_model(reg, s["model"]["file"], model_id="rover-enki")
+    assert reg.read_text() == text
+
+
+def test_a_rerun_continues_and_a_changed_option_is_refused(
+    chain: dict[str, Any], capsys: pytest.CaptureFixture[str]
+) -> None:
+    work = chain["tmp"] / "work"
+    again = _run(argv(chain["model"], chain["data"], work, "--register", str(chain["registry"])))
+    assert again["reused_stages"] == ALL_STAGES
+    assert again["model"] == chain["summary"]["model"]
+    capsys.readouterr()
+    changed = argv(chain["model"], chain["data"], work)
+    changed[changed.index("--epochs") + 1] = "3"
+    assert main(changed) == 2
+    err = capsys.readouterr().err
+    assert "finetune" in err and "epochs" in err and "another --out" in err
+
+
+def test_resume_after_an_interruption_mid_fine_tune(chain: dict[str, Any]) -> None:
+    """Ctrl-C in the fine-tune's second epoch; the rerun ends with the same weights."""
+    from anunnaki.cli._robustify import _config
+
+    work = chain["tmp"] / "resumed"
+    args = build_parser().parse_args(
+        argv(chain["model"], chain["data"], work, "--archive", chain["summary"]["archive"]["path"])
+    )
+    config = _config(args)
+    assert "--threads" in _TINY
+
+    def interrupt(stage: str, done: int, total: int) -> None:
+        if stage.startswith("fine-tune, epoch 2"):
+            raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt):
+        robustify(chain["model"], chain["data"], work, config, progress=interrupt)
+    assert [p.name for p in (work / "finetune").glob("epoch-*.pt")] == ["epoch-001.pt"]
+    assert not (work / "stages" / "finetune.json").exists()
+    summary = robustify(chain["model"], chain["data"], work, config)
+    assert summary["reused_stages"] == ["search", "select"]
+    assert summary["model"]["sha256"] == chain["summary"]["model"]["sha256"]
+    assert summary["metrics"] == chain["summary"]["metrics"]
+
+
+def test_kill_9_mid_fine_tune_then_the_same_command_continues(chain: dict[str, Any]) -> None:
+    """kill -9 once a fine-tune checkpoint is on disk; the rerun matches a straight run."""
+
+    def args(out: Path) -> list[str]:
+        a = argv(
+            chain["model"], chain["data"], out, "--archive", chain["summary"]["archive"]["path"]
+        )
+        a[a.index("--epochs") + 1] = "12"
+        return a
+
+    out = chain["tmp"] / "killed"
+    cmd = [sys.executable, "-m", "anunnaki", *args(out), "--json"]
+    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    try:
+        deadline = time.monotonic() + 120
+        while not list((out / "finetune").glob("epoch-*.pt")):
+            assert proc.poll() is None, "robustify ended before it could be killed"
+            assert time.monotonic() < deadline, "no fine-tune checkpoint in 120 s"
+            time.sleep(0.05)
+    finally:
+        os.kill(proc.pid, signal.SIGKILL)
+        proc.wait()
+    assert not (out / "stages" / "finetune.json").exists()
+    resumed = _run(args(out))
+    assert resumed["reused_stages"] == ["search", "select"]
+    straight = _run(args(chain["tmp"] / "straight"))
+    assert resumed["model"]["sha256"] == straight["model"]["sha256"]
+    assert resumed["finetune"]["steps"] == straight["finetune"]["steps"] == 24

@@ -1,0 +1,70 @@
+"""Bad input to ``anunnaki robustify``: the error names the thing and the fix."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+from enki_helpers import argv
+
+pytest.importorskip("torch")
+
+import numpy as np
+
+from anunnaki.cli.main import main
+from anunnaki.enlil import ArchiveMeta, ArchiveWriter, ContextResult
+
+
+def _fails(args: list[str], capsys: pytest.CaptureFixture[str]) -> str:
+    assert main(args) == 2
+    return capsys.readouterr().err
+
+
+def _archive(path: Path, *, phenomenon: str, params: tuple[str, ...], sha: str) -> Path:
+    meta = ArchiveMeta(
+        model_id="rover-default", sha256=sha, dataset="d", split="val", phenomenon=phenomenon,
+        param_names=params, seed=0, thresholds=(0.05, 0.10), budget=2, search="sobol",
+        batch_images=4, clean_f1=0.9,
+    )  # fmt: skip
+    writer = ArchiveWriter(path, meta)
+    results = [ContextResult(np.full(len(params), v), 0.5, 0.4, 2) for v in (0.2, 0.8)]
+    writer.append(0, 0, results)
+    return path
+
+
+def test_an_unknown_phenomenon(
+    models: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    args = argv(models / "rover-default.safetensors", tmp_path, tmp_path / "w")
+    args[args.index("brightness")] = "fgo"
+    err = _fails(args, capsys)
+    assert "--phenomenon fgo" in err and "fog" in err  # the valid names are listed
+
+
+def test_missing_data(models: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    err = _fails(argv(models / "rover-default.safetensors", tmp_path / "nope", tmp_path / "w"),
+                 capsys)  # fmt: skip
+    assert f"--data {tmp_path / 'nope'}" in err and "make-dataset" in err
+    (tmp_path / "empty").mkdir()
+    err = _fails(argv(models / "rover-default.safetensors", tmp_path / "empty", tmp_path / "w"),
+                 capsys)  # fmt: skip
+    assert "no readable train split" in err
+
+
+def test_an_archive_of_another_phenomenon_or_model(
+    models: Path, rover_data: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    from anunnaki.lec import sha256_file
+
+    model = models / "rover-default.safetensors"
+    fog = _archive(tmp_path / "fog", phenomenon="fog", params=("density",), sha=sha256_file(model))
+    err = _fails([*argv(model, rover_data, tmp_path / "w1"), "--archive", str(fog)], capsys)
+    assert f"--archive {fog}" in err and "search of fog, not of --phenomenon brightness" in err
+    other = _archive(tmp_path / "other", phenomenon="brightness", params=("gain", "gamma"),
+                     sha=sha256_file(models / "rover-fog.safetensors"))  # fmt: skip
+    err = _fails([*argv(model, rover_data, tmp_path / "w2"), "--archive", str(other)], capsys)
+    assert f"--archive {other}" in err and "not " + str(model) in err
+    assert "leave --archive out" in err
+    err = _fails([*argv(model, rover_data, tmp_path / "w3"), "--archive", str(tmp_path / "x")],
+                 capsys)  # fmt: skip
+    assert str(tmp_path / "x") in err and "no archive here" in err
