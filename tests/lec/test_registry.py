@@ -11,18 +11,20 @@ from typing import Any
 import pytest
 
 from anunnaki.errors import AnunnakiError, ModelFileError
-from anunnaki.lec import DetectorLoadError, load_detector, sha256_file
-from anunnaki.lec._detector import DetectionResult
-from anunnaki.lec._registry import (
+from anunnaki.lec import (
+    DetectorLoadError,
     ModelIntegrityError,
     ModelLoadError,
     ModelRegistry,
     ModelRegistryError,
     ModelSpec,
     UnknownModelError,
+    load_detector,
     load_registry,
     parse_registry,
+    sha256_file,
 )
+from anunnaki.lec._detector import DetectionResult
 
 
 class FakeDetector:

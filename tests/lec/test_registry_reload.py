@@ -26,8 +26,7 @@ from lec_helpers import Collector
 from anunnaki import topics
 from anunnaki.bus import Bus, ServiceError, open_bus
 from anunnaki.errors import ModelFileError
-from anunnaki.lec import load_registry
-from anunnaki.lec._node import LecNode
+from anunnaki.lec import LecNode, load_registry
 from anunnaki.messages import Detections, Image
 from anunnaki.tokens import OPERATOR_TOKEN_ENV
 

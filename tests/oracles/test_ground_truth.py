@@ -10,7 +10,7 @@ from typing import Any
 import numpy as np
 import pytest
 
-from anunnaki.lec._registry import ModelRegistry
+from anunnaki.lec import ModelRegistry
 from anunnaki.messages import Detections
 from anunnaki.oracles import (
     GroundTruthAssessor,

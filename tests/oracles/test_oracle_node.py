@@ -14,9 +14,8 @@ import numpy as np
 import pytest
 
 from anunnaki.bus import Bus, Sample, open_bus
+from anunnaki.lec import LecNode, ModelRegistry
 from anunnaki.lec._detector import DetectionResult
-from anunnaki.lec._node import LecNode
-from anunnaki.lec._registry import ModelRegistry
 from anunnaki.messages import Assessment, Detections, Image
 from anunnaki.oracles import GroundTruthAssessor, OracleError, OracleNode
 

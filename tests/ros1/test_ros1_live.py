@@ -22,9 +22,8 @@ from ros1_support import DEADLINE, ROVER, Proc, RosSetup, need_ros
 
 from anunnaki.bus import Bus, open_bus
 from anunnaki.goals import load_binding, parse_goal_model
+from anunnaki.lec import LecNode, ModelRegistry
 from anunnaki.lec._detector import DetectionResult
-from anunnaki.lec._node import LecNode
-from anunnaki.lec._registry import ModelRegistry
 from anunnaki.messages import Detections
 from anunnaki.tactics import load_tactics
 from anunnaki.utu import AutonomicManager

@@ -75,8 +75,15 @@ from anunnaki.lec._metrics import (
     f1_at_iou,
     match_image,
 )
-from anunnaki.lec._node import LecNode, LecNodeStats, SwapResult, decode_image, detections_topic
-from anunnaki.lec._register import register_model as register_model
+from anunnaki.lec._node import (
+    LecNode,
+    LecNodeStats,
+    ReloadResult,
+    SwapResult,
+    decode_image,
+    detections_topic,
+)
+from anunnaki.lec._register import register_model
 from anunnaki.lec._registry import (
     DEFAULT_DOMAIN,
     REGISTRY_FORMAT,
@@ -86,6 +93,7 @@ from anunnaki.lec._registry import (
     ModelRegistryError,
     ModelSpec,
     OracleRef,
+    RegistryChange,
     ResolvedModel,
     UnknownModelError,
     load_registry,
@@ -139,6 +147,8 @@ __all__ = [
     "OracleRef",
     "Perturb",
     "ReadsFiles",
+    "RegistryChange",
+    "ReloadResult",
     "ResolvedModel",
     "SharedClassesDetector",
     "SwapResult",
@@ -162,6 +172,7 @@ __all__ = [
     "parse_registry",
     "predict",
     "read_card",
+    "register_model",
     "resolve_model",
     "save_detector",
     "sha256_file",
