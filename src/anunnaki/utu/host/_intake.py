@@ -14,14 +14,14 @@ simulation, replay) takes ``intake`` per topic, so it stays deterministic.
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Callable, Iterable, Mapping
 from typing import Any
 
 from anunnaki.bus import Subscriber
 from anunnaki.clock import Clock, SimClock
 from anunnaki.messages import body_of
 
-__all__ = ["FIRST", "FLOOR", "IntakeBudget", "take_clock", "take_inputs"]
+__all__ = ["FIRST", "FLOOR", "IntakeBudget", "MonitoredTopics", "take_clock", "take_inputs"]
 
 #: One input of a step: (topic, message body, arrival time or ``None`` for the step's time).
 Input = tuple[str, dict[str, Any], float | None]
@@ -80,6 +80,45 @@ def take_inputs(subs: Mapping[str, Subscriber], limit: int, *, wall: bool) -> li
                 break
             inputs.append((topic, body_of(sample.message), sample.sent_at if wall else None))
     return inputs
+
+
+class MonitoredTopics:
+    """The bounded pull subscribers of the topics a host monitors (guideline S1), by topic.
+
+    Every host (the inline manager, the monitor node) keeps its inputs here: a flood on one
+    topic cannot starve the others, and a step takes what arrived before it.
+
+    Args:
+        subscribe: Declares the host's pull subscriber of one topic (with the host's
+            doorbell, closed with the host).
+
+    """
+
+    def __init__(self, subscribe: Callable[[str], Subscriber]) -> None:
+        self._subscribe = subscribe
+        self.subs: dict[str, Subscriber] = {}
+
+    def watch(self, topics: Iterable[str]) -> None:
+        """Subscribe each of ``topics`` not watched yet (a reload may watch new ones)."""
+        for topic in topics:
+            if topic not in self.subs:
+                self.subs[topic] = self._subscribe(topic)
+
+    def take(self, limit: int, *, wall: bool) -> list[Input]:
+        """At most ``limit`` queued messages of each topic (:func:`take_inputs`)."""
+        return take_inputs(self.subs, limit, wall=wall)
+
+    def queues(self) -> list[Subscriber]:
+        """The bounded queues, one a topic."""
+        return list(self.subs.values())
+
+    @property
+    def pending(self) -> bool:
+        """Whether a message waits on any topic."""
+        return any(sub.pending for sub in self.subs.values())
+
+    def __len__(self) -> int:
+        return len(self.subs)
 
 
 def take_clock(clock: Clock, sub: Subscriber | None) -> None:
