@@ -135,8 +135,12 @@ class OperatorDesk:
     def declare(self, bus: Bus) -> list[Any]:
         """Offer the operator services on ``bus`` and watch the agents' nodes.
 
-        Returns what was declared (the host closes it).
+        The operator token is resolved here, by the one host that offers the services
+        (:meth:`~anunnaki.utu.UtuConfig.operator_token`: the user's token file is written
+        first if none is given), never by a host without a bus. Returns what was declared
+        (the host closes it).
         """
+        self.stage.operator_token = self.stage.parts.config.operator_token()
         declared: list[Any] = [
             bus.service(service, self._handler(op))
             for op, service in topics.OPERATOR_SERVICES.items()
