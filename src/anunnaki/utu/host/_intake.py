@@ -21,7 +21,16 @@ from anunnaki.bus import Subscriber
 from anunnaki.clock import Clock, SimClock
 from anunnaki.messages import body_of
 
-__all__ = ["FIRST", "FLOOR", "IntakeBudget", "MonitoredTopics", "take_clock", "take_inputs"]
+__all__ = [
+    "CLOCK_QUEUE",
+    "FIRST",
+    "FLOOR",
+    "IntakeBudget",
+    "MonitoredTopics",
+    "clock_feed",
+    "take_clock",
+    "take_inputs",
+]
 
 #: One input of a step: (topic, message body, arrival time or ``None`` for the step's time).
 Input = tuple[str, dict[str, Any], float | None]
@@ -31,6 +40,9 @@ FLOOR = 16
 
 FIRST = 64
 """The limit until a step has measured what an input costs (then it follows the budget)."""
+
+CLOCK_QUEUE = 64
+"""Depth of a host's ``/clock`` queue, and how many times a step applies at most."""
 
 
 class IntakeBudget:
@@ -121,15 +133,27 @@ class MonitoredTopics:
         return len(self.subs)
 
 
+def clock_feed(
+    clock: Clock, topic: str, subscribe: Callable[[str, int], Subscriber]
+) -> Subscriber | None:
+    """The ``/clock`` queue of a host whose clock is the simulation's (else ``None``).
+
+    ``subscribe(topic, depth)`` declares the host's pull subscriber; :func:`take_clock`
+    applies what it holds at the start of each step, after the inputs: a message published
+    after its instant's ``/clock`` is never stamped with an earlier time.
+    """
+    return subscribe(topic, CLOCK_QUEUE) if isinstance(clock, SimClock) else None
+
+
 def take_clock(clock: Clock, sub: Subscriber | None) -> None:
     """Apply the simulation times queued on ``sub`` (the ``/clock`` topic) to ``clock``.
 
-    At most 64 a call: a ``/clock`` flood must not hold the step. Nothing happens on a
-    wall clock or without a subscriber.
+    At most :data:`CLOCK_QUEUE` a call: a ``/clock`` flood must not hold the step. Nothing
+    happens on a wall clock or without a subscriber.
     """
     if sub is None or not isinstance(clock, SimClock):
         return
-    for _ in range(64):
+    for _ in range(CLOCK_QUEUE):
         if (sample := sub.try_recv()) is None:
             break
         t = getattr(sample.message, "time", None)

@@ -43,7 +43,7 @@ from typing import Any
 from anunnaki import topics
 from anunnaki._closing import Closing
 from anunnaki.bus import InprocBus
-from anunnaki.clock import Clock, SimClock, WallClock
+from anunnaki.clock import Clock, WallClock
 from anunnaki.errors import AnunnakiError
 from anunnaki.goals import GoalModel
 from anunnaki.messages import AnalysisState, body_of
@@ -69,7 +69,7 @@ from anunnaki.utu.host._host import (
     take_up,
     watched,
 )
-from anunnaki.utu.host._intake import IntakeBudget, MonitoredTopics, take_clock
+from anunnaki.utu.host._intake import IntakeBudget, MonitoredTopics, clock_feed, take_clock
 from anunnaki.utu.host._threads import ThreadRunner
 
 __all__ = ["AutonomicManager"]
@@ -255,11 +255,7 @@ class AutonomicManager(Closing):
 
     def _connect(self, bus: Any) -> None:
         self._pull.watch(self.monitor_stage.topics)
-        if isinstance(self.clock, SimClock):
-            # Pulled at the start of each step, after the inputs: a message published
-            # after its instant's /clock is never stamped with an earlier time.
-            self._clock_sub = bus.subscribe(self.parts.config.clock_topic, queue=64)
-            self._declared.append(self._clock_sub)
+        self._clock_sub = clock_feed(self.clock, self.parts.config.clock_topic, self._subscribe)
         who = f"utu:{self.name}"
         self._declared.append(listen_run_stop(bus, self.name, who, self.desk.heard_run_stop))
         self._declared += self.desk.declare(bus)
@@ -279,8 +275,11 @@ class AutonomicManager(Closing):
     def _subscribe_topic(self, topic: str) -> Any:
         # ``step`` drains the queue, so a step sees exactly what arrived before it; the
         # doorbell reacts the moment a message is queued.
+        return self._subscribe(topic, self.parts.config.queue, on_ready=self._arrived)
+
+    def _subscribe(self, topic: str, queue: int, **kwargs: Any) -> Any:
         assert self.bus is not None
-        sub = self.bus.subscribe(topic, queue=self.parts.config.queue, on_ready=self._arrived)
+        sub = self.bus.subscribe(topic, queue=queue, **kwargs)
         self._declared.append(sub)
         return sub
 

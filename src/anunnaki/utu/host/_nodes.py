@@ -50,7 +50,7 @@ from typing import Any, ClassVar, cast
 
 from anunnaki import topics
 from anunnaki.bus import Bus, Node, Sample, Subscriber
-from anunnaki.clock import Clock, SimClock, WallClock
+from anunnaki.clock import Clock, WallClock
 from anunnaki.errors import AnunnakiError
 from anunnaki.messages import (
     MAX_BATCH,
@@ -89,7 +89,7 @@ from anunnaki.utu.host._host import (
     take_up,
     watched,
 )
-from anunnaki.utu.host._intake import MonitoredTopics, take_clock
+from anunnaki.utu.host._intake import MonitoredTopics, clock_feed, take_clock
 
 __all__ = [
     "NODE_NAMES",
@@ -178,8 +178,9 @@ class UtuNode(Node):
 
     def declare(self) -> None:
         """Declare the run-stop subscription, the clock, then the node's own (:meth:`bring_up`)."""
-        if isinstance(self.clock, SimClock) and self.uses_clock:
-            self._clock_sub = self.pull(self.config.clock_topic, queue=64)
+        if self.uses_clock:
+            topic = self.config.clock_topic
+            self._clock_sub = clock_feed(self.clock, topic, lambda t, q: self.pull(t, queue=q))
         self.own(listen_run_stop(self.bus, self.config.name, self.name, self._heard_run_stop))
         self.bring_up()
 
