@@ -4,6 +4,11 @@
 :mod:`anunnaki.utu.cycle` called one after the other — the same code the per-node
 deployment runs, here with direct calls instead of bus hops. ``step(now)`` runs one
 deterministic cycle — tests, simulation and replay drive it — and ``spin()`` runs it live.
+What it adds around the stages (operator desk, run-stop, the watchdog around its loop,
+readiness, the execute side with its actuator, threads and notifier, the monitored topics'
+queues) is the code the nodes use too (:mod:`~anunnaki.utu.host._desk`,
+:mod:`~anunnaki.utu.host._host`, :mod:`~anunnaki.utu.host._intake`). Why it calls the
+stages rather than the node classes: docs/architecture.md ("Where a goal update flows").
 
 Why reaction is event-driven and rates bound only time
     In ``spin()`` a message on a monitored topic is analysed the moment it arrives: on the
