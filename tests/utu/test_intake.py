@@ -73,7 +73,7 @@ def test_a_live_loop_takes_what_fits_its_budget_and_a_driven_step_takes_intake()
     flood = Endless()
     with open_bus("inproc") as bus:
         m = AutonomicManager.from_config(cfg, bus=bus, actuator=RecordingActuator())
-        m._pull["/rover/ultrasonic"] = flood
+        m._pull.subs["/rover/ultrasonic"] = flood
         per_step: list[int] = []
         stop = threading.Event()
 
@@ -91,5 +91,5 @@ def test_a_live_loop_takes_what_fits_its_budget_and_a_driven_step_takes_intake()
             m.step()  # driven, not spinning: deterministic, a full ``intake``
             assert flood.taken - before == cfg.intake
         finally:
-            m._pull.clear()
+            m._pull.subs.clear()
             m.close()

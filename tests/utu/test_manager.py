@@ -589,14 +589,14 @@ def test_a_flood_does_not_hold_a_step(tmp_path: Path) -> None:
             rover_model(), load_tactics(ROVER / "tactics.xml"), bus=bus, queue=16,
             actuator=RecordingActuator(),
         )  # fmt: skip
-        m._pull["/rover/status"] = Endless()
+        m._pull.subs["/rover/status"] = Endless()
         try:
             for t in (1.0, 2.0, 3.0):
                 m.step(t)  # returns: the flood is taken a queue at a time
             assert Endless.taken == 3 * 16
             assert m.analyze_stage.taken == 3 * 16
         finally:
-            m._pull.clear()
+            m._pull.subs.clear()
             m.close()
     # ``intake`` bounds it below the queue (a deployment that expects floods).
     Endless.taken = 0
@@ -609,12 +609,12 @@ def test_a_flood_does_not_hold_a_step(tmp_path: Path) -> None:
             bus=bus,
             actuator=RecordingActuator(),
         )
-        m._pull["/rover/status"] = Endless()
+        m._pull.subs["/rover/status"] = Endless()
         try:
             m.step(1.0)
             assert Endless.taken == m.parts.config.intake == 64
         finally:
-            m._pull.clear()
+            m._pull.subs.clear()
             m.close()
 
 

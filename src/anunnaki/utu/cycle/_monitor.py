@@ -30,13 +30,21 @@ class MonitorStage:
     Each input keeps its own arrival time (the sender's stamp on wall time, else the
     cycle's), clamped into ``(previous cycle, this cycle]``: a burst taken by one cycle
     keeps its spacing, so ``rate(A)`` and temporal goals see what really happened.
+
+    Attributes:
+        operator_token: The token pause, resume, approve and reload requests must carry;
+            ``None`` (as built) until a host offers the operator services on a bus and sets
+            it (:meth:`~anunnaki.utu.host.OperatorDesk.declare`): a manager without a bus
+            (a replay, a test) takes calls only from its own process, and never reads or
+            writes the user's token file.
+
     """
 
     def __init__(self, parts: UtuParts, *, origin: str = "") -> None:
         self.origin = origin
         self.seq = 0
         self.last_t = 0.0  # inputs are never stamped before the start of time
-        self.operator_token = parts.config.operator_token()
+        self.operator_token: str | None = None
         self.unauthorised = 0  # operator requests refused for want of the token
         self.set_parts(parts)
 

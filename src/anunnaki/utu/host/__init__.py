@@ -4,13 +4,16 @@
   the five stage nodes (one process each, or several in one process);
 * ``_manager``: :class:`AutonomicManager`, the five stages run inline on one thread, handing
   each other their messages by direct call;
-* ``_desk``: what both hosts call, written once — the operator desk, run-stop listening and
-  announcement, the watchdog, the decisions publication;
+* ``_desk``, ``_host``: what both hosts call, written once — the operator desk, run-stop
+  listening and announcement, the watchdog's run-stop, the decisions feed (``_desk``); the
+  host's clock, the watchdog around a live loop, a stage's bring-up on a run's knowledge,
+  the execute side (actuator, action threads, notifier), the token and readiness of a node
+  stood for (``_host``);
 * ``_actuators``: how actions reach the managed system (over the bus, or recorded);
 * ``_threads``: actions off the loop's path (worker threads);
-* ``_intake``, ``_peers``, ``_notify``: what a step takes from the monitored topics and
-  ``/clock`` (and a live step's budget), the watch over the nodes of other processes,
-  notifications.
+* ``_intake``, ``_peers``, ``_notify``: the monitored topics' queues and what a step takes
+  from them and from ``/clock`` (and a live step's budget), the watch over the nodes of
+  other processes, notifications.
 
 The public names are re-exported by :mod:`anunnaki.utu`.
 """

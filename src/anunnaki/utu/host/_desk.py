@@ -12,7 +12,7 @@ Run-stop, written once too: every host listens on ``/utu/run_stop`` through
 performs (:func:`execute_stage`, :func:`announce_run_stop`). A stuck loop is the one thing
 that cannot wait for the next cycle: the watchdog of a host's loop (:func:`loop_watchdog`)
 tells the platform from its own thread (:func:`watchdog_run_stop`), the same way in every
-host. :class:`Throttle` paces the decisions publication (:func:`publish_decisions`).
+host. :class:`DecisionFeed` publishes new decisions at a rate, for every host.
 """
 
 from __future__ import annotations
@@ -25,7 +25,6 @@ from typing import Any
 
 from anunnaki import topics
 from anunnaki.bus import Bus, Sample, Subscriber
-from anunnaki.clock import Clock, SimClock
 from anunnaki.errors import AnunnakiError
 from anunnaki.messages import RunStop, body_of
 from anunnaki.utu._config import UtuConfig
@@ -39,16 +38,13 @@ from anunnaki.utu.cycle._parts import UtuParts
 from anunnaki.utu.host._actuators import stop_platform
 
 __all__ = [
+    "DecisionFeed",
     "OperatorDesk",
-    "Throttle",
     "Watchdog",
     "announce_run_stop",
     "execute_stage",
-    "idle_wait",
     "listen_run_stop",
     "loop_watchdog",
-    "publish_decisions",
-    "ready_fields",
     "watchdog_run_stop",
 ]
 
@@ -139,8 +135,12 @@ class OperatorDesk:
     def declare(self, bus: Bus) -> list[Any]:
         """Offer the operator services on ``bus`` and watch the agents' nodes.
 
-        Returns what was declared (the host closes it).
+        The operator token is resolved here, by the one host that offers the services
+        (:meth:`~anunnaki.utu.UtuConfig.operator_token`: the user's token file is written
+        first if none is given), never by a host without a bus. Returns what was declared
+        (the host closes it).
         """
+        self.stage.operator_token = self.stage.parts.config.operator_token()
         declared: list[Any] = [
             bus.service(service, self._handler(op))
             for op, service in topics.OPERATOR_SERVICES.items()
@@ -208,17 +208,6 @@ def loop_watchdog(
     return Watchdog(fire, max(limit, floor))
 
 
-def idle_wait(clock: Clock, period: float) -> float:
-    """Seconds of wall time an idle loop waits for work.
-
-    ``period`` on the wall clock; on a simulation clock the period scaled by its speed (at
-    most 0.5 s).
-    """
-    if isinstance(clock, SimClock) and clock.speed > 0:
-        return min(period / max(clock.speed, 0.05), 0.5)
-    return period
-
-
 def announce_run_stop(bus: Bus, utu: str, caller: str, reason: str) -> None:
     """Tell every part of Utu ``utu`` and any dashboard that it performs a run-stop.
 
@@ -255,31 +244,34 @@ def execute_stage(
     return ExecuteStage(parts, knowledge, actuator, on_run_stop=announce, runner=runner)
 
 
-def ready_fields(utu: str, rate: float, run_stopped: bool) -> dict[str, Any]:
-    """What every host's readiness reply (``/utu/<node>/ready``) says of Utu ``utu``."""
-    return {"utu": utu, "rate": rate, "run_stopped": run_stopped}
+class DecisionFeed:
+    """New decisions of a knowledge base on ``/utu/knowledge/decisions``, for dashboards and logs.
 
+    ``{decisions: [{id, t, kind, tactic, data}]}``, each decision once, from those written
+    after the feed was made (by any writer of the knowledge base).
 
-def publish_decisions(bus: Bus, tail: DecisionTail) -> bool:
-    """Publish the decisions written since the last call; returns whether there were any.
+    Args:
+        bus: Where to publish.
+        knowledge: The knowledge base to follow.
+        rate: At most this many publications a second of wall time (:meth:`due`).
 
-    On ``/utu/knowledge/decisions``: ``{decisions: [{id, t, kind, tactic, data}]}``.
     """
-    rows = tail.read()
-    if rows:
-        bus.publish(topics.DECISIONS, {"decisions": [decision_dict(d) for d in rows]})
-    return bool(rows)
 
-
-class Throttle:
-    """At most one go per ``period`` seconds of wall time (e.g. publishing decisions)."""
-
-    def __init__(self, period: float) -> None:
-        self.period = period
+    def __init__(self, bus: Bus, knowledge: Knowledge, rate: float) -> None:
+        self.bus = bus
+        self.tail = DecisionTail(knowledge)
+        self.period = 1.0 / rate
         self._next = 0.0
 
+    def publish(self) -> bool:
+        """Publish the decisions written since the last call; returns whether there were any."""
+        rows = self.tail.read()
+        if rows:
+            self.bus.publish(topics.DECISIONS, {"decisions": [decision_dict(d) for d in rows]})
+        return bool(rows)
+
     def due(self) -> bool:
-        """Whether a go is due now; if so, the next is one period from now."""
+        """Whether a publication is due now; if so, the next is one period from now."""
         now = time.monotonic()
         if now < self._next:
             return False
@@ -287,7 +279,7 @@ class Throttle:
         return True
 
     def wait(self) -> float:
-        """Seconds until the next go is due."""
+        """Seconds until the next publication is due."""
         return max(0.0, self._next - time.monotonic())
 
 

@@ -14,14 +14,23 @@ simulation, replay) takes ``intake`` per topic, so it stays deterministic.
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Callable, Iterable, Mapping
 from typing import Any
 
 from anunnaki.bus import Subscriber
 from anunnaki.clock import Clock, SimClock
 from anunnaki.messages import body_of
 
-__all__ = ["FIRST", "FLOOR", "IntakeBudget", "take_clock", "take_inputs"]
+__all__ = [
+    "CLOCK_QUEUE",
+    "FIRST",
+    "FLOOR",
+    "IntakeBudget",
+    "MonitoredTopics",
+    "clock_feed",
+    "take_clock",
+    "take_inputs",
+]
 
 #: One input of a step: (topic, message body, arrival time or ``None`` for the step's time).
 Input = tuple[str, dict[str, Any], float | None]
@@ -31,6 +40,9 @@ FLOOR = 16
 
 FIRST = 64
 """The limit until a step has measured what an input costs (then it follows the budget)."""
+
+CLOCK_QUEUE = 64
+"""Depth of a host's ``/clock`` queue, and how many times a step applies at most."""
 
 
 class IntakeBudget:
@@ -82,15 +94,66 @@ def take_inputs(subs: Mapping[str, Subscriber], limit: int, *, wall: bool) -> li
     return inputs
 
 
+class MonitoredTopics:
+    """The bounded pull subscribers of the topics a host monitors (guideline S1), by topic.
+
+    Every host (the inline manager, the monitor node) keeps its inputs here: a flood on one
+    topic cannot starve the others, and a step takes what arrived before it.
+
+    Args:
+        subscribe: Declares the host's pull subscriber of one topic (with the host's
+            doorbell, closed with the host).
+
+    """
+
+    def __init__(self, subscribe: Callable[[str], Subscriber]) -> None:
+        self._subscribe = subscribe
+        self.subs: dict[str, Subscriber] = {}
+
+    def watch(self, topics: Iterable[str]) -> None:
+        """Subscribe each of ``topics`` not watched yet (a reload may watch new ones)."""
+        for topic in topics:
+            if topic not in self.subs:
+                self.subs[topic] = self._subscribe(topic)
+
+    def take(self, limit: int, *, wall: bool) -> list[Input]:
+        """At most ``limit`` queued messages of each topic (:func:`take_inputs`)."""
+        return take_inputs(self.subs, limit, wall=wall)
+
+    def queues(self) -> list[Subscriber]:
+        """The bounded queues, one a topic."""
+        return list(self.subs.values())
+
+    @property
+    def pending(self) -> bool:
+        """Whether a message waits on any topic."""
+        return any(sub.pending for sub in self.subs.values())
+
+    def __len__(self) -> int:
+        return len(self.subs)
+
+
+def clock_feed(
+    clock: Clock, topic: str, subscribe: Callable[[str, int], Subscriber]
+) -> Subscriber | None:
+    """The ``/clock`` queue of a host whose clock is the simulation's (else ``None``).
+
+    ``subscribe(topic, depth)`` declares the host's pull subscriber; :func:`take_clock`
+    applies what it holds at the start of each step, after the inputs: a message published
+    after its instant's ``/clock`` is never stamped with an earlier time.
+    """
+    return subscribe(topic, CLOCK_QUEUE) if isinstance(clock, SimClock) else None
+
+
 def take_clock(clock: Clock, sub: Subscriber | None) -> None:
     """Apply the simulation times queued on ``sub`` (the ``/clock`` topic) to ``clock``.
 
-    At most 64 a call: a ``/clock`` flood must not hold the step. Nothing happens on a
-    wall clock or without a subscriber.
+    At most :data:`CLOCK_QUEUE` a call: a ``/clock`` flood must not hold the step. Nothing
+    happens on a wall clock or without a subscriber.
     """
     if sub is None or not isinstance(clock, SimClock):
         return
-    for _ in range(64):
+    for _ in range(CLOCK_QUEUE):
         if (sample := sub.try_recv()) is None:
             break
         t = getattr(sample.message, "time", None)

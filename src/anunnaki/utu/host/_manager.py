@@ -4,6 +4,11 @@
 :mod:`anunnaki.utu.cycle` called one after the other — the same code the per-node
 deployment runs, here with direct calls instead of bus hops. ``step(now)`` runs one
 deterministic cycle — tests, simulation and replay drive it — and ``spin()`` runs it live.
+What it adds around the stages (operator desk, run-stop, the watchdog around its loop,
+readiness, the execute side with its actuator, threads and notifier, the monitored topics'
+queues) is the code the nodes use too (:mod:`~anunnaki.utu.host._desk`,
+:mod:`~anunnaki.utu.host._host`, :mod:`~anunnaki.utu.host._intake`). Why it calls the
+stages rather than the node classes: docs/architecture.md ("Where a goal update flows").
 
 Why reaction is event-driven and rates bound only time
     In ``spin()`` a message on a monitored topic is analysed the moment it arrives: on the
@@ -33,7 +38,6 @@ the decision log with their caller):
 from __future__ import annotations
 
 import logging
-import os
 import threading
 import time
 from collections import deque
@@ -44,46 +48,36 @@ from typing import Any
 from anunnaki import topics
 from anunnaki._closing import Closing
 from anunnaki.bus import InprocBus
-from anunnaki.clock import Clock, SimClock, WallClock
+from anunnaki.clock import Clock, WallClock
 from anunnaki.errors import AnunnakiError
 from anunnaki.goals import GoalModel
 from anunnaki.messages import AnalysisState, body_of
 from anunnaki.tactics import TacticSet
 from anunnaki.topics import UTU_NODES as NODE_NAMES
-from anunnaki.topics import node_token, ready_service
 from anunnaki.utu._config import RunStopConfig, UtuConfig
 from anunnaki.utu.cycle._actions import ActionRunner
 from anunnaki.utu.cycle._analyze import AnalyzeStage
-from anunnaki.utu.cycle._entries import OPERATOR, TICK, mark_restart, resuming
 from anunnaki.utu.cycle._execute import ExecuteStage
 from anunnaki.utu.cycle._knowledge import Knowledge
-from anunnaki.utu.cycle._knowledge_stage import DecisionTail, KnowledgeStage
+from anunnaki.utu.cycle._knowledge_stage import KnowledgeStage
 from anunnaki.utu.cycle._mape import Actuator, Analyzer, Executor, Monitor, Planner
 from anunnaki.utu.cycle._monitor import MonitorStage
-from anunnaki.utu.cycle._parts import UtuParts, load_parts, load_tactics_text, record_run
+from anunnaki.utu.cycle._parts import UtuParts, load_parts, record_run
 from anunnaki.utu.cycle._plan import PlanStage
-from anunnaki.utu.host._actuators import BusActuator, RecordingActuator, bus_actuator
-from anunnaki.utu.host._desk import (
-    OperatorDesk,
-    Throttle,
-    execute_stage,
+from anunnaki.utu.host._desk import DecisionFeed, OperatorDesk, listen_run_stop
+from anunnaki.utu.host._host import (
+    ExecuteSide,
+    StandIn,
+    host_clock,
     idle_wait,
-    listen_run_stop,
-    loop_watchdog,
-    publish_decisions,
     ready_fields,
+    take_up,
+    watched,
 )
-from anunnaki.utu.host._intake import IntakeBudget, take_clock, take_inputs
-from anunnaki.utu.host._threads import ThreadRunner, action_runner
+from anunnaki.utu.host._intake import IntakeBudget, MonitoredTopics, clock_feed, take_clock
+from anunnaki.utu.host._threads import ThreadRunner
 
-__all__ = [
-    "OPERATOR",
-    "TICK",
-    "AutonomicManager",
-    "BusActuator",
-    "RecordingActuator",
-    "load_tactics_text",
-]
+__all__ = ["AutonomicManager"]
 
 log = logging.getLogger("anunnaki.utu")
 
@@ -185,13 +179,9 @@ class AutonomicManager(Closing):
         self.knowledge = knowledge or Knowledge()
         self.bus = bus
         self.clock: Clock = clock or WallClock()
-        self.actuator: Actuator = actuator or (
-            BusActuator(bus) if bus is not None else RecordingActuator()
-        )
         self.publish_state = config.publish_state and bus is not None
         self._nodes = dict(nodes or {}) if bus is not None else {}
         self.rate = max(self._nodes.values(), default=config.rate)
-        self._decisions_due = Throttle(1.0 / self._nodes.get("knowledge", config.rate))
         self._closed = False
         self._live = False
         # (topic, message, arrival time or None for "now"): a step takes inputs at their own
@@ -203,31 +193,37 @@ class AutonomicManager(Closing):
         self._budget: IntakeBudget | None = None  # live on the wall clock (spin)
         self._wake = threading.Event()
         self._declared: list[Any] = []
-        self._pull: dict[str, Any] = {}
+        # the monitored topics' queues (a manager with a bus)
+        self._pull = MonitoredTopics(self._subscribe_topic)
         self._clock_sub: Any = None
         self._stepped = False
         self._last_eligible: list[str] = []
         self._state_cache: AnalysisState | None = None
-        if isinstance(self.actuator, BusActuator) and self.actuator.on_notified is None:
-            self.actuator.on_notified = self._notified
         record_run(self.knowledge, parts)
-        restarted = resuming(self.knowledge)
-        self.monitor_stage = MonitorStage(parts)
-        #: Operator calls, run-stops heard and lost nodes, queued for the next step.
-        self.desk = OperatorDesk(self.monitor_stage, wake=self.wake, watch=self._watch_topics)
-        self.analyze_stage = AnalyzeStage(parts, self.knowledge)
-        self.plan_stage = PlanStage(parts, self.knowledge)
-        # requests never hold the loop
-        self.actions = actions if actions is not None else action_runner(self.actuator, self.wake)
-        self.execute_stage = self._execute_stage()
-        self.knowledge_stage = KnowledgeStage(parts, self.knowledge)
-        self._tail = DecisionTail(self.knowledge)
-        if restarted:
-            mark_restart(self.knowledge, "manager")
+        take_up(self.knowledge, "manager", lambda: self._build_stages(actuator, actions))
         self.now = self.analyze_stage.now
         self.monitor_stage.last_t = self.now
         if bus is not None:
             self._connect(bus)
+
+    def _build_stages(self, actuator: Actuator | None, actions: ActionRunner | None) -> None:
+        parts, kb = self.parts, self.knowledge
+        self.monitor_stage = MonitorStage(parts)
+        #: Operator calls, run-stops heard and lost nodes, queued for the next step.
+        self.desk = OperatorDesk(
+            self.monitor_stage,
+            wake=self.wake,
+            watch=self._pull.watch if self.bus is not None else None,
+        )
+        self.analyze_stage = AnalyzeStage(parts, kb)
+        self.plan_stage = PlanStage(parts, kb)
+        # requests never hold the loop
+        self._execute = ExecuteSide(
+            parts, kb, bus=self.bus, actuator=actuator, wake=self.wake, actions=actions
+        )
+        self.knowledge_stage = KnowledgeStage(parts, kb)
+        rate = self._nodes.get("knowledge", parts.config.rate)
+        self._decisions = DecisionFeed(self.bus, kb, rate) if self.bus is not None else None
 
     # -- construction ---------------------------------------------------------------------
     @classmethod
@@ -251,24 +247,20 @@ class AutonomicManager(Closing):
         """
         parts = config if isinstance(config, UtuParts) else load_parts(config)
         cfg = parts.config
-        if clock is None:
-            clock = SimClock(max_jump=cfg.max_time_jump) if cfg.clock == "sim" else WallClock()
-        if actuator is None and bus is not None:
-            actuator = bus_actuator(bus, cfg)
         manager = cls.__new__(cls)
         manager._init(
-            parts, knowledge or Knowledge(cfg.knowledge), bus, actuator, clock, nodes=nodes
+            parts,
+            knowledge or Knowledge(cfg.knowledge),
+            bus,
+            actuator,
+            clock or host_clock(cfg),
+            nodes=nodes,
         )
         return manager
 
     def _connect(self, bus: Any) -> None:
-        for topic in self.monitor_stage.topics:
-            self._subscribe_topic(topic)
-        if isinstance(self.clock, SimClock):
-            # Pulled at the start of each step, after the inputs: a message published
-            # after its instant's /clock is never stamped with an earlier time.
-            self._clock_sub = bus.subscribe(self.parts.config.clock_topic, queue=64)
-            self._declared.append(self._clock_sub)
+        self._pull.watch(self.monitor_stage.topics)
+        self._clock_sub = clock_feed(self.clock, self.parts.config.clock_topic, self._subscribe)
         who = f"utu:{self.name}"
         self._declared.append(listen_run_stop(bus, self.name, who, self.desk.heard_run_stop))
         self._declared += self.desk.declare(bus)
@@ -278,44 +270,44 @@ class AutonomicManager(Closing):
         }
         for name, handler in services.items():
             self._declared.append(bus.service(name, handler))
-        if self._nodes:  # standing for the five nodes: their tokens, then (last) readiness
-            for node in NODE_NAMES:
-                self._declared.append(bus.liveliness_token(node_token(node)))
-            for node in NODE_NAMES:
-                self._declared.append(bus.service(ready_service(node), self._ready_handler(node)))
+        if self._nodes:  # standing for the five nodes: each one's token, then its readiness
+            self._declared += [StandIn(bus, node, self._ready_info) for node in NODE_NAMES]
 
-    def _ready_handler(self, node: str) -> Callable[[Any], dict[str, Any]]:
-        return lambda message: {
-            "ready": not self._closed,
-            "node": node_token(node),
-            "pid": os.getpid(),
-            "composed": True,
-            **ready_fields(self.name, self.rate, self.desk.stopping(self.run_stopped)),
-        }
+    def _ready_info(self) -> dict[str, Any]:
+        stopping = self.desk.stopping(self.run_stopped)
+        return {"composed": True, **ready_fields(self.name, self.rate, stopping)}
 
-    def _watch_topics(self, watched: list[str]) -> None:
-        """Subscribe the topics a reload added (a manager with a bus)."""
-        if self.bus is None:
-            return
-        for topic in watched:
-            if topic not in self._pull:
-                self._subscribe_topic(topic)
+    def _subscribe_topic(self, topic: str) -> Any:
+        # ``step`` drains the queue, so a step sees exactly what arrived before it; the
+        # doorbell reacts the moment a message is queued.
+        return self._subscribe(topic, self.parts.config.queue, on_ready=self._arrived)
 
-    def _subscribe_topic(self, topic: str) -> None:
-        # A pull subscriber holds the inputs (bounded: a flood on one topic cannot starve
-        # the others, guideline S1) and ``step`` drains it, so a step sees exactly what
-        # arrived before it; its doorbell reacts the moment a message is queued.
+    def _subscribe(self, topic: str, queue: int, **kwargs: Any) -> Any:
         assert self.bus is not None
-        self._pull[topic] = self.bus.subscribe(
-            topic, queue=self.parts.config.queue, on_ready=self._arrived
-        )
-        self._declared.append(self._pull[topic])
+        sub = self.bus.subscribe(topic, queue=queue, **kwargs)
+        self._declared.append(sub)
+        return sub
 
     # -- the parts, as the tests and tools know them ----------------------------------------
     @property
     def model(self) -> GoalModel:
         """The goal model in force."""
         return self.analyze_stage.parts.model
+
+    @property
+    def execute_stage(self) -> ExecuteStage:
+        """The execute stage (operator calls, postconditions, actions)."""
+        return self._execute.stage
+
+    @property
+    def actuator(self) -> Actuator:
+        """How actions reach the managed system."""
+        return self._execute.actuator
+
+    @property
+    def actions(self) -> ActionRunner | None:
+        """What runs blocking requests off the loop (``None``: they run in the step)."""
+        return self._execute.actions
 
     @property
     def tactics(self) -> TacticSet:
@@ -407,19 +399,8 @@ class AutonomicManager(Closing):
         limit = min(self.parts.config.queue, self.parts.config.intake)
         if self._budget is not None and self._live:
             limit = min(limit, self._budget.limit())  # a live step's time budget
-        self._inputs.extend(take_inputs(self._pull, limit, wall=wall))
+        self._inputs.extend(self._pull.take(limit, wall=wall))
         take_clock(self.clock, self._clock_sub)
-
-    def _execute_stage(self) -> ExecuteStage:
-        return execute_stage(
-            self.parts, self.knowledge, self.actuator, bus=self.bus, runner=self.actions
-        )
-
-    def _notified(self, tactic: str, result: Any) -> None:
-        # Called from the notifier's worker thread; Knowledge is thread-safe. Delivery
-        # results arrive asynchronously, so replay does not compare them.
-        if not self._closed:
-            self.execute_stage.notified(tactic, result)
 
     def feed(self, topic: str, msg: Mapping[str, Any], *, t: float | None = None) -> None:
         """Queue one input message (what the bus subscription does); processed by ``step``.
@@ -589,17 +570,18 @@ class AutonomicManager(Closing):
             ValueError: Another ``node``.
 
         """
-        kb = self.knowledge
+        kb, parts = self.knowledge, self.parts
         with self._step_lock:
             if node == "analyze":
-                self.analyze_stage = AnalyzeStage(self.parts, kb)
+                self.analyze_stage = take_up(
+                    kb, node, lambda: AnalyzeStage(parts, kb), restarted=True
+                )
             elif node == "plan":
-                self.plan_stage = PlanStage(self.parts, kb)
+                self.plan_stage = take_up(kb, node, lambda: PlanStage(parts, kb), restarted=True)
             elif node == "execute":
-                self.execute_stage = self._execute_stage()
+                self._execute.restart()
             else:
                 raise ValueError(f"no part {node!r} to restart: analyze, plan or execute")
-            mark_restart(kb, node)
 
     # -- live ----------------------------------------------------------------------------------
     def spin(
@@ -621,49 +603,45 @@ class AutonomicManager(Closing):
         if isinstance(self.clock, WallClock):  # a step's inputs fit in half a period
             self._budget = IntakeBudget(period / 2, ceiling=self.parts.config.intake)
         self._live = True
-        if isinstance(self.actions, ThreadRunner) and not isinstance(self.clock, SimClock):
-            self.actions.settle = self.parts.config.action_settle  # live: hold the loop briefly
-        dog = loop_watchdog(
-            self.bus,
-            self.parts.config,
-            what=f"the manager {self.name}",
-            caller=f"watchdog:{self.name}",
-            floor=2 * period,
-        )
+        self._execute.go_live(self.clock)
         try:
-            while not stop.is_set() and not self._closed:
-                if dog is not None:
-                    dog.beat()
-                self.step()
-                if self._nodes:
-                    self._publish_decisions()
-                if on_step is not None:
-                    on_step(self)
-                if until is not None and self.clock.now() >= until:
-                    break
-                if not self._inputs and not self.desk.pending and not self._pending():
-                    self._wake.wait(idle_wait(self.clock, period))
+            with watched(
+                self.bus, self.parts.config, what=f"the manager {self.name}", name=self.name,
+                floor=2 * period,
+            ) as beat:  # fmt: skip
+                while not stop.is_set() and not self._closed:
+                    beat()
+                    self._round(on_step)
+                    if until is not None and self.clock.now() >= until:
+                        break
+                    if not self._inputs and not self.desk.pending and not self._pending():
+                        self._wake.wait(idle_wait(self.clock, period))
             if self.analyze_stage.reacted and not self._closed:
                 self.step()  # a normal end ends the step its last reactions began
         finally:
             self._live = False
-            if dog is not None:
-                dog.close()
+
+    def _round(self, on_step: Callable[[AutonomicManager], None] | None) -> None:
+        self.step()
+        if self._nodes:
+            self._publish_decisions()
+        if on_step is not None:
+            on_step(self)
 
     _inline = False
 
     def _publish_decisions(self) -> None:
-        if self.bus is not None and self._decisions_due.due():
-            publish_decisions(self.bus, self._tail)
+        if self._decisions is not None and self._decisions.due():
+            self._decisions.publish()
 
     def _pending(self) -> bool:
         if isinstance(self.actions, ThreadRunner) and self.actions.has_outcomes:
             return True  # an action came back: take it now
-        return any(sub.pending for sub in self._pull.values())
+        return self._pull.pending
 
     def input_queues(self) -> list[Any]:
         """The bounded queues of the monitored topics (pull subscribers)."""
-        return list(self._pull.values())
+        return self._pull.queues()
 
     def wake(self) -> None:
         """Wake ``spin()`` now."""
@@ -686,10 +664,6 @@ class AutonomicManager(Closing):
             except Exception as exc:  # pragma: no cover - best effort at shutdown
                 log.debug("closing %r: %r", d, exc)
         self._declared.clear()
-        if self.actions is not None:
-            self.actions.close()
-        notifier = getattr(self.actuator, "notifier", None)
-        if notifier is not None:
-            notifier.close()
+        self._execute.close()
         with self._step_lock:
             self.knowledge.close()

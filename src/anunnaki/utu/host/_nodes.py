@@ -50,7 +50,7 @@ from typing import Any, ClassVar, cast
 
 from anunnaki import topics
 from anunnaki.bus import Bus, Node, Sample, Subscriber
-from anunnaki.clock import Clock, SimClock, WallClock
+from anunnaki.clock import Clock, WallClock
 from anunnaki.errors import AnunnakiError
 from anunnaki.messages import (
     MAX_BATCH,
@@ -67,7 +67,7 @@ from anunnaki.topics import UtuNodeName as NodeName
 from anunnaki.topics import node_token, ready_service
 from anunnaki.utu._config import UtuConfig
 from anunnaki.utu.cycle._analyze import AnalyzeStage
-from anunnaki.utu.cycle._entries import mark_restart, resuming
+from anunnaki.utu.cycle._execute import ExecuteStage
 from anunnaki.utu.cycle._knowledge import Knowledge
 from anunnaki.utu.cycle._knowledge_stage import DecisionTail, KnowledgeStage
 from anunnaki.utu.cycle._mape import Actuator
@@ -80,19 +80,16 @@ from anunnaki.utu.cycle._parts import (
     record_run,
 )
 from anunnaki.utu.cycle._plan import PlanStage
-from anunnaki.utu.host._actuators import bus_actuator
-from anunnaki.utu.host._desk import (
-    OperatorDesk,
-    Throttle,
-    execute_stage,
+from anunnaki.utu.host._desk import DecisionFeed, OperatorDesk, listen_run_stop
+from anunnaki.utu.host._host import (
+    ExecuteSide,
+    host_clock,
     idle_wait,
-    listen_run_stop,
-    loop_watchdog,
-    publish_decisions,
     ready_fields,
+    take_up,
+    watched,
 )
-from anunnaki.utu.host._intake import take_clock, take_inputs
-from anunnaki.utu.host._threads import ThreadRunner, action_runner
+from anunnaki.utu.host._intake import MonitoredTopics, clock_feed, take_clock
 
 __all__ = [
     "NODE_NAMES",
@@ -160,11 +157,7 @@ class UtuNode(Node):
         if not 0 < self.rate <= 10_000:
             raise NodeConfigError(f"{self.name}: rate must be in (0, 10000] Hz, got {rate!r}")
         self.timeout = float(timeout)
-        self.clock: Clock = clock or (
-            SimClock(max_jump=self.config.max_time_jump)
-            if self.config.clock == "sim"
-            else WallClock()
-        )
+        self.clock: Clock = clock or host_clock(self.config)
         self.run_stopped = False
         self._lock = threading.Lock()
         self._kb: Knowledge | None = knowledge
@@ -185,8 +178,9 @@ class UtuNode(Node):
 
     def declare(self) -> None:
         """Declare the run-stop subscription, the clock, then the node's own (:meth:`bring_up`)."""
-        if isinstance(self.clock, SimClock) and self.uses_clock:
-            self._clock_sub = self.pull(self.config.clock_topic, queue=64)
+        if self.uses_clock:
+            topic = self.config.clock_topic
+            self._clock_sub = clock_feed(self.clock, topic, lambda t, q: self.pull(t, queue=q))
         self.own(listen_run_stop(self.bus, self.config.name, self.name, self._heard_run_stop))
         self.bring_up()
 
@@ -259,22 +253,15 @@ class UtuNode(Node):
     def spin(self, stop: threading.Event | None = None) -> None:
         """Run live; a watchdog run-stops the platform if a round takes ``watchdog`` s."""
         # An idle node's round waits up to 0.5 s for work (Node.spin): never less than 1 s.
-        dog = loop_watchdog(
-            self.bus,
-            self.config,
-            what=f"node {self.name}",
-            caller=f"watchdog:{self.name}",
-            floor=max(2 * self._period(), 1.0),
-        )
-        if dog is None:
-            super().spin(stop)
-            return
-        self.on_round = dog.beat
-        try:
-            super().spin(stop)
-        finally:
-            self.on_round = None
-            dog.close()
+        floor = max(2 * self._period(), 1.0)
+        with watched(
+            self.bus, self.config, what=f"node {self.name}", name=self.name, floor=floor
+        ) as beat:
+            self.on_round = beat
+            try:
+                super().spin(stop)
+            finally:
+                self.on_round = None
 
     def release(self) -> None:
         """Close the knowledge base the node opened itself."""
@@ -329,17 +316,13 @@ class MonitorNode(UtuNode):
     def bring_up(self) -> None:
         """Subscribe the monitored topics; offer the operator services."""
         self.stage = MonitorStage(self.parts, origin=secrets.token_hex(4))
-        self._subs = {t: self.pull(t, queue=self.config.queue) for t in self.stage.topics}
+        self._subs = MonitoredTopics(lambda topic: self.pull(topic, queue=self.config.queue))
+        self._subs.watch(self.stage.topics)
         self._fed: list[tuple[str, dict[str, Any], float | None]] = []
         #: Operator calls, run-stops heard and lost nodes, queued for the next batch.
-        self.desk = OperatorDesk(self.stage, wake=self.wake, watch=self._watch_topics)
+        self.desk = OperatorDesk(self.stage, wake=self.wake, watch=self._subs.watch)
         for declared in self.desk.declare(self.bus):
             self.own(declared)
-
-    def _watch_topics(self, watched: list[str]) -> None:
-        for topic in watched:  # a reload may watch new topics
-            if topic not in self._subs:
-                self._subs[topic] = self.pull(topic, queue=self.config.queue)
 
     def feed(self, topic: str, msg: Mapping[str, Any]) -> None:
         """Queue one input as if it had arrived on ``topic`` (tests, replay)."""
@@ -359,7 +342,7 @@ class MonitorNode(UtuNode):
 
     def input_queues(self) -> list[Subscriber]:
         """The bounded queues of the monitored topics (empty: everything was taken)."""
-        return list(self._subs.values())
+        return self._subs.queues()
 
     def step(self, now: float | None = None) -> bool:
         """Publish what arrived since the last step as one batch; returns whether it did.
@@ -379,7 +362,7 @@ class MonitorNode(UtuNode):
                 self.config.intake,
                 MAX_BATCH // max(1, len(self._subs) + 1),
             )
-            inputs += take_inputs(self._subs, limit, wall=wall)
+            inputs += self._subs.take(limit, wall=wall)
         ops = self.desk.take()
         if now is None:
             self._take_clock()
@@ -444,10 +427,12 @@ class AnalyzeNode(UtuNode):
 
     def bring_up(self) -> None:
         """Subscribe the batches and the execute node's reports; watch who is alive."""
-        restarted = resuming(self.knowledge, self.name)
-        self.stage = AnalyzeStage(self.parts, self.knowledge, origin=secrets.token_hex(4))
-        if restarted:
-            mark_restart(self.knowledge, self.name)
+        origin = secrets.token_hex(4)
+        self.stage = take_up(
+            self.knowledge,
+            self.name,
+            lambda: AnalyzeStage(self.parts, self.knowledge, origin=origin),
+        )
         # execute itself waits up to ``timeout`` for plan: give it time to say so
         self._ack_timeout = 2 * self.timeout
         self._awaiting: tuple[int, float] | None = None  # (seq, since)
@@ -461,21 +446,6 @@ class AnalyzeNode(UtuNode):
         self.stage.execute_alive = lambda: self._presence.alive("execute")
         self.own(self._presence.watch)
 
-    @property
-    def now(self) -> float:
-        """The time of the last cycle."""
-        return self.stage.now
-
-    @property
-    def origin(self) -> str:
-        """The analyzer's id (execute's reports carry it)."""
-        return self.stage.origin
-
-    @property
-    def taken(self) -> int:
-        """Inputs taken since bring-up."""
-        return self.stage.taken
-
     def _paced(self) -> bool:
         expects = self._pace if self._pace is not None else self._presence.alive("execute")
         return expects and not self._unpaced
@@ -485,7 +455,7 @@ class AnalyzeNode(UtuNode):
         finished = False
         while (sample := self._done.try_recv()) is not None:
             done = cast(CycleDone, sample.message)
-            if done.origin != self.origin:
+            if done.origin != self.stage.origin:
                 continue
             if self._awaiting is not None and done.seq == self._awaiting[0]:
                 self._awaiting = None
@@ -597,16 +567,10 @@ class PlanNode(UtuNode):
 
     def bring_up(self) -> None:
         """Subscribe the execute node's statuses."""
-        restarted = resuming(self.knowledge, self.name)
-        self.stage = PlanStage(self.parts, self.knowledge)
-        if restarted:
-            mark_restart(self.knowledge, self.name)
+        self.stage = take_up(
+            self.knowledge, self.name, lambda: PlanStage(self.parts, self.knowledge)
+        )
         self._statuses = self.pull(topics.EXECUTE_STATUS, queue=64, expect=ExecuteStatus)
-
-    @property
-    def planner(self) -> Any:
-        """The planner (selection state of every tactic)."""
-        return self.stage.planner
 
     def on_run_stop(self, caller: str, reason: str) -> None:
         """Stop starting tactics at once (guideline S4)."""
@@ -667,22 +631,17 @@ class ExecuteNode(UtuNode):
 
     def bring_up(self) -> None:
         """Build the actuator and the stage; subscribe analyses and plan's answers."""
-        self._notifier: Any = None
-        actuator = self._actuator_arg
-        if actuator is None:
-            actuator = bus_actuator(self.bus, self.config, on_notified=self._notified)
-            self._notifier = actuator.notifier
-        self.actuator: Actuator = actuator
         # requests never hold a cycle
-        self.actions: ThreadRunner | None = action_runner(actuator, self.wake)
-        if self.actions is not None and not isinstance(self.clock, SimClock):
-            self.actions.settle = self.config.action_settle
-        restarted = resuming(self.knowledge, self.name)
-        self.stage = execute_stage(
-            self.parts, self.knowledge, self.actuator, bus=self.bus, runner=self.actions
+        self.side = ExecuteSide(
+            self.parts,
+            self.knowledge,
+            bus=self.bus,
+            actuator=self._actuator_arg,
+            wake=self.wake,
+            node=self.name,
         )
-        if restarted:
-            mark_restart(self.knowledge, self.name)
+        self.side.go_live(self.clock)
+        self.actuator: Actuator = self.side.actuator
         self._flush()
         self._pending: tuple[str, int, float] | None = None  # (origin, seq, since)
         self.timeouts = 0
@@ -694,18 +653,16 @@ class ExecuteNode(UtuNode):
         if self._presence is not None:
             self.own(self._presence.watch)
 
+    @property
+    def stage(self) -> ExecuteStage:
+        """The execute stage."""
+        return self.side.stage
+
     def release_extra(self) -> None:
         """Stop the notifier and the action threads."""
-        actions = getattr(self, "actions", None)
-        if actions is not None:
-            actions.close()
-        if self._notifier is not None:
-            self._notifier.close()
-
-    def _notified(self, tactic: str, result: Any) -> None:
-        if not self.closed:
-            self.stage.notified(tactic, result)
-            self._flush()
+        side = getattr(self, "side", None)
+        if side is not None:
+            side.close()
 
     def on_run_stop(self, caller: str, reason: str) -> None:
         """Stop starting tactics at once (guideline S4); the monitor's op records it."""
@@ -715,11 +672,6 @@ class ExecuteNode(UtuNode):
     def halted(self) -> bool:
         """Whether adaptation is halted (paused, run-stopped, or a run-stop was heard)."""
         return self.stage.halted
-
-    @property
-    def planner(self) -> Any:
-        """Every tactic's runtime."""
-        return self.stage.planner
 
     def ready_info(self) -> dict[str, Any]:
         """Readiness, with whether a run-stop is in force."""
@@ -803,9 +755,8 @@ class KnowledgeNode(UtuNode):
         """Record settings and model texts; follow the cycle's messages; offer queries."""
         kb = self.knowledge
         record_run(kb, self.parts)
-        self.tail = DecisionTail(kb)
+        self.feed = DecisionFeed(self.bus, kb, self.rate)
         self.stage = KnowledgeStage(self.parts, kb)
-        self._due = Throttle(1.0 / self.rate)
         sub = self.bus.subscribe
         self.own(sub(topics.ANALYSIS, self._on_state, queue=64, expect=AnalysisState))
         self.own(sub(topics.PLAN_START, self._on_start, queue=64, expect=PlanStart))
@@ -835,15 +786,15 @@ class KnowledgeNode(UtuNode):
 
     def step(self) -> bool:
         """Publish the decisions written since the last step; returns whether there were any."""
-        published = publish_decisions(self.bus, self.tail)
+        published = self.feed.publish()
         self.cycles += 1
         return published
 
     def spin_once(self) -> float:
         """Publish new decisions at most ``rate`` times a second (it only tails the file)."""
-        if self._due.due():
+        if self.feed.due():
             self.step()
-        return self._due.wait()
+        return self.feed.wait()
 
 
 # -- composition -------------------------------------------------------------------------------
