@@ -20,6 +20,7 @@ from anunnaki.tokens import (
     OPERATOR_TOKEN_ENV,
     client_operator_token,
     default_token_file,
+    service_operator_token,
     token_weakness,
     user_operator_token,
 )
@@ -105,3 +106,34 @@ def test_a_token_that_cannot_be_written_is_an_error_naming_the_file_and_the_fix(
     with pytest.raises(ModelFileError, match="cannot write the operator token") as err:
         user_operator_token()
     assert str(default_token_file()) in str(err.value) and OPERATOR_TOKEN_ENV in str(err.value)
+
+
+def test_every_service_finds_its_token_one_way_given_then_variable_then_file_then_user(
+    home: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    strong = "k" * 10 + "Q9x-Tz_4bW7yLm2Np8Rv5Hs3"
+    file = tmp_path / "token"
+    file.write_text("F" + strong + "\n", encoding="utf-8")
+    monkeypatch.setenv(OPERATOR_TOKEN_ENV, "E" + strong)
+    assert service_operator_token("utu", given="G" + strong, file=file) == "G" + strong
+    assert service_operator_token("utu", file=file) == "E" + strong
+    monkeypatch.delenv(OPERATOR_TOKEN_ENV)
+    assert service_operator_token("utu", file=file) == "F" + strong
+    assert not default_token_file().exists()  # a token was found: no user file written
+    made = service_operator_token("the model manager")
+    assert default_token_file().read_text(encoding="utf-8").strip() == made
+    assert service_operator_token("utu") == made  # both services share the user's token
+
+
+def test_a_weak_token_is_refused_naming_the_service_and_where_it_came_from(
+    home: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    file = tmp_path / "token"
+    file.write_text("secret\n", encoding="utf-8")
+    with pytest.raises(ModelFileError, match=r"of utu is too weak") as raised:
+        service_operator_token("utu", file=file)
+    assert raised.value.path == str(file)
+    monkeypatch.setenv(OPERATOR_TOKEN_ENV, "secret")
+    with pytest.raises(ModelFileError, match=r"model manager is too weak") as raised:
+        service_operator_token("the model manager")
+    assert raised.value.element == f"${OPERATOR_TOKEN_ENV}"

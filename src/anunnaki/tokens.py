@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import contextlib
 import hmac
+import logging
 import math
 import os
 import secrets
@@ -30,10 +31,13 @@ __all__ = [
     "OPERATOR_TOKEN_ENV",
     "client_operator_token",
     "default_token_file",
+    "service_operator_token",
     "token_matches",
     "token_weakness",
     "user_operator_token",
 ]
+
+log = logging.getLogger("anunnaki.tokens")
 
 #: The environment variable that holds Utu's operator token (for Utu and its clients).
 OPERATOR_TOKEN_ENV: Final = "ANUNNAKI_OPERATOR_TOKEN"
@@ -172,3 +176,48 @@ def client_operator_token() -> str | None:
         return token
     path = default_token_file()
     return _read_private(path) if path.exists() else None
+
+
+def service_operator_token(
+    who: str, *, given: str | None = None, file: str | os.PathLike[str] | None = None
+) -> str:
+    """The token an operator service of ``who`` (``utu``, ``the model manager``) checks.
+
+    The one ``given``, else ``$ANUNNAKI_OPERATOR_TOKEN``, else the token ``file``, else the
+    user's own token file (:func:`user_operator_token`: written first if missing, and
+    logged where), so operator services are never open by accident. Every service finds its
+    token this one way.
+
+    Raises:
+        ModelFileError: A token file is unreadable, or the token too weak (naming where it
+            came from).
+
+    """
+    token, where, from_file = given, "operator_token", False
+    if token is None:
+        token, where = os.environ.get(OPERATOR_TOKEN_ENV), f"${OPERATOR_TOKEN_ENV}"
+    if token is None and file is not None:
+        where, from_file = os.fspath(file), True
+        try:
+            token = Path(where).read_text(encoding="utf-8").strip()
+        except OSError as exc:
+            raise ModelFileError(
+                f"cannot read the operator token: {exc.strerror}", path=where
+            ) from None
+    if token is None:
+        token, path, generated = user_operator_token()  # checked as it is read
+        log.info(
+            "%s: operator token %s %s (mode 0600); anunnaki reload and the dashboard read it there",
+            who,
+            "written to" if generated else "read from",
+            path,
+        )
+        return token
+    if (weak := token_weakness(token)) is not None:
+        raise ModelFileError(
+            f"the operator token of {who} is too weak: {weak}",
+            path=where if from_file else None,
+            element=None if from_file else where,
+            hint="make one with: python -c 'import secrets; print(secrets.token_urlsafe(32))'",
+        )
+    return token

@@ -40,7 +40,6 @@ swapping back to the default model is instant.
 from __future__ import annotations
 
 import logging
-import os
 import threading
 import time
 from collections import OrderedDict
@@ -61,9 +60,8 @@ from anunnaki.messages import Detections, Image, ServiceReply, body_of
 from anunnaki.tokens import (
     OPERATOR_TOKEN_ENV,
     default_token_file,
+    service_operator_token,
     token_matches,
-    token_weakness,
-    user_operator_token,
 )
 
 __all__ = [
@@ -247,16 +245,7 @@ def _operator_token(given: str | None) -> str:
             weak.
 
     """
-    token = given if given is not None else os.environ.get(OPERATOR_TOKEN_ENV)
-    if token is None:
-        return user_operator_token()[0]  # checked as it is read
-    if (weak := token_weakness(token)) is not None:
-        raise ModelFileError(
-            f"the operator token of the model manager is too weak: {weak}",
-            element="operator_token" if given is not None else f"${OPERATOR_TOKEN_ENV}",
-            hint="make one with: python -c 'import secrets; print(secrets.token_urlsafe(32))'",
-        )
-    return token
+    return service_operator_token("the model manager", given=given)
 
 
 class _Active(NamedTuple):

@@ -21,7 +21,6 @@ file), the knowledge database, the bus, the clock and the policies of the MAPE-K
 from __future__ import annotations
 
 import logging
-import os
 from pathlib import Path
 from typing import Annotated, Any, Literal
 
@@ -30,7 +29,7 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError
 from anunnaki import topics
 from anunnaki._safeyaml import LineMap, load_yaml, validation_error
 from anunnaki.errors import ModelFileError
-from anunnaki.tokens import OPERATOR_TOKEN_ENV, token_weakness, user_operator_token
+from anunnaki.tokens import service_operator_token
 
 __all__ = ["RunStopConfig", "UtuConfig", "load_config", "parse_config"]
 
@@ -102,32 +101,7 @@ class UtuConfig(_Strict):
             ModelFileError: The token file is unreadable or the token too weak.
 
         """
-        token = os.environ.get(OPERATOR_TOKEN_ENV)
-        where = f"${OPERATOR_TOKEN_ENV}"
-        if token is None and self.operator_token_file is not None:
-            where = self.operator_token_file
-            try:
-                token = Path(where).read_text(encoding="utf-8").strip()
-            except OSError as exc:
-                raise ModelFileError(
-                    f"cannot read the operator token: {exc.strerror}", path=where
-                ) from None
-        if token is None:
-            token, path, generated = user_operator_token()
-            log.info(
-                "utu: operator token %s %s (mode 0600); anunnaki reload and the dashboard "
-                "read it there",
-                "written to" if generated else "read from",
-                path,
-            )
-            return token
-        if (weak := token_weakness(token)) is not None:
-            raise ModelFileError(
-                f"the operator token is too weak: {weak}",
-                path=where,
-                hint="make one with: python -c 'import secrets; print(secrets.token_urlsafe(16))'",
-            )
-        return token
+        return service_operator_token("utu", file=self.operator_token_file)
 
     def reload_roots(self) -> list[Path]:
         """The folders a hot reload may read files from (symlinks resolved)."""
