@@ -3,8 +3,7 @@
 from __future__ import annotations
 
 import importlib
-import sys
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from types import ModuleType
 
@@ -30,21 +29,18 @@ TINY = ["--until", "1", "--speed", "0", "--width", "32", "--height", "32", "--qu
 
 
 @pytest.fixture
-def installed(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Iterator[ModuleType]:
-    """The plugin's module on the path and its distribution's entry point, as pip would."""
-    (tmp_path / "anunnaki_loopbus.py").write_text(PLUGIN, encoding="utf-8")
-    dist = tmp_path / "anunnaki_loopbus-0.1.dist-info"
-    dist.mkdir()
-    (dist / "METADATA").write_text("Metadata-Version: 2.1\nName: anunnaki-loopbus\nVersion: 0.1\n")
-    (dist / "entry_points.txt").write_text("[anunnaki.buses]\nloopbus = anunnaki_loopbus:loopbus\n")
-    monkeypatch.syspath_prepend(str(tmp_path))
-    importlib.invalidate_caches()
+def installed(install_distribution: Callable[..., Path]) -> Iterator[ModuleType]:
+    """The plugin's distribution, installed as pip would."""
+    install_distribution(
+        "anunnaki-loopbus",
+        {"anunnaki.buses": {"loopbus": "anunnaki_loopbus:loopbus"}},
+        modules={"anunnaki_loopbus": PLUGIN},
+    )
     BUS_KINDS.load_entry_points(force=True)
     try:
         yield importlib.import_module("anunnaki_loopbus")
     finally:
         BUS_KINDS.unregister("loopbus")
-        sys.modules.pop("anunnaki_loopbus", None)
 
 
 def test_the_help_offers_every_bus_kind(
