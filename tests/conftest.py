@@ -6,7 +6,9 @@ nothing wrong (measurements live in benchmarks/, not in tests).
 """
 
 import os
-from collections.abc import Iterator
+import sys
+from collections.abc import Callable, Iterator, Mapping
+from pathlib import Path
 
 import pytest
 from hypothesis import settings
@@ -29,3 +31,52 @@ def _private_operator_token(tmp_path_factory: pytest.TempPathFactory) -> Iterato
         del os.environ["XDG_CONFIG_HOME"]
     else:
         os.environ["XDG_CONFIG_HOME"] = old
+
+
+#: ``install(dist, {group: {name: "module:attr"}}, modules={name: source}) -> folder``
+Installer = Callable[..., Path]
+
+
+@pytest.fixture
+def install_distribution(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Iterator[Installer]:
+    """Install a third party's distribution as pip would, for a plugin slot's tests.
+
+    The installer writes ``modules`` (name → source) and a ``<dist>.dist-info`` with the
+    given entry points into a folder it puts on ``sys.path`` (``path``: more folders, e.g.
+    an example's), so ``importlib.metadata`` finds them; it returns that folder. Call it
+    inside the test to install after something was created without the plugin. At the end
+    the path is restored and the written modules are forgotten.
+    """
+    site = tmp_path / "site-packages"
+    written: list[str] = []
+
+    def install(
+        dist: str,
+        entry_points: Mapping[str, Mapping[str, str]],
+        *,
+        modules: Mapping[str, str] | None = None,
+        path: tuple[Path, ...] = (),
+    ) -> Path:
+        site.mkdir(exist_ok=True)
+        for module, source in (modules or {}).items():
+            (site / f"{module}.py").write_text(source, encoding="utf-8")
+            sys.modules.pop(module, None)
+            written.append(module)
+        info = site / f"{dist.replace('-', '_')}-0.1.dist-info"
+        info.mkdir()
+        (info / "METADATA").write_text(f"Metadata-Version: 2.1\nName: {dist}\nVersion: 0.1\n")
+        (info / "entry_points.txt").write_text(
+            "".join(
+                f"[{group}]\n" + "".join(f"{name} = {ref}\n" for name, ref in refs.items())
+                for group, refs in entry_points.items()
+            ),
+            encoding="utf-8",
+        )
+        for folder in path:
+            monkeypatch.syspath_prepend(str(folder))
+        monkeypatch.syspath_prepend(str(site))  # also invalidates the import caches
+        return site
+
+    yield install
+    for module in written:
+        sys.modules.pop(module, None)

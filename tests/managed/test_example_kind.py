@@ -7,9 +7,8 @@ distribution whose entry point names the class in group ``anunnaki.managed``), f
 
 from __future__ import annotations
 
-import importlib
 import io
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from pathlib import Path
 
 import pytest
@@ -24,17 +23,10 @@ EXAMPLE = ROOT / "examples" / "managed"
 
 
 @pytest.fixture
-def installed(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Iterator[type]:
-    """The toy robot's module on the path and its distribution's entry point, as pip would."""
-    dist = tmp_path / "toy_robot-0.1.dist-info"
-    dist.mkdir()
-    (dist / "METADATA").write_text("Metadata-Version: 2.1\nName: toy-robot\nVersion: 0.1\n")
-    (dist / "entry_points.txt").write_text(
-        "[anunnaki.managed]\ntoy_robot = toy_robot:ToyRobotKind\n"
-    )
-    monkeypatch.syspath_prepend(str(tmp_path))
-    monkeypatch.syspath_prepend(str(EXAMPLE))
-    importlib.invalidate_caches()
+def installed(install_distribution: Callable[..., Path]) -> Iterator[type]:
+    """The toy robot's module (the example's) and its distribution's entry point, as pip would."""
+    entry_points = {"anunnaki.managed": {"toy_robot": "toy_robot:ToyRobotKind"}}
+    install_distribution("toy-robot", entry_points, path=(EXAMPLE,))
     MANAGED.load_entry_points(force=True)
     try:
         yield MANAGED.factory("toy_robot")

@@ -16,6 +16,7 @@ from typing import Any
 
 import pytest
 import yaml
+from managed_helpers import fog_scene
 
 from anunnaki import topics
 from anunnaki.launch import parse_launch, run_launch
@@ -28,23 +29,7 @@ MODELS = ROOT / "examples" / "models" / "rover.yaml"
 
 #: 10 s without background clutter: a pedestrian crossing 5 m ahead, a deer in view; dense
 #: fog (the default model's F1 falls to about 0) from t = 3 s.
-SCENARIO: dict[str, Any] = {
-    "anunnaki": "scenario/1",
-    "platform": "rover",
-    "name": "enlil-fog",
-    "layout": 3,
-    "background": False,
-    "seed": 0,
-    "duration": 10,
-    "camera": {"rate": 10, "width": 128, "height": 128},
-    "route": [[0, 0], [30, 0]],
-    "cruise_speed": 0.3,
-    "objects": [
-        {"kind": "pedestrian", "x": 5.0, "y": -1.5, "walk_to": [5.0, 1.5], "speed": 0.3},
-        {"kind": "deer", "x": 7.0, "y": 2.2, "yaw": 1.57},
-    ],
-    "phenomena": [{"at": 3, "phenomenon": "fog", "params": {"density": 8, "intensity": 0.3}}],
-}
+SCENARIO = fog_scene("enlil-fog", duration=10, fog_at=3)
 
 LAUNCH = """
 anunnaki: launch/1

@@ -15,6 +15,7 @@ from pathlib import Path
 from typing import Any
 
 import pytest
+from managed_helpers import fog_scene
 
 from anunnaki.errors import ModelFileError
 from anunnaki.launch import parse_launch, run_launch
@@ -29,22 +30,7 @@ MODEL = ROOT / "examples" / "models" / "rover-default.safetensors"
 
 #: 16 s, no background clutter: a pedestrian crosses 4-5 m ahead and a deer stands in view;
 #: a dense fog from t = 5 s.
-SCENARIO: dict[str, Any] = {
-    "platform": "rover",
-    "name": "fog-test",
-    "layout": 3,
-    "background": False,
-    "seed": 0,
-    "duration": 16,
-    "camera": {"rate": 10, "width": 128, "height": 128},
-    "route": [[0, 0], [30, 0]],
-    "cruise_speed": 0.3,
-    "objects": [
-        {"kind": "pedestrian", "x": 5.0, "y": -1.5, "walk_to": [5.0, 1.5], "speed": 0.3},
-        {"kind": "deer", "x": 7.0, "y": 2.2, "yaw": 1.57},
-    ],
-    "phenomena": [{"at": 5, "phenomenon": "fog", "params": {"density": 8, "intensity": 0.3}}],
-}
+SCENARIO = fog_scene("fog-test", duration=16, fog_at=5)
 
 
 def test_phases_split_at_phenomena() -> None:

@@ -3,8 +3,7 @@
 from __future__ import annotations
 
 import logging
-import sys
-import textwrap
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -140,35 +139,24 @@ NOT_AN_ORACLE = 42
 '''
 
 
-def install_fake_plugin(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
-    """Install a fake distribution whose entry points name good and broken oracles."""
-    (tmp_path / "fake_oracle_plugin.py").write_text(PLUGIN)
-    dist = tmp_path / "fake_oracle_plugin-0.1.dist-info"
-    dist.mkdir()
-    (dist / "METADATA").write_text(
-        "Metadata-Version: 2.1\nName: fake-oracle-plugin\nVersion: 0.1\n"
-    )
-    (dist / "entry_points.txt").write_text(
-        textwrap.dedent(
-            f"""\
-            [{ORACLES.group}]
-            haze = fake_oracle_plugin:Haze
-            broken = fake_no_such_oracle_module:Nope
-            answer = fake_oracle_plugin:NOT_AN_ORACLE
-            ground_truth = fake_oracle_plugin:FakeGroundTruth
-            other_name = fake_oracle_plugin:Renamed
-            """
-        )
-    )
-    monkeypatch.syspath_prepend(str(tmp_path))
-    monkeypatch.delitem(sys.modules, "fake_oracle_plugin", raising=False)
+ENTRY_POINTS = {
+    "haze": "fake_oracle_plugin:Haze",
+    "broken": "fake_no_such_oracle_module:Nope",
+    "answer": "fake_oracle_plugin:NOT_AN_ORACLE",
+    "ground_truth": "fake_oracle_plugin:FakeGroundTruth",
+    "other_name": "fake_oracle_plugin:Renamed",
+}
 
 
 def test_entry_point_plugins(
-    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, caplog: pytest.LogCaptureFixture
+    install_distribution: Callable[..., Path], caplog: pytest.LogCaptureFixture
 ) -> None:
     registry = ORACLES.copy()  # created before the plugin is installed: lookups are lazy
-    install_fake_plugin(tmp_path, monkeypatch)
+    install_distribution(
+        "fake-oracle-plugin",
+        {str(ORACLES.group): ENTRY_POINTS},
+        modules={"fake_oracle_plugin": PLUGIN},
+    )
     with caplog.at_level(logging.WARNING, logger="anunnaki.oracles"):
         assert registry.names() == ["enlil", "ground_truth", "haze", "light", "renamed_haze"]
     haze = registry.create("haze", level=2)

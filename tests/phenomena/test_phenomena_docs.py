@@ -1,8 +1,10 @@
-"""docs/phenomena.md agrees with the code; its example, figure script and benchmark run."""
+"""docs/phenomena.md agrees with the code; its example and figure script run.
+
+Its benchmark's quick mode is tests/benchmarks/test_phenomena_benchmark.py.
+"""
 
 from __future__ import annotations
 
-import json
 import re
 import subprocess
 import sys
@@ -85,28 +87,3 @@ def test_figure_is_in_the_doc_and_the_script_writes_it(tmp_path: Path) -> None:
         capture_output=True,
     )
     assert output.read_bytes().startswith(b"\x89PNG")
-
-
-def test_benchmark_script_writes_json(tmp_path: Path) -> None:
-    output = tmp_path / "bench.json"
-    subprocess.run(
-        [
-            sys.executable,
-            str(ROOT / "benchmarks" / "phenomena.py"),
-            "--runs",
-            "2",
-            "--warmup",
-            "0",
-            "--output",
-            str(output),
-        ],
-        check=True,
-        timeout=120,
-        capture_output=True,
-    )
-    report = json.loads(output.read_text())
-    assert set(PHENOMENA.names()) <= set(report["results"])
-    for sizes in report["results"].values():
-        assert set(sizes) == {"128x128", "320x240"}
-        assert all(entry["median_ms"] > 0 for entry in sizes.values())
-    assert "benchmarks/results/phenomena.json" in doc_text()

@@ -5,7 +5,7 @@ from __future__ import annotations
 import logging
 import subprocess
 import sys
-import textwrap
+from collections.abc import Callable
 from pathlib import Path
 from typing import ClassVar
 
@@ -190,33 +190,25 @@ NOT_A_PHENOMENON = 42
 '''
 
 
-def install_fake_plugin(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Path:
-    """Install a fake distribution whose entry points name one good and three bad plugins."""
-    (tmp_path / "fake_anunnaki_plugin.py").write_text(PLUGIN)
-    dist = tmp_path / "fake_anunnaki_plugin-0.1.dist-info"
-    dist.mkdir()
-    (dist / "METADATA").write_text(
-        "Metadata-Version: 2.1\nName: fake-anunnaki-plugin\nVersion: 0.1\n"
-    )
-    (dist / "entry_points.txt").write_text(
-        textwrap.dedent(
-            f"""\
-            [{PHENOMENA.group}]
-            sepia = fake_anunnaki_plugin:Sepia
-            broken = fake_no_such_module:Nope
-            answer = fake_anunnaki_plugin:NOT_A_PHENOMENON
-            fog = fake_anunnaki_plugin:FakeFog
-            """
-        )
-    )
-    monkeypatch.syspath_prepend(str(tmp_path))
-    monkeypatch.delitem(sys.modules, "fake_anunnaki_plugin", raising=False)
-    return tmp_path
+ENTRY_POINTS = {
+    "sepia": "fake_anunnaki_plugin:Sepia",
+    "broken": "fake_no_such_module:Nope",
+    "answer": "fake_anunnaki_plugin:NOT_A_PHENOMENON",
+    "fog": "fake_anunnaki_plugin:FakeFog",
+}
 
 
 @pytest.fixture
-def plugin_path(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Path:
-    return install_fake_plugin(tmp_path, monkeypatch)
+def install_fake_plugin(install_distribution: Callable[..., Path]) -> Callable[[], Path]:
+    """Installs a fake distribution whose entry points name one good and three bad plugins."""
+    modules = {"fake_anunnaki_plugin": PLUGIN}
+    entry_points = {str(PHENOMENA.group): ENTRY_POINTS}
+    return lambda: install_distribution("fake-anunnaki-plugin", entry_points, modules=modules)
+
+
+@pytest.fixture
+def plugin_path(install_fake_plugin: Callable[[], Path]) -> Path:
+    return install_fake_plugin()
 
 
 def test_entry_point_plugins_are_found_by_name(
@@ -240,10 +232,10 @@ def test_entry_point_plugins_are_found_by_name(
 
 
 def test_entry_points_load_lazily_on_first_lookup(
-    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, caplog: pytest.LogCaptureFixture
+    install_fake_plugin: Callable[[], Path], caplog: pytest.LogCaptureFixture
 ) -> None:
     registry = PHENOMENA.copy()  # created before the plugin is installed
-    install_fake_plugin(tmp_path, monkeypatch)
+    install_fake_plugin()
     assert isinstance(registry.create("fog"), Fog)  # a built-in: no entry point is loaded
     assert "fake_anunnaki_plugin" not in sys.modules
     with caplog.at_level(logging.WARNING, logger="anunnaki.phenomena"):

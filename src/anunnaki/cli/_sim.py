@@ -3,8 +3,10 @@
 The platform publishes its camera, sensors, status, ``/clock`` and ground truth and obeys
 mode, stop, buzzer and teleoperation commands, on an in-process bus (``--bus inproc``: on
 its own, e.g. to check a scenario) or a zenoh peer (``--bus zenoh``, loopback by default)
-that Utu, the detector and the dashboard join. One line per simulated second: time, mode,
-speed, collisions (rover) or altitude and battery (UAV), frames. Ctrl-C ends it cleanly.
+that Utu, the detector and the dashboard join; ``--bus`` offers every kind of
+:data:`anunnaki.bus.BUS_KINDS`, a transport installed by entry point too. One line per
+simulated second: time, mode, speed, collisions (rover) or altitude and battery (UAV),
+frames. Ctrl-C ends it cleanly.
 """
 
 from __future__ import annotations
@@ -13,9 +15,29 @@ import argparse
 import signal
 import sys
 import threading
+from collections.abc import Iterator
 from typing import Any
 
 __all__ = ["add_parser", "run"]
+
+
+class _BusKinds:
+    """``--bus``'s choices: the bus kinds registry, read when a name is checked or listed.
+
+    Building the parser loads no plugin: a built-in name is checked without the entry
+    points, which are loaded for another name, for ``--help`` and for the error that lists
+    the valid names.
+    """
+
+    def __contains__(self, name: object) -> bool:
+        from anunnaki.bus import BUS_KINDS
+
+        return name in BUS_KINDS
+
+    def __iter__(self) -> Iterator[str]:
+        from anunnaki.bus import BUS_KINDS
+
+        return iter(BUS_KINDS.names())
 
 
 def add_parser(sub: Any) -> None:
@@ -40,15 +62,21 @@ def add_parser(sub: Any) -> None:
     )
     p.add_argument("--width", type=int, metavar="W", help="camera width (overrides scenario)")
     p.add_argument("--height", type=int, metavar="H", help="camera height (overrides scenario)")
-    p.add_argument("--bus", choices=["inproc", "zenoh"], default="inproc", help="bus kind")
+    p.add_argument(
+        "--bus",
+        choices=_BusKinds(),
+        default="inproc",
+        metavar="KIND",
+        help="bus kind: %(choices)s (default %(default)s)",
+    )
     p.add_argument(
         "--listen",
         action="append",
         metavar="ENDPOINT",
-        help="zenoh endpoint to listen on (default tcp/127.0.0.1:<free port>)",
+        help="endpoint to listen on (zenoh: default tcp/127.0.0.1:<free port>)",
     )
     p.add_argument(
-        "--connect", action="append", metavar="ENDPOINT", help="zenoh endpoint to connect to"
+        "--connect", action="append", metavar="ENDPOINT", help="endpoint to connect to (zenoh)"
     )
     p.add_argument(
         "--models",
@@ -190,11 +218,10 @@ def run(args: argparse.Namespace) -> int:
         require_plot_extra()  # before the run, not after it
     scenario = _scenario(args)
     options: dict[str, Any] = {"name": f"sim-{args.platform}"}
-    if args.bus == "zenoh":
-        if args.listen:
-            options["listen"] = args.listen
-        if args.connect:
-            options["connect"] = args.connect
+    if args.listen:  # the bus's configuration says whether its kind listens
+        options["listen"] = args.listen
+    if args.connect:
+        options["connect"] = args.connect
     until = args.until if args.until is not None else scenario.duration
     stop = threading.Event()
     previous = signal.getsignal(signal.SIGINT)
@@ -203,9 +230,8 @@ def run(args: argparse.Namespace) -> int:
         signal.signal(signal.SIGINT, lambda *_: stop.set())
     try:
         with open_bus(args.bus, **options) as bus:
-            if args.bus == "zenoh":
-                endpoints = getattr(bus, "endpoints", ())
-                print(f"zenoh peer listening on {', '.join(endpoints) or '(none)'}", flush=True)
+            if bus.endpoints:  # a networked kind: where the others join it
+                print(f"{args.bus} peer listening on {', '.join(bus.endpoints)}", flush=True)
             callback = None if args.quiet else (lambda s: print(_line(s), flush=True))
             if args.models:
                 return _run_loop(args, bus, scenario, stop=stop, until=until, callback=callback)

@@ -216,6 +216,20 @@ class GoalModel:
             element = f"{section}[{ident}]" + "".join(f".{k}" for k in key)
         self.findings.append(Finding(severity, message, path or self.path, line, element, hint))
 
+    def _known(
+        self, name: str, known: Mapping[str, Any], message: str, *, at: tuple[str, str, str]
+    ) -> bool:
+        """Whether ``name`` is in ``known``; else an error at ``section[ident].key`` (``at``).
+
+        The error's hint names the nearest known names.
+        """
+        if name in known:
+            return True
+        section, ident, key = at
+        hint = _did_you_mean(name, known)
+        self._add("error", message, section=section, ident=ident, key=(key,), hint=hint)
+        return False
+
     # -- resolution ---------------------------------------------------------------------
     def _resolve(self) -> None:
         self._collect()
@@ -414,52 +428,22 @@ class GoalModel:
                 hint="list each child once",
             )
         for c in g.children:
-            if c not in self.goals:
-                self._add(
-                    "error",
-                    f"unknown child goal '{c}'",
-                    section="goals",
-                    ident=g.id,
-                    key=("children",),
-                    hint=_did_you_mean(c, self.goals),
-                )
-                continue
-            self.parents.setdefault(c, []).append(g.id)
+            if self._known(
+                c, self.goals, f"unknown child goal '{c}'", at=("goals", g.id, "children")
+            ):
+                self.parents.setdefault(c, []).append(g.id)
         for a in g.agents:
-            if a not in self.agents:
-                self._add(
-                    "error",
-                    f"unknown agent '{a}'",
-                    section="goals",
-                    ident=g.id,
-                    key=("agents",),
-                    hint=_did_you_mean(a, self.agents),
-                )
+            self._known(a, self.agents, f"unknown agent '{a}'", at=("goals", g.id, "agents"))
 
     def _link_obstacle(self, o: ObstacleSpec) -> None:
         """Record what ``o`` obstructs; report unknown obstructed and resolution goals."""
         for gid in o.obstructs:
-            if gid not in self.goals:
-                self._add(
-                    "error",
-                    f"obstructs unknown goal '{gid}'",
-                    section="obstacles",
-                    ident=o.id,
-                    key=("obstructs",),
-                    hint=_did_you_mean(gid, self.goals),
-                )
-            else:
+            what = f"obstructs unknown goal '{gid}'"
+            if self._known(gid, self.goals, what, at=("obstacles", o.id, "obstructs")):
                 self.obstructed_by.setdefault(gid, []).append(o.id)
         for gid in o.resolutions:
-            if gid not in self.goals:
-                self._add(
-                    "error",
-                    f"unknown resolution goal '{gid}'",
-                    section="obstacles",
-                    ident=o.id,
-                    key=("resolutions",),
-                    hint=_did_you_mean(gid, self.goals),
-                )
+            what = f"unknown resolution goal '{gid}'"
+            self._known(gid, self.goals, what, at=("obstacles", o.id, "resolutions"))
 
     def _find_cycles(self) -> None:
         # Iterative DFS over refinement edges (goal -> children); a model is a DAG.
@@ -572,16 +556,10 @@ class GoalModel:
 
     def _check_refs(self, section: str, ident: str, key: str, expr: Expression) -> None:
         for agent_id in sorted(expr.agents):
-            if agent_id not in self.agents:
-                self._add(
-                    "error",
-                    f"unknown agent '{agent_id}' in '{expr.text}'",
-                    section=section,
-                    ident=ident,
-                    key=(key,),
-                    hint=_did_you_mean(agent_id, self.agents),
-                )
-            elif not self.agents[agent_id].topics:
+            what = f"unknown agent '{agent_id}' in '{expr.text}'"
+            if not self._known(agent_id, self.agents, what, at=(section, ident, key)):
+                continue
+            if not self.agents[agent_id].topics:
                 self._silent.setdefault(agent_id, []).append(ident)
         for ref in sorted(expr.refs):
             agent = self.agents.get(ref.agent)

@@ -14,6 +14,10 @@ BatteryState, NavSatFix; geometry_msgs Twist and PoseStamped; services std_srvs 
 Trigger, Empty and ``anunnaki_msgs/SetString`` (string in, success and message out) for
 mode changes.
 
+What the bus gets of a ROS message (a camera frame as the bus's ``Image``, else the mapped
+fields, several ROS topics feeding one bus topic merged) is :class:`ToBus`, shared by this
+bridge, the ROS 2 bridge and :func:`read_bag`.
+
 Rosbags (``rosbags``, pure Python): :func:`read_bag` turns a ROS 1 or ROS 2 bag into trace
 records through the same bridge file; :func:`write_bag` writes a run's inputs and decisions
 to a ROS 1 bag.
@@ -47,6 +51,7 @@ from anunnaki.ros1._schema import (
     load_bridge,
     parse_bridge,
 )
+from anunnaki.ros1._tobus import ToBus
 from anunnaki.ros1._types import IMAGE_TYPES, MESSAGE_TYPES, SERVICE_TYPES, SET_STRING_SRV
 
 __all__ = [
@@ -61,6 +66,7 @@ __all__ = [
     "LightOracle",
     "RosUnavailable",
     "ServiceBridge",
+    "ToBus",
     "TopicBridge",
     "bag_message_to_dict",
     "bus_image_to_compressed",

@@ -26,8 +26,8 @@ from typing import Any
 
 from anunnaki import topics
 from anunnaki.errors import AnunnakiError, MissingExtraError, ModelFileError
-from anunnaki.ros1._convert import to_bus_fields
 from anunnaki.ros1._schema import BridgeSpec, TopicBridge
+from anunnaki.ros1._tobus import ToBus
 from anunnaki.trace import Record
 
 __all__ = [
@@ -109,8 +109,7 @@ def read_bag(path: str | Path, spec: BridgeSpec | None = None) -> list[Record]:
     for t in spec.topics:
         if t.direction == "to_bus" and not t.as_image:
             entries.setdefault(t.ros, []).append(t)
-    shared = _shared_topics(spec)
-    merged: dict[str, dict[str, Any]] = {}
+    to_bus = ToBus(spec, strict=False)
     records: list[Record] = []
     try:
         with rb.highlevel.AnyReader([Path(path)]) as reader:
@@ -120,11 +119,7 @@ def read_bag(path: str | Path, spec: BridgeSpec | None = None) -> list[Record]:
             for connection, stamp, raw in reader.messages(connections=wanted):
                 data = bag_message_to_dict(reader.deserialize(raw, connection.msgtype))
                 for t in entries[connection.topic]:
-                    fields = to_bus_fields(data, t.fields, strict=False)
-                    if t.bus_topic in shared:
-                        merged.setdefault(t.bus_topic, {}).update(fields)
-                        fields = dict(merged[t.bus_topic])
-                    records.append(Record(stamp / 1e9, t.bus_topic, fields))
+                    records.append(Record(stamp / 1e9, t.bus_topic, to_bus.fields(t, data)))
     except (rb.highlevel.AnyReaderError, OSError) as exc:
         raise ModelFileError(f"cannot read the bag: {exc}", path=str(path)) from None
     return records
@@ -166,14 +161,6 @@ def _read_run_bag(rb: Any, path: Path) -> list[Record]:
     except (rb.highlevel.AnyReaderError, OSError) as exc:
         raise ModelFileError(f"cannot read the bag: {exc}", path=str(path)) from None
     return records
-
-
-def _shared_topics(spec: BridgeSpec) -> set[str]:
-    count: dict[str, int] = {}
-    for t in spec.topics:
-        if t.direction == "to_bus" and not t.as_image:
-            count[t.bus_topic] = count.get(t.bus_topic, 0) + 1
-    return {topic for topic, n in count.items() if n > 1}
 
 
 def _check_type(path: str | Path, topic: str, found: str, entries: list[TopicBridge]) -> None:

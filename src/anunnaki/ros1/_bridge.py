@@ -30,15 +30,13 @@ from anunnaki.ros1._convert import (
     ConversionError,
     bus_image_to_compressed,
     bus_image_to_raw,
-    compressed_to_image,
     fill_message,
     message_to_dict,
-    raw_to_image,
-    to_bus_fields,
     to_ros_fields,
 )
 from anunnaki.ros1._rospy import master_pid, message_class, reregister_node, service_class
 from anunnaki.ros1._schema import BridgeSpec, ServiceBridge, TopicBridge
+from anunnaki.ros1._tobus import ToBus
 
 __all__ = ["Bridge"]
 
@@ -68,7 +66,7 @@ class Bridge(Closing):
         self.rospy = rospy
         self.stats: Counter[str] = Counter()
         self._lock = threading.Lock()
-        self._merged: dict[str, dict[str, Any]] = {}
+        self._to_bus = ToBus(spec)
         self._ros_handles: list[Any] = []
         self._publishers: dict[int, Any] = {}
         self._bus_handles: list[Any] = []
@@ -76,11 +74,6 @@ class Bridge(Closing):
         self._watch_every = watch_every
         self._watchdog: threading.Thread | None = None
         self._master_pid: int | None = None
-        feeds: Counter[str] = Counter(
-            t.bus_topic for t in spec.topics if t.direction == "to_bus" and not t.as_image
-        )
-        # bus topics fed by several ROS topics: each message publishes the merged latest values
-        self._shared = {topic for topic, n in feeds.items() if n > 1}
 
     # -- life ----------------------------------------------------------------------------------
     def start(self) -> None:
@@ -154,7 +147,7 @@ class Bridge(Closing):
     def _from_ros(self, t: TopicBridge) -> Callable[[Any], None]:
         def on_message(msg: Any) -> None:
             try:
-                self.bus.publish(t.bus_topic, self._bus_message(t, msg))
+                self.bus.publish(t.bus_topic, self._to_bus.message(t, message_to_dict(msg)))
             except (ConversionError, KeyError, ValueError, TypeError) as exc:
                 self.stats["malformed"] += 1
                 log.warning("dropped a message from %s (%s): %s", t.ros, t.type, exc)
@@ -162,20 +155,6 @@ class Bridge(Closing):
             self.stats["to_bus"] += 1
 
         return on_message
-
-    def _bus_message(self, t: TopicBridge, msg: Any) -> Image | dict[str, Any]:
-        data = message_to_dict(msg)
-        if t.as_image:
-            if t.type == "sensor_msgs/CompressedImage":
-                return compressed_to_image(data)
-            return raw_to_image(data)
-        fields = to_bus_fields(data, t.fields)
-        if t.bus_topic in self._shared:
-            with self._lock:
-                merged = self._merged.setdefault(t.bus_topic, {})
-                merged.update(fields)
-                return dict(merged)
-        return fields
 
     # -- bus → ROS -----------------------------------------------------------------------------
     def _from_bus(self, index: int, t: TopicBridge) -> Callable[[Any], None]:

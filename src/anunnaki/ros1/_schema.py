@@ -8,9 +8,10 @@ several ROS topics gets each field from one of them.
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Annotated, Literal
+from typing import Annotated, Literal, TypeVar
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
@@ -34,6 +35,8 @@ __all__ = [
 ]
 
 FORMAT_TAG = "ros1-bridge/1"
+
+_T = TypeVar("_T")
 
 _NAME_PATTERN = r"^(/[A-Za-z0-9_]+)+$"
 _FIELD_PATTERN = r"^[A-Za-z_][A-Za-z0-9_]*(\.[A-Za-z_][A-Za-z0-9_]*)*$"
@@ -175,19 +178,9 @@ def _check_meaning(spec: BridgeSpec, lines: LineMap, path: str) -> None:
     merged: dict[str, dict[str, int]] = {}  # bus topic → bus field → topic entry
     for i, t in enumerate(spec.topics):
         element = f"topics[{t.ros}]"
-        fields = MESSAGE_TYPES.get(t.type)
-        if fields is None:
-            raise f.error(
-                f"unknown ROS message type {t.type!r}",
-                ("topics", i, "type"),
-                f"{element}.type",
-                "the bridge converts: " + ", ".join(sorted(MESSAGE_TYPES)),
-            )
-        for bus_field, ros_field in t.fields.items():
-            where = ("topics", i, "fields", bus_field)
-            _check_field(
-                f, t.type, fields, ros_field, where, element=f"{element}.fields.{bus_field}"
-            )
+        at = ("topics", i)
+        fields = _known(f, MESSAGE_TYPES, t.type, at=at, element=element, kind="message")
+        _check_fields(f, t.type, fields, t.fields, at=at, element=element)
         if t.direction == "to_bus" and not t.as_image:
             for bus_field in t.fields or dict(fields):
                 first = merged.setdefault(t.bus_topic, {}).setdefault(bus_field, i)
@@ -201,20 +194,46 @@ def _check_meaning(spec: BridgeSpec, lines: LineMap, path: str) -> None:
                     )
     for i, s in enumerate(spec.services):
         element = f"services[{s.bus}]"
-        types = SERVICE_TYPES.get(s.type)
-        if types is None:
-            raise f.error(
-                f"unknown ROS service type {s.type!r}",
-                ("services", i, "type"),
-                f"{element}.type",
-                "the bridge calls: " + ", ".join(sorted(SERVICE_TYPES)),
-            )
-        for bus_field, ros_field in s.fields.items():
-            where = ("services", i, "fields", bus_field)
-            label = f"{s.type} request"
-            _check_field(
-                f, label, types[0], ros_field, where, element=f"{element}.fields.{bus_field}"
-            )
+        at = ("services", i)
+        request, _ = _known(f, SERVICE_TYPES, s.type, at=at, element=element, kind="service")
+        _check_fields(f, f"{s.type} request", request, s.fields, at=at, element=element)
+
+
+def _known(
+    f: _File,
+    table: Mapping[str, _T],
+    type_name: str,
+    *,
+    at: tuple[str, int],
+    element: str,
+    kind: Literal["message", "service"],
+) -> _T:
+    """The table's entry for an entry's ROS type, or an error listing the known ones."""
+    found = table.get(type_name)
+    if found is None:
+        verb = "converts" if kind == "message" else "calls"
+        raise f.error(
+            f"unknown ROS {kind} type {type_name!r}",
+            (*at, "type"),
+            f"{element}.type",
+            f"the bridge {verb}: " + ", ".join(sorted(table)),
+        )
+    return found
+
+
+def _check_fields(
+    f: _File,
+    type_name: str,
+    fields: tuple[tuple[str, str], ...],
+    mapping: Mapping[str, str],
+    *,
+    at: tuple[str, int],
+    element: str,
+) -> None:
+    """Every ROS field an entry's mapping names is one of its type's (not the image bytes)."""
+    for bus_field, ros_field in mapping.items():
+        where, name = (*at, "fields", bus_field), f"{element}.fields.{bus_field}"
+        _check_field(f, type_name, fields, ros_field, where, element=name)
 
 
 def _check_field(

@@ -22,7 +22,6 @@ left out), and publishes on Anunnaki's bus what the ROS 1 bridge publishes.
 from __future__ import annotations
 
 import logging
-import threading
 from collections.abc import Callable, Mapping
 from typing import Any, Literal
 
@@ -33,12 +32,10 @@ from anunnaki.messages import Image, body_of
 from anunnaki.ros1 import (
     BridgeSpec,
     ConversionError,
+    ToBus,
     TopicBridge,
     bag_message_to_dict,
     bus_image_to_compressed,
-    compressed_to_image,
-    raw_to_image,
-    to_bus_fields,
     to_ros_fields,
 )
 
@@ -174,14 +171,8 @@ class Ros2ZenohBridge(Closing):
         self.namespace = namespace
         self.store = _store()
         self.stats: dict[str, int] = {"to_bus": 0, "to_ros": 0, "malformed": 0}
-        self._lock = threading.Lock()
-        self._merged: dict[str, dict[str, Any]] = {}
+        self._to_bus = ToBus(spec, strict=False)
         self._handles: list[Any] = []
-        count: dict[str, int] = {}
-        for t in spec.topics:
-            if t.direction == "to_bus" and not t.as_image:
-                count[t.bus_topic] = count.get(t.bus_topic, 0) + 1
-        self._shared = {topic for topic, n in count.items() if n > 1}
 
     def key(self, t: TopicBridge, *, type_hash: str = "*") -> str:
         """The zenoh key of a bridge entry's ROS 2 topic."""
@@ -218,7 +209,7 @@ class Ros2ZenohBridge(Closing):
         def on_sample(sample: Any) -> None:
             try:
                 data = decode_cdr(t.type, sample.payload.to_bytes(), self.store)
-                self.bus.publish(t.bus_topic, self._bus_message(t, data))
+                self.bus.publish(t.bus_topic, self._to_bus.message(t, data))
             except Exception as exc:  # a bad sample is counted and dropped, never fatal
                 self.stats["malformed"] += 1
                 log.warning("dropped a ROS 2 sample on %s (%s): %s", t.ros, t.type, exc)
@@ -226,19 +217,6 @@ class Ros2ZenohBridge(Closing):
             self.stats["to_bus"] += 1
 
         return on_sample
-
-    def _bus_message(self, t: TopicBridge, data: dict[str, Any]) -> Image | dict[str, Any]:
-        if t.as_image:
-            if t.type == "sensor_msgs/CompressedImage":
-                return compressed_to_image(data)
-            return raw_to_image(data)
-        fields = to_bus_fields(data, t.fields, strict=False)
-        if t.bus_topic in self._shared:
-            with self._lock:
-                merged = self._merged.setdefault(t.bus_topic, {})
-                merged.update(fields)
-                return dict(merged)
-        return fields
 
     def _from_bus(self, t: TopicBridge) -> Callable[[Any], None]:
         key = self.key(t, type_hash="0")

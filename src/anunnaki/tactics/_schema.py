@@ -13,6 +13,7 @@ validation from the same element-path → line map that locates their errors.
 
 from __future__ import annotations
 
+import re
 from collections.abc import Iterator, Mapping
 from typing import Annotated, Any, Final, Literal
 
@@ -189,6 +190,18 @@ class SwapModelAction(_Model):
         return "service", self.service, payload
 
 
+#: The channels that need a recipient: its pattern, the wording of the error, an example.
+_RECIPIENTS: Final[dict[str, tuple[re.Pattern[str], str, str, str]]] = {
+    "email": (_EMAIL, "an email notification", "an e-mail address", "operator@example.com"),
+    "webhook": (
+        _URL,
+        "a webhook notification",
+        "an http(s) URL",
+        "https://hooks.example.com/rover",
+    ),
+}
+
+
 class NotifyAction(_Model):
     """Tell a person: an e-mail, a webhook call, or a log record.
 
@@ -204,22 +217,17 @@ class NotifyAction(_Model):
 
     @model_validator(mode="after")
     def _recipient(self) -> NotifyAction:
-        if self.channel == "email" and (self.to is None or not _EMAIL.fullmatch(self.to)):
+        rule = _RECIPIENTS.get(self.channel)
+        if rule is None:
+            return self
+        pattern, notification, what, example = rule
+        if self.to is None or not pattern.fullmatch(self.to):
             raise _error(
                 "notify_to",
-                "an email notification needs 'to': an e-mail address"
+                f"{notification} needs 'to': {what}"
                 if self.to is None
-                else f"{self.to!r} is not an e-mail address",
-                hint="e.g. to: operator@example.com",
-                where=("to",),
-            )
-        if self.channel == "webhook" and (self.to is None or not _URL.fullmatch(self.to)):
-            raise _error(
-                "notify_to",
-                "a webhook notification needs 'to': an http(s) URL"
-                if self.to is None
-                else f"{self.to!r} is not an http(s) URL",
-                hint="e.g. to: https://hooks.example.com/rover",
+                else f"{self.to!r} is not {what}",
+                hint=f"e.g. to: {example}",
                 where=("to",),
             )
         return self
@@ -277,27 +285,19 @@ class Tactic(_Model):
 
     @model_validator(mode="after")
     def _consistent(self) -> Tactic:
-        seen: dict[str, int] = {}
-        for i, cond in enumerate(self.preconditions):
-            if isinstance(cond, GoalState):
+        for field in ("preconditions", "postconditions"):
+            seen: set[str] = set()
+            for i, cond in enumerate(getattr(self, field)):
+                if not isinstance(cond, GoalState):
+                    continue  # an expression precondition
                 if cond.goal in seen:
                     raise _error(
                         "repeated_goal",
-                        f"goal {cond.goal} appears twice in the preconditions",
+                        f"goal {cond.goal} appears twice in the {field}",
                         hint="state each goal once",
-                        where=("preconditions", i),
+                        where=(field, i),
                     )
-                seen[cond.goal] = i
-        seen.clear()
-        for i, cond in enumerate(self.postconditions):
-            if cond.goal in seen:
-                raise _error(
-                    "repeated_goal",
-                    f"goal {cond.goal} appears twice in the postconditions",
-                    hint="state each goal once",
-                    where=("postconditions", i),
-                )
-            seen[cond.goal] = i
+                seen.add(cond.goal)
         names: set[str] = set()
         for i, other in enumerate(self.conflicts):
             if other == self.name:

@@ -87,26 +87,21 @@ def _error(kind: str, message: str, *, hint: str | None = None, **ctx: Any) -> P
 # --------------------------------------------------------------------------- value types
 
 
-def _check_text(value: str) -> str:
-    bad = _BAD_CHARS.search(value)
+def _no_control(value: str, bad_chars: re.Pattern[str], where: str, hint: str) -> str:
+    bad = bad_chars.search(value)
     if bad:
-        raise _error(
-            "control_character",
-            f"control character U+{ord(bad.group()):04X} is not allowed",
-            hint="use plain text; tabs and newlines are the only control characters allowed",
-        )
+        message = f"control character U+{ord(bad.group()):04X} is not allowed{where}"
+        raise _error("control_character", message, hint=hint)
     return value
+
+
+def _check_text(value: str) -> str:
+    hint = "use plain text; tabs and newlines are the only control characters allowed"
+    return _no_control(value, _BAD_CHARS, "", hint)
 
 
 def _check_line(value: str) -> str:
-    bad = _BAD_LINE_CHARS.search(value)
-    if bad:
-        raise _error(
-            "control_character",
-            f"control character U+{ord(bad.group()):04X} is not allowed here",
-            hint="this value is one line of plain text",
-        )
-    return value
+    return _no_control(value, _BAD_LINE_CHARS, " here", "this value is one line of plain text")
 
 
 def _check_token(value: str) -> str:

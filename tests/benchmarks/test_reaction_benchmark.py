@@ -6,14 +6,10 @@ trials through the manager's public hooks and the result has the structure the d
 
 from __future__ import annotations
 
-import json
-import subprocess
-import sys
 from pathlib import Path
 
 import pytest
-
-ROOT = Path(__file__).resolve().parents[1]
+from bench_helpers import load, run
 
 pytest.importorskip("zenoh")
 
@@ -23,17 +19,8 @@ SUMMARY = {"n", "p50", "p90", "p99", "max", "mean"}
 @pytest.mark.slow
 def test_reaction_benchmark_quick(tmp_path: Path) -> None:
     out = tmp_path / "reaction.json"
-    argv = [sys.executable, str(ROOT / "benchmarks" / "reaction.py"), "--quick"]
-    result = subprocess.run(
-        [*argv, "--output", str(out)],
-        capture_output=True,
-        text=True,
-        timeout=300,
-        cwd=ROOT,
-        check=False,
-    )
-    assert result.returncode == 0, result.stdout[-3000:] + result.stderr[-3000:]
-    doc = json.loads(out.read_text())
+    run("reaction.py", "--quick", "--output", str(out), timeout=300)
+    doc = load(out)
     assert doc["benchmark"] == "reaction"
     assert "loadavg_end" in doc["machine"]
 

@@ -1,29 +1,49 @@
-"""benchmarks/oracle.py keeps the figures of every label batch size apart (issue 13).
+"""benchmarks/oracle.py: its inference part runs; its figures of every label batch size stay apart.
 
-The true category of a held-out context is one measurement on a fixed batch of test images
+The accuracy part needs datasets and oracles; its library is tested in tests/enlil. The true
+category of a held-out context is one measurement on a fixed batch of test images
 (``--batch-images``); rows measured at another size than the documented one must land beside
-the documented figures, never over them.
+the documented figures, never over them (issue 13).
 """
 
 from __future__ import annotations
 
 import importlib.util
+import json
 from pathlib import Path
 from typing import Any
 
 import pytest
-
-ROOT = Path(__file__).resolve().parents[1]
+from bench_helpers import BENCH, load, run
 
 
 @pytest.fixture(scope="module")
 def bench() -> Any:
     pytest.importorskip("torch")
-    spec = importlib.util.spec_from_file_location("oracle_bench", ROOT / "benchmarks" / "oracle.py")
+    spec = importlib.util.spec_from_file_location("oracle_bench", BENCH / "oracle.py")
     assert spec is not None and spec.loader is not None
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
     return module
+
+
+@pytest.mark.slow
+def test_oracle_benchmark_inference_part(tmp_path: Path) -> None:
+    """The accuracy part needs datasets and oracles; its library is tested in tests/enlil."""
+    out = tmp_path / "oracle.json"
+    run("oracle.py", "--only-inference", "--frames", "5", "--output", str(out))
+    doc = load(out)
+    assert doc["inference_ms_per_frame_128"]["median"] > 0
+    assert doc["inference_ms_per_frame_128"]["threads"] == 1 and "accuracy" not in doc
+    assert doc["measured_elsewhere"]["ramps"].startswith("benchmarks/results/oracle_ramps.json")
+    # --keep-inference keeps both figures of an earlier (quieter) run, the shipped one's too
+    kept = {"median": 123.0, "p90": 456.0}
+    doc["inference_ms_per_frame_128_shipped_rover_default"] = kept
+    out.write_text(json.dumps(doc))
+    run("oracle.py", "--only-inference", "--keep-inference", "--frames", "5", "--output", str(out))
+    again = load(out)
+    assert again["inference_ms_per_frame_128"] == doc["inference_ms_per_frame_128"]
+    assert again["inference_ms_per_frame_128_shipped_rover_default"] == kept
 
 
 def settings(size: int) -> dict[str, Any]:

@@ -8,14 +8,10 @@ raises no traceback, kills no loop and changes no decision.
 
 from __future__ import annotations
 
-import json
-import subprocess
-import sys
 from pathlib import Path
 
 import pytest
-
-ROOT = Path(__file__).resolve().parents[1]
+from bench_helpers import load, run
 
 pytest.importorskip("zenoh")
 
@@ -23,14 +19,10 @@ pytest.importorskip("zenoh")
 @pytest.mark.slow
 def test_faults_benchmark_shortened(tmp_path: Path) -> None:
     out = tmp_path / "faults.json"
-    argv = [sys.executable, str(ROOT / "benchmarks" / "faults.py"), "--quick"]
-    argv += ["--victims", "analyze", "manager", "--skip", "flood", "--corpus", "processes"]
-    argv += ["--deadline", "1.5", "--output", str(out)]
-    result = subprocess.run(
-        argv, capture_output=True, text=True, timeout=360, cwd=ROOT, check=False
-    )
-    assert result.returncode == 0, result.stdout[-3000:] + result.stderr[-3000:]
-    doc = json.loads(out.read_text())
+    args = ["--quick", "--victims", "analyze", "manager", "--skip", "flood"]
+    args += ["--corpus", "processes", "--deadline", "1.5", "--output", str(out)]
+    run("faults.py", *args, timeout=360)
+    doc = load(out)
 
     trials = doc["kill_trials"]
     assert [(t["deployment"], t["victim"]) for t in trials] == [
