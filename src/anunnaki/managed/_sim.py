@@ -162,9 +162,10 @@ class SimulatedSystem(Closing):
             runs no detector (the platform then has only its other sensors).
         oracle: The oracle's options (``name`` defaults to ``ground_truth``; the others go to
             the oracle, e.g. ``window``); ``None`` runs no oracle.
-        lockstep: Hold each frame's successor until its detections are out (bounded by
-            ``lockstep_timeout`` seconds of wall time).
-        lockstep_timeout: The longest a frame waits for its detections.
+        lockstep: Hold each frame's successor until its detections and the oracle's and
+            scorer's assessments are out (bounded by ``lockstep_timeout`` seconds of wall
+            time).
+        lockstep_timeout: The longest a frame waits for its detections and assessments.
         on_time: Called with the simulation time before each physics chunk (Utu's clock).
         stop_without_utu: Seconds a Utu node the platform has seen may be gone before it
             stops (rover) or lands (UAV) by itself (``None``: never).
@@ -346,8 +347,22 @@ class SimulatedSystem(Closing):
                         frame.seq,
                         self.lockstep_timeout,
                     )
-                    break
+                    return
                 self._lock.wait(min(left, 0.05))
+        if self._stopping.is_set():
+            return
+        # ... and its assessments: an oracle that fell behind would drop frames from its
+        # queue and report late, in simulated time, what a real-time one reports at once.
+        for node in (self.oracle, self.scorer):
+            if node is not None and not node.wait_for_frame(
+                frame.seq, max(0.0, deadline - time.monotonic())
+            ):
+                log.warning(
+                    "sim: frame %d got no assessment from %s within %.1f s",
+                    frame.seq,
+                    node.node,
+                    self.lockstep_timeout,
+                )
 
     # -- running -------------------------------------------------------------------------------
     def run(
