@@ -4,6 +4,10 @@ See ``lec_helpers.py``: the model is cached under pytest's cache directory keyed
 the settings and of the source of ``anunnaki.lec``, ``anunnaki.datasets`` and ``anunnaki.sim``.
 The cache is locked while it is checked and filled: with ``make test``'s two xdist workers the
 first trains and the second waits, then reads its model.
+
+Training it takes about 40 s on a quiet machine and over 120 s (the suite's per-test timeout)
+on a loaded one, and pytest-timeout counts a fixture's setup against its first test: the
+tests that use it get a timeout that holds the training (and the wait for the other worker's).
 """
 
 from __future__ import annotations
@@ -15,6 +19,21 @@ from pathlib import Path
 
 import pytest
 from lec_helpers import Trained, cache_key, train_session_model
+
+#: Seconds a test that uses the session model may take, its training included.
+TRAINED_TIMEOUT = 900
+
+
+def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
+    """Give the tests here that use the session model a timeout that holds its training."""
+    here = Path(__file__).parent
+    for item in items:
+        if (
+            item.path.is_relative_to(here)
+            and "trained" in getattr(item, "fixturenames", ())
+            and item.get_closest_marker("timeout") is None
+        ):
+            item.add_marker(pytest.mark.timeout(TRAINED_TIMEOUT))
 
 
 @pytest.fixture(scope="session")
