@@ -12,7 +12,9 @@ timed here at a fixed small size on the rendered rover dataset:
 - ``oracle_frames``: ``perturbed_frames`` of four phenomena, ``--frames`` train-split frames;
 - ``oracle_fit``: the training loop over those frames, ``--epochs`` epochs, one thread;
 - ``uav_render``: ``--uav-frames`` frames of a UAV scene at 320 x 240 (unchanged code);
-- ``oracle_predict``: the shipped ``rover-default`` oracle's whole ``predict`` (network,
+- ``oracle_predict``: the ``rover-default`` oracle shipped at ``--predict-oracle`` (a git
+  revision; an oracle both trees read: the one the speed-up was made for, a ``small_cnn``
+  of ``anunnaki-oracle/2`` without a drop head) and its whole ``predict`` (network,
   context lookup, mix) on one 128 x 128 frame at a time, ``--predict-calls`` calls over 16
   val frames under fog, HSL and raindrop contexts (the ``enlil`` plugin's per-frame work;
   aim <= 3 ms); its baseline is ``--predict-baseline`` (the commit before its speed-up),
@@ -52,6 +54,9 @@ DEFAULT_OUTPUT = ROOT / "benchmarks" / "results" / "enlil_speed.json"
 BASELINE = "f6199dffe105fc8d4e679e6baaba8d1ddffad15b"
 #: The last commit before the oracle's per-frame speed-up (``oracle_predict``).
 PREDICT_BASELINE = "b23725c3e1a5e82f7dd570fefbed67d1e878d845"
+#: The revision whose shipped ``rover-default`` oracle ``oracle_predict`` times: the last one
+#: the ``--predict-baseline`` tree can read (later ones have a drop head, or are patch_cnn).
+PREDICT_ORACLE = "32e59dc76dbe0612ba80de4f1894e3aa5ada0702"
 STEPS = ("assess_fog", "assess_hsl", "oracle_frames", "oracle_fit", "uav_render", "oracle_predict")
 #: Sizes: assess evaluations, perturbed frames, fit frames and epochs, UAV frames, rounds.
 FULL = {
@@ -164,15 +169,13 @@ def _render(n: int) -> dict[str, Any]:
     return {"wall": wall, "cpu": cpu, "per_frame_wall": wall / n, "digest": digest}
 
 
-def _predict(data: str, calls: int) -> dict[str, Any]:
+def _predict(data: str, calls: int, oracle_file: str) -> dict[str, Any]:
     import numpy as np
 
     from anunnaki.datasets import load_split
     from anunnaki.enlil import load_oracle
-    from anunnaki.lec import load_registry
 
-    spec = load_registry(ROOT / "examples" / "models" / "rover.yaml").get("rover-default")
-    oracle = load_oracle(spec.oracle.file, sha256=spec.oracle.sha256)
+    oracle = load_oracle(oracle_file)  # its sidecar's weights_sha256 is checked
     val = load_split(data, "val")
     rng = np.random.default_rng(0)
     frames = []
@@ -224,7 +227,7 @@ def run_step(step: str, args: argparse.Namespace) -> dict[str, Any]:
     if step == "oracle_fit":
         return _fit(args.data, args.fit_frames, args.epochs)
     if step == "oracle_predict":
-        return _predict(args.data, args.predict_calls)
+        return _predict(args.data, args.predict_calls, args.predict_oracle_file)
     return _render(args.uav_frames)
 
 
@@ -240,12 +243,26 @@ def _extract(rev: str, into: Path) -> Path:
     return into / "src"
 
 
+def _oracle_at(rev: str, into: Path) -> str:
+    """``rover-default``'s oracle file (both halves) as shipped at *rev*, under *into*."""
+    into.mkdir()
+    for suffix in (".safetensors", ".json"):
+        name = f"rover-default.oracle{suffix}"
+        blob = subprocess.run(
+            ["git", "-C", str(ROOT), "show", f"{rev}:examples/models/{name}"],
+            capture_output=True, check=True,
+        ).stdout  # fmt: skip
+        (into / name).write_bytes(blob)
+    return str(into / "rover-default.oracle.safetensors")
+
+
 def _child(step: str, src: Path, args: argparse.Namespace) -> dict[str, Any]:
     env = dict(os.environ, PYTHONPATH=str(src), OMP_NUM_THREADS="1")
     cmd = [sys.executable, __file__, "--step", step, "--data", args.data]
     cmd += ["--evals", str(args.evals), "--frames", str(args.frames)]
     cmd += ["--fit-frames", str(args.fit_frames), "--epochs", str(args.epochs)]
     cmd += ["--uav-frames", str(args.uav_frames), "--predict-calls", str(args.predict_calls)]
+    cmd += ["--predict-oracle-file", getattr(args, "predict_oracle_file", "")]
     out = subprocess.run(cmd, env=env, check=True, capture_output=True, text=True).stdout
     result: dict[str, Any] = json.loads(out.strip().splitlines()[-1])
     return result
@@ -264,6 +281,7 @@ def compare(args: argparse.Namespace) -> dict[str, Any]:
     if "oracle_predict" in args.steps:
         (tmp / "predict").mkdir()
         trees["predict_baseline"] = _extract(args.predict_baseline, tmp / "predict")
+        args.predict_oracle_file = _oracle_at(args.predict_oracle, tmp / "oracle")
     runs: dict[str, dict[str, list[dict[str, Any]]]] = {
         s: {"baseline": [], "current": []} for s in args.steps
     }
@@ -302,6 +320,7 @@ def compare(args: argparse.Namespace) -> dict[str, Any]:
             )
             entry["max_prob_diff"] = float(f"{diff:.2e}")
             entry["baseline"] = args.predict_baseline
+            entry["oracle_shipped_at"] = args.predict_oracle
         if "losses" in base:
             rel = [abs(a - b) / abs(a) for a, b in zip(base["losses"], cur["losses"], strict=True)]
             entry["fit_loss_max_rel_diff"] = float(f"{max(rel):.2e}")
@@ -341,6 +360,12 @@ def main() -> None:
     )
     for name, value in FULL.items():  # --quick: QUICK's value unless given
         parser.add_argument(f"--{name.replace('_', '-')}", type=int, help=f"default {value}")
+    parser.add_argument(
+        "--predict-oracle",
+        default=PREDICT_ORACLE,
+        help="git revision whose shipped rover-default oracle oracle_predict times",
+    )
+    parser.add_argument("--predict-oracle-file", help=argparse.SUPPRESS)  # internal: its file
     parser.add_argument("--steps", default=",".join(STEPS))
     parser.add_argument("--step", help=argparse.SUPPRESS)  # internal: run one step, print JSON
     parser.add_argument("--output", default=str(DEFAULT_OUTPUT))

@@ -32,6 +32,10 @@
    trains one oracle per ``--architectures`` and ``--train-seeds`` with equal budgets
    (``--train-frames``, ``--train-epochs``) on those archives and scores them beside the
    others as ``ARCH-sSEED``; ``seeds`` gives each architecture's mean and spread.
+   ``--seed-oracle MODEL=FILE`` (repeatable) scores oracles trained elsewhere with one
+   recipe and several seeds (``oracle train --seeds``; the shipped file is seed 0) as
+   ``recipe-sSEED``: their mean and spread are ``seeds["recipe"]``, and the issue's
+   ``seed_spread`` aim (balanced macro-F1, max - min <= 0.05) is judged on them.
 
 Writes ``benchmarks/results/oracle.json``. Data: ``anunnaki make-dataset rover --out D`` and
 ``anunnaki make-dataset uav --out D --width 320 --height 240`` (docs/enlil.md).
@@ -141,14 +145,22 @@ def inference_shipped(frames: int) -> dict[str, Any]:
     return _time_predict(oracle, images * 8, frames) | {"lookup": oracle.card.lookup is not None}
 
 
+def _split(item: str, flag: str) -> tuple[str, Path]:
+    """``MODEL=FILE`` of *flag*: the model id and the file."""
+    model, sep, path = item.partition("=")
+    if not sep:
+        raise SystemExit(f"{flag} {item!r}: write MODEL=FILE, e.g. rover-default=o.oracle")
+    return model, Path(path)
+
+
 def _pairs(items: list[str], flag: str) -> dict[str, Path]:
-    out = {}
-    for item in items:
-        model, sep, path = item.partition("=")
-        if not sep:
-            raise SystemExit(f"{flag} {item!r}: write MODEL=FILE, e.g. rover-default=o.oracle")
-        out[model] = Path(path)
-    return out
+    return dict(_split(item, flag) for item in items)
+
+
+def _seed_files(items: list[str], model: str) -> list[Path]:
+    """The files ``--seed-oracle MODEL=FILE`` names for *model*, in the order given."""
+    pairs = [_split(item, "--seed-oracle") for item in items]
+    return [path for owner, path in pairs if owner == model]
 
 
 def _oracles(model: str, phen: str, spec: Any, args: argparse.Namespace) -> dict[str, Any]:
@@ -165,6 +177,13 @@ def _oracles(model: str, phen: str, spec: Any, args: argparse.Namespace) -> dict
     mc = _pairs(args.mc_oracle, "--mc-oracle").get(model)
     if mc is not None:
         out["monte-carlo"] = load_oracle(mc)
+    for path in _seed_files(args.seed_oracle, model):
+        oracle = load_oracle(path)
+        name = f"recipe-s{oracle.card.training.get('config', {}).get('seed')}"
+        if name in out:
+            raise SystemExit(f"--seed-oracle {path}: a second oracle of {model} named {name}")
+        if phen in oracle.card.phenomenon_classes[1:]:
+            out[name] = oracle
     for name, path in train_grid(args, model).items():
         oracle = load_oracle(path)
         if phen in oracle.card.phenomenon_classes[1:]:
@@ -247,6 +266,21 @@ def _aims(runs: dict[str, Any]) -> dict[str, Any]:
             "met": drop is not None and all(v is None or drop < v for v in drops.values()),
         },
         "ece_balanced": {"value": ece, "aim": 0.05, "met": ece is not None and ece <= 0.05},
+    }  # fmt: skip
+
+
+def _spread_aim(seeds: dict[str, Any]) -> dict[str, Any]:
+    """Issue 22's steadiness aim on the ``--seed-oracle`` group: balanced macro-F1's spread."""
+    if "recipe" not in seeds:
+        return {}
+    group = seeds["recipe"]
+    spread = group["balanced_macro_f1"]["spread"]
+    return {
+        "seed_spread": {
+            "value": spread, "seeds": group["seeds"], "aim": 0.05, "met": spread <= 0.05,
+            "random_accuracy_spread": group["random_accuracy"]["spread"],
+            "interior_macro_f1_spread": group["interior_macro_f1"]["spread"],
+        }
     }  # fmt: skip
 
 
@@ -489,9 +523,9 @@ def _case(args: argparse.Namespace, plat: str, model: str, phen: str) -> dict[st
         },
         "fit": fitted["info"],
         **runs,
-        "seeds": _seed_groups(runs),
+        "seeds": (seeds := _seed_groups(runs)),
         "paper_accuracy": PAPER.get(phen),
-        "aims": _aims(runs),
+        "aims": _aims(runs) | _spread_aim(seeds),
         "contexts_n": n,
         "batch_images": common["batch_images"],
         "seconds": round(time.perf_counter() - start, 1),
@@ -617,6 +651,14 @@ def main() -> None:
     parser.add_argument("--uav-data", help="uav dataset folder, 320x240 (val and test)")
     parser.add_argument("--enlil-oracle", action="append", default=[], metavar="MODEL=FILE")
     parser.add_argument("--mc-oracle", action="append", default=[], metavar="MODEL=FILE")
+    parser.add_argument(
+        "--seed-oracle",
+        action="append",
+        default=[],
+        metavar="MODEL=FILE",
+        help="an oracle of the shipped recipe at another seed (repeatable; the shipped one "
+        "too, as seed 0): scored as recipe-sSEED, with their mean, spread and the seed aim",
+    )
     parser.add_argument("--contexts", type=int, default=60, help="N of random:N, balanced:N")
     parser.add_argument("--frames-per-context", type=int, default=10)
     parser.add_argument(

@@ -215,8 +215,8 @@ def close_in_view(seed: int, t: float) -> bool:
 class Truth:
     """The true category of a context, measured on a fixed batch of test images."""
 
-    def __init__(self, data: str, model_id: str) -> None:
-        registry = load_registry(MODELS)
+    def __init__(self, data: str, model_id: str, models: Path = MODELS) -> None:
+        registry = load_registry(models)
         self.detector = registry.load(registry.get(model_id))
         self.batch = fixed_batch(data, "test", 32, seed=0)
         self.clean_f1 = float(evaluate_detector(self.detector, self.batch).f1)
@@ -250,7 +250,15 @@ class Truth:
 
 
 def run_ramp(
-    kind: str, seed: int, truth: Truth, *, clean: float, ramp: float, hold: float, window: int
+    kind: str,
+    seed: int,
+    truth: Truth,
+    *,
+    clean: float,
+    ramp: float,
+    hold: float,
+    window: int,
+    models: Path = MODELS,
 ) -> dict[str, Any]:
     """One scripted ramp: the oracle's per-frame categories against the true change."""
     sc = scenario(kind, seed, clean, ramp, hold)
@@ -273,7 +281,7 @@ def run_ramp(
         bus.subscribe(topics.ORACLE_OUTPUT, on_assessment, queue=1024)
         bus.subscribe(topics.GROUND_TRUTH, on_truth, queue=1024)
         with SimulatedSystem(
-            bus, sc, models=MODELS, oracle={"name": "enlil", "window": window}
+            bus, sc, models=models, oracle={"name": "enlil", "window": window}
         ) as system:
             t0 = time.perf_counter()
             system.run(threading.Event(), speed=FAST)
@@ -435,6 +443,13 @@ def main() -> None:
     ap.add_argument("--loop-seconds", type=float, help="simulated s per loop run (20; quick: 10)")
     ap.add_argument("--quick", action="store_true", help="2 seeds, 5 s clean, 5 s ramps")
     ap.add_argument("--threads", type=int, default=2)
+    ap.add_argument(
+        "--models",
+        type=Path,
+        default=MODELS,
+        help="the model registry of the ramps (examples/models/rover.yaml; e.g. a copy, so "
+        "that oracles re-pinned meanwhile do not change a run; the loop runs the examples')",
+    )
     ap.add_argument("--output", type=Path, default=RESULTS)
     args = ap.parse_args()
     defaults = (2, 5.0, 5.0, 10.0) if args.quick else (10, 10.0, 10.0, 20.0)
@@ -446,7 +461,7 @@ def main() -> None:
     if unknown:
         ap.error(f"--ramps: unknown {', '.join(unknown)}; the cases are {', '.join(KINDS)}")
     torch.set_num_threads(args.threads)
-    truth = Truth(args.data, "rover-default")
+    truth = Truth(args.data, "rover-default", args.models)
     results: dict[str, Any] = {
         "benchmark": "oracle_ramps",
         "date": time.strftime("%Y-%m-%d %H:%M:%S"),
@@ -457,7 +472,7 @@ def main() -> None:
             "load_average_before": list(os.getloadavg()),
         },
         "model": "rover-default",
-        "oracle": oracle_file(),
+        "oracle": oracle_file(args.models),
         "settings": {
             k: getattr(args, k) for k in ("seeds", "clean", "ramp", "hold", "window", "quick")
         },
@@ -476,6 +491,7 @@ def main() -> None:
                 ramp=args.ramp,
                 hold=args.hold,
                 window=args.window,
+                models=args.models,
             )
             runs[kind].append(r)
             print(
@@ -506,12 +522,14 @@ def main() -> None:
     )
 
 
-def oracle_file() -> dict[str, Any]:
-    """The oracle the run assessed with: the registry's pin of rover-default's oracle."""
-    ref = load_registry(MODELS).get("rover-default").oracle
+def oracle_file(models: Path = MODELS) -> dict[str, Any]:
+    """The oracle the ramps assessed with: the registry's pin of rover-default's oracle."""
+    ref = load_registry(models).get("rover-default").oracle
     if ref is None:
         return {}
-    return {"file": str(Path(ref.file).relative_to(ROOT)), "sha256": ref.sha256}
+    path = Path(ref.file).resolve()
+    shown = path.relative_to(ROOT) if path.is_relative_to(ROOT) else path
+    return {"file": str(shown), "sha256": ref.sha256}
 
 
 if __name__ == "__main__":

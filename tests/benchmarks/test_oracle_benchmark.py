@@ -136,3 +136,19 @@ def test_seed_groups_give_mean_and_spread_per_architecture(bench: Any) -> None:
     assert patch["balanced_macro_f1"]["spread"] == pytest.approx(0.2)
     assert patch["balanced_drop_rmse"]["mean"] == pytest.approx(0.06)
     assert patch["balanced_of_ceiling"]["mean"] == pytest.approx(0.7 / 0.8)
+
+
+def test_seed_oracles_name_their_model_and_give_the_spread_aim(bench: Any) -> None:
+    items = ["rover-default=a.oracle", "uav-default=b.oracle", "rover-default=c.oracle"]
+    assert bench._seed_files(items, "rover-default") == [Path("a.oracle"), Path("c.oracle")]
+    assert bench._seed_files(items, "rover-fog") == []
+    with pytest.raises(SystemExit, match="write MODEL=FILE"):
+        bench._seed_files(["a.oracle"], "rover-default")
+    predictors = {f"recipe-s{i}": _figures(f1, 0.9, 0.05) for i, f1 in enumerate((0.8, 0.83))}
+    runs = {k: {"predictors": predictors} for k in ("random", "balanced", "interior")}
+    aim = bench._spread_aim(bench._seed_groups(runs))["seed_spread"]
+    assert aim["seeds"] == 2 and aim["value"] == pytest.approx(0.03) and aim["met"]
+    wide = {"recipe-s0": _figures(0.6, 0.9, 0.05), "recipe-s1": _figures(0.7, 0.9, 0.05)}
+    runs = {k: {"predictors": wide} for k in ("random", "balanced", "interior")}
+    assert not bench._spread_aim(bench._seed_groups(runs))["seed_spread"]["met"]
+    assert bench._spread_aim({}) == {}  # no --seed-oracle: no such aim

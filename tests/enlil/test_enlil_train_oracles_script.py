@@ -25,12 +25,20 @@ def choices(tmp_path: Path, **env: str) -> tuple[int, dict[str, str], str]:
     return result.returncode, rows, result.stderr
 
 
-def test_small_cnn_unless_a_variable_names_another(tmp_path: Path) -> None:
+def test_the_measured_choice_by_default(tmp_path: Path) -> None:
     code, rows, _ = choices(tmp_path)
+    assert code == 0
+    # patch_cnn for hsl (docs/enlil.md, "Issue 22"): the models with hsl among their phenomena
+    assert rows == {"rover-default": "patch_cnn", "rover-fog": "small_cnn",
+                    "rover-low_light": "patch_cnn", "uav-default": "small_cnn"}  # fmt: skip
+    assert not (tmp_path / "runs").exists() and not (tmp_path / "data").exists()
+
+
+def test_small_cnn_unless_a_variable_names_another(tmp_path: Path) -> None:
+    code, rows, _ = choices(tmp_path, ARCH_hsl="")  # an empty variable drops the default
     assert code == 0
     assert rows == dict.fromkeys(("rover-default", "rover-fog", "rover-low_light",
                                   "uav-default"), "small_cnn")  # fmt: skip
-    assert not (tmp_path / "runs").exists() and not (tmp_path / "data").exists()
 
 
 def test_per_phenomenon_then_per_model(tmp_path: Path) -> None:
