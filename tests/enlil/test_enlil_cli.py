@@ -57,15 +57,16 @@ def test_assess_prints_a_summary_and_plots(
     assert archive.meta.model_id == "rover-default" and len(archive.meta.sha256) == 64
 
 
+@pytest.mark.timeout(600)  # a new interpreter, torch and two rounds: minutes at load 25
 def test_kill_9_then_resume_loses_and_repeats_nothing(tiny: Path, tmp_path: Path) -> None:
     out = tmp_path / "k"
     cmd = [sys.executable, "-m", "anunnaki", *_args(tiny, out, 40), "--json"]
     proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     try:
-        deadline = time.monotonic() + 120
+        deadline = time.monotonic() + 300
         while len(list(out.glob("part-*.parquet"))) < 2:  # wait for two rounds on disk
             assert proc.poll() is None, "assess ended before it could be killed"
-            assert time.monotonic() < deadline, "no round written in 120 s"
+            assert time.monotonic() < deadline, "no round written in 300 s"
             time.sleep(0.05)
     finally:
         os.kill(proc.pid, signal.SIGKILL)
