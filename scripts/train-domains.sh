@@ -16,9 +16,11 @@
 # entry to rebuild it). Each model's work folder is $RUNS/ID: rerunning after Ctrl-C or
 # kill -9 continues where it stopped (the chain's stages, search parts and fine-tune
 # checkpoints; docs/robustify.md, "The work folder and resuming"); datasets are rendered once.
-# Every step's wall time goes to $RUNS/times.tsv, and the chain's own lines (one per stage
-# and fine-tune epoch) to $RUNS/ID.log with the time of day, so each stage's time can be
-# read off. Two threads / two workers: the machine this was written on has two cores.
+# Every step's wall time goes to $RUNS/times.tsv, each chain stage's too (from when its
+# stages/NAME.json was written; a stage reused from an earlier run gets no line), with the
+# load average when the step started; the chain's messages go to $RUNS/ID.log and its
+# summary to $RUNS/ID.summary.json. Two threads / two workers: the machine this was written
+# on has two cores.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
@@ -56,8 +58,16 @@ registered() { # registered REGISTRY ID: is ID in the registry's models list?
   grep -Eq "^  - id: $2\$" "$1"
 }
 
-stamp() { # the chain's progress lines, each with the time of day
-  while IFS= read -r line; do printf '%(%H:%M:%S)T %s\n' -1 "$line"; done
+stage_times() { # stage_times ID: each stage's wall seconds, from its stages/NAME.json
+  local id=$1 prev name t
+  prev=$(stat -c %Y "$RUNS/$id/robustify.json")
+  for name in search select finetune measure assess oracle; do
+    [[ -f $RUNS/$id/stages/$name.json ]] || continue
+    t=$(stat -c %Y "$RUNS/$id/stages/$name.json")
+    ((t >= prev)) || continue
+    printf '%s\t%d\t-\n' "  $id: $name" $((t - prev)) >> "$TIMES"
+    prev=$t
+  done
 }
 
 # robustify ID PLATFORM PHENOMENON DOMAIN BUDGET EPOCHS [more robustify options]
@@ -74,7 +84,8 @@ robustify() {
     --data "$DATA/$platform" --phenomenon "$phenomenon" --domain "$domain" --id "$id" \
     --out "$RUNS/$id" --budget "$budget" --epochs "$epochs" --seed "$SEED" \
     --workers "$THREADS" --threads "$THREADS" "$@" --register "$registry" --json \
-    > "$RUNS/$id.summary.json" 2> >(stamp >> "$RUNS/$id.log")
+    > "$RUNS/$id.summary.json" 2>> "$RUNS/$id.log"
+  stage_times "$id"
   "$PY" scripts/describe-domain.py "$registry" "$id"
 }
 
