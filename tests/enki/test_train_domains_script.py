@@ -89,7 +89,11 @@ def test_an_unknown_model_is_refused(tmp_path: Path) -> None:
 
 
 #: The shipped Enki models: registry, id, domain.
-SHIPPED = [("rover.yaml", "rover-hsl", "hsl"), ("rover.yaml", "rover-raindrop", "raindrop")]
+SHIPPED = [
+    ("rover.yaml", "rover-hsl", "hsl"),
+    ("rover.yaml", "rover-raindrop", "raindrop"),
+    ("uav.yaml", "uav-fog", "fog"),
+]
 
 
 @pytest.mark.parametrize(("registry", "name", "domain"), SHIPPED)
