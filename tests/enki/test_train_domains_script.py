@@ -93,6 +93,7 @@ SHIPPED = [
     ("rover.yaml", "rover-hsl", "hsl"),
     ("rover.yaml", "rover-raindrop", "raindrop"),
     ("uav.yaml", "uav-fog", "fog"),
+    ("rover.yaml", "rover-fog-enki", "fog"),
 ]
 
 
