@@ -56,9 +56,9 @@ managed:
 """
 
 
-def launch_text(tmp: Path) -> str:
-    """The launch above with its scenario written into *tmp* and the report going there."""
-    (tmp / "scenario.yaml").write_text(yaml.safe_dump(SCENARIO))
+def launch_text(tmp: Path, scenario: dict[str, Any] = SCENARIO) -> str:
+    """The launch above with *scenario* written into *tmp* and the report going there."""
+    (tmp / "scenario.yaml").write_text(yaml.safe_dump(scenario))
     return (
         LAUNCH.replace("ROVER", str(ROVER))
         .replace("SCENARIO", str(tmp / "scenario.yaml"))
@@ -70,8 +70,12 @@ def launch_text(tmp: Path) -> str:
 @pytest.fixture(scope="module")
 def enlil_run(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
     """Run the loop once; keep the decisions, every published assessment and the report."""
-    tmp = tmp_path_factory.mktemp("enlil")
-    text = launch_text(tmp)
+    return run_enlil(tmp_path_factory.mktemp("enlil"), SCENARIO)
+
+
+def run_enlil(tmp: Path, scenario: dict[str, Any]) -> dict[str, Any]:
+    """Run the launch above on *scenario*: the result, log, assessments and report."""
+    text = launch_text(tmp, scenario)
     seen: list[Assessment] = []
     lock = threading.Lock()
 
