@@ -1288,8 +1288,9 @@ def _domain_section(name: str, d: dict[str, Any]) -> list[str]:
         "",
         f"- Enki on random contexts ≥ {r['aim']} × the default's clean F1: "
         f"{'—' if r['value'] is None else format(r['value'], '.3f')} × — {word[r['met']]};",
-        f"- Enki loses ≤ {100 * cl['aim']:.0f} points of clean F1: it loses "
-        f"{100 * cl['value']:+.1f} — {word[cl['met']]};",
+        f"- Enki loses ≤ {100 * cl['aim']:.0f} points of clean F1: it "
+        f"{'loses' if cl['value'] >= 0 else 'gains'} {abs(100 * cl['value']):.1f} — "
+        f"{word[cl['met']]};",
         f"- Enki beats random contexts on (c) by ≥ {100 * h['aim']:.0f} points outside the "
         f"spread: {100 * h['value']:+.1f} ({d['enki_vs_random']['hardest']['verdict']}) — "
         f"{word[h['met']]}.",
