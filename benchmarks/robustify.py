@@ -49,6 +49,9 @@ Run::
         --domains rover-hsl --train-images 600 --epochs 3
     .venv/bin/python benchmarks/robustify.py --report     # docs/enki.md + docs/images/enki-*
 
+Domains measured by separate processes (``--output runs/D.json`` each) join the results with
+``--merge runs/D.json ...`` (refused unless their settings are the same).
+
 ``--report`` regenerates docs/enki.md and its plots from benchmarks/results/robustify.json
 alone (nothing typed by hand; a test checks the page regenerates identically). ``--quick``
 is the suite's tiny end-to-end run.
@@ -967,6 +970,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     p.add_argument("--families", help="held-out phenomenon families (default motion_blur)")
     p.add_argument("--nice", type=int, default=0, help="add this to the process's niceness")
     p.add_argument("--quiet", action="store_true")
+    p.add_argument(
+        "--merge",
+        type=Path,
+        nargs="+",
+        help="add the domains of these result files (same settings) to --output, measure nothing",
+    )
     defaults = Settings()
     for name in (
         "train_images",
@@ -1000,6 +1009,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = p.parse_args(argv)
     if args.report:
         write_report(json.loads(args.output.read_text(encoding="utf-8")), args.doc, args.images)
+        return 0
+    if args.merge:
+        merge(args.output, args.merge)
         return 0
     if args.nice:
         os.nice(args.nice)
@@ -1055,6 +1067,25 @@ def main(argv: Sequence[str] | None = None) -> int:
             write_json(args.output, doc)
             bars.log(f"{name}: written to {args.output}")
     return 0
+
+
+def merge(output: Path, others: Sequence[Path]) -> None:
+    """Add the domains of *others* to *output*; refuse files measured with other settings.
+
+    Domains measured by separate processes (one per domain, side by side) end up in one
+    result file, each with its own run record, as measured.
+    """
+    doc = json.loads(output.read_text(encoding="utf-8"))
+    for other in others:
+        more = json.loads(other.read_text(encoding="utf-8"))
+        for key in ("settings", "quick"):
+            if more.get(key) != doc.get(key):
+                raise SystemExit(
+                    f"--merge {other}: its {key} differ from {output}'s; only results measured "
+                    "with the same settings go in one file"
+                )
+        doc["domains"] |= more["domains"]
+    write_json(output, doc)
 
 
 def _settings_json(s: Settings) -> dict[str, Any]:
@@ -1168,7 +1199,9 @@ def render_report(doc: dict[str, Any]) -> str:
         "```",
         "",
         "The work folder (`--work`, default `runs/robustify-benchmark`) keeps every search, "
-        "fine-tune checkpoint and arm × seed result: a killed run continues where it stopped.",
+        "fine-tune checkpoint and arm × seed result: a killed run continues where it stopped. "
+        "Domains measured side by side, one process each (`--output runs/DOMAIN.json`), join "
+        "the results with `--merge runs/DOMAIN.json …` (same settings only).",
         "",
     ]
     return "\n".join(lines)

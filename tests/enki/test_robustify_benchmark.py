@@ -179,3 +179,19 @@ def test_quick_run_end_to_end_resumes_and_reports(
         "enki-rover-hsl-conditions.png",
         "enki-rover-hsl-space.png",
     }
+
+
+def test_merge_adds_domains_measured_with_the_same_settings(bench: Any, tmp_path: Path) -> None:
+    doc = json.loads((ROOT / "benchmarks" / "results" / "robustify.json").read_text("utf-8"))
+    (name, entry), *_ = doc["domains"].items()
+    base, other, odd = tmp_path / "a.json", tmp_path / "b.json", tmp_path / "c.json"
+    base.write_text(json.dumps(doc))
+    other.write_text(json.dumps(doc | {"domains": {"rover-other": entry}}))
+    changed = doc["settings"] | {"epochs": doc["settings"]["epochs"] + 1}
+    odd.write_text(json.dumps(doc | {"settings": changed}))
+    assert bench.main(["--output", str(base), "--merge", str(other)]) == 0
+    merged = json.loads(base.read_text("utf-8"))
+    assert list(merged["domains"]) == [*doc["domains"], "rover-other"]
+    assert merged["domains"][name] == entry
+    with pytest.raises(SystemExit, match="settings differ"):
+        bench.main(["--output", str(base), "--merge", str(odd)])
