@@ -5,7 +5,12 @@ from __future__ import annotations
 import contextlib
 import io
 import json
+import os
 import shutil
+import signal
+import subprocess
+import sys
+import time
 from pathlib import Path
 from typing import Any
 
@@ -144,3 +149,33 @@ def test_resume_after_an_interruption_mid_fine_tune(chain: dict[str, Any]) -> No
     assert summary["reused_stages"] == ["search", "select"]
     assert summary["model"]["sha256"] == chain["summary"]["model"]["sha256"]
     assert summary["metrics"] == chain["summary"]["metrics"]
+
+
+def test_kill_9_mid_fine_tune_then_the_same_command_continues(chain: dict[str, Any]) -> None:
+    """kill -9 once a fine-tune checkpoint is on disk; the rerun matches a straight run."""
+
+    def args(out: Path) -> list[str]:
+        a = argv(
+            chain["model"], chain["data"], out, "--archive", chain["summary"]["archive"]["path"]
+        )
+        a[a.index("--epochs") + 1] = "12"
+        return a
+
+    out = chain["tmp"] / "killed"
+    cmd = [sys.executable, "-m", "anunnaki", *args(out), "--json"]
+    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    try:
+        deadline = time.monotonic() + 120
+        while not list((out / "finetune").glob("epoch-*.pt")):
+            assert proc.poll() is None, "robustify ended before it could be killed"
+            assert time.monotonic() < deadline, "no fine-tune checkpoint in 120 s"
+            time.sleep(0.05)
+    finally:
+        os.kill(proc.pid, signal.SIGKILL)
+        proc.wait()
+    assert not (out / "stages" / "finetune.json").exists()
+    resumed = _run(args(out))
+    assert resumed["reused_stages"] == ["search", "select"]
+    straight = _run(args(chain["tmp"] / "straight"))
+    assert resumed["model"]["sha256"] == straight["model"]["sha256"]
+    assert resumed["finetune"]["steps"] == straight["finetune"]["steps"] == 24

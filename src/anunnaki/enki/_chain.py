@@ -244,12 +244,20 @@ class _Chain:
         source = ArchiveContexts(cfg.phenomenon, selection.params, clean=cfg.clean)
         epochs = cfg.finetune.epochs
         self.progress("fine-tune", 0, cfg.finetune.steps(len(train)))
+        last = {"text": ""}
+
+        def on_epoch(info: dict[str, float]) -> None:
+            last["text"] = f" (epoch {int(info['epoch'])}: loss {info['loss']:.3f}, " + (
+                f"val F1 {info['val_f1']:.3f})"
+            )
+
         result = finetune(
             self.model.file, train, val, source, budget=cfg.finetune, seed=cfg.seed, test=test,
             model_id=self.new_id, domain=cfg.domain, checkpoints=self.work.path / "finetune",
             on_step=lambda step, total, info: self.progress(
-                f"fine-tune, epoch {int(info['epoch'])}/{epochs}", step, total
+                f"fine-tune, epoch {int(info['epoch'])}/{epochs}{last['text']}", step, total
             ),
+            on_epoch=on_epoch,
         )  # fmt: skip
         det = result.detector
         det.training["enki"] = {

@@ -141,6 +141,7 @@ def register_model(
             f"{reg}: no model registry there; give an existing one (e.g. a copy of "
             "examples/models/rover.yaml) — it needs the default model the manager starts with"
         )
+    _, indent = _insert(text, None, reg)  # a registry that cannot be added to fails first
     folder = reg.resolve().parent
     folder.mkdir(parents=True, exist_ok=True)
     model_file = _copy_in(weights, folder, "model")
@@ -150,7 +151,6 @@ def register_model(
     if oracle is not None:
         oracle_file = _copy_in(weights_path(oracle), folder, "oracle")
         pin = (oracle_file.name, sha256_file(oracle_file))
-    _, indent = _insert(text, None, reg)
     lines, _ = _insert(text, _entry(fields, pin, indent), reg)
     _write(reg, "\n".join(lines) + "\n")
     try:

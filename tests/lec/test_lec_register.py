@@ -1,0 +1,91 @@
+"""``register_model``: an entry appended as text, hashes checked, the file kept or restored."""
+
+from __future__ import annotations
+
+import shutil
+from pathlib import Path
+
+import pytest
+
+from anunnaki.errors import ModelFileError
+from anunnaki.lec import (
+    ModelRegistryError,
+    load_registry,
+    read_card,
+    register_model,
+    sha256_file,
+)
+
+MODELS = Path(__file__).resolve().parents[2] / "examples" / "models"
+
+
+def _model(folder: Path, name: str) -> Path:
+    folder.mkdir(parents=True, exist_ok=True)
+    for suffix in (".safetensors", ".json"):
+        shutil.copy(MODELS / f"{name}{suffix}", folder / f"{name}{suffix}")
+    return folder / f"{name}.safetensors"
+
+
+def test_an_entry_goes_at_the_end_of_the_models_block_and_the_rest_is_kept(
+    tmp_path: Path,
+) -> None:
+    default = _model(tmp_path / "reg", "rover-default")
+    reg = tmp_path / "reg" / "models.yaml"
+    text = (
+        "# my registry\nanunnaki: models/1\nlec: detector\nmodels:\n"
+        "    - id: rover-default   # the start\n      domain: default\n"
+        f"      file: rover-default.safetensors\n      sha256: {sha256_file(default)}\n"
+        "\n# the end\ndescription: kept after the list\n"
+    )
+    reg.write_text(text)
+    fog = _model(tmp_path / "elsewhere", "rover-fog")
+    oracle = _model(tmp_path / "elsewhere", "rover-fog.oracle")
+    spec = register_model(reg, fog, oracle=oracle, description='fog: "thick"')
+    assert spec.id == "rover-fog" == read_card(fog).model_id and spec.domain == "fog"
+    assert (tmp_path / "reg" / "rover-fog.safetensors").is_file()  # copied in, sidecar too
+    assert (tmp_path / "reg" / "rover-fog.oracle.json").is_file()
+    new = reg.read_text()
+    assert new.startswith(
+        text.split("\n# the end", maxsplit=1)[0].rstrip("\n") + "\n    - id: rover-fog\n"
+    )
+    assert new.endswith("\n# the end\ndescription: kept after the list\n")
+    registry = load_registry(reg)
+    assert registry.verify("rover-fog") == sha256_file(fog)
+    assert registry.get("rover-fog").oracle is not None
+    assert registry.get("rover-fog").description == 'fog: "thick"'
+
+
+def test_a_new_registry_starts_from_its_default_model(tmp_path: Path) -> None:
+    reg = tmp_path / "new" / "reg.yaml"
+    fog = _model(tmp_path / "m", "rover-fog")
+    with pytest.raises(ModelRegistryError, match="no model registry there"):
+        register_model(reg, fog)
+    with pytest.raises(ModelFileError, match="no model for the domain 'default'"):
+        register_model(reg, fog, create=True)
+    assert not reg.exists()  # nothing half-written stays
+    register_model(reg, _model(tmp_path / "m", "rover-default"), create=True)
+    register_model(reg, fog)
+    assert load_registry(reg).ids() == ["rover-default", "rover-fog"]
+
+
+def test_refusals_leave_the_registry_as_it_was(tmp_path: Path) -> None:
+    reg = tmp_path / "reg" / "r.yaml"
+    register_model(reg, _model(tmp_path / "m", "rover-default"), create=True)
+    before = reg.read_text()
+    with pytest.raises(ModelRegistryError, match=r"r\.yaml:4: a model with id 'rover-default'"):
+        register_model(reg, _model(tmp_path / "m", "rover-default"))
+    # another file of the same name already in the registry's folder
+    other = _model(tmp_path / "m2", "rover-fog")
+    (tmp_path / "reg" / "rover-fog.safetensors").write_bytes(b"not this one")
+    with pytest.raises(ModelRegistryError, match="another model file of this name"):
+        register_model(reg, other)
+    inline = tmp_path / "reg" / "inline.yaml"
+    sha = sha256_file(tmp_path / "reg" / "rover-default.safetensors")
+    entry = (
+        f"{{id: rover-default, domain: default, file: rover-default.safetensors, sha256: {sha}}}"
+    )
+    inline.write_text(f"anunnaki: models/1\nlec: detector\nmodels: [{entry}]\n")
+    with pytest.raises(ModelRegistryError, match="written inline"):
+        register_model(inline, _model(tmp_path / "m3", "rover-low_light"))
+    assert not (tmp_path / "reg" / "rover-low_light.safetensors").exists()  # nothing copied
+    assert reg.read_text() == before
