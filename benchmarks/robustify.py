@@ -1372,8 +1372,8 @@ def _budget_lines(d: dict[str, Any]) -> list[str]:
         f"- held-out family: {', '.join(held['families'])} (excluded from the corruption mix "
         f"too); held-out region (normalised): {box} — Enki's archive rows in it dropped "
         f"({held['region']['enki_archive_rows_dropped']}), the random arm draws outside it, "
-        f"the library's random-strength rule (the corruption mix's and today's --augment): "
-        f"{reach};",
+        f"the library's random-strength rule (the corruption mix's"
+        f"{' and today' + chr(39) + 's --augment' if 'today' in arms else ''}): {reach};",
         f"- searches: Enki's {srch['enki']['evaluations']} evaluations (seed "
         f"{srch['enki']['seed']}, categories {srch['enki']['counts']}), (c)'s "
         f"{srch['hardest']['evaluations']} (seed {srch['hardest']['seed']}, categories "
@@ -1385,7 +1385,8 @@ def _budget_lines(d: dict[str, Any]) -> list[str]:
         lines.append(
             f"- wall time per fine-tune: {min(walls):.0f}–{max(walls):.0f} s (median "
             f"{statistics.median(walls):.0f} s) at load average {min(loads):.1f}–"
-            f"{max(loads):.1f} (1 min); the whole domain {run.get('wall_seconds', 0):.0f} s, "
+            f"{max(loads):.1f} (1 min); the run that completed the domain took "
+            f"{run.get('wall_seconds', 0):.0f} s (a resumed run counts only its own part), "
             f"load {run.get('loadavg_start', ['?'])[0]} → {run.get('loadavg_end', ['?'])[0]}, "
             f"{run.get('date', '')}."
         )
