@@ -1,0 +1,197 @@
+"""benchmarks/robustify.py: Enki against its baselines, end to end on tiny data, and its report.
+
+The figures are not judged here (no timed assertions, and a tiny run measures nothing): that
+every arm ran with the same optimiser steps, the held-out conditions were kept out of
+training, a killed run continues to the same figures, other settings are refused, and
+docs/enki.md is exactly what ``--report`` makes of the committed JSON.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import json
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+from types import ModuleType
+from typing import Any
+
+import numpy as np
+import pytest
+
+ROOT = Path(__file__).resolve().parents[2]
+SCRIPT = ROOT / "benchmarks" / "robustify.py"
+
+
+@pytest.fixture(scope="module")
+def bench() -> ModuleType:
+    spec = importlib.util.spec_from_file_location("robustify_benchmark", SCRIPT)
+    assert spec is not None and spec.loader is not None
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = module  # dataclasses look their module up
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_docs_enki_md_is_what_the_report_makes_of_the_committed_json(bench: Any) -> None:
+    doc = json.loads((ROOT / "benchmarks" / "results" / "robustify.json").read_text("utf-8"))
+    page = (ROOT / "docs" / "enki.md").read_text("utf-8")
+    assert bench.render_report(doc) == page, (
+        "docs/enki.md is out of date: run .venv/bin/python benchmarks/robustify.py --report"
+    )
+    for name in doc["domains"]:
+        for kind in ("conditions", "space"):
+            assert (ROOT / "docs" / "images" / f"enki-{name}-{kind}.png").is_file()
+
+
+def test_a_tie_unless_the_margin_leaves_the_seeds_spread(bench: Any) -> None:
+    a = {"mean": 0.60, "std": 0.02}
+    assert bench.verdict(a, {"mean": 0.55, "std": 0.02})["verdict"] == "win"
+    assert bench.verdict(a, {"mean": 0.57, "std": 0.02})["verdict"] == "tie"
+    assert bench.verdict(a, {"mean": 0.65, "std": 0.02})["verdict"] == "loss"
+    assert bench.mean_std([0.5]) == {"mean": 0.5, "std": 0.0, "n": 1}
+
+
+def test_the_held_out_regions_lie_beyond_the_random_strength_rule(bench: Any) -> None:
+    from anunnaki.phenomena import PHENOMENA
+
+    hsl = PHENOMENA.create("hsl")
+    # the rule darkens and desaturates (lightness down to -0.8: normalised 0.1), any hue
+    assert bench.augmenter_reaches(hsl, bench.region_box(hsl, {"lightness": (0.0, 0.2)}))
+    assert bench.augmenter_reaches(hsl, bench.region_box(hsl, {"hue": (0.9, 1.0)}))
+    for domain in bench.DOMAINS.values():
+        names = [*domain.phenomenon.split("+"), domain.phenomenon]
+        reach = bench.region_reach(domain, names)
+        assert reach and not any(reach.values()), (domain.name, reach)
+    with pytest.raises(SystemExit, match="has"):
+        bench.region_box(hsl, {"gain": (0.0, 1.0)})
+
+
+def test_the_random_arm_never_draws_in_the_held_out_box(bench: Any) -> None:
+    box = np.array([[0.0, 1.0], [0.0, 1.0], [0.8, 1.0]])
+    source = bench._uniform_outside_class()("hsl", box, 0.0)
+    rng = np.random.default_rng(0)
+    seen = []
+    source.phenomenon.apply = lambda image, params, seed: seen.append(params) or image
+    image = np.zeros((8, 8, 3), np.uint8)
+    for _ in range(300):
+        source(image, rng)
+    assert len(seen) == 300 and max(p["lightness"] for p in seen) < 0.6
+    assert source.describe()["excluded_box"] == box.tolist()
+
+
+def test_perturbed_test_images_are_evaluate_detectors_own(bench: Any, rover_data: Path) -> None:
+    from anunnaki.datasets import load_split
+    from anunnaki.enlil import to_phenomenon_vector
+    from anunnaki.lec import evaluate_detector, load_detector
+    from anunnaki.phenomena import PHENOMENA
+
+    det = load_detector(bench.MODELS / "rover-default.safetensors")
+    test = load_split(rover_data, "test").in_memory()
+    unit = [0.3, 0.2, 0.35]
+    hsl = PHENOMENA.create("hsl")
+    params = hsl.from_vector(to_phenomenon_vector(hsl, unit))
+    mine = evaluate_detector(det, bench.Perturbed(test, 300).get("hsl", unit, ("b", 0)))
+    theirs = evaluate_detector(det, test, phenomenon="hsl", params=params, seed=300)
+    assert (mine.tp, mine.fp, mine.fn) == (theirs.tp, theirs.fp, theirs.fn)
+
+
+def _run(*args: str) -> subprocess.CompletedProcess[str]:
+    return subprocess.run(
+        [sys.executable, str(SCRIPT), *args],
+        capture_output=True,
+        text=True,
+        timeout=300,
+        cwd=ROOT,
+        check=False,
+    )
+
+
+@pytest.mark.slow
+@pytest.mark.timeout(600)
+def test_quick_run_end_to_end_resumes_and_reports(
+    bench: Any, rover_data: Path, tmp_path: Path, capfd: pytest.CaptureFixture[str]
+) -> None:
+    torch = pytest.importorskip("torch")
+    work, out = tmp_path / "work", tmp_path / "robustify.json"
+    argv = ["--quick", "--rover-data", str(rover_data), "--work", str(work), "--output", str(out)]
+    first = _run(*argv)
+    assert first.returncode == 0, first.stdout[-2000:] + first.stderr[-4000:]
+    doc = json.loads(out.read_text("utf-8"))
+    assert doc["quick"] is True and list(doc["domains"]) == ["rover-hsl"]
+    d = doc["domains"]["rover-hsl"]
+    assert list(d["arms"]) == ["default", "enki", "random", "corruption_mix", "today"]
+    seeds = list(doc["settings"]["seeds"])
+    conditions = ["clean", "random", "hardest", "family:motion_blur", "region"]
+    for arm, entry in d["arms"].items():
+        trained = arm in ("enki", "random", "corruption_mix")
+        assert [p["seed"] for p in entry["per_seed"]] == (seeds if trained else [None])
+        for c in [*conditions, "mPC", "rPC"]:
+            assert entry[c]["n"] == len(entry["per_seed"]) and 0 <= entry[c]["mean"] <= 1
+    # equal budgets, asserted: every trained run made the same optimiser steps
+    steps = d["budget"]["steps"]
+    assert d["budget"]["equal"] and len({s for v in steps.values() for s in v}) == 1
+    assert all(len(v) == len(seeds) for v in steps.values())
+    assert d["arms"]["today"]["training"][0]["steps"] == 504  # rover-low_light's own budget
+    # held out: the family from the mix, the box from every arm
+    mix = d["arms"]["corruption_mix"]["training"][0]["source"]["phenomena"]
+    assert "motion_blur" not in mix and "hsl" in mix
+    box = np.asarray(json.loads((work / "rover-hsl" / "conditions.json").read_text())["box"])
+    enki = np.asarray(d["enki_selection"]["contexts"])
+    assert not np.any(np.all((enki >= box[:, 0]) & (enki <= box[:, 1]), axis=1))
+    region = np.asarray(d["conditions"]["region"]["contexts"])
+    assert np.all((region >= box[:, 0]) & (region <= box[:, 1]))
+    assert d["held_out"]["region"]["augmenter_reaches"] == {"hsl": False}
+    assert set(d["enki_vs_random"]) == {*conditions, "mPC", "rPC"}
+    assert {v["verdict"] for v in d["enki_vs_random"].values()} <= {"win", "tie", "loss"}
+
+    # a run killed before one arm was measured continues to the same figures
+    lost = work / "rover-hsl" / "arms" / "random-s1"
+    for name in ("result.json", "model.safetensors", "training.json"):
+        (lost / name).unlink()
+    shutil.rmtree(lost / "finetune")
+    capfd.readouterr()
+    threads = torch.get_num_threads()
+    try:  # in this process this time (the same code as the command line, less start-up)
+        assert bench.main(argv) == 0
+    finally:
+        torch.set_num_threads(threads)
+    assert capfd.readouterr().err.count("done before") == 2 + 3 * len(seeds) - 1  # not random-s1
+    redo = json.loads(out.read_text("utf-8"))["domains"]["rover-hsl"]
+    for arm in d["arms"]:
+        if arm != "random":
+            assert redo["arms"][arm] == d["arms"][arm]
+    assert redo["arms"]["random"]["per_seed"] == d["arms"]["random"]["per_seed"]
+
+    # other settings are refused, naming the setting
+    settings = json.loads((work / "rover-hsl" / "settings.json").read_text("utf-8"))
+    bench.claim(work / "rover-hsl", settings)  # the same: accepted
+    with pytest.raises(SystemExit, match="epochs = 1, this run has 2"):
+        bench.claim(work / "rover-hsl", settings | {"epochs": 2})
+
+    # the report: the page and both plots, from this JSON alone
+    page, images = tmp_path / "enki.md", tmp_path / "images"
+    bench.write_report(json.loads(out.read_text("utf-8")), page, images)
+    text = page.read_text("utf-8")
+    assert "quick mode" in text and "## rover-hsl" in text and "| 96.8 | 2.0 | 60.7 |" in text
+    assert {p.name for p in images.iterdir()} == {
+        "enki-rover-hsl-conditions.png",
+        "enki-rover-hsl-space.png",
+    }
+
+
+def test_merge_adds_domains_measured_with_the_same_settings(bench: Any, tmp_path: Path) -> None:
+    doc = json.loads((ROOT / "benchmarks" / "results" / "robustify.json").read_text("utf-8"))
+    (name, entry), *_ = doc["domains"].items()
+    base, other, odd = tmp_path / "a.json", tmp_path / "b.json", tmp_path / "c.json"
+    base.write_text(json.dumps(doc))
+    other.write_text(json.dumps(doc | {"domains": {"rover-other": entry}}))
+    changed = doc["settings"] | {"epochs": doc["settings"]["epochs"] + 1}
+    odd.write_text(json.dumps(doc | {"settings": changed}))
+    assert bench.main(["--output", str(base), "--merge", str(other)]) == 0
+    merged = json.loads(base.read_text("utf-8"))
+    assert list(merged["domains"]) == [*doc["domains"], "rover-other"]
+    assert merged["domains"][name] == entry
+    with pytest.raises(SystemExit, match="settings differ"):
+        bench.main(["--output", str(base), "--merge", str(odd)])
