@@ -9,7 +9,10 @@ from bench_helpers import BENCH, ROOT
 HERE = Path(__file__).parent
 
 #: Scripts tested beside the tests whose helpers they need.
-ELSEWHERE = {"ros1": ROOT / "tests" / "ros1" / "test_ros1_benchmark.py"}
+ELSEWHERE = {
+    "ros1": ROOT / "tests" / "ros1" / "test_ros1_benchmark.py",
+    "robustify": ROOT / "tests" / "enki" / "test_robustify_benchmark.py",
+}
 #: Scripts that are part of another benchmark, not benchmarks of their own.
 PARTS = {"ros1_node": "benchmarks/ros1.py's ROS side (an echo node under Debian's python3)"}
 
