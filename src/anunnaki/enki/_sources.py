@@ -14,6 +14,7 @@ geometric augmentation. With probability ``clean`` the image stays clean; otherw
 
 from __future__ import annotations
 
+import abc
 from collections.abc import Sequence
 from typing import Any
 
@@ -29,7 +30,7 @@ __all__ = ["ArchiveContexts", "ContextSource", "CorruptionMix", "UniformContexts
 Image = npt.NDArray[np.uint8]
 
 
-class ContextSource:
+class ContextSource(abc.ABC):
     """Base of the sources: the clean share, the call, a JSON description.
 
     Args:
@@ -44,9 +45,9 @@ class ContextSource:
             raise EnkiError(f"the clean share must be in [0, 1), got {clean}")
         self.clean = clean
 
+    @abc.abstractmethod
     def perturb(self, image: Image, rng: np.random.Generator) -> Image:
         """Return *image* under one context of this source (never clean)."""
-        raise NotImplementedError
 
     def __call__(self, image: Image, rng: np.random.Generator) -> Image:
         """The training loop's hook: clean with probability ``clean``, else :meth:`perturb`."""
