@@ -234,20 +234,6 @@ class ReloadResult:
         )
 
 
-def _operator_token(given: str | None) -> str:
-    """The token reload requests must carry, found as Utu's operator services find theirs.
-
-    The one given, else ``$ANUNNAKI_OPERATOR_TOKEN``, else the user's own token file
-    (written first if missing).
-
-    Raises:
-        ModelFileError: The user's file is unreadable or open to others, or a token is too
-            weak.
-
-    """
-    return service_operator_token("the model manager", given=given)
-
-
 class _Active(NamedTuple):
     spec: ModelSpec
     detector: Detector
@@ -337,7 +323,7 @@ class LecNode(Node):
         roots += [Path(d).resolve() for d in reload_dirs]
         #: The folders a reload may read a registry from (symlinks resolved).
         self.reload_roots: list[Path] = list(dict.fromkeys(roots))
-        self._operator_token = _operator_token(operator_token)
+        self._operator_token = service_operator_token("the model manager", given=operator_token)
         self._cache_size = cache
         self._cache: OrderedDict[str, Detector] = OrderedDict()
         self._lock = threading.Lock()
