@@ -13,6 +13,8 @@ altitude and lands, ``land`` descends where it is; ``auto`` resumes the mission.
 
 The battery drains, per second airborne, ``drain_hover + drain_per_speed × speed`` percent,
 plus any ``battery_drain`` fault of the scenario (obstacle O2); nothing on the ground.
+``/uav/link`` says whether the ground station answers: ``connected`` is false during a
+scenario's ``link`` dropout.
 """
 
 from __future__ import annotations
@@ -251,7 +253,8 @@ class UavSim(SimPlatform):
         m = self.scenario.mission
         hx, hy = m.home
         if math.hypot(hx - self.x, hy - self.y) > 0.3:
-            self.phase = "return"
+            # climbing vertically to cruise altitude first (from a low hover, the drop point)
+            self.phase = "climb" if self.z < m.cruise_altitude - 2.0 else "return"
             self._fly_to(hx, hy, max(self.z, m.cruise_altitude), h)
         else:
             self.phase = "landing" if self.z > 0 else "landed"
@@ -277,7 +280,10 @@ class UavSim(SimPlatform):
         if self._due("battery", self.timeline.rate("battery", m.battery_rate, t)):
             self._publish(f"{self.prefix}/battery", {"level": round(self.battery, 3)}, "battery")
         if self._due("link", self.timeline.rate("link", self.link_rate, t)):
-            self._publish(f"{self.prefix}/link", {"connected": True}, "link")
+            # the UAV's own view of the link: in a scenario's link dropout the ground station
+            # stops answering, and the UAV says so (it does not fall silent itself)
+            connected = not self.timeline.silent("link", t)
+            self._publish(f"{self.prefix}/link", {"connected": connected})
 
     def _camera(self) -> Camera:
         z = max(self.z, 0.5)
