@@ -113,6 +113,8 @@ class UavSim(SimPlatform):
             self.speed = 0.0
             self.battery = float(m.battery)
             self.delivered = False
+            self.airborne_at: float | None = None  # first take-off (simulated s)
+            self.landed_at: float | None = None  # last touch-down after a flight
             self.mode: UavMode = mode
             self.phase = "takeoff"
             self.leg = 0
@@ -226,6 +228,12 @@ class UavSim(SimPlatform):
         if self.z <= 0.0:
             self.speed = 0.0
         airborne = self.z > 0.05
+        if airborne:
+            self.landed_at = None
+            if self.airborne_at is None:
+                self.airborne_at = self.t
+        elif self.airborne_at is not None and self.landed_at is None:
+            self.landed_at = self.t
         drain = self.timeline.extra_drain(self.t)
         if airborne:
             drain += m.drain_hover + m.drain_per_speed * self.speed
@@ -292,6 +300,23 @@ class UavSim(SimPlatform):
         eye = (self.x, self.y, z)
         target = (self.x + reach * c, self.y + reach * s, 0.0)
         return Camera(eye, target, fov=UAV_CAMERA_FOV, near=0.3, far=250.0)
+
+    def summary(self) -> str:
+        """The mission's outcome in one line: delivered, where and when it landed, battery."""
+        with self._lock:
+            hx, hy = self.scenario.mission.home
+            away = math.hypot(self.x - hx, self.y - hy)
+            if self.airborne_at is None:
+                where = "never took off"
+            elif self.landed_at is None:
+                where = f"still airborne at {self.z:.1f} m ({self.phase})"
+            else:
+                place = "at home" if away < 1.0 else f"{away:.0f} m from home"
+                where = f"landed {place} at t = {self.landed_at:.1f} s"
+            return (
+                f"mission: package {'delivered' if self.delivered else 'not delivered'}; "
+                f"{where}; battery {self.battery:.1f} %"
+            )
 
     @property
     def altitude(self) -> float:
