@@ -12,13 +12,16 @@ again through G9, and the draining battery makes it return home: G11 (RELAX-ed, 
 from __future__ import annotations
 
 import io
+import json
 import threading
+import urllib.request
 from pathlib import Path
 from typing import Any
 
 import pytest
 import yaml
 
+from anunnaki.cli._dashboard import dashboard_for_launch
 from anunnaki.launch import load_launch, run_launch
 from anunnaki.managed import SimKind
 from anunnaki.messages import body_of
@@ -66,17 +69,24 @@ def run_short(tmp: Path, scenario: dict[str, Any]) -> dict[str, Any]:
         with lock:
             statuses.append(body_of(sample.message))
 
+    # the dashboard, as `anunnaki run examples/uav/sim.yaml --dashboard` attaches it
+    dashboard = dashboard_for_launch(launch, port=0)
+    dashboard.start()
+
+    def attach(bus: Any) -> None:
+        dashboard.attach(bus)
+        bus.subscribe("/uav/status", keep, queue=1024)
+
     out = io.StringIO()
-    result = run_launch(
-        launch,
-        speed=1000,
-        out=out,
-        handle_signals=False,
-        on_bus=lambda bus: bus.subscribe("/uav/status", keep, queue=1024),
-    )
+    try:
+        result = run_launch(launch, speed=1000, out=out, handle_signals=False, on_bus=attach)
+        with urllib.request.urlopen(dashboard.url.rstrip("/") + "/api/snapshot") as reply:
+            snapshot = json.loads(reply.read())
+    finally:
+        dashboard.close()
     with lock:
         seen = list(statuses)
-    return {"result": result, "log": out.getvalue(), "statuses": seen}
+    return {"result": result, "log": out.getvalue(), "statuses": seen, "snapshot": snapshot}
 
 
 @pytest.fixture(scope="module")
@@ -129,3 +139,19 @@ def test_low_battery_sends_the_uav_home(short_run: dict[str, Any]) -> None:
     assert min(s["battery"] for s in statuses if s["t"] <= home[0]) < 30.0  # G11 had failed
     # the mission's outcome, printed under the per-phase table
     assert "mission: package not delivered; still airborne" in short_run["log"]
+
+
+@pytest.mark.timeout(600)
+def test_the_dashboard_shows_the_uav_run(short_run: dict[str, Any]) -> None:
+    """The page's snapshot at the end of the run: the UAV's goal model with G13/G14, its
+    camera feed with the detector's boxes, the fog model active, the enlil oracle, the swap."""
+    snap = short_run["snapshot"]
+    assert snap["structure"]["root"] == "G1"
+    assert {"G13", "G14", "O1", "O2"} <= set(snap["goals"])
+    camera = snap["camera"]
+    assert camera["frame"]["topic"] == "/uav/camera/image"
+    assert (camera["frame"]["width"], camera["frame"]["height"]) == (320, 240)
+    assert camera["active"]["model"] == "uav-fog" and camera["detections"]["model_id"] == "uav-fog"
+    assert {o["assessor"] for o in snap["oracle"]} == {"enlil"}
+    tactics = [e["tactic"] for e in snap["executions"]]
+    assert "swap-to-robust-model" in tactics and "return-home" in tactics
