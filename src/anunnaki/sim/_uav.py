@@ -12,7 +12,8 @@ altitude and lands, ``land`` descends where it is; ``auto`` resumes the mission.
 (``/uav/stop``) lands in place and refuses further modes. An empty battery forces a landing.
 
 The battery drains, per second airborne, ``drain_hover + drain_per_speed × speed`` percent,
-plus any ``battery_drain`` fault of the scenario (obstacle O2); nothing on the ground.
+plus any ``battery_drain`` fault of the scenario (obstacle O2); nothing on the ground (a
+landed UAV draws no power, whatever the fault).
 ``/uav/link`` says whether the ground station answers: ``connected`` is false during a
 scenario's ``link`` dropout.
 """
@@ -115,6 +116,7 @@ class UavSim(SimPlatform):
             self.delivered = False
             self.airborne_at: float | None = None  # first take-off (simulated s)
             self.landed_at: float | None = None  # last touch-down after a flight
+            self.landed_battery: float | None = None  # battery (%) at that touch-down
             self.mode: UavMode = mode
             self.phase = "takeoff"
             self.leg = 0
@@ -232,12 +234,10 @@ class UavSim(SimPlatform):
             self.landed_at = None
             if self.airborne_at is None:
                 self.airborne_at = self.t
+            drain = self.timeline.extra_drain(self.t) + m.drain_hover
+            self.battery = max(0.0, self.battery - (drain + m.drain_per_speed * self.speed) * h)
         elif self.airborne_at is not None and self.landed_at is None:
-            self.landed_at = self.t
-        drain = self.timeline.extra_drain(self.t)
-        if airborne:
-            drain += m.drain_hover + m.drain_per_speed * self.speed
-        self.battery = max(0.0, self.battery - drain * h)
+            self.landed_at, self.landed_battery = self.t, self.battery
 
     def _follow_mission(self, h: float) -> None:
         """Fly the mission's current leg (hold over the drop point to deliver), then land."""
@@ -307,15 +307,16 @@ class UavSim(SimPlatform):
             hx, hy = self.scenario.mission.home
             away = math.hypot(self.x - hx, self.y - hy)
             if self.airborne_at is None:
-                where = "never took off"
+                where = "never took off;"
             elif self.landed_at is None:
-                where = f"still airborne at {self.z:.1f} m ({self.phase})"
+                where = f"still airborne at {self.z:.1f} m ({self.phase});"
             else:
                 place = "at home" if away < 1.0 else f"{away:.0f} m from home"
-                where = f"landed {place} at t = {self.landed_at:.1f} s"
+                where = f"landed {place} at t = {self.landed_at:.1f} s with"
+            level = self.battery if self.landed_battery is None else self.landed_battery
             return (
                 f"mission: package {'delivered' if self.delivered else 'not delivered'}; "
-                f"{where}; battery {self.battery:.1f} %"
+                f"{where} battery {level:.1f} %"
             )
 
     @property
