@@ -16,6 +16,7 @@ def _stages_of(doc: dict[str, Any]) -> None:
     for entry in stages.values():
         assert entry["runs"][0]["frames"] == 15  # 10 Hz camera over 1.5 simulated seconds
         assert entry["fps_median"] > 0
+    assert all(entry["cpu_ms_per_frame_median"] > 0 for entry in stages.values())
     assert stages["platform"]["ratio_to_platform"] == 1.0
     assert doc["whole_loop_hz"] == stages["utu"]["fps_median"]
     assert doc["aim_met"] is (doc["whole_loop_hz"] >= doc["aim_hz"])
