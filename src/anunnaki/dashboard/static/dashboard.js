@@ -104,11 +104,12 @@
   // link); under each goal or obstacle, one white hexagon per agent responsible for it, linked
   // to it (an agent responsible for several goals appears under each, as in the paper). Every
   // node gets columns of its own, so nothing overlaps. Colours follow the analysis live:
-  // goals and obstacles by their status, an agent by the goals it is responsible for (red
-  // when one is violated), a responsibility link by its goal, an obstruction link when the
-  // obstacle holds, a resolution link when the resolution goal is satisfied.
+  // goals and obstacles by their status; a hexagon and its responsibility link by how the
+  // goal it hangs under stands (red: the agent does not achieve it; an obstacle that holds
+  // counts as red); an obstruction link when the obstacle holds; a resolution link when the
+  // resolution goal is satisfied.
   let linkEls = {};   // node id -> [[path element, kind]] links whose look follows its status
-  let agentEls = {};  // agent id -> [hexagon group elements]
+  let agentEls = {};  // goal or obstacle id -> [the hexagons of the agents responsible for it]
   let dutiesOf = {};  // agent id -> [goal or obstacle ids it is responsible for]
   let agentsOf = {};  // goal or obstacle id -> [agent ids responsible for it]
   let obstacleIds = new Set();
@@ -119,14 +120,6 @@
     const st = status(id);
     if (!obstacleIds.has(id) || st === "unknown") return st;
     return st === "satisfied" ? "unsatisfied" : "satisfied";
-  }
-  function agentHealth(aid) {
-    const duties = dutiesOf[aid] || [];
-    const goalsOnly = duties.filter((id) => !obstacleIds.has(id));
-    const hs = (goalsOnly.length ? goalsOnly : duties).map(health);
-    if (hs.includes("unsatisfied")) return "unsatisfied";
-    if (!hs.length || hs.includes("unknown")) return "unknown";
-    return "satisfied";
   }
   function linkClass(kind, id) {
     if (kind === "responsibility") return "edge responsibility " + health(id);
@@ -236,14 +229,14 @@
       const { x, y, w, h } = box(key), kind = pos[key].kind;
       if (kind === "agent") {
         const [aid, owner] = key.split(AGENT);
-        const g = svg("g", { class: "agent unknown", "data-agent": aid, "data-for": owner });
+        const g = svg("g", { class: "agent " + health(owner), "data-agent": aid, "data-for": owner });
         g.append(svg("polygon", { points: `${x + 8},${y} ${x + w - 8},${y} ${x + w},${y + h / 2} ${x + w - 8},${y + h} ${x + 8},${y + h} ${x},${y + h / 2}` }));
         const t = svg("text", { x: x + w / 2, y: y + h / 2 + 4, class: "id" }); t.textContent = aid;
         const title = svg("title", {});
         title.textContent = `${aid}: ${agents[aid].description || ""} — responsible for ${(dutiesOf[aid] || []).join(", ")}`;
         g.append(title, t);
         nodes.append(g);
-        (agentEls[aid] = agentEls[aid] || []).push(g);
+        (agentEls[owner] = agentEls[owner] || []).push(g);
         continue;
       }
       const obstacle = kind === "obstacle";
@@ -263,16 +256,9 @@
       nodeEls[key] = { g, u: t2, obstacle };
     }
     root.append(nodes);
-    for (const aid of Object.keys(agentEls)) drawAgent(aid);
-  }
-
-  function drawAgent(aid) {
-    const cls = "agent " + agentHealth(aid);
-    for (const g of agentEls[aid] || []) if (g.getAttribute("class") !== cls) g.setAttribute("class", cls);
   }
 
   function drawGoals() {
-    const agentsTouched = new Set();
     for (const id of changedGoals) {
       const n = nodeEls[id]; if (!n) continue;
       const v = S.goals[id] || [null, "unknown"];
@@ -284,9 +270,9 @@
         const lc = linkClass(kind, id);
         if (e.getAttribute("class") !== lc) e.setAttribute("class", lc);
       }
-      (agentsOf[id] || []).forEach((a) => agentsTouched.add(a));
+      const ac = "agent " + health(id);
+      for (const g of agentEls[id] || []) if (g.getAttribute("class") !== ac) g.setAttribute("class", ac);
     }
-    agentsTouched.forEach(drawAgent);
     for (const id of changedGoals) drawPill(id, S.goals[id] || [null, "unknown"]);
     changedGoals.clear();
     $("goal-source").textContent = S.goal_source === "utu" ? "as Utu evaluates it" : "evaluated by the dashboard (no analysis from Utu yet)";
