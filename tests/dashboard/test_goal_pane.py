@@ -20,8 +20,8 @@ import pytest
 from dashboard_helpers import ARTIFACTS, DEADLINE, ROOT
 
 from anunnaki.dashboard import Dashboard
-from anunnaki.goals import GoalModel, load_binding, load_goal_model
-from anunnaki.tactics import load_tactics
+from anunnaki.goals import GoalModel, load_binding, load_goal_model, parse_goal_model
+from anunnaki.tactics import TacticSet, load_tactics
 
 pytestmark = pytest.mark.slow
 
@@ -263,3 +263,39 @@ def test_timeline_labels_lie_inside_the_plot(pane: Pane) -> None:
     assert any(t[0] == "swap-to-robust-model" for t in found["texts"])
     for text, x0, y0, x1, y1 in found["texts"]:
         assert left <= x0 and x1 <= right + 0.5 and top <= y0 and y1 <= bottom + 0.5, text
+
+
+def test_a_model_too_wide_to_fit_scrolls_at_three_quarters(chromium: Any) -> None:
+    leaves = [f"G{i}" for i in range(2, 42)]  # 40 leaves: about 3000 px wide at full size
+    text = "\n".join(
+        [
+            "anunnaki: goal-model/1",
+            "name: wide",
+            "root: G1",
+            "agents: [{id: A1, topics: [{topic: /wide/status, attributes: [v]}]}]",
+            "goals:",
+            f"  - {{id: G1, refinement: and, children: [{', '.join(leaves)}]}}",
+            *(f"  - {{id: {g}, utility: A1.v >= 0, agents: [A1]}}" for g in leaves),
+        ]
+    )
+    dash = Dashboard(
+        parse_goal_model(text), TacticSet(name="wide", tactics=[]), clock="sim", port=0
+    )
+    dash.start()
+    page = chromium.new_page()
+    try:
+        page.goto(dash.url)
+        page.wait_for_selector("#goal-svg [data-node=G41]", timeout=WAIT)
+        size = page.evaluate(
+            """() => { const s = document.getElementById('goal-svg');
+            const tree = document.getElementById('goal-tree');
+            return {natural: Number(s.getAttribute('width')),
+                    shown: s.getBoundingClientRect().width,
+                    pane: tree.clientWidth, scroll: tree.scrollWidth}; }"""
+        )
+    finally:
+        page.close()
+        dash.close()
+    assert size["natural"] * 0.75 > size["pane"]  # it cannot fit at a readable scale …
+    assert abs(size["shown"] - round(size["natural"] * 0.75)) <= 1, size  # … so it stops there
+    assert size["scroll"] > size["pane"]  # and the pane scrolls

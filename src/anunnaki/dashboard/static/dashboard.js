@@ -113,6 +113,7 @@
   let dutiesOf = {};  // agent id -> [goal or obstacle ids it is responsible for]
   let agentsOf = {};  // goal or obstacle id -> [agent ids responsible for it]
   let obstacleIds = new Set();
+  const MIN_SCALE = 0.75;  // the smallest scale the goal model is drawn at
   const AGENT = "@";  // an agent's layout key is A1@G7: ids are identifiers, so never "@"
 
   // How well a node stands: a goal's status; an obstacle that holds is a failure.
@@ -183,6 +184,9 @@
     const width = Math.max(nextX * W + 20, 300), height = (maxDepth + 1) * H + 16;
     root.setAttribute("width", width); root.setAttribute("height", height);
     root.setAttribute("viewBox", `0 0 ${width} ${height}`);
+    // Shrunk to the pane's width (CSS max-width), never below 3/4 of its size: a model too
+    // wide for that scrolls instead of turning unreadable. (CSSOM: allowed by the CSP.)
+    root.style.minWidth = `${Math.round(width * MIN_SCALE)}px`;
     root.dataset.columns = String(nextX);
     function box(key) {
       const p = pos[key], [w, h] = SIZE[p.kind];
