@@ -215,7 +215,7 @@
       const e = svg("path", Object.assign({ class: linkClass(kind, follows), d: route(from, to), "data-from": from.split(AGENT)[0], "data-to": to }, attrs || {}));
       if (kind === "obstruct" || kind === "resolution") e.setAttribute("marker-end", `url(#arrow-${kind})`);
       edges.append(e);
-      (linkEls[follows] = linkEls[follows] || []).push([e, kind]);
+      if (kind !== "refine") (linkEls[follows] = linkEls[follows] || []).push([e, kind]);
     }
     st.goals.forEach((g) => g.children.forEach((c) => link("refine", g.id, c, g.id)));
     st.obstacles.forEach((o) => {
@@ -257,7 +257,7 @@
       g.addEventListener("click", () => explain(key));
       g.addEventListener("keydown", (ev) => { if (ev.key === "Enter") explain(key); });
       nodes.append(g);
-      nodeEls[key] = { g, u: t2, obstacle };
+      nodeEls[key] = { g, u: t2, obstacle, status: null };
     }
     root.append(nodes);
   }
@@ -270,12 +270,11 @@
       if (n.g.getAttribute("class") !== cls) n.g.setAttribute("class", cls);
       const txt = "u " + fmtU(v[0]);
       if (n.u.textContent !== txt) n.u.textContent = txt;
-      for (const [e, kind] of linkEls[id] || []) {
-        const lc = linkClass(kind, id);
-        if (e.getAttribute("class") !== lc) e.setAttribute("class", lc);
-      }
+      if (n.status === v[1]) continue;  // links and hexagons follow the status only
+      n.status = v[1];
+      for (const [e, kind] of linkEls[id] || []) e.setAttribute("class", linkClass(kind, id));
       const ac = "agent " + health(id);
-      for (const g of agentEls[id] || []) if (g.getAttribute("class") !== ac) g.setAttribute("class", ac);
+      for (const g of agentEls[id] || []) g.setAttribute("class", ac);
     }
     for (const id of changedGoals) drawPill(id, S.goals[id] || [null, "unknown"]);
     changedGoals.clear();
