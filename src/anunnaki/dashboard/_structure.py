@@ -37,6 +37,7 @@ def describe(name: str, model: GoalModel, tactics: TacticSet) -> dict[str, Any]:
             "obstructs": list(o.obstructs),
             "condition": o.condition,
             "resolutions": list(o.resolutions),
+            "agents": list(o.agents),
         }
         for o in model.obstacles.values()
     ]
@@ -46,6 +47,7 @@ def describe(name: str, model: GoalModel, tactics: TacticSet) -> dict[str, Any]:
             "description": a.description,
             "topics": [{"topic": tb.topic, "attributes": list(tb.attributes)} for tb in a.topics],
             "goals": [g.id for g in model.goals.values() if a.id in g.agents],
+            "obstacles": [o.id for o in model.obstacles.values() if a.id in o.agents],
         }
         for a in model.agents.values()
     ]

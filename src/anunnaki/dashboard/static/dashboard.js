@@ -96,74 +96,168 @@
     if (p.goals) dirty.add("timeline");
   }
 
-  // -- goal tree ----------------------------------------------------------------------------
+  // -- goal model -------------------------------------------------------------------------
+  // Drawn as the paper's KAOS figures (Fig. 6, Fig. 18): goals refined top down; each
+  // obstacle under the goal it obstructs, with a dashed red link up into that goal; a
+  // resolution goal under the obstacle it resolves, with a link up into the obstacle (a
+  // resolution goal that also refines another goal keeps its place there and gets the same
+  // link); under each goal or obstacle, one white hexagon per agent responsible for it, linked
+  // to it (an agent responsible for several goals appears under each, as in the paper). Every
+  // node gets columns of its own, so nothing overlaps. Colours follow the analysis live:
+  // goals and obstacles by their status; a hexagon and its responsibility link by how the
+  // goal it hangs under stands (red: the agent does not achieve it; an obstacle that holds
+  // counts as red); an obstruction link when the obstacle holds; a resolution link when the
+  // resolution goal is satisfied.
+  let linkEls = {};   // node id -> [[path element, kind]] links whose look follows its status
+  let agentEls = {};  // goal or obstacle id -> [the hexagons of the agents responsible for it]
+  let dutiesOf = {};  // agent id -> [goal or obstacle ids it is responsible for]
+  let agentsOf = {};  // goal or obstacle id -> [agent ids responsible for it]
+  let obstacleIds = new Set();
+  const MIN_SCALE = 0.75;  // the smallest scale the goal model is drawn at
+  const AGENT = "@";  // an agent's layout key is A1@G7: ids are identifiers, so never "@"
+
+  // How well a node stands: a goal's status; an obstacle that holds is a failure.
+  function health(id) {
+    const st = status(id);
+    if (!obstacleIds.has(id) || st === "unknown") return st;
+    return st === "satisfied" ? "unsatisfied" : "satisfied";
+  }
+  function linkClass(kind, id) {
+    if (kind === "responsibility") return "edge responsibility " + health(id);
+    if (kind === "obstruct") return "edge obstruct" + (status(id) === "satisfied" ? " holds" : "");
+    if (kind === "resolution") return "edge resolution" + (status(id) === "satisfied" ? " resolves" : "");
+    return "edge refine";
+  }
+
   function buildTree() {
     const st = S.structure;
     const root = $("goal-svg");
     root.replaceChildren();
-    nodeEls = {};
+    nodeEls = {}; linkEls = {}; agentEls = {}; dutiesOf = {}; agentsOf = {};
     if (!st) return;
     const goals = {}; st.goals.forEach((g) => { goals[g.id] = g; });
+    const obstacles = {}; st.obstacles.forEach((o) => { obstacles[o.id] = o; });
+    obstacleIds = new Set(Object.keys(obstacles));
+    const agents = {}; (st.agents || []).forEach((a) => { agents[a.id] = a; });
     const obstaclesOf = {};
     st.obstacles.forEach((o) => o.obstructs.forEach((gid) => {
-      (obstaclesOf[gid] = obstaclesOf[gid] || []).push(o);
+      (obstaclesOf[gid] = obstaclesOf[gid] || []).push(o.id);
     }));
-    const W = 78, H = 62, BW = 66, BH = 34;
+    const refining = new Set([st.root]);
+    st.goals.forEach((g) => g.children.forEach((c) => refining.add(c)));
+    function duties(id, list) {
+      const known = (list || []).filter((a) => agents[a]);
+      agentsOf[id] = known;
+      known.forEach((a) => (dutiesOf[a] = dutiesOf[a] || []).push(id));
+      return known.map((a) => [a + AGENT + id, "agent"]);
+    }
+    // The children a node is laid out over: [key, kind] pairs.
+    function kidsOf(key, kind) {
+      if (kind === "goal") {
+        const g = goals[key];
+        return g.children.filter((c) => goals[c]).map((c) => [c, "goal"])
+          .concat(duties(key, g.agents), (obstaclesOf[key] || []).map((o) => [o, "obstacle"]));
+      }
+      if (kind === "obstacle") {
+        const o = obstacles[key];
+        return o.resolutions.filter((r) => goals[r] && !refining.has(r)).map((r) => [r, "goal"])
+          .concat(duties(key, o.agents || []));
+      }
+      return [];
+    }
+    const W = 74, H = 58, SIZE = { goal: [64, 34], obstacle: [64, 34], agent: [46, 24] };
     const pos = {}; let nextX = 0; let maxDepth = 0;
-    const extraEdges = [];
-    function place(id, depth, parent) {
-      if (pos[id]) { if (parent) extraEdges.push([parent, id]); return pos[id].x; }
-      const g = goals[id];
-      const kids = g ? g.children.slice() : [];
-      pos[id] = { x: 0, y: depth, kind: g ? "goal" : "obstacle" };
+    function place(key, kind, depth) {
+      const n = pos[key] = { x: 0, y: depth, kind };
       maxDepth = Math.max(maxDepth, depth);
       const xs = [];
-      for (const c of kids) xs.push(place(c, depth + 1, id));
-      for (const o of (obstaclesOf[id] || [])) {
-        if (!pos[o.id]) { pos[o.id] = { x: 0, y: depth + 1, kind: "obstacle", of: id }; xs.push(nextX++); pos[o.id].x = xs[xs.length - 1]; maxDepth = Math.max(maxDepth, depth + 1); }
-        else extraEdges.push([id, o.id, true]);
+      for (const [k, kk] of kidsOf(key, kind)) {
+        if (!pos[k]) xs.push(place(k, kk, depth + 1));
+        else if (kind === "goal" && kk === "goal") xs.push(pos[k].x);  // a shared child
       }
-      pos[id].x = xs.length ? (Math.min(...xs) + Math.max(...xs)) / 2 : nextX++;
-      return pos[id].x;
+      n.x = xs.length ? (Math.min(...xs) + Math.max(...xs)) / 2 : nextX++;
+      return n.x;
     }
-    place(st.root, 0, null);
-    st.goals.forEach((g) => { if (!pos[g.id]) place(g.id, 0, null); });
-    st.obstacles.forEach((o) => { if (!pos[o.id]) { pos[o.id] = { x: nextX++, y: 0, kind: "obstacle" }; } });
-    const width = Math.max(nextX * W + 20, 300), height = (maxDepth + 1) * H + 20;
+    if (goals[st.root]) place(st.root, "goal", 0);
+    st.goals.forEach((g) => { if (!pos[g.id]) place(g.id, "goal", 0); });
+    st.obstacles.forEach((o) => { if (!pos[o.id]) place(o.id, "obstacle", 0); });
+    const width = Math.max(nextX * W + 20, 300), height = (maxDepth + 1) * H + 16;
     root.setAttribute("width", width); root.setAttribute("height", height);
     root.setAttribute("viewBox", `0 0 ${width} ${height}`);
-    const cx = (id) => 10 + pos[id].x * W + W / 2, cy = (id) => 10 + pos[id].y * H + BH / 2;
-    const edges = svg("g", { class: "edges" });
-    function edge(a, b, obstruct) {
-      edges.append(svg("path", {
-        class: "edge" + (obstruct ? " obstruct" : ""),
-        d: `M${cx(a)},${cy(a) + BH / 2} C${cx(a)},${cy(a) + BH} ${cx(b)},${cy(b) - BH} ${cx(b)},${cy(b) - BH / 2}`,
-      }));
+    // Shrunk to the pane's width (CSS max-width), never below 3/4 of its size: a model too
+    // wide for that scrolls instead of turning unreadable. (CSSOM: allowed by the CSP.)
+    root.style.minWidth = `${Math.round(width * MIN_SCALE)}px`;
+    root.dataset.columns = String(nextX);
+    function box(key) {
+      const p = pos[key], [w, h] = SIZE[p.kind];
+      return { x: 10 + p.x * W + (W - w) / 2, y: 10 + p.y * H, w, h };
     }
-    st.goals.forEach((g) => g.children.forEach((c) => { if (pos[c] && pos[c].y > pos[g.id].y) edge(g.id, c, false); }));
-    st.obstacles.forEach((o) => o.obstructs.forEach((gid) => { if (pos[gid] && pos[o.id]) edge(gid, o.id, true); }));
-    extraEdges.forEach(([a, b, ob]) => { if (pos[b].y > pos[a].y) edge(a, b, ob); });
-    root.append(edges);
+    // A link from a's edge to b's: down, up, or (same row) below both.
+    function route(a, b) {
+      const A = box(a), B = box(b);
+      const ax = A.x + A.w / 2, bx = B.x + B.w / 2;
+      let ay, by, c1, c2;
+      if (B.y >= A.y + A.h) { ay = A.y + A.h; by = B.y; c1 = c2 = (ay + by) / 2; }
+      else if (A.y >= B.y + B.h) { ay = A.y; by = B.y + B.h; c1 = c2 = (ay + by) / 2; }
+      else { ay = A.y + A.h; by = B.y + B.h; c1 = ay + 22; c2 = by + 22; }
+      return `M${ax},${ay} C${ax},${c1} ${bx},${c2} ${bx},${by}`;
+    }
+    const defs = svg("defs", {});
+    ["obstruct", "resolution"].forEach((kind) => {
+      const m = svg("marker", { id: "arrow-" + kind, class: kind, viewBox: "0 0 8 8", refX: "7", refY: "4", markerWidth: "7", markerHeight: "7", orient: "auto-start-reverse" });
+      m.append(svg("path", { d: "M0,0 L8,4 L0,8 z" }));
+      defs.append(m);
+    });
+    const edges = svg("g", { class: "edges" });
+    // kind, from, to; the link's look follows node `follows`.
+    function link(kind, from, to, follows, attrs) {
+      if (!pos[from] || !pos[to]) return;
+      const e = svg("path", Object.assign({ class: linkClass(kind, follows), d: route(from, to), "data-from": from.split(AGENT)[0], "data-to": to }, attrs || {}));
+      if (kind === "obstruct" || kind === "resolution") e.setAttribute("marker-end", `url(#arrow-${kind})`);
+      edges.append(e);
+      if (kind !== "refine") (linkEls[follows] = linkEls[follows] || []).push([e, kind]);
+    }
+    st.goals.forEach((g) => g.children.forEach((c) => link("refine", g.id, c, g.id)));
+    st.obstacles.forEach((o) => {
+      o.obstructs.forEach((gid) => link("obstruct", o.id, gid, o.id));
+      o.resolutions.forEach((gid) => link("resolution", gid, o.id, gid));
+    });
+    for (const [owner, list] of Object.entries(agentsOf)) {
+      list.forEach((a) => link("responsibility", a + AGENT + owner, owner, owner, { "data-agent": a, "data-for": owner }));
+    }
+    root.append(defs, edges);
     const nodes = svg("g", { class: "nodes" });
     const descr = {}; st.goals.forEach((g) => { descr[g.id] = g.description; });
     st.obstacles.forEach((o) => { descr[o.id] = o.description; });
-    for (const id of Object.keys(pos)) {
-      const x = 10 + pos[id].x * W + (W - BW) / 2, y = 10 + pos[id].y * H;
-      const obstacle = pos[id].kind === "obstacle";
-      const g = svg("g", { class: "node " + (obstacle ? "obstacle " : "") + status(id), "data-node": id, tabindex: "0" });
-      if (obstacle) {
-        g.append(svg("polygon", { points: `${x + 8},${y} ${x + BW},${y} ${x + BW - 8},${y + BH} ${x},${y + BH}` }));
-      } else {
-        g.append(svg("rect", { x, y, width: BW, height: BH, rx: 5 }));
+    for (const key of Object.keys(pos)) {
+      const { x, y, w, h } = box(key), kind = pos[key].kind;
+      if (kind === "agent") {
+        const [aid, owner] = key.split(AGENT);
+        const g = svg("g", { class: "agent " + health(owner), "data-agent": aid, "data-for": owner });
+        g.append(svg("polygon", { points: `${x + 8},${y} ${x + w - 8},${y} ${x + w},${y + h / 2} ${x + w - 8},${y + h} ${x + 8},${y + h} ${x},${y + h / 2}` }));
+        const t = svg("text", { x: x + w / 2, y: y + h / 2 + 4, class: "id" }); t.textContent = aid;
+        const title = svg("title", {});
+        title.textContent = `${aid}: ${agents[aid].description || ""} — responsible for ${(dutiesOf[aid] || []).join(", ")}`;
+        g.append(title, t);
+        nodes.append(g);
+        (agentEls[owner] = agentEls[owner] || []).push(g);
+        continue;
       }
-      const t1 = svg("text", { x: x + BW / 2, y: y + 14, class: "id" }); t1.textContent = id;
-      const t2 = svg("text", { x: x + BW / 2, y: y + 27, class: "u" });
-      const title = svg("title", {}); title.textContent = `${id}: ${descr[id] || ""}`;
+      const obstacle = kind === "obstacle";
+      const g = svg("g", { class: "node " + (obstacle ? "obstacle " : "") + status(key), "data-node": key, tabindex: "0" });
+      if (obstacle) {
+        g.append(svg("polygon", { points: `${x + 8},${y} ${x + w},${y} ${x + w - 8},${y + h} ${x},${y + h}` }));
+      } else {
+        g.append(svg("rect", { x, y, width: w, height: h, rx: 5 }));
+      }
+      const t1 = svg("text", { x: x + w / 2, y: y + 14, class: "id" }); t1.textContent = key;
+      const t2 = svg("text", { x: x + w / 2, y: y + 27, class: "u" });
+      const title = svg("title", {}); title.textContent = `${key}: ${descr[key] || ""}`;
       g.append(title, t1, t2);
-      g.addEventListener("click", () => explain(id));
-      g.addEventListener("keydown", (ev) => { if (ev.key === "Enter") explain(id); });
+      g.addEventListener("click", () => explain(key));
+      g.addEventListener("keydown", (ev) => { if (ev.key === "Enter") explain(key); });
       nodes.append(g);
-      nodeEls[id] = { g, u: t2, obstacle };
+      nodeEls[key] = { g, u: t2, obstacle, status: null };
     }
     root.append(nodes);
   }
@@ -176,6 +270,11 @@
       if (n.g.getAttribute("class") !== cls) n.g.setAttribute("class", cls);
       const txt = "u " + fmtU(v[0]);
       if (n.u.textContent !== txt) n.u.textContent = txt;
+      if (n.status === v[1]) continue;  // links and hexagons follow the status only
+      n.status = v[1];
+      for (const [e, kind] of linkEls[id] || []) e.setAttribute("class", linkClass(kind, id));
+      const ac = "agent " + health(id);
+      for (const g of agentEls[id] || []) g.setAttribute("class", ac);
     }
     for (const id of changedGoals) drawPill(id, S.goals[id] || [null, "unknown"]);
     changedGoals.clear();
@@ -433,8 +532,10 @@
       if (t1 - t0 < 1) t1 = t0 + 1;
       const X = (t) => L + (t - t0) / (t1 - t0) * (w - L - R);
       const Y = (u) => T + (1 - (u === null ? 0 : u)) * (h - T - B);
-      [t0, (t0 + t1) / 2, t1].forEach((t) => {
-        const tx = svg("text", { x: X(t) - 10, y: h - 4 }); tx.textContent = fmtT(t); kids.push(tx);
+      // The first label starts at the axis's start, the last ends at its end: inside the plot.
+      [[t0, "start"], [(t0 + t1) / 2, "middle"], [t1, "end"]].forEach(([t, anchor]) => {
+        const tx = svg("text", { x: X(t), y: h - 4, "text-anchor": anchor, class: "tick" });
+        tx.textContent = fmtT(t); kids.push(tx);
       });
       if (pts.length) {
         const step = Math.max(1, Math.floor(pts.length / 2000));
@@ -457,7 +558,9 @@
         const title = svg("title", {}); title.textContent = `t=${fmtT(m.t)} ${m.kind} ${m.tactic || ""} ${fmtData(m.data)}`;
         g.append(title);
         if (m.kind === "started" || m.kind === "run_stop" || m.kind === "escalated") {
-          const tx = svg("text", { x: x + 3, y: T + 8 + (labelRow++ % 3) * 11 });
+          // Right of its line, or left of it near the plot's right end (never clipped).
+          const right = x > w - R - 140;
+          const tx = svg("text", { x: right ? x - 3 : x + 3, y: T + 8 + (labelRow++ % 3) * 11, "text-anchor": right ? "end" : "start" });
           tx.textContent = (m.tactic || m.kind) + (m.kind === "started" ? "" : " " + m.kind);
           g.append(tx);
         }
