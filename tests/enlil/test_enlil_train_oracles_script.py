@@ -1,9 +1,14 @@
-"""``scripts/train-oracles.sh``: the oracle architecture each model gets from the variables."""
+"""``scripts/train-oracles.sh``: the oracle architecture each model gets from the variables.
+
+The script asks the rule in code (``anunnaki oracle architecture``), so each model starts an
+interpreter: the timeout allows for a loaded machine.
+"""
 
 from __future__ import annotations
 
 import os
 import subprocess
+import sys
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -13,12 +18,13 @@ SCRIPT = ROOT / "scripts" / "train-oracles.sh"
 def choices(tmp_path: Path, **env: str) -> tuple[int, dict[str, str], str]:
     """Run ``--print-architectures`` (trains nothing): exit code, model → network, stderr."""
     clean = {k: v for k, v in os.environ.items() if not k.startswith("ARCH")}
+    clean["PY"] = sys.executable
     result = subprocess.run(
         ["bash", str(SCRIPT), "--print-architectures"],
         env=clean | {"RUNS": str(tmp_path / "runs"), "DATA": str(tmp_path / "data")} | env,
         capture_output=True,
         text=True,
-        timeout=60,
+        timeout=600,
         check=False,
     )
     rows = dict(line.split("\t") for line in result.stdout.splitlines())
@@ -42,11 +48,7 @@ def test_small_cnn_unless_a_variable_names_another(tmp_path: Path) -> None:
 
 
 def test_per_phenomenon_then_per_model(tmp_path: Path) -> None:
-    code, rows, _ = choices(tmp_path, ARCH_hsl="patch_cnn", ARCH_raindrop="patch_cnn")
-    assert code == 0
-    # rover-default covers hsl and raindrop, rover-low_light hsl; the fog-only ones do not
-    assert rows == {"rover-default": "patch_cnn", "rover-fog": "small_cnn",
-                    "rover-low_light": "patch_cnn", "uav-default": "small_cnn"}  # fmt: skip
+    # (ARCH_<phenomenon> reaching the rule: test_phenomena_of_one_oracle_must_agree)
     code, rows, _ = choices(tmp_path, ARCH="patch_cnn", ARCH_rover_fog="small_cnn")
     assert rows["rover-fog"] == "small_cnn" and rows["uav-default"] == "patch_cnn"
 
@@ -54,8 +56,8 @@ def test_per_phenomenon_then_per_model(tmp_path: Path) -> None:
 def test_phenomena_of_one_oracle_must_agree(tmp_path: Path) -> None:
     code, _, err = choices(tmp_path, ARCH_hsl="patch_cnn", ARCH_raindrop="small_cnn")
     assert code == 1
-    assert "rover-default's phenomena name different architectures" in err
-    assert "set ARCH_rover_default" in err
+    assert "phenomenon hsl names patch_cnn and raindrop names small_cnn" in err
+    assert "no oracle network for rover-default (above): set ARCH_rover_default" in err
     code, rows, _ = choices(
         tmp_path, ARCH_hsl="patch_cnn", ARCH_raindrop="small_cnn", ARCH_rover_default="patch_cnn"
     )
