@@ -50,6 +50,7 @@ def test_small_cnn_unless_a_variable_names_another(tmp_path: Path) -> None:
 def test_per_phenomenon_then_per_model(tmp_path: Path) -> None:
     # (ARCH_<phenomenon> reaching the rule: test_phenomena_of_one_oracle_must_agree)
     code, rows, _ = choices(tmp_path, ARCH="patch_cnn", ARCH_rover_fog="small_cnn")
+    assert code == 0
     assert rows["rover-fog"] == "small_cnn" and rows["uav-default"] == "patch_cnn"
 
 
