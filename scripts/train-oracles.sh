@@ -14,8 +14,9 @@
 # through `anunnaki oracle architecture`; `anunnaki robustify` asks it too): one oracle
 # covers all of its model's phenomena, so the phenomena that name a network decide it (they
 # must agree; the others follow them), and a model whose phenomena name none gets small_cnn.
-# The measured choice (docs/enlil.md, "Issue 22"): patch_cnn for hsl, none for raindrop,
-# fog and brightness. ARCH_<phenomenon> (ARCH_hsl, ARCH_raindrop …) overrides a
+# The measured choice (docs/enlil.md, "Issue 22 at the shipped scale: the network"): none
+# (hsl, raindrop and fog tie at the shipped scale; brightness not measured), so every model
+# gets small_cnn unless a variable names another. ARCH_<phenomenon> (ARCH_hsl, ARCH_raindrop …) overrides a
 # phenomenon's choice (empty, ARCH_hsl=, drops it); ARCH_<model> (dashes as underscores:
 # ARCH_rover_default) sets one model's network; ARCH the network of a model whose phenomena
 # name none. `scripts/train-oracles.sh --print-architectures` prints each model's choice
@@ -85,7 +86,8 @@ architecture() { # architecture MODEL PHENOMENON...: the network of MODEL's orac
     var="ARCH_$phenomenon"
     if [[ -n ${!var+set} ]]; then choose+=(--choose "$phenomenon=${!var}"); fi
   done
-  "${ANUNNAKI[@]}" oracle architecture "$@" "${choose[@]}" --default "${ARCH:-small_cnn}" || {
+  "${ANUNNAKI[@]}" oracle architecture "$@" --model "$model" "${choose[@]}" \
+    --default "${ARCH:-small_cnn}" || {
     echo "train-oracles.sh: no oracle network for $model (above): set $own to the one to train" >&2
     return 1
   }

@@ -185,15 +185,27 @@ def test_kill_9_mid_fine_tune_then_the_same_command_continues(chain: dict[str, A
     assert resumed["finetune"]["steps"] == straight["finetune"]["steps"] == 24
 
 
-def test_the_oracle_network_follows_the_per_phenomenon_rule() -> None:
+def test_the_oracle_network_follows_the_per_phenomenon_rule(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    from types import MappingProxyType
+
     from anunnaki.enki import RobustifyConfig
-    from anunnaki.enlil import oracle_architecture
+    from anunnaki.enlil import _oracle_choice, oracle_architecture
+
+    # a measured choice in the table (today's is empty: every oracle small_cnn)
+    table = MappingProxyType({"hsl": "patch_cnn"})
+    monkeypatch.setattr(_oracle_choice, "PHENOMENON_ARCHITECTURES", table)
 
     for phenomenon in ("hsl", "raindrop+raindrop+raindrop", "fog", "brightness"):
         options = RobustifyConfig(phenomenon=phenomenon, domain="d").oracle_options()
         assert options["architecture"] == oracle_architecture([phenomenon])
     assert RobustifyConfig("hsl", "hsl").oracle_options()["architecture"] == "patch_cnn"
     assert RobustifyConfig("fog", "fog").oracle_options()["architecture"] == "small_cnn"
+    # a model with a measured choice of its own gets it (an Enki model's id has none)
+    fog = RobustifyConfig("fog", "fog")
+    assert fog.oracle_options("rover-default")["architecture"] == "patch_cnn"
+    assert fog.oracle_options("rover-fog-enki")["architecture"] == "small_cnn"
     given = RobustifyConfig("hsl", "hsl", oracle_architecture="small_cnn", oracle={"epochs": 2})
     assert given.oracle_options() == {"epochs": 2, "architecture": "small_cnn"}
     # the oracle's options are its stage's own, not the work folder's

@@ -541,10 +541,12 @@ def _add_architecture(osub: Any) -> None:
         "architecture",
         help="print the oracle network chosen for phenomena (the per-phenomenon rule)",
         description="Print the network one oracle covering PHENOMENON... gets by the measured "
-        "per-phenomenon choice (docs/enlil.md): the architecture the phenomena name (they must "
-        "agree), else --default. scripts/train-oracles.sh and robustify use the same rule.",
+        "choice (docs/enlil.md): the model's own (--model), else the architecture the phenomena "
+        "name (they must agree), else --default. scripts/train-oracles.sh and robustify use "
+        "the same rule.",
     )
     a.add_argument("phenomenon", nargs="+", help="the oracle's phenomena (a+b: each part)")
+    a.add_argument("--model", metavar="ID", help="the oracle's model (a measured per-model choice)")
     a.add_argument(
         "--choose",
         action="append",
@@ -570,7 +572,10 @@ def run_architecture(args: argparse.Namespace) -> int:
             )
         choices[name.strip()] = arch.strip() or None
     chosen = oracle_architecture(
-        args.phenomenon, choices=choices, default=args.default or DEFAULT_ORACLE_ARCHITECTURE
+        args.phenomenon,
+        model_id=args.model,
+        choices=choices,
+        default=args.default or DEFAULT_ORACLE_ARCHITECTURE,
     )
     _check_architecture(chosen, "oracle architecture: the chosen network")
     print(chosen)

@@ -91,11 +91,15 @@ class RobustifyConfig:
             del data[key]
         return data
 
-    def oracle_options(self) -> dict[str, Any]:
-        """The oracle stage's options: the overrides and the network (resolved by the rule)."""
+    def oracle_options(self, model_id: str | None = None) -> dict[str, Any]:
+        """The oracle stage's options: the overrides and the network.
+
+        The network: ``oracle_architecture``, else the rule's for the phenomenon and the new
+        model's id *model_id* (:func:`anunnaki.enlil.oracle_architecture`).
+        """
         from anunnaki.enlil import oracle_architecture
 
-        arch = self.oracle_architecture or oracle_architecture([self.phenomenon])
+        arch = self.oracle_architecture or oracle_architecture([self.phenomenon], model_id=model_id)
         return {**self.oracle, "architecture": arch}
 
 
@@ -126,12 +130,12 @@ def _check_phenomenon(name: str) -> None:
         raise EnkiError(f"--phenomenon {name}: {exc}") from None
 
 
-def _oracle_options(config: RobustifyConfig) -> dict[str, Any]:
+def _oracle_options(config: RobustifyConfig, model_id: str) -> dict[str, Any]:
     """The oracle stage's options, with its network checked against the registered ones."""
     from anunnaki.enlil import ORACLE_ARCHITECTURES
 
     try:
-        options = config.oracle_options()
+        options = config.oracle_options(model_id)
     except AnunnakiError as exc:
         raise EnkiError(f"--phenomenon {config.phenomenon}: {exc}") from None
     names = ORACLE_ARCHITECTURES.names()
@@ -471,10 +475,10 @@ def robustify(
 
     """
     _check_phenomenon(config.phenomenon)
-    oracle_options = _oracle_options(config)  # a bad network fails before any work
     resolved = resolve_model(model, model_in_id)
     splits = _splits(data)  # a missing split fails before any work
     new_id = config.model_id or new_model_id(resolved.model_id, config.domain)
+    oracle_options = _oracle_options(config, new_id)  # a bad network too
     options = config.options() | {
         "model": resolved.model_id,
         "model_sha256": resolved.sha256,

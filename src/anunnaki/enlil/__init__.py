@@ -22,6 +22,7 @@ from anunnaki.enlil._context import (
 )
 from anunnaki.enlil._oracle_choice import (
     DEFAULT_ORACLE_ARCHITECTURE,
+    MODEL_ARCHITECTURES,
     PHENOMENON_ARCHITECTURES,
     oracle_architecture,
 )
@@ -75,6 +76,7 @@ from anunnaki.enlil._sweep import ContextDraw, ContextSpec, draw_contexts, parse
 __all__ = [
     "BASELINES",
     "DEFAULT_ORACLE_ARCHITECTURE",
+    "MODEL_ARCHITECTURES",
     "ORACLE_ARCHITECTURES",
     "PHENOMENON_ARCHITECTURES",
     "SEARCHES",
