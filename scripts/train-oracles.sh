@@ -9,18 +9,17 @@
 #   BUDGET=300 FRAMES=2000 EPOCHS=8 scripts/train-oracles.sh   # quicker, weaker (all models)
 #   ARCH_raindrop=patch_cnn scripts/train-oracles.sh rover-default   # another network
 #
-# The oracle network (`oracle train --architecture`, docs/enlil.md) is chosen per
-# phenomenon by the rule written once in code (anunnaki.enlil.oracle_architecture, asked
-# through `anunnaki oracle architecture`; `anunnaki robustify` asks it too): one oracle
-# covers all of its model's phenomena, so the phenomena that name a network decide it (they
-# must agree; the others follow them), and a model whose phenomena name none gets small_cnn.
-# The measured choice (docs/enlil.md, "Issue 22 at the shipped scale: the network"): none
-# (hsl, raindrop and fog tie at the shipped scale; brightness not measured), so every model
-# gets small_cnn unless a variable names another. ARCH_<phenomenon> (ARCH_hsl, ARCH_raindrop …) overrides a
-# phenomenon's choice (empty, ARCH_hsl=, drops it); ARCH_<model> (dashes as underscores:
-# ARCH_rover_default) sets one model's network; ARCH the network of a model whose phenomena
-# name none. `scripts/train-oracles.sh --print-architectures` prints each model's choice
-# and trains nothing.
+# The oracle network (`oracle train --architecture`, docs/enlil.md, "Shipped oracles") is
+# the measured choice, written once in code (anunnaki.enlil.oracle_architecture, asked
+# through `anunnaki oracle architecture PHENOMENON... --model ID`; `anunnaki robustify` asks
+# it too): the model's own (rover-default patch_cnn, for its false alarms on close
+# pedestrians; rover-low_light patch_cnn, kept as shipped), else the one its phenomena name
+# (none today: hsl, raindrop and fog tie at the shipped scale), else small_cnn. Variables
+# come first: ARCH_<phenomenon> (ARCH_hsl, ARCH_raindrop …) names a phenomenon's network (one
+# oracle covers all of its model's phenomena: those named must agree; empty, ARCH_hsl=,
+# drops a table entry); ARCH_<model> (dashes as underscores: ARCH_rover_default) sets one
+# model's network; ARCH the network of a model nothing names. `scripts/train-oracles.sh
+# --print-architectures` prints each model's choice and trains nothing.
 # Without BUDGET/FRAMES/EPOCHS each model gets the settings its shipped oracle was made with
 # (the table at the end; docs/enlil.md): the shipped files are rebuilt with the same settings.
 # Every step's wall time goes to $RUNS/times.tsv. Assessments resume when re-run (the
