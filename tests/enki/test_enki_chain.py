@@ -90,7 +90,7 @@ def test_the_chain_makes_a_model_its_sidecar_and_its_oracle(chain: dict[str, Any
     assert oracle.card.model_sha256 == s["model"]["sha256"]
     # its network by the per-phenomenon rule (brightness names none: small_cnn), recorded
     assert oracle.card.architecture == "small_cnn" == s["oracle"]["architecture"]
-    assert oracle.card.training["config"]["architecture_from"] == "per-phenomenon rule"
+    assert oracle.card.training["config"]["architecture_from"] == "measured choice"
     assert s["oracle"]["options"]["architecture"] == "small_cnn"
 
 

@@ -1,7 +1,8 @@
 """``scripts/train-oracles.sh``: the oracle architecture each model gets from the variables.
 
 The script asks the rule in code (``anunnaki oracle architecture``), so each model starts an
-interpreter: the timeout allows for a loaded machine.
+interpreter (about 2 s quiet, 15-30 s on the shared machine at load 30): the timeouts allow
+for a loaded machine.
 """
 
 from __future__ import annotations
@@ -10,6 +11,8 @@ import os
 import subprocess
 import sys
 from pathlib import Path
+
+import pytest
 
 ROOT = Path(__file__).resolve().parents[2]
 SCRIPT = ROOT / "scripts" / "train-oracles.sh"
@@ -31,6 +34,7 @@ def choices(tmp_path: Path, **env: str) -> tuple[int, dict[str, str], str]:
     return result.returncode, rows, result.stderr
 
 
+@pytest.mark.timeout(900)  # four interpreters a run (module docstring)
 def test_the_measured_choice_by_default(tmp_path: Path) -> None:
     code, rows, _ = choices(tmp_path)
     assert code == 0
@@ -41,6 +45,7 @@ def test_the_measured_choice_by_default(tmp_path: Path) -> None:
     assert not (tmp_path / "runs").exists() and not (tmp_path / "data").exists()
 
 
+@pytest.mark.timeout(900)  # four interpreters a run (module docstring)
 def test_a_phenomenon_s_choice_reaches_the_models_with_it(tmp_path: Path) -> None:
     code, rows, _ = choices(tmp_path, ARCH_fog="patch_cnn")
     assert code == 0
@@ -52,12 +57,14 @@ def test_a_phenomenon_s_choice_reaches_the_models_with_it(tmp_path: Path) -> Non
     assert rows["rover-fog"] == rows["uav-default"] == "small_cnn"
 
 
+@pytest.mark.timeout(900)  # four interpreters a run (module docstring)
 def test_per_model_and_the_default(tmp_path: Path) -> None:
     code, rows, _ = choices(tmp_path, ARCH="patch_cnn", ARCH_rover_fog="small_cnn")
     assert code == 0
     assert rows["rover-fog"] == "small_cnn" and rows["uav-default"] == "patch_cnn"
 
 
+@pytest.mark.timeout(900)  # four interpreters a run (module docstring)
 def test_phenomena_of_one_oracle_must_agree(tmp_path: Path) -> None:
     code, _, err = choices(tmp_path, ARCH_hsl="patch_cnn", ARCH_raindrop="small_cnn")
     assert code == 1

@@ -411,7 +411,7 @@ class _Chain:
         from anunnaki.enlil import OracleTrainConfig, contexts_from_archive, train_oracle
 
         train, val, _ = self.splits
-        how = "--oracle-architecture" if self.cfg.oracle_architecture else "per-phenomenon rule"
+        how = "--oracle-architecture" if self.cfg.oracle_architecture else "measured choice"
         config = OracleTrainConfig(
             seed=self.cfg.seed, **options, extra={"architecture_from": how}
         )  # the sidecar's training.config says how the network was chosen
