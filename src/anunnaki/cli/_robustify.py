@@ -69,8 +69,8 @@ def add_parser(sub: Any) -> None:
     o.add_argument(
         "--oracle-architecture",
         metavar="NAME",
-        help="the oracle's network, e.g. small_cnn or patch_cnn (default: the per-phenomenon "
-        "choice, as scripts/train-oracles.sh: `anunnaki oracle architecture P` prints it)",
+        help="the oracle's network, e.g. small_cnn or patch_cnn (default: the measured choice, "
+        "as scripts/train-oracles.sh: `anunnaki oracle architecture P --model ID` prints it)",
     )
     p.add_argument("--json", action="store_true", help="print the summary as one JSON object")
     p.set_defaults(run=run_robustify)

@@ -53,9 +53,9 @@ class RobustifyConfig:
         measure_contexts: Archive contexts the new and the input model are measured on.
         oracle: Overrides of the oracle's training settings (``frames``, ``val_frames``,
             ``epochs``, ``threads``); the rest are ``anunnaki oracle train``'s defaults.
-        oracle_architecture: The oracle's network; ``None``: the per-phenomenon rule
-            (:func:`anunnaki.enlil.oracle_architecture` of the phenomenon), as
-            ``scripts/train-oracles.sh`` chooses it.
+        oracle_architecture: The oracle's network; ``None``: the measured choice
+            (:func:`anunnaki.enlil.oracle_architecture` of the phenomenon and the new
+            model's id), as ``scripts/train-oracles.sh`` chooses it.
 
     The oracle's options (``oracle``, ``oracle_architecture``) are the oracle stage's own:
     when they change, a rerun into the same work folder trains the oracle again and reuses
