@@ -18,11 +18,14 @@ phases, in a seeded order — goes through the arms:
   lasted :attr:`Settings.hold` frames, goal G20); a degraded report in clear weather from a
   domain model restores the default at once; a clear scene for 5 s (G15) restores it too;
   each swap tactic waits out its 10 s cooldown; the oracle averages 3 frames (sim-enlil.yaml);
+  a swap is in force from the next frame. A report naming a condition none of the three
+  models is for (``brightness``: the tactics' ``rover-low_light``, not an arm here) leaves
+  the model as it is;
 - ``switched_truth``: the same models switched by the frame's true condition, at once: what
   a perfect oracle would give, the bound of switching.
 
 The stream is rendered by the simulator (:class:`anunnaki.sim.RoverSim`: a scenario with the
-rover driving a route through a test layout, pedestrians and deer crossing; its camera at
+rover driving a route through a test layout, pedestrians and deer beside it; its camera at
 10 Hz, 128 x 128), every frame's ground truth from the simulator's segmentation. The
 phases' phenomena are applied to the clean frame exactly as the platform applies a
 scenario's (render, phenomena in order with the platform's per-frame seed, JPEG at quality
@@ -34,8 +37,10 @@ the domain's Enlil search archive that no model was trained on (not in the selec
 Figures, per arm and stream seed: F1 per phase kind (clean, hsl, raindrop, fog) and over the
 whole stream (true/false positives and misses summed over the frames, each model at its own
 score threshold, the detector's F1 rule), swaps made, frames spent in a wrong model (the
-model's domain is not the frame's true condition); then mean and standard deviation over
-the stream seeds (the all-domain arm: over fine-tune seeds x stream seeds).
+model's domain is not the frame's true condition; the all-domain model has none by
+definition); then mean and standard deviation over the stream seeds (the all-domain arm:
+over fine-tune seeds x stream seeds), and the differences between arms paired by stream (a
+tie unless the mean difference exceeds its standard deviation).
 
 Work (the fine-tunes with per-epoch checkpoints, the rendered streams, every model's per-frame
 counts) is kept in ``--work``: a killed run continues where it stopped; other settings are
@@ -90,6 +95,12 @@ LABELS = {
     "switched": "per-domain models, switched by the Enlil oracle",
     "switched_truth": "per-domain models, switched by the true condition (bound)",
 }
+SHORT = {
+    "default": "default",
+    "all_domains": "all-domain",
+    "switched": "switched",
+    "switched_truth": "switched (truth)",
+}
 KINDS = ("clean", *DOMAINS)
 
 
@@ -104,8 +115,8 @@ class Settings:
     lr: float = 2e-3
     threads: int = 2
     clean: float = 0.3
-    finetune_seeds: tuple[int, ...] = (0,)
-    stream_seeds: tuple[int, ...] = (0, 1, 2)
+    finetune_seeds: tuple[int, ...] = (0, 1)
+    stream_seeds: tuple[int, ...] = (0, 1, 2, 3, 4)
     clean_seconds: float = 6.0
     adverse_seconds: float = 12.0
     rate: float = 10.0
@@ -346,6 +357,7 @@ def render_stream(
     from anunnaki.messages import Image
     from anunnaki.sim import RoverSim, parse_scenario
 
+    start = time.monotonic()
     plan = phase_plan(seed, s)
     lengths = [s.clean_seconds if p == "clean" else s.adverse_seconds for p in plan]
     per_frame = 1.0 / s.rate
@@ -395,6 +407,7 @@ def render_stream(
         "phase": phase,
         "truths": truths,
         "objects": len(scenario.objects),
+        "render_seconds": round(time.monotonic() - start, 1),
     }
     folder.mkdir(parents=True, exist_ok=True)
     np.save(folder / "images.npy", np.stack(images))
@@ -487,6 +500,27 @@ def switch_by_oracle(stream: dict[str, Any], s: Settings, oracles: Any) -> dict[
     return {"active": actives, "swaps": swaps, "reports": reports}
 
 
+def runs_of(values: Sequence[str]) -> list[list[Any]]:
+    """Run-length code: ``[[value, first frame, frames], ...]``."""
+    out: list[list[Any]] = []
+    for i, v in enumerate(values):
+        if out and out[-1][0] == v:
+            out[-1][2] += 1
+        else:
+            out.append([v, i, 1])
+    return out
+
+
+def expand(runs: Sequence[Sequence[Any]]) -> list[Any]:
+    """Inverse of :func:`runs_of`."""
+    return [v for v, _, n in runs for _ in range(int(n))]
+
+
+def per_frame(keep: bool, counts: npt.NDArray[np.int64]) -> dict[str, Any]:
+    """The per-frame counts, kept for the plotted stream only."""
+    return {"counts": counts.tolist()} if keep else {}
+
+
 def switch_by_truth(stream: dict[str, Any]) -> dict[str, Any]:
     """The bound: the true condition's model, on every frame (a swap per phase change)."""
     active = ["default" if c == "clean" else c for c in stream["condition"]]
@@ -558,6 +592,37 @@ def summarise(runs: list[dict[str, Any]]) -> dict[str, Any]:
     return out
 
 
+#: The comparisons, each paired by stream (both arms saw the same frames): a minus b.
+PAIRS = (
+    ("switched", "all_domains"),
+    ("switched", "default"),
+    ("all_domains", "default"),
+    ("switched_truth", "switched"),
+)
+
+
+def paired(runs: dict[str, list[dict[str, Any]]], a: str, b: str, key: str) -> dict[str, Any]:
+    """F1 of arm *a* minus arm *b* on the same streams: mean, sd, and the verdict.
+
+    A **tie** unless the mean difference exceeds the standard deviation of the per-stream
+    differences (the issue's rule: a difference inside the seeds' spread is a tie).
+    """
+    diffs = [
+        ra["f1"][key] - rb["f1"][key]
+        for ra in runs[a]
+        for rb in runs[b]
+        if ra["stream_seed"] == rb["stream_seed"]
+        and ra["f1"][key] is not None
+        and rb["f1"][key] is not None
+    ]
+    out = mean_std(diffs)
+    if out["mean"] is None or out["n"] < 2 or abs(out["mean"]) <= out["std"]:
+        out["verdict"] = "tie"
+    else:
+        out["verdict"] = "win" if out["mean"] > 0 else "loss"
+    return out
+
+
 # -- the run ----------------------------------------------------------------------------------
 
 
@@ -583,26 +648,28 @@ def run(args: argparse.Namespace, s: Settings) -> dict[str, Any]:
     }
     runs: dict[str, list[dict[str, Any]]] = {arm: [] for arm in ARMS}
     streams = []
+    first = s.stream_seeds[0]
     for seed in s.stream_seeds:
-        st = time.monotonic()
         stream = render_stream(seed, inputs, s, work, quiet)
-        render_s = round(time.monotonic() - st, 1)
+        render_s = stream.get("render_seconds")
         counts = {key: frame_counts(path, key, stream, work) for key, path in models.items()}
         if args.streams_only:
             streams.append({"seed": seed, "plan": stream["plan"], "render_seconds": render_s})
             continue
+        # per-frame series only for the first stream (the plot); run-length codes for the rest
+        keep = seed == first
         for rec in trained:
             counts[f"all-s{rec['seed']}"] = frame_counts(
                 work / rec["file"], f"all-s{rec['seed']}", stream, work
             )
         base = {"stream_seed": seed}
         r = score(counts["default"], stream, ["default"] * len(stream["condition"]))
-        runs["default"].append(base | r | {"swaps": 0, "counts": counts["default"].tolist()})
+        runs["default"].append(base | r | {"swaps": 0} | per_frame(keep, counts["default"]))
         for rec in trained:
             c = counts[f"all-s{rec['seed']}"]
             r = score(c, stream, None)
             runs["all_domains"].append(
-                base | {"finetune_seed": rec["seed"]} | r | {"swaps": 0, "counts": c.tolist()}
+                base | {"finetune_seed": rec["seed"]} | r | {"swaps": 0} | per_frame(keep, c)
             )
         oracles = EnlilOracle(registry, window=s.oracle_window)
         for arm, switched in (
@@ -614,16 +681,16 @@ def run(args: argparse.Namespace, s: Settings) -> dict[str, Any]:
             r = score(picked, stream, active)
             runs[arm].append(
                 base | r | {"swaps": len(switched["swaps"]), "swap_list": switched["swaps"],
-                            "active": active, "counts": picked.tolist()}
+                            "active": runs_of(active)} | per_frame(keep, picked)
             )  # fmt: skip
             if arm == "switched":
-                runs[arm][-1]["reports"] = switched["reports"]
+                runs[arm][-1]["reports"] = runs_of([f"{c} {x}" for c, x in switched["reports"]])
         streams.append({
             "seed": seed, "layout": stream["layout"], "plan": stream["plan"],
             "frames_per_phase": stream["frames_per_phase"], "contexts": stream["contexts"],
             "frames": len(stream["condition"]), "objects": stream["objects"],
             "truth_boxes": int(sum(len(t["boxes"]) for t in stream["truths"])),
-            "condition": stream["condition"], "render_seconds": render_s,
+            "render_seconds": render_s,
         })  # fmt: skip
         log(quiet, f"stream {seed}: " + ", ".join(
             f"{arm} {runs[arm][-1]['f1']['overall']}" for arm in ARMS))  # fmt: skip
@@ -664,6 +731,10 @@ def run(args: argparse.Namespace, s: Settings) -> dict[str, Any]:
         "streams": streams,
         "runs": runs,
         "summary": {arm: summarise(runs[arm]) for arm in ARMS},
+        "paired": {
+            f"{a}-{b}": {k: paired(runs, a, b, k) for k in (*KINDS, "adverse", "overall")}
+            for a, b in PAIRS
+        },
         "wall_seconds": round(time.monotonic() - t0, 1),
         "machine": {
             "cpus": os.cpu_count(),
@@ -683,8 +754,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     p.add_argument("--doc", type=Path, default=DOC, help="--report: the page written")
     p.add_argument("--images", type=Path, default=IMAGES, help="--report: the plot's folder")
     p.add_argument("--quick", action="store_true", help="tiny sizes (the test suite's run)")
-    p.add_argument("--finetune-seeds", help="comma list (default 0)")
-    p.add_argument("--stream-seeds", help="comma list (default 0,1,2)")
+    p.add_argument("--finetune-seeds", help="comma list (default 0,1)")
+    p.add_argument("--stream-seeds", help="comma list (default 0,1,2,3,4)")
     p.add_argument("--finetune-only", action="store_true", help="train the all-domain model(s)")
     p.add_argument(
         "--streams-only", action="store_true",
@@ -729,14 +800,6 @@ def ms(entry: dict[str, Any] | None, *, scale: float = 100.0, digits: int = 1) -
     return f"{m:.{digits}f} ± {sd:.{digits}f}"
 
 
-def verdict(a: dict[str, Any], b: dict[str, Any]) -> dict[str, Any]:
-    """``a`` against ``b``: a tie unless the margin exceeds the sum of their spreads."""
-    margin = a["mean"] - b["mean"]
-    spread = a["std"] + b["std"]
-    word = "tie" if abs(margin) <= spread else ("win" if margin > 0 else "loss")
-    return {"margin": round(margin, 5), "spread": round(spread, 5), "verdict": word}
-
-
 def render_report(doc: dict[str, Any]) -> str:
     """docs/switching.md from the benchmark's JSON alone."""
     s, summ, runs = doc["settings"], doc["summary"], doc["runs"]
@@ -761,7 +824,7 @@ def render_report(doc: dict[str, Any]) -> str:
         "",
         f"- **Stream** ({len(seeds)} stream seeds: {', '.join(map(str, seeds))}): the rover "
         f"drives a route through a test layout (never in a training split) with pedestrians and "
-        f"deer crossing; camera at {s['rate']:g} Hz, 128 x 128, JPEG quality 90. Phases: "
+        f"deer beside it; camera at {s['rate']:g} Hz, 128 x 128, JPEG quality 90. Phases: "
         f"clean {s['clean_seconds']:g} s, then hsl, raindrop and fog ({s['adverse_seconds']:g} s "
         f"each) in a seeded order, each followed by a clean phase; every adverse phase holds "
         "one context the default model degrades on (categories 1-2 of its Enlil search "
@@ -805,26 +868,21 @@ def render_report(doc: dict[str, Any]) -> str:
             f"{ms(f['fog'])} | {ms(f['adverse'])} | **{ms(f['overall'])}** | "
             f"{ms(e['swaps'], scale=1.0)} | {wrong} |"
         )
-    sw, al, de, tr = (
-        summ[a]["f1"] for a in ("switched", "all_domains", "default", "switched_truth")
-    )
     lines += [
         "",
-        "Margins (overall F1; a tie unless the margin exceeds the sum of the two spreads):",
+        "Differences, paired by stream (every arm saw the same frames): arm a minus arm b, F1 "
+        "points, mean ± sd over the streams; a **tie** unless the mean exceeds the sd.",
         "",
+        "| a − b | clean | hsl | raindrop | fog | adverse | overall |",
+        "|---|---|---|---|---|---|---|",
     ]
-    for a_name, a, b_name, bb in (
-        ("switched", sw, "one model, all domains", al),
-        ("switched", sw, "rover-default alone", de),
-        ("one model, all domains", al, "rover-default alone", de),
-        ("switched by the true condition", tr, "switched by the oracle", sw),
-    ):
-        for key in ("overall", "adverse", "clean"):
-            v = verdict(a[key], bb[key])
-            lines.append(
-                f"- {a_name} vs {b_name}, {key}: {100 * v['margin']:+.1f} points "
-                f"(spread {100 * v['spread']:.1f}): **{v['verdict']}**"
-            )
+    for a, b in PAIRS:
+        p = doc["paired"][f"{a}-{b}"]
+        cells = [
+            f"{ms(p[k])} ({p[k]['verdict']})" if p[k]["mean"] is not None else "—"
+            for k in (*KINDS, "adverse", "overall")
+        ]
+        lines.append(f"| {SHORT[a]} − {SHORT[b]} | " + " | ".join(cells) + " |")
     lines += ["", "Where the switched arm's wrong-model frames went (mean per stream):", ""]
     details = [r["wrong_detail"] for r in runs["switched"]]
     for key, text in (
@@ -859,10 +917,12 @@ def render_report(doc: dict[str, Any]) -> str:
             f"{t['train_seconds']:.0f} s of training, {t['wall_seconds']:.0f} s wall (load "
             f"{t['load'][0][0]:g} at start); val F1 {pct(t['val_f1'])}"
         )
-    renders = [st["render_seconds"] for st in doc["streams"]]
+    renders = [st["render_seconds"] for st in doc["streams"] if st["render_seconds"]]
     lines += [
-        f"- rendering a stream: {statistics.fmean(renders):.0f} s mean; the whole run "
-        f"{doc['wall_seconds']:.0f} s on {doc['machine']['cpus']} CPUs shared with other work "
+        f"- rendering a stream ({doc['streams'][0]['frames']} frames, the phenomena applied): "
+        f"{statistics.fmean(renders):.0f} s mean; the last run (fine-tunes and streams made "
+        f"before, reused from the work folder) {doc['wall_seconds']:.0f} s on "
+        f"{doc['machine']['cpus']} CPUs shared with other work "
         f"({doc['date']}).",
         "- switching ships and keeps four models and four oracles (each assessed by Enlil) "
         "where one model for all needs one model and one oracle; the swap itself is the model "
@@ -876,29 +936,27 @@ def render_report(doc: dict[str, Any]) -> str:
 
 
 def _conclusion(doc: dict[str, Any]) -> list[str]:
-    summ = doc["summary"]
+    summ, pair = doc["summary"], doc["paired"]
     sw, al = summ["switched"]["f1"], summ["all_domains"]["f1"]
-    tr = summ["switched_truth"]["f1"]
-    v = verdict(sw["overall"], al["overall"])
+    v = pair["switched-all_domains"]["overall"]
     word = {"win": "beats", "loss": "loses to", "tie": "ties with"}[v["verdict"]]
-    out = [
-        f"Over the whole stream, switching the per-domain models by the Enlil oracle {word} "
-        f"one model fine-tuned on all domains at once ({ms(sw['overall'])} against "
-        f"{ms(al['overall'])} F1 points, margin {100 * v['margin']:+.1f}).",
-    ]
-    kinds = []
-    for kind in DOMAINS:
-        k = verdict(sw[kind], al[kind])
-        kinds.append(f"{kind} {100 * k['margin']:+.1f} ({k['verdict']})")
-    out[-1] += " Per adverse phase, switched minus all-domain: " + ", ".join(kinds) + "."
-    g = verdict(tr["overall"], sw["overall"])
-    out.append("")
-    out.append(
-        f"A perfect oracle would add {100 * g['margin']:+.1f} points overall to switching "
-        f"({g['verdict']}): what the oracle's late or wrong reports cost "
-        f"({ms(summ['switched']['wrong_frames'], scale=1.0)} wrong-model frames per stream)."
+    kinds = ", ".join(
+        f"{k} {ms(pair['switched-all_domains'][k])} ({pair['switched-all_domains'][k]['verdict']})"
+        for k in ("clean", *DOMAINS)
     )
-    return out
+    g = pair["switched_truth-switched"]["overall"]
+    d = pair["all_domains-default"]["overall"]
+    return [
+        f"Over the whole stream, switching the per-domain models by the Enlil oracle {word} "
+        f"one model fine-tuned on all domains at once with one domain model's budget "
+        f"({ms(sw['overall'])} against {ms(al['overall'])} F1 points; paired difference "
+        f"{ms(v)}). Per phase, switched minus all-domain: {kinds}. Both beat `rover-default` "
+        f"alone (all-domain − default: {ms(d)} points overall, {d['verdict']}).",
+        "",
+        f"A perfect oracle would change switching by {ms(g)} points overall ({g['verdict']}): "
+        f"what the oracle's late or missed reports cost "
+        f"({ms(summ['switched']['wrong_frames'], scale=1.0)} wrong-model frames per stream).",
+    ]
 
 
 def write_plot(doc: dict[str, Any], images: Path) -> Path | None:
@@ -913,16 +971,19 @@ def write_plot(doc: dict[str, Any], images: Path) -> Path | None:
     st = doc["streams"][0]
     rate = doc["settings"]["rate"]
     n = st["frames"]
+    condition = [
+        p for p, k in zip(st["plan"], st["frames_per_phase"], strict=True) for _ in range(k)
+    ]
     t = np.arange(n) / rate
     fig, (ax0, ax1) = plt.subplots(2, 1, figsize=(9, 4.6), sharex=True,
                                    gridspec_kw={"height_ratios": [1, 2]})  # fmt: skip
     levels = {"default": 0, "clean": 0, **{d: i + 1 for i, d in enumerate(DOMAINS)}}
-    ax0.step(t, [levels[c] for c in st["condition"]], where="post", color="k", lw=2,
+    ax0.step(t, [levels[c] for c in condition], where="post", color="k", lw=2,
              label="true condition")  # fmt: skip
     for arm, color in (("switched", "tab:red"), ("switched_truth", "tab:gray")):
         r = next(r for r in doc["runs"][arm] if r["stream_seed"] == st["seed"])
         off = 0.08 if arm == "switched" else -0.08
-        ax0.step(t, [levels[a] + off for a in r["active"]], where="post", color=color,
+        ax0.step(t, [levels[a] + off for a in expand(r["active"])], where="post", color=color,
                  lw=1.2, label=f"active model: {LABELS[arm].split(', ')[1]}")  # fmt: skip
     ax0.set_yticks(range(len(DOMAINS) + 1), ["default/clean", *DOMAINS])
     ax0.legend(fontsize=7, loc="upper right")

@@ -108,6 +108,21 @@ def test_a_swap_tactic_waits_out_its_cooldown(bench: Any) -> None:
     assert fog == [0, 10]  # fired at 0, then not before 10 frames (1 s) had passed
 
 
+def test_paired_differences_and_run_length_codes(bench: Any) -> None:
+    runs = {
+        "a": [{"stream_seed": i, "f1": {"overall": v}} for i, v in enumerate([0.8, 0.7, 0.9])],
+        "b": [{"stream_seed": i, "f1": {"overall": v}} for i, v in enumerate([0.7, 0.6, 0.8])],
+        "c": [{"stream_seed": i, "f1": {"overall": v}} for i, v in enumerate([0.9, 0.5, 0.9])],
+    }
+    win = bench.paired(runs, "a", "b", "overall")
+    assert win["n"] == 3 and win["mean"] == pytest.approx(0.1) and win["verdict"] == "win"
+    assert bench.paired(runs, "a", "c", "overall")["verdict"] == "tie"  # +0.2, -0.1, 0: spread
+    assert bench.paired(runs, "b", "a", "overall")["verdict"] == "loss"
+    codes = bench.runs_of(["x", "x", "y", "x"])
+    assert codes == [["x", 0, 2], ["y", 2, 1], ["x", 3, 1]]
+    assert bench.expand(codes) == ["x", "x", "y", "x"]
+
+
 def test_scores_pool_counts_per_phase_and_count_wrong_models(bench: Any) -> None:
     stream = {"condition": ["clean", "clean", "fog", "fog", "hsl"]}
     counts = np.array([[1, 0, 0], [1, 1, 0], [0, 0, 2], [1, 0, 1], [0, 0, 0]])
@@ -177,7 +192,7 @@ def test_quick_run_end_to_end_resumes_and_reports(
     for st in doc["streams"]:
         assert st["plan"][0] == "clean" and sorted(set(st["plan"]) - {"clean"}) == [
             "fog", "hsl", "raindrop"]  # fmt: skip
-        assert st["frames"] == sum(st["frames_per_phase"]) == len(st["condition"])
+        assert st["frames"] == sum(st["frames_per_phase"])
         # every adverse phase has a context of its domain's held-out pool
         assert all(
             (c is None) == (p == "clean") for p, c in zip(st["plan"], st["contexts"], strict=True)
@@ -190,11 +205,19 @@ def test_quick_run_end_to_end_resumes_and_reports(
         "hsl", "raindrop+raindrop+raindrop", "fog"]  # fmt: skip
     # the arms' runs: default never swaps and is in a wrong model exactly on adverse frames
     for r, st in zip(doc["runs"]["default"], doc["streams"], strict=True):
-        assert r["swaps"] == 0 and r["wrong_frames"] == sum(c != "clean" for c in st["condition"])
+        adverse = sum(k for p, k in zip(st["plan"], st["frames_per_phase"], strict=True)
+                      if p != "clean")  # fmt: skip
+        assert r["swaps"] == 0 and r["wrong_frames"] == adverse
     for r in doc["runs"]["switched_truth"]:
         assert r["wrong_frames"] == 0 and r["swaps"] == 6
-    for r in doc["runs"]["switched"]:
-        assert len(r["active"]) == len(r["reports"]) == len(r["counts"])
+    for i, r in enumerate(doc["runs"]["switched"]):
+        frames = doc["streams"][i]["frames"]
+        assert len(bench.expand(r["active"])) == len(bench.expand(r["reports"])) == frames
+        assert ("counts" in r) == (i == 0)  # per-frame counts for the plotted stream only
+        assert len({w["frame"] for w in r["swap_list"]}) == r["swaps"]
+    # the paired differences: one per stream (and fine-tune seed), a verdict each
+    p = doc["paired"]["switched-all_domains"]["overall"]
+    assert p["n"] == len(doc["streams"]) and p["verdict"] in ("win", "tie", "loss")
     # a second run continues: nothing is trained or rendered again, the figures are the same
     mtime = (work / "all-s0" / "rover-all.safetensors").stat().st_mtime
     again = _run(*argv)
