@@ -942,9 +942,13 @@ def _conclusion(doc: dict[str, Any]) -> list[str]:
     word = {"win": "beats", "loss": "loses to", "tie": "ties with"}[v["verdict"]]
     kinds = ", ".join(
         f"{k} {ms(pair['switched-all_domains'][k])} ({pair['switched-all_domains'][k]['verdict']})"
-        for k in ("clean", *DOMAINS)
+        for k in ("clean", *DOMAINS, "adverse")
     )
     g = pair["switched_truth-switched"]["overall"]
+    detail = {
+        k: statistics.fmean(r["wrong_detail"][k] for r in doc["runs"]["switched"])
+        for k in ("clean_in_domain_model", "adverse_in_default")
+    }
     d = pair["all_domains-default"]["overall"]
     return [
         f"Over the whole stream, switching the per-domain models by the Enlil oracle {word} "
@@ -955,7 +959,11 @@ def _conclusion(doc: dict[str, Any]) -> list[str]:
         "",
         f"A perfect oracle would change switching by {ms(g)} points overall ({g['verdict']}): "
         f"what the oracle's late or missed reports cost "
-        f"({ms(summ['switched']['wrong_frames'], scale=1.0)} wrong-model frames per stream).",
+        f"({ms(summ['switched']['wrong_frames'], scale=1.0)} wrong-model frames per stream: "
+        f"{detail['clean_in_domain_model']:.0f} clean frames in a domain model, mostly the "
+        f"rule's {doc['settings']['back_after_s']:g} s wait before the swap back, and "
+        f"{detail['adverse_in_default']:.0f} adverse frames still in the default model, the "
+        "hold before a swap and conditions its oracle did not flag).",
     ]
 
 
