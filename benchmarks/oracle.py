@@ -36,6 +36,8 @@
    recipe and several seeds (``oracle train --seeds``; the shipped file is seed 0) as
    ``recipe-sSEED``: their mean and spread are ``seeds["recipe"]``, and the issue's
    ``seed_spread`` aim (balanced macro-F1, max - min <= 0.05) is judged on them.
+   ``--seed-oracle MODEL:GROUP=FILE`` scores the seeds of another recipe beside them as
+   ``GROUP-sSEED`` (``seeds["GROUP"]``), e.g. the same recipe with the other architecture.
 
 Writes ``benchmarks/results/oracle.json``. Data: ``anunnaki make-dataset rover --out D`` and
 ``anunnaki make-dataset uav --out D --width 320 --height 240`` (docs/enlil.md).
@@ -157,10 +159,16 @@ def _pairs(items: list[str], flag: str) -> dict[str, Path]:
     return dict(_split(item, flag) for item in items)
 
 
-def _seed_files(items: list[str], model: str) -> list[Path]:
-    """The files ``--seed-oracle MODEL=FILE`` names for *model*, in the order given."""
-    pairs = [_split(item, "--seed-oracle") for item in items]
-    return [path for owner, path in pairs if owner == model]
+def _seed_files(items: list[str], model: str) -> list[tuple[str, Path]]:
+    """(group, file) of each ``--seed-oracle MODEL[:GROUP]=FILE`` of *model*, in the order
+    given; the group is ``recipe`` (the shipped recipe) unless named."""
+    out = []
+    for item in items:
+        owner, path = _split(item, "--seed-oracle")
+        owner, _, group = owner.partition(":")
+        if owner == model:
+            out.append((group or "recipe", path))
+    return out
 
 
 def _oracles(model: str, phen: str, spec: Any, args: argparse.Namespace) -> dict[str, Any]:
@@ -177,9 +185,9 @@ def _oracles(model: str, phen: str, spec: Any, args: argparse.Namespace) -> dict
     mc = _pairs(args.mc_oracle, "--mc-oracle").get(model)
     if mc is not None:
         out["monte-carlo"] = load_oracle(mc)
-    for path in _seed_files(args.seed_oracle, model):
+    for group, path in _seed_files(args.seed_oracle, model):
         oracle = load_oracle(path)
-        name = f"recipe-s{oracle.card.training.get('config', {}).get('seed')}"
+        name = f"{group}-s{oracle.card.training.get('config', {}).get('seed')}"
         if name in out:
             raise SystemExit(f"--seed-oracle {path}: a second oracle of {model} named {name}")
         if phen in oracle.card.phenomenon_classes[1:]:
@@ -655,9 +663,11 @@ def main() -> None:
         "--seed-oracle",
         action="append",
         default=[],
-        metavar="MODEL=FILE",
+        metavar="MODEL[:GROUP]=FILE",
         help="an oracle of the shipped recipe at another seed (repeatable; the shipped one "
-        "too, as seed 0): scored as recipe-sSEED, with their mean, spread and the seed aim",
+        "too, as seed 0): scored as recipe-sSEED, with their mean, spread and the seed aim; "
+        "MODEL:GROUP=FILE scores another recipe's seeds as GROUP-sSEED (their mean and spread "
+        "beside the recipe's, no aim)",
     )
     parser.add_argument("--contexts", type=int, default=60, help="N of random:N, balanced:N")
     parser.add_argument("--frames-per-context", type=int, default=10)

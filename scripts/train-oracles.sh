@@ -9,16 +9,17 @@
 #   BUDGET=300 FRAMES=2000 EPOCHS=8 scripts/train-oracles.sh   # quicker, weaker (all models)
 #   ARCH_raindrop=patch_cnn scripts/train-oracles.sh rover-default   # another network
 #
-# The oracle network (`oracle train --architecture`, docs/enlil.md) is chosen per
-# phenomenon: ARCH_<phenomenon> (ARCH_hsl, ARCH_raindrop …). One oracle covers all of its
-# model's phenomena, so the phenomena that name one decide it (they must agree; the others
-# follow them); ARCH_<model> (dashes as underscores: ARCH_rover_default) overrides them for
-# one model, ARCH (small_cnn unless set) is the network of a model whose phenomena name
-# none. `scripts/train-oracles.sh --print-architectures` prints each model's choice and
-# trains nothing. The defaults below are the measured choice (docs/enlil.md, "Issue 22"):
-# patch_cnn for hsl (above small_cnn on every seed), none for raindrop, fog and brightness
-# (a tie, or not measured: the cheaper small_cnn unless another phenomenon of the model
-# names patch_cnn). Set a variable to empty (ARCH_hsl=) to drop a default.
+# The oracle network (`oracle train --architecture`, docs/enlil.md, "Shipped oracles") is
+# the measured choice, written once in code (anunnaki.enlil.oracle_architecture, asked
+# through `anunnaki oracle architecture PHENOMENON... --model ID`; `anunnaki robustify` asks
+# it too): the model's own (rover-default patch_cnn, for its false alarms on close
+# pedestrians; rover-low_light patch_cnn, kept as shipped), else the one its phenomena name
+# (none today: hsl, raindrop and fog tie at the shipped scale), else small_cnn. Variables
+# come first: ARCH_<phenomenon> (ARCH_hsl, ARCH_raindrop …) names a phenomenon's network (one
+# oracle covers all of its model's phenomena: those named must agree; empty, ARCH_hsl=,
+# drops a table entry); ARCH_<model> (dashes as underscores: ARCH_rover_default) sets one
+# model's network; ARCH the network of a model nothing names. `scripts/train-oracles.sh
+# --print-architectures` prints each model's choice and trains nothing.
 # Without BUDGET/FRAMES/EPOCHS each model gets the settings its shipped oracle was made with
 # (the table at the end; docs/enlil.md): the shipped files are rebuilt with the same settings.
 # Every step's wall time goes to $RUNS/times.tsv. Assessments resume when re-run (the
@@ -34,7 +35,6 @@ THREADS=${THREADS:-2}
 SEED=${SEED:-0}
 MODELS=${MODELS:-examples/models} # a scratch copy keeps the shipped files (and their pins) as they are
 ANUNNAKI=("$PY" -m anunnaki.cli.main)
-ARCH_hsl=${ARCH_hsl-patch_cnn} # the measured choice (above); unset elsewhere: small_cnn
 
 PRINT_ARCH=0
 if [[ ${1:-} == --print-architectures ]]; then
@@ -74,7 +74,8 @@ assess() { # assess MODEL PLATFORM PHENOMENON BUDGET: one Enlil archive
 EXTRA=() # more `oracle train` options for the next train (rover-default: --extra-data)
 
 architecture() { # architecture MODEL PHENOMENON...: the network of MODEL's oracle (above)
-  local model=$1 own="ARCH_${1//-/_}" chosen="" phenomenon var
+  local model=$1 own="ARCH_${1//-/_}" phenomenon var
+  local choose=()
   shift
   if [[ -n ${!own:-} ]]; then
     echo "${!own}"
@@ -82,15 +83,13 @@ architecture() { # architecture MODEL PHENOMENON...: the network of MODEL's orac
   fi
   for phenomenon in "$@"; do
     var="ARCH_$phenomenon"
-    [[ -n ${!var:-} ]] || continue
-    if [[ -n $chosen && $chosen != "${!var}" ]]; then
-      echo "train-oracles.sh: $model's phenomena name different architectures ($chosen;" \
-        "$var=${!var}), but one oracle covers all of them: set $own to the one to train" >&2
-      return 1
-    fi
-    chosen=${!var}
+    if [[ -n ${!var+set} ]]; then choose+=(--choose "$phenomenon=${!var}"); fi
   done
-  echo "${chosen:-${ARCH:-small_cnn}}"
+  "${ANUNNAKI[@]}" oracle architecture "$@" --model "$model" "${choose[@]}" \
+    --default "${ARCH:-small_cnn}" || {
+    echo "train-oracles.sh: no oracle network for $model (above): set $own to the one to train" >&2
+    return 1
+  }
 }
 
 train() { # train MODEL PLATFORM REGISTRY BUDGET FRAMES EPOCHS PHENOMENON...

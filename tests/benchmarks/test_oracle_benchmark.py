@@ -139,9 +139,25 @@ def test_seed_groups_give_mean_and_spread_per_architecture(bench: Any) -> None:
 
 
 def test_seed_oracles_name_their_model_and_give_the_spread_aim(bench: Any) -> None:
-    items = ["rover-default=a.oracle", "uav-default=b.oracle", "rover-default=c.oracle"]
-    assert bench._seed_files(items, "rover-default") == [Path("a.oracle"), Path("c.oracle")]
+    items = ["rover-default=a.oracle", "uav-default=b.oracle", "rover-default=c.oracle",
+             "rover-default:small_cnn=d.oracle"]  # fmt: skip
+    assert bench._seed_files(items, "rover-default") == [
+        ("recipe", Path("a.oracle")), ("recipe", Path("c.oracle")),
+        ("small_cnn", Path("d.oracle")),
+    ]  # fmt: skip
     assert bench._seed_files(items, "rover-fog") == []
+    # another recipe's seeds group apart from the recipe's (and give no aim)
+    two = {
+        "recipe-s0": _figures(0.8, 0.9, 0.05),
+        "recipe-s1": _figures(0.82, 0.9, 0.05),
+        "small_cnn-s0": _figures(0.6, 0.9, 0.05),
+        "small_cnn-s1": _figures(0.7, 0.9, 0.05),
+    }
+    kinds = ("random", "balanced", "interior")
+    groups = bench._seed_groups({k: {"predictors": two} for k in kinds})
+    assert set(groups) == {"recipe", "small_cnn"}
+    assert groups["small_cnn"]["balanced_macro_f1"]["spread"] == pytest.approx(0.1)
+    assert bench._spread_aim(groups)["seed_spread"]["value"] == pytest.approx(0.02)
     with pytest.raises(SystemExit, match="write MODEL=FILE"):
         bench._seed_files(["a.oracle"], "rover-default")
     predictors = {f"recipe-s{i}": _figures(f1, 0.9, 0.05) for i, f1 in enumerate((0.8, 0.83))}

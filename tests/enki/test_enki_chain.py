@@ -88,6 +88,10 @@ def test_the_chain_makes_a_model_its_sidecar_and_its_oracle(chain: dict[str, Any
     oracle = load_oracle(s["oracle"]["file"], sha256=s["oracle"]["sha256"])
     assert oracle.model_id == "rover-enki"
     assert oracle.card.model_sha256 == s["model"]["sha256"]
+    # its network by the per-phenomenon rule (brightness names none: small_cnn), recorded
+    assert oracle.card.architecture == "small_cnn" == s["oracle"]["architecture"]
+    assert oracle.card.training["config"]["architecture_from"] == "measured choice"
+    assert s["oracle"]["options"]["architecture"] == "small_cnn"
 
 
 def test_the_input_model_is_never_modified(chain: dict[str, Any]) -> None:
@@ -179,3 +183,82 @@ def test_kill_9_mid_fine_tune_then_the_same_command_continues(chain: dict[str, A
     straight = _run(args(chain["tmp"] / "straight"))
     assert resumed["model"]["sha256"] == straight["model"]["sha256"]
     assert resumed["finetune"]["steps"] == straight["finetune"]["steps"] == 24
+
+
+def test_the_oracle_network_follows_the_per_phenomenon_rule(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    from types import MappingProxyType
+
+    from anunnaki.enki import RobustifyConfig
+    from anunnaki.enlil import _oracle_choice, oracle_architecture
+
+    # a measured choice in the table (today's is empty: every oracle small_cnn)
+    table = MappingProxyType({"hsl": "patch_cnn"})
+    monkeypatch.setattr(_oracle_choice, "PHENOMENON_ARCHITECTURES", table)
+
+    for phenomenon in ("hsl", "raindrop+raindrop+raindrop", "fog", "brightness"):
+        options = RobustifyConfig(phenomenon=phenomenon, domain="d").oracle_options()
+        assert options["architecture"] == oracle_architecture([phenomenon])
+    assert RobustifyConfig("hsl", "hsl").oracle_options()["architecture"] == "patch_cnn"
+    assert RobustifyConfig("fog", "fog").oracle_options()["architecture"] == "small_cnn"
+    # a model with a measured choice of its own gets it (an Enki model's id has none)
+    fog = RobustifyConfig("fog", "fog")
+    assert fog.oracle_options("rover-default")["architecture"] == "patch_cnn"
+    assert fog.oracle_options("rover-fog-enki")["architecture"] == "small_cnn"
+    given = RobustifyConfig("hsl", "hsl", oracle_architecture="small_cnn", oracle={"epochs": 2})
+    assert given.oracle_options() == {"epochs": 2, "architecture": "small_cnn"}
+    # the oracle's options are its stage's own, not the work folder's
+    assert "oracle" not in given.options() and "oracle_architecture" not in given.options()
+
+
+def test_another_oracle_network_trains_the_oracle_again_and_nothing_else(
+    chain: dict[str, Any], tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    work = tmp_path / "work"
+    shutil.copytree(chain["tmp"] / "work", work)
+    first = chain["summary"]
+    again = _run([*argv(chain["model"], chain["data"], work), "--oracle-architecture", "patch_cnn"])
+    assert again["rerun_stages"] == ["oracle"]
+    assert again["reused_stages"] == ALL_STAGES[:-1]
+    assert again["model"] == first["model"] and again["metrics"] == first["metrics"]
+    assert again["assessment"] == first["assessment"]
+    oracle = load_oracle(again["oracle"]["file"], sha256=again["oracle"]["sha256"])
+    assert oracle.card.architecture == "patch_cnn" == again["oracle"]["architecture"]
+    assert oracle.card.training["config"]["architecture_from"] == "--oracle-architecture"
+    assert oracle.card.model_sha256 == first["model"]["sha256"]
+    # the registration of the earlier oracle is stale: dropped, so --register adds afresh
+    assert not list((work / "stages").glob("register-*.json"))
+    # the same options again: everything reused
+    same = _run([*argv(chain["model"], chain["data"], work), "--oracle-architecture", "patch_cnn"])
+    assert same["reused_stages"] == ALL_STAGES and same["rerun_stages"] == []
+    assert same["oracle"]["sha256"] == again["oracle"]["sha256"]
+    # a network nobody registered fails before any work, naming the registered ones
+    capsys.readouterr()
+    bad = [*argv(chain["model"], chain["data"], tmp_path / "new"), "--oracle-architecture", "x"]
+    assert main(bad) == 2
+    err = capsys.readouterr().err
+    assert "--oracle-architecture 'x'" in err and "small_cnn" in err and "patch_cnn" in err
+    assert not (tmp_path / "new").exists()
+
+
+def test_a_folder_from_before_the_oracle_options_were_the_stage_s_own(
+    chain: dict[str, Any], tmp_path: Path
+) -> None:
+    """robustify.json held ``oracle`` and stages/oracle.json no options: reused, or re-run."""
+    work = tmp_path / "old"
+    shutil.copytree(chain["tmp"] / "work", work)
+    marker = work / "robustify.json"
+    old = json.loads(marker.read_text())
+    old["options"]["oracle"] = {"epochs": 1, "frames": 24, "threads": 1, "val_frames": 12}
+    marker.write_text(json.dumps(old))
+    stage = work / "stages" / "oracle.json"
+    record = json.loads(stage.read_text())
+    for key in ("options", "architecture"):
+        del record[key]
+    stage.write_text(json.dumps(record))
+    reused = _run(argv(chain["model"], chain["data"], work))
+    assert reused["reused_stages"] == ALL_STAGES and reused["rerun_stages"] == []
+    rerun = _run([*argv(chain["model"], chain["data"], work), "--oracle-architecture", "patch_cnn"])
+    assert rerun["rerun_stages"] == ["oracle"]
+    assert rerun["oracle"]["architecture"] == "patch_cnn"

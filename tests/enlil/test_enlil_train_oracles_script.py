@@ -1,10 +1,18 @@
-"""``scripts/train-oracles.sh``: the oracle architecture each model gets from the variables."""
+"""``scripts/train-oracles.sh``: the oracle architecture each model gets from the variables.
+
+The script asks the rule in code (``anunnaki oracle architecture``), so each model starts an
+interpreter (about 2 s quiet, 15-30 s on the shared machine at load 30): the timeouts allow
+for a loaded machine.
+"""
 
 from __future__ import annotations
 
 import os
 import subprocess
+import sys
 from pathlib import Path
+
+import pytest
 
 ROOT = Path(__file__).resolve().parents[2]
 SCRIPT = ROOT / "scripts" / "train-oracles.sh"
@@ -13,49 +21,55 @@ SCRIPT = ROOT / "scripts" / "train-oracles.sh"
 def choices(tmp_path: Path, **env: str) -> tuple[int, dict[str, str], str]:
     """Run ``--print-architectures`` (trains nothing): exit code, model → network, stderr."""
     clean = {k: v for k, v in os.environ.items() if not k.startswith("ARCH")}
+    clean["PY"] = sys.executable
     result = subprocess.run(
         ["bash", str(SCRIPT), "--print-architectures"],
         env=clean | {"RUNS": str(tmp_path / "runs"), "DATA": str(tmp_path / "data")} | env,
         capture_output=True,
         text=True,
-        timeout=60,
+        timeout=600,
         check=False,
     )
     rows = dict(line.split("\t") for line in result.stdout.splitlines())
     return result.returncode, rows, result.stderr
 
 
+@pytest.mark.timeout(900)  # four interpreters a run (module docstring)
 def test_the_measured_choice_by_default(tmp_path: Path) -> None:
     code, rows, _ = choices(tmp_path)
     assert code == 0
-    # patch_cnn for hsl (docs/enlil.md, "Issue 22"): the models with hsl among their phenomena
+    # no phenomenon names a network (docs/enlil.md, "Issue 22 at the shipped scale"), so
+    # small_cnn but for the models measured (or kept) as patch_cnn
     assert rows == {"rover-default": "patch_cnn", "rover-fog": "small_cnn",
                     "rover-low_light": "patch_cnn", "uav-default": "small_cnn"}  # fmt: skip
     assert not (tmp_path / "runs").exists() and not (tmp_path / "data").exists()
 
 
-def test_small_cnn_unless_a_variable_names_another(tmp_path: Path) -> None:
-    code, rows, _ = choices(tmp_path, ARCH_hsl="")  # an empty variable drops the default
+@pytest.mark.timeout(900)  # four interpreters a run (module docstring)
+def test_a_phenomenon_s_choice_reaches_the_models_with_it(tmp_path: Path) -> None:
+    code, rows, _ = choices(tmp_path, ARCH_fog="patch_cnn")
     assert code == 0
-    assert rows == dict.fromkeys(("rover-default", "rover-fog", "rover-low_light",
-                                  "uav-default"), "small_cnn")  # fmt: skip
+    # every model covers fog but rover-low_light (brightness, hsl)
+    assert rows == {"rover-default": "patch_cnn", "rover-fog": "patch_cnn",
+                    "rover-low_light": "patch_cnn", "uav-default": "patch_cnn"}  # fmt: skip
+    code, rows, _ = choices(tmp_path, ARCH_brightness="patch_cnn")
+    assert code == 0
+    assert rows["rover-fog"] == rows["uav-default"] == "small_cnn"
 
 
-def test_per_phenomenon_then_per_model(tmp_path: Path) -> None:
-    code, rows, _ = choices(tmp_path, ARCH_hsl="patch_cnn", ARCH_raindrop="patch_cnn")
-    assert code == 0
-    # rover-default covers hsl and raindrop, rover-low_light hsl; the fog-only ones do not
-    assert rows == {"rover-default": "patch_cnn", "rover-fog": "small_cnn",
-                    "rover-low_light": "patch_cnn", "uav-default": "small_cnn"}  # fmt: skip
+@pytest.mark.timeout(900)  # four interpreters a run (module docstring)
+def test_per_model_and_the_default(tmp_path: Path) -> None:
     code, rows, _ = choices(tmp_path, ARCH="patch_cnn", ARCH_rover_fog="small_cnn")
+    assert code == 0
     assert rows["rover-fog"] == "small_cnn" and rows["uav-default"] == "patch_cnn"
 
 
+@pytest.mark.timeout(900)  # four interpreters a run (module docstring)
 def test_phenomena_of_one_oracle_must_agree(tmp_path: Path) -> None:
     code, _, err = choices(tmp_path, ARCH_hsl="patch_cnn", ARCH_raindrop="small_cnn")
     assert code == 1
-    assert "rover-default's phenomena name different architectures" in err
-    assert "set ARCH_rover_default" in err
+    assert "phenomenon hsl names patch_cnn and raindrop names small_cnn" in err
+    assert "no oracle network for rover-default (above): set ARCH_rover_default" in err
     code, rows, _ = choices(
         tmp_path, ARCH_hsl="patch_cnn", ARCH_raindrop="small_cnn", ARCH_rover_default="patch_cnn"
     )

@@ -243,3 +243,36 @@ def test_oracle_train_shows_progress_a_table_and_warns_without_category_1(
     assert re.search(r"sha256: [0-9a-f]{64}}", out)  # one line to paste into the registry
     assert "classes counted: pedestrian, deer" in err
     assert not out.lstrip().startswith("{")  # the JSON only with --json
+
+
+def test_oracle_train_measures_random_contexts_on_the_shared_classes(
+    setup: tuple[Path, Path], plugin: None, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """``oracle train --random`` measures the plugin model itself: shared classes on request."""
+    pytest.importorskip("torch")
+    from anunnaki.enlil import load_oracle
+
+    registry, data = setup
+    out_file = tmp_path / "mc.oracle"
+    train = ["oracle", "train", "--models", str(registry), "--model", "person", "--data",
+             str(data), "--random", "3", "-p", "brightness", "--out", str(out_file),
+             "--frames", "16", "--val-frames", "8", "--epochs", "1", "--threads", "1"]  # fmt: skip
+    code, _, err = run(train, capsys)
+    assert code == 2 and "--shared-classes" in err  # refused before any training
+    assert not out_file.with_name("mc.oracle.safetensors").exists()
+    code, out, err = run([*train, "--shared-classes", "--json"], capsys)
+    assert code == 0, err
+    report = json.loads(out)
+    assert report["model_id"] == "person"
+    assert (report["classes"], report["data_only"], report["model_only"]) == (
+        ["pedestrian"], ["deer"], [])  # fmt: skip
+    assert "classes counted: pedestrian (left out: the data's deer)" in err
+    trained = load_oracle(out_file, sha256=report["sha256"])
+    assert trained.card.model_sha256 == sha(registry.parent / "person.json")
+    # oracle evaluate measures the model too: refused without --shared-classes, naming it
+    evaluate = ["oracle", "evaluate", "--models", str(registry), "--model", "person", "--data",
+                str(data), "-p", "brightness", "--contexts", "random:2", "--oracle",
+                str(out_file), "--frames-per-context", "2", "--window", "2", "--batch-images",
+                "4", "--threads", "1"]  # fmt: skip
+    code, _, err = run(evaluate, capsys)
+    assert code == 2 and "--shared-classes" in err

@@ -1,4 +1,4 @@
-"""``anunnaki oracle train | evaluate``: a model's behavior oracle (docs/enlil.md)."""
+"""``anunnaki oracle train | evaluate | architecture``: a model's oracle (docs/enlil.md)."""
 
 from __future__ import annotations
 
@@ -15,7 +15,9 @@ __all__ = ["add_parser"]
 def add_parser(sub: Any) -> None:
     """Register ``oracle`` and its sub-commands."""
     p: argparse.ArgumentParser = sub.add_parser(
-        "oracle", help="learned behavior oracles (Enlil): train, evaluate", description=__doc__
+        "oracle",
+        help="learned behavior oracles (Enlil): train, evaluate, architecture",
+        description=__doc__,
     )
     osub = p.add_subparsers(dest="oracle_command", metavar="SUBCOMMAND")
     osub.required = True
@@ -72,6 +74,7 @@ def add_parser(sub: Any) -> None:
     t.add_argument("--json", action="store_true", help="print the result as one JSON object")
     t.set_defaults(run=run_train)
     _add_evaluate(osub)
+    _add_architecture(osub)
 
 
 def run_train(args: argparse.Namespace) -> int:
@@ -188,14 +191,14 @@ def _seeds(text: str | None, first: int) -> list[int]:
     return seeds
 
 
-def _check_architecture(name: str) -> None:
+def _check_architecture(name: str, flag: str = "oracle train --architecture") -> None:
     """An unknown ``--architecture`` is an error that lists the registered ones."""
     from anunnaki.enlil import ORACLE_ARCHITECTURES, EnlilError
 
     names = ORACLE_ARCHITECTURES.names()
     if name not in names:
         raise EnlilError(
-            f"oracle train --architecture {name!r}: no such oracle architecture; the "
+            f"{flag} {name!r}: no such oracle architecture; the "
             f"registered ones are {', '.join(names)} (plugins register more under the "
             f"entry-point group {ORACLE_ARCHITECTURES.group})"
         )
@@ -531,3 +534,49 @@ def _table(part: dict[str, Any], info: dict[str, Any], split: str, who: str) -> 
             fmt(f["context_error"]), fmt(w["accuracy"]), fmt(w["macro_f1"]),
         )  # fmt: skip
     return table
+
+
+def _add_architecture(osub: Any) -> None:
+    a: argparse.ArgumentParser = osub.add_parser(
+        "architecture",
+        help="print the oracle network chosen for phenomena (the per-phenomenon rule)",
+        description="Print the network one oracle covering PHENOMENON... gets by the measured "
+        "choice (docs/enlil.md): the model's own (--model), else the architecture the phenomena "
+        "name (they must agree), else --default. scripts/train-oracles.sh and robustify use "
+        "the same rule.",
+    )
+    a.add_argument("phenomenon", nargs="+", help="the oracle's phenomena (a+b: each part)")
+    a.add_argument("--model", metavar="ID", help="the oracle's model (a measured per-model choice)")
+    a.add_argument(
+        "--choose",
+        action="append",
+        default=[],
+        metavar="P=ARCH",
+        help="override the choice of phenomenon P (repeatable; P= drops it)",
+    )
+    a.add_argument("--default", help="the network when no phenomenon names one (small_cnn)")
+    a.set_defaults(run=run_architecture)
+
+
+def run_architecture(args: argparse.Namespace) -> int:
+    """Print the chosen architecture's name (checked against the registered ones)."""
+    from anunnaki.enlil import DEFAULT_ORACLE_ARCHITECTURE, EnlilError, oracle_architecture
+
+    choices: dict[str, str | None] = {}
+    for item in args.choose:
+        name, sep, arch = item.partition("=")
+        if not sep or not name.strip():
+            raise EnlilError(
+                f"oracle architecture --choose {item!r}: write PHENOMENON=ARCH "
+                "(hsl=patch_cnn), or PHENOMENON= to drop its choice"
+            )
+        choices[name.strip()] = arch.strip() or None
+    chosen = oracle_architecture(
+        args.phenomenon,
+        model_id=args.model,
+        choices=choices,
+        default=args.default or DEFAULT_ORACLE_ARCHITECTURE,
+    )
+    _check_architecture(chosen, "oracle architecture: the chosen network")
+    print(chosen)
+    return 0

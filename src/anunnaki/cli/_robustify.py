@@ -66,6 +66,12 @@ def add_parser(sub: Any) -> None:
     o.add_argument("--oracle-val-frames", type=int, help="(oracle train's default)")
     o.add_argument("--oracle-epochs", type=int, help="(oracle train's default)")
     o.add_argument("--oracle-threads", type=int, help="(oracle train's default)")
+    o.add_argument(
+        "--oracle-architecture",
+        metavar="NAME",
+        help="the oracle's network, e.g. small_cnn or patch_cnn (default: the measured choice, "
+        "as scripts/train-oracles.sh: `anunnaki oracle architecture P --model ID` prints it)",
+    )
     p.add_argument("--json", action="store_true", help="print the summary as one JSON object")
     p.set_defaults(run=run_robustify)
 
@@ -95,6 +101,7 @@ def _config(args: argparse.Namespace) -> Any:
         seed=args.seed,
         measure_contexts=args.measure_contexts,
         oracle=oracle,
+        oracle_architecture=args.oracle_architecture,
     )
 
 
@@ -175,12 +182,15 @@ def _print(summary: dict[str, Any]) -> None:
         f"fine-tune: {t['epochs']} epochs, {t['steps']} optimizer steps on {t['images']} "
         f"images, seed {summary['seed']}",
         f"model: {model['file']} (sha256 {model['sha256'][:16]}…)",
-        f"oracle: {summary['oracle']['file']} (sha256 {summary['oracle']['sha256'][:16]}…)",
+        f"oracle: {summary['oracle']['file']} ({summary['oracle'].get('architecture', '?')}, "
+        f"sha256 {summary['oracle']['sha256'][:16]}…)",
         f"assessment: {summary['assessment']['path']} (categories "
         f"{'/'.join(map(str, summary['assessment']['counts']))})",
     ]
     if summary.get("reused_stages"):
         lines.append(f"continued: {', '.join(summary['reused_stages'])} done before")
+    if summary.get("rerun_stages"):
+        lines.append(f"run again (their options changed): {', '.join(summary['rerun_stages'])}")
     if "registered" in summary:
         r = summary["registered"]
         lines.append(f"registered {r['model_id']} ({r['domain']}) in {r['registry']}")

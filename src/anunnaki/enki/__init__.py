@@ -21,14 +21,21 @@ comparison runs every arm with the same images, epochs, optimiser steps and seed
                     UniformContexts("hsl"), budget=Budget(epochs=8), seed=1)
 
 :class:`CorruptionMix` is the third source: each frame a random phenomenon of the library at
-a random strength. Needs the ``vision`` and ``enlil`` extras.
+a random strength. :class:`MixedContexts` draws each frame's source from several (one model
+for several domains: benchmarks/switching.py). Needs the ``vision`` and ``enlil`` extras.
 """
 
 from anunnaki.enki._chain import RobustifyConfig, archive_sha256, new_model_id, robustify
 from anunnaki.enki._errors import EnkiError
 from anunnaki.enki._finetune import Budget, finetune
 from anunnaki.enki._select import Selection, SelectionRule, select_contexts
-from anunnaki.enki._sources import ArchiveContexts, ContextSource, CorruptionMix, UniformContexts
+from anunnaki.enki._sources import (
+    ArchiveContexts,
+    ContextSource,
+    CorruptionMix,
+    MixedContexts,
+    UniformContexts,
+)
 
 __all__ = [
     "ArchiveContexts",
@@ -36,6 +43,7 @@ __all__ = [
     "ContextSource",
     "CorruptionMix",
     "EnkiError",
+    "MixedContexts",
     "RobustifyConfig",
     "Selection",
     "SelectionRule",

@@ -53,6 +53,13 @@ class RobustifyConfig:
         measure_contexts: Archive contexts the new and the input model are measured on.
         oracle: Overrides of the oracle's training settings (``frames``, ``val_frames``,
             ``epochs``, ``threads``); the rest are ``anunnaki oracle train``'s defaults.
+        oracle_architecture: The oracle's network; ``None``: the measured choice
+            (:func:`anunnaki.enlil.oracle_architecture` of the phenomenon and the new
+            model's id), as ``scripts/train-oracles.sh`` chooses it.
+
+    The oracle's options (``oracle``, ``oracle_architecture``) are the oracle stage's own:
+    when they change, a rerun into the same work folder trains the oracle again and reuses
+    the rest.
 
     """
 
@@ -72,12 +79,28 @@ class RobustifyConfig:
     seed: int = 0
     measure_contexts: int = 32
     oracle: dict[str, int] = field(default_factory=dict)
+    oracle_architecture: str | None = None
 
     def options(self) -> dict[str, Any]:
-        """The options that decide the results (all but ``workers``), JSON-safe."""
+        """The options that decide the results, JSON-safe.
+
+        All but ``workers`` and the oracle stage's own (:meth:`oracle_options`).
+        """
         data = asdict(self)
-        del data["workers"]
+        for key in ("workers", "oracle", "oracle_architecture"):
+            del data[key]
         return data
+
+    def oracle_options(self, model_id: str | None = None) -> dict[str, Any]:
+        """The oracle stage's options: the overrides and the network.
+
+        The network: ``oracle_architecture``, else the rule's for the phenomenon and the new
+        model's id *model_id* (:func:`anunnaki.enlil.oracle_architecture`).
+        """
+        from anunnaki.enlil import oracle_architecture
+
+        arch = self.oracle_architecture or oracle_architecture([self.phenomenon], model_id=model_id)
+        return {**self.oracle, "architecture": arch}
 
 
 def new_model_id(model_id: str, domain: str) -> str:
@@ -105,6 +128,23 @@ def _check_phenomenon(name: str) -> None:
         PHENOMENA.create(name)
     except AnunnakiError as exc:
         raise EnkiError(f"--phenomenon {name}: {exc}") from None
+
+
+def _oracle_options(config: RobustifyConfig, model_id: str) -> dict[str, Any]:
+    """The oracle stage's options, with its network checked against the registered ones."""
+    from anunnaki.enlil import ORACLE_ARCHITECTURES
+
+    try:
+        options = config.oracle_options(model_id)
+    except AnunnakiError as exc:
+        raise EnkiError(f"--phenomenon {config.phenomenon}: {exc}") from None
+    names = ORACLE_ARCHITECTURES.names()
+    if options["architecture"] not in names:
+        raise EnkiError(
+            f"--oracle-architecture {options['architecture']!r}: no such oracle architecture; "
+            f"the registered ones are {', '.join(names)}"
+        )
+    return options
 
 
 def _splits(data: str | Path) -> tuple[Dataset, Dataset, Dataset | None]:
@@ -151,19 +191,50 @@ class _Chain:
         self.cfg, self.new_id, self.splits = cfg, new_id, splits
         self._progress = progress
         self.reused: list[str] = []
+        self.rerun: list[str] = []
 
     def progress(self, stage: str, done: int, total: int) -> None:
         if self._progress is not None:
             self._progress(stage, done, total)
 
-    def stage(self, name: str, run: Callable[[], dict[str, Any]]) -> dict[str, Any]:
-        """The stage's recorded result, or run it and record it."""
+    def stage(
+        self,
+        name: str,
+        run: Callable[[], dict[str, Any]],
+        options: dict[str, Any] | None = None,
+    ) -> dict[str, Any]:
+        """The stage's recorded result, or run it and record it.
+
+        *options*: the stage's own options, recorded with its result; a result recorded
+        with other ones is run again.
+        """
         old = self.work.stage(name)
+        if old is not None and options is not None:
+            before = old.get("options") or self._legacy_options(name, old)
+            if before != options:
+                changed = sorted(k for k in set(before) | set(options)
+                                 if before.get(k) != options.get(k))  # fmt: skip
+                self.progress(f"{name}: {', '.join(changed)} changed, run again", 0, 0)
+                self.rerun.append(name)
+                old = None
         if old is not None:
             self.reused.append(name)
             self.progress(f"{name} (done before)", 1, 1)
             return old
-        return self.work.done(name, run())
+        result = run()
+        return self.work.done(name, result if options is None else result | {"options": options})
+
+    def _legacy_options(self, name: str, old: dict[str, Any]) -> dict[str, Any]:
+        """The options of a stage recorded before stages recorded them.
+
+        The oracle's: the folder's ``oracle`` overrides and the network its file names.
+        """
+        from anunnaki.enlil import load_oracle
+
+        if name != "oracle":
+            return {}
+        arch = load_oracle(old["file"]).card.architecture
+        return {**self.work.recorded.get("oracle", {}), "architecture": arch}
 
     # -- stages ------------------------------------------------------------------------------
 
@@ -334,11 +405,16 @@ class _Chain:
         archive = self._search(file, None, path, label)
         return _archive_record(archive, path, reused=False)
 
-    def oracle(self, finetuned: dict[str, Any], assess: dict[str, Any]) -> dict[str, Any]:
+    def oracle(
+        self, finetuned: dict[str, Any], assess: dict[str, Any], options: dict[str, Any]
+    ) -> dict[str, Any]:
         from anunnaki.enlil import OracleTrainConfig, contexts_from_archive, train_oracle
 
         train, val, _ = self.splits
-        config = OracleTrainConfig(seed=self.cfg.seed, **self.cfg.oracle)  # type: ignore[arg-type]
+        how = "--oracle-architecture" if self.cfg.oracle_architecture else "measured choice"
+        config = OracleTrainConfig(
+            seed=self.cfg.seed, **options, extra={"architecture_from": how}
+        )  # the sidecar's training.config says how the network was chosen
         oracle = train_oracle(
             train, val, [contexts_from_archive(assess["path"])], model_id=self.new_id,
             model_sha256=finetuned["sha256"], thresholds=self.cfg.thresholds, config=config,
@@ -346,7 +422,8 @@ class _Chain:
         )  # fmt: skip
         file = self.work.path / f"{self.new_id}.oracle.safetensors"
         sha = oracle.save(file)
-        return {"file": str(file), "sha256": sha, "val": oracle.card.metrics.get("val", {})}
+        return {"file": str(file), "sha256": sha, "architecture": oracle.card.architecture,
+                "val": oracle.card.metrics.get("val", {})}  # fmt: skip
 
 
 def _archive_record(archive: Archive, path: Path, *, reused: bool) -> dict[str, Any]:
@@ -401,13 +478,14 @@ def robustify(
     resolved = resolve_model(model, model_in_id)
     splits = _splits(data)  # a missing split fails before any work
     new_id = config.model_id or new_model_id(resolved.model_id, config.domain)
+    oracle_options = _oracle_options(config, new_id)  # a bad network too
     options = config.options() | {
         "model": resolved.model_id,
         "model_sha256": resolved.sha256,
         "data": str(Path(data).resolve()),
         "model_id": new_id,
     }
-    work = WorkFolder(out, options)
+    work = WorkFolder(out, options, scoped=("oracle",))  # older folders recorded it here
     chain = _Chain(
         resolved, Path(data), work, config, splits=splits, model_in_id=model_in_id,
         new_id=new_id, progress=progress,
@@ -418,7 +496,10 @@ def robustify(
     tuned = chain.stage("finetune", lambda: chain.finetune(search, selection))
     metrics = chain.stage("measure", lambda: chain.measure(search, selection, tuned["file"]))
     assess = chain.stage("assess", lambda: chain.assess(tuned["file"]))
-    oracle = chain.stage("oracle", lambda: chain.oracle(tuned, assess))
+    oracle = chain.stage("oracle", lambda: chain.oracle(tuned, assess, oracle_options),
+                         options=oracle_options)  # fmt: skip
+    if "oracle" in chain.rerun:  # a registration of the earlier oracle is stale
+        work.forget("register-")
     summary: dict[str, Any] = {
         "input": {"model_id": resolved.model_id, "file": str(resolved.file),
                   "sha256": resolved.sha256},
@@ -434,6 +515,7 @@ def robustify(
         "seed": config.seed,
         "work": str(work.path),
         "reused_stages": chain.reused,
+        "rerun_stages": chain.rerun,
     }  # fmt: skip
     if register is not None:
         summary["registered"] = _register(

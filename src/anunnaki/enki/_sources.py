@@ -9,7 +9,9 @@ geometric augmentation. With probability ``clean`` the image stays clean; otherw
 - :class:`UniformContexts` (random-context augmentation): a context drawn uniformly over the
   phenomenon's normalised parameter space ``[0, 1]^d``;
 - :class:`CorruptionMix` (AugMix-style): a phenomenon of the library drawn uniformly, at a
-  random strength (:class:`anunnaki.lec.Augmenter`'s rule).
+  random strength (:class:`anunnaki.lec.Augmenter`'s rule);
+- :class:`MixedContexts` (one model for several domains): one of several sources drawn by
+  weight, which then perturbs the frame (e.g. the Enki selections of every domain at once).
 """
 
 from __future__ import annotations
@@ -25,7 +27,7 @@ from anunnaki.enki._errors import EnkiError
 from anunnaki.enlil import resolve_phenomenon, to_phenomenon_vector
 from anunnaki.phenomena import PHENOMENA, Phenomenon
 
-__all__ = ["ArchiveContexts", "ContextSource", "CorruptionMix", "UniformContexts"]
+__all__ = ["ArchiveContexts", "ContextSource", "CorruptionMix", "MixedContexts", "UniformContexts"]
 
 Image = npt.NDArray[np.uint8]
 
@@ -159,3 +161,57 @@ class CorruptionMix(ContextSource):
     def describe(self) -> dict[str, Any]:
         """Kind, clean share and the library."""
         return super().describe() | {"phenomena": self.augmenter.names}
+
+
+class MixedContexts(ContextSource):
+    """Several sources in one: each perturbed frame goes to one of them, drawn by weight.
+
+    The training set of one model for several domains: e.g. the Enki selection of every
+    domain, ``MixedContexts([ArchiveContexts("hsl", a), ArchiveContexts("fog", b)])``. The
+    clean share is this source's own (the inner sources' ``clean`` is not used: a drawn
+    source always perturbs, :meth:`ContextSource.perturb`).
+
+    Args:
+        sources: The inner sources (at least one).
+        weights: Their relative weights (default: equal).
+        clean: Share of clean frames.
+
+    """
+
+    kind = "mixed"
+
+    def __init__(
+        self,
+        sources: Sequence[ContextSource],
+        *,
+        weights: Sequence[float] | None = None,
+        clean: float = 0.3,
+    ) -> None:
+        super().__init__(clean=clean)
+        self.sources = list(sources)
+        if not self.sources:
+            raise EnkiError("a mixed context source needs at least one source")
+        w = np.ones(len(self.sources)) if weights is None else np.asarray(weights, np.float64)
+        if (
+            w.shape != (len(self.sources),)
+            or not np.all(np.isfinite(w))
+            or w.min() < 0
+            or (w.sum() <= 0)
+        ):
+            raise EnkiError(
+                f"give one non-negative weight per source ({len(self.sources)}), at least one "
+                f"positive; got {list(np.atleast_1d(w))}"
+            )
+        self.weights = w / w.sum()
+
+    def perturb(self, image: Image, rng: np.random.Generator) -> Image:
+        """A frame of one inner source, drawn by weight."""
+        k = int(rng.choice(len(self.sources), p=self.weights))
+        return self.sources[k].perturb(image, rng)
+
+    def describe(self) -> dict[str, Any]:
+        """Kind, clean share, the inner sources (each described) and their weights."""
+        return super().describe() | {
+            "sources": [s.describe() for s in self.sources],
+            "weights": [round(float(x), 6) for x in self.weights],
+        }

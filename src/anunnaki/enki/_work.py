@@ -38,14 +38,20 @@ class WorkFolder:
     Args:
         path: The folder (created when missing).
         options: The options that decide the results (JSON-safe).
+        scoped: Options that belong to one stage and are checked there (see
+            :meth:`stage`): an older folder whose ``robustify.json`` holds them is not
+            refused for them; :attr:`recorded` keeps what it held.
 
     Raises:
         EnkiError: The folder holds work made with other options, or is a file.
 
     """
 
-    def __init__(self, path: str | Path, options: dict[str, Any]) -> None:
+    def __init__(
+        self, path: str | Path, options: dict[str, Any], *, scoped: tuple[str, ...] = ()
+    ) -> None:
         self.path = Path(path)
+        self.recorded: dict[str, Any] = {}
         if self.path.exists() and not self.path.is_dir():
             raise EnkiError(f"--out {self.path}: is a file; give a folder for the work")
         self.path.mkdir(parents=True, exist_ok=True)
@@ -55,7 +61,8 @@ class WorkFolder:
             old = json.loads(marker.read_text(encoding="utf-8"))
             if old.get("format") != FORMAT:
                 raise EnkiError(f"{marker}: not a robustify work folder ({FORMAT})")
-            self._check(old.get("options", {}), options)
+            self.recorded = old.get("options", {})
+            self._check({k: v for k, v in self.recorded.items() if k not in scoped}, options)
         else:
             write_json(marker, {"format": FORMAT, "options": options})
         self.options = options
@@ -76,6 +83,14 @@ class WorkFolder:
             return None
         data: dict[str, Any] = json.loads(file.read_text(encoding="utf-8"))
         return data
+
+    def forget(self, prefix: str) -> list[str]:
+        """Drop the records of the stages whose names start with *prefix* (to run them again)."""
+        gone = []
+        for file in sorted((self.path / "stages").glob(f"{prefix}*.json")):
+            file.unlink()
+            gone.append(file.stem)
+        return gone
 
     def done(self, name: str, result: dict[str, Any]) -> dict[str, Any]:
         """Mark stage *name* complete with *result*; returns *result*."""

@@ -20,6 +20,12 @@ from anunnaki.enlil._context import (
     resolve_phenomenon,
     to_phenomenon_vector,
 )
+from anunnaki.enlil._oracle_choice import (
+    DEFAULT_ORACLE_ARCHITECTURE,
+    MODEL_ARCHITECTURES,
+    PHENOMENON_ARCHITECTURES,
+    oracle_architecture,
+)
 from anunnaki.enlil._oracle_eval import (
     BASELINES,
     BaselineFit,
@@ -69,7 +75,10 @@ from anunnaki.enlil._sweep import ContextDraw, ContextSpec, draw_contexts, parse
 
 __all__ = [
     "BASELINES",
+    "DEFAULT_ORACLE_ARCHITECTURE",
+    "MODEL_ARCHITECTURES",
     "ORACLE_ARCHITECTURES",
+    "PHENOMENON_ARCHITECTURES",
     "SEARCHES",
     "Archive",
     "ArchiveMeta",
@@ -115,6 +124,7 @@ __all__ = [
     "normalise",
     "occupied_cells",
     "of_ceiling",
+    "oracle_architecture",
     "oracle_predictions",
     "parse_contexts",
     "plot_archive",
