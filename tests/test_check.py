@@ -699,3 +699,130 @@ def test_the_rover_check_with_the_ros_binding_passes_from_the_command_line(
     args = ["check", str(rover / "goals.yaml"), str(rover / "binding-ros.yaml")]
     assert main([*args, str(rover / "tactics.xml")]) == 0
     assert "unknown service" not in capsys.readouterr().out
+
+
+# -- platform modes (issue #24: every mode a tactic requests exists on the platform) ----------
+
+
+def _uav_files(tmp_path: Path, tactics_text: str | None = None) -> Path:
+    """A copy of examples/uav (tactics replaced by *tactics_text* if given)."""
+    import shutil
+
+    uav = tmp_path / "uav"
+    shutil.copytree(EXAMPLES / "uav", uav)
+    shutil.copytree(EXAMPLES / "models", tmp_path / "models")
+    if tactics_text is not None:
+        (uav / "tactics.yaml").write_text(tactics_text)
+    return uav
+
+
+LOITER = (
+    (EXAMPLES / "uav" / "tactics.yaml")
+    .read_text()
+    .replace(
+        "        mode: hover\n      - type: notify\n        channel: log",
+        "        mode: loiter\n      - type: notify\n        channel: log",
+    )
+)
+
+
+def test_the_uav_tactics_request_only_the_simulated_uavs_modes() -> None:
+    from anunnaki.check import PlatformModes
+    from anunnaki.sim import PLATFORM_MODES, UavSim
+
+    assert PLATFORM_MODES["uav"] == UavSim.modes == ("auto", "hover", "return_home", "land")
+    d = EXAMPLES / "uav"
+    result = check_files(
+        d / "goals.yaml",
+        d / "binding.yaml",
+        d / "tactics.yaml",
+        modes=PlatformModes("uav", PLATFORM_MODES["uav"]),
+    )
+    assert result.findings == []
+
+
+def test_an_undeclared_mode_is_an_error_with_file_line_element_and_fix(tmp_path: Path) -> None:
+    from anunnaki.check import PlatformModes
+
+    assert (EXAMPLES / "uav" / "tactics.yaml").read_text() != LOITER
+    uav = _uav_files(tmp_path, LOITER)
+    modes = PlatformModes("uav", ("auto", "hover", "return_home", "land"), "UavSim.modes")
+    result = check_files(
+        uav / "goals.yaml", uav / "binding.yaml", uav / "tactics.yaml", modes=modes
+    )
+    assert result.exit_code == 1
+    # the binding's payload schema (enum) says so too; the platform's modes say it for sure
+    (finding,) = [f for f in result.findings if "platform" in f.message]
+    assert finding.severity == "error"
+    assert finding.message == (
+        "tactic 'hold-route' requests mode 'loiter', which the uav platform does not declare"
+    )
+    assert finding.path == str(uav / "tactics.yaml")
+    # the line where the action starts ('- type: change_mode', two lines above its mode)
+    assert finding.line == line_of(uav / "tactics.yaml", "mode: loiter") - 2
+    assert finding.element == "tactics[hold-route].actions[0].mode"
+    assert finding.hint == (
+        "the uav platform's modes (UavSim.modes): auto, hover, return_home, land; "
+        "request one of them, or declare the mode on the platform"
+    )
+    # a binding without a schema for the mode says nothing; the platform's modes still do
+    binding = uav / "binding.yaml"
+    binding.write_text(
+        binding.read_text().replace(
+            "mode: {type: string, enum: [auto, hover, return_home, land]}", "mode: string"
+        )
+    )
+    files = (uav / "goals.yaml", binding, uav / "tactics.yaml")
+    assert check_files(*files).findings == []
+    assert [f.message for f in check_files(*files, modes=modes).findings] == [finding.message]
+
+
+def test_check_a_launch_file_takes_the_modes_of_its_simulated_platform(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    assert main(["check", str(EXAMPLES / "uav" / "sim.yaml")]) == 0
+    assert "ok: 14 goals, 2 obstacles, 7 agents" in capsys.readouterr().out
+    assert main(["check", str(EXAMPLES / "rover" / "sim.yaml")]) == 0
+    capsys.readouterr()
+    uav = _uav_files(tmp_path, LOITER)
+    # with the binding's enum the launch does not load: its first error, as 'run' says it
+    assert main(["check", str(uav / "sim.yaml")]) == 2
+    assert "field 'mode' of /uav/set_mode must be one of" in capsys.readouterr().out
+    binding = uav / "binding.yaml"  # a binding that does not say which modes there are
+    binding.write_text(
+        binding.read_text().replace(
+            "mode: {type: string, enum: [auto, hover, return_home, land]}", "mode: string"
+        )
+    )
+    assert main(["check", str(uav / "sim.yaml")]) == 1
+    out = capsys.readouterr().out
+    line = line_of(uav / "tactics.yaml", "mode: loiter") - 2
+    assert f"{uav / 'tactics.yaml'}:{line}: error: tactics[hold-route].actions[0].mode" in out
+    assert "anunnaki.sim.UavSim.modes" in out and "1 error(s)" in out
+
+
+def test_check_platform_option_and_a_launchs_declared_modes(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    d = EXAMPLES / "uav"
+    files = [str(d / "goals.yaml"), str(d / "binding.yaml"), str(d / "tactics.yaml")]
+    assert main(["check", *files, "--platform", "uav"]) == 0
+    capsys.readouterr()
+    assert main(["check", *files, "--platform", "rover", "--json"]) == 1
+    found = json.loads(capsys.readouterr().out)["findings"]
+    assert found
+    assert all(f["message"].endswith("the rover platform does not declare") for f in found)
+    assert {f["element"].split(".")[0] for f in found} >= {"tactics[return-home]"}
+    # a scripted system declares its modes in the launch file (managed.scripted.modes)
+    launch = tmp_path / "scripted.yaml"
+    launch.write_text(
+        "anunnaki: launch/1\nname: t\n"
+        f"utu: {{goal_model: {d / 'goals.yaml'}, binding: {d / 'binding.yaml'}, "
+        f"tactics: {d / 'tactics.yaml'}}}\n"
+        f"managed:\n  scripted: {{trace: {d / 'trace.jsonl'}, prefix: /uav, "
+        "modes: [auto, hover, land]}\n"
+    )
+    assert main(["check", str(launch)]) == 1
+    out = capsys.readouterr().out
+    assert "requests mode 'return_home', which the scripted platform does not declare" in out
+    assert f"{launch}: managed.scripted.modes" in out

@@ -179,3 +179,26 @@ def test_evaluate_json_output_follows_the_phases(capsys: pytest.CaptureFixture[s
     assert violation["t"] == 25.0
     assert violation["phase"] == "dim-light"
     assert violation["explanation"]["leaves"]["A4.category"] == 1
+
+
+def test_uav_g3_applies_while_cruising_not_on_the_ground_or_in_the_climb() -> None:
+    """G13 = G3 OR G14: at 0 m on the ground and in the climb the route goal G2 holds (the
+    take-off is not a violation), while cruising at 0 m or 12 m it does not."""
+    d = EXAMPLES / "uav"
+    ev = Evaluator(load_goal_model(d / "goals.yaml", d / "binding.yaml"))
+    for k in range(11):  # GPS at 10 Hz, so that G4 holds
+        ev.observe("/uav/gps", {"lat": 42.7, "lon": -84.4}, k / 10)
+    status = {"mode": "auto", "delivered": False}
+    for t, altitude, phase, g13 in [
+        (1.0, 0.0, "takeoff", True),
+        (1.1, 12.0, "takeoff", True),
+        (1.2, 12.0, "hover", True),
+        (1.3, 12.0, "waypoint 1", False),
+        (1.4, 30.0, "waypoint 1", True),
+        (1.5, 10.0, "deliver", True),
+        (1.6, 0.0, "landed", True),
+    ]:
+        ev.observe("/uav/status", {**status, "altitude": altitude, "phase": phase}, t)
+        assert ev.state("G3").status is (abs(altitude - 30.0) <= 5.0), (t, phase)
+        assert ev.state("G13").status is g13, (t, phase)
+        assert ev.state("G2").status is g13, (t, phase)

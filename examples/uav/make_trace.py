@@ -34,6 +34,11 @@ def mode(t: float) -> str:
     return "return_home" if t >= 70 else "hover" if t >= 50 else "auto"
 
 
+def phase(mode: str) -> str:
+    """The simulated UAV's ``phase`` in that mode: cruising on the leg to the target."""
+    return {"auto": "to delivery", "hover": "hover", "return_home": "return"}[mode]
+
+
 def altitude(t: float) -> float:
     if 20 <= t < 25:
         return 36.0
@@ -70,7 +75,8 @@ def build() -> list[Record | Phase]:
 
     for k in range(int(END * 2)):  # A1 status at 2 Hz
         t = k / 2
-        at(t, "/uav/status", {"mode": mode(t), "altitude": altitude(t), "delivered": False})
+        status = {"mode": mode(t), "altitude": altitude(t), "delivered": False}
+        at(t, "/uav/status", {**status, "phase": phase(mode(t))})
     for k in range(int(END * 10)):  # A2 camera metadata and A5 GPS at 10 Hz
         t = k / 10
         at(t, "/uav/camera/info", {"seq": k, "width": 320, "height": 240})

@@ -13,7 +13,10 @@ Every finding names the file, the line and the element, and most carry a hint. C
 * (warning) goals whose violation no tactic addresses: a goal is addressed when a tactic's
   precondition names it or an ancestor as unsatisfied/unknown, when it is AND-refined and
   all its children are addressed, or OR-refined and one child is. Goals that only serve as
-  resolutions of obstacles are exempt.
+  resolutions of obstacles are exempt;
+* given the modes the platform declares (``anunnaki check --platform uav``, or a launch file,
+  whose managed platform says them), every mode a ``change_mode`` action requests is one of
+  them.
 
 Exit codes of the command: 0 clean, 1 findings (errors or warnings), 2 a file unreadable.
 """
@@ -36,9 +39,31 @@ from anunnaki.goals import (
     load_binding,
     load_goal_model,
 )
-from anunnaki.tactics import EndpointReference, GoalState, TacticSet, load_tactics
+from anunnaki.tactics import (
+    ChangeModeAction,
+    EndpointReference,
+    GoalState,
+    TacticSet,
+    load_tactics,
+)
 
-__all__ = ["CheckResult", "check_files", "check_tactics"]
+__all__ = ["CheckResult", "PlatformModes", "check_files", "check_modes", "check_tactics"]
+
+
+@dataclass(frozen=True)
+class PlatformModes:
+    """The modes a platform declares (what its ``set_mode`` accepts).
+
+    Attributes:
+        platform: The platform's name, for messages (``uav``, ``rover``, a launch's system).
+        modes: The modes it accepts.
+        declared: Where they are declared, for the hint (e.g. ``anunnaki.sim.UavSim.modes``).
+
+    """
+
+    platform: str
+    modes: tuple[str, ...]
+    declared: str = ""
 
 
 @dataclass
@@ -104,11 +129,14 @@ def check_files(
     *extra: str | Path,
     binding: str | Path | None = None,
     tactics: str | Path | None = None,
+    modes: PlatformModes | None = None,
 ) -> CheckResult:
     """Check a goal model with an optional binding and tactics file.
 
     ``extra`` files are recognised by their format tag (``binding/1``, ``tactics/1``) or
     extension (``.xml`` = tactics), so ``check MODEL TACTICS`` works without a binding.
+    With ``modes``, the tactics' ``change_mode`` actions are checked against the platform's
+    declared modes (:func:`check_modes`).
     """
     result = CheckResult()
     binding, tactics = _sort_extra(result, extra, binding, tactics)
@@ -138,6 +166,8 @@ def check_files(
             result.findings.append(Finding.from_error(exc))
     if tactics is not None:
         _check_tactics_file(result, model, tactics)
+        if modes is not None and result.tactics is not None:
+            result.findings.extend(check_modes(result.tactics, str(tactics), modes))
     return result
 
 
@@ -194,6 +224,34 @@ def check_tactics(model: GoalModel, ts: TacticSet, path: str | None) -> list[Fin
         *_endpoint_findings(model, ts, path),
         *_expression_findings(model, ts, path),
     ]
+
+
+def check_modes(ts: TacticSet, path: str | None, modes: PlatformModes) -> list[Finding]:
+    """An error for every ``change_mode`` action asking for a mode the platform lacks.
+
+    A tactic that requests an undeclared mode fails at run time, when it is needed most (the
+    platform refuses the request); this finds it before the run.
+    """
+    out: list[Finding] = []
+    declared = ", ".join(modes.modes) or "none"
+    where = f" ({modes.declared})" if modes.declared else ""
+    for tactic in ts.tactics:
+        for i, action in enumerate(tactic.actions):
+            if not isinstance(action, ChangeModeAction) or action.mode in modes.modes:
+                continue
+            out.append(
+                Finding(
+                    "error",
+                    f"tactic '{tactic.name}' requests mode '{action.mode}', which the "
+                    f"{modes.platform} platform does not declare",
+                    path,
+                    action.source.line,
+                    f"tactics[{tactic.name}].actions[{i}].mode",
+                    f"the {modes.platform} platform's modes{where}: {declared}; request one "
+                    "of them, or declare the mode on the platform",
+                )
+            )
+    return out
 
 
 def _goal_findings(model: GoalModel, ts: TacticSet, path: str | None) -> list[Finding]:

@@ -1,16 +1,25 @@
-"""``anunnaki check MODEL [BINDING] [TACTICS]``: static checks with file:line messages."""
+"""``anunnaki check MODEL [BINDING] [TACTICS]``: static checks with file:line messages.
+
+``anunnaki check LAUNCH`` checks the goal model, binding and tactics a launch file names,
+with the modes its managed system declares; ``--platform rover|uav`` checks the tactics'
+modes against a simulated platform's.
+"""
 
 from __future__ import annotations
 
 import argparse
 import json
+import re
 import sys
+from pathlib import Path
 from typing import Any
 
 from rich.console import Console
 from rich.text import Text
 
-from anunnaki.check import check_files
+from anunnaki._findings import Finding
+from anunnaki.check import CheckResult, PlatformModes, check_files
+from anunnaki.errors import ModelFileError
 
 
 def add_parser(sub: Any) -> None:
@@ -24,10 +33,16 @@ def add_parser(sub: Any) -> None:
             "file, line and element. Exit 0 clean, 1 findings, 2 a file is unreadable."
         ),
     )
-    p.add_argument("model", help="goal-model YAML file")
+    p.add_argument("model", help="goal-model YAML file, or a launch file (anunnaki: launch/1)")
     p.add_argument("files", nargs="*", metavar="BINDING|TACTICS", help="binding and/or tactics")
     p.add_argument("--binding", "-b", help="platform-binding file (instead of positional)")
     p.add_argument("--tactics", help="tactics file, XML or YAML (instead of positional)")
+    p.add_argument(
+        "--platform",
+        choices=["rover", "uav"],
+        help="check the modes the tactics request against this simulated platform's "
+        "(a launch file's managed system says its own)",
+    )
     p.add_argument("--json", action="store_true", help="print findings as JSON")
     p.set_defaults(run=run)
 
@@ -37,7 +52,7 @@ def run(args: argparse.Namespace) -> int:
     if len(args.files) > 2:
         print("error: give at most a binding and a tactics file", file=sys.stderr)
         return 2
-    result = check_files(args.model, *args.files, binding=args.binding, tactics=args.tactics)
+    result = _check(args)
     if args.json:
         out = {
             "exit_code": result.exit_code,
@@ -78,3 +93,65 @@ def run(args: argparse.Namespace) -> int:
     else:
         console.print(f"{n_err} error(s), {n_warn} warning(s)")
     return result.exit_code
+
+
+def _check(args: argparse.Namespace) -> CheckResult:
+    """Check the files given, or those a launch file names (with its platform's modes)."""
+    modes = _simulated(args.platform) if args.platform else None
+    if not _is_launch(args.model):
+        return check_files(
+            args.model, *args.files, binding=args.binding, tactics=args.tactics, modes=modes
+        )
+    from anunnaki.launch import load_launch
+
+    try:
+        launch = load_launch(args.model, read_records=False)
+    except ModelFileError as exc:
+        return CheckResult(findings=[Finding.from_error(exc)], unreadable=True)
+    utu = launch.utu
+    if modes is None and launch.managed is not None:
+        modes = _managed_modes(launch.managed, args.model)
+    return check_files(
+        utu.goal_model,
+        binding=args.binding or utu.binding,
+        tactics=args.tactics or utu.tactics,
+        modes=modes,
+    )
+
+
+_LAUNCH_TAG = re.compile(r"""^anunnaki:[ \t]*['"]?launch/1\b""", re.MULTILINE)
+
+
+def _is_launch(path: str) -> bool:
+    """Whether *path* is a launch file (its format tag); unreadable files are not."""
+    try:
+        with Path(path).open("rb") as fh:
+            head = fh.read(4096).decode("utf-8", errors="replace")
+    except OSError:
+        return False  # check_files says why
+    return _LAUNCH_TAG.search(head) is not None
+
+
+def _simulated(platform: str) -> PlatformModes:
+    from anunnaki.sim import PLATFORM_MODES
+
+    cls = {"rover": "RoverSim", "uav": "UavSim"}[platform]
+    return PlatformModes(platform, PLATFORM_MODES[platform], f"anunnaki.sim.{cls}.modes")
+
+
+def _managed_modes(managed: Any, launch: str) -> PlatformModes | None:
+    """The modes a launch's managed system declares: a simulated platform's, or its option."""
+    options = getattr(managed, "options", None)
+    scenario = getattr(options, "scenario", None)
+    if getattr(managed, "name", None) == "sim" and scenario is not None:
+        from anunnaki.sim import load_scenario
+
+        try:
+            return _simulated(load_scenario(scenario).platform)
+        except (ModelFileError, KeyError):
+            return None  # the run reports the scenario; the files are still checked
+    declared = getattr(options, "modes", None)
+    if declared:
+        name = getattr(managed, "name", "managed")
+        return PlatformModes(name, tuple(declared), f"{launch}: managed.{name}.modes")
+    return None

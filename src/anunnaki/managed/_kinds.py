@@ -384,6 +384,9 @@ class SimKind:
                 "per phase:"
             )
             say(format_phases(system.phases(list(decisions))))
+            summary = getattr(platform, "summary", None)  # the UAV's mission outcome
+            if callable(summary):
+                say(summary())
             scoring = system.scoring()
             if scoring is not None:
                 say(format_scoring(scoring))

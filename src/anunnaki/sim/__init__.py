@@ -79,6 +79,9 @@ from anunnaki.sim._scene import Scene, dataset_frames
 from anunnaki.sim._uav import UAV_CAMERA_FOV, UavMode, UavSim
 from anunnaki.sim._world import Camera, Light
 
+PLATFORM_MODES: dict[str, tuple[str, ...]] = {"rover": RoverSim.modes, "uav": UavSim.modes}
+"""The modes each simulated platform's ``set_mode`` accepts (``anunnaki check --platform``)."""
+
 __all__ = [
     "CAMERA_FOV",
     "CAMERA_HEIGHT",
@@ -86,6 +89,7 @@ __all__ = [
     "MIN_IN_FRAME",
     "MIN_LABEL_HEIGHT",
     "MIN_VISIBLE",
+    "PLATFORM_MODES",
     "ROVER_CLASSES",
     "UAV_CAMERA_FOV",
     "UAV_CLASSES",

@@ -12,7 +12,10 @@ altitude and lands, ``land`` descends where it is; ``auto`` resumes the mission.
 (``/uav/stop``) lands in place and refuses further modes. An empty battery forces a landing.
 
 The battery drains, per second airborne, ``drain_hover + drain_per_speed × speed`` percent,
-plus any ``battery_drain`` fault of the scenario (obstacle O2); nothing on the ground.
+plus any ``battery_drain`` fault of the scenario (obstacle O2); nothing on the ground (a
+landed UAV draws no power, whatever the fault).
+``/uav/link`` says whether the ground station answers: ``connected`` is false during a
+scenario's ``link`` dropout.
 """
 
 from __future__ import annotations
@@ -111,6 +114,9 @@ class UavSim(SimPlatform):
             self.speed = 0.0
             self.battery = float(m.battery)
             self.delivered = False
+            self.airborne_at: float | None = None  # first take-off (simulated s)
+            self.landed_at: float | None = None  # last touch-down after a flight
+            self.landed_battery: float | None = None  # battery (%) at that touch-down
             self.mode: UavMode = mode
             self.phase = "takeoff"
             self.leg = 0
@@ -224,10 +230,14 @@ class UavSim(SimPlatform):
         if self.z <= 0.0:
             self.speed = 0.0
         airborne = self.z > 0.05
-        drain = self.timeline.extra_drain(self.t)
         if airborne:
-            drain += m.drain_hover + m.drain_per_speed * self.speed
-        self.battery = max(0.0, self.battery - drain * h)
+            self.landed_at = None
+            if self.airborne_at is None:
+                self.airborne_at = self.t
+            drain = self.timeline.extra_drain(self.t) + m.drain_hover
+            self.battery = max(0.0, self.battery - (drain + m.drain_per_speed * self.speed) * h)
+        elif self.airborne_at is not None and self.landed_at is None:
+            self.landed_at, self.landed_battery = self.t, self.battery
 
     def _follow_mission(self, h: float) -> None:
         """Fly the mission's current leg (hold over the drop point to deliver), then land."""
@@ -251,7 +261,8 @@ class UavSim(SimPlatform):
         m = self.scenario.mission
         hx, hy = m.home
         if math.hypot(hx - self.x, hy - self.y) > 0.3:
-            self.phase = "return"
+            # climbing vertically to cruise altitude first (from a low hover, the drop point)
+            self.phase = "climb" if self.z < m.cruise_altitude - 2.0 else "return"
             self._fly_to(hx, hy, max(self.z, m.cruise_altitude), h)
         else:
             self.phase = "landing" if self.z > 0 else "landed"
@@ -277,7 +288,10 @@ class UavSim(SimPlatform):
         if self._due("battery", self.timeline.rate("battery", m.battery_rate, t)):
             self._publish(f"{self.prefix}/battery", {"level": round(self.battery, 3)}, "battery")
         if self._due("link", self.timeline.rate("link", self.link_rate, t)):
-            self._publish(f"{self.prefix}/link", {"connected": True}, "link")
+            # the UAV's own view of the link: in a scenario's link dropout the ground station
+            # stops answering, and the UAV says so (it does not fall silent itself)
+            connected = not self.timeline.silent("link", t)
+            self._publish(f"{self.prefix}/link", {"connected": connected})
 
     def _camera(self) -> Camera:
         z = max(self.z, 0.5)
@@ -286,6 +300,24 @@ class UavSim(SimPlatform):
         eye = (self.x, self.y, z)
         target = (self.x + reach * c, self.y + reach * s, 0.0)
         return Camera(eye, target, fov=UAV_CAMERA_FOV, near=0.3, far=250.0)
+
+    def summary(self) -> str:
+        """The mission's outcome in one line: delivered, where and when it landed, battery."""
+        with self._lock:
+            hx, hy = self.scenario.mission.home
+            away = math.hypot(self.x - hx, self.y - hy)
+            if self.airborne_at is None:
+                where = "never took off;"
+            elif self.landed_at is None:
+                where = f"still airborne at {self.z:.1f} m ({self.phase});"
+            else:
+                place = "at home" if away < 1.0 else f"{away:.0f} m from home"
+                where = f"landed {place} at t = {self.landed_at:.1f} s with"
+            level = self.battery if self.landed_battery is None else self.landed_battery
+            return (
+                f"mission: package {'delivered' if self.delivered else 'not delivered'}; "
+                f"{where} battery {level:.1f} %"
+            )
 
     @property
     def altitude(self) -> float:

@@ -1,0 +1,157 @@
+"""The UAV demo under Utu (examples/uav/sim.yaml, issue #24 item 2), on a shortened scenario.
+
+The launch file as shipped (goals, binding, tactics, the learned ``enlil`` oracle as A4, the
+ground-truth oracle as its live scorer, the shipped uav-default/uav-fog models) flies a
+short delivery from the ground: a fast climb, one waypoint, dense fog from t = 4 s, and a
+battery that starts draining fast at t = 7 s. The UAV takes off (no tactic keeps it on the
+ground: G3 applies only while it cruises), Utu swaps in the Enki fog model and G6 holds
+again through G9, and the draining battery makes it return home: G11 (RELAX-ed, utility
+0.5 at 30 %) fails on the way to obstacle O2 (20 %), G8 then holds only through G10.
+"""
+
+from __future__ import annotations
+
+import io
+import json
+import threading
+import urllib.request
+from pathlib import Path
+from typing import Any
+
+import pytest
+import yaml
+
+from anunnaki.cli._dashboard import dashboard_for_launch
+from anunnaki.launch import load_launch, run_launch
+from anunnaki.managed import SimKind
+from anunnaki.messages import body_of
+
+ROOT = Path(__file__).parents[2]
+UAV = ROOT / "examples" / "uav"
+
+#: 13 s from the ground: climb at 10 m/s to 30 m (3 s), one waypoint, fog from 4 s (dense
+#: by 5 s: uav-default's F1 falls far, uav-fog copes), a 45 % battery draining 4 %/s more
+#: from 7 s (below 30 % about 3 s later, below O2's 20 % about 2 s after that).
+SHORT: dict[str, Any] = {
+    "anunnaki": "scenario/1",
+    "platform": "uav",
+    "name": "short-delivery",
+    "layout": 0,
+    "seed": 0,
+    "duration": 13,
+    "camera": {"rate": 10, "width": 320, "height": 240, "encoding": "jpeg"},
+    "mission": {
+        "home": [0, 0],
+        "waypoints": [[-20, 10], [10, 25]],
+        "delivery": [25, -15],
+        "cruise_altitude": 30,
+        "speed": 8,
+        "climb_rate": 10,
+        "battery": 45,
+    },
+    "phenomena": [{"at": 4, "phenomenon": "fog", "strength": 0.7, "ramp": 1}],
+    "faults": [{"at": 7, "fault": "battery_drain", "rate": 4}],
+}
+
+
+def run_short(tmp: Path, scenario: dict[str, Any]) -> dict[str, Any]:
+    """examples/uav/sim.yaml on *scenario* at 1000× (lockstep): result, log, UAV statuses."""
+    (tmp / "scenario.yaml").write_text(yaml.safe_dump(scenario))
+    launch = load_launch(UAV / "sim.yaml")
+    assert isinstance(launch.managed, SimKind)
+    launch.managed.options = launch.managed.options.model_copy(
+        update={"scenario": str(tmp / "scenario.yaml")}
+    )
+    statuses: list[dict[str, Any]] = []
+    lock = threading.Lock()
+
+    def keep(sample: Any) -> None:
+        with lock:
+            statuses.append(body_of(sample.message))
+
+    # the dashboard, as `anunnaki run examples/uav/sim.yaml --dashboard` attaches it
+    dashboard = dashboard_for_launch(launch, port=0)
+    dashboard.start()
+
+    def attach(bus: Any) -> None:
+        dashboard.attach(bus)
+        bus.subscribe("/uav/status", keep, queue=1024)
+
+    out = io.StringIO()
+    try:
+        result = run_launch(launch, speed=1000, out=out, handle_signals=False, on_bus=attach)
+        with urllib.request.urlopen(dashboard.url.rstrip("/") + "/api/snapshot") as reply:
+            snapshot = json.loads(reply.read())
+    finally:
+        dashboard.close()
+    with lock:
+        seen = list(statuses)
+    return {"result": result, "log": out.getvalue(), "statuses": seen, "snapshot": snapshot}
+
+
+@pytest.fixture(scope="module")
+def short_run(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
+    return run_short(tmp_path_factory.mktemp("uav"), SHORT)
+
+
+def started(run: dict[str, Any]) -> list[tuple[float, str]]:
+    return [(d.t, d.tactic) for d in run["result"].decisions if d.kind == "started"]
+
+
+@pytest.mark.timeout(600)  # 130 frames at 320x240: about 30 s on a quiet machine
+def test_the_uav_takes_off_with_utu_in_the_loop(short_run: dict[str, Any]) -> None:
+    result, log = short_run["result"], short_run["log"]
+    assert result.exit_code == 0, log
+    statuses = short_run["statuses"]
+    assert statuses[0]["altitude"] == 0.0 and statuses[0]["phase"] == "takeoff"
+    top = max(s["altitude"] for s in statuses)
+    assert top == pytest.approx(30.0, abs=0.5), top  # it climbed to cruise altitude
+    # G3 applies while cruising: nothing answered the climb with a hover.
+    assert all(tactic != "hold-route" for _, tactic in started(short_run)), started(short_run)
+    assert "waypoint 1" in {s["phase"] for s in statuses}
+
+
+@pytest.mark.timeout(600)
+def test_fog_near_the_target_swaps_in_uav_fog(short_run: dict[str, Any]) -> None:
+    result, log = short_run["result"], short_run["log"]
+    swaps = [
+        (d.t, d.data)
+        for d in result.decisions
+        if d.kind == "action" and d.tactic == "swap-to-robust-model"
+    ]
+    assert len(swaps) == 1 and 4.0 <= swaps[0][0] < 8.0, swaps
+    assert swaps[0][1]["ok"] is True and swaps[0][1]["domain"] == "fog"
+    verified = [d.tactic for d in result.decisions if d.kind == "postcondition_ok"]
+    assert "swap-to-robust-model" in verified, log  # G6 holds again: G9 resolves O1
+    assert "uav-fog" in log  # the per-phase table names the models that ran
+
+
+@pytest.mark.timeout(600)
+def test_low_battery_sends_the_uav_home(short_run: dict[str, Any]) -> None:
+    result, statuses = short_run["result"], short_run["statuses"]
+    home = [t for t, tactic in started(short_run) if tactic == "return-home"]
+    assert len(home) == 1 and home[0] >= 7.0, started(short_run)
+    action = next(d for d in result.decisions if d.kind == "action" and d.tactic == "return-home")
+    assert action.data["ok"] is True and action.data["mode"] == "return_home", action.data
+    assert "return-home" in [d.tactic for d in result.decisions if d.kind == "postcondition_ok"]
+    after = [s for s in statuses if s["t"] > home[0] + 0.5]
+    assert after and all(s["mode"] == "return_home" for s in after)  # it flies home
+    assert min(s["battery"] for s in statuses if s["t"] <= home[0]) < 30.0  # G11 had failed
+    # the mission's outcome, printed under the per-phase table
+    assert "mission: package not delivered; still airborne" in short_run["log"]
+
+
+@pytest.mark.timeout(600)
+def test_the_dashboard_shows_the_uav_run(short_run: dict[str, Any]) -> None:
+    """The page's snapshot at the end of the run: the UAV's goal model with G13/G14, its
+    camera feed with the detector's boxes, the fog model active, the enlil oracle, the swap."""
+    snap = short_run["snapshot"]
+    assert snap["structure"]["root"] == "G1"
+    assert {"G13", "G14", "O1", "O2"} <= set(snap["goals"])
+    camera = snap["camera"]
+    assert camera["frame"]["topic"] == "/uav/camera/image"
+    assert (camera["frame"]["width"], camera["frame"]["height"]) == (320, 240)
+    assert camera["active"]["model"] == "uav-fog" and camera["detections"]["model_id"] == "uav-fog"
+    assert {o["assessor"] for o in snap["oracle"]} == {"enlil"}
+    tactics = [e["tactic"] for e in snap["executions"]]
+    assert "swap-to-robust-model" in tactics and "return-home" in tactics
