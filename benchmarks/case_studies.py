@@ -26,8 +26,9 @@ measured from the run's public topics (``on_bus``), its decisions and its report
 * ``adaptations``: each adaptation tactic started, with the outcome of its postconditions
   (``ok``, ``failed``, or ``null`` when the run ended first).
 
-The runs' fail-safe e-mails go to the launch's SMTP port with no sink listening: their
-delivery fails, is recorded as a decision, and its log lines are kept off the output.
+The runs send no e-mail (the launch's ``notify`` section is dropped, so a fail-safe's e-mail
+fails at once as not configured, recorded as a decision, its log lines kept off the output):
+a benchmark must not mail whatever listens on the demo's port.
 
 The summary gives per manager the mean, standard deviation, min and max over seeds, and the
 onset delays' p95 over all phases of all seeds. A case is one entry of :data:`CASES`: a
@@ -177,6 +178,7 @@ def run_once(case: Case, manager: str, seed: int, until: float | None) -> dict[s
         update={"scenario_seed": seed, "report": False, "scorer": SCORER}
     )
     launch.managed.options = options
+    launch.utu = launch.utu.model_copy(update={"notify": {}})
     scenario = draw_scenario(load_scenario(options.scenario), seed)
     end = scenario.duration if until is None else min(until, scenario.duration)
     recorder = _Recorder(scenario.camera.width, scenario.camera.height)
