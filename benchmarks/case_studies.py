@@ -16,6 +16,9 @@ measured from the run's public topics (``on_bus``), its decisions and its report
   :meth:`anunnaki.sim.StopRule.box_ahead`), the rover drove autonomously and the detector
   reported no pedestrian there (no detection box the stop rule stops for);
 * ``collisions``: contacts with pedestrians or deer (the report's);
+* ``distance_m``: how far the rover got along its route (its ``x`` on ``/rover/status`` at
+  the end: a rover handed over, run-stopped or halted early is safe and gets nowhere), and
+  ``final_mode``, its mode then (``autonomous``, ``manual``, ``stopped``);
 * ``onset_delays``: per adverse phase of the scenario (phenomena starting together), the
   simulated seconds from its onset (the event's ``at``) to the first adaptation action in
   it (a swap of the detector's model to a robust one, or the fail-safe's mode change), or
@@ -96,6 +99,7 @@ class _Recorder:
     scorer: dict[int, int] = field(default_factory=dict)  # seq -> ground-truth category
     mode: dict[int, str] = field(default_factory=dict)  # seq -> rover mode when detected
     current_mode: str = "autonomous"
+    x: float = 0.0
     subs: list[Any] = field(default_factory=list)
     rule: StopRule = field(default_factory=StopRule)
 
@@ -139,23 +143,32 @@ class _Recorder:
                 self.scorer[message.frame_seq] = message.category
 
     def _on_status(self, sample: Any) -> None:
-        mode = body_of(sample.message).get("mode")
-        if isinstance(mode, str):
-            with self.lock:
+        body = body_of(sample.message)
+        mode, x = body.get("mode"), body.get("x")
+        with self.lock:
+            if isinstance(mode, str):
                 self.current_mode = mode
+            if isinstance(x, int | float):
+                self.x = float(x)
 
     def close(self) -> None:
         for sub in self.subs:
             sub.close()
 
-    def counts(self) -> dict[str, int]:
+    def counts(self) -> dict[str, Any]:
         with self.lock:
             auto = {s for s, m in self.mode.items() if m == "autonomous"}
             degraded = sum(1 for s, c in self.scorer.items() if c >= 1 and s in auto)
             misses = sum(
                 1 for s, boxes in self.truth.items() if boxes and s in auto and not self.ahead[s]
             )
-        return {"degraded_frames": degraded, "pedestrian_misses": misses}
+            x, mode = self.x, self.current_mode
+        return {
+            "degraded_frames": degraded,
+            "pedestrian_misses": misses,
+            "distance_m": round(x, 2),
+            "final_mode": mode,
+        }
 
 
 def _phases(scenario: Any) -> list[tuple[float, float, str]]:
@@ -287,7 +300,14 @@ def _p95(values: list[float]) -> float | None:
     return round(ordered[min(len(ordered) - 1, math.ceil(0.95 * len(ordered)) - 1)], 3)
 
 
-MEASURES = ("degraded_frames", "pedestrian_misses", "collisions", "false_alarms", "decisions")
+MEASURES = (
+    "degraded_frames",
+    "pedestrian_misses",
+    "collisions",
+    "distance_m",
+    "false_alarms",
+    "decisions",
+)
 
 
 def summarise(runs: list[dict[str, Any]]) -> dict[str, Any]:
@@ -359,7 +379,8 @@ def main() -> None:
                 print(
                     f"{name} {manager:<6} seed {seed}: {run['frames']} frames in "
                     f"{run['wall_s']:.0f} s; degraded {run['degraded_frames']}, missed "
-                    f"{run['pedestrian_misses']}, collisions {run['collisions']}, delays "
+                    f"{run['pedestrian_misses']}, collisions {run['collisions']}, "
+                    f"{run['distance_m']:.1f} m ({run['final_mode']}), delays "
                     f"{[p['delay_s'] for p in run['onset_delays']]}, false alarms "
                     f"{run['false_alarms']}, decisions {run['decisions']}",
                     flush=True,

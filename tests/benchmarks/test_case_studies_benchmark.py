@@ -33,6 +33,7 @@ def test_case_studies_benchmark(tmp_path: Path) -> None:
     for r in runs.values():
         assert r["simulated_s"] == pytest.approx(14.0, abs=0.11) and r["frames"] >= 130
         assert [p["phase"] for p in r["onset_delays"]] == ["hsl"]
+        assert r["distance_m"] > 0 and r["final_mode"] in ("autonomous", "manual", "stopped")
     utu, none = runs["utu"], runs["none"]
     # the adaptation happened, in the HSL phase, and its postcondition held
     swap = next(a for a in utu["adaptations"] if a["tactic"] == "swap-to-hsl-model")
