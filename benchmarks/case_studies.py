@@ -45,6 +45,7 @@ the UAV (examples/uav) joins with one entry. Writes ``benchmarks/results/case-st
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import io
 import json
 import logging
@@ -191,7 +192,7 @@ def run_once(case: Case, manager: str, seed: int, until: float | None) -> dict[s
         update={"scenario_seed": seed, "report": False, "scorer": SCORER}
     )
     launch.managed.options = options
-    launch.utu = launch.utu.model_copy(update={"notify": {}})
+    launch = dataclasses.replace(launch, utu=launch.utu.model_copy(update={"notify": {}}))
     scenario = draw_scenario(load_scenario(options.scenario), seed)
     end = scenario.duration if until is None else min(until, scenario.duration)
     recorder = _Recorder(scenario.camera.width, scenario.camera.height)
