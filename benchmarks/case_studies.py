@@ -21,8 +21,9 @@ measured from the run's public topics (``on_bus``), its decisions and its report
   ``final_mode``, its mode then (``autonomous``, ``manual``, ``stopped``);
 * ``onset_delays``: per adverse phase of the scenario (phenomena starting together), the
   simulated seconds from its onset (the event's ``at``) to the first adaptation action in
-  it (a swap of the detector's model to a robust one, or the fail-safe's mode change), or
-  ``null`` when none came before the phase ended;
+  it that fits it (a swap of the detector's model to the domain for one of the phase's
+  phenomena, :attr:`Case.fits`, or the fail-safe's mode change), or ``null`` when none came
+  before the phase ended (a swap to another domain is no adaptation to the phase);
 * ``false_alarms``: adaptation tactics started (swap to a robust model, fail-safe) while no
   adverse condition was in force nor had been in the last second;
 * ``decisions``: tactics started (any);
@@ -81,6 +82,14 @@ class Case:
     launch: Path
     #: Tactic-name prefixes of the adaptations (onset delay, false alarms).
     adaptations: tuple[str, ...] = ("swap-to-", "fail-safe")
+    #: The model domain that fits each phenomenon: a swap adapts to a phase only to a
+    #: domain fitting one of its phenomena (a hand-over to a human fits any).
+    fits: tuple[tuple[str, str], ...] = (
+        ("hsl", "hsl"),
+        ("fog", "fog"),
+        ("raindrop", "raindrop"),
+        ("brightness", "low_light"),
+    )
 
 
 CASES: dict[str, Case] = {
@@ -229,7 +238,16 @@ def run_once(case: Case, manager: str, seed: int, until: float | None) -> dict[s
     for onset, phase_end, label in _phases(scenario):
         if onset >= end:
             continue
-        first = next((d.t for d in adaptive if onset <= d.t < phase_end), None)
+        domains = {dict(case.fits).get(p) for p in label.split("+")}
+        first = next(
+            (
+                d.t
+                for d in adaptive
+                if onset <= d.t < phase_end
+                and (d.data.get("type") == "change_mode" or d.data.get("domain") in domains)
+            ),
+            None,
+        )
         delays.append(
             {
                 "onset": round(onset, 3),
