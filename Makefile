@@ -9,13 +9,15 @@ ROVER := examples/rover
 setup:
 	@scripts/setup.sh
 
-# The simulated rover with its detector, the ground-truth oracle and Utu, through the
-# fog-then-dusk scenario (about 45 s), with the live dashboard (URL printed; it stays up 60 s
-# after the run); a per-phase table (detector F1, categories, models, tactics) at the end, the
-# run as data and drawn in runs/demo.json and runs/demo.png.
+# The simulated rover with its detector, the learned (enlil) oracles and Utu, through an HSL
+# shift, a raindrop on the lens, fog, and fog with poor light (about 65 s): Utu swaps in the
+# Enki models by domain and, when no model is trusted, hands the rover to a human and e-mails
+# the operator (a local SMTP sink on port 8025, started and stopped by the run, prints the
+# mail). The live dashboard (URL printed; it stays up 60 s after the run); a per-phase table
+# at the end, the run as data and drawn in runs/demo.json and runs/demo.png.
 demo: setup
-	$(PY) -m anunnaki.cli.main check $(ROVER)/goals-lm.yaml $(ROVER)/binding-lm.yaml $(ROVER)/tactics-lm.yaml
-	$(PY) -m anunnaki.cli.main run $(ROVER)/sim.yaml --dashboard --dashboard-linger 60 \
+	$(PY) -m anunnaki.cli.main check $(ROVER)/goals-lm.yaml $(ROVER)/binding-enlil.yaml $(ROVER)/tactics-lm.yaml
+	$(PY) -m anunnaki.cli.main run $(ROVER)/demo.yaml --mail-sink 8025 --dashboard --dashboard-linger 60 \
 		--report runs/demo.json --plot runs/demo.png
 
 test: setup

@@ -142,3 +142,60 @@ def test_same_phenomena_seed_gives_same_bytes(bus) -> None:
             assert rover.last_image is not None
             images.append(rover.last_image.copy())
     assert np.array_equal(images[0], images[1])
+
+
+# -- seeded draws (vary:) ------------------------------------------------------------------------
+def _varied() -> object:
+    return parse_scenario(
+        rover_scenario(
+            objects=[
+                {"kind": "pedestrian", "x": 7, "y": -2, "walk_to": [7, 2], "speed": 0.4, "start": 1}
+            ],
+            phenomena=[
+                {"at": 8, "phenomenon": "fog", "strength": 1.0, "ramp": 1, "until": 18},
+                {"at": 8, "phenomenon": "brightness", "strength": 0.8, "ramp": 1},
+                {
+                    "at": 24,
+                    "phenomenon": "hsl",
+                    "params": {"hue": 90, "saturation": 0, "lightness": -0.3},
+                },
+            ],
+            vary={"timing": 1.5, "placement": 1.0, "strength": 0.3},
+        )
+    )
+
+
+def test_a_draw_moves_phases_objects_and_strengths_within_the_bounds() -> None:
+    from anunnaki.sim import Scenario, draw_scenario
+
+    sc = _varied()
+    assert isinstance(sc, Scenario)
+    for seed in range(20):
+        d = draw_scenario(sc, seed)
+        assert d.seed == seed and d.vary is None
+        fog, dim, hsl = d.phenomena
+        assert fog.at == dim.at and abs(fog.at - 8) <= 1.5  # events starting together move together
+        assert fog.until == pytest.approx(fog.at + 10)  # a phase keeps its length
+        assert abs(hsl.at - 24) <= 1.5
+        assert 0.7 - 1e-9 <= fog.strength <= 1.0 and 0.56 - 1e-9 <= dim.strength <= 0.8
+        assert fog.strength / 1.0 == pytest.approx(dim.strength / 0.8)  # one draw per phase
+        assert hsl.params is not None and -0.3 <= hsl.params["lightness"] <= -0.21 + 1e-9
+        (p,) = d.objects
+        assert abs(p.x - 7) <= 1.0 and p.walk_to == (p.x, 2.0)
+        assert 0.0 <= p.start <= 2.5
+    assert draw_scenario(sc, 4) == draw_scenario(sc, 4)
+    assert draw_scenario(sc, 4) != draw_scenario(sc, 5)
+
+
+def test_without_vary_a_draw_only_sets_the_seed() -> None:
+    from anunnaki.sim import draw_scenario
+
+    sc = parse_scenario(rover_scenario())
+    assert draw_scenario(sc, 7) == sc.model_copy(update={"seed": 7})
+
+
+def test_a_bad_vary_names_its_line(tmp_path) -> None:
+    path = tmp_path / "bad.yaml"
+    path.write_text("anunnaki: scenario/1\nplatform: rover\nvary:\n  timing: -1\n")
+    with pytest.raises(ModelFileError, match=r"bad.yaml:4: vary.timing"):
+        load_scenario(path)

@@ -20,10 +20,11 @@ from typing import Any
 from anunnaki._parent import stop_with_parent
 from anunnaki.bus import BusConfig, open_bus
 from anunnaki.cli import _dashboard
-from anunnaki.launch import load_launch, run_launch, signals_to
+from anunnaki.launch import MailSink, load_launch, run_launch, signals_to
 from anunnaki.managed import WritesReports
 from anunnaki.tokens import OPERATOR_TOKEN_ENV, user_operator_token
 from anunnaki.utu import NODE_NAMES, NodeConfigError, build_node
+from anunnaki.utu.cycle import MANAGERS
 from anunnaki.utu.host import PeerWatch
 
 __all__ = ["add_parser", "run", "run_node"]
@@ -82,6 +83,23 @@ def _add_run_parser(sub: Any) -> None:
         "category, tactics; overrides managed.sim.plot_file)",
     )
     _dashboard.add_run_options(p)
+    p.add_argument(
+        "--manager",
+        choices=MANAGERS,
+        help="who chooses the tactics: utu (the default), or a baseline to compare it with: "
+        "none (no adaptation) or random (a startable tactic drawn uniformly whenever Utu would "
+        "start one; docs/whole-loop.md)",
+    )
+    p.add_argument(
+        "--manager-seed", type=int, metavar="N", help="the random manager's seed (default 0)"
+    )
+    p.add_argument(
+        "--mail-sink",
+        type=int,
+        metavar="PORT",
+        help="start a local SMTP sink on 127.0.0.1:PORT for the run (the launch's notify.smtp "
+        "points there) and print the mail it received at the end",
+    )
     p.set_defaults(run=run)
 
 
@@ -167,6 +185,9 @@ def run(args: argparse.Namespace) -> int:
         )
         dashboard.start()
         _dashboard.announce(dashboard, token)
+    sink = MailSink(args.mail_sink) if getattr(args, "mail_sink", None) is not None else None
+    if sink is not None:
+        print(f"mail sink: SMTP on 127.0.0.1:{sink.port} (the demo's stand-in for a mail server)")
     try:
         result = run_launch(
             launch,
@@ -176,7 +197,11 @@ def run(args: argparse.Namespace) -> int:
             knowledge=args.knowledge,
             fresh=args.fresh,
             on_bus=None if dashboard is None else dashboard.attach,
+            manager=getattr(args, "manager", None),
+            manager_seed=getattr(args, "manager_seed", None),
         )
+        if sink is not None:
+            _print_mail(sink, result.decisions)
         if dashboard is not None and result.reason != "stopped by a signal":
             linger = args.dashboard_linger
             print(
@@ -188,7 +213,23 @@ def run(args: argparse.Namespace) -> int:
     finally:
         if dashboard is not None:
             dashboard.close()
+        if sink is not None:
+            sink.close()
     return result.exit_code
+
+
+def _print_mail(sink: MailSink, decisions: list[Any]) -> None:
+    """The mail the sink received, after the run (an e-mail decided late: up to 5 s)."""
+    emailed = any(
+        d.kind == "notify_result" and d.data.get("channel") == "email" for d in decisions
+    ) or any(d.kind == "action" and d.data.get("type") == "notify" for d in decisions)
+    if emailed and not sink.mails:
+        sink.wait(5.0)
+    mails = sink.mails
+    print(f"mail sink: {len(mails)} message(s) received")
+    for i, mail in enumerate(mails, 1):
+        print(f"--- message {i}")
+        print(mail.render())
 
 
 def _say(line: str) -> None:

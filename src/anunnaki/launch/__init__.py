@@ -20,6 +20,7 @@ oracle::
 See docs/running.md.
 """
 
+from anunnaki.launch._mailsink import MailSink, ReceivedMail
 from anunnaki.launch._runner import RunResult, format_decision, run_launch
 from anunnaki.launch._schema import (
     Launch,
@@ -36,7 +37,9 @@ __all__ = [
     "Launch",
     "LaunchConfig",
     "LaunchError",
+    "MailSink",
     "NodeSettings",
+    "ReceivedMail",
     "RunResult",
     "child_bus_config",
     "format_decision",

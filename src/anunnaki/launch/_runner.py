@@ -38,7 +38,7 @@ from anunnaki.launch._supervisor import (
 )
 from anunnaki.managed import ManagedContext, ManagedRun
 from anunnaki.utu import NODE_NAMES, AutonomicManager, Decision, Knowledge, UtuNode, build_node
-from anunnaki.utu.cycle import DecisionTail, UtuParts, open_knowledge
+from anunnaki.utu.cycle import MANAGERS, DecisionTail, UtuParts, open_knowledge
 from anunnaki.utu.host import ACT_ORDER, PeerWatch, stop_platform
 
 __all__ = ["RunResult", "format_decision", "run_launch"]
@@ -204,6 +204,8 @@ def run_launch(
     err: TextIO | None = None,
     handle_signals: bool = True,
     on_bus: Callable[[Bus], object] | None = None,
+    manager: str | None = None,
+    manager_seed: int | None = None,
 ) -> RunResult:
     """Run a launch: nodes (in this process or one process each), then the managed system.
 
@@ -221,6 +223,9 @@ def run_launch(
         handle_signals: Turn SIGINT/SIGTERM into a clean stop (main thread only).
         on_bus: Called with the launch's bus once it is open, before any node starts (e.g.
             to attach a dashboard); what it declares on the bus closes with the bus.
+        manager: Who chooses the tactics: ``utu``, or a baseline, ``none`` or ``random``
+            (overrides the Utu configuration's ``manager``; docs/whole-loop.md).
+        manager_seed: The random manager's seed (overrides ``manager_seed``).
 
     Raises:
         LaunchError: A node failed at bring-up or did not become ready in time.
@@ -241,11 +246,17 @@ def run_launch(
         out=out,
         err=err,
         on_bus=on_bus,
+        manager=manager,
+        manager_seed=manager_seed,
     )
     if not handle_signals:
         return runner.run()
     with signals_to(stop):
         return runner.run()
+
+
+def _manager_fields(utu: Any) -> list[tuple[str, Any]]:
+    return [("manager", utu.manager), ("manager_seed", utu.manager_seed)]
 
 
 class _Runner:
@@ -262,6 +273,8 @@ class _Runner:
         out: TextIO,
         err: TextIO,
         on_bus: Callable[[Bus], object] | None = None,
+        manager: str | None = None,
+        manager_seed: int | None = None,
     ) -> None:
         self.launch = launch
         self.on_bus = on_bus
@@ -288,7 +301,19 @@ class _Runner:
         self.kb_path = kb
         if fresh and kb != ":memory:":
             remove_db(kb)
-        self.utu = launch.utu.model_copy(update={"knowledge": kb})
+        update: dict[str, Any] = {"knowledge": kb}
+        if manager is not None:
+            if manager not in MANAGERS:
+                raise LaunchError(f"unknown manager {manager!r}; managers: {', '.join(MANAGERS)}")
+            update["manager"] = manager
+        if manager_seed is not None:
+            update["manager_seed"] = manager_seed
+        if processes and any(update.get(k, v) != v for k, v in _manager_fields(launch.utu)):
+            raise LaunchError(
+                "--manager and --manager-seed apply in one process; with --processes the plan "
+                "node reads them from the launch file (utu: manager, manager_seed)"
+            )
+        self.utu = launch.utu.model_copy(update=update)
         self.parts = UtuParts(
             self.utu,
             launch.parts.sources,

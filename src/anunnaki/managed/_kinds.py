@@ -271,6 +271,9 @@ class SimConfig(_Strict):
         plot_file: Also draw the run (windowed F1 per model, the oracle's category, the
             tactics; PNG, or any format matplotlib knows by the suffix); relative to the
             launch file.
+        scenario_seed: Draw the scenario again from this seed as its ``vary:`` section says
+            (:func:`~anunnaki.sim.draw_scenario`: phase timing, object placement, condition
+            strength); ``None`` runs it as written.
 
     """
 
@@ -283,6 +286,7 @@ class SimConfig(_Strict):
     report: bool = True
     report_file: str | None = None
     plot_file: str | None = None
+    scenario_seed: Annotated[int, Field(ge=0)] | None = None
 
 
 class SimKind:
@@ -339,9 +343,14 @@ class SimKind:
         from anunnaki.managed import SimulatedSystem
 
         cfg = self.options
+        scenario: Any = cfg.scenario
+        if cfg.scenario_seed is not None:
+            from anunnaki.sim import draw_scenario, load_scenario
+
+            scenario = draw_scenario(load_scenario(cfg.scenario), cfg.scenario_seed)
         system = SimulatedSystem(
             ctx.bus,
-            cfg.scenario,
+            scenario,
             models=cfg.models,
             oracle=cfg.oracle,
             scorer=cfg.scorer,

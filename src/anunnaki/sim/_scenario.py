@@ -34,6 +34,8 @@ __all__ = [
     "Timeline",
     "UavMission",
     "UltrasonicConfig",
+    "Variation",
+    "draw_scenario",
     "load_scenario",
     "parse_scenario",
 ]
@@ -168,6 +170,27 @@ class UavMission(_Strict):
         return v
 
 
+class Variation(_Strict):
+    """How a scenario is drawn again per seed (``vary:``; :func:`draw_scenario`).
+
+    Attributes:
+        timing: Seconds: the phenomenon events that start at the same time (one phase) move
+            together by a shift drawn uniformly in ``[-timing, timing]`` (``at`` and
+            ``until`` alike), and each object's ``start`` moves by its own draw (not
+            below 0).
+        placement: Metres: each object's ``x`` (along the route) and its ``walk_to`` move
+            by a shift drawn uniformly in ``[-placement, placement]``.
+        strength: Each phenomenon event's target moves towards the identity by a fraction
+            drawn uniformly in ``[0, strength]`` (0: as written; 0.3: as weak as 70 % of
+            it); events that start together share the draw.
+
+    """
+
+    timing: float = Field(0.0, ge=0.0, le=30.0)
+    placement: float = Field(0.0, ge=0.0, le=20.0)
+    strength: float = Field(0.0, ge=0.0, le=1.0)
+
+
 class Scenario(_Strict):
     """A whole scenario file (``anunnaki: scenario/1``)."""
 
@@ -187,6 +210,7 @@ class Scenario(_Strict):
     objects: list[ObjectSpec] = Field(default_factory=list)
     phenomena: list[PhenomenonEvent] = Field(default_factory=list)
     faults: list[FaultEvent] = Field(default_factory=list)
+    vary: Variation | None = None
 
     @field_validator("route")
     @classmethod
@@ -212,6 +236,61 @@ class Scenario(_Strict):
                 "background: false is for the rover (the UAV's layout is its whole scene)"
             )
         return self
+
+
+def _weaker(event: PhenomenonEvent, fraction: float) -> dict[str, Any]:
+    """``event``'s fields with its target moved ``fraction`` of the way to the identity."""
+    from anunnaki.phenomena import PHENOMENA
+
+    fields = event.model_dump(exclude_none=True)
+    if event.strength is not None:
+        fields["strength"] = event.strength * (1.0 - fraction)
+        return fields
+    assert event.params is not None
+    ph = PHENOMENA.create(event.phenomenon)
+    target, identity = ph.validate(event.params), ph.identity_params()
+    params = {k: v + fraction * (identity[k] - v) for k, v in target.items()}
+    fields["params"] = ph.validate(params)
+    return fields
+
+
+def draw_scenario(scenario: Scenario, seed: int) -> Scenario:
+    """The scenario drawn again from ``seed`` as its ``vary:`` section says.
+
+    Phase timing, object placement and condition strength are drawn with one generator
+    seeded by ``seed`` (the same seed, the same scenario); the drawn scenario's ``seed`` is
+    ``seed`` too, and it has no ``vary`` (drawing it again changes nothing). Without
+    ``vary`` the scenario comes back with only its ``seed`` replaced.
+    """
+    import numpy as np
+
+    v = scenario.vary
+    if v is None:
+        return scenario.model_copy(update={"seed": seed})
+    rng = np.random.default_rng(seed)
+    starts = sorted({e.at for e in scenario.phenomena})
+    shift = {at: float(rng.uniform(-v.timing, v.timing)) for at in starts}
+    weaken = {at: float(rng.uniform(0.0, v.strength)) for at in starts}
+    phenomena = []
+    for e in scenario.phenomena:
+        fields = _weaker(e, weaken[e.at])
+        fields["at"] = max(0.0, e.at + shift[e.at])
+        if e.until is not None:
+            fields["until"] = fields["at"] + (e.until - e.at)
+        phenomena.append(PhenomenonEvent.model_validate(fields))
+    objects = []
+    for o in scenario.objects:
+        dx = float(rng.uniform(-v.placement, v.placement))
+        dt = float(rng.uniform(-v.timing, v.timing))
+        fields = o.model_dump(exclude_none=True)
+        fields["x"] = o.x + dx
+        fields["start"] = max(0.0, o.start + dt)
+        if o.walk_to is not None:
+            fields["walk_to"] = (o.walk_to[0] + dx, o.walk_to[1])
+        objects.append(ObjectSpec.model_validate(fields))
+    return scenario.model_copy(
+        update={"seed": seed, "vary": None, "objects": objects, "phenomena": phenomena}
+    )
 
 
 def parse_scenario(data: Any, *, lines: Any = None, path: str | Path | None = None) -> Scenario:

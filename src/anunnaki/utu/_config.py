@@ -89,6 +89,12 @@ class UtuConfig(_Strict):
     reload_dirs: list[str] = Field(default_factory=list)
     #: A file holding the operator token (``$ANUNNAKI_OPERATOR_TOKEN`` takes precedence).
     operator_token_file: str | None = None
+    #: Who chooses the tactics (``anunnaki run --manager``): ``utu`` (the planner),
+    #: ``none`` (nothing is started: no adaptation) or ``random`` (a baseline: whenever
+    #: the planner would start tactics, one drawn uniformly among those it could start,
+    #: seeded by ``manager_seed``; docs/whole-loop.md "Managers compared").
+    manager: Literal["utu", "none", "random"] = "utu"
+    manager_seed: Annotated[int, Field(ge=0)] = 0
 
     def operator_token(self) -> str:
         """The token pause, resume, approve and reload requests must carry.

@@ -102,6 +102,7 @@ KINDS: tuple[str, ...] = (
     "reload_requested",
     "notify_result",
     "node_died",
+    "random_draw",
 )
 """Every kind of decision the manager records (docs/decision-log.md describes each)."""
 

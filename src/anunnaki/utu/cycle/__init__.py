@@ -51,6 +51,7 @@ from anunnaki.utu.cycle._analyze import AnalyzeStage
 from anunnaki.utu.cycle._execute import ExecuteStage
 from anunnaki.utu.cycle._knowledge import Decision, InputRow, Knowledge, TacticRow, VerdictRow
 from anunnaki.utu.cycle._knowledge_stage import DecisionTail, KnowledgeStage
+from anunnaki.utu.cycle._managers import MANAGERS, baseline
 from anunnaki.utu.cycle._mape import Analyzer, Executor, Monitor, Planner, TacticRuntime
 from anunnaki.utu.cycle._monitor import MonitorStage
 from anunnaki.utu.cycle._parts import (
@@ -63,6 +64,7 @@ from anunnaki.utu.cycle._parts import (
 from anunnaki.utu.cycle._plan import PlanStage
 
 __all__ = [
+    "MANAGERS",
     "ActionOutcome",
     "ActionRunner",
     "Actuator",
@@ -87,6 +89,7 @@ __all__ = [
     "TacticRuntime",
     "UtuParts",
     "VerdictRow",
+    "baseline",
     "load_parts",
     "load_tactics_text",
     "open_knowledge",

@@ -283,6 +283,10 @@ class Planner:
         self.knowledge = knowledge
         self.dwell = dwell
         self.runtimes: dict[str, TacticRuntime] = {}
+        #: A baseline manager in place of the planner's choice (``anunnaki run --manager``):
+        #: given the planner, the tactics it would start and the time, what starts instead.
+        self.select: Callable[[Planner, list[TacticRuntime], float], list[TacticRuntime]] | None
+        self.select = None
         self.set_tactics(tactics)
 
     def set_tactics(self, tactics: TacticSet) -> None:
@@ -324,6 +328,10 @@ class Planner:
             return True
         return bool(self._endpoints.get(a, set()) & self._endpoints.get(b, set()))
 
+    def blocked(self, rt: TacticRuntime, now: float) -> str | None:
+        """Why ``rt`` cannot start now (cooldown, a conflicting tactic in flight), or ``None``."""
+        return self._blocked(rt, now)
+
     def _blocked(self, rt: TacticRuntime, now: float) -> str | None:
         if rt.cooldown_until is not None and now < rt.cooldown_until:
             return f"cooldown until {rt.cooldown_until:.3f}"
@@ -362,7 +370,8 @@ class Planner:
                 self.knowledge.record_decision(now, "pending_approval", name)
             else:
                 rt.state = "queued"
-        return self._dispatch(now)
+        start = self._dispatch(now)
+        return start if self.select is None else self.select(self, start, now)
 
     def _dispatch(self, now: float) -> list[TacticRuntime]:
         queue = sorted(

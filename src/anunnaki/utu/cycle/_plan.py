@@ -15,6 +15,7 @@ from anunnaki.utu.cycle._entries import (
     tactics_from_sources,
 )
 from anunnaki.utu.cycle._knowledge import Knowledge
+from anunnaki.utu.cycle._managers import baseline
 from anunnaki.utu.cycle._mape import Planner
 from anunnaki.utu.cycle._parts import UtuParts
 
@@ -29,6 +30,7 @@ class PlanStage:
     def __init__(self, parts: UtuParts, knowledge: Knowledge) -> None:
         self.knowledge = knowledge
         self.planner = Planner(parts.tactics, knowledge, dwell=parts.config.dwell)
+        self.planner.select = baseline(parts.config.manager, parts.config.manager_seed)
         self.run_stopped = False  # a run-stop heard on its topic (guideline S4)
         if resuming(knowledge):
             self.run_stopped = last_halt(knowledge)[1]
