@@ -93,12 +93,9 @@ from anunnaki.lec._registry import (
     ModelRegistryError,
     ModelSpec,
     OracleRef,
-    ResolvedModel,
     UnknownModelError,
-    load_registry,
-    parse_registry,
-    resolve_model,
 )
+from anunnaki.lec._registry_file import ResolvedModel, load_registry, parse_registry, resolve_model
 from anunnaki.lec._registry_reload import RegistryChange
 
 if TYPE_CHECKING:

@@ -17,8 +17,8 @@ from anunnaki.lec._registry import (
     ModelRegistry,
     ModelRegistryError,
     ModelSpec,
-    load_registry,
 )
+from anunnaki.lec._registry_file import load_registry
 
 __all__ = ["RegistryChange", "replace", "reread"]
 
