@@ -16,7 +16,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from anunnaki.lec import ModelRegistry
+from anunnaki.lec import load_registry
 
 
 def describe(model: dict[str, Any], oracle: dict[str, Any]) -> str:
@@ -39,7 +39,7 @@ def describe(model: dict[str, Any], oracle: dict[str, Any]) -> str:
 def main(registry_file: str, model_id: str) -> None:
     """Replace the description line of *model_id*'s entry in *registry_file*."""
     path = Path(registry_file)
-    spec = ModelRegistry.from_file(path).get(model_id)
+    spec = load_registry(path).get(model_id)
     if spec.oracle is None:
         sys.exit(f"{path}: {model_id} has no oracle; robustify --register adds one")
     model = json.loads(spec.file.with_suffix(".json").read_text(encoding="utf-8"))
@@ -54,7 +54,7 @@ def main(registry_file: str, model_id: str) -> None:
             lines[i] = f"    description: {json.dumps(describe(model, oracle))}\n"
             path.write_text("".join(lines), encoding="utf-8")
             try:
-                ModelRegistry.from_file(path).verify(model_id)  # still valid, hashes checked
+                load_registry(path).verify(model_id)  # still valid, hashes checked
             except Exception:
                 path.write_text(before, encoding="utf-8")
                 raise

@@ -11,7 +11,7 @@ from pathlib import Path
 
 import pytest
 
-from anunnaki.lec import ModelRegistry
+from anunnaki.lec import load_registry
 
 ROOT = Path(__file__).resolve().parents[2]
 SCRIPTS = ROOT / "scripts"
@@ -70,7 +70,7 @@ def test_the_description_carries_the_sidecars_figures(tmp_path: Path) -> None:
     assert [i for i, (a, b) in enumerate(zip(lines, after, strict=True)) if a != b] == [d]
     sidecar = json.loads((models / "rover-hsl.json").read_text(encoding="utf-8"))
     clean = sidecar["metrics"]["enki"]["clean"]
-    spec = ModelRegistry.from_file(registry).get("rover-hsl")
+    spec = load_registry(registry).get("rover-hsl")
     assert spec.description.startswith("Enki (hsl, seed 0): test F1 ")
     assert f"{clean['new']:.3f} clean (rover-default {clean['input']:.3f})" in spec.description
     assert "oracle val accuracy" in spec.description
@@ -100,7 +100,7 @@ SHIPPED = [
 @pytest.mark.parametrize(("registry", "name", "domain"), SHIPPED)
 def test_the_shipped_entry_matches_its_sidecar(registry: str, name: str, domain: str) -> None:
     """The shipped description line is what describe-domain.py writes from the sidecars."""
-    spec = ModelRegistry.from_file(MODELS / registry).get(name)
+    spec = load_registry(MODELS / registry).get(name)
     assert spec.domain == domain and spec.oracle is not None
     sys.path.insert(0, str(SCRIPTS))
     try:

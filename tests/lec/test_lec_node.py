@@ -17,9 +17,9 @@ from lec_helpers import DEADLINE, Collector
 
 from anunnaki.bus import Bus, ServiceError, open_bus
 from anunnaki.goals import parse_binding, parse_goal_model
+from anunnaki.lec import ModelRegistry, ModelRegistryError, parse_registry
 from anunnaki.lec._detector import DetectionResult
 from anunnaki.lec._node import LecNode, LecNodeStats, SwapResult, decode_image, detections_topic
-from anunnaki.lec._registry import ModelRegistry, ModelRegistryError, parse_registry
 from anunnaki.messages import Assessment, Detections, Generic, Image
 from anunnaki.tactics import parse_tactics_yaml
 from anunnaki.utu import AutonomicManager, Knowledge

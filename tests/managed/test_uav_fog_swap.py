@@ -12,7 +12,7 @@ from pathlib import Path
 from anunnaki import topics
 from anunnaki.bus import open_bus
 from anunnaki.goals import parse_binding, parse_goal_model
-from anunnaki.lec import LecNode, ModelRegistry
+from anunnaki.lec import LecNode, load_registry
 from anunnaki.messages import Assessment
 from anunnaki.tactics import parse_tactics_yaml
 from anunnaki.utu import AutonomicManager, Knowledge
@@ -38,7 +38,7 @@ def test_a_uav_fog_swap_succeeds(tmp_path: Path) -> None:
     binding = parse_binding((UAV / "binding.yaml").read_text(), source="binding.yaml")
     goals = parse_goal_model((UAV / "goals.yaml").read_text(), source="goals.yaml", binding=binding)
     tactics = parse_tactics_yaml((UAV / "tactics.yaml").read_text(), source="tactics.yaml")
-    registry = ModelRegistry.from_file(ROOT / "examples" / "models" / "uav.yaml")
+    registry = load_registry(ROOT / "examples" / "models" / "uav.yaml")
     with (
         open_bus("inproc") as bus,
         LecNode(bus, registry, camera="/uav/camera/image", active_period=None) as node,

@@ -93,13 +93,10 @@ from anunnaki.lec._registry import (
     ModelRegistryError,
     ModelSpec,
     OracleRef,
-    RegistryChange,
-    ResolvedModel,
     UnknownModelError,
-    load_registry,
-    parse_registry,
-    resolve_model,
 )
+from anunnaki.lec._registry_file import ResolvedModel, load_registry, parse_registry, resolve_model
+from anunnaki.lec._registry_reload import RegistryChange
 
 if TYPE_CHECKING:
     from anunnaki.lec._centernet import CenterNet, CenterNetArchitecture, CenterNetDetector

@@ -56,6 +56,7 @@ from anunnaki.bus import Bus, Node, Publisher, Sample
 from anunnaki.errors import AnunnakiError, MissingExtraError, ModelFileError
 from anunnaki.lec._detector import Detector
 from anunnaki.lec._registry import ModelRegistry, ModelRegistryError, ModelSpec
+from anunnaki.lec._registry_reload import replace, reread
 from anunnaki.messages import Detections, Image, ServiceReply, body_of
 from anunnaki.tokens import (
     OPERATOR_TOKEN_ENV,
@@ -523,8 +524,8 @@ class LecNode(Node):
     def reload(self, registry: str | Path | None = None, *, caller: str = "api") -> ReloadResult:
         """Re-read the registry file (or ``registry``) and swap from the new one from now on.
 
-        The file must lie in :attr:`reload_roots`; it is read and checked by
-        :meth:`ModelRegistry.reread` (every model's and oracle's sha256, every new model
+        The file must lie in :attr:`reload_roots`; it is read and checked as at a start
+        (``_registry_reload.reread``: every model's and oracle's sha256, every new model
         loaded once) while frames keep running; the model in use must stay listed with the
         same files. Accepted, the registry object is updated in place (whoever holds it
         sees the new models), cached models whose entry changed are dropped, the reload is
@@ -559,13 +560,13 @@ class LecNode(Node):
                     ),
                 )
             try:
-                change = self.registry.reread(path, keep=current.id)
+                change = reread(self.registry, path, keep=current.id)
             except AnunnakiError as exc:
                 return self._refuse_reload(current, caller, str(exc))
             except Exception as exc:  # a loader bug must not take the node down
                 return self._refuse_reload(current, caller, f"{type(exc).__name__}: {exc}")
             with self._lock:
-                self.registry.replace(change)
+                replace(self.registry, change)
                 spec = self.registry.get(current.id)
                 self._active = _Active(spec, self._active.detector)
                 self._reloads += 1

@@ -18,12 +18,8 @@ import shutil
 from pathlib import Path
 
 from anunnaki.lec._detector import read_card, sha256_file, sidecar_path, weights_path
-from anunnaki.lec._registry import (
-    REGISTRY_FORMAT,
-    ModelRegistryError,
-    ModelSpec,
-    load_registry,
-)
+from anunnaki.lec._registry import REGISTRY_FORMAT, ModelRegistryError, ModelSpec
+from anunnaki.lec._registry_file import load_registry
 
 __all__ = ["register_model"]
 

@@ -10,7 +10,7 @@ reads in the paper's goal models.
 Using one::
 
     from anunnaki.bus import open_bus
-    from anunnaki.lec._registry import load_registry
+    from anunnaki.lec import load_registry
     from anunnaki.oracles import OracleNode
 
     registry = load_registry("models/registry.yaml")

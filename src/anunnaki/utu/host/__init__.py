@@ -13,9 +13,10 @@
 * ``_threads``: actions off the loop's path (worker threads);
 * ``_intake``, ``_peers``, ``_notify``: the monitored topics' queues and what a step takes
   from them and from ``/clock`` (and a live step's budget), the watch over the nodes of
-  other processes, notifications.
+  other processes, notifications (:class:`Notifier` sends a :class:`Notification` as its
+  :class:`NotifyConfig` says: e-mail, webhook or log).
 
-The public names are re-exported by :mod:`anunnaki.utu`.
+The names :mod:`anunnaki.utu` re-exports are its face; the rest are here.
 """
 
 from anunnaki.topics import UTU_NODES as NODE_NAMES
@@ -34,6 +35,7 @@ from anunnaki.utu.host._nodes import (
     build_node,
     step_nodes,
 )
+from anunnaki.utu.host._notify import Notification, Notifier, NotifyConfig
 from anunnaki.utu.host._peers import ACT_ORDER, PeerWatch
 from anunnaki.utu.host._threads import ThreadRunner
 
@@ -48,6 +50,9 @@ __all__ = [
     "KnowledgeNode",
     "MonitorNode",
     "NodeName",
+    "Notification",
+    "Notifier",
+    "NotifyConfig",
     "OperatorDesk",
     "PeerWatch",
     "PlanNode",

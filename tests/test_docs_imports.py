@@ -1,8 +1,9 @@
-"""The Python examples of the LEC pages import public names that exist (issue 22, item 8).
+"""The Python examples of the docs import public names that exist (issue 22, item 8).
 
 docs/model-manager.md's example imported ``anunnaki.lec._node`` and ``anunnaki.lec._registry``
-although ``anunnaki.lec`` exports both; every block is parsed, and every ``from anunnaki…
-import`` in it must name a public module and names that module has.
+although ``anunnaki.lec`` exports both, and docs/notify.md's ``anunnaki.utu.host._notify``;
+every block of every page (and the README) is parsed, and every ``from anunnaki… import`` in
+it must name a public module and names that module has.
 """
 
 from __future__ import annotations
@@ -14,12 +15,16 @@ from pathlib import Path
 
 import pytest
 
-DOCS = Path(__file__).resolve().parents[2] / "docs"
-PAGES = ("model-manager.md", "detector.md")
+ROOT = Path(__file__).resolve().parents[1]
+PAGES = sorted(
+    str(p.relative_to(ROOT))
+    for p in [ROOT / "README.md", *(ROOT / "docs").glob("*.md")]
+    if "```python" in p.read_text(encoding="utf-8")
+)
 
 
 def blocks(page: str) -> list[tuple[int, str]]:
-    text = (DOCS / page).read_text(encoding="utf-8")
+    text = (ROOT / page).read_text(encoding="utf-8")
     return [
         (text[: m.start()].count("\n") + 2, m.group(1))
         for m in re.finditer(r"```python\n(.*?)```", text, re.S)
@@ -38,7 +43,7 @@ def test_python_examples_import_public_names(page: str) -> None:
             ):
                 continue
             module = node.module or ""
-            where = f"docs/{page}:{line + node.lineno - 1}"
+            where = f"{page}:{line + node.lineno - 1}"
             assert not any(p.startswith("_") for p in module.split(".")), (
                 f"{where}: imports the private module {module}"
             )
