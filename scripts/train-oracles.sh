@@ -10,7 +10,8 @@
 #   ARCH_raindrop=patch_cnn scripts/train-oracles.sh rover-default   # another network
 #
 # The oracle network (`oracle train --architecture`, docs/enlil.md) is chosen per
-# phenomenon: ARCH_<phenomenon> (ARCH_hsl, ARCH_raindrop …). One oracle covers all of its
+# phenomenon: ARCH_<phenomenon> (ARCH_hsl, ARCH_raindrop …; a composition's with + as _:
+# ARCH_rain_brightness). One oracle covers all of its
 # model's phenomena, so the phenomena that name one decide it (they must agree; the others
 # follow them); ARCH_<model> (dashes as underscores: ARCH_rover_default) overrides them for
 # one model, ARCH (small_cnn unless set) is the network of a model whose phenomena name
@@ -81,7 +82,7 @@ architecture() { # architecture MODEL PHENOMENON...: the network of MODEL's orac
     return
   fi
   for phenomenon in "$@"; do
-    var="ARCH_$phenomenon"
+    var="ARCH_${phenomenon//+/_}" # a composition's: ARCH_rain_brightness for rain+brightness
     [[ -n ${!var:-} ]] || continue
     if [[ -n $chosen && $chosen != "${!var}" ]]; then
       echo "train-oracles.sh: $model's phenomena name different architectures ($chosen;" \
@@ -133,6 +134,8 @@ EXTRA=()
 pick rover-fog && train rover-fog rover "$MODELS/rover.yaml" 600 3000 12 fog
 pick rover-low_light && train rover-low_light rover "$MODELS/rover.yaml" 400 3000 12 brightness hsl
 pick uav-default && dataset uav --width 320 --height 240
-# 176 evaluations (11 rounds): the shipped one's search was stopped there for time
-pick uav-default && train uav-default uav "$MODELS/uav.yaml" 176 2000 10 fog
+# 176 evaluations (11 rounds) per phenomenon: the first shipped one's search was stopped
+# there for time. fog and rain+brightness: the UAV's domain models (uav-fog,
+# uav-rain_brightness, docs/robustify.md) are swapped in when this oracle names their domain.
+pick uav-default && train uav-default uav "$MODELS/uav.yaml" 176 2000 10 fog rain+brightness
 [[ $PRINT_ARCH == 1 ]] || echo "times: $TIMES" >&2
