@@ -94,6 +94,7 @@ SHIPPED = [
     ("rover.yaml", "rover-raindrop", "raindrop"),
     ("uav.yaml", "uav-fog", "fog"),
     ("rover.yaml", "rover-fog-enki", "fog"),
+    ("uav.yaml", "uav-rain_brightness", "rain_brightness"),
 ]
 
 

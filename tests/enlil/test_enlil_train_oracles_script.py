@@ -74,3 +74,15 @@ def test_phenomena_of_one_oracle_must_agree(tmp_path: Path) -> None:
         tmp_path, ARCH_hsl="patch_cnn", ARCH_raindrop="small_cnn", ARCH_rover_default="patch_cnn"
     )
     assert code == 0 and rows["rover-default"] == "patch_cnn"
+
+
+def test_a_composition_is_named_with_underscores(tmp_path: Path) -> None:
+    # uav-default covers fog and rain+brightness: ARCH_rain+brightness is no shell name
+    code, rows, err = choices(tmp_path, ARCH_rain_brightness="patch_cnn")
+    assert code == 0, err
+    assert rows["uav-default"] == "patch_cnn" and rows["rover-fog"] == "small_cnn"
+    code, _, err = choices(
+        tmp_path, ARCH_hsl="", ARCH_rain_brightness="patch_cnn", ARCH_fog="small_cnn"
+    )
+    assert code == 1 and "uav-default's phenomena" in err
+    assert "ARCH_rain_brightness=patch_cnn" in err
