@@ -57,6 +57,11 @@ def test_compositions_count_each_part(hsl_patch: None) -> None:
     assert oracle_architecture(["raindrop+raindrop+raindrop"]) == "small_cnn"
     assert oracle_architecture(["fog+hsl"]) == "patch_cnn"
     assert oracle_architecture(["rain + brightness"], choices={"brightness": "x"}) == "x"
+    # a choice named for a composition (ARCH_rain_brightness in scripts/train-oracles.sh)
+    # names each of its parts
+    both = ["fog", "rain+brightness"]
+    assert oracle_architecture(both, choices={"rain+brightness": "patch_cnn"}) == "patch_cnn"
+    assert oracle_architecture(["hsl+fog"], choices={"hsl+fog": ""}) == "small_cnn"
 
 
 def test_overrides_default_and_dropping_a_choice(hsl_patch: None) -> None:

@@ -88,8 +88,9 @@ def oracle_architecture(
         phenomena: The phenomena the oracle covers; a composition (``raindrop+raindrop``,
             ``rain+brightness``) counts each of its parts.
         model_id: The oracle's model, for :data:`MODEL_ARCHITECTURES`.
-        choices: Networks named per phenomenon, before the measured tables; an empty name
-            (or ``None``) drops that phenomenon's entry of :data:`PHENOMENON_ARCHITECTURES`.
+        choices: Networks named per phenomenon, before the measured tables (a composition's
+            name names each of its parts); an empty name (or ``None``) drops that
+            phenomenon's entry of :data:`PHENOMENON_ARCHITECTURES`.
         default: The network when nothing names one.
 
     Returns:
@@ -101,12 +102,14 @@ def oracle_architecture(
 
     """
     parts = _parts(phenomena)
-    given = {name: arch for name, arch in (choices or {}).items() if arch}
+    # a choice named for a composition (``rain+brightness``) is a choice for each of its parts
+    named = [(part, arch) for name, arch in (choices or {}).items() for part in _parts([name])]
+    given = {part: arch for part, arch in named if arch}
     chosen = _agree([(p, given[p]) for p in parts if p in given])
     if chosen is not None:
         return chosen
     if model_id is not None and model_id in MODEL_ARCHITECTURES:
         return MODEL_ARCHITECTURES[model_id]
-    dropped = {name for name, arch in (choices or {}).items() if not arch}
+    dropped = {part for part, arch in named if not arch}
     table = {k: v for k, v in PHENOMENON_ARCHITECTURES.items() if k not in dropped}
     return _agree([(p, table[p]) for p in parts if p in table]) or default
