@@ -202,3 +202,28 @@ def test_uav_g3_applies_while_cruising_not_on_the_ground_or_in_the_climb() -> No
         assert ev.state("G3").status is (abs(altitude - 30.0) <= 5.0), (t, phase)
         assert ev.state("G13").status is g13, (t, phase)
         assert ev.state("G2").status is g13, (t, phase)
+
+
+def test_uav_g9_holds_for_the_model_of_the_perceived_condition() -> None:
+    """G9 (O1's resolution): the active model's domain is the oracle's context, a
+    composition's domain named as an identifier (context rain+brightness, domain
+    rain_brightness), and the oracle does not call the model compromised."""
+    d = EXAMPLES / "uav"
+    ev = Evaluator(load_goal_model(d / "goals.yaml", d / "binding.yaml"))
+    oracle, active = "/utu/oracle/output", "/lm_manager/active"
+    for t, (context, category, model, domain, g9) in enumerate(
+        [
+            ("fog", 1, "uav-fog", "fog", True),
+            ("fog", 2, "uav-fog", "fog", False),
+            ("rain+brightness", 1, "uav-rain_brightness", "rain_brightness", True),
+            ("rain+brightness", 0, "uav-fog", "fog", False),
+            ("fog", 0, "uav-rain_brightness", "rain_brightness", False),
+        ]
+    ):
+        ev.observe(
+            oracle,
+            {"category": category, "confidence": 0.9, "context": {"phenomenon": context}},
+            float(t),
+        )
+        ev.observe(active, {"model": model, "domain": domain}, float(t))
+        assert ev.state("G9").status is g9, (context, category, domain)
