@@ -37,7 +37,7 @@ bench: setup
 
 # The paper's §4 figures beside ours (the shipped models and oracles on our rendered data,
 # rendered into data/ if absent) and the managers' table of benchmarks/case_studies.py:
-# regenerates docs/results-paper.md and docs/images/results-paper-*.png (about 25 min;
+# regenerates docs/results-paper.md and docs/images/results-paper-*.png (18 min at load 22;
 # measurements cached in runs/paper/, so a rerun measures only what changed).
 .PHONY: results
 results: setup

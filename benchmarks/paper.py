@@ -26,8 +26,9 @@ key of its command and the sha256 of the files it reads, so a rerun after an int
 measures only what is missing. Nothing on the page is typed by hand but the paper's own
 figures (:data:`PAPER`, each with its section) and the prose.
 
-    .venv/bin/python benchmarks/paper.py             # -> docs/results-paper.md (about 25 min)
-    .venv/bin/python benchmarks/paper.py --quick     # a check: 3 contexts of 4 images
+    .venv/bin/python benchmarks/paper.py             # -> docs/results-paper.md (18 min at load 22)
+    .venv/bin/python benchmarks/paper.py --quick     # a check: 3 contexts of 4 images,
+                                                     # written into runs/paper-quick/
 """
 
 from __future__ import annotations
@@ -605,14 +606,21 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--rover-data", type=Path, default=ROOT / "data" / "rover")
     ap.add_argument("--uav-data", type=Path, default=ROOT / "data" / "uav")
     ap.add_argument("--work", type=Path, help="work folder (runs/paper, quick: runs/paper-quick)")
-    ap.add_argument("--page", type=Path, default=ROOT / "docs" / "results-paper.md")
+    ap.add_argument(
+        "--page",
+        type=Path,
+        help="the page (docs/results-paper.md; quick: in the work folder, the docs untouched)",
+    )
     ap.add_argument("--images", type=Path, help="plots' folder (the page's images/)")
     ap.add_argument("--case-studies", type=Path, default=CASE_STUDIES)
     ap.add_argument("--threads", type=int, default=2, help="torch threads per measurement")
     args = ap.parse_args(argv)
     setting = QUICK if args.quick else FULL
     work = Work(args.work or ROOT / "runs" / ("paper-quick" if args.quick else "paper"))
-    images_dir = args.images or args.page.parent / "images"
+    page_path = args.page or (
+        work.folder / "results-paper.md" if args.quick else ROOT / "docs" / "results-paper.md"
+    )
+    images_dir = args.images or page_path.parent / "images"
     platforms = [p for p in args.platforms.split(",") if p]
     start = time.monotonic()
     load_before = list(os.getloadavg())
@@ -639,16 +647,16 @@ def main(argv: list[str] | None = None) -> int:
         "load_after": list(os.getloadavg()),
         "cpus": os.cpu_count(),
     }
-    text = page(rows, setting, args.quick, images, args.page, args.case_studies, machine)
-    args.page.parent.mkdir(parents=True, exist_ok=True)
-    args.page.write_text(text, encoding="utf-8")
+    text = page(rows, setting, args.quick, images, page_path, args.case_studies, machine)
+    page_path.parent.mkdir(parents=True, exist_ok=True)
+    page_path.write_text(text, encoding="utf-8")
     figures = [{"label": f.label, "cite": f.cite, "paper": f.paper,
                 "paper_robust": f.paper_robust, **row} for f, row in rows]  # fmt: skip
     (work.folder / "figures.json").write_text(
         json.dumps({"machine": machine, "quick": args.quick, "figures": figures}, indent=1),
         encoding="utf-8",
     )
-    print(f"wrote {args.page} and {len(images)} plot(s) in {machine['wall_s']:.0f} s")
+    print(f"wrote {page_path} and {len(images)} plot(s) in {machine['wall_s']:.0f} s")
     return 0
 
 
