@@ -1,0 +1,105 @@
+"""benchmarks/paper.py: the paper-vs-ours page regenerates, from measurements and files only.
+
+The quick setting runs the rover's rows with the project's own commands on a rendered dataset
+of 4 frames per split (the UAV's rows are the same code on another registry; rendering its
+dataset here would cost minutes). The figures are not judged; that every one of ours comes
+from a measurement (or a file the page names), that the paper's figures are cited, that a
+rerun measures nothing again, and what the page says without and with the managers' JSON are.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import json
+import re
+import sys
+from pathlib import Path
+from typing import Any
+
+import pytest
+from bench_helpers import BENCH, run
+
+
+@pytest.fixture(scope="module")
+def bench() -> Any:
+    spec = importlib.util.spec_from_file_location("paper_bench", BENCH / "paper.py")
+    assert spec is not None and spec.loader is not None
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = module  # its dataclasses look their module up
+    spec.loader.exec_module(module)
+    return module
+
+
+def _case_studies(path: Path) -> None:
+    spread = {"mean": 2.0, "std": 0.5, "min": 1.0, "max": 3.0}
+    summary = {
+        "degraded_frames": spread,
+        "onset_delay_s": {**spread, "p95": 3.0},
+        "phases_without_adaptation": 1,
+        "phases": 4,
+    }
+    doc = {
+        "date": "2026-11-27 12:00:00",
+        "settings": {"seeds": 2, "quick": True},
+        "cases": {
+            "rover": {
+                "launch": "examples/rover/sim.yaml",
+                "summary": {"utu": summary, "none": summary},
+            }
+        },
+    }
+    path.write_text(json.dumps(doc), encoding="utf-8")
+
+
+@pytest.mark.slow
+@pytest.mark.timeout(900)
+def test_quick_page_regenerates_from_measurements(tiny_rover: Path, tmp_path: Path) -> None:
+    pytest.importorskip("torch")
+    page = tmp_path / "docs" / "results-paper.md"
+    work = tmp_path / "work"
+    args = [
+        "--quick", "--platforms", "rover", "--rover-data", str(tiny_rover),
+        "--work", str(work), "--page", str(page),
+        "--case-studies", str(tmp_path / "case-studies.json"),
+    ]  # fmt: skip
+    run("paper.py", *args, timeout=900)
+    text = page.read_text(encoding="utf-8")
+    assert "benchmarks/paper.py" in text and "Quick setting" in text
+    # the paper's figures, each with its section
+    for figure, section in (
+        ("96.8 %", "§4.1.1"),
+        ("2.0 % → 60.7 %", "§4.1.3"),
+        ("83.0 %", "§4.1.2"),
+    ):
+        assert re.search(rf"\| {re.escape(figure)} \| {re.escape(section)}", text), figure
+    # ours: the figures the work folder's measurements hold, nothing else
+    figures = json.loads((work / "figures.json").read_text(encoding="utf-8"))["figures"]
+    assert len(figures) == 5 and all(0.0 <= f["ours"] <= 1.0 for f in figures)
+    hsl = next(f for f in figures if "HSL variations" in f["label"])
+    assert hsl["robust_model"] == "rover-hsl" and hsl["phenomenon"] == "hsl"
+    assert f"{100 * hsl['ours_robust']:.1f} % (`rover-hsl`)" in text
+    assert "has not been run" in text and "benchmarks/case_studies.py" in text
+    assert (tmp_path / "docs" / "images" / "results-paper-rover.png").stat().st_size > 1000
+    assert "](images/results-paper-rover.png)" in text
+    # a rerun reuses every measurement, and shows the managers' table once the JSON is there
+    _case_studies(tmp_path / "case-studies.json")
+    run("paper.py", *args, timeout=900)
+    again = page.read_text(encoding="utf-8")
+    assert "(0 measurements made, 7 reused" in again
+    assert "| degraded_frames | 2.00 ± 0.50 [1–3] | 2.00 ± 0.50 [1–3] |" in again
+    assert "| phases not adapted | 1/4 | 1/4 |" in again
+
+
+def test_a_domain_without_its_model_says_so(bench: Any) -> None:
+    fig = next(f for f in bench.PAPER if f.domain == "rain_brightness")
+    row = {"ours": 0.25, "phenomenon": "rain+brightness", "model": "uav-default",
+           "robust_absent": "no 'rain_brightness' model in examples/models/uav.yaml"}  # fmt: skip
+    line = bench.figure_table([(fig, row)], bench.QUICK)[-1]
+    assert "27.0 % → 42.0 %" in line and "25.0 %" in line
+    assert "not shipped (no 'rain_brightness' model in examples/models/uav.yaml)" in line
+
+
+def test_every_paper_figure_is_cited(bench: Any) -> None:
+    assert len(bench.PAPER) == 9
+    assert all(f.cite.startswith("§4.") for f in bench.PAPER)
+    assert {f.what for f in bench.PAPER} == {"clean", "domain", "oracle"}
