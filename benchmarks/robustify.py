@@ -1211,7 +1211,7 @@ def merge(output: Path, others: Sequence[Path], *, own_settings: bool = False) -
                     "with their own settings, stated per domain in the report)"
                 )
         for entry in more["domains"].values():
-            entry.setdefault("settings", more["settings"])
+            entry["settings"] = more["settings"]  # the settings its file was measured with
         doc["domains"] |= more["domains"]
     write_json(output, doc)
 
@@ -1464,8 +1464,11 @@ def _decision(domains: dict[str, Any]) -> list[str]:
             f"{'**replace**' if dec['replace'] else '**keep**'} |"
         )
         verb = "replaces" if dec["replace"] else "does not replace"
+        hard = d["enki_vs_random"]["hardest"]
         words.append(
-            f"for {d['phenomenon']}, `{dec['candidate']}` {verb} `{dec['today']}` ({dec['reason']})"
+            f"for {d['phenomenon']}, `{dec['candidate']}` {verb} `{dec['today']}` "
+            f"({dec['reason']}; at equal budget the Enki arm's margin over random contexts on "
+            f"(c) is {100 * hard['margin']:+.1f}, a {hard['verdict']})"
         )
     if not rows:
         return []
@@ -1487,7 +1490,10 @@ def _decision(domains: dict[str, Any]) -> list[str]:
         "|---" * (5 + len(conds)) + "|",
         *rows,
         "",
-        "**Decision, from these figures**: " + "; ".join(words) + ".",
+        "**Decision, from these figures**: " + "; ".join(words) + ". The decision is "
+        "between shipped models; whether a gain comes from Enki's search rather than from "
+        "training on the phenomenon's whole parameter space is what the equal-budget "
+        "comparison against random contexts (the summary above) answers.",
         "",
     ]
 
