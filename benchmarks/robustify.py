@@ -10,10 +10,15 @@ with one :class:`~anunnaki.enki.Budget`); only what perturbs a training frame di
 - ``enki``: contexts selected (:func:`anunnaki.enki.select_contexts`) from an Enlil search
   against the default model (``--search-seed``);
 - ``random``: random-context augmentation, uniform over the same parameter space;
-- ``corruption_mix``: each frame a random phenomenon of the library at a random strength;
+- ``corruption_mix``: each frame a random phenomenon of the library at a random strength
+  (it does not depend on the domain: trained once per platform and seed, in the work
+  folder's ``PLATFORM-shared``, and measured under every domain's conditions);
 - ``today``: the shipped ``train-detector --augment`` model where the domain has one
   (``rover-fog`` for fog; ``rover-low_light``, trained on brightness and HSL darkening, for
-  hsl). It was trained before, at its own budget: its budget is recorded, not equal.
+  hsl). It was trained before, at its own budget: its budget is recorded, not equal;
+- ``shipped``: the shipped Enki model of the domain (scripts/train-domains.sh), at its own
+  budget (the rover's: 504 steps, as today's), for the decision whether Enki models replace
+  today's (:func:`decide`).
 
 Each trained arm runs with ``--seeds`` (3 by default). Every model is measured on the same
 **test** images (never used in training or in any search), with its own score threshold
@@ -50,7 +55,10 @@ Run::
     .venv/bin/python benchmarks/robustify.py --report     # docs/enki.md + docs/images/enki-*
 
 Domains measured by separate processes (``--output runs/D.json`` each) join the results with
-``--merge runs/D.json ...`` (refused unless their settings are the same).
+``--merge runs/D.json ...`` (refused unless their settings are the same; ``--own-settings``
+adds a domain measured at its own scale, e.g. a slower platform at a smaller budget, and the
+report states each domain's). Every arm × seed (and the searches) runs under a lock in the
+work folder, so several processes given the same domain and ``--work`` share its work.
 
 ``--report`` regenerates docs/enki.md and its plots from benchmarks/results/robustify.json
 alone (nothing typed by hand; a test checks the page regenerates identically). ``--quick``
@@ -80,14 +88,17 @@ DOC = ROOT / "docs" / "enki.md"
 IMAGES = ROOT / "docs" / "images"
 MODELS = ROOT / "examples" / "models"
 
-ARMS = ("default", "enki", "random", "corruption_mix", "today")
+ARMS = ("default", "enki", "random", "corruption_mix", "today", "shipped")
 TRAINED = ("enki", "random", "corruption_mix")
+#: Trained arms that do not depend on the domain: one model per platform and seed.
+SHARED = ("corruption_mix",)
 LABELS = {
     "default": "default",
     "enki": "Enki",
     "random": "random contexts",
     "corruption_mix": "corruption mix",
     "today": "today's --augment",
+    "shipped": "shipped Enki",
 }
 #: The issue's aims: Enki on random contexts >= 0.9 x the default's clean F1; Enki's clean
 #: F1 at most 0.02 below the default's; Enki beats random augmentation on the hardest
@@ -108,6 +119,7 @@ class Domain:
             parameters not named span ``[0, 1]``.
         axes: The two parameters the F1-over-the-space plot uses.
         today: The shipped ``--augment`` model of this domain, if any.
+        shipped: The shipped Enki model of this domain (scripts/train-domains.sh), if any.
         paper: The paper's figures (F1, %) for this domain.
 
     """
@@ -119,6 +131,7 @@ class Domain:
     region: dict[str, tuple[float, float]]
     axes: tuple[str, str]
     today: str | None = None
+    shipped: str | None = None
     paper: dict[str, float] = field(default_factory=dict)
 
 
@@ -133,6 +146,7 @@ DOMAINS = {
             {"lightness": (0.8, 1.0)},
             ("saturation", "lightness"),
             today="rover-low_light",
+            shipped="rover-hsl",
             paper={"clean": 96.8, "default": 2.0, "robustified": 60.7},
         ),
         Domain(
@@ -142,6 +156,7 @@ DOMAINS = {
             "raindrop",
             {"radius": (0.7, 1.0)},
             ("x", "radius"),
+            shipped="rover-raindrop",
             paper={"clean": 96.8, "default": 5.0, "robustified": 87.0},
         ),
         Domain(
@@ -152,6 +167,7 @@ DOMAINS = {
             {"intensity": (0.6, 1.0)},
             ("density", "intensity"),
             today="rover-fog",
+            shipped="rover-fog-enki",
         ),
         Domain(
             "uav-fog",
@@ -160,6 +176,7 @@ DOMAINS = {
             "fog",
             {"intensity": (0.6, 1.0)},
             ("density", "intensity"),
+            shipped="uav-fog",
             paper={"clean": 61.3, "default": 39.0, "robustified": 47.0},
         ),
         Domain(
@@ -684,11 +701,126 @@ def loadavg() -> list[float]:
     return [round(x, 2) for x in os.getloadavg()]
 
 
-def run_arm(arm: str, seed: int | None, domain: Domain, ctx: dict[str, Any]) -> dict[str, Any]:
-    """One arm × seed: fine-tune (or load), measure; cached in the work folder."""
-    from anunnaki.lec import load_detector, read_card, save_detector
+class _TrainLock:
+    """An exclusive lock on a shared fine-tune's folder (released by the OS if killed).
+
+    Domains of one platform measured by side-by-side processes share the corruption-mix
+    models: one process trains a seed while the others wait for it, or (``blocking=False``)
+    raise :class:`BlockingIOError` so that they can train another seed meanwhile.
+    """
+
+    def __init__(self, folder: Path | None, *, blocking: bool = True) -> None:
+        self.folder, self.blocking = folder, blocking
+        self.handle: Any = None
+
+    def __enter__(self) -> _TrainLock:
+        if self.folder is not None:
+            import fcntl
+
+            self.folder.mkdir(parents=True, exist_ok=True)
+            self.handle = (self.folder / ".lock").open("a")
+            flags = fcntl.LOCK_EX | (0 if self.blocking else fcntl.LOCK_NB)
+            try:
+                fcntl.flock(self.handle, flags)
+            except BlockingIOError:
+                self.handle.close()
+                raise
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        if self.handle is not None:
+            self.handle.close()  # releases the lock
+
+
+def _tune(arm: str, seed: int, domain: Domain, ctx: dict[str, Any], folder: Path) -> None:
+    """Fine-tune the arm × seed into *folder* (model.safetensors, training.json) unless done."""
+    from anunnaki.enki import finetune
+    from anunnaki.lec import save_detector
 
     s: Settings = ctx["settings"]
+    bars: Bars = ctx["bars"]
+    file = folder / "model.safetensors"
+    if file.is_file() and (folder / "training.json").is_file():
+        return
+    shared = arm in SHARED
+    source = source_for(arm, domain, ctx["prep"], s)
+    who = f"{domain.platform} (shared)" if shared else domain.name
+    label = f"{who} {arm} seed {seed}: fine-tune"
+    load0, t0 = loadavg(), time.perf_counter()
+    tuned = finetune(
+        MODELS / f"{domain.model}.safetensors",
+        ctx["train"],
+        ctx["val"],
+        source,
+        budget=s.finetune_budget(),
+        seed=seed,
+        model_id=f"{domain.model}-{arm}-s{seed}",
+        domain=f"{domain.platform}-{arm}" if shared else domain.name,
+        checkpoints=folder / "finetune",
+        on_step=lambda step, total, info: bars.update(label, step, total),
+    )
+    bars.finish(label)
+    training = {
+        "steps": int(tuned.detector.training["steps"]),
+        "images": len(ctx["train"]),
+        "seconds": round(time.perf_counter() - t0, 1),
+        "train_loop_seconds": round(tuned.seconds, 1),
+        "loadavg_start": load0,
+        "loadavg_end": loadavg(),
+        "source": source.describe(),
+        "threshold": round(float(tuned.threshold), 5),
+    }
+    save_detector(tuned.detector, file)
+    write_json(folder / "training.json", training)
+
+
+def _shared_note(domain: Domain, ctx: dict[str, Any]) -> dict[str, Any]:
+    return {
+        "platform": domain.platform,
+        "folder": ctx["shared"].relative_to(ctx["work"].parent).as_posix(),
+        "note": f"trained once per seed for every {domain.platform} domain (domain-independent)",
+    }
+
+
+def run_jobs(domain: Domain, ctx: dict[str, Any]) -> dict[str, list[dict[str, Any]]]:
+    """Every arm × seed of the domain, each under a lock: processes can share the work.
+
+    A job another process holds (the same domain measured by two processes, or the
+    platform's shared corruption mix being trained for another domain) is left for later
+    and waited for only when nothing else is left; a finished job is read back.
+    """
+    s: Settings = ctx["settings"]
+    jobs: list[tuple[str, int | None]] = [("default", None)]
+    jobs += [(arm, seed) for arm in TRAINED for seed in s.seeds]
+    if domain.today is not None:
+        jobs.append(("today", None))
+    if domain.shipped is not None and (MODELS / f"{domain.shipped}.safetensors").is_file():
+        jobs.append(("shipped", None))
+    done: dict[tuple[str, int | None], dict[str, Any]] = {}
+    for blocking in (False, True):
+        for arm, seed in jobs:
+            if (arm, seed) in done:
+                continue
+            folder = ctx["work"] / "arms" / (arm if seed is None else f"{arm}-s{seed}")
+            try:
+                with _TrainLock(folder, blocking=blocking):
+                    if arm in SHARED:
+                        shared = ctx["shared"] / f"s{seed}"
+                        with _TrainLock(shared, blocking=blocking):
+                            _tune(arm, int(seed or 0), domain, ctx, shared)
+                    done[arm, seed] = run_arm(arm, seed, domain, ctx)
+            except BlockingIOError:
+                continue
+    results: dict[str, list[dict[str, Any]]] = {}
+    for arm, seed in jobs:
+        results.setdefault(arm, []).append(done[arm, seed])
+    return results
+
+
+def run_arm(arm: str, seed: int | None, domain: Domain, ctx: dict[str, Any]) -> dict[str, Any]:
+    """One arm × seed: fine-tune (or load), measure; cached in the work folder."""
+    from anunnaki.lec import load_detector, read_card
+
     bars: Bars = ctx["bars"]
     folder = ctx["work"] / "arms" / (arm if seed is None else f"{arm}-s{seed}")
     done = read_json(folder / "result.json")
@@ -698,44 +830,18 @@ def run_arm(arm: str, seed: int | None, domain: Domain, ctx: dict[str, Any]) -> 
     result: dict[str, Any] = {"arm": arm, "seed": seed}
     if arm in TRAINED:
         assert seed is not None
-        from anunnaki.enki import finetune
-
-        file = folder / "model.safetensors"
-        train, val = ctx["train"], ctx["val"]
-        budget = s.finetune_budget()
-        if not file.is_file():
-            source = source_for(arm, domain, ctx["prep"], s)
-            label = f"{domain.name} {arm} seed {seed}: fine-tune"
-            load0, t0 = loadavg(), time.perf_counter()
-            tuned = finetune(
-                MODELS / f"{domain.model}.safetensors",
-                train,
-                val,
-                source,
-                budget=budget,
-                seed=seed,
-                model_id=f"{domain.model}-{arm}-s{seed}",
-                domain=domain.name,
-                checkpoints=folder / "finetune",
-                on_step=lambda step, total, info: bars.update(label, step, total),
-            )
-            bars.finish(label)
-            training = {
-                "steps": int(tuned.detector.training["steps"]),
-                "images": len(train),
-                "seconds": round(time.perf_counter() - t0, 1),
-                "train_loop_seconds": round(tuned.seconds, 1),
-                "loadavg_start": load0,
-                "loadavg_end": loadavg(),
-                "source": source.describe(),
-                "threshold": round(float(tuned.threshold), 5),
-            }
-            save_detector(tuned.detector, file)
-            write_json(folder / "training.json", training)
-        result["training"] = read_json(folder / "training.json")
-        det = load_detector(file)
+        # the corruption mix does not depend on the domain: trained once per platform and
+        # seed (in the platform's shared folder), measured under each domain's conditions
+        tuned_in = ctx["shared"] / f"s{seed}" if arm in SHARED else folder
+        with _TrainLock(tuned_in if arm in SHARED else None):
+            _tune(arm, seed, domain, ctx, tuned_in)
+        result["training"] = read_json(tuned_in / "training.json")
+        if arm in SHARED:
+            result["training"] = result["training"] | {"shared": _shared_note(domain, ctx)}
+        det = load_detector(tuned_in / "model.safetensors")
     else:
-        model = domain.model if arm == "default" else domain.today
+        model = {"default": domain.model, "today": domain.today, "shipped": domain.shipped}[arm]
+        assert model is not None
         file = MODELS / f"{model}.safetensors"
         det = load_detector(file)
         card = read_card(file).training
@@ -749,6 +855,15 @@ def run_arm(arm: str, seed: int | None, domain: Domain, ctx: dict[str, Any]) -> 
                 "augment": card.get("augment", []),
                 "augment_prob": card.get("augment_prob"),
                 "note": "shipped model, trained before at its own budget (not equal)",
+            }
+        if arm == "shipped":
+            result["training"] = {
+                "steps": int(card["steps"]),
+                "images": int(card["train_images"]),
+                "epochs": int(card["epochs"]),
+                "source": card.get("source", {}),
+                "note": "shipped Enki model (its own search and budget; its training contexts "
+                "were not kept out of the held-out region)",
             }
     t0 = time.perf_counter()
     label = f"{domain.name} {folder.name}: measure"
@@ -927,8 +1042,14 @@ def run_domain(
 ) -> dict[str, Any]:
     work = work_root / domain.name
     claim(work, asdict(s) | {"domain": domain.name, "data": str(data.resolve()), "quick": quick})
+    shared = work_root / f"{domain.platform}-shared" / "corruption_mix"
+    claim(
+        shared,
+        asdict(s) | {"platform": domain.platform, "data": str(data.resolve()), "quick": quick},
+    )
     bars.log(f"{domain.name}: searches and conditions")
-    prep = prepare(domain, data, work, s, bars)
+    with _TrainLock(work / "searches"):  # one process searches, the others wait for it
+        prep = prepare(domain, data, work, s, bars)
     train, val, test = splits(data, s)
     ctx = {
         "settings": s,
@@ -939,14 +1060,10 @@ def run_domain(
         "val": val,
         "test": test.in_memory(),
         "perturbed": None,
+        "shared": shared,
     }
     ctx["perturbed"] = Perturbed(ctx["test"], s.eval_seed)
-    results: dict[str, list[dict[str, Any]]] = {"default": [run_arm("default", None, domain, ctx)]}
-    for arm in TRAINED:
-        results[arm] = [run_arm(arm, seed, domain, ctx) for seed in s.seeds]
-    if domain.today is not None:
-        results["today"] = [run_arm("today", None, domain, ctx)]
-    return domain_figures(domain, prep, results, s)
+    return domain_figures(domain, prep, run_jobs(domain, ctx), s)
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -970,6 +1087,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     p.add_argument("--families", help="held-out phenomenon families (default motion_blur)")
     p.add_argument("--nice", type=int, default=0, help="add this to the process's niceness")
     p.add_argument("--quiet", action="store_true")
+    p.add_argument(
+        "--own-settings",
+        action="store_true",
+        help="--merge: also add domains measured with other settings (kept per domain)",
+    )
     p.add_argument(
         "--merge",
         type=Path,
@@ -1011,7 +1133,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         write_report(json.loads(args.output.read_text(encoding="utf-8")), args.doc, args.images)
         return 0
     if args.merge:
-        merge(args.output, args.merge)
+        merge(args.output, args.merge, own_settings=args.own_settings)
         return 0
     if args.nice:
         os.nice(args.nice)
@@ -1056,6 +1178,7 @@ def main(argv: Sequence[str] | None = None) -> int:
                 )
             t0, load0 = time.perf_counter(), loadavg()
             entry = run_domain(domain, data, args.work, s, bars, quick=args.quick)
+            entry["settings"] = _settings_json(s)
             entry["run"] = {
                 "date": time.strftime("%Y-%m-%d", time.gmtime()),
                 "wall_seconds": round(time.perf_counter() - t0, 1),
@@ -1069,21 +1192,26 @@ def main(argv: Sequence[str] | None = None) -> int:
     return 0
 
 
-def merge(output: Path, others: Sequence[Path]) -> None:
+def merge(output: Path, others: Sequence[Path], *, own_settings: bool = False) -> None:
     """Add the domains of *others* to *output*; refuse files measured with other settings.
 
     Domains measured by separate processes (one per domain, side by side) end up in one
-    result file, each with its own run record, as measured.
+    result file, each with its own run record, as measured. With *own_settings* a domain
+    measured at other settings (a smaller budget where the platform is slower) is added
+    too: it keeps its settings, and the report states them for that domain.
     """
     doc = json.loads(output.read_text(encoding="utf-8"))
     for other in others:
         more = json.loads(other.read_text(encoding="utf-8"))
         for key in ("settings", "quick"):
-            if more.get(key) != doc.get(key):
+            if more.get(key) != doc.get(key) and not (own_settings and key == "settings"):
                 raise SystemExit(
                     f"--merge {other}: its {key} differ from {output}'s; only results measured "
-                    "with the same settings go in one file"
+                    "with the same settings go in one file (--own-settings adds its domains "
+                    "with their own settings, stated per domain in the report)"
                 )
+        for entry in more["domains"].values():
+            entry["settings"] = more["settings"]  # the settings its file was measured with
         doc["domains"] |= more["domains"]
     write_json(output, doc)
 
@@ -1156,21 +1284,19 @@ def render_report(doc: dict[str, Any]) -> str:
         "",
     ]
     quick = " (**quick mode**: a smoke run, not a measurement)" if doc.get("quick") else ""
-    steps = -(-s["train_images"] // s["batch_size"]) * s["epochs"]
-    lines += [
-        f"Measured at a **reduced scale**{quick}: {s['train_images']} training images × "
-        f"{s['epochs']} epochs, batch {s['batch_size']} → **{steps} optimiser steps per trained "
-        f"arm and seed** (the shipped rover-fog/low_light: 2,000 images × 8 epochs = 504 "
-        f"steps); learning rate {s['lr']}, {s['threads']} torch threads, clean share "
-        f"{s['clean']}; seeds {', '.join(map(str, s['seeds']))}; {s['val_images']} val images "
-        f"(threshold), {s['test_images']} test images per context. Searches: "
-        f"{s['search_budget']} evaluations for Enki (seed {s['search_seed']}), "
-        f"{s['hard_budget']} for (c) (seed {s['hard_seed']}), {s['search_images']} val images "
-        f"each; Enki trains on {s['contexts']} selected contexts. Contexts per condition: "
-        f"(b) {s['n_random']}, (c) {s['n_hardest']}, (d) {s['n_family']} per held-out family "
-        f"and {s['n_region']} in the held-out region.",
-        "",
-    ]
+    domains = doc["domains"]
+    groups: list[tuple[dict[str, Any], list[str]]] = []
+    for name, d in domains.items():
+        own = d.get("settings", s)
+        for settings, names in groups:
+            if settings == own:
+                names.append(name)
+                break
+        else:
+            groups.append((own, [name]))
+    for own, names in groups or [(s, [])]:
+        who = f"{', '.join(names)}: m" if len(groups) > 1 else "M"
+        lines += [_scale(who, own, quick), ""]
     machine = doc.get("machine", {})
     lines += [
         f"Machine: {machine.get('cpus')} cores shared with other jobs (load averages "
@@ -1181,30 +1307,60 @@ def render_report(doc: dict[str, Any]) -> str:
         + ".",
         "",
     ]
-    domains = doc["domains"]
     if not domains:
         lines += ["No domain measured yet.", ""]
     lines += _summary_table(domains)
+    lines += _decision(domains)
     lines += _paper_table(domains)
     for name, d in domains.items():
         lines += _domain_section(name, d)
+    lines += ["## How to regenerate", "", "```"]
+    for own, names in groups or [(s, [])]:
+        lines += [
+            "nice -n 10 .venv/bin/python benchmarks/robustify.py --rover-data data/rover "
+            "--uav-data data/uav \\",
+            f"    --domains {','.join(names) or 'rover-hsl'}"
+            f"{_options(own, bool(doc.get('quick')))}",
+        ]
+    if len(groups) > 1:
+        lines.append(
+            ".venv/bin/python benchmarks/robustify.py --merge OTHER.json --own-settings"
+            "   # the domains measured at their own scale"
+        )
     lines += [
-        "## How to regenerate",
-        "",
-        "```",
-        "nice -n 10 .venv/bin/python benchmarks/robustify.py --rover-data data/rover "
-        "--uav-data data/uav \\",
-        f"    --domains {','.join(domains) or 'rover-hsl'}{_options(s, bool(doc.get('quick')))}",
         ".venv/bin/python benchmarks/robustify.py --report",
         "```",
         "",
         "The work folder (`--work`, default `runs/robustify-benchmark`) keeps every search, "
         "fine-tune checkpoint and arm × seed result: a killed run continues where it stopped. "
         "Domains measured side by side, one process each (`--output runs/DOMAIN.json`), join "
-        "the results with `--merge runs/DOMAIN.json …` (same settings only).",
+        "the results with `--merge runs/DOMAIN.json …` (same settings only, unless "
+        "`--own-settings`: then each keeps its own, as stated above). The corruption mix does "
+        "not depend on the domain: it is trained once per platform and seed (the work "
+        "folder's `PLATFORM-shared`, locked while one process trains a seed) and measured in "
+        "every domain of the platform.",
         "",
     ]
     return "\n".join(lines)
+
+
+def _scale(who: str, s: dict[str, Any], quick: str) -> str:
+    """The paragraph stating one group of settings (the scale, budget and sizes)."""
+    steps = -(-s["train_images"] // s["batch_size"]) * s["epochs"]
+    seeds = ", ".join(map(str, s["seeds"]))
+    return (
+        f"{who}easured at a **reduced scale**{quick}: {s['train_images']} training images × "
+        f"{s['epochs']} epochs, batch {s['batch_size']} → **{steps} optimiser steps per "
+        "trained arm and seed** (the shipped models' own budgets are listed per domain: "
+        f"504 steps for the rover's); learning rate {s['lr']}, {s['threads']} torch "
+        f"thread(s), clean share {s['clean']}; seeds {seeds}; {s['val_images']} val images "
+        f"(threshold), {s['test_images']} test images per context. Searches: "
+        f"{s['search_budget']} evaluations for Enki (seed {s['search_seed']}), "
+        f"{s['hard_budget']} for (c) (seed {s['hard_seed']}), {s['search_images']} val "
+        f"images each; Enki trains on {s['contexts']} selected contexts. Contexts per "
+        f"condition: (b) {s['n_random']}, (c) {s['n_hardest']}, (d) {s['n_family']} per "
+        f"held-out family and {s['n_region']} in the held-out region."
+    )
 
 
 def _options(s: dict[str, Any], quick: bool) -> str:
@@ -1228,16 +1384,118 @@ def _summary_table(domains: dict[str, Any]) -> list[str]:
         "",
         "F1 points, mean over seeds; **win** / **loss** only outside the seeds' spread, else tie.",
         "",
-        "| domain | " + " | ".join(cond_title(c) if c != "mPC" else c for c in conds) + " |",
-        "|---" * (len(conds) + 1) + "|",
+        "| domain | steps per arm | "
+        + " | ".join(cond_title(c) if c != "mPC" else c for c in conds)
+        + " |",
+        "|---" * (len(conds) + 2) + "|",
     ]
     for name, d in domains.items():
         cells = []
         for c in conds:
             m = d["enki_vs_random"].get(c)
             cells.append("—" if m is None else f"{100 * m['margin']:+.1f} ({m['verdict']})")
-        lines.append(f"| {name} | " + " | ".join(cells) + " |")
+        steps = next(iter(d["budget"]["steps"].values()))[0]
+        lines.append(f"| {name} | {steps} | " + " | ".join(cells) + " |")
     return [*lines, ""]
+
+
+def decide(d: dict[str, Any]) -> dict[str, Any] | None:
+    """Whether the domain's Enki model replaces today's ``--augment`` model, from the figures.
+
+    The candidate is the shipped Enki model (trained, like today's, at the shipped budget)
+    or, without one, the benchmark's Enki arm. It replaces today's model if it loses at most
+    ``AIMS["clean_loss"]`` of clean F1 and, on the domain's own contexts ((b) random and
+    (c) hardest), loses on neither and wins on at least one. Single models have no seeds:
+    a difference counts only outside twice the Enki arm's seed spread on that condition
+    (two models, each as variable as an Enki fine-tune); else it is a tie.
+    """
+    arms = d["arms"]
+    if "today" not in arms:
+        return None
+    cand = "shipped" if "shipped" in arms else "enki"
+    c, t = arms[cand], arms["today"]
+    margins = {}
+    for cond in ("clean", "random", "hardest", *(k for k in d["conditions"] if k[:7] == "family:")):
+        margin = c[cond]["mean"] - t[cond]["mean"]
+        spread = 2 * arms["enki"][cond]["std"]
+        word = "win" if margin > spread else "loss" if margin < -spread else "tie"
+        margins[cond] = {"margin": round(margin, 4), "spread": round(spread, 4), "verdict": word}
+    clean_ok = margins["clean"]["margin"] >= -AIMS["clean_loss"]
+    own = [margins[k]["verdict"] for k in ("random", "hardest")]
+    replace = clean_ok and "loss" not in own and "win" in own
+    if replace:
+        reason = "no loss on (b) or (c), a win on " + " and ".join(
+            cond_title(k) for k in ("random", "hardest") if margins[k]["verdict"] == "win"
+        )
+    elif not clean_ok:
+        reason = f"it loses {-100 * margins['clean']['margin']:.1f} points of clean F1"
+    elif "loss" in own:
+        reason = "it loses on " + " and ".join(
+            cond_title(k) for k in ("random", "hardest") if margins[k]["verdict"] == "loss"
+        )
+    else:
+        reason = "it ties on both (b) and (c): no measured gain to earn the switch"
+    steps = {k: arms[k]["training"][0]["steps"] for k in (cand, "today")}
+    return {
+        "candidate": arms[cand].get("model", "Enki arm"),
+        "today": t["model"],
+        "steps": steps,
+        "equal_budget": len(set(steps.values())) == 1,
+        "margins": margins,
+        "replace": replace,
+        "reason": reason,
+    }
+
+
+def _decision(domains: dict[str, Any]) -> list[str]:
+    """The decision the comparison feeds: do Enki models replace today's --augment ones?"""
+    rows, words, conds = [], [], []
+    for name, d in domains.items():
+        dec = decide(d)
+        if dec is None:
+            continue
+        m = dec["margins"]
+        conds = list(m)
+        cells = " | ".join(f"{100 * v['margin']:+.1f} ({v['verdict']})" for v in m.values())
+        budget = "equal" if dec["equal_budget"] else "**not equal**"
+        rows.append(
+            f"| {name} | `{dec['candidate']}` ({dec['steps'][next(iter(dec['steps']))]}) | "
+            f"`{dec['today']}` ({dec['steps']['today']}) | {budget} | {cells} | "
+            f"{'**replace**' if dec['replace'] else '**keep**'} |"
+        )
+        verb = "replaces" if dec["replace"] else "does not replace"
+        hard = d["enki_vs_random"]["hardest"]
+        words.append(
+            f"for {d['phenomenon']}, `{dec['candidate']}` {verb} `{dec['today']}` "
+            f"({dec['reason']}; at equal budget the Enki arm's margin over random contexts on "
+            f"(c) is {100 * hard['margin']:+.1f}, a {hard['verdict']})"
+        )
+    if not rows:
+        return []
+    return [
+        "## Decision: do Enki models replace rover-fog / rover-low_light?",
+        "",
+        "Where a domain has today's `--augment` model, the shipped Enki model of the domain "
+        "(`scripts/train-domains.sh`, trained at the same 504-step budget as today's) is "
+        "measured beside it under the same conditions. It replaces today's model if it loses "
+        f"at most {100 * AIMS['clean_loss']:.0f} points of clean F1 and, on the domain's own "
+        "contexts ((b) and (c)), loses on neither and wins on one; single models have no "
+        "seeds, so a difference counts only outside twice the Enki arm's seed spread on that "
+        "condition (a tie otherwise). The held-out family is shown, not used: neither model "
+        "is meant for it. Margins: Enki − today's, F1 points (steps in brackets).",
+        "",
+        "| domain | Enki model | today's | budgets | "
+        + " | ".join(cond_title(c) for c in conds)
+        + " | decision |",
+        "|---" * (5 + len(conds)) + "|",
+        *rows,
+        "",
+        "**Decision, from these figures**: " + "; ".join(words) + ". The decision is "
+        "between shipped models; whether a gain comes from Enki's search rather than from "
+        "training on the phenomenon's whole parameter space is what the equal-budget "
+        "comparison against random contexts (the summary above) answers.",
+        "",
+    ]
 
 
 def _paper_table(domains: dict[str, Any]) -> list[str]:
@@ -1279,8 +1537,11 @@ def _domain_section(name: str, d: dict[str, Any]) -> list[str]:
     lines = [
         f"## {name}",
         "",
-        f"Model `{d['model']}`, phenomenon `{d['phenomenon']}`. F1 (%), mean ± std over "
-        "seeds (the default and today's model are one model each).",
+        f"Model `{d['model']}`, phenomenon `{d['phenomenon']}`; budget **"
+        f"{next(iter(d['budget']['steps'].values()))[0]} optimiser steps per trained arm and "
+        f"seed** ({d['budget']['train_images']} images × {d['budget']['epochs']} epochs). "
+        "F1 (%), mean ± std over seeds (the default, today's and the shipped Enki model are "
+        "one model each).",
         "",
         head,
         "|---" * (len(conds) + 3) + "|",
@@ -1289,7 +1550,7 @@ def _domain_section(name: str, d: dict[str, Any]) -> list[str]:
         if arm not in arms:
             continue
         a = arms[arm]
-        label = LABELS[arm] + (f" (`{a['model']}`)" if arm == "today" else "")
+        label = LABELS[arm] + (f" (`{a['model']}`)" if arm in ("today", "shipped") else "")
         cells = [ms(a[c]) for c in conds] + [ms(a["mPC"]), f"{a['rPC']['mean']:.3f}"]
         lines.append(f"| {label} | " + " | ".join(cells) + " |")
     lines += [
@@ -1367,6 +1628,21 @@ def _budget_lines(d: dict[str, Any]) -> list[str]:
             f"- today's `{arms['today']['model']}`: {t['steps']} steps ({t['images']} images × "
             f"{t['epochs']} epochs, augment {', '.join(t['augment'])} on "
             f"{100 * (t['augment_prob'] or 0):.0f} % of frames) — its own, larger budget;"
+        )
+    if "shipped" in arms:
+        t = arms["shipped"]["training"][0]
+        lines.append(
+            f"- shipped Enki `{arms['shipped']['model']}`: {t['steps']} steps ({t['images']} "
+            f"images × {t['epochs']} epochs, {t['source'].get('contexts', '?')} contexts of its "
+            "own search) — its own budget; its training contexts were not kept out of the "
+            "held-out region, so (d) region is not held out for it;"
+        )
+    shared = arms["corruption_mix"].get("training", [{}])[0].get("shared")
+    if shared:
+        lines.append(
+            f"- the corruption mix is trained once per seed for every {shared['platform']} "
+            f"domain (`{shared['folder']}`): the same {len(arms['corruption_mix']['training'])} "
+            "models are measured here and in the platform's other domains;"
         )
     lines += [
         f"- held-out family: {', '.join(held['families'])} (excluded from the corruption mix "

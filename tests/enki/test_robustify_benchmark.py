@@ -121,19 +121,29 @@ def test_quick_run_end_to_end_resumes_and_reports(
     doc = json.loads(out.read_text("utf-8"))
     assert doc["quick"] is True and list(doc["domains"]) == ["rover-hsl"]
     d = doc["domains"]["rover-hsl"]
-    assert list(d["arms"]) == ["default", "enki", "random", "corruption_mix", "today"]
+    assert list(d["arms"]) == ["default", "enki", "random", "corruption_mix", "today", "shipped"]
     seeds = list(doc["settings"]["seeds"])
     conditions = ["clean", "random", "hardest", "family:motion_blur", "region"]
     for arm, entry in d["arms"].items():
         trained = arm in ("enki", "random", "corruption_mix")
         assert [p["seed"] for p in entry["per_seed"]] == (seeds if trained else [None])
-        for c in [*conditions, "mPC", "rPC"]:
+        for c in [*conditions, "mPC"]:
             assert entry[c]["n"] == len(entry["per_seed"]) and 0 <= entry[c]["mean"] <= 1
+        assert entry["rPC"]["mean"] >= 0  # above 1 if a model does better perturbed than clean
     # equal budgets, asserted: every trained run made the same optimiser steps
     steps = d["budget"]["steps"]
     assert d["budget"]["equal"] and len({s for v in steps.values() for s in v}) == 1
     assert all(len(v) == len(seeds) for v in steps.values())
     assert d["arms"]["today"]["training"][0]["steps"] == 504  # rover-low_light's own budget
+    assert d["arms"]["shipped"]["model"] == "rover-hsl"
+    assert d["arms"]["shipped"]["training"][0]["steps"] == 504  # the shipped Enki model's
+    # the corruption mix is the platform's, trained once per seed, measured in the domain
+    shared = work / "rover-shared" / "corruption_mix"
+    for seed, run in zip(seeds, d["arms"]["corruption_mix"]["training"], strict=True):
+        assert (shared / f"s{seed}" / "model.safetensors").is_file()
+        assert not (work / "rover-hsl" / "arms" / f"corruption_mix-s{seed}" / "finetune").exists()
+        assert run["shared"]["folder"] == "rover-shared/corruption_mix"
+    assert d["settings"] == doc["settings"]
     # held out: the family from the mix, the box from every arm
     mix = d["arms"]["corruption_mix"]["training"][0]["source"]["phenomena"]
     assert "motion_blur" not in mix and "hsl" in mix
@@ -157,7 +167,7 @@ def test_quick_run_end_to_end_resumes_and_reports(
         assert bench.main(argv) == 0
     finally:
         torch.set_num_threads(threads)
-    assert capfd.readouterr().err.count("done before") == 2 + 3 * len(seeds) - 1  # not random-s1
+    assert capfd.readouterr().err.count("done before") == 3 + 3 * len(seeds) - 1  # not random-s1
     redo = json.loads(out.read_text("utf-8"))["domains"]["rover-hsl"]
     for arm in d["arms"]:
         if arm != "random":
@@ -175,6 +185,7 @@ def test_quick_run_end_to_end_resumes_and_reports(
     bench.write_report(json.loads(out.read_text("utf-8")), page, images)
     text = page.read_text("utf-8")
     assert "quick mode" in text and "## rover-hsl" in text and "| 96.8 | 2.0 | 60.7 |" in text
+    assert "**Decision, from these figures**: for hsl, `rover-hsl` " in text
     assert {p.name for p in images.iterdir()} == {
         "enki-rover-hsl-conditions.png",
         "enki-rover-hsl-space.png",
@@ -195,3 +206,49 @@ def test_merge_adds_domains_measured_with_the_same_settings(bench: Any, tmp_path
     assert merged["domains"][name] == entry
     with pytest.raises(SystemExit, match="settings differ"):
         bench.main(["--output", str(base), "--merge", str(odd)])
+    # a domain measured at its own (smaller) budget joins with --own-settings, keeping them
+    small = doc["settings"] | {"train_images": 64, "epochs": 1}
+    odd.write_text(json.dumps(doc | {"settings": small, "domains": {"uav-x": entry}}))
+    assert bench.main(["--output", str(base), "--merge", str(odd), "--own-settings"]) == 0
+    merged = json.loads(base.read_text("utf-8"))
+    assert merged["settings"] == doc["settings"] and merged["domains"]["uav-x"]["settings"] == small
+    page = bench.render_report(merged)
+    assert "uav-x: measured at a **reduced scale**: 64 training images × 1 epochs" in page
+    assert "--domains uav-x --train-images 64 --val-images" in page
+
+
+def test_the_shared_fine_tune_lock_lets_one_process_train_a_seed(
+    bench: Any, tmp_path: Path
+) -> None:
+    with bench._TrainLock(tmp_path / "s0"):
+        with pytest.raises(BlockingIOError), bench._TrainLock(tmp_path / "s0", blocking=False):
+            pass
+        with bench._TrainLock(tmp_path / "s1", blocking=False):  # another seed: free
+            pass
+    with bench._TrainLock(tmp_path / "s0", blocking=False):  # released
+        pass
+
+
+def test_the_decision_follows_the_figures(bench: Any) -> None:
+    def arm(clean: float, rand: float, hard: float, std: float = 0.0) -> dict[str, Any]:
+        row = {"clean": clean, "random": rand, "hardest": hard, "family:motion_blur": 0.5}
+        return {k: {"mean": v, "std": std, "n": 1} for k, v in row.items()}
+
+    def domain(shipped: dict[str, Any]) -> dict[str, Any]:
+        runs = [{"steps": 504}]
+        arms = {
+            "enki": arm(0.9, 0.7, 0.6, std=0.01),
+            "today": arm(0.92, 0.7, 0.6) | {"model": "rover-fog", "training": runs},
+            "shipped": shipped | {"model": "rover-fog-enki", "training": runs},
+        }
+        return {"arms": arms, "conditions": {"random": {}, "hardest": {}, "family:motion_blur": {}}}
+
+    win = bench.decide(domain(arm(0.91, 0.75, 0.6)))  # +5 on (b), a tie on (c)
+    assert win["replace"] and win["equal_budget"] and "(b)" in win["reason"]
+    tie = bench.decide(domain(arm(0.92, 0.71, 0.61)))  # inside twice the Enki arm's spread
+    assert not tie["replace"] and "ties" in tie["reason"]
+    clean = bench.decide(domain(arm(0.85, 0.9, 0.9)))
+    assert not clean["replace"] and "7.0 points of clean F1" in clean["reason"]
+    loss = bench.decide(domain(arm(0.92, 0.9, 0.5)))
+    assert not loss["replace"] and "loses on (c)" in loss["reason"]
+    assert bench.decide({"arms": {"enki": {}}, "conditions": {}}) is None
