@@ -20,7 +20,7 @@ import pytest
 from anunnaki import topics
 from anunnaki.bus import open_bus
 from anunnaki.goals import parse_binding, parse_goal_model
-from anunnaki.lec import LecNode, ModelRegistry
+from anunnaki.lec import LecNode, load_registry
 from anunnaki.messages import Assessment, Image
 from anunnaki.oracles import OracleNode
 from anunnaki.phenomena import PHENOMENA
@@ -57,7 +57,7 @@ def run(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
     binding = parse_binding((UAV / "binding.yaml").read_text(), source="binding.yaml")
     goals = parse_goal_model((UAV / "goals.yaml").read_text(), source="goals.yaml", binding=binding)
     tactics = parse_tactics_yaml((UAV / "tactics.yaml").read_text(), source="tactics.yaml")
-    registry = ModelRegistry.from_file(ROOT / "examples" / "models" / "uav.yaml")
+    registry = load_registry(ROOT / "examples" / "models" / "uav.yaml")
     rain = PHENOMENA.create("rain+brightness")
     clean = frames(10)
     seen: list[Assessment] = []
