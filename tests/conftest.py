@@ -17,6 +17,29 @@ settings.register_profile("anunnaki", deadline=None)
 settings.load_profile("anunnaki")
 
 
+#: Session fixtures whose setup pytest-timeout counts against the first test that uses them,
+#: with a timeout that holds it (and the other xdist worker's wait for it), per folder under
+#: tests/: the LEC session model trains in about 40 s quiet and passed the suite's 120 s at
+#: load 23; Enki's tiny rendered dataset takes seconds quiet and passed 120 s at load 35.
+SLOW_FIXTURES: Mapping[tuple[str, str], int] = {
+    ("lec", "trained"): 900,
+    ("enki", "rover_data"): 600,
+}
+
+
+def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
+    """Give the tests that use a slow session fixture a timeout that holds its setup."""
+    here = Path(__file__).parent
+    for item in items:
+        if item.get_closest_marker("timeout") is not None:
+            continue
+        names = getattr(item, "fixturenames", ())
+        for (folder, fixture), seconds in SLOW_FIXTURES.items():
+            if fixture in names and item.path.is_relative_to(here / folder):
+                item.add_marker(pytest.mark.timeout(seconds))
+                break
+
+
 @pytest.fixture(autouse=True, scope="session")
 def _private_operator_token(tmp_path_factory: pytest.TempPathFactory) -> Iterator[None]:
     """Utu's own operator token file (docs/running.md) lives in the session's folder.

@@ -14,23 +14,6 @@ import pytest
 
 MODELS = Path(__file__).resolve().parents[2] / "examples" / "models"
 
-#: Seconds a test that uses the rendered dataset may take, its rendering included: quiet it is
-#: a few seconds, but pytest-timeout counts a session fixture's setup against its first test,
-#: and at load 35 the rendering alone passed the suite's 120 s (a helper's run, 2026-11-27).
-RENDERED_TIMEOUT = 600
-
-
-def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
-    """Give the tests here that use the rendered dataset a timeout that holds its rendering."""
-    here = Path(__file__).parent
-    for item in items:
-        if (
-            item.path.is_relative_to(here)
-            and "rover_data" in getattr(item, "fixturenames", ())
-            and item.get_closest_marker("timeout") is None
-        ):
-            item.add_marker(pytest.mark.timeout(RENDERED_TIMEOUT))
-
 
 @pytest.fixture(scope="session")
 def rover_data(tmp_path_factory: pytest.TempPathFactory) -> Path:

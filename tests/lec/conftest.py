@@ -7,7 +7,8 @@ first trains and the second waits, then reads its model.
 
 Training it takes about 40 s on a quiet machine and over 120 s (the suite's per-test timeout)
 on a loaded one, and pytest-timeout counts a fixture's setup against its first test: the
-tests that use it get a timeout that holds the training (and the wait for the other worker's).
+tests that use it get a timeout that holds the training (and the wait for the other worker's;
+``SLOW_FIXTURES`` in tests/conftest.py).
 """
 
 from __future__ import annotations
@@ -19,21 +20,6 @@ from pathlib import Path
 
 import pytest
 from lec_helpers import Trained, cache_key, train_session_model
-
-#: Seconds a test that uses the session model may take, its training included.
-TRAINED_TIMEOUT = 900
-
-
-def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
-    """Give the tests here that use the session model a timeout that holds its training."""
-    here = Path(__file__).parent
-    for item in items:
-        if (
-            item.path.is_relative_to(here)
-            and "trained" in getattr(item, "fixturenames", ())
-            and item.get_closest_marker("timeout") is None
-        ):
-            item.add_marker(pytest.mark.timeout(TRAINED_TIMEOUT))
 
 
 @pytest.fixture(scope="session")
