@@ -8,23 +8,18 @@ the documented figures, never over them (issue 13).
 
 from __future__ import annotations
 
-import importlib.util
 import json
 from pathlib import Path
 from typing import Any
 
 import pytest
-from bench_helpers import BENCH, load, run
+from bench_helpers import load, run, script_module
 
 
 @pytest.fixture(scope="module")
 def bench() -> Any:
     pytest.importorskip("torch")
-    spec = importlib.util.spec_from_file_location("oracle_bench", BENCH / "oracle.py")
-    assert spec is not None and spec.loader is not None
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+    return script_module("oracle.py", "oracle_bench")
 
 
 @pytest.mark.slow

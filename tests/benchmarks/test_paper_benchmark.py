@@ -9,25 +9,18 @@ rerun measures nothing again, and what the page says without and with the manage
 
 from __future__ import annotations
 
-import importlib.util
 import json
 import re
-import sys
 from pathlib import Path
 from typing import Any
 
 import pytest
-from bench_helpers import BENCH, run
+from bench_helpers import run, script_module
 
 
 @pytest.fixture(scope="module")
 def bench() -> Any:
-    spec = importlib.util.spec_from_file_location("paper_bench", BENCH / "paper.py")
-    assert spec is not None and spec.loader is not None
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[spec.name] = module  # its dataclasses look their module up
-    spec.loader.exec_module(module)
-    return module
+    return script_module("paper.py", "paper_bench")
 
 
 def _case_studies(path: Path) -> None:

@@ -9,7 +9,6 @@ to the same figures, other settings are refused, and docs/switching.md is exactl
 
 from __future__ import annotations
 
-import importlib.util
 import json
 import subprocess
 import sys
@@ -19,19 +18,14 @@ from typing import Any
 
 import numpy as np
 import pytest
-from bench_helpers import ROOT
+from bench_helpers import ROOT, script_module
 
 SCRIPT = ROOT / "benchmarks" / "switching.py"
 
 
 @pytest.fixture(scope="module")
 def bench() -> ModuleType:
-    spec = importlib.util.spec_from_file_location("switching_benchmark", SCRIPT)
-    assert spec is not None and spec.loader is not None
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[spec.name] = module  # dataclasses look their module up
-    spec.loader.exec_module(module)
-    return module
+    return script_module("switching.py", "switching_benchmark")
 
 
 def test_docs_switching_md_is_what_the_report_makes_of_the_committed_json(bench: Any) -> None:
