@@ -306,12 +306,15 @@ def processes_run(launch: Path, seconds: float, *, torch_threads: int = 0) -> di
             child.close()
     frames = int(ran["frames"])
     cpu = {name: round(1000 * float(d["cpu_s"]) / max(frames, 1), 1) for name, d in done.items()}
+    wall = float(ran["wall_s"])
     return {
         "frames": frames,
-        "wall_s": round(float(ran["wall_s"]), 3),
-        "fps": round(frames / float(ran["wall_s"]), 2),
+        "wall_s": round(wall, 3),
+        "fps": round(frames / wall, 2),
         "cpu_ms_per_frame": round(sum(cpu.values()), 1),
         "cpu_ms_per_frame_by_process": cpu,
+        # cores each process kept busy (its CPU seconds per wall second of the run)
+        "cores_by_process": {n: round(float(d["cpu_s"]) / wall, 2) for n, d in done.items()},
         "lockstep_timeouts": int(ran["timeouts"]),
         "flow": {
             name: {k: v for k, v in d.items() if k not in ("cpu_s", "torch_threads")}
@@ -516,11 +519,12 @@ def _utu(bus: Any, launch: Launch, closing: list[Any]) -> Callable[[], dict[str,
 
 
 # -- where the CPU time goes --------------------------------------------------------------------
-#: What the profile's breakdown adds up: a part's CPU time is the inclusive time of the calls
-#: that match (file suffix and function name; ``~`` for a built-in's name), summed over every
-#: thread. The parts do not nest: what is left over goes to ``other``.
+#: What the profile's breakdown adds up, per frame: a part's CPU time is the inclusive time
+#: of the calls that match (file suffix and function name; ``~`` for a C function), summed
+#: over every thread, or (``*`` as the name) the functions' own time in files under that
+#: folder. The parts do not nest; the rest of the Python threads' time is ``other``.
 PARTS: dict[str, tuple[tuple[str, str], ...]] = {
-    "physics": (("~", "<built-in method pybullet.stepSimulation>"),),
+    "physics and motion": (("anunnaki/sim/_rover.py", "_tick"), ("anunnaki/sim/_uav.py", "_tick")),
     "rendering": (("anunnaki/sim/_scene.py", "render"),),
     "phenomena": (("anunnaki/phenomena/_base.py", "apply"),),
     "jpeg encode": (("~", "<imencode>"),),
@@ -528,10 +532,19 @@ PARTS: dict[str, tuple[tuple[str, str], ...]] = {
     "detector forward": (("anunnaki/lec/_centernet.py", "detect"),),
     "oracle forward": (("anunnaki/enlil/_oracle_plugin.py", "assess"),),
     "utu": (("anunnaki/utu/host/_manager.py", "step"),),
+    "bus (own time)": (("anunnaki/bus/", "*"), ("anunnaki/messages/", "*")),
+    "scoring (F1; not the loop)": (("anunnaki/managed/_sim.py", "_score"),),
+    "bring-up (not per frame)": (
+        ("anunnaki/managed/_sim.py", "__init__"),
+        ("anunnaki/launch/_schema.py", "load_launch"),
+        ("anunnaki/launch/_runner.py", "_build_nodes"),
+    ),
 }
 
 
-def profile(launch: Path, seconds: float, *, top: int = 30) -> dict[str, Any]:
+def profile(
+    launch: Path, seconds: float, *, top: int = 30, dump: Path | None = None
+) -> dict[str, Any]:
     """The whole loop in one process (the ``utu`` stage) under cProfile, every thread.
 
     Each thread gets a profiler of its own (``threading.setprofile`` installs it as the
@@ -564,6 +577,8 @@ def profile(launch: Path, seconds: float, *, top: int = 30) -> dict[str, Any]:
     stats = pstats.Stats(main)
     for prof in profiles:
         stats.add(prof)
+    if dump is not None:
+        stats.dump_stats(dump)  # for a closer look: python -m pstats FILE
     table: dict[tuple[str, int, str], Any] = getattr(stats, "stats")  # noqa: B009 (untyped)
     frames = max(int(run["frames"]), 1)
 
@@ -573,9 +588,12 @@ def profile(launch: Path, seconds: float, *, top: int = 30) -> dict[str, Any]:
     parts: dict[str, float] = {}
     for part, keys in PARTS.items():
         total = 0.0
-        for (file, _, func), (_, _, _, cum, _) in table.items():
-            if any(file.endswith(f) and func == name for f, name in keys):
-                total += cum
+        for (file, _, func), (_, _, own, cum, _) in table.items():
+            for where, name in keys:
+                if name == "*" and f"/{where}" in file:
+                    total += own
+                elif name == func and file.endswith(where):
+                    total += cum
         parts[part] = ms(total)
     threads = sum(v[2] for v in table.values())  # every Python thread's own time
     parts["other (python)"] = round(ms(threads) - sum(parts.values()), 2)
@@ -600,6 +618,19 @@ def _median(runs: list[dict[str, Any]], key: str) -> float:
     return round(statistics.median(float(r[key]) for r in runs), 2)
 
 
+def _summary(runs: list[dict[str, Any]]) -> dict[str, Any]:
+    out: dict[str, Any] = {
+        "fps_median": _median(runs, "fps"),
+        "cpu_ms_per_frame_median": _median(runs, "cpu_ms_per_frame"),
+    }
+    if "cpu_ms_per_frame_by_process" in runs[0]:
+        out["cpu_ms_per_frame_by_process_median"] = {
+            name: round(statistics.median(r["cpu_ms_per_frame_by_process"][name] for r in runs), 1)
+            for name in COMPONENTS
+        }
+    return out | {"runs": runs}
+
+
 def measure(
     loop: str,
     launch: Path,
@@ -611,7 +642,10 @@ def measure(
 ) -> dict[str, Any]:
     """One loop in its layouts: median frames per second and CPU time each, and the ratios.
 
-    A repeat runs every stage and layout once, one after the other.
+    A repeat runs every stage and layout once, one after the other. With several
+    ``torch_threads`` (torch's threads in this process and in each component's; 0: torch's
+    default), the first gives the stages and ``processes``; each gives the whole loop in
+    both layouts under ``torch_threads_variants``, from the same repeats.
     """
     as_written = load_launch(launch).managed
     assert isinstance(as_written, SimKind)
@@ -619,62 +653,57 @@ def measure(
     out["camera"] = _camera(as_written)
     out["scorer"] = "off" if as_written.options.scorer is not None else "none"
     out["oracle"] = str((as_written.options.oracle or {}).get("name"))
+    default_threads = torch.get_num_threads()
     stage_runs: dict[str, list[dict[str, Any]]] = {}
-    proc_runs: dict[int, list[dict[str, Any]]] = {}
+    whole: dict[int, dict[str, list[dict[str, Any]]]] = {t: {} for t in torch_threads}
     for _ in range(repeats):
-        if "one_process" in layouts:
-            for name in STAGES:
-                run = stage(name, seconds, launch)
-                stage_runs.setdefault(name, []).append(run)
-                print(f"  {name:9s} {_rate(run)}")
-        if "processes" in layouts:
-            for threads in torch_threads:
+        for k, threads in enumerate(torch_threads):
+            tag = f" (torch threads {threads})" if threads else ""
+            if "one_process" in layouts:
+                torch.set_num_threads(threads or default_threads)
+                try:
+                    for name in STAGES if k == 0 else ("utu",):
+                        run = stage(name, seconds, launch)
+                        if k == 0:
+                            stage_runs.setdefault(name, []).append(run)
+                        if name == "utu":
+                            whole[threads].setdefault("one_process", []).append(run)
+                        print(f"  {name:9s} {_rate(run)}{tag}")
+                finally:
+                    torch.set_num_threads(default_threads)
+            if "processes" in layouts:
                 split = processes_run(launch, seconds, torch_threads=threads)
-                proc_runs.setdefault(threads, []).append(split)
+                whole[threads].setdefault("processes", []).append(split)
                 by = split["cpu_ms_per_frame_by_process"]
                 print(
                     f"  processes {_rate(split)} ({', '.join(f'{k} {v}' for k, v in by.items())})"
-                    + (f", torch threads {threads}" if threads else "")
+                    + tag
                 )
     aim = AIM_HZ[loop]
     out["aim_hz"] = aim
     if stage_runs:
         for name, runs in stage_runs.items():
-            out["stages"][name] = {
-                "fps_median": _median(runs, "fps"),
-                "cpu_ms_per_frame_median": _median(runs, "cpu_ms_per_frame"),
-                "runs": runs,
-            }
+            out["stages"][name] = _summary(runs)
         base = out["stages"]["platform"]["fps_median"]
         for entry in out["stages"].values():
             entry["ratio_to_platform"] = round(entry["fps_median"] / base, 3)
-        whole = out["stages"]["utu"]["fps_median"]
-        out["whole_loop_hz"] = whole
-        out["aim_met"] = whole >= aim
-    if proc_runs:
-        variants: dict[str, dict[str, Any]] = {}
-        for threads, runs in proc_runs.items():
-            by_process = {
-                name: round(
-                    statistics.median(r["cpu_ms_per_frame_by_process"][name] for r in runs), 1
-                )
-                for name in COMPONENTS
-            }
-            variants[str(threads)] = {
-                "torch_threads": threads or "default",
-                "fps_median": _median(runs, "fps"),
-                "cpu_ms_per_frame_median": _median(runs, "cpu_ms_per_frame"),
-                "cpu_ms_per_frame_by_process_median": by_process,
-                "runs": runs,
-            }
-        first = variants[str(torch_threads[0])]
-        out["processes"] = {**first, "variants": variants} if len(variants) > 1 else first
-        out["processes_hz"] = first["fps_median"]
-        out["aim_met_processes"] = first["fps_median"] >= aim
+        out["whole_loop_hz"] = out["stages"]["utu"]["fps_median"]
+        out["aim_met"] = out["whole_loop_hz"] >= aim
+    first = whole[torch_threads[0]]
+    if "processes" in first:
+        out["processes"] = _summary(first["processes"])
+        out["processes_hz"] = out["processes"]["fps_median"]
+        out["aim_met_processes"] = out["processes_hz"] >= aim
         if "whole_loop_hz" in out:
             out["processes"]["ratio_to_one_process"] = round(
-                first["fps_median"] / out["whole_loop_hz"], 3
+                out["processes_hz"] / out["whole_loop_hz"], 3
             )
+    if len(torch_threads) > 1:
+        out["torch_threads_variants"] = {
+            str(t): {"torch_threads": t or default_threads}
+            | {layout: _summary(runs) for layout, runs in by_layout.items()}
+            for t, by_layout in whole.items()
+        }
     return out
 
 
@@ -699,7 +728,7 @@ def _csv(text: str, allowed: tuple[str, ...], flag: str, ap: argparse.ArgumentPa
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--seconds", type=float, default=20.0, help="simulated seconds per run")
+    ap.add_argument("--seconds", type=float, default=15.0, help="simulated seconds per run")
     ap.add_argument("--repeats", type=int, default=2, help="runs per stage (median kept)")
     ap.add_argument("--output", type=Path, default=RESULTS)
     ap.add_argument("--launch", type=Path, default=LAUNCH, help="the rover's launch file")
@@ -745,8 +774,9 @@ def main() -> None:
         if variants[0] > 0:
             torch.set_num_threads(variants[0])
         found: dict[str, Any] = {"load_average_before": list(os.getloadavg())}
-        found |= profile(launch, args.seconds)
+        found |= profile(launch, args.seconds, dump=args.profile.with_suffix(".pstats"))
         found["load_average_after"] = list(os.getloadavg())
+        found["pstats"] = str(args.profile.with_suffix(".pstats"))
         args.profile.write_text(json.dumps(found, indent=1) + "\n")
         print(json.dumps(found["parts_ms_per_frame"], indent=1))
         print(f"wrote {args.profile}")
