@@ -45,7 +45,12 @@ top level of the results (as before); the UAV's are under ``"uav"``. Writes
     .venv/bin/python benchmarks/loop.py
     .venv/bin/python benchmarks/loop.py --seconds 10 --repeats 1 --output /tmp/loop.json
     .venv/bin/python benchmarks/loop.py --loops uav        # the UAV's loop only
-    .venv/bin/python benchmarks/loop.py --layouts one_process  # today's four stages only
+    .venv/bin/python benchmarks/loop.py --layouts one_process  # the four stages only
+    .venv/bin/python benchmarks/loop.py --torch-threads 0,1    # torch's default threads vs 1
+    .venv/bin/python benchmarks/loop.py --loops uav --profile runs/profile.json  # where it goes
+
+``--profile`` runs the whole loop in one process under cProfile, every thread on its own CPU
+clock, and writes the CPU time per frame of each part (:data:`PARTS`) instead.
 """
 
 from __future__ import annotations
@@ -754,6 +759,12 @@ def main() -> None:
         help="instead: profile the first of --loops in one process (cProfile, every thread) "
         "and write where the CPU time per frame goes",
     )
+    ap.add_argument(
+        "--pstats",
+        type=Path,
+        metavar="FILE",
+        help="with --profile: also keep the merged profile (python -m pstats FILE)",
+    )
     ap.add_argument("--component", choices=COMPONENTS, help=argparse.SUPPRESS)
     ap.add_argument("--bus-json", help=argparse.SUPPRESS)
     args = ap.parse_args()
@@ -774,9 +785,8 @@ def main() -> None:
         if variants[0] > 0:
             torch.set_num_threads(variants[0])
         found: dict[str, Any] = {"load_average_before": list(os.getloadavg())}
-        found |= profile(launch, args.seconds, dump=args.profile.with_suffix(".pstats"))
+        found |= profile(launch, args.seconds, dump=args.pstats)
         found["load_average_after"] = list(os.getloadavg())
-        found["pstats"] = str(args.profile.with_suffix(".pstats"))
         args.profile.write_text(json.dumps(found, indent=1) + "\n")
         print(json.dumps(found["parts_ms_per_frame"], indent=1))
         print(f"wrote {args.profile}")
