@@ -67,7 +67,7 @@ import sys
 import tempfile
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import IO, Any
 
@@ -99,12 +99,18 @@ BRING_UP = 180.0
 TAG = "@loop "
 
 
-def _launch(path: Path) -> tuple[Launch, SimKind]:
-    """The launch, without its live scorer (scoring, not the loop; see above)."""
+def _launch(path: Path, oracle: Mapping[str, Any] | None = None) -> tuple[Launch, SimKind]:
+    """The launch, without its live scorer (scoring, not the loop; see above).
+
+    ``oracle``: options to set on the launch's oracle (e.g. ``{"blas_threads": None}``).
+    """
     launch = load_launch(path)
     assert isinstance(launch.managed, SimKind)
-    if launch.managed.options.scorer is not None:
-        launch.managed.options = launch.managed.options.model_copy(update={"scorer": None})
+    options = launch.managed.options
+    update: dict[str, Any] = {"scorer": None}
+    if oracle:
+        update["oracle"] = {**(options.oracle or {}), **oracle}
+    launch.managed.options = options.model_copy(update=update)
     return launch, launch.managed
 
 
@@ -147,14 +153,16 @@ def _camera_topic(scenario: Any) -> str:
     return f"{(RoverSim if scenario.platform == 'rover' else UavSim).prefix}/camera/image"
 
 
-def stage(name: str, seconds: float, launch_path: Path) -> dict[str, float]:
+def stage(
+    name: str, seconds: float, launch_path: Path, oracle: Mapping[str, Any] | None = None
+) -> dict[str, float]:
     """Run one stage in this process for ``seconds`` of simulated time; frames and wall time.
 
     The ``utu`` stage (the whole launch, ``run_launch``) is timed from its first camera
     frame to its last; ``run_s`` is its managed system's run with its bring-up, and
     ``fps_with_bring_up`` the frames over it (how this stage was timed before 2026-11-27).
     """
-    launch, managed = _launch(launch_path)
+    launch, managed = _launch(launch_path, oracle)
     sim = managed.options
     if name == "utu":
         from anunnaki.sim import load_scenario
@@ -261,7 +269,14 @@ class _Child:
         self.errors.close()
 
 
-def _child_argv(name: str, launch: Path, bus: BusConfig, seconds: float, threads: int) -> list[str]:
+def _child_argv(
+    name: str,
+    launch: Path,
+    bus: BusConfig,
+    seconds: float,
+    threads: int,
+    oracle: Mapping[str, Any] | None,
+) -> list[str]:
     return [
         sys.executable,
         str(Path(__file__).resolve()),
@@ -275,25 +290,35 @@ def _child_argv(name: str, launch: Path, bus: BusConfig, seconds: float, threads
         repr(seconds),
         "--torch-threads",
         str(threads),
+        "--oracle-json",
+        json.dumps(dict(oracle or {})),
     ]
 
 
-def processes_run(launch: Path, seconds: float, *, torch_threads: int = 0) -> dict[str, Any]:
+def processes_run(
+    launch: Path,
+    seconds: float,
+    *,
+    torch_threads: int = 0,
+    oracle: Mapping[str, Any] | None = None,
+) -> dict[str, Any]:
     """One run of the loop with one process per component; rates, CPU time, what flowed.
 
     ``torch_threads``: torch's intra-op threads in each component's process (0: torch's
-    default, one per core).
+    default, one per core); ``oracle``: options set on the launch's oracle.
     """
     listen = BusConfig(kind="zenoh", mode="peer")  # on a free loopback port, no scouting
     children: dict[str, _Child] = {}
     try:
         children["platform"] = _Child(
-            "platform", _child_argv("platform", launch, listen, seconds, torch_threads)
+            "platform", _child_argv("platform", launch, listen, seconds, torch_threads, oracle)
         )
         endpoints = children["platform"].expect("ready", BRING_UP)["endpoints"]
         for name in COMPONENTS[1:]:
             join = BusConfig(kind="zenoh", mode="client", connect=endpoints, name=f"loop-{name}")
-            children[name] = _Child(name, _child_argv(name, launch, join, seconds, torch_threads))
+            children[name] = _Child(
+                name, _child_argv(name, launch, join, seconds, torch_threads, oracle)
+            )
         for name in COMPONENTS[1:]:
             children[name].expect("ready", BRING_UP)
         children["platform"].send("peers")  # it waits to see the others' nodes on the bus
@@ -379,7 +404,13 @@ def _wait_for(word: str) -> None:
         raise SystemExit(f"loop component: expected {word!r} on stdin, got {line.strip()!r}")
 
 
-def component(name: str, launch_path: Path, bus_json: str, seconds: float) -> None:
+def component(
+    name: str,
+    launch_path: Path,
+    bus_json: str,
+    seconds: float,
+    oracle: Mapping[str, Any] | None = None,
+) -> None:
     """One component's process (``--component``): bring up, say ready, run, report.
 
     The protocol with :func:`processes_run`, a JSON object a line on stdout after ``TAG``:
@@ -387,7 +418,7 @@ def component(name: str, launch_path: Path, bus_json: str, seconds: float) -> No
     in → [platform: runs ``seconds``, ``ran`` out] → ``stop`` in → ``cpu_s`` and the
     component's counters out (CPU seconds of the process from ``go`` to ``stop``).
     """
-    launch, managed = _launch(launch_path)
+    launch, managed = _launch(launch_path, oracle)
     sim = managed.options
     from anunnaki.sim import RoverSim, UavSim, load_scenario
 
@@ -644,13 +675,16 @@ def measure(
     *,
     layouts: tuple[str, ...] = LAYOUTS,
     torch_threads: tuple[int, ...] = (0,),
+    oracle_blas: tuple[str, ...] = ("1",),
 ) -> dict[str, Any]:
     """One loop in its layouts: median frames per second and CPU time each, and the ratios.
 
-    A repeat runs every stage and layout once, one after the other. With several
-    ``torch_threads`` (torch's threads in this process and in each component's; 0: torch's
-    default), the first gives the stages and ``processes``; each gives the whole loop in
-    both layouts under ``torch_threads_variants``, from the same repeats.
+    A repeat runs every stage and layout once, one after the other. Variants of the whole
+    loop run in the same repeats, in both layouts: each further ``torch_threads`` (torch's
+    threads in this process and in each component's; 0: torch's default) and each further
+    ``oracle_blas`` (the enlil oracle's ``blas_threads``: a number or ``none``), the others
+    as the first; they go to ``torch_threads_variants`` and ``oracle_blas_variants`` (the
+    first included). The first of each gives the stages and ``processes``.
     """
     as_written = load_launch(launch).managed
     assert isinstance(as_written, SimKind)
@@ -659,26 +693,35 @@ def measure(
     out["scorer"] = "off" if as_written.options.scorer is not None else "none"
     out["oracle"] = str((as_written.options.oracle or {}).get("name"))
     default_threads = torch.get_num_threads()
+
+    # (label, torch threads, oracle options): the first is the baseline, as the launch says
+    def blas(b: str) -> dict[str, Any] | None:  # the oracle's option; 1 is its default
+        return None if b == "1" else {"blas_threads": None if b == "none" else int(b)}
+
+    base = blas(oracle_blas[0])
+    variants: list[tuple[str, int, dict[str, Any] | None]] = [("", torch_threads[0], base)]
+    variants += [(f"torch threads {t}", t, base) for t in torch_threads[1:]]
+    variants += [(f"oracle blas_threads {b}", torch_threads[0], blas(b)) for b in oracle_blas[1:]]
     stage_runs: dict[str, list[dict[str, Any]]] = {}
-    whole: dict[int, dict[str, list[dict[str, Any]]]] = {t: {} for t in torch_threads}
+    whole: dict[str, dict[str, list[dict[str, Any]]]] = {label: {} for label, _, _ in variants}
     for _ in range(repeats):
-        for k, threads in enumerate(torch_threads):
-            tag = f" (torch threads {threads})" if threads else ""
+        for label, threads, oracle in variants:
+            tag = f" ({label})" if label else ""
             if "one_process" in layouts:
                 torch.set_num_threads(threads or default_threads)
                 try:
-                    for name in STAGES if k == 0 else ("utu",):
-                        run = stage(name, seconds, launch)
-                        if k == 0:
+                    for name in ("utu",) if label else STAGES:
+                        run = stage(name, seconds, launch, oracle)
+                        if not label:
                             stage_runs.setdefault(name, []).append(run)
                         if name == "utu":
-                            whole[threads].setdefault("one_process", []).append(run)
+                            whole[label].setdefault("one_process", []).append(run)
                         print(f"  {name:9s} {_rate(run)}{tag}")
                 finally:
                     torch.set_num_threads(default_threads)
             if "processes" in layouts:
-                split = processes_run(launch, seconds, torch_threads=threads)
-                whole[threads].setdefault("processes", []).append(split)
+                split = processes_run(launch, seconds, torch_threads=threads, oracle=oracle)
+                whole[label].setdefault("processes", []).append(split)
                 by = split["cpu_ms_per_frame_by_process"]
                 print(
                     f"  processes {_rate(split)} ({', '.join(f'{k} {v}' for k, v in by.items())})"
@@ -689,12 +732,12 @@ def measure(
     if stage_runs:
         for name, runs in stage_runs.items():
             out["stages"][name] = _summary(runs)
-        base = out["stages"]["platform"]["fps_median"]
+        alone = out["stages"]["platform"]["fps_median"]
         for entry in out["stages"].values():
-            entry["ratio_to_platform"] = round(entry["fps_median"] / base, 3)
+            entry["ratio_to_platform"] = round(entry["fps_median"] / alone, 3)
         out["whole_loop_hz"] = out["stages"]["utu"]["fps_median"]
         out["aim_met"] = out["whole_loop_hz"] >= aim
-    first = whole[torch_threads[0]]
+    first = whole[""]
     if "processes" in first:
         out["processes"] = _summary(first["processes"])
         out["processes_hz"] = out["processes"]["fps_median"]
@@ -703,11 +746,20 @@ def measure(
             out["processes"]["ratio_to_one_process"] = round(
                 out["processes_hz"] / out["whole_loop_hz"], 3
             )
+
+    def summaries(label: str) -> dict[str, Any]:
+        return {layout: _summary(runs) for layout, runs in whole[label].items()}
+
     if len(torch_threads) > 1:
         out["torch_threads_variants"] = {
             str(t): {"torch_threads": t or default_threads}
-            | {layout: _summary(runs) for layout, runs in by_layout.items()}
-            for t, by_layout in whole.items()
+            | summaries(f"torch threads {t}" if k else "")
+            for k, t in enumerate(torch_threads)
+        }
+    if len(oracle_blas) > 1:
+        out["oracle_blas_variants"] = {
+            b: {"oracle_blas_threads": b} | summaries(f"oracle blas_threads {b}" if k else "")
+            for k, b in enumerate(oracle_blas)
         }
     return out
 
@@ -765,14 +817,23 @@ def main() -> None:
         metavar="FILE",
         help="with --profile: also keep the merged profile (python -m pstats FILE)",
     )
+    ap.add_argument(
+        "--oracle-blas-threads",
+        default="1",
+        help="the enlil oracle's BLAS threads (its blas_threads: 1, the default, or none: the "
+        "process's), comma-separated variants to compare in the same run",
+    )
     ap.add_argument("--component", choices=COMPONENTS, help=argparse.SUPPRESS)
+    ap.add_argument("--oracle-json", default="{}", help=argparse.SUPPRESS)
     ap.add_argument("--bus-json", help=argparse.SUPPRESS)
     args = ap.parse_args()
     if args.component is not None:  # one component's process of the processes layout
         threads = int(args.torch_threads)
         if threads > 0:
             torch.set_num_threads(threads)
-        component(args.component, args.launch, args.bus_json, args.seconds)
+        component(
+            args.component, args.launch, args.bus_json, args.seconds, json.loads(args.oracle_json)
+        )
         return
     loops = _csv(args.loops, ("rover", "uav"), "--loops", ap)
     layouts = tuple(_csv(args.layouts, LAYOUTS, "--layouts", ap))
@@ -780,6 +841,9 @@ def main() -> None:
         variants = tuple(int(x) for x in args.torch_threads.split(","))
     except ValueError:
         ap.error(f"--torch-threads: whole numbers, e.g. 0,1, not {args.torch_threads!r}")
+    blas = tuple(x.strip().lower() for x in args.oracle_blas_threads.split(","))
+    if not all(x == "none" or (x.isdigit() and int(x) > 0) for x in blas):
+        ap.error(f"--oracle-blas-threads: 1, 2, … or none, not {args.oracle_blas_threads!r}")
     if args.profile is not None:
         launch = args.launch if loops[0] == "rover" else args.uav_launch
         if variants[0] > 0:
@@ -814,6 +878,7 @@ def main() -> None:
                 args.repeats,
                 layouts=layouts,
                 torch_threads=variants,
+                oracle_blas=blas,
             )
         )
     if "uav" in loops:
@@ -825,6 +890,7 @@ def main() -> None:
             args.repeats,
             layouts=layouts,
             torch_threads=variants,
+            oracle_blas=blas,
         )
     results["machine"]["load_average_after"] = list(os.getloadavg())
     args.output.parent.mkdir(parents=True, exist_ok=True)
