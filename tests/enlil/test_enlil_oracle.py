@@ -141,7 +141,7 @@ def _blas_threads() -> set[int]:
 
 def test_enlil_plugin_assesses_on_one_blas_thread(oracle_file, monkeypatch) -> None:  # type: ignore[no-untyped-def]
     # A frame's lookup is a few small BLAS calls; idle OpenBLAS workers spun between frames
-    # (34 ms of CPU a frame against 7 on one thread, docs/whole-loop.md). The process's own
+    # (23–34 ms of CPU a frame against 8–9 on one thread, docs/whole-loop.md). The process's own
     # setting is restored after each frame, and the figures are those of the default threads.
     path, _, _ = oracle_file
     threaded = EnlilOracle(oracles={"colour": path}, blas_threads=None)

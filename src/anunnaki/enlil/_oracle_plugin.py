@@ -18,8 +18,8 @@ sha256 checked); for a model no oracle covers nothing is invented: ``assess`` re
 A frame's context lookup is a few small BLAS calls (one query against the stored
 contexts). OpenBLAS's idle workers spin for a while after each threaded call, so at a camera
 rate they kept a core busy between frames: measured in the whole loop, the UAV's oracle
-process took 34 ms of CPU per frame with numpy's and SciPy's default two BLAS threads and 7
-with one (docs/whole-loop.md). ``assess`` therefore runs on one BLAS thread
+process took 23–34 ms of CPU per frame with numpy's and SciPy's default two BLAS threads
+and 8–9 with one (docs/whole-loop.md). ``assess`` therefore runs on one BLAS thread
 (``blas_threads``), through threadpoolctl, and restores the process's setting after.
 """
 
