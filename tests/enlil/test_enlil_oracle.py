@@ -131,3 +131,49 @@ def test_registry_names_each_models_oracle(oracle_file, tmp_path) -> None:  # ty
     registry.write_text(body.replace(f"{path}.safetensors", "missing.safetensors"))
     with pytest.raises(RegistryFileError, match=r"oracle file 'missing\.safetensors' not found"):
         load_registry(registry)
+
+
+def _blas_threads() -> set[int]:
+    from threadpoolctl import threadpool_info  # type: ignore[import-untyped]
+
+    return {int(lib["num_threads"]) for lib in threadpool_info() if lib["user_api"] == "blas"}
+
+
+def test_enlil_plugin_assesses_on_one_blas_thread(oracle_file, monkeypatch) -> None:  # type: ignore[no-untyped-def]
+    # A frame's lookup is a few small BLAS calls; idle OpenBLAS workers spun between frames
+    # (23–34 ms of CPU a frame against 8–9 on one thread, docs/whole-loop.md). The process's own
+    # setting is restored after each frame, and the figures are those of the default threads.
+    path, _, _ = oracle_file
+    threaded = EnlilOracle(oracles={"colour": path}, blas_threads=None)
+    single = EnlilOracle(oracles={"colour": path})
+    assert single.blas_threads == 1
+    from anunnaki.enlil import OracleModel
+
+    seen: list[set[int]] = []
+    probabilities = OracleModel.category_probabilities
+
+    def recording(self, *args, **kwargs):  # type: ignore[no-untyped-def]
+        seen.append(_blas_threads())
+        return probabilities(self, *args, **kwargs)
+
+    monkeypatch.setattr(OracleModel, "category_probabilities", recording)
+    before = _blas_threads()
+    frames = tiny_data(3)
+    for i in range(3):
+        a = threaded.assess(frames.image(i), seq=i, model_id="colour")
+        b = single.assess(frames.image(i), seq=i, model_id="colour")
+        assert a is not None and b is not None
+        assert (a.category, a.context["phenomenon"]) == (b.category, b.context["phenomenon"])
+        probs = [np.asarray(x.context["probs"], dtype=float) for x in (a, b)]
+        np.testing.assert_allclose(probs[0], probs[1], atol=1e-4)
+        assert _blas_threads() == before  # restored
+    assert seen[0::2] == [before] * 3  # blas_threads=None: the process's threads
+    assert seen[1::2] == [{1}] * 3  # the default: one
+
+
+def test_enlil_plugin_refuses_bad_blas_threads(oracle_file) -> None:  # type: ignore[no-untyped-def]
+    from anunnaki.oracles import OracleError
+
+    path, _, _ = oracle_file
+    with pytest.raises(OracleError, match="blas_threads"):
+        EnlilOracle(oracles={"colour": path}, blas_threads=0)
