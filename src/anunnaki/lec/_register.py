@@ -107,8 +107,9 @@ def register_model(
             of the ``default`` domain: a registry starts from its default model).
 
     Raises:
-        ModelRegistryError: The id is registered already, the registry is missing (without
-            *create*) or cannot be added to, or a file of the same name is in the way.
+        ModelRegistryError: The id is registered already, another model serves the domain,
+            the registry is missing (without *create*) or cannot be added to, or a file of
+            the same name is in the way.
         ModelFileError: The registry is malformed (naming the line) or the result does not
             load (the file is then restored).
 
@@ -129,6 +130,13 @@ def register_model(
             raise ModelRegistryError(
                 f"{reg}:{line}: a model with id {model_id!r} is registered already; give the "
                 "new model another id (robustify --id NAME) or remove that entry first"
+            )
+        serving = next((m for m in existing if m.domain == domain), None)
+        if serving is not None:
+            raise ModelRegistryError(
+                f"{reg}: {serving.id!r} serves domain {domain!r} already (one model per "
+                f"domain: a swap names a domain); remove that entry first to register "
+                f"{model_id!r} in its place, or give the new model another domain"
             )
     elif create:
         text = f"anunnaki: {REGISTRY_FORMAT}\nlec: detector\nmodels:\n"
