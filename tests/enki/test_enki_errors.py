@@ -61,7 +61,7 @@ def test_an_archive_of_another_phenomenon_or_model(
     err = _fails([*argv(model, rover_data, tmp_path / "w1"), "--archive", str(fog)], capsys)
     assert f"--archive {fog}" in err and "search of fog, not of --phenomenon brightness" in err
     other = _archive(tmp_path / "other", phenomenon="brightness", params=("gain", "gamma"),
-                     sha=sha256_file(models / "rover-fog.safetensors"))  # fmt: skip
+                     sha=sha256_file(models / "rover-fog-enki.safetensors"))  # fmt: skip
     err = _fails([*argv(model, rover_data, tmp_path / "w2"), "--archive", str(other)], capsys)
     assert f"--archive {other}" in err and "not " + str(model) in err
     assert "leave --archive out" in err
