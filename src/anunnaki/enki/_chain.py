@@ -486,6 +486,8 @@ def robustify(
         "model_id": new_id,
     }
     work = WorkFolder(out, options, scoped=("oracle",))  # older folders recorded it here
+    if register is not None:  # a registry that would refuse the model fails before any work
+        _check_register(work, Path(register), new_id=new_id, domain=config.domain)
     chain = _Chain(
         resolved, Path(data), work, config, splits=splits, model_in_id=model_in_id,
         new_id=new_id, progress=progress,
@@ -525,6 +527,38 @@ def robustify(
     return summary
 
 
+def _register_key(registry: Path) -> str:
+    """The work folder's stage name of a registration into *registry*."""
+    return "register-" + hashlib.sha256(str(registry.resolve()).encode()).hexdigest()[:12]
+
+
+def _check_register(work: WorkFolder, registry: Path, *, new_id: str, domain: str) -> None:
+    """Refuse ``--register`` up front when the registry has the id or a model of the domain.
+
+    A registration this work folder made already is left to the register stage (it reuses it).
+    """
+    from anunnaki.lec import load_registry
+
+    if not registry.is_file() or work.stage(_register_key(registry)) is not None:
+        return  # a missing registry is register_model's to refuse, with its own message
+    try:
+        existing = load_registry(registry)
+    except AnunnakiError as exc:
+        raise EnkiError(f"--register {registry}: {exc}") from None
+    if new_id in existing:
+        raise EnkiError(
+            f"--register {registry}: a model with id {new_id!r} is registered already; give "
+            "the new model another id (--id NAME) or remove that entry first"
+        )
+    serving = next((m for m in existing if m.domain == domain), None)
+    if serving is not None:
+        raise EnkiError(
+            f"--register {registry}: {serving.id!r} serves domain {domain!r} already (one "
+            f"model per domain); remove its entry to register {new_id!r} in its place, or "
+            "leave --register out and register the model later (anunnaki.lec.register_model)"
+        )
+
+
 def _register(
     work: WorkFolder,
     registry: Path,
@@ -537,7 +571,7 @@ def _register(
     """Add the model and its oracle to *registry* (once per registry: a rerun reuses it)."""
     from anunnaki.lec import register_model
 
-    key = "register-" + hashlib.sha256(str(registry.resolve()).encode()).hexdigest()[:12]
+    key = _register_key(registry)
     done = work.stage(key)
     if done is not None:
         return done
