@@ -79,7 +79,7 @@ def test_a_registry_that_would_refuse_the_model_fails_before_any_work(
     # the copy of the shipped registry has a low_light model: one model per domain
     err = _fails([*argv(model, rover_data, tmp_path / "w1"), "--register", str(reg)], capsys)
     assert f"--register {reg}: 'rover-low_light' serves domain 'low_light' already" in err
-    assert "remove its entry to register 'rover-enki' in its place" in err
+    assert "remove that entry first to register 'rover-enki' in its place" in err
     taken = [*argv(model, rover_data, tmp_path / "w2"), "--register", str(reg)]
     taken[taken.index("low_light")] = "dusk"
     taken[taken.index("rover-enki")] = "rover-hsl"

@@ -537,26 +537,17 @@ def _check_register(work: WorkFolder, registry: Path, *, new_id: str, domain: st
 
     A registration this work folder made already is left to the register stage (it reuses it).
     """
-    from anunnaki.lec import load_registry
+    from anunnaki.lec import check_registrable
 
     if not registry.is_file() or work.stage(_register_key(registry)) is not None:
         return  # a missing registry is register_model's to refuse, with its own message
     try:
-        existing = load_registry(registry)
+        check_registrable(registry, new_id, domain)
     except AnunnakiError as exc:
-        raise EnkiError(f"--register {registry}: {exc}") from None
-    if new_id in existing:
         raise EnkiError(
-            f"--register {registry}: a model with id {new_id!r} is registered already; give "
-            "the new model another id (--id NAME) or remove that entry first"
-        )
-    serving = next((m for m in existing if m.domain == domain), None)
-    if serving is not None:
-        raise EnkiError(
-            f"--register {registry}: {serving.id!r} serves domain {domain!r} already (one "
-            f"model per domain); remove its entry to register {new_id!r} in its place, or "
-            "leave --register out and register the model later (anunnaki.lec.register_model)"
-        )
+            f"--register {exc} (or leave --register out and register the model later: "
+            "anunnaki.lec.register_model)"
+        ) from None
 
 
 def _register(
