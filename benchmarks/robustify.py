@@ -13,9 +13,12 @@ with one :class:`~anunnaki.enki.Budget`); only what perturbs a training frame di
 - ``corruption_mix``: each frame a random phenomenon of the library at a random strength
   (it does not depend on the domain: trained once per platform and seed, in the work
   folder's ``PLATFORM-shared``, and measured under every domain's conditions);
-- ``today``: the shipped ``train-detector --augment`` model where the domain has one
-  (``rover-fog`` for fog; ``rover-low_light``, trained on brightness and HSL darkening, for
-  hsl). It was trained before, at its own budget: its budget is recorded, not equal;
+- ``today``: the ``train-detector --augment`` model where the domain has one (``rover-fog``
+  for fog; ``rover-low_light``, trained on brightness and HSL darkening, for hsl). It was
+  trained before, at its own budget: its budget is recorded, not equal. ``rover-fog`` is no
+  longer shipped (``rover-fog-enki`` replaced it, as :func:`decide` found): when
+  examples/models lacks it, the arm rebuilds it into its work folder with the command that
+  made it (:data:`RETIRED`, docs/detector.md) on the ``--rover-data`` dataset;
 - ``shipped``: the shipped Enki model of the domain (scripts/train-domains.sh), at its own
   budget (the rover's: 504 steps, as today's), for the decision whether Enki models replace
   today's (:func:`decide`).
@@ -190,6 +193,43 @@ DOMAINS = {
         ),
     )
 }
+
+
+#: Today's ``--augment`` models that are no longer shipped, with the ``train-detector``
+#: options that made them (docs/detector.md; ``--init`` names a model of examples/models).
+#: ``rover-fog`` gave way to the Enki model ``rover-fog-enki`` (docs/enki.md, "Decision").
+RETIRED: dict[str, list[str]] = {
+    "rover-fog": ["--model-id", "rover-fog", "--domain", "fog", "--augment", "fog",
+                  "--augment-prob", "0.7", "--init", "rover-default", "--epochs", "8",
+                  "--lr", "2e-3", "--seed", "0", "--threads", "2"],
+}  # fmt: skip
+
+
+def today_model(model_id: str, data: Path, folder: Path, bars: Bars | None = None) -> Path:
+    """Today's ``--augment`` model file: the shipped one, or one rebuilt into *folder*.
+
+    A model of :data:`RETIRED` that examples/models no longer holds is trained once with its
+    command on *data* (the run's dataset), into ``folder/ID.safetensors``, and reused.
+    """
+    shipped = MODELS / f"{model_id}.safetensors"
+    if shipped.is_file() or model_id not in RETIRED:
+        return shipped
+    out = folder / f"{model_id}.safetensors"
+    if not out.is_file():
+        import subprocess
+
+        args = list(RETIRED[model_id])
+        k = args.index("--init") + 1
+        args[k] = str(MODELS / f"{args[k]}.safetensors")
+        if bars is not None:
+            bars.log(
+                f"  {model_id}: not shipped any more, rebuilt (train-detector {' '.join(args)})"
+            )
+        folder.mkdir(parents=True, exist_ok=True)
+        cmd = [sys.executable, "-m", "anunnaki.cli.main", "train-detector", "--data", str(data),
+               "--out", str(out), *args]  # fmt: skip
+        subprocess.run(cmd, check=True, stdout=subprocess.DEVNULL)
+    return out
 
 
 @dataclass(frozen=True)
@@ -843,6 +883,8 @@ def run_arm(arm: str, seed: int | None, domain: Domain, ctx: dict[str, Any]) -> 
         model = {"default": domain.model, "today": domain.today, "shipped": domain.shipped}[arm]
         assert model is not None
         file = MODELS / f"{model}.safetensors"
+        if arm == "today":
+            file = today_model(model, ctx["data"], folder, bars)
         det = load_detector(file)
         card = read_card(file).training
         result["model"] = model
@@ -1030,7 +1072,11 @@ def _today_augment(domain: Domain) -> list[str]:
         return []
     from anunnaki.lec import read_card
 
-    aug = read_card(MODELS / f"{domain.today}.safetensors").training.get("augment", [])
+    shipped = MODELS / f"{domain.today}.safetensors"
+    if not shipped.is_file() and domain.today in RETIRED:  # its command names the phenomena
+        args = RETIRED[domain.today]
+        return [args[args.index("--augment") + 1]]
+    aug = read_card(shipped).training.get("augment", [])
     return [str(a) for a in aug]
 
 
@@ -1061,6 +1107,7 @@ def run_domain(
         "test": test.in_memory(),
         "perturbed": None,
         "shared": shared,
+        "data": data,
     }
     ctx["perturbed"] = Perturbed(ctx["test"], s.eval_seed)
     return domain_figures(domain, prep, run_jobs(domain, ctx), s)

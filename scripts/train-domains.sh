@@ -108,7 +108,7 @@ pick uav-fog && robustify uav-fog uav fog fog 96 5 "${UAV[@]}"
 pick uav-rain_brightness && robustify uav-rain_brightness uav rain+brightness rain_brightness \
   96 5 "${UAV[@]}"
 DATASET=()
-# rover-fog-enki beside rover-fog (made by `train-detector --augment fog`): which one the
-# registry's fog domain should name waits for benchmarks/robustify.py.
+# rover-fog-enki: the rover's fog model. It replaced rover-fog (`train-detector --augment
+# fog`, no longer shipped) as benchmarks/robustify.py measured (docs/enki.md, "Decision").
 pick rover-fog-enki && robustify rover-fog-enki rover fog fog 400 8
 echo "times: $TIMES" >&2

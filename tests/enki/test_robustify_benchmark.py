@@ -252,3 +252,30 @@ def test_the_decision_follows_the_figures(bench: Any) -> None:
     loss = bench.decide(domain(arm(0.92, 0.9, 0.5)))
     assert not loss["replace"] and "loses on (c)" in loss["reason"]
     assert bench.decide({"arms": {"enki": {}}, "conditions": {}}) is None
+
+
+@pytest.mark.timeout(600)  # one train-detector process: seconds on tiny data, more under load
+def test_a_today_model_no_longer_shipped_is_rebuilt_by_its_command(
+    bench: Any, rover_data: Path, tmp_path: Path
+) -> None:
+    """rover-fog left examples/models (rover-fog-enki serves fog): the today arm trains it."""
+    from anunnaki.lec import load_registry, read_card
+
+    assert not (bench.MODELS / "rover-fog.safetensors").exists()
+    assert load_registry(bench.MODELS / "rover.yaml").for_domain("fog").id == "rover-fog-enki"
+    folder = tmp_path / "arms" / "today"
+    file = bench.today_model("rover-fog", rover_data, folder)
+    assert file == folder / "rover-fog.safetensors"
+    card = read_card(file)
+    assert card.model_id == "rover-fog" and card.domain == "fog"
+    t = card.training
+    assert t["augment"] == ["fog"] and t["augment_prob"] == 0.7 and t["init"] == "rover-default"
+    assert (t["epochs"], t["lr"], t["seed"], t["threads"]) == (8, 0.002, 0, 2)  # as shipped
+    stamp = file.stat().st_mtime_ns
+    assert bench.today_model("rover-fog", rover_data, folder) == file  # reused, not retrained
+    assert file.stat().st_mtime_ns == stamp
+    # the held-out region check reads its augmentation from the command
+    assert bench._today_augment(bench.DOMAINS["rover-fog"]) == ["fog"]
+    shipped = bench.today_model("rover-low_light", rover_data, tmp_path / "x")
+    assert shipped == bench.MODELS / "rover-low_light.safetensors"  # still shipped: used as is
+    assert not (tmp_path / "x").exists()

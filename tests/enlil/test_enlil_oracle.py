@@ -104,30 +104,32 @@ def test_registry_names_each_models_oracle(oracle_file, tmp_path) -> None:  # ty
 
     path, digest, _ = oracle_file
     models = Path(__file__).resolve().parents[2] / "examples" / "models"
-    for name in ("rover-default", "rover-fog"):  # a registry's files sit in its folder
+    for name in ("rover-default", "rover-fog-enki"):  # a registry's files sit in its folder
         for suffix in (".safetensors", ".json"):
             shutil.copy(models / f"{name}{suffix}", tmp_path / f"{name}{suffix}")
     for suffix in (".safetensors", ".json"):
         shutil.copy(f"{path}{suffix}", tmp_path / f"{path.name}{suffix}")  # NAME.oracle + suffix
     path = tmp_path / path.name
-    pin = {n: sha256_file(tmp_path / f"{n}.safetensors") for n in ("rover-default", "rover-fog")}
+    pin = {
+        n: sha256_file(tmp_path / f"{n}.safetensors") for n in ("rover-default", "rover-fog-enki")
+    }
     registry = tmp_path / "models.yaml"
     body = (
         "anunnaki: models/1\nmodels:\n"
         "  - id: colour\n    domain: default\n    file: rover-default.safetensors\n"
         f"    sha256: {pin['rover-default']}\n"
         f"    oracle: {{file: {path}.safetensors, sha256: {digest}}}\n"
-        "  - id: rover-fog\n    domain: fog\n    file: rover-fog.safetensors\n"
-        f"    sha256: {pin['rover-fog']}\n"
+        "  - id: rover-fog-enki\n    domain: fog\n    file: rover-fog-enki.safetensors\n"
+        f"    sha256: {pin['rover-fog-enki']}\n"
     )
     registry.write_text(body)
     spec = load_registry(registry).get("colour")
     assert spec.oracle is not None and spec.oracle.sha256 == digest
-    assert load_registry(registry).get("rover-fog").oracle is None  # old entries still load
+    assert load_registry(registry).get("rover-fog-enki").oracle is None  # old entries still load
     plugin = EnlilOracle(registry)
     assert plugin.covered == ["colour"]
     assert plugin.assess(tiny_data(1).image(0), seq=0, model_id="colour") is not None
-    assert plugin.assess(tiny_data(1).image(0), seq=1, model_id="rover-fog") is None
+    assert plugin.assess(tiny_data(1).image(0), seq=1, model_id="rover-fog-enki") is None
     registry.write_text(body.replace(f"{path}.safetensors", "missing.safetensors"))
     with pytest.raises(RegistryFileError, match=r"oracle file 'missing\.safetensors' not found"):
         load_registry(registry)

@@ -20,6 +20,7 @@ from managed_helpers import fog_scene
 
 from anunnaki import topics
 from anunnaki.launch import parse_launch, run_launch
+from anunnaki.lec import load_registry
 from anunnaki.messages import Assessment
 from anunnaki.sim import load_report
 
@@ -127,10 +128,11 @@ def test_enlil_drives_a4_fog_then_the_fog_model(enlil_run: dict[str, Any]) -> No
 def test_after_the_swap_the_fog_models_oracle_assesses(enlil_run: dict[str, Any]) -> None:
     seen: list[Assessment] = enlil_run["assessments"]
     models = [a.model_id for a in seen]
-    assert models[0] == "rover-default" and models[-1] == "rover-fog"
-    k = models.index("rover-fog")
+    fog_model = load_registry(MODELS).for_domain("fog").id  # rover-fog-enki, Enki's
+    assert models[0] == "rover-default" and models[-1] == fog_model
+    k = models.index(fog_model)
     assert all(m == "rover-default" for m in models[:k])  # one switch, no going back
-    assert all(m == "rover-fog" for m in models[k:])
+    assert all(m == fog_model for m in models[k:])
     clear = [a for a in seen[:k] if a.frame_seq is not None and a.frame_seq < 25]
     assert clear and all(a.category == 0 for a in clear)  # no alarm in clear weather
     # In fog the default model's oracle said degraded in fog (what started the swap) ...
