@@ -252,3 +252,32 @@ def test_the_decision_follows_the_figures(bench: Any) -> None:
     loss = bench.decide(domain(arm(0.92, 0.9, 0.5)))
     assert not loss["replace"] and "loses on (c)" in loss["reason"]
     assert bench.decide({"arms": {"enki": {}}, "conditions": {}}) is None
+
+
+def test_a_shipped_model_without_a_rival_is_kept_only_for_a_gain_on_its_own_contexts(
+    bench: Any,
+) -> None:
+    def arm(clean: float, rand: float, hard: float, std: float = 0.0) -> dict[str, Any]:
+        row = {"clean": clean, "random": rand, "hardest": hard, "family:motion_blur": 0.5}
+        return {k: {"mean": v, "std": std, "n": 1} for k, v in row.items()}
+
+    def domain(shipped: dict[str, Any]) -> dict[str, Any]:
+        arms = {
+            "default": arm(0.95, 0.2, 0.1),
+            "enki": arm(0.9, 0.6, 0.5, std=0.02),
+            "shipped": shipped | {"model": "uav-fog", "training": [{"steps": 315}]},
+        }
+        return {"arms": arms, "conditions": {"random": {}, "hardest": {}, "family:motion_blur": {}}}
+
+    kept = bench.keep_shipped(domain(arm(0.92, 0.7, 0.12)))  # +50 on (b), a tie on (c)
+    assert kept["keep"] and "(b)" in kept["reason"] and kept["steps"] == 315
+    assert kept["clean_loss"] == 0.03 and not kept["clean_within_aim"]  # stated, not used
+    tie = bench.keep_shipped(domain(arm(0.95, 0.22, 0.13)))  # inside twice Enki's spread
+    assert not tie["keep"] and "ties" in tie["reason"]
+    loss = bench.keep_shipped(domain(arm(0.95, 0.9, 0.0)))
+    assert not loss["keep"] and "loses to the default on (c)" in loss["reason"]
+    # a domain with today's --augment model is decided by decide(), not here
+    today = domain(arm(0.92, 0.7, 0.12))
+    today["arms"]["today"] = arm(0.9, 0.5, 0.4)
+    assert bench.keep_shipped(today) is None
+    assert bench.keep_shipped({"arms": {"enki": {}}, "conditions": {}}) is None
