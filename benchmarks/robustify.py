@@ -1131,13 +1131,22 @@ def main(argv: Sequence[str] | None = None) -> int:
             help=f"default {getattr(defaults, name)} ({getattr(QUICK, name)} quick)",
         )
     p.add_argument("--lr", type=float, default=None)
+    p.add_argument(
+        "--lr-choice",
+        type=Path,
+        help="--merge: a JSON record of how the merged domains' learning rate was chosen on "
+        "val (kept with each domain and stated in the report)",
+    )
     p.add_argument("--clean", type=float, default=None)
     args = p.parse_args(argv)
     if args.report:
         write_report(json.loads(args.output.read_text(encoding="utf-8")), args.doc, args.images)
         return 0
     if args.merge:
-        merge(args.output, args.merge, own_settings=args.own_settings)
+        choice = read_json(args.lr_choice) if args.lr_choice else None
+        if args.lr_choice and choice is None:
+            p.error(f"--lr-choice {args.lr_choice}: no such file")
+        merge(args.output, args.merge, own_settings=args.own_settings, lr_choice=choice)
         return 0
     if args.nice:
         os.nice(args.nice)
@@ -1196,13 +1205,21 @@ def main(argv: Sequence[str] | None = None) -> int:
     return 0
 
 
-def merge(output: Path, others: Sequence[Path], *, own_settings: bool = False) -> None:
+def merge(
+    output: Path,
+    others: Sequence[Path],
+    *,
+    own_settings: bool = False,
+    lr_choice: dict[str, Any] | None = None,
+) -> None:
     """Add the domains of *others* to *output*; refuse files measured with other settings.
 
     Domains measured by separate processes (one per domain, side by side) end up in one
     result file, each with its own run record, as measured. With *own_settings* a domain
     measured at other settings (a smaller budget where the platform is slower) is added
-    too: it keeps its settings, and the report states them for that domain.
+    too: it keeps its settings, and the report states them for that domain. *lr_choice*
+    (how the learning rate was chosen on val: ``candidates`` with their val F1, ``chosen``)
+    is kept with each added domain; its ``chosen`` must be the domain's learning rate.
     """
     doc = json.loads(output.read_text(encoding="utf-8"))
     for other in others:
@@ -1214,8 +1231,15 @@ def merge(output: Path, others: Sequence[Path], *, own_settings: bool = False) -
                     "with the same settings go in one file (--own-settings adds its domains "
                     "with their own settings, stated per domain in the report)"
                 )
-        for entry in more["domains"].values():
+        for name, entry in more["domains"].items():
             entry["settings"] = more["settings"]  # the settings its file was measured with
+            if lr_choice is not None:
+                if lr_choice.get("chosen") != more["settings"]["lr"]:
+                    raise SystemExit(
+                        f"--lr-choice: it chose lr {lr_choice.get('chosen')}, {name} in {other} "
+                        f"was measured with {more['settings']['lr']}"
+                    )
+                entry["lr_choice"] = lr_choice
         doc["domains"] |= more["domains"]
     write_json(output, doc)
 
@@ -1730,6 +1754,20 @@ def _budget_lines(d: dict[str, Any]) -> list[str]:
         "- clean F1 the fine-tune costs at this budget (default − arm, points; negative: a "
         f"gain): {cost};",
     ]
+    choice = d.get("lr_choice")
+    if choice:
+        under = f"under {choice['phenomenon']}"
+        tried = "; ".join(
+            f"lr {c['lr']}: clean {pct(c['clean'])}, {under} {pct(c['perturbed'])}"
+            for c in choice["candidates"]
+        )
+        lines.append(
+            f"- learning rate {choice['chosen']}, chosen on val (never test) for every arm "
+            f"alike, on {choice['domain']}: {choice['how']}; at {choice['steps']} steps "
+            f"({choice['images']} images × {choice['epochs']} epochs) val F1 {tried} (the "
+            f"default: clean {pct(choice['default']['clean'])}, {under} "
+            f"{pct(choice['default']['perturbed'])});"
+        )
     if "today" in arms:
         t = arms["today"]["training"][0]
         lines.append(

@@ -215,6 +215,30 @@ def test_merge_adds_domains_measured_with_the_same_settings(bench: Any, tmp_path
     page = bench.render_report(merged)
     assert "uav-x: measured at a **reduced scale**: 64 training images × 1 epochs" in page
     assert "--domains uav-x --train-images 64 --val-images" in page
+    # how the learning rate was chosen on val is kept with the domain and stated
+    val = {"clean": 0.9, "perturbed": 0.3}
+    choice = {
+        "domain": "uav-x",
+        "phenomenon": "fog",
+        "how": "two candidates",
+        "steps": 4,
+        "images": 64,
+        "epochs": 1,
+        "default": val,
+        "candidates": [{"lr": small["lr"], **val}, {"lr": 1e-4, **val}],
+        "chosen": small["lr"],
+    }
+    record = tmp_path / "lr.json"
+    record.write_text(json.dumps(choice))
+    args = ["--output", str(base), "--merge", str(odd), "--own-settings", "--lr-choice"]
+    assert bench.main([*args, str(record)]) == 0
+    merged = json.loads(base.read_text("utf-8"))
+    assert merged["domains"]["uav-x"]["lr_choice"] == choice
+    assert "lr_choice" not in merged["domains"][name]
+    assert f"learning rate {small['lr']}, chosen on val (never test)" in bench.render_report(merged)
+    record.write_text(json.dumps(choice | {"chosen": 1e-4}))  # not what uav-x was run with
+    with pytest.raises(SystemExit, match="lr-choice"):
+        bench.main([*args, str(record)])
 
 
 def test_the_shared_fine_tune_lock_lets_one_process_train_a_seed(
