@@ -57,7 +57,8 @@ Run::
 Domains measured by separate processes (``--output runs/D.json`` each) join the results with
 ``--merge runs/D.json ...`` (refused unless their settings are the same; ``--own-settings``
 adds a domain measured at its own scale, e.g. a slower platform at a smaller budget, and the
-report states each domain's). Every arm × seed (and the searches) runs under a lock in the
+report states each domain's; ``--lr-choice FILE`` keeps with them how their learning rate was
+chosen on val). Every arm × seed (and the searches) runs under a lock in the
 work folder, so several processes given the same domain and ``--work`` share its work.
 
 ``--report`` regenerates docs/enki.md and its plots from benchmarks/results/robustify.json
