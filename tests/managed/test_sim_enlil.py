@@ -174,3 +174,46 @@ def test_the_demo_with_the_learned_oracle_swaps_and_keeps_the_rover(run_demo: An
     assert {"swap-to-fog-model", "swap-to-low-light-model"} <= set(demo.verified), log
     run = load_report(demo.report)
     assert run.scoring is not None and run.scoring["oracle"] == "enlil"
+
+
+#: The demo's raindrop (examples/rover/conditions-scenario.yaml) on the scene above from 3 s:
+#: the raindrop model's own oracle finds it compromised in this drop, as the demo shows.
+RAINDROP = {
+    **fog_scene("enlil-raindrop", duration=11, fog_at=3),
+    "phenomena": [
+        {
+            "at": 3,
+            "phenomenon": "raindrop",
+            "params": {"x": 0.6, "y": 0.5, "radius": 0.3, "feather": 0.25},
+            "ramp": 1,
+        }
+    ],
+}
+
+
+@pytest.mark.timeout(300)  # 11 s simulated: about 20 s on a quiet machine
+def test_a_robust_model_its_own_oracle_finds_degraded_hands_the_rover_over(
+    tmp_path: Path,
+) -> None:
+    """Failsafe F-1 when no model is trusted (tactics-lm.yaml): the raindrop model swapped in,
+    its own oracle says it is degraded too, so the rover is handed over once the alarm has
+    outlasted G19's 0.5 s, not at the swap's 6 s deadline, and only once."""
+    run = run_enlil(tmp_path, RAINDROP)
+    result, log = run["result"], run["log"]
+    assert result.exit_code == 0, log
+    started = {d.tactic: d.t for d in result.decisions if d.kind == "started"}
+    swap, hand_over = started["swap-to-raindrop-model"], started["fail-safe-robust-model-degraded"]
+    assert 3.0 <= swap < hand_over < swap + 6.0, log
+    action = next(
+        d
+        for d in result.decisions
+        if d.kind == "action" and d.tactic == "fail-safe-robust-model-degraded"
+    )
+    assert action.data["mode"] == "manual" and action.data["ok"] is True
+    # the verdict it acted on was the raindrop model's own
+    judged = [a for a in run["assessments"] if a.model_id == "rover-raindrop"]
+    assert judged and judged[0].category >= 1, judged[:3]
+    assert "fail-safe" not in started, log  # handed over once
+    kinds = [(d.kind, d.tactic) for d in result.decisions]
+    assert ("postcondition_failed", "swap-to-raindrop-model") in kinds, log
+    assert ("escalation_exhausted", "swap-to-raindrop-model") in kinds, log
