@@ -63,9 +63,10 @@ the UAV (examples/uav) is the second. Writes ``benchmarks/results/case-studies.j
     .venv/bin/python benchmarks/case_studies.py --quick         # 1 seed: 14 s; a short UAV flight
     .venv/bin/python benchmarks/case_studies.py --cases uav --managers utu --merge
 
-``--merge`` writes into the file (under a lock): its other cases stay, and within a case the
-runs of the managers not run again (so each manager can run in a process of its own); the
-case's summary is computed again. Each case records its own ``settings`` (seeds, simulated
+``--merge`` writes into the file (under a lock) after each run: its other cases stay, and
+within a case the runs of the managers not run again (so each manager can run in a process
+of its own, and an interrupted comparison keeps what it measured); the case's summary is
+computed again. Each case records its own ``settings`` (seeds, simulated
 seconds, scenario, managers, date, load average).
 """
 
@@ -84,6 +85,7 @@ import statistics
 import tempfile
 import threading
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -667,41 +669,66 @@ def main() -> None:
     }
     with tempfile.TemporaryDirectory(prefix="case-studies-") as tmp:
         for name in (c for c in args.cases.split(",") if c):
-            doc["cases"][name] = run_case(CASES[name], name, args, managers, seeds, Path(tmp))
+
+            def save(entry: dict[str, Any], name: str = name) -> None:
+                write({**doc, "cases": {name: entry}}, args.output, merge=True)
+
+            doc["cases"][name] = run_case(
+                CASES[name], name, args, managers, seeds, Path(tmp), save if args.merge else None
+            )
     doc["machine"]["load_average_after"] = list(os.getloadavg())
     write(doc, args.output, merge=args.merge)
     print(f"wrote {args.output}")
 
 
 def run_case(
-    case: Case, name: str, args: argparse.Namespace, managers: list[str], seeds: int, tmp: Path
+    case: Case,
+    name: str,
+    args: argparse.Namespace,
+    managers: list[str],
+    seeds: int,
+    tmp: Path,
+    save: Callable[[dict[str, Any]], None] | None = None,
 ) -> dict[str, Any]:
-    """``case`` under each manager over ``seeds`` seeds: its entry of the JSON's ``cases``."""
+    """``case`` under each manager over ``seeds`` seeds: its entry of the JSON's ``cases``.
+
+    ``save`` is called with the entry so far after each run (``--merge``: an interrupted
+    comparison keeps the runs it made).
+    """
     until = args.until if args.until is not None else (case.quick_until if args.quick else None)
     scenario_file = quick_scenario(case, tmp) if args.quick else None
     load_before = list(os.getloadavg())
-    runs = []
+    measures = measures_of(case)
+    runs: list[dict[str, Any]] = []
+
+    def entry() -> dict[str, Any]:
+        ran = [m for m in managers if any(r["manager"] == m for r in runs)]
+        return {
+            "launch": str(case.launch.relative_to(ROOT)),
+            "summary": {
+                m: summarise([r for r in runs if r["manager"] == m], measures) for m in ran
+            },
+            "runs": list(runs),
+            "settings": {
+                "seeds": seeds,
+                "until": until,
+                "scenario": "quick" if scenario_file is not None else "the launch's",
+                "managers": ran,
+                "date": time.strftime("%Y-%m-%d %H:%M:%S"),
+                "load_average": [load_before, list(os.getloadavg())],
+            },
+        }
+
     for manager in managers:
         for seed in range(seeds):
             run = run_once(case, manager, seed, until, scenario_file)
             runs.append(run)
             print(f"{name} {manager:<6} seed {seed}: {_line(run)}", flush=True)
-    measures = measures_of(case)
-    summary = {m: summarise([r for r in runs if r["manager"] == m], measures) for m in managers}
-    print(f"\n{name}:\n{table(summary, measures)}\n")
-    return {
-        "launch": str(case.launch.relative_to(ROOT)),
-        "summary": summary,
-        "runs": runs,
-        "settings": {
-            "seeds": seeds,
-            "until": until,
-            "scenario": "quick" if scenario_file is not None else "the launch's",
-            "managers": managers,
-            "date": time.strftime("%Y-%m-%d %H:%M:%S"),
-            "load_average": [load_before, list(os.getloadavg())],
-        },
-    }
+            if save is not None:
+                save(entry())
+    done = entry()
+    print(f"\n{name}:\n{table(done['summary'], measures)}\n")
+    return done
 
 
 def _line(run: dict[str, Any]) -> str:

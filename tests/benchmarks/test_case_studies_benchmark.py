@@ -95,3 +95,26 @@ def test_merge_keeps_other_cases_and_other_managers_runs(tmp_path: Path) -> None
     assert uav["summary"]["random"]["degraded_frames"]["mean"] == 8.5
     cs.write(doc("none", [7]), out, merge=False)  # without --merge the file is replaced
     assert set(load(out)["cases"]) == {"uav"}
+
+
+def test_with_merge_each_run_is_saved_as_it_ends(tmp_path: Path) -> None:
+    import argparse
+
+    cs = script_module("case_studies.py", "case_studies_save")
+    figures = {"frames": 10, "wall_s": 1.0, "pedestrian_misses": 0, "collisions": 0}
+    figures |= {"distance_m": 1.0, "final_mode": "manual", "false_alarms": 0, "decisions": 1}
+    figures |= {"degraded_frames": 2, "onset_delays": [{"delay_s": 0.5}]}
+
+    def run_once(case: object, manager: str, seed: int, *rest: object) -> dict[str, object]:
+        return {"manager": manager, "seed": seed, **figures}
+
+    cs.run_once = run_once  # the runs themselves are the quick test's
+    saved: list[dict[str, object]] = []
+    args = argparse.Namespace(until=None, quick=False)
+    rover = cs.CASES["rover"]
+    done = cs.run_case(rover, "rover", args, ["utu", "none"], 2, tmp_path, saved.append)
+    assert [len(e["runs"]) for e in saved] == [1, 2, 3, 4]
+    both = ["utu", "none"]
+    assert [e["settings"]["managers"] for e in saved] == [["utu"], ["utu"], both, both]
+    assert done["summary"]["none"]["degraded_frames"]["mean"] == 2.0
+    assert done["summary"]["utu"]["onset_delay_s"]["p95"] == 0.5
