@@ -64,10 +64,10 @@ the UAV (examples/uav) is the second. Writes ``benchmarks/results/case-studies.j
     .venv/bin/python benchmarks/case_studies.py --cases uav --managers utu --merge
 
 ``--merge`` writes into the file (under a lock) after each run: its other cases stay, and
-within a case the runs of the managers not run again (so each manager can run in a process
-of its own, and an interrupted comparison keeps what it measured); the case's summary is
-computed again. Each case records its own ``settings`` (seeds, simulated
-seconds, scenario, managers, date, load average).
+within a case the runs of the (manager, seed) pairs not run again (so managers and seeds,
+``--first-seed``, can run in processes of their own, and an interrupted comparison keeps
+what it measured); the case's summary is computed again. Each case records its own
+``settings`` (seeds, simulated seconds, scenario, managers, date, load average).
 """
 
 from __future__ import annotations
@@ -600,9 +600,9 @@ def _order(run: dict[str, Any]) -> tuple[int, int]:
 def write(doc: dict[str, Any], path: Path, *, merge: bool) -> None:
     """Write ``doc`` to ``path``; with ``merge``, into what the file holds (under a lock).
 
-    Merging keeps the file's other cases and, within a case, the runs of the managers this
-    run did not run (so the managers can run in separate processes); the case's summary is
-    computed again over its runs.
+    Merging keeps the file's other cases and, within a case, the runs of the (manager, seed)
+    pairs this run did not run (so managers and seeds can run in separate processes); the
+    case's summary is computed again over its runs.
     """
     path.parent.mkdir(parents=True, exist_ok=True)
     with open(path, "a+", encoding="utf-8") as f:
@@ -614,12 +614,13 @@ def write(doc: dict[str, Any], path: Path, *, merge: bool) -> None:
             for name, case in doc["cases"].items():
                 before = old.get("cases", {}).get(name)
                 if before is not None:
-                    ran = set(case["settings"]["managers"])
-                    runs = [r for r in before["runs"] if r["manager"] not in ran] + case["runs"]
+                    ran = {_order(r) for r in case["runs"]}
+                    runs = [r for r in before["runs"] if _order(r) not in ran] + case["runs"]
                     runs.sort(key=_order)
                     managers = [m for m in MANAGERS if any(r["manager"] == m for r in runs)]
+                    seeds = max(sum(r["manager"] == m for r in runs) for m in managers)
                     case["runs"] = runs
-                    case["settings"] = {**case["settings"], "managers": managers}
+                    case["settings"] = {**case["settings"], "managers": managers, "seeds": seeds}
                     measures = measures_of(CASES[name])
                     case["summary"] = {
                         m: summarise([r for r in runs if r["manager"] == m], measures)
@@ -637,6 +638,7 @@ def main() -> None:
     ap.add_argument("--cases", default=",".join(CASES), help="comma-separated (default: all)")
     ap.add_argument("--managers", default=",".join(MANAGERS), help="comma-separated")
     ap.add_argument("--seeds", type=int, help="seeds per manager (10; quick: 1)")
+    ap.add_argument("--first-seed", type=int, default=0, help="seeds from this one (0)")
     ap.add_argument("--until", type=float, help="simulated seconds per run (the scenario's)")
     ap.add_argument(
         "--quick", action="store_true", help="1 seed; the rover's first 14 s, a short UAV mission"
@@ -720,7 +722,7 @@ def run_case(
         }
 
     for manager in managers:
-        for seed in range(seeds):
+        for seed in range(args.first_seed, args.first_seed + seeds):
             run = run_once(case, manager, seed, until, scenario_file)
             runs.append(run)
             print(f"{name} {manager:<6} seed {seed}: {_line(run)}", flush=True)

@@ -64,8 +64,10 @@ def test_merge_keeps_other_cases_and_other_managers_runs(tmp_path: Path) -> None
     cs.measures_of = lambda case: measures  # the synthetic runs carry one measure
     out = tmp_path / "case-studies.json"
 
-    def doc(manager: str, degraded: list[int], case: str = "uav") -> dict[str, object]:
-        runs = [_run(manager, seed, d) for seed, d in enumerate(degraded)]
+    def doc(
+        manager: str, degraded: list[int], case: str = "uav", first: int = 0
+    ) -> dict[str, object]:
+        runs = [_run(manager, first + i, d) for i, d in enumerate(degraded)]
         return {
             "settings": {"managers": [manager]},
             "cases": {
@@ -80,7 +82,7 @@ def test_merge_keeps_other_cases_and_other_managers_runs(tmp_path: Path) -> None
     cs.write(doc("utu", [3, 5], case="rover"), out, merge=True)  # a new file: written as is
     cs.write(doc("random", [8, 9]), out, merge=True)
     cs.write(doc("utu", [1, 2]), out, merge=True)
-    cs.write(doc("utu", [2, 4]), out, merge=True)  # the same manager again: replaces its runs
+    cs.write(doc("utu", [2, 4]), out, merge=True)  # the same seeds again: replaces their runs
     merged = load(out)
     assert merged["cases"]["rover"]["summary"]["utu"]["degraded_frames"]["mean"] == 4.0
     uav = merged["cases"]["uav"]
@@ -93,6 +95,11 @@ def test_merge_keeps_other_cases_and_other_managers_runs(tmp_path: Path) -> None
     assert uav["settings"]["managers"] == ["utu", "random"]
     assert uav["summary"]["utu"]["degraded_frames"]["mean"] == 3.0
     assert uav["summary"]["random"]["degraded_frames"]["mean"] == 8.5
+    cs.write(doc("random", [10], first=2), out, merge=True)  # more seeds, from another process
+    uav = load(out)["cases"]["uav"]
+    assert [r["seed"] for r in uav["runs"] if r["manager"] == "random"] == [0, 1, 2]
+    assert uav["settings"]["seeds"] == 3
+    assert uav["summary"]["random"]["degraded_frames"]["mean"] == 9.0
     cs.write(doc("none", [7]), out, merge=False)  # without --merge the file is replaced
     assert set(load(out)["cases"]) == {"uav"}
 
@@ -110,7 +117,7 @@ def test_with_merge_each_run_is_saved_as_it_ends(tmp_path: Path) -> None:
 
     cs.run_once = run_once  # the runs themselves are the quick test's
     saved: list[dict[str, object]] = []
-    args = argparse.Namespace(until=None, quick=False)
+    args = argparse.Namespace(until=None, quick=False, first_seed=0)
     rover = cs.CASES["rover"]
     done = cs.run_case(rover, "rover", args, ["utu", "none"], 2, tmp_path, saved.append)
     assert [len(e["runs"]) for e in saved] == [1, 2, 3, 4]
