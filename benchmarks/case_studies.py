@@ -43,6 +43,8 @@ its flight (nothing of the mission changes after it), or at the scenario's end:
 * ``low_battery_s``: simulated seconds airborne below 20 % (obstacle O2 holding);
 * ``degraded_frames``: frames the UAV flew on its detector (airborne in ``auto`` or
   ``return_home``) with a model in category >= 1 by the ground-truth scorer;
+* ``lockstep_misses``: frames the simulator stepped past after 2 s of wall time without
+  their detections (a loaded machine; the figures of such a run lag behind);
 * onset delays, false alarms, decisions and adaptations as for the rover, with the UAV's
   tactics (:data:`CASES`): adaptations are the swaps, ``failsafe-f1``, ``return-home``,
   ``hold-route`` and ``link-lost``; a mode change adapts to a camera phase only from
@@ -337,6 +339,18 @@ class _UavRecorder:
         }
 
 
+class _LockstepMisses(logging.Handler):
+    """Counts the frames the simulator stepped past without their detections (under load)."""
+
+    def __init__(self) -> None:
+        super().__init__(logging.WARNING)
+        self.count = 0
+
+    def emit(self, record: logging.LogRecord) -> None:
+        if "got no detections" in record.getMessage():
+            self.count += 1
+
+
 def _adverse(scenario: Any, timeline: Timeline, t: float) -> bool:
     """A condition in force at ``t``: a phenomenon or a fault (a rate off the nominal one)."""
     if timeline.phenomena(t):
@@ -393,6 +407,8 @@ def run_once(
         recorder = _Recorder(scenario.camera.width, scenario.camera.height)
     report_path = Path(os.environ.get("TMPDIR", "/tmp")) / f"case-{os.getpid()}-{seed}.json"
     launch.managed.with_reports(report=str(report_path), plot=None)
+    misses = _LockstepMisses()
+    logging.getLogger("anunnaki.managed").addHandler(misses)
     t0 = time.perf_counter()
     try:
         result = run_launch(
@@ -408,6 +424,7 @@ def run_once(
         )
     finally:
         recorder.close()
+        logging.getLogger("anunnaki.managed").removeHandler(misses)
     wall = time.perf_counter() - t0
     report = json.loads(report_path.read_text(encoding="utf-8"))
     report_path.unlink(missing_ok=True)
@@ -482,6 +499,7 @@ def run_once(
         "wall_s": round(wall, 2),
         **recorder.counts(),
         **({"collisions": len(report["collisions"])} if case.platform == "rover" else {}),
+        **({"lockstep_misses": misses.count} if case.platform == "uav" else {}),
         "onset_delays": delays,
         "false_alarms": len(alarms),
         "false_alarm_tactics": [f"{d.tactic}@{d.t:.1f}" for d in alarms],
