@@ -14,7 +14,10 @@ measured from the run's public topics (``on_bus``), its decisions and its report
 * ``pedestrian_misses``: frames in which a pedestrian stood within stopping distance in the
   rover's path (its ground-truth box is one the rover's stop rule stops for:
   :meth:`anunnaki.sim.StopRule.box_ahead`), the rover drove autonomously and the detector
-  reported no pedestrian there (no detection box the stop rule stops for);
+  reported no pedestrian there (no detection box the stop rule stops for); they count only
+  while autonomous, so a rover handed over or stopped early misses nothing, hence beside
+  them ``autonomous_m`` (metres driven in autonomous mode) and
+  ``misses_per_10_autonomous_m`` (misses per 10 of those metres; 0 when it drove none);
 * ``collisions``: contacts with pedestrians or deer (the report's);
 * ``distance_m``: how far the rover got along its route (its ``x`` on ``/rover/status`` at
   the end: a rover handed over, run-stopped or halted early is safe and gets nowhere), and
@@ -184,6 +187,7 @@ class _Recorder:
     mode: dict[int, str] = field(default_factory=dict)  # seq -> rover mode when detected
     current_mode: str = "autonomous"
     x: float = 0.0
+    autonomous_m: float = 0.0  # metres driven in autonomous mode
     subs: list[Any] = field(default_factory=list)
     rule: StopRule = field(default_factory=StopRule)
 
@@ -233,6 +237,8 @@ class _Recorder:
             if isinstance(mode, str):
                 self.current_mode = mode
             if isinstance(x, int | float):
+                if self.current_mode == "autonomous":
+                    self.autonomous_m += max(0.0, float(x) - self.x)
                 self.x = float(x)
 
     def close(self) -> None:
@@ -246,10 +252,12 @@ class _Recorder:
             misses = sum(
                 1 for s, boxes in self.truth.items() if boxes and s in auto and not self.ahead[s]
             )
-            x, mode = self.x, self.current_mode
+            x, mode, auto_m = self.x, self.current_mode, self.autonomous_m
         return {
             "degraded_frames": degraded,
             "pedestrian_misses": misses,
+            "autonomous_m": round(auto_m, 2),
+            "misses_per_10_autonomous_m": round(10.0 * misses / auto_m, 3) if auto_m else 0.0,
             "distance_m": round(x, 2),
             "final_mode": mode,
         }
@@ -530,6 +538,8 @@ def _p95(values: list[float]) -> float | None:
 MEASURES = (
     "degraded_frames",
     "pedestrian_misses",
+    "misses_per_10_autonomous_m",
+    "autonomous_m",
     "collisions",
     "distance_m",
     "false_alarms",

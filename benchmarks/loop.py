@@ -1,36 +1,56 @@
 """The whole loop's throughput: simulator, phenomena, bus, detector, oracle and Utu.
 
-The rover demo (``examples/rover/sim.yaml``: 128 × 128 camera at 10 Hz, the fog-then-dusk
-scenario, the default/fog/low-light registry, the ground-truth oracle, Utu's five nodes in
-one process on the in-process bus) is run flat out — ``--speed`` far above what the machine
-can keep, with the simulator in lockstep with the detector — and timed in wall seconds.
-Four stages are run in the same process, each adding a part, so the ratios show what each
-part costs on this (shared, noisy) machine:
+Two loops, each with the learned ``enlil`` oracles as agent A4 (issue #24):
 
-* ``platform``: the rover alone (physics, rendering, phenomena, JPEG, publishing);
+* the rover's, ``examples/rover/demo.yaml`` (what ``make demo`` runs: 128 × 128 camera at
+  10 Hz, the HSL/fog/raindrop scenario, the registry of ``examples/models/rover.yaml``, the
+  oracle of the active model; aim 20 Hz);
+* the UAV's, ``examples/uav/sim.yaml`` (320 × 240 camera at 10 Hz, the delivery scenario
+  from take-off, uav-default/uav-fog and their oracles; aim 10 Hz).
+
+Each is run flat out — ``--speed`` far above what the machine can keep, with the simulator
+in lockstep with the detector and the oracle: a frame is not followed by the next until its
+detections and its assessment are out — and timed in wall seconds, in two layouts:
+
+**one process** (the launch as ``anunnaki run`` starts it, on the in-process bus), in four
+stages, each adding a part, so the ratios show what each part costs:
+
+* ``platform``: the platform alone (physics, rendering, phenomena, JPEG, publishing);
 * ``detector``: + the LEC node running the active model on every frame, in lockstep;
-* ``oracle``: + the ground-truth oracle node;
+* ``oracle``: + the oracle node (enlil);
 * ``utu``: the whole launch, + Utu's monitor, analyzer, planner, executor and knowledge.
 
-The figure of merit is camera frames per wall second of the ``utu`` stage (the issue's aim:
-10 Hz or more on 2 cores): each frame is rendered, perturbed, published, detected, assessed
-and fed to Utu before the next.
+**one process per component** (``processes``): the platform, the detector (the LEC node),
+the oracle node and Utu (the composed manager with the launch's five nodes) each in a
+process of its own, on zenoh over ``tcp/127.0.0.1`` (multicast scouting off): the platform's
+session listens, the other three join it as clients, as ``anunnaki run --processes`` has
+its nodes join the launch's session. The platform waits for each frame's detections and its
+assessment (an acknowledgement the oracle's process publishes once its node has handled the
+frame) before the next, as in one process. Every process reports what flowed through it
+(frames rendered, detected, assessed; the oracle's verdicts Utu took in).
 
-Each run also gives the process's CPU time per frame (``cpu_ms_per_frame``, every thread of
-the process: simulator, detector, oracle, Utu): on a machine shared with other work the
-frame rate measures the load as much as the loop, the CPU time much less so.
+The figure of merit is camera frames per wall second of the whole loop (``utu`` in one
+process; ``processes``). Beside it, each run gives the CPU time per frame
+(``cpu_ms_per_frame``): of the one process (every thread: simulator, detector, oracle,
+Utu), or of each component's process and their sum. On a machine shared with other work the
+frame rate measures the load as much as the loop, the CPU time much less so; the sum is what
+must fit the cores' budget (two cores at 10 Hz: 200 ms per frame).
 
-The UAV's loop (``examples/uav/sim.yaml``: 320 × 240 camera at 10 Hz, the delivery scenario
-from take-off, uav-default/uav-fog, the learned ``enlil`` oracle as A4) is measured the same
-way, in the same four stages (aim: 10 Hz at 320 × 240, issue #24). Its launch runs the
-ground-truth oracle beside enlil as a live scorer; that is scoring, not the loop, so the
-``utu`` stage runs without it (``"scorer": "off"`` in the results). The rover's figures stay
-at the top level of the results (as before); the UAV's are under ``"uav"``. Writes
+The stages and the layouts of a repeat run one after the other, so the ratios between them
+come from the same minutes of the same machine. A launch's live ground-truth scorer is
+scoring, not the loop: it is left out (``"scorer": "off"``). The rover's figures stay at the
+top level of the results (as before); the UAV's are under ``"uav"``. Writes
 ``benchmarks/results/loop.json``::
 
     .venv/bin/python benchmarks/loop.py
     .venv/bin/python benchmarks/loop.py --seconds 10 --repeats 1 --output /tmp/loop.json
     .venv/bin/python benchmarks/loop.py --loops uav        # the UAV's loop only
+    .venv/bin/python benchmarks/loop.py --layouts one_process  # the four stages only
+    .venv/bin/python benchmarks/loop.py --torch-threads 0,1    # torch's default threads vs 1
+    .venv/bin/python benchmarks/loop.py --loops uav --profile runs/profile.json  # where it goes
+
+``--profile`` runs the whole loop in one process under cProfile, every thread on its own CPU
+clock, and writes the CPU time per frame of each part (:data:`PARTS`) instead.
 """
 
 from __future__ import annotations
@@ -40,46 +60,130 @@ import io
 import json
 import os
 import platform
+import queue
 import statistics
+import subprocess
+import sys
+import tempfile
 import threading
 import time
+from collections.abc import Callable, Mapping
 from pathlib import Path
-from typing import Any
+from typing import IO, Any
 
 import torch
 
-from anunnaki.bus import open_bus
-from anunnaki.launch import load_launch, run_launch
+from anunnaki import topics
+from anunnaki.bus import BusConfig, open_bus
+from anunnaki.launch import Launch, load_launch, run_launch
 from anunnaki.managed import SimKind, SimulatedSystem
 
 ROOT = Path(__file__).parents[1]
-LAUNCH = ROOT / "examples" / "rover" / "sim.yaml"
+LAUNCH = ROOT / "examples" / "rover" / "demo.yaml"
 UAV_LAUNCH = ROOT / "examples" / "uav" / "sim.yaml"
-AIM_HZ = 10.0
+AIM_HZ = {"rover": 20.0, "uav": 10.0}  # issue #24
 RESULTS = Path(__file__).parent / "results" / "loop.json"
 FAST = 1000.0  # simulated seconds per wall second asked for: far beyond the machine
+STAGES = ("platform", "detector", "oracle", "utu")
+LAYOUTS = ("one_process", "processes")
+COMPONENTS = ("platform", "detector", "oracle", "utu")
+#: Where the oracle's process acknowledges each frame its node has handled (assessed,
+#: withheld or skipped): the platform's lockstep across processes. The benchmark's own.
+HANDLED = "/bench/loop/oracle_handled"
+#: The longest a frame waits for its detections and its assessment (wall seconds); the
+#: one-process lockstep waits 2 s, but a process on a loaded machine may be descheduled.
+LOCKSTEP_TIMEOUT = 10.0
+#: Seconds a component process gets to come up (imports, models, bus) and to finish.
+BRING_UP = 180.0
+#: A line of the components' protocol on stdout starts with this (anything else is noise).
+TAG = "@loop "
 
 
-def stage(name: str, seconds: float, launch_path: Path) -> dict[str, float]:
-    """Run one stage for ``seconds`` of simulated time; frames and wall time."""
-    launch = load_launch(launch_path)
+def _launch(path: Path, oracle: Mapping[str, Any] | None = None) -> tuple[Launch, SimKind]:
+    """The launch, without its live scorer (scoring, not the loop; see above).
+
+    ``oracle``: options to set on the launch's oracle (e.g. ``{"blas_threads": None}``).
+    """
+    launch = load_launch(path)
     assert isinstance(launch.managed, SimKind)
-    if launch.managed.options.scorer is not None:  # scoring, not the loop (see above)
-        launch.managed.options = launch.managed.options.model_copy(update={"scorer": None})
-    sim = launch.managed.options
+    options = launch.managed.options
+    update: dict[str, Any] = {"scorer": None}
+    if oracle:
+        update["oracle"] = {**(options.oracle or {}), **oracle}
+    launch.managed.options = options.model_copy(update=update)
+    return launch, launch.managed
+
+
+class _FrameClock:
+    """Wall and process CPU time at the first and the last camera frame of a run.
+
+    Subscribed on the launch's bus through ``run_launch``'s ``on_bus`` hook, so the whole
+    launch is timed from its first frame to its last, without its bring-up (Utu's nodes,
+    the models and the scene loading), as the other stages are.
+    """
+
+    def __init__(self, camera: str) -> None:
+        self.camera = camera
+        self.frames = 0
+        self.first = self.last = (0.0, 0.0)
+        self._lock = threading.Lock()
+
+    def attach(self, bus: Any) -> None:
+        bus.subscribe(self.camera, self._on_frame, queue=256)  # closes with the bus
+
+    def _on_frame(self, sample: Any) -> None:
+        now = (time.perf_counter(), time.process_time())
+        with self._lock:
+            if self.frames == 0:
+                self.first = now
+            self.last = now
+            self.frames += 1
+
+    def per_frame(self) -> tuple[float, float]:
+        """Frames per wall second and CPU ms per frame, from the first frame to the last."""
+        with self._lock:
+            n = max(self.frames - 1, 1)
+            wall, cpu = self.last[0] - self.first[0], self.last[1] - self.first[1]
+        return n / max(wall, 1e-9), 1000 * cpu / n
+
+
+def _camera_topic(scenario: Any) -> str:
+    from anunnaki.sim import RoverSim, UavSim
+
+    return f"{(RoverSim if scenario.platform == 'rover' else UavSim).prefix}/camera/image"
+
+
+def stage(
+    name: str, seconds: float, launch_path: Path, oracle: Mapping[str, Any] | None = None
+) -> dict[str, float]:
+    """Run one stage in this process for ``seconds`` of simulated time; frames and wall time.
+
+    The ``utu`` stage (the whole launch, ``run_launch``) is timed from its first camera
+    frame to its last; ``run_s`` is its managed system's run with its bring-up, and
+    ``fps_with_bring_up`` the frames over it (how this stage was timed before 2026-11-27).
+    """
+    launch, managed = _launch(launch_path, oracle)
+    sim = managed.options
     if name == "utu":
+        from anunnaki.sim import load_scenario
+
         out = io.StringIO()
-        t0, cpu0 = time.perf_counter(), time.process_time()
-        result = run_launch(launch, speed=FAST, until=seconds, out=out, handle_signals=False)
-        wall, cpu = time.perf_counter() - t0, time.process_time() - cpu0
+        clock = _FrameClock(_camera_topic(load_scenario(sim.scenario)))
+        t0 = time.perf_counter()
+        result = run_launch(
+            launch, speed=FAST, until=seconds, out=out, handle_signals=False, on_bus=clock.attach
+        )
+        wall = time.perf_counter() - t0
         line = next(x for x in out.getvalue().splitlines() if x.startswith("simulated "))
         frames = int(line.split("(")[1].split()[0])
+        fps, cpu_ms = clock.per_frame()
         return {
             "frames": frames,
             "wall_s": round(wall, 3),
             "run_s": round(result.ran, 3),
-            "fps": round(frames / result.ran, 2),
-            "cpu_ms_per_frame": round(1000 * cpu / max(frames, 1), 1),
+            "fps": round(fps, 2),
+            "fps_with_bring_up": round(frames / result.ran, 2),
+            "cpu_ms_per_frame": round(cpu_ms, 1),
             "decisions": len(result.decisions),
         }
     with open_bus("inproc") as bus:
@@ -103,31 +207,565 @@ def stage(name: str, seconds: float, launch_path: Path) -> dict[str, float]:
     }
 
 
-def measure(launch: Path, seconds: float, repeats: int) -> dict[str, Any]:
-    """The four stages of one loop: median frames per second each, and the ratios."""
-    out: dict[str, Any] = {"launch": str(launch), "stages": {}}
-    sim = load_launch(launch).managed
-    assert isinstance(sim, SimKind)
-    camera = _camera(sim)
-    out["camera"] = camera
-    out["scorer"] = "off" if sim.options.scorer is not None else "none"
-    for name in ("platform", "detector", "oracle", "utu"):
-        runs = [stage(name, seconds, launch) for _ in range(repeats)]
-        fps = statistics.median(r["fps"] for r in runs)
-        cpu = statistics.median(r["cpu_ms_per_frame"] for r in runs)
-        out["stages"][name] = {"fps_median": fps, "cpu_ms_per_frame_median": cpu, "runs": runs}
-        print(
-            f"{name:9s} {fps:6.1f} frames/s  ({', '.join(str(r['fps']) for r in runs)}); "
-            f"{cpu:6.1f} ms of CPU per frame"
+# -- one process per component ------------------------------------------------------------------
+class _Child:
+    """One component's process: its protocol lines on a queue, its errors in a file."""
+
+    def __init__(self, name: str, argv: list[str]) -> None:
+        self.name = name
+        # closed in close(), after the process has ended
+        self.errors: IO[str] = tempfile.TemporaryFile("w+", encoding="utf-8")  # noqa: SIM115
+        self.proc = subprocess.Popen(
+            argv,
+            stdin=subprocess.PIPE,
+            stdout=subprocess.PIPE,
+            stderr=self.errors,
+            text=True,
+            bufsize=1,
+            cwd=ROOT,
         )
-    base = out["stages"]["platform"]["fps_median"]
-    for entry in out["stages"].values():
-        entry["ratio_to_platform"] = round(entry["fps_median"] / base, 3)
-    whole = out["stages"]["utu"]["fps_median"]
-    out["whole_loop_hz"] = whole
-    out["aim_hz"] = AIM_HZ
-    out["aim_met"] = whole >= AIM_HZ
+        self.lines: queue.Queue[dict[str, Any] | None] = queue.Queue()
+        threading.Thread(target=self._read, name=f"loop-{name}", daemon=True).start()
+
+    def _read(self) -> None:
+        assert self.proc.stdout is not None
+        for line in self.proc.stdout:
+            if line.startswith(TAG):
+                self.lines.put(json.loads(line[len(TAG) :]))
+        self.lines.put(None)  # the process closed its output: it has ended
+
+    def expect(self, key: str, timeout: float) -> dict[str, Any]:
+        """The next protocol message, which must hold ``key``."""
+        try:
+            message = self.lines.get(timeout=timeout)
+        except queue.Empty:
+            message = None
+            why = f"said nothing within {timeout:g} s"
+        else:
+            why = "ended"
+        if message is None or key not in message:
+            raise RuntimeError(
+                f"the {self.name} process {why} (waiting for {key!r}): "
+                f"{message if message is not None else self.stderr()}"
+            )
+        return message
+
+    def send(self, word: str) -> None:
+        assert self.proc.stdin is not None
+        self.proc.stdin.write(word + "\n")
+        self.proc.stdin.flush()
+
+    def stderr(self) -> str:
+        self.errors.seek(0)
+        return self.errors.read()[-3000:]
+
+    def close(self) -> None:
+        if self.proc.poll() is None:
+            self.proc.kill()
+        self.proc.wait()
+        for stream in (self.proc.stdin, self.proc.stdout):
+            if stream is not None:
+                stream.close()
+        self.errors.close()
+
+
+def _child_argv(
+    name: str,
+    launch: Path,
+    bus: BusConfig,
+    seconds: float,
+    threads: int,
+    oracle: Mapping[str, Any] | None,
+) -> list[str]:
+    return [
+        sys.executable,
+        str(Path(__file__).resolve()),
+        "--component",
+        name,
+        "--launch",
+        str(launch),
+        "--bus-json",
+        bus.model_dump_json(exclude_none=True),
+        "--seconds",
+        repr(seconds),
+        "--torch-threads",
+        str(threads),
+        "--oracle-json",
+        json.dumps(dict(oracle or {})),
+    ]
+
+
+def processes_run(
+    launch: Path,
+    seconds: float,
+    *,
+    torch_threads: int = 0,
+    oracle: Mapping[str, Any] | None = None,
+) -> dict[str, Any]:
+    """One run of the loop with one process per component; rates, CPU time, what flowed.
+
+    ``torch_threads``: torch's intra-op threads in each component's process (0: torch's
+    default, one per core); ``oracle``: options set on the launch's oracle.
+    """
+    listen = BusConfig(kind="zenoh", mode="peer")  # on a free loopback port, no scouting
+    children: dict[str, _Child] = {}
+    try:
+        children["platform"] = _Child(
+            "platform", _child_argv("platform", launch, listen, seconds, torch_threads, oracle)
+        )
+        endpoints = children["platform"].expect("ready", BRING_UP)["endpoints"]
+        for name in COMPONENTS[1:]:
+            join = BusConfig(kind="zenoh", mode="client", connect=endpoints, name=f"loop-{name}")
+            children[name] = _Child(
+                name, _child_argv(name, launch, join, seconds, torch_threads, oracle)
+            )
+        for name in COMPONENTS[1:]:
+            children[name].expect("ready", BRING_UP)
+        children["platform"].send("peers")  # it waits to see the others' nodes on the bus
+        children["platform"].expect("peers", BRING_UP)
+        for name in (*COMPONENTS[1:], "platform"):  # the platform last: it starts the frames
+            children[name].send("go")
+        ran = children["platform"].expect("ran", BRING_UP + 60 * seconds)
+        for child in children.values():
+            child.send("stop")
+        done = {name: child.expect("cpu_s", BRING_UP) for name, child in children.items()}
+        for child in children.values():
+            child.proc.wait(timeout=BRING_UP)
+    finally:
+        for child in children.values():
+            child.close()
+    frames = int(ran["frames"])
+    cpu = {name: round(1000 * float(d["cpu_s"]) / max(frames, 1), 1) for name, d in done.items()}
+    wall = float(ran["wall_s"])
+    return {
+        "frames": frames,
+        "wall_s": round(wall, 3),
+        "fps": round(frames / wall, 2),
+        "cpu_ms_per_frame": round(sum(cpu.values()), 1),
+        "cpu_ms_per_frame_by_process": cpu,
+        # cores each process kept busy (its CPU seconds per wall second of the run)
+        "cores_by_process": {n: round(float(d["cpu_s"]) / wall, 2) for n, d in done.items()},
+        "lockstep_timeouts": int(ran["timeouts"]),
+        "flow": {
+            name: {k: v for k, v in d.items() if k not in ("cpu_s", "torch_threads")}
+            for name, d in done.items()
+        },
+        "torch_threads": {name: d.get("torch_threads") for name, d in done.items()},
+    }
+
+
+class _Lockstep:
+    """The platform's frame hook across processes: wait for the frame's detections and the
+    oracle process's acknowledgement, both on the bus (at most ``LOCKSTEP_TIMEOUT``)."""
+
+    def __init__(self, bus: Any, detections: str) -> None:
+        self._cond = threading.Condition()
+        self._seen = {"detections": -1, "handled": -1}
+        self.timeouts = 0
+        self._subs = [
+            bus.subscribe(detections, self._on("detections"), queue=256),
+            bus.subscribe(HANDLED, self._on("handled"), queue=256),
+        ]
+
+    def _on(self, key: str) -> Callable[[Any], None]:
+        def callback(sample: Any) -> None:
+            message = sample.message
+            seq = getattr(message, "frame_seq", None)
+            if seq is None:
+                seq = message.to_body().get("seq")
+            with self._cond:
+                self._seen[key] = max(self._seen[key], int(seq))
+                self._cond.notify_all()
+
+        return callback
+
+    def __call__(self, sim: Any, frame: Any, image: Any) -> None:
+        deadline = time.monotonic() + LOCKSTEP_TIMEOUT
+        with self._cond:
+            while min(self._seen.values()) < frame.seq:
+                left = deadline - time.monotonic()
+                if left <= 0:
+                    self.timeouts += 1
+                    return
+                self._cond.wait(left)
+
+    def close(self) -> None:
+        for sub in self._subs:
+            sub.close()
+
+
+def _say(**message: Any) -> None:
+    print(TAG + json.dumps(message), flush=True)
+
+
+def _wait_for(word: str) -> None:
+    line = sys.stdin.readline()
+    if line.strip() != word:
+        raise SystemExit(f"loop component: expected {word!r} on stdin, got {line.strip()!r}")
+
+
+def component(
+    name: str,
+    launch_path: Path,
+    bus_json: str,
+    seconds: float,
+    oracle: Mapping[str, Any] | None = None,
+) -> None:
+    """One component's process (``--component``): bring up, say ready, run, report.
+
+    The protocol with :func:`processes_run`, a JSON object a line on stdout after ``TAG``:
+    ``ready`` (the platform: with its endpoints) → [platform: ``peers`` in, out] → ``go``
+    in → [platform: runs ``seconds``, ``ran`` out] → ``stop`` in → ``cpu_s`` and the
+    component's counters out (CPU seconds of the process from ``go`` to ``stop``).
+    """
+    launch, managed = _launch(launch_path, oracle)
+    sim = managed.options
+    from anunnaki.sim import RoverSim, UavSim, load_scenario
+
+    scenario = load_scenario(sim.scenario)
+    platform_class = RoverSim if scenario.platform == "rover" else UavSim
+    camera = _camera_topic(scenario)
+    with open_bus(BusConfig.model_validate_json(bus_json), name=f"loop-{name}") as bus:
+        report: Callable[[], dict[str, Any]]
+        closing: list[Any] = []
+        if name == "platform":
+            from anunnaki.lec import detections_topic, load_registry
+
+            lec = load_registry(sim.models).lec if sim.models is not None else "detector"
+            lockstep = _Lockstep(bus, detections_topic(lec))
+            system = platform_class(bus, scenario, frame_hook=lockstep)
+            closing.extend([lockstep, system])
+            _say(ready=True, endpoints=list(bus.endpoints))
+            _wait_for("peers")
+            want = {"/lm_manager", "/oracle_" + str((sim.oracle or {}).get("name"))}
+            want |= {f"/utu_{n}" for n in launch.nodes}
+            deadline = time.monotonic() + BRING_UP
+            while not want <= bus.alive_nodes(timeout=2.0):
+                if time.monotonic() > deadline:
+                    raise SystemExit(f"loop platform: {sorted(want - bus.alive_nodes())} not up")
+            _say(peers=True)
+            _wait_for("go")
+            t0, cpu0 = time.perf_counter(), time.process_time()
+            system.run(threading.Event(), speed=FAST, until=seconds)
+            wall = time.perf_counter() - t0
+            _say(ran=True, frames=system.frames, wall_s=wall, timeouts=lockstep.timeouts)
+
+            def report() -> dict[str, Any]:
+                return {"frames": system.frames}
+
+        elif name == "detector":
+            from anunnaki.lec import LecNode, load_registry
+
+            assert sim.models is not None, f"{launch_path}: the loop needs a detector (models)"
+            node = LecNode(bus, load_registry(sim.models), camera=camera)
+            closing.append(node)
+
+            def report() -> dict[str, Any]:
+                stats = node.stats()
+                return {"frames": stats.frames, "detections": stats.detections}
+
+        elif name == "oracle":
+            node, ack = _oracle_node(bus, sim, camera)
+            closing.extend([ack, node])
+
+            def report() -> dict[str, Any]:
+                stats = node.stats()
+                return {"frames": stats.frames, "assessments": stats.assessments}
+
+        else:
+            report = _utu(bus, launch, closing)
+        if name != "platform":
+            bus.alive_nodes(timeout=5.0)  # our declarations have left (see anunnaki node)
+            _say(ready=True)
+            _wait_for("go")
+            cpu0 = time.process_time()
+        _wait_for("stop")
+        cpu = time.process_time() - cpu0
+        _say(cpu_s=cpu, torch_threads=torch.get_num_threads(), **report())
+        for obj in reversed(closing):
+            obj.close()
+
+
+class _Acks:
+    """The oracle process's acknowledgements: frame ``seq`` handled by the oracle node."""
+
+    def __init__(self, bus: Any, node: Any) -> None:
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, args=(bus, node), daemon=True)
+        self._thread.start()
+
+    def _run(self, bus: Any, node: Any) -> None:
+        seq = 0
+        while not self._stop.is_set():
+            if node.wait_for_frame(seq, 0.2):
+                bus.publish(HANDLED, {"seq": seq})
+                seq += 1
+
+    def close(self) -> None:
+        self._stop.set()
+        self._thread.join(timeout=5.0)
+
+
+def _oracle_node(bus: Any, sim: Any, camera: str) -> tuple[Any, _Acks]:
+    """The launch's oracle node alone, with what it takes from the detector's registry."""
+    from anunnaki.lec import load_registry
+    from anunnaki.managed import TakesModels
+    from anunnaki.oracles import ORACLES, OracleNode
+
+    options = dict(sim.oracle or {})
+    name = str(options.pop("name", "ground_truth"))
+    factory = ORACLES.factory(name)
+    if sim.models is not None and isinstance(factory, TakesModels):
+        options = {**factory.options_from_models(load_registry(sim.models)), **options}
+    node = OracleNode(bus, name, camera=camera, **options)
+    return node, _Acks(bus, node)
+
+
+def _utu(bus: Any, launch: Launch, closing: list[Any]) -> Callable[[], dict[str, Any]]:
+    """Utu's five nodes composed in this process (the launch's ``nodes``), spinning."""
+    from anunnaki.utu import AutonomicManager
+    from anunnaki.utu.cycle import open_knowledge
+
+    kb = open_knowledge(":memory:")
+    manager = AutonomicManager.from_config(launch.parts, bus=bus, knowledge=kb, nodes=launch.nodes)
+    halt = threading.Event()
+    thread = threading.Thread(target=manager.spin, args=(halt,), name="loop-utu", daemon=True)
+    thread.start()
+
+    class _Stop:
+        def close(self) -> None:
+            halt.set()
+            manager.wake()
+            thread.join(timeout=10.0)
+            manager.close()
+            kb.close()
+
+    closing.append(_Stop())
+
+    def report() -> dict[str, Any]:
+        kb.flush()
+        verdicts = sum(1 for row in kb.inputs() if row.topic == topics.ORACLE_OUTPUT)
+        return {
+            "inputs": kb.counts()["inputs"],
+            "oracle_verdicts": verdicts,
+            "decisions": len(kb.decisions()),
+        }
+
+    return report
+
+
+# -- where the CPU time goes --------------------------------------------------------------------
+#: What the profile's breakdown adds up, per frame: a part's CPU time is the inclusive time
+#: of the calls that match (file suffix and function name; ``~`` for a C function), summed
+#: over every thread, or (``*`` as the name) the functions' own time in files under that
+#: folder. The parts do not nest; the rest of the Python threads' time is ``other``.
+PARTS: dict[str, tuple[tuple[str, str], ...]] = {
+    "physics and motion": (("anunnaki/sim/_rover.py", "_tick"), ("anunnaki/sim/_uav.py", "_tick")),
+    "rendering": (("anunnaki/sim/_scene.py", "render"),),
+    "phenomena": (("anunnaki/phenomena/_base.py", "apply"),),
+    "jpeg encode": (("~", "<imencode>"),),
+    "jpeg decode": (("anunnaki/messages/_image.py", "to_array"),),
+    "detector forward": (("anunnaki/lec/_centernet.py", "detect"),),
+    "oracle forward": (("anunnaki/enlil/_oracle_plugin.py", "assess"),),
+    "utu": (("anunnaki/utu/host/_manager.py", "step"),),
+    "bus (own time)": (("anunnaki/bus/", "*"), ("anunnaki/messages/", "*")),
+    "scoring (F1; not the loop)": (("anunnaki/managed/_sim.py", "_score"),),
+    "bring-up (not per frame)": (
+        ("anunnaki/managed/_sim.py", "__init__"),
+        ("anunnaki/launch/_schema.py", "load_launch"),
+        ("anunnaki/launch/_runner.py", "_build_nodes"),
+    ),
+}
+
+
+def profile(
+    launch: Path, seconds: float, *, top: int = 30, dump: Path | None = None
+) -> dict[str, Any]:
+    """The whole loop in one process (the ``utu`` stage) under cProfile, every thread.
+
+    Each thread gets a profiler of its own (``threading.setprofile`` installs it as the
+    thread starts) timed by ``time.thread_time``, so the figures are CPU time, not wall
+    time. Torch's own worker threads are not Python threads: their time shows only in the
+    process's total (``native_threads_ms_per_frame``).
+    """
+    import cProfile
+    import pstats
+
+    profiles: list[cProfile.Profile] = []
+    lock = threading.Lock()
+
+    def install(*_: Any) -> None:
+        prof = cProfile.Profile(time.thread_time)
+        with lock:
+            profiles.append(prof)
+        prof.enable()
+
+    main = cProfile.Profile(time.thread_time)
+    threading.setprofile(install)
+    try:
+        cpu0 = time.process_time()
+        main.enable()
+        run = stage("utu", seconds, launch)
+        main.disable()
+        cpu = time.process_time() - cpu0
+    finally:
+        threading.setprofile(None)
+    stats = pstats.Stats(main)
+    for prof in profiles:
+        stats.add(prof)
+    if dump is not None:
+        stats.dump_stats(dump)  # for a closer look: python -m pstats FILE
+    table: dict[tuple[str, int, str], Any] = getattr(stats, "stats")  # noqa: B009 (untyped)
+    frames = max(int(run["frames"]), 1)
+
+    def ms(seconds: float) -> float:
+        return round(1000 * seconds / frames, 2)
+
+    parts: dict[str, float] = {}
+    for part, keys in PARTS.items():
+        total = 0.0
+        for (file, _, func), (_, _, own, cum, _) in table.items():
+            for where, name in keys:
+                if name == "*" and f"/{where}" in file:
+                    total += own
+                elif name == func and file.endswith(where):
+                    total += cum
+        parts[part] = ms(total)
+    threads = sum(v[2] for v in table.values())  # every Python thread's own time
+    parts["other (python)"] = round(ms(threads) - sum(parts.values()), 2)
+    ranked = sorted(table.items(), key=lambda kv: kv[1][3], reverse=True)[:top]
+    return {
+        "launch": str(launch),
+        "run": run,
+        "cpu_ms_per_frame": ms(cpu),
+        "python_threads_ms_per_frame": ms(threads),
+        "native_threads_ms_per_frame": round(ms(cpu) - ms(threads), 2),
+        "torch_threads": torch.get_num_threads(),
+        "parts_ms_per_frame": parts,
+        "top_inclusive_ms_per_frame": [
+            {"function": f"{Path(file).name}:{line}({func})", "ms": ms(v[3]), "calls": v[1]}
+            for (file, line, func), v in ranked
+        ],
+    }
+
+
+# -- the measurement ----------------------------------------------------------------------------
+def _median(runs: list[dict[str, Any]], key: str) -> float:
+    return round(statistics.median(float(r[key]) for r in runs), 2)
+
+
+def _summary(runs: list[dict[str, Any]]) -> dict[str, Any]:
+    out: dict[str, Any] = {
+        "fps_median": _median(runs, "fps"),
+        "cpu_ms_per_frame_median": _median(runs, "cpu_ms_per_frame"),
+    }
+    if "cpu_ms_per_frame_by_process" in runs[0]:
+        out["cpu_ms_per_frame_by_process_median"] = {
+            name: round(statistics.median(r["cpu_ms_per_frame_by_process"][name] for r in runs), 1)
+            for name in COMPONENTS
+        }
+    return out | {"runs": runs}
+
+
+def measure(
+    loop: str,
+    launch: Path,
+    seconds: float,
+    repeats: int,
+    *,
+    layouts: tuple[str, ...] = LAYOUTS,
+    torch_threads: tuple[int, ...] = (0,),
+    oracle_blas: tuple[str, ...] = ("1",),
+) -> dict[str, Any]:
+    """One loop in its layouts: median frames per second and CPU time each, and the ratios.
+
+    A repeat runs every stage and layout once, one after the other. Variants of the whole
+    loop run in the same repeats, in both layouts: each further ``torch_threads`` (torch's
+    threads in this process and in each component's; 0: torch's default) and each further
+    ``oracle_blas`` (the enlil oracle's ``blas_threads``: a number or ``none``), the others
+    as the first; they go to ``torch_threads_variants`` and ``oracle_blas_variants`` (the
+    first included). The first of each gives the stages and ``processes``.
+    """
+    as_written = load_launch(launch).managed
+    assert isinstance(as_written, SimKind)
+    out: dict[str, Any] = {"launch": str(launch), "stages": {}}
+    out["camera"] = _camera(as_written)
+    out["scorer"] = "off" if as_written.options.scorer is not None else "none"
+    out["oracle"] = str((as_written.options.oracle or {}).get("name"))
+    default_threads = torch.get_num_threads()
+
+    # (label, torch threads, oracle options): the first is the baseline, as the launch says
+    def blas(b: str) -> dict[str, Any] | None:  # the oracle's option; 1 is its default
+        return None if b == "1" else {"blas_threads": None if b == "none" else int(b)}
+
+    base = blas(oracle_blas[0])
+    variants: list[tuple[str, int, dict[str, Any] | None]] = [("", torch_threads[0], base)]
+    variants += [(f"torch threads {t}", t, base) for t in torch_threads[1:]]
+    variants += [(f"oracle blas_threads {b}", torch_threads[0], blas(b)) for b in oracle_blas[1:]]
+    stage_runs: dict[str, list[dict[str, Any]]] = {}
+    whole: dict[str, dict[str, list[dict[str, Any]]]] = {label: {} for label, _, _ in variants}
+    for _ in range(repeats):
+        for label, threads, oracle in variants:
+            tag = f" ({label})" if label else ""
+            if "one_process" in layouts:
+                torch.set_num_threads(threads or default_threads)
+                try:
+                    for name in ("utu",) if label else STAGES:
+                        run = stage(name, seconds, launch, oracle)
+                        if not label:
+                            stage_runs.setdefault(name, []).append(run)
+                        if name == "utu":
+                            whole[label].setdefault("one_process", []).append(run)
+                        print(f"  {name:9s} {_rate(run)}{tag}")
+                finally:
+                    torch.set_num_threads(default_threads)
+            if "processes" in layouts:
+                split = processes_run(launch, seconds, torch_threads=threads, oracle=oracle)
+                whole[label].setdefault("processes", []).append(split)
+                by = split["cpu_ms_per_frame_by_process"]
+                print(
+                    f"  processes {_rate(split)} ({', '.join(f'{k} {v}' for k, v in by.items())})"
+                    + tag
+                )
+    aim = AIM_HZ[loop]
+    out["aim_hz"] = aim
+    if stage_runs:
+        for name, runs in stage_runs.items():
+            out["stages"][name] = _summary(runs)
+        alone = out["stages"]["platform"]["fps_median"]
+        for entry in out["stages"].values():
+            entry["ratio_to_platform"] = round(entry["fps_median"] / alone, 3)
+        out["whole_loop_hz"] = out["stages"]["utu"]["fps_median"]
+        out["aim_met"] = out["whole_loop_hz"] >= aim
+    first = whole[""]
+    if "processes" in first:
+        out["processes"] = _summary(first["processes"])
+        out["processes_hz"] = out["processes"]["fps_median"]
+        out["aim_met_processes"] = out["processes_hz"] >= aim
+        if "whole_loop_hz" in out:
+            out["processes"]["ratio_to_one_process"] = round(
+                out["processes_hz"] / out["whole_loop_hz"], 3
+            )
+
+    def summaries(label: str) -> dict[str, Any]:
+        return {layout: _summary(runs) for layout, runs in whole[label].items()}
+
+    if len(torch_threads) > 1:
+        out["torch_threads_variants"] = {
+            str(t): {"torch_threads": t or default_threads}
+            | summaries(f"torch threads {t}" if k else "")
+            for k, t in enumerate(torch_threads)
+        }
+    if len(oracle_blas) > 1:
+        out["oracle_blas_variants"] = {
+            b: {"oracle_blas_threads": b} | summaries(f"oracle blas_threads {b}" if k else "")
+            for k, b in enumerate(oracle_blas)
+        }
     return out
+
+
+def _rate(run: dict[str, Any]) -> str:
+    return f"{run['fps']:6.1f} frames/s; {run['cpu_ms_per_frame']:6.1f} ms of CPU per frame"
 
 
 def _camera(sim: SimKind) -> str:
@@ -137,21 +775,86 @@ def _camera(sim: SimKind) -> str:
     return f"{cam.width}x{cam.height} at {cam.rate:g} Hz"
 
 
+def _csv(text: str, allowed: tuple[str, ...], flag: str, ap: argparse.ArgumentParser) -> list[str]:
+    items = [x.strip() for x in text.split(",") if x.strip()]
+    unknown = sorted(set(items) - set(allowed))
+    if unknown or not items:
+        ap.error(f"{flag}: {' and/or '.join(allowed)}, not {', '.join(unknown) or 'nothing'}")
+    return items
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--seconds", type=float, default=30.0, help="simulated seconds per run")
-    ap.add_argument("--repeats", type=int, default=3, help="runs per stage (median kept)")
+    ap.add_argument("--seconds", type=float, default=15.0, help="simulated seconds per run")
+    ap.add_argument("--repeats", type=int, default=2, help="runs per stage (median kept)")
     ap.add_argument("--output", type=Path, default=RESULTS)
     ap.add_argument("--launch", type=Path, default=LAUNCH, help="the rover's launch file")
     ap.add_argument("--uav-launch", type=Path, default=UAV_LAUNCH, help="the UAV's launch file")
     ap.add_argument(
         "--loops", default="rover,uav", help="which loops to measure: rover, uav or both"
     )
+    ap.add_argument(
+        "--layouts",
+        default=",".join(LAYOUTS),
+        help="one_process (four stages in this process) and/or processes (one per component)",
+    )
+    ap.add_argument(
+        "--torch-threads",
+        default="0",
+        help="torch threads in each component's process, comma-separated variants to compare "
+        "in the same run (0: torch's default, one per core)",
+    )
+    ap.add_argument(
+        "--profile",
+        type=Path,
+        metavar="FILE.json",
+        help="instead: profile the first of --loops in one process (cProfile, every thread) "
+        "and write where the CPU time per frame goes",
+    )
+    ap.add_argument(
+        "--pstats",
+        type=Path,
+        metavar="FILE",
+        help="with --profile: also keep the merged profile (python -m pstats FILE)",
+    )
+    ap.add_argument(
+        "--oracle-blas-threads",
+        default="1",
+        help="the enlil oracle's BLAS threads (its blas_threads: 1, the default, or none: the "
+        "process's), comma-separated variants to compare in the same run",
+    )
+    ap.add_argument("--component", choices=COMPONENTS, help=argparse.SUPPRESS)
+    ap.add_argument("--oracle-json", default="{}", help=argparse.SUPPRESS)
+    ap.add_argument("--bus-json", help=argparse.SUPPRESS)
     args = ap.parse_args()
-    loops = [x.strip() for x in args.loops.split(",") if x.strip()]
-    unknown = sorted(set(loops) - {"rover", "uav"})
-    if unknown or not loops:
-        ap.error(f"--loops: rover and/or uav, not {', '.join(unknown) or 'nothing'}")
+    if args.component is not None:  # one component's process of the processes layout
+        threads = int(args.torch_threads)
+        if threads > 0:
+            torch.set_num_threads(threads)
+        component(
+            args.component, args.launch, args.bus_json, args.seconds, json.loads(args.oracle_json)
+        )
+        return
+    loops = _csv(args.loops, ("rover", "uav"), "--loops", ap)
+    layouts = tuple(_csv(args.layouts, LAYOUTS, "--layouts", ap))
+    try:
+        variants = tuple(int(x) for x in args.torch_threads.split(","))
+    except ValueError:
+        ap.error(f"--torch-threads: whole numbers, e.g. 0,1, not {args.torch_threads!r}")
+    blas = tuple(x.strip().lower() for x in args.oracle_blas_threads.split(","))
+    if not all(x == "none" or (x.isdigit() and int(x) > 0) for x in blas):
+        ap.error(f"--oracle-blas-threads: 1, 2, … or none, not {args.oracle_blas_threads!r}")
+    if args.profile is not None:
+        launch = args.launch if loops[0] == "rover" else args.uav_launch
+        if variants[0] > 0:
+            torch.set_num_threads(variants[0])
+        found: dict[str, Any] = {"load_average_before": list(os.getloadavg())}
+        found |= profile(launch, args.seconds, dump=args.pstats)
+        found["load_average_after"] = list(os.getloadavg())
+        args.profile.write_text(json.dumps(found, indent=1) + "\n")
+        print(json.dumps(found["parts_ms_per_frame"], indent=1))
+        print(f"wrote {args.profile}")
+        return
     results: dict[str, Any] = {
         "benchmark": "loop",
         "date": time.strftime("%Y-%m-%d %H:%M:%S"),
@@ -163,22 +866,47 @@ def main() -> None:
         },
         "simulated_seconds": args.seconds,
         "repeats": args.repeats,
+        "layouts": list(layouts),
     }
     if "rover" in loops:
         print(f"rover loop ({args.launch})")
-        results.update(measure(args.launch, args.seconds, args.repeats))
+        results.update(
+            measure(
+                "rover",
+                args.launch,
+                args.seconds,
+                args.repeats,
+                layouts=layouts,
+                torch_threads=variants,
+                oracle_blas=blas,
+            )
+        )
     if "uav" in loops:
         print(f"UAV loop ({args.uav_launch})")
-        results["uav"] = measure(args.uav_launch, args.seconds, args.repeats)
+        results["uav"] = measure(
+            "uav",
+            args.uav_launch,
+            args.seconds,
+            args.repeats,
+            layouts=layouts,
+            torch_threads=variants,
+            oracle_blas=blas,
+        )
     results["machine"]["load_average_after"] = list(os.getloadavg())
     args.output.parent.mkdir(parents=True, exist_ok=True)
     args.output.write_text(json.dumps(results, indent=1) + "\n")
     for name, doc in (("rover", results), ("UAV", results.get("uav"))):
-        if doc is not None and "whole_loop_hz" in doc:
-            print(
-                f"{name} whole loop {doc['whole_loop_hz']:.1f} Hz at {doc['camera']} "
-                f"(aim {doc['aim_hz']:g} Hz)"
-            )
+        if doc is None:
+            continue
+        for key, what in (
+            ("whole_loop_hz", "one process"),
+            ("processes_hz", "one process per component"),
+        ):
+            if key in doc:
+                print(
+                    f"{name} whole loop, {what}: {doc[key]:.1f} Hz at {doc['camera']} "
+                    f"(aim {doc['aim_hz']:g} Hz)"
+                )
     print(f"wrote {args.output}")
 
 

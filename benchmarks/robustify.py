@@ -13,9 +13,12 @@ with one :class:`~anunnaki.enki.Budget`); only what perturbs a training frame di
 - ``corruption_mix``: each frame a random phenomenon of the library at a random strength
   (it does not depend on the domain: trained once per platform and seed, in the work
   folder's ``PLATFORM-shared``, and measured under every domain's conditions);
-- ``today``: the shipped ``train-detector --augment`` model where the domain has one
-  (``rover-fog`` for fog; ``rover-low_light``, trained on brightness and HSL darkening, for
-  hsl). It was trained before, at its own budget: its budget is recorded, not equal;
+- ``today``: the ``train-detector --augment`` model where the domain has one (``rover-fog``
+  for fog; ``rover-low_light``, trained on brightness and HSL darkening, for hsl). It was
+  trained before, at its own budget: its budget is recorded, not equal. ``rover-fog`` is no
+  longer shipped (``rover-fog-enki`` replaced it, as :func:`decide` found): when
+  examples/models lacks it, the arm rebuilds it into its work folder with the command that
+  made it (:data:`RETIRED`, docs/detector.md) on the ``--rover-data`` dataset;
 - ``shipped``: the shipped Enki model of the domain (scripts/train-domains.sh), at its own
   budget (the rover's: 504 steps, as today's), for the decision whether Enki models replace
   today's (:func:`decide`).
@@ -57,7 +60,8 @@ Run::
 Domains measured by separate processes (``--output runs/D.json`` each) join the results with
 ``--merge runs/D.json ...`` (refused unless their settings are the same; ``--own-settings``
 adds a domain measured at its own scale, e.g. a slower platform at a smaller budget, and the
-report states each domain's). Every arm × seed (and the searches) runs under a lock in the
+report states each domain's; ``--lr-choice FILE`` keeps with them how their learning rate was
+chosen on val). Every arm × seed (and the searches) runs under a lock in the
 work folder, so several processes given the same domain and ``--work`` share its work.
 
 ``--report`` regenerates docs/enki.md and its plots from benchmarks/results/robustify.json
@@ -186,10 +190,48 @@ DOMAINS = {
             "rain+brightness",
             {"brightness.gain": (0.75, 1.0)},
             ("rain.intensity", "brightness.gain"),
+            shipped="uav-rain_brightness",
             paper={"clean": 61.3, "default": 27.0, "robustified": 42.0},
         ),
     )
 }
+
+
+#: Today's ``--augment`` models that are no longer shipped, with the ``train-detector``
+#: options that made them (docs/detector.md; ``--init`` names a model of examples/models).
+#: ``rover-fog`` gave way to the Enki model ``rover-fog-enki`` (docs/enki.md, "Decision").
+RETIRED: dict[str, list[str]] = {
+    "rover-fog": ["--model-id", "rover-fog", "--domain", "fog", "--augment", "fog",
+                  "--augment-prob", "0.7", "--init", "rover-default", "--epochs", "8",
+                  "--lr", "2e-3", "--seed", "0", "--threads", "2"],
+}  # fmt: skip
+
+
+def today_model(model_id: str, data: Path, folder: Path, bars: Bars | None = None) -> Path:
+    """Today's ``--augment`` model file: the shipped one, or one rebuilt into *folder*.
+
+    A model of :data:`RETIRED` that examples/models no longer holds is trained once with its
+    command on *data* (the run's dataset), into ``folder/ID.safetensors``, and reused.
+    """
+    shipped = MODELS / f"{model_id}.safetensors"
+    if shipped.is_file() or model_id not in RETIRED:
+        return shipped
+    out = folder / f"{model_id}.safetensors"
+    if not out.is_file():
+        import subprocess
+
+        args = list(RETIRED[model_id])
+        k = args.index("--init") + 1
+        args[k] = str(MODELS / f"{args[k]}.safetensors")
+        if bars is not None:
+            bars.log(
+                f"  {model_id}: not shipped any more, rebuilt (train-detector {' '.join(args)})"
+            )
+        folder.mkdir(parents=True, exist_ok=True)
+        cmd = [sys.executable, "-m", "anunnaki.cli.main", "train-detector", "--data", str(data),
+               "--out", str(out), *args]  # fmt: skip
+        subprocess.run(cmd, check=True, stdout=subprocess.DEVNULL)
+    return out
 
 
 @dataclass(frozen=True)
@@ -787,15 +829,18 @@ def run_jobs(domain: Domain, ctx: dict[str, Any]) -> dict[str, list[dict[str, An
 
     A job another process holds (the same domain measured by two processes, or the
     platform's shared corruption mix being trained for another domain) is left for later
-    and waited for only when nothing else is left; a finished job is read back.
+    and waited for only when nothing else is left; a finished job is read back. The single
+    models (default, today's, shipped: measured only) go first, then the trained arms seed
+    by seed: a run stopped early leaves whole seeds done, each a paired comparison.
     """
     s: Settings = ctx["settings"]
     jobs: list[tuple[str, int | None]] = [("default", None)]
-    jobs += [(arm, seed) for arm in TRAINED for seed in s.seeds]
     if domain.today is not None:
         jobs.append(("today", None))
     if domain.shipped is not None and (MODELS / f"{domain.shipped}.safetensors").is_file():
         jobs.append(("shipped", None))
+    # seed by seed: a run stopped early has whole seeds (every trained arm) done
+    jobs += [(arm, seed) for seed in s.seeds for arm in TRAINED]
     done: dict[tuple[str, int | None], dict[str, Any]] = {}
     for blocking in (False, True):
         for arm, seed in jobs:
@@ -812,7 +857,7 @@ def run_jobs(domain: Domain, ctx: dict[str, Any]) -> dict[str, list[dict[str, An
             except BlockingIOError:
                 continue
     results: dict[str, list[dict[str, Any]]] = {}
-    for arm, seed in jobs:
+    for arm, seed in sorted(jobs, key=lambda job: ARMS.index(job[0])):  # stable: seeds in order
         results.setdefault(arm, []).append(done[arm, seed])
     return results
 
@@ -843,6 +888,8 @@ def run_arm(arm: str, seed: int | None, domain: Domain, ctx: dict[str, Any]) -> 
         model = {"default": domain.model, "today": domain.today, "shipped": domain.shipped}[arm]
         assert model is not None
         file = MODELS / f"{model}.safetensors"
+        if arm == "today":
+            file = today_model(model, ctx["data"], folder, bars)
         det = load_detector(file)
         card = read_card(file).training
         result["model"] = model
@@ -1030,7 +1077,11 @@ def _today_augment(domain: Domain) -> list[str]:
         return []
     from anunnaki.lec import read_card
 
-    aug = read_card(MODELS / f"{domain.today}.safetensors").training.get("augment", [])
+    shipped = MODELS / f"{domain.today}.safetensors"
+    if not shipped.is_file() and domain.today in RETIRED:  # its command names the phenomena
+        args = RETIRED[domain.today]
+        return [args[args.index("--augment") + 1]]
+    aug = read_card(shipped).training.get("augment", [])
     return [str(a) for a in aug]
 
 
@@ -1061,6 +1112,7 @@ def run_domain(
         "test": test.in_memory(),
         "perturbed": None,
         "shared": shared,
+        "data": data,
     }
     ctx["perturbed"] = Perturbed(ctx["test"], s.eval_seed)
     return domain_figures(domain, prep, run_jobs(domain, ctx), s)
@@ -1127,13 +1179,22 @@ def main(argv: Sequence[str] | None = None) -> int:
             help=f"default {getattr(defaults, name)} ({getattr(QUICK, name)} quick)",
         )
     p.add_argument("--lr", type=float, default=None)
+    p.add_argument(
+        "--lr-choice",
+        type=Path,
+        help="--merge: a JSON record of how the merged domains' learning rate was chosen on "
+        "val (kept with each domain and stated in the report)",
+    )
     p.add_argument("--clean", type=float, default=None)
     args = p.parse_args(argv)
     if args.report:
         write_report(json.loads(args.output.read_text(encoding="utf-8")), args.doc, args.images)
         return 0
     if args.merge:
-        merge(args.output, args.merge, own_settings=args.own_settings)
+        choice = read_json(args.lr_choice) if args.lr_choice else None
+        if args.lr_choice and choice is None:
+            p.error(f"--lr-choice {args.lr_choice}: no such file")
+        merge(args.output, args.merge, own_settings=args.own_settings, lr_choice=choice)
         return 0
     if args.nice:
         os.nice(args.nice)
@@ -1192,13 +1253,21 @@ def main(argv: Sequence[str] | None = None) -> int:
     return 0
 
 
-def merge(output: Path, others: Sequence[Path], *, own_settings: bool = False) -> None:
+def merge(
+    output: Path,
+    others: Sequence[Path],
+    *,
+    own_settings: bool = False,
+    lr_choice: dict[str, Any] | None = None,
+) -> None:
     """Add the domains of *others* to *output*; refuse files measured with other settings.
 
     Domains measured by separate processes (one per domain, side by side) end up in one
     result file, each with its own run record, as measured. With *own_settings* a domain
     measured at other settings (a smaller budget where the platform is slower) is added
-    too: it keeps its settings, and the report states them for that domain.
+    too: it keeps its settings, and the report states them for that domain. *lr_choice*
+    (how the learning rate was chosen on val: ``candidates`` with their val F1, ``chosen``)
+    is kept with each added domain; its ``chosen`` must be the domain's learning rate.
     """
     doc = json.loads(output.read_text(encoding="utf-8"))
     for other in others:
@@ -1210,8 +1279,15 @@ def merge(output: Path, others: Sequence[Path], *, own_settings: bool = False) -
                     "with the same settings go in one file (--own-settings adds its domains "
                     "with their own settings, stated per domain in the report)"
                 )
-        for entry in more["domains"].values():
+        for name, entry in more["domains"].items():
             entry["settings"] = more["settings"]  # the settings its file was measured with
+            if lr_choice is not None:
+                if lr_choice.get("chosen") != more["settings"]["lr"]:
+                    raise SystemExit(
+                        f"--lr-choice: it chose lr {lr_choice.get('chosen')}, {name} in {other} "
+                        f"was measured with {more['settings']['lr']}"
+                    )
+                entry["lr_choice"] = lr_choice
         doc["domains"] |= more["domains"]
     write_json(output, doc)
 
@@ -1311,6 +1387,7 @@ def render_report(doc: dict[str, Any]) -> str:
         lines += ["No domain measured yet.", ""]
     lines += _summary_table(domains)
     lines += _decision(domains)
+    lines += _kept(domains)
     lines += _paper_table(domains)
     for name, d in domains.items():
         lines += _domain_section(name, d)
@@ -1413,13 +1490,7 @@ def decide(d: dict[str, Any]) -> dict[str, Any] | None:
     if "today" not in arms:
         return None
     cand = "shipped" if "shipped" in arms else "enki"
-    c, t = arms[cand], arms["today"]
-    margins = {}
-    for cond in ("clean", "random", "hardest", *(k for k in d["conditions"] if k[:7] == "family:")):
-        margin = c[cond]["mean"] - t[cond]["mean"]
-        spread = 2 * arms["enki"][cond]["std"]
-        word = "win" if margin > spread else "loss" if margin < -spread else "tie"
-        margins[cond] = {"margin": round(margin, 4), "spread": round(spread, 4), "verdict": word}
+    margins = _single_margins(d, cand, "today")
     clean_ok = margins["clean"]["margin"] >= -AIMS["clean_loss"]
     own = [margins[k]["verdict"] for k in ("random", "hardest")]
     replace = clean_ok and "loss" not in own and "win" in own
@@ -1438,13 +1509,116 @@ def decide(d: dict[str, Any]) -> dict[str, Any] | None:
     steps = {k: arms[k]["training"][0]["steps"] for k in (cand, "today")}
     return {
         "candidate": arms[cand].get("model", "Enki arm"),
-        "today": t["model"],
+        "today": arms["today"]["model"],
         "steps": steps,
         "equal_budget": len(set(steps.values())) == 1,
         "margins": margins,
         "replace": replace,
         "reason": reason,
     }
+
+
+def _single_margins(d: dict[str, Any], a: str, b: str) -> dict[str, dict[str, Any]]:
+    """Arm *a* − arm *b* (single models) on clean, (b), (c) and the held-out families.
+
+    A difference counts only outside twice the Enki arm's seed spread on that condition
+    (two models, each as variable as an Enki fine-tune); else it is a tie.
+    """
+    arms = d["arms"]
+    margins = {}
+    for cond in ("clean", "random", "hardest", *(k for k in d["conditions"] if k[:7] == "family:")):
+        margin = arms[a][cond]["mean"] - arms[b][cond]["mean"]
+        spread = 2 * arms["enki"][cond]["std"]
+        word = "win" if margin > spread else "loss" if margin < -spread else "tie"
+        margins[cond] = {"margin": round(margin, 4), "spread": round(spread, 4), "verdict": word}
+    return margins
+
+
+def keep_shipped(d: dict[str, Any]) -> dict[str, Any] | None:
+    """Whether a domain's shipped Enki model is kept where no today's model competes with it.
+
+    Such a model (``uav-fog``, ``uav-rain_brightness``, ``rover-raindrop``) is swapped in only
+    under its phenomenon, in place of the default model: it is kept if, on the domain's own
+    contexts ((b) random and (c) hardest), it beats the default on one and loses on neither
+    (single models: outside twice the Enki arm's seed spread, as :func:`decide`). Its clean
+    F1 is checked against ``AIMS["clean_loss"]`` and stated, not used: the default model,
+    not this one, runs on clean frames.
+    """
+    arms = d["arms"]
+    if "today" in arms or "shipped" not in arms:
+        return None
+    margins = _single_margins(d, "shipped", "default")
+    own = [margins[k]["verdict"] for k in ("random", "hardest")]
+    keep = "loss" not in own and "win" in own
+    named = [cond_title(k) for k in ("random", "hardest") if margins[k]["verdict"] == "win"]
+    if keep:
+        reason = "a win over the default on " + " and ".join(named) + ", no loss"
+    elif "loss" in own:
+        lost = [cond_title(k) for k in ("random", "hardest") if margins[k]["verdict"] == "loss"]
+        reason = "it loses to the default on " + " and ".join(lost)
+    else:
+        reason = "it ties with the default on both (b) and (c)"
+    return {
+        "model": arms["shipped"]["model"],
+        "steps": arms["shipped"]["training"][0]["steps"],
+        "margins": margins,
+        "keep": keep,
+        "reason": reason,
+        "clean_loss": round(-margins["clean"]["margin"], 4),
+        "clean_within_aim": -margins["clean"]["margin"] <= AIMS["clean_loss"],
+    }
+
+
+def _cells(margins: dict[str, dict[str, Any]]) -> str:
+    """Table cells ``+1.2 (win) | …`` of single-model margins."""
+    return " | ".join(f"{100 * v['margin']:+.1f} ({v['verdict']})" for v in margins.values())
+
+
+def _kept(domains: dict[str, Any]) -> list[str]:
+    """The decision on shipped Enki models that no today's model competes with."""
+    rows, words, conds = [], [], []
+    for name, d in domains.items():
+        dec = keep_shipped(d)
+        if dec is None:
+            continue
+        conds = list(dec["margins"])
+        cells = _cells(dec["margins"])
+        aim = "within" if dec["clean_within_aim"] else "**over**"
+        rows.append(
+            f"| {name} | `{dec['model']}` ({dec['steps']}) | {cells} | {aim} | "
+            f"{'**keep**' if dec['keep'] else '**drop**'} |"
+        )
+        hard = d["enki_vs_random"]["hardest"]
+        words.append(
+            f"`{dec['model']}` is {'kept' if dec['keep'] else 'not kept'} ({dec['reason']}; "
+            f"it {'loses' if dec['clean_loss'] >= 0 else 'gains'} "
+            f"{abs(100 * dec['clean_loss']):.1f} points of clean F1, "
+            f"{'within' if dec['clean_within_aim'] else 'over'} the aim; at equal budget the "
+            f"Enki arm's margin over random contexts on (c) is {100 * hard['margin']:+.1f}, a "
+            f"{hard['verdict']})"
+        )
+    if not rows:
+        return []
+    return [
+        "## Decision: are the shipped Enki models without a rival kept?",
+        "",
+        "A domain's shipped Enki model that no `--augment` model competes with is swapped in "
+        "only under its phenomenon, in place of the default model. It is kept if, on the "
+        "domain's own contexts ((b) and (c)), it beats the default model on one and loses on "
+        "neither (single models: a difference counts only outside twice the Enki arm's seed "
+        "spread, as above). Its clean F1 is checked against the aim (at most "
+        f"{100 * AIMS['clean_loss']:.0f} points lost) and stated, not used: the default model "
+        "runs on clean frames. Margins: shipped − default, F1 points (steps in brackets).",
+        "",
+        "| domain | shipped model | "
+        + " | ".join(cond_title(c) for c in conds)
+        + " | clean loss vs aim | decision |",
+        "|---" * (4 + len(conds)) + "|",
+        *rows,
+        "",
+        "**Decision, from these figures**: " + "; ".join(words) + ".",
+        "",
+    ]
 
 
 def _decision(domains: dict[str, Any]) -> list[str]:
@@ -1456,7 +1630,7 @@ def _decision(domains: dict[str, Any]) -> list[str]:
             continue
         m = dec["margins"]
         conds = list(m)
-        cells = " | ".join(f"{100 * v['margin']:+.1f} ({v['verdict']})" for v in m.values())
+        cells = _cells(m)
         budget = "equal" if dec["equal_budget"] else "**not equal**"
         rows.append(
             f"| {name} | `{dec['candidate']}` ({dec['steps'][next(iter(dec['steps']))]}) | "
@@ -1615,13 +1789,33 @@ def _budget_lines(d: dict[str, Any]) -> list[str]:
     run = d.get("run", {})
     sel = d["enki_selection"]["counts"]
     srch = d["searches"]
+    base = arms["default"]["clean"]["mean"]
+    cost = ", ".join(
+        f"{LABELS[a]} {100 * (base - arms[a]['clean']['mean']):.1f}" for a in TRAINED if a in arms
+    )
     lines = [
         "Budgets and held-out conditions, as recorded:",
         "",
         f"- optimiser steps per run: {steps} — equal: **{'yes' if b['equal'] else 'no'}**; "
         f"{b['train_images']} images, {b['epochs']} epochs, batch {b['batch_size']}, "
         f"lr {b['lr']};",
+        "- clean F1 the fine-tune costs at this budget (default − arm, points; negative: a "
+        f"gain): {cost};",
     ]
+    choice = d.get("lr_choice")
+    if choice:
+        under = f"under {choice['phenomenon']}"
+        tried = "; ".join(
+            f"lr {c['lr']}: clean {pct(c['clean'])}, {under} {pct(c['perturbed'])}"
+            for c in choice["candidates"]
+        )
+        lines.append(
+            f"- learning rate {choice['chosen']}, chosen on val (never test) for every arm "
+            f"alike, on {choice['domain']}: {choice['how']}; at {choice['steps']} steps "
+            f"({choice['images']} images × {choice['epochs']} epochs) val F1 {tried} (the "
+            f"default: clean {pct(choice['default']['clean'])}, {under} "
+            f"{pct(choice['default']['perturbed'])});"
+        )
     if "today" in arms:
         t = arms["today"]["training"][0]
         lines.append(

@@ -80,7 +80,8 @@ DOC = ROOT / "docs" / "switching.md"
 IMAGES = ROOT / "docs" / "images"
 MODELS = ROOT / "examples" / "models"
 
-#: domain -> (shipped model id, the chain's phenomenon)
+#: domain -> (shipped model id, the chain's phenomenon): the model examples/models/rover.yaml
+#: serves the domain with (fog: Enki's rover-fog-enki, which replaced the --augment rover-fog)
 DOMAINS = {
     "hsl": ("rover-hsl", "hsl"),
     "raindrop": ("rover-raindrop", "raindrop+raindrop+raindrop"),

@@ -38,6 +38,11 @@ def test_case_studies_benchmark(tmp_path: Path) -> None:
         assert r["simulated_s"] == pytest.approx(14.0, abs=0.11) and r["frames"] >= 130
         assert [p["phase"] for p in r["onset_delays"]] == ["hsl"]
         assert r["distance_m"] > 0 and r["final_mode"] in ("autonomous", "manual", "stopped")
+        # the misses' companion: metres driven autonomously, misses per 10 of them
+        assert 0 <= r["autonomous_m"] <= r["distance_m"] + 0.05
+        if r["autonomous_m"] > 0:
+            expected = 10 * r["pedestrian_misses"] / r["autonomous_m"]
+            assert r["misses_per_10_autonomous_m"] == pytest.approx(expected, abs=0.01)
     utu, none = runs["utu"], runs["none"]
     # the adaptation happened, in the HSL phase, and its postcondition held
     swap = next(a for a in utu["adaptations"] if a["tactic"] == "swap-to-hsl-model")
@@ -50,7 +55,14 @@ def test_case_studies_benchmark(tmp_path: Path) -> None:
     summary = rover["summary"]
     assert set(summary) == {"utu", "none", "random"}
     for s in summary.values():
-        assert set(s) >= {"degraded_frames", "pedestrian_misses", "collisions", "false_alarms"}
+        assert set(s) >= {
+            "degraded_frames",
+            "pedestrian_misses",
+            "misses_per_10_autonomous_m",
+            "autonomous_m",
+            "collisions",
+            "false_alarms",
+        }
         assert s["onset_delay_s"].keys() >= {"mean", "std", "min", "max", "p95"}
 
 

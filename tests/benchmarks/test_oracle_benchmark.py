@@ -140,7 +140,7 @@ def test_seed_oracles_name_their_model_and_give_the_spread_aim(bench: Any) -> No
         ("recipe", Path("a.oracle")), ("recipe", Path("c.oracle")),
         ("small_cnn", Path("d.oracle")),
     ]  # fmt: skip
-    assert bench._seed_files(items, "rover-fog") == []
+    assert bench._seed_files(items, "rover-fog-enki") == []
     # another recipe's seeds group apart from the recipe's (and give no aim)
     two = {
         "recipe-s0": _figures(0.8, 0.9, 0.05),

@@ -62,6 +62,15 @@ def _stream(n: int) -> dict[str, Any]:
     return {"images": [np.zeros((4, 4, 3), np.uint8)] * n, "condition": ["clean"] * n}
 
 
+def test_the_switched_models_are_the_registrys(bench: Any) -> None:
+    """Each domain's model is the one the shipped registry swaps in for it (fog: rover-fog-enki)."""
+    from anunnaki.lec import load_registry
+
+    registry = load_registry(bench.MODELS / "rover.yaml")
+    for domain, (model_id, _) in bench.DOMAINS.items():
+        assert registry.for_domain(domain).id == model_id, domain
+
+
 def test_the_switching_rule_is_the_tactics(bench: Any) -> None:
     s = bench.Settings(rate=10, hold=(("hsl", 3), ("raindrop", 3), ("fog", 1)), cooldown_s=1.0,
                        back_after_s=0.5)  # fmt: skip

@@ -46,17 +46,27 @@ def _run(args: list[str]) -> dict[str, Any]:
 
 @pytest.fixture(scope="module")
 def chain(rover_data: Path, tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
-    """One chain run with --register into a copy of examples/models; hashes before and after."""
+    """One chain run with --register into a copy of examples/models; hashes before and after.
+
+    The new model (``low_light``) takes the place of ``rover-low_light``, whose entry the copy
+    drops first: one model serves each domain.
+    """
     tmp = tmp_path_factory.mktemp("chain")
     models = tmp / "models"
     shutil.copytree(MODELS, models)
     model = models / "rover-default.safetensors"
     before = {p.name: sha256_file(p) for p in (model, model.with_suffix(".json"))}
     reg = models / "rover.yaml"
+    head, *entries = reg.read_text(encoding="utf-8").split("\n  - id: ")
+    kept = [e for e in entries if not e.startswith("rover-low_light\n")]
+    assert len(kept) == len(entries) - 1
+    reg.write_text(head + "".join("\n  - id: " + e for e in kept), encoding="utf-8")
+    registry_before = reg.read_text(encoding="utf-8")
     summary = _run(argv(model, rover_data, tmp / "work", "--register", str(reg)))
     after = {p.name: sha256_file(p) for p in (model, model.with_suffix(".json"))}
     return {"summary": summary, "before": before, "after": after, "tmp": tmp,
-            "model": model, "registry": reg, "data": rover_data}  # fmt: skip
+            "model": model, "registry": reg, "data": rover_data,
+            "registry_before": registry_before}  # fmt: skip
 
 
 def test_the_chain_makes_a_model_its_sidecar_and_its_oracle(chain: dict[str, Any]) -> None:
@@ -107,12 +117,20 @@ def test_register_adds_entries_a_registry_loads(chain: dict[str, Any]) -> None:
     assert spec.oracle.sha256 == s["oracle"]["sha256"]
     load_oracle(spec.oracle.file, sha256=spec.oracle.sha256)
     text = reg.read_text()
-    original = (MODELS / "rover.yaml").read_text()
-    assert text.startswith(original.rstrip("\n"))  # other entries and comments kept
-    assert {"rover-default", "rover-fog", "rover-low_light"} <= set(registry.ids())
+    assert text.startswith(chain["registry_before"].rstrip("\n"))  # the rest is kept
+    shipped = load_registry(MODELS / "rover.yaml")
+    others = [m.id for m in shipped if m.domain != "low_light"]
+    assert registry.ids() == [*others, "rover-enki"] and registry.for_domain("low_light") == spec
     with pytest.raises(ModelRegistryError, match="registered already"):
         register_model(reg, s["model"]["file"], model_id="rover-enki")
     assert reg.read_text() == text
+    # a copy of the shipped registry has its low_light model: a second one is refused
+    copy = chain["tmp"] / "shipped"
+    shutil.copytree(MODELS, copy)
+    unchanged = (copy / "rover.yaml").read_text()
+    with pytest.raises(ModelRegistryError, match="'rover-low_light' serves domain 'low_light'"):
+        register_model(copy / "rover.yaml", s["model"]["file"], model_id="rover-enki")
+    assert (copy / "rover.yaml").read_text() == unchanged
 
 
 def test_a_rerun_continues_and_a_changed_option_is_refused(

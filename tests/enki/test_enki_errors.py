@@ -61,10 +61,30 @@ def test_an_archive_of_another_phenomenon_or_model(
     err = _fails([*argv(model, rover_data, tmp_path / "w1"), "--archive", str(fog)], capsys)
     assert f"--archive {fog}" in err and "search of fog, not of --phenomenon brightness" in err
     other = _archive(tmp_path / "other", phenomenon="brightness", params=("gain", "gamma"),
-                     sha=sha256_file(models / "rover-fog.safetensors"))  # fmt: skip
+                     sha=sha256_file(models / "rover-fog-enki.safetensors"))  # fmt: skip
     err = _fails([*argv(model, rover_data, tmp_path / "w2"), "--archive", str(other)], capsys)
     assert f"--archive {other}" in err and "not " + str(model) in err
     assert "leave --archive out" in err
     err = _fails([*argv(model, rover_data, tmp_path / "w3"), "--archive", str(tmp_path / "x")],
                  capsys)  # fmt: skip
     assert str(tmp_path / "x") in err and "no archive here" in err
+
+
+def test_a_registry_that_would_refuse_the_model_fails_before_any_work(
+    models: Path, rover_data: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    reg = models / "rover.yaml"
+    before = reg.read_text(encoding="utf-8")
+    model = models / "rover-default.safetensors"
+    # the copy of the shipped registry has a low_light model: one model per domain
+    err = _fails([*argv(model, rover_data, tmp_path / "w1"), "--register", str(reg)], capsys)
+    assert f"--register {reg}: 'rover-low_light' serves domain 'low_light' already" in err
+    assert "remove that entry first to register 'rover-enki' in its place" in err
+    taken = [*argv(model, rover_data, tmp_path / "w2"), "--register", str(reg)]
+    taken[taken.index("low_light")] = "dusk"
+    taken[taken.index("rover-enki")] = "rover-hsl"
+    err = _fails(taken, capsys)
+    assert "a model with id 'rover-hsl' is registered already" in err and "--id NAME" in err
+    assert reg.read_text(encoding="utf-8") == before
+    for work in (tmp_path / "w1", tmp_path / "w2"):  # no stage ran
+        assert not list(work.glob("stages/*.json"))

@@ -215,6 +215,30 @@ def test_merge_adds_domains_measured_with_the_same_settings(bench: Any, tmp_path
     page = bench.render_report(merged)
     assert "uav-x: measured at a **reduced scale**: 64 training images × 1 epochs" in page
     assert "--domains uav-x --train-images 64 --val-images" in page
+    # how the learning rate was chosen on val is kept with the domain and stated
+    val = {"clean": 0.9, "perturbed": 0.3}
+    choice = {
+        "domain": "uav-x",
+        "phenomenon": "fog",
+        "how": "two candidates",
+        "steps": 4,
+        "images": 64,
+        "epochs": 1,
+        "default": val,
+        "candidates": [{"lr": small["lr"], **val}, {"lr": 1e-4, **val}],
+        "chosen": small["lr"],
+    }
+    record = tmp_path / "lr.json"
+    record.write_text(json.dumps(choice))
+    args = ["--output", str(base), "--merge", str(odd), "--own-settings", "--lr-choice"]
+    assert bench.main([*args, str(record)]) == 0
+    merged = json.loads(base.read_text("utf-8"))
+    assert merged["domains"]["uav-x"]["lr_choice"] == choice
+    assert "lr_choice" not in merged["domains"][name]
+    assert f"learning rate {small['lr']}, chosen on val (never test)" in bench.render_report(merged)
+    record.write_text(json.dumps(choice | {"chosen": 1e-4}))  # not what uav-x was run with
+    with pytest.raises(SystemExit, match="lr-choice"):
+        bench.main([*args, str(record)])
 
 
 def test_the_shared_fine_tune_lock_lets_one_process_train_a_seed(
@@ -252,3 +276,59 @@ def test_the_decision_follows_the_figures(bench: Any) -> None:
     loss = bench.decide(domain(arm(0.92, 0.9, 0.5)))
     assert not loss["replace"] and "loses on (c)" in loss["reason"]
     assert bench.decide({"arms": {"enki": {}}, "conditions": {}}) is None
+
+
+@pytest.mark.timeout(600)  # one train-detector process: seconds on tiny data, more under load
+def test_a_today_model_no_longer_shipped_is_rebuilt_by_its_command(
+    bench: Any, rover_data: Path, tmp_path: Path
+) -> None:
+    """rover-fog left examples/models (rover-fog-enki serves fog): the today arm trains it."""
+    from anunnaki.lec import load_registry, read_card
+
+    assert not (bench.MODELS / "rover-fog.safetensors").exists()
+    assert load_registry(bench.MODELS / "rover.yaml").for_domain("fog").id == "rover-fog-enki"
+    folder = tmp_path / "arms" / "today"
+    file = bench.today_model("rover-fog", rover_data, folder)
+    assert file == folder / "rover-fog.safetensors"
+    card = read_card(file)
+    assert card.model_id == "rover-fog" and card.domain == "fog"
+    t = card.training
+    assert t["augment"] == ["fog"] and t["augment_prob"] == 0.7 and t["init"] == "rover-default"
+    assert (t["epochs"], t["lr"], t["seed"], t["threads"]) == (8, 0.002, 0, 2)  # as shipped
+    stamp = file.stat().st_mtime_ns
+    assert bench.today_model("rover-fog", rover_data, folder) == file  # reused, not retrained
+    assert file.stat().st_mtime_ns == stamp
+    # the held-out region check reads its augmentation from the command
+    assert bench._today_augment(bench.DOMAINS["rover-fog"]) == ["fog"]
+    shipped = bench.today_model("rover-low_light", rover_data, tmp_path / "x")
+    assert shipped == bench.MODELS / "rover-low_light.safetensors"  # still shipped: used as is
+    assert not (tmp_path / "x").exists()
+
+
+def test_a_shipped_model_without_a_rival_is_kept_only_for_a_gain_on_its_own_contexts(
+    bench: Any,
+) -> None:
+    def arm(clean: float, rand: float, hard: float, std: float = 0.0) -> dict[str, Any]:
+        row = {"clean": clean, "random": rand, "hardest": hard, "family:motion_blur": 0.5}
+        return {k: {"mean": v, "std": std, "n": 1} for k, v in row.items()}
+
+    def domain(shipped: dict[str, Any]) -> dict[str, Any]:
+        arms = {
+            "default": arm(0.95, 0.2, 0.1),
+            "enki": arm(0.9, 0.6, 0.5, std=0.02),
+            "shipped": shipped | {"model": "uav-fog", "training": [{"steps": 315}]},
+        }
+        return {"arms": arms, "conditions": {"random": {}, "hardest": {}, "family:motion_blur": {}}}
+
+    kept = bench.keep_shipped(domain(arm(0.92, 0.7, 0.12)))  # +50 on (b), a tie on (c)
+    assert kept["keep"] and "(b)" in kept["reason"] and kept["steps"] == 315
+    assert kept["clean_loss"] == 0.03 and not kept["clean_within_aim"]  # stated, not used
+    tie = bench.keep_shipped(domain(arm(0.95, 0.22, 0.13)))  # inside twice Enki's spread
+    assert not tie["keep"] and "ties" in tie["reason"]
+    loss = bench.keep_shipped(domain(arm(0.95, 0.9, 0.0)))
+    assert not loss["keep"] and "loses to the default on (c)" in loss["reason"]
+    # a domain with today's --augment model is decided by decide(), not here
+    today = domain(arm(0.92, 0.7, 0.12))
+    today["arms"]["today"] = arm(0.9, 0.5, 0.4)
+    assert bench.keep_shipped(today) is None
+    assert bench.keep_shipped({"arms": {"enki": {}}, "conditions": {}}) is None

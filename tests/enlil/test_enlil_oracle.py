@@ -104,30 +104,78 @@ def test_registry_names_each_models_oracle(oracle_file, tmp_path) -> None:  # ty
 
     path, digest, _ = oracle_file
     models = Path(__file__).resolve().parents[2] / "examples" / "models"
-    for name in ("rover-default", "rover-fog"):  # a registry's files sit in its folder
+    for name in ("rover-default", "rover-fog-enki"):  # a registry's files sit in its folder
         for suffix in (".safetensors", ".json"):
             shutil.copy(models / f"{name}{suffix}", tmp_path / f"{name}{suffix}")
     for suffix in (".safetensors", ".json"):
         shutil.copy(f"{path}{suffix}", tmp_path / f"{path.name}{suffix}")  # NAME.oracle + suffix
     path = tmp_path / path.name
-    pin = {n: sha256_file(tmp_path / f"{n}.safetensors") for n in ("rover-default", "rover-fog")}
+    pin = {
+        n: sha256_file(tmp_path / f"{n}.safetensors") for n in ("rover-default", "rover-fog-enki")
+    }
     registry = tmp_path / "models.yaml"
     body = (
         "anunnaki: models/1\nmodels:\n"
         "  - id: colour\n    domain: default\n    file: rover-default.safetensors\n"
         f"    sha256: {pin['rover-default']}\n"
         f"    oracle: {{file: {path}.safetensors, sha256: {digest}}}\n"
-        "  - id: rover-fog\n    domain: fog\n    file: rover-fog.safetensors\n"
-        f"    sha256: {pin['rover-fog']}\n"
+        "  - id: rover-fog-enki\n    domain: fog\n    file: rover-fog-enki.safetensors\n"
+        f"    sha256: {pin['rover-fog-enki']}\n"
     )
     registry.write_text(body)
     spec = load_registry(registry).get("colour")
     assert spec.oracle is not None and spec.oracle.sha256 == digest
-    assert load_registry(registry).get("rover-fog").oracle is None  # old entries still load
+    assert load_registry(registry).get("rover-fog-enki").oracle is None  # old entries still load
     plugin = EnlilOracle(registry)
     assert plugin.covered == ["colour"]
     assert plugin.assess(tiny_data(1).image(0), seq=0, model_id="colour") is not None
-    assert plugin.assess(tiny_data(1).image(0), seq=1, model_id="rover-fog") is None
+    assert plugin.assess(tiny_data(1).image(0), seq=1, model_id="rover-fog-enki") is None
     registry.write_text(body.replace(f"{path}.safetensors", "missing.safetensors"))
     with pytest.raises(RegistryFileError, match=r"oracle file 'missing\.safetensors' not found"):
         load_registry(registry)
+
+
+def _blas_threads() -> set[int]:
+    from threadpoolctl import threadpool_info  # type: ignore[import-untyped]
+
+    return {int(lib["num_threads"]) for lib in threadpool_info() if lib["user_api"] == "blas"}
+
+
+def test_enlil_plugin_assesses_on_one_blas_thread(oracle_file, monkeypatch) -> None:  # type: ignore[no-untyped-def]
+    # A frame's lookup is a few small BLAS calls; idle OpenBLAS workers spun between frames
+    # (23–34 ms of CPU a frame against 8–9 on one thread, docs/whole-loop.md). The process's own
+    # setting is restored after each frame, and the figures are those of the default threads.
+    path, _, _ = oracle_file
+    threaded = EnlilOracle(oracles={"colour": path}, blas_threads=None)
+    single = EnlilOracle(oracles={"colour": path})
+    assert single.blas_threads == 1
+    from anunnaki.enlil import OracleModel
+
+    seen: list[set[int]] = []
+    probabilities = OracleModel.category_probabilities
+
+    def recording(self, *args, **kwargs):  # type: ignore[no-untyped-def]
+        seen.append(_blas_threads())
+        return probabilities(self, *args, **kwargs)
+
+    monkeypatch.setattr(OracleModel, "category_probabilities", recording)
+    before = _blas_threads()
+    frames = tiny_data(3)
+    for i in range(3):
+        a = threaded.assess(frames.image(i), seq=i, model_id="colour")
+        b = single.assess(frames.image(i), seq=i, model_id="colour")
+        assert a is not None and b is not None
+        assert (a.category, a.context["phenomenon"]) == (b.category, b.context["phenomenon"])
+        probs = [np.asarray(x.context["probs"], dtype=float) for x in (a, b)]
+        np.testing.assert_allclose(probs[0], probs[1], atol=1e-4)
+        assert _blas_threads() == before  # restored
+    assert seen[0::2] == [before] * 3  # blas_threads=None: the process's threads
+    assert seen[1::2] == [{1}] * 3  # the default: one
+
+
+def test_enlil_plugin_refuses_bad_blas_threads(oracle_file) -> None:  # type: ignore[no-untyped-def]
+    from anunnaki.oracles import OracleError
+
+    path, _, _ = oracle_file
+    with pytest.raises(OracleError, match="blas_threads"):
+        EnlilOracle(oracles={"colour": path}, blas_threads=0)

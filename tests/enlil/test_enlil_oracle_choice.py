@@ -41,7 +41,7 @@ def test_the_measured_choice() -> None:
         assert oracle_architecture(phenomena) == "small_cnn"
     assert oracle_architecture(everything, model_id="rover-default") == "patch_cnn"
     assert oracle_architecture(["hsl"], model_id="rover-hsl") == "small_cnn"  # Enki's
-    assert oracle_architecture(["fog"], model_id="rover-fog") == "small_cnn"
+    assert oracle_architecture(["fog"], model_id="rover-fog-enki") == "small_cnn"
 
 
 def test_the_phenomenon_with_a_choice_decides(hsl_patch: None) -> None:

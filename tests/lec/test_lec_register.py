@@ -17,6 +17,7 @@ from anunnaki.lec import (
 )
 
 MODELS = Path(__file__).resolve().parents[2] / "examples" / "models"
+FOG = "rover-fog-enki"  # the rover's shipped fog model
 
 
 def _model(folder: Path, name: str) -> Path:
@@ -38,26 +39,26 @@ def test_an_entry_goes_at_the_end_of_the_models_block_and_the_rest_is_kept(
         "\n# the end\ndescription: kept after the list\n"
     )
     reg.write_text(text)
-    fog = _model(tmp_path / "elsewhere", "rover-fog")
-    oracle = _model(tmp_path / "elsewhere", "rover-fog.oracle")
+    fog = _model(tmp_path / "elsewhere", FOG)
+    oracle = _model(tmp_path / "elsewhere", f"{FOG}.oracle")
     spec = register_model(reg, fog, oracle=oracle, description='fog: "thick"')
-    assert spec.id == "rover-fog" == read_card(fog).model_id and spec.domain == "fog"
-    assert (tmp_path / "reg" / "rover-fog.safetensors").is_file()  # copied in, sidecar too
-    assert (tmp_path / "reg" / "rover-fog.oracle.json").is_file()
+    assert spec.id == FOG == read_card(fog).model_id and spec.domain == "fog"
+    assert (tmp_path / "reg" / f"{FOG}.safetensors").is_file()  # copied in, sidecar too
+    assert (tmp_path / "reg" / f"{FOG}.oracle.json").is_file()
     new = reg.read_text()
     assert new.startswith(
-        text.split("\n# the end", maxsplit=1)[0].rstrip("\n") + "\n    - id: rover-fog\n"
+        text.split("\n# the end", maxsplit=1)[0].rstrip("\n") + f"\n    - id: {FOG}\n"
     )
     assert new.endswith("\n# the end\ndescription: kept after the list\n")
     registry = load_registry(reg)
-    assert registry.verify("rover-fog") == sha256_file(fog)
-    assert registry.get("rover-fog").oracle is not None
-    assert registry.get("rover-fog").description == 'fog: "thick"'
+    assert registry.verify(FOG) == sha256_file(fog)
+    assert registry.get(FOG).oracle is not None
+    assert registry.get(FOG).description == 'fog: "thick"'
 
 
 def test_a_new_registry_starts_from_its_default_model(tmp_path: Path) -> None:
     reg = tmp_path / "new" / "reg.yaml"
-    fog = _model(tmp_path / "m", "rover-fog")
+    fog = _model(tmp_path / "m", FOG)
     with pytest.raises(ModelRegistryError, match="no model registry there"):
         register_model(reg, fog)
     with pytest.raises(ModelFileError, match="no model for the domain 'default'"):
@@ -65,7 +66,7 @@ def test_a_new_registry_starts_from_its_default_model(tmp_path: Path) -> None:
     assert not reg.exists()  # nothing half-written stays
     register_model(reg, _model(tmp_path / "m", "rover-default"), create=True)
     register_model(reg, fog)
-    assert load_registry(reg).ids() == ["rover-default", "rover-fog"]
+    assert load_registry(reg).ids() == ["rover-default", FOG]
 
 
 def test_refusals_leave_the_registry_as_it_was(tmp_path: Path) -> None:
@@ -75,8 +76,8 @@ def test_refusals_leave_the_registry_as_it_was(tmp_path: Path) -> None:
     with pytest.raises(ModelRegistryError, match=r"r\.yaml:4: a model with id 'rover-default'"):
         register_model(reg, _model(tmp_path / "m", "rover-default"))
     # another file of the same name already in the registry's folder
-    other = _model(tmp_path / "m2", "rover-fog")
-    (tmp_path / "reg" / "rover-fog.safetensors").write_bytes(b"not this one")
+    other = _model(tmp_path / "m2", FOG)
+    (tmp_path / "reg" / f"{FOG}.safetensors").write_bytes(b"not this one")
     with pytest.raises(ModelRegistryError, match="another model file of this name"):
         register_model(reg, other)
     inline = tmp_path / "reg" / "inline.yaml"
@@ -89,3 +90,17 @@ def test_refusals_leave_the_registry_as_it_was(tmp_path: Path) -> None:
         register_model(inline, _model(tmp_path / "m3", "rover-low_light"))
     assert not (tmp_path / "reg" / "rover-low_light.safetensors").exists()  # nothing copied
     assert reg.read_text() == before
+
+
+def test_a_second_model_for_a_served_domain_is_refused(tmp_path: Path) -> None:
+    reg = tmp_path / "reg" / "r.yaml"
+    register_model(reg, _model(tmp_path / "m", "rover-default"), create=True)
+    register_model(reg, _model(tmp_path / "m", FOG))
+    before = reg.read_text()
+    with pytest.raises(ModelRegistryError, match=f"'{FOG}' serves domain 'fog' already") as info:
+        register_model(reg, _model(tmp_path / "m", "rover-hsl"), domain="fog")
+    assert "remove that entry first" in str(info.value)
+    assert reg.read_text() == before
+    assert not (tmp_path / "reg" / "rover-hsl.safetensors").exists()  # nothing copied
+    register_model(reg, _model(tmp_path / "m", "rover-hsl"))  # its own domain: welcome
+    assert load_registry(reg).for_domain("hsl").id == "rover-hsl"

@@ -115,6 +115,9 @@ def test_bad_entries_in_code_are_refused(tmp_path: Path) -> None:
         reg.add(id="-b", domain="fog", file=tmp_path / "b")
     spec = reg.add(id="c", domain="fog", file=tmp_path / "c", sha256="AB" * 32)
     assert spec.sha256 == "ab" * 32  # normalised
+    with pytest.raises(ModelRegistryError, match="'c' and 'd' both serve domain 'fog'"):
+        reg.add(id="d", domain="fog", file=tmp_path / "d")  # a swap to fog would be ambiguous
+    assert reg.ids() == ["a", "c"] and reg.for_domain("fog").id == "c"
 
 
 @pytest.mark.parametrize(
@@ -215,6 +218,9 @@ def test_load_a_registry_file(tmp_path: Path, models: dict[str, tuple[Path, str]
         (lambda t: t.replace("file: det-fog.model", "file: nowhere.model"), 12,
          "model file 'nowhere.model' not found"),
         (lambda t: t.replace("id: det-fog", "id: det-default"), 10, "used twice"),
+        (lambda t: t.replace("domain: fog", "domain: default"), 11,
+         r"models\[0\] \('det-default'\) and models\[1\] \('det-fog'\) both serve domain "
+         "'default'"),
         (lambda t: t.replace("domain: default", "domain: clear"), 4, "no model for the domain"),
         (lambda t: t.replace("domain: fog", "domain: heavy-fog"), 11, "must be an identifier"),
         (lambda t: t.replace("    domain: fog\n", ""), 10, "missing required field 'domain'"),

@@ -20,6 +20,7 @@ from managed_helpers import fog_scene
 
 from anunnaki import topics
 from anunnaki.launch import parse_launch, run_launch
+from anunnaki.lec import load_registry
 from anunnaki.messages import Assessment
 from anunnaki.sim import load_report
 
@@ -127,10 +128,11 @@ def test_enlil_drives_a4_fog_then_the_fog_model(enlil_run: dict[str, Any]) -> No
 def test_after_the_swap_the_fog_models_oracle_assesses(enlil_run: dict[str, Any]) -> None:
     seen: list[Assessment] = enlil_run["assessments"]
     models = [a.model_id for a in seen]
-    assert models[0] == "rover-default" and models[-1] == "rover-fog"
-    k = models.index("rover-fog")
+    fog_model = load_registry(MODELS).for_domain("fog").id  # rover-fog-enki, Enki's
+    assert models[0] == "rover-default" and models[-1] == fog_model
+    k = models.index(fog_model)
     assert all(m == "rover-default" for m in models[:k])  # one switch, no going back
-    assert all(m == "rover-fog" for m in models[k:])
+    assert all(m == fog_model for m in models[k:])
     clear = [a for a in seen[:k] if a.frame_seq is not None and a.frame_seq < 25]
     assert clear and all(a.category == 0 for a in clear)  # no alarm in clear weather
     # In fog the default model's oracle said degraded in fog (what started the swap) ...
@@ -172,3 +174,46 @@ def test_the_demo_with_the_learned_oracle_swaps_and_keeps_the_rover(run_demo: An
     assert {"swap-to-fog-model", "swap-to-low-light-model"} <= set(demo.verified), log
     run = load_report(demo.report)
     assert run.scoring is not None and run.scoring["oracle"] == "enlil"
+
+
+#: The demo's raindrop (examples/rover/conditions-scenario.yaml) on the scene above from 3 s:
+#: the raindrop model's own oracle finds it compromised in this drop, as the demo shows.
+RAINDROP = {
+    **fog_scene("enlil-raindrop", duration=11, fog_at=3),
+    "phenomena": [
+        {
+            "at": 3,
+            "phenomenon": "raindrop",
+            "params": {"x": 0.6, "y": 0.5, "radius": 0.3, "feather": 0.25},
+            "ramp": 1,
+        }
+    ],
+}
+
+
+@pytest.mark.timeout(300)  # 11 s simulated: about 20 s on a quiet machine
+def test_a_robust_model_its_own_oracle_finds_degraded_hands_the_rover_over(
+    tmp_path: Path,
+) -> None:
+    """Failsafe F-1 when no model is trusted (tactics-lm.yaml): the raindrop model swapped in,
+    its own oracle says it is degraded too, so the rover is handed over once the alarm has
+    outlasted G19's 0.5 s, not at the swap's 6 s deadline, and only once."""
+    run = run_enlil(tmp_path, RAINDROP)
+    result, log = run["result"], run["log"]
+    assert result.exit_code == 0, log
+    started = {d.tactic: d.t for d in result.decisions if d.kind == "started"}
+    swap, hand_over = started["swap-to-raindrop-model"], started["fail-safe-robust-model-degraded"]
+    assert 3.0 <= swap < hand_over < swap + 6.0, log
+    action = next(
+        d
+        for d in result.decisions
+        if d.kind == "action" and d.tactic == "fail-safe-robust-model-degraded"
+    )
+    assert action.data["mode"] == "manual" and action.data["ok"] is True
+    # the verdict it acted on was the raindrop model's own
+    judged = [a for a in run["assessments"] if a.model_id == "rover-raindrop"]
+    assert judged and judged[0].category >= 1, judged[:3]
+    assert "fail-safe" not in started, log  # handed over once
+    kinds = [(d.kind, d.tactic) for d in result.decisions]
+    assert ("postcondition_failed", "swap-to-raindrop-model") in kinds, log
+    assert ("escalation_exhausted", "swap-to-raindrop-model") in kinds, log

@@ -486,6 +486,8 @@ def robustify(
         "model_id": new_id,
     }
     work = WorkFolder(out, options, scoped=("oracle",))  # older folders recorded it here
+    if register is not None:  # a registry that would refuse the model fails before any work
+        _check_register(work, Path(register), new_id=new_id, domain=config.domain)
     chain = _Chain(
         resolved, Path(data), work, config, splits=splits, model_in_id=model_in_id,
         new_id=new_id, progress=progress,
@@ -525,6 +527,29 @@ def robustify(
     return summary
 
 
+def _register_key(registry: Path) -> str:
+    """The work folder's stage name of a registration into *registry*."""
+    return "register-" + hashlib.sha256(str(registry.resolve()).encode()).hexdigest()[:12]
+
+
+def _check_register(work: WorkFolder, registry: Path, *, new_id: str, domain: str) -> None:
+    """Refuse ``--register`` up front when the registry has the id or a model of the domain.
+
+    A registration this work folder made already is left to the register stage (it reuses it).
+    """
+    from anunnaki.lec import check_registrable
+
+    if not registry.is_file() or work.stage(_register_key(registry)) is not None:
+        return  # a missing registry is register_model's to refuse, with its own message
+    try:
+        check_registrable(registry, new_id, domain)
+    except AnunnakiError as exc:
+        raise EnkiError(
+            f"--register {exc} (or leave --register out and register the model later: "
+            "anunnaki.lec.register_model)"
+        ) from None
+
+
 def _register(
     work: WorkFolder,
     registry: Path,
@@ -537,7 +562,7 @@ def _register(
     """Add the model and its oracle to *registry* (once per registry: a rerun reuses it)."""
     from anunnaki.lec import register_model
 
-    key = "register-" + hashlib.sha256(str(registry.resolve()).encode()).hexdigest()[:12]
+    key = _register_key(registry)
     done = work.stage(key)
     if done is not None:
         return done

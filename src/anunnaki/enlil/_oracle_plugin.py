@@ -14,10 +14,18 @@ and the plugin uses that model's oracle, named in the model registry::
 After a swap the new model's oracle is used (all are loaded when the plugin is built, each
 sha256 checked); for a model no oracle covers nothing is invented: ``assess`` returns
 ``None`` (nothing is published) and the plugin logs it once per model.
+
+A frame's context lookup is a few small BLAS calls (one query against the stored
+contexts). OpenBLAS's idle workers spin for a while after each threaded call, so at a camera
+rate they kept a core busy between frames: measured in the whole loop, the UAV's oracle
+process took 23–34 ms of CPU per frame with numpy's and SciPy's default two BLAS threads
+and 8–9 with one (docs/whole-loop.md). ``assess`` therefore runs on one BLAS thread
+(``blas_threads``), through threadpoolctl, and restores the process's setting after.
 """
 
 from __future__ import annotations
 
+import contextlib
 import logging
 from collections import deque
 from collections.abc import Mapping
@@ -50,6 +58,8 @@ class EnlilOracle:
         preload: Load every named oracle now (a bad file is reported when the node is
             built, and no frame waits for a file to be read and prepared); ``False``: each
             on the first frame of its model.
+        blas_threads: The BLAS threads (numpy's and SciPy's) ``assess`` runs on; ``None``
+            leaves them as the process has them. The figures are the same (to rounding).
 
     Raises:
         OracleError: Neither *models* nor *oracles* given, or *window* < 1.
@@ -65,6 +75,7 @@ class EnlilOracle:
         oracles: Mapping[str, str | Path | OracleModel] | None = None,
         window: int = 1,
         preload: bool = True,
+        blas_threads: int | None = 1,
     ) -> None:
         if models is None and not oracles:
             raise OracleError(
@@ -73,7 +84,11 @@ class EnlilOracle:
             )
         if not isinstance(window, int) or window < 1:
             raise OracleError(f"enlil: window must be a whole number >= 1, got {window!r}")
+        if blas_threads is not None and (not isinstance(blas_threads, int) or blas_threads < 1):
+            raise OracleError(f"enlil: blas_threads must be >= 1 or None, got {blas_threads!r}")
         self.window = window
+        self.blas_threads = blas_threads
+        self._blas: Any = None  # threadpoolctl's view of the BLAS libraries, on first use
         self._sources: dict[str, tuple[Path, str | None] | OracleModel] = {}
         if models is not None:
             from anunnaki.lec import load_registry
@@ -139,6 +154,21 @@ class EnlilOracle:
         if model_id != self._last_model:
             self._history.clear()
             self._last_model = model_id
+        with self._blas_limit():
+            return self._assess(oracle, frame, seq=seq, model_id=model_id)
+
+    def _blas_limit(self) -> contextlib.AbstractContextManager[Any]:
+        """At most ``blas_threads`` BLAS threads in the block (a no-op with ``None``)."""
+        if self.blas_threads is None:
+            return contextlib.nullcontext()
+        if self._blas is None:  # after the oracles' loading: their BLAS is loaded by now
+            from threadpoolctl import ThreadpoolController  # type: ignore[import-untyped]
+
+            self._blas = ThreadpoolController().select(user_api="blas")
+        limiter: contextlib.AbstractContextManager[Any] = self._blas.limit(limits=self.blas_threads)
+        return limiter
+
+    def _assess(self, oracle: OracleModel, frame: Frame, *, seq: int, model_id: str) -> Assessment:
         out = oracle.outputs([frame])
         cat, params, phen = out.category, out.params, out.phenomenon
         drop = oracle.predicted_drop(out.drop)

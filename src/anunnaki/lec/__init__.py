@@ -83,7 +83,7 @@ from anunnaki.lec._node import (
     decode_image,
     detections_topic,
 )
-from anunnaki.lec._register import register_model
+from anunnaki.lec._register import check_registrable, register_model
 from anunnaki.lec._registry import (
     DEFAULT_DOMAIN,
     REGISTRY_FORMAT,
@@ -157,6 +157,7 @@ __all__ = [
     "architecture_files",
     "as_image_list",
     "box_iou",
+    "check_registrable",
     "choose_threshold",
     "class_map",
     "decode_image",

@@ -21,7 +21,7 @@ from anunnaki.lec._detector import read_card, sha256_file, sidecar_path, weights
 from anunnaki.lec._registry import REGISTRY_FORMAT, ModelRegistryError, ModelSpec
 from anunnaki.lec._registry_file import load_registry
 
-__all__ = ["register_model"]
+__all__ = ["check_registrable", "register_model"]
 
 _MODELS = re.compile(r"^models:\s*(#.*)?$")
 
@@ -84,6 +84,34 @@ def _write(path: Path, text: str) -> None:
     os.replace(tmp, path)
 
 
+def check_registrable(registry: str | Path, model_id: str, domain: str) -> None:
+    """Refuse what :func:`register_model` would refuse in an existing *registry*, up front.
+
+    Raises:
+        ModelRegistryError: A model with *model_id* is registered already (naming its line),
+            or another model serves *domain* (one model per domain: a swap names a domain).
+        ModelFileError: The registry is malformed (naming the line).
+
+    """
+    reg = Path(registry)
+    existing = load_registry(reg)
+    if model_id in existing:
+        entry_re = re.compile(rf"\s*- id: {re.escape(model_id)}\s*")
+        lines = reg.read_text(encoding="utf-8").splitlines()
+        line = next((n for n, t in enumerate(lines, 1) if entry_re.fullmatch(t)), "?")
+        raise ModelRegistryError(
+            f"{reg}:{line}: a model with id {model_id!r} is registered already; give the "
+            "new model another id (robustify --id NAME) or remove that entry first"
+        )
+    serving = next((m for m in existing if m.domain == domain), None)
+    if serving is not None:
+        raise ModelRegistryError(
+            f"{reg}: {serving.id!r} serves domain {domain!r} already (one model per domain: a "
+            f"swap names a domain); remove that entry first to register {model_id!r} in its "
+            "place, or give the new model another domain"
+        )
+
+
 def register_model(
     registry: str | Path,
     model: str | Path,
@@ -107,8 +135,9 @@ def register_model(
             of the ``default`` domain: a registry starts from its default model).
 
     Raises:
-        ModelRegistryError: The id is registered already, the registry is missing (without
-            *create*) or cannot be added to, or a file of the same name is in the way.
+        ModelRegistryError: The id is registered already, another model serves the domain,
+            the registry is missing (without *create*) or cannot be added to, or a file of
+            the same name is in the way.
         ModelFileError: The registry is malformed (naming the line) or the result does not
             load (the file is then restored).
 
@@ -121,15 +150,7 @@ def register_model(
     domain = domain or card.domain
     if reg.is_file():
         text = reg.read_text(encoding="utf-8")
-        existing = load_registry(reg)
-        if model_id in existing:
-            entry_re = re.compile(rf"\s*- id: {re.escape(model_id)}\s*")
-            lines = text.splitlines()
-            line = next((n for n, t in enumerate(lines, 1) if entry_re.fullmatch(t)), "?")
-            raise ModelRegistryError(
-                f"{reg}:{line}: a model with id {model_id!r} is registered already; give the "
-                "new model another id (robustify --id NAME) or remove that entry first"
-            )
+        check_registrable(reg, model_id, domain)
     elif create:
         text = f"anunnaki: {REGISTRY_FORMAT}\nlec: detector\nmodels:\n"
     else:

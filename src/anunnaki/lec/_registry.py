@@ -244,7 +244,8 @@ class ModelRegistry:
         """Add one model: a :class:`ModelSpec`, a mapping, or its fields as keywords.
 
         Raises:
-            ModelRegistryError: Invalid fields (naming the field), or the id is taken.
+            ModelRegistryError: Invalid fields (naming the field), the id is taken, or another
+                model serves the domain already.
 
         """
         if spec is None:
@@ -272,6 +273,13 @@ class ModelRegistry:
             if spec.id in self._models:
                 raise ModelRegistryError(
                     f"model id {spec.id!r} is registered twice; give each model its own id"
+                )
+            other = next((m for m in self._models.values() if m.domain == spec.domain), None)
+            if other is not None:
+                raise ModelRegistryError(
+                    f"models {other.id!r} and {spec.id!r} both serve domain {spec.domain!r}; "
+                    "a swap names a domain and gets its one model: keep one of them, or give "
+                    "the other its own domain"
                 )
             self._models[spec.id] = spec
         return spec
@@ -326,7 +334,7 @@ class ModelRegistry:
         return spec
 
     def for_domain(self, domain: str) -> ModelSpec:
-        """Return the model of a domain (the first one added, if several serve it).
+        """Return the model of a domain (one serves each: :meth:`add` refuses a second).
 
         Raises:
             UnknownModelError: No model serves the domain; the message lists the domains.

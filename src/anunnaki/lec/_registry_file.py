@@ -126,6 +126,7 @@ def _build(  # noqa: C901
     registry = ModelRegistry(lec=parsed.lec, loader=loader, source=source)
     registry._lines = lines
     seen: dict[str, int] = {}
+    domains: dict[str, tuple[int, str]] = {}  # domain -> (index, id) of the entry serving it
     for i, entry in enumerate(parsed.models):
 
         def fail(message: str, field: str | None, hint: str, i: int = i) -> ModelFileError:
@@ -199,7 +200,20 @@ def _build(  # noqa: C901
                 field="id",
                 hint="give each model its own id",
             )
+        if spec.domain in domains:
+            j, other = domains[spec.domain]
+            raise _entry_error(
+                f"models[{j}] ({other!r}) and models[{i}] ({spec.id!r}) both serve domain "
+                f"{spec.domain!r}",
+                lines=lines,
+                path=source,
+                index=i,
+                field="domain",
+                hint="a swap names a domain and gets its one model: remove the entry of the "
+                "model that no longer serves it, or give one of them its own domain",
+            )
         seen[spec.id] = i
+        domains[spec.domain] = (i, spec.id)
         registry.add(spec)
         registry._where[spec.id] = i
     if DEFAULT_DOMAIN not in registry.domains():

@@ -293,6 +293,14 @@ class ExecuteStage:
                 return
         fs = planner.runtimes.get(self.parts.config.failsafe or "")
         if fs is not None and fs.name not in self._cascade and not fs.in_flight:
+            if fs.tactic.postconditions and self._view.postconditions_hold(fs.tactic):
+                # Already where the fail-safe brings the system (another tactic handed it
+                # over while the failed one was in flight): running it again would only
+                # repeat its actions, its e-mail included.
+                kb.record_decision(
+                    now, "escalation_exhausted", failed.name, note="fail-safe's goal already holds"
+                )
+                return
             kb.record_decision(now, "escalated", failed.name, to=fs.name)
             self.executor.start(fs, now, reason=f"escalation from {failed.name} (fail-safe)")
             return
