@@ -33,23 +33,53 @@ measured from the run's public topics (``on_bus``), its decisions and its report
 * ``adaptations``: each adaptation tactic started, with the outcome of its postconditions
   (``ok``, ``failed``, or ``null`` when the run ended first).
 
-The runs send no e-mail (the launch's ``notify`` section is dropped, so a fail-safe's e-mail
-fails at once as not configured, recorded as a decision, its log lines kept off the output):
-a benchmark must not mail whatever listens on the demo's port.
+The UAV (examples/uav/sim.yaml, ``platform: uav`` in :data:`CASES`) is measured on its
+mission instead of pedestrians, from ``/uav/status``; its run ends at the touch-down after
+its flight (nothing of the mission changes after it), or at the scenario's end:
+
+* ``delivered``: 1 when the package was dropped at the delivery point (``delivered``);
+* ``landing``: where the flight ended: ``home`` (within 1 m of it), ``elsewhere``,
+  ``forced`` (the empty battery forced it down: phase ``forced landing``), ``airborne`` at
+  the end, or ``ground`` (never took off); ``landed_home`` is 1 for ``home``;
+* ``battery_at_landing``: % at the touch-down (at the end, still airborne);
+  ``mission_time_s``: the touch-down's simulated time (``null`` while airborne);
+* ``low_battery_s``: simulated seconds airborne below 20 % (obstacle O2 holding);
+* ``degraded_frames``: frames the UAV flew on its detector (airborne in ``auto`` or
+  ``return_home``) with a model in category >= 1 by the ground-truth scorer;
+* ``lockstep_misses``: frames the simulator stepped past after 2 s of wall time without
+  their detections (a loaded machine; the figures of such a run lag behind);
+* onset delays, false alarms, decisions and adaptations as for the rover, with the UAV's
+  tactics (:data:`CASES`): adaptations are the swaps, ``failsafe-f1``, ``return-home``,
+  ``hold-route`` and ``link-lost``; a mode change adapts to a camera phase only from
+  ``failsafe-f1``; an adverse condition is a phenomenon or a fault in force (a sensor off
+  its nominal rate, the link down, the battery's extra drain).
+
+Utu's wall-time watchdog gets :data:`WATCHDOG` (a loaded machine, not the scenario, would
+trip its 3 s). The runs send no e-mail (the launch's ``notify`` section is dropped, so a
+fail-safe's e-mail fails at once as not configured, recorded as a decision, its log lines
+kept off the output): a benchmark must not mail whatever listens on the demo's port.
 
 The summary gives per manager the mean, standard deviation, min and max over seeds, and the
 onset delays' p95 over all phases of all seeds. A case is one entry of :data:`CASES`: a
 launch file whose managed system is ``kind: sim``, whose scenario has a ``vary:`` section;
-the UAV (examples/uav) joins with one entry. Writes ``benchmarks/results/case-studies.json``::
+the UAV (examples/uav) is the second. Writes ``benchmarks/results/case-studies.json``::
 
     .venv/bin/python benchmarks/case_studies.py                 # 10 seeds per manager
-    .venv/bin/python benchmarks/case_studies.py --quick         # 1 seed, 14 s, a check
+    .venv/bin/python benchmarks/case_studies.py --quick         # 1 seed: 14 s; a short UAV flight
+    .venv/bin/python benchmarks/case_studies.py --cases uav --managers utu --merge
+
+``--merge`` writes into the file (under a lock) after each run: its other cases stay, and
+within a case the runs of the (manager, seed) pairs not run again (so managers and seeds,
+``--first-seed``, can run in processes of their own, and an interrupted comparison keeps
+what it measured); the case's summary is computed again. Each case records its own
+``settings`` (seeds, simulated seconds, scenario, managers, date, load average).
 """
 
 from __future__ import annotations
 
 import argparse
 import dataclasses
+import fcntl
 import io
 import json
 import logging
@@ -57,8 +87,10 @@ import math
 import os
 import platform
 import statistics
+import tempfile
 import threading
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -67,7 +99,7 @@ from anunnaki import topics
 from anunnaki.launch import load_launch, run_launch
 from anunnaki.managed import SimKind
 from anunnaki.messages import Assessment, Detections, body_of
-from anunnaki.sim import StopRule, Timeline, draw_scenario, load_scenario
+from anunnaki.sim import Scenario, StopRule, Timeline, draw_scenario, load_scenario
 
 ROOT = Path(__file__).parents[1]
 RESULTS = Path(__file__).parent / "results" / "case-studies.json"
@@ -76,6 +108,11 @@ FAST = 0.0  # --speed 0: as fast as the lockstep allows
 #: The live scorer of every run: the ground truth over the last second (10 frames), so that
 #: a frame's category is that of the model that handled it, not of the last 3 s.
 SCORER = {"name": "ground_truth", "window": 10, "min_frames": 5, "min_objects": 5}
+#: Utu's watchdog (wall seconds a round may take before it run-stops the platform; 3 s by
+#: default): a run in lockstep on a loaded machine can starve Utu's thread for longer while
+#: simulated time waits, and a run-stop then would end the run for the host's load, not for
+#: anything the scenario did.
+WATCHDOG = 120.0
 
 
 @dataclass(frozen=True)
@@ -93,11 +130,48 @@ class Case:
         ("raindrop", "raindrop"),
         ("brightness", "low_light"),
     )
+    #: Tactic-name prefixes whose mode change adapts to any adverse phase (the fail-safe).
+    failsafe: tuple[str, ...] = ("fail-safe",)
+    #: The platform: which recorder hears the run and which measures it gets.
+    platform: str = "rover"
+    #: ``--quick``: simulated seconds per run (``None``: the whole scenario), and fields of
+    #: the scenario replaced (a shorter mission; the drawn ``vary`` is dropped with it).
+    quick_until: float | None = 14.0
+    quick: dict[str, Any] = field(default_factory=dict)
 
 
 CASES: dict[str, Case] = {
     "rover": Case(ROOT / "examples" / "rover" / "demo.yaml"),
+    "uav": Case(
+        ROOT / "examples" / "uav" / "sim.yaml",
+        adaptations=("swap-to-", "failsafe-", "return-home", "hold-route", "link-lost"),
+        fits=(("fog", "fog"), ("rain", "rain_brightness"), ("brightness", "rain_brightness")),
+        failsafe=("failsafe-",),
+        platform="uav",
+        quick_until=None,
+        # 26 s at most from the ground: climb at 10 m/s to 30 m (3 s), out east over 24 and
+        # 48 m at 8 m/s; fog from 3 s; the battery (36 %) drains 1.5 %/s more from 2 s, below
+        # G11's 30 % at about 5 s, when the UAV is 16 m out: home from there lands with about
+        # 20 %, while the delivery (at 9-14 s) and the 48 m back empty it before home
+        quick={
+            "duration": 26,
+            "mission": {
+                "home": [0, 0],
+                "waypoints": [[24, 0]],
+                "delivery": [48, 0],
+                "cruise_altitude": 30,
+                "speed": 8,
+                "climb_rate": 10,
+                "battery": 36,
+            },
+            "phenomena": [{"at": 3, "phenomenon": "fog", "strength": 0.7, "ramp": 1}],
+            "faults": [{"at": 2, "fault": "battery_drain", "rate": 1.5}],
+            "vary": None,
+        },
+    ),
 }
+#: The UAV's power obstacle O2 (examples/uav/goals.yaml): the battery below 20 %.
+UAV_LOW_BATTERY = 20.0
 
 
 @dataclass
@@ -189,6 +263,118 @@ class _Recorder:
         }
 
 
+@dataclass
+class _UavRecorder:
+    """What a UAV run publishes, heard on its bus: its frames' categories and its flight.
+
+    A frame counts as handled by the detector while the UAV flies on it (airborne in
+    ``auto`` or ``return_home``; hovering or landing it waits). The flight is read from
+    ``/uav/status``: take-off, the last touch-down (time, battery, where, and whether the
+    battery had forced it), seconds airborne below O2's 20 %, the package's ``delivered``.
+    ``landed`` is set at the touch-down after a flight (the run can stop there: nothing of
+    the mission changes after it).
+    """
+
+    home: tuple[float, float]
+    lock: threading.Lock = field(default_factory=threading.Lock)
+    landed: threading.Event = field(default_factory=threading.Event)
+    scorer: dict[int, int] = field(default_factory=dict)  # seq -> ground-truth category
+    flying: dict[int, bool] = field(default_factory=dict)  # seq -> flying on the detector
+    status: dict[str, Any] = field(default_factory=dict)  # the last /uav/status
+    airborne_at: float | None = None
+    touchdown: dict[str, Any] | None = None  # t, battery, x, y, forced
+    forced: bool = False
+    low_battery_s: float = 0.0
+    subs: list[Any] = field(default_factory=list)
+
+    def attach(self, bus: Any) -> None:
+        self.subs = [
+            bus.subscribe(topics.DETECTIONS, self._on_detections, queue=1024),
+            bus.subscribe(topics.SCORER, self._on_scorer, queue=1024),
+            bus.subscribe("/uav/status", self._on_status, queue=1024),
+        ]
+
+    def _on_detections(self, sample: Any) -> None:
+        det = sample.message
+        if isinstance(det, Detections):
+            with self.lock:
+                s = self.status
+                airborne = float(s.get("altitude", 0.0)) > 0.05
+                self.flying[det.frame_seq] = airborne and s.get("mode") in ("auto", "return_home")
+
+    _on_scorer = _Recorder._on_scorer  # the same fields: lock, scorer
+    close = _Recorder.close  # subs
+
+    def _on_status(self, sample: Any) -> None:
+        body = body_of(sample.message)
+        t, altitude, battery = float(body["t"]), float(body["altitude"]), float(body["battery"])
+        with self.lock:
+            last = self.status
+            if last and float(last["altitude"]) > 0.05 and float(last["battery"]) < UAV_LOW_BATTERY:
+                self.low_battery_s += max(0.0, t - float(last["t"]))
+            self.status = body
+            if altitude > 0.05:
+                if self.airborne_at is None:
+                    self.airborne_at = t
+                self.touchdown = None
+                self.forced = self.forced or body.get("phase") == "forced landing"
+            elif self.airborne_at is not None and self.touchdown is None:
+                self.touchdown = {"t": t, "battery": battery, "x": body["x"], "y": body["y"]}
+                self.landed.set()
+
+    def counts(self) -> dict[str, Any]:
+        with self.lock:
+            degraded = sum(1 for s, c in self.scorer.items() if c >= 1 and self.flying.get(s))
+            last, down = dict(self.status), self.touchdown
+            low, forced, airborne_at = self.low_battery_s, self.forced, self.airborne_at
+        if airborne_at is None:
+            landing = "ground"
+        elif down is None:
+            landing = "airborne"
+        elif forced:
+            landing = "forced"
+        else:
+            away = math.hypot(float(down["x"]) - self.home[0], float(down["y"]) - self.home[1])
+            landing = "home" if away < 1.0 else "elsewhere"
+        return {
+            "degraded_frames": degraded,
+            "delivered": int(bool(last.get("delivered"))),
+            "landing": landing,
+            "landed_home": int(landing == "home"),
+            "battery_at_landing": round(float(down["battery"] if down else last["battery"]), 2),
+            "mission_time_s": None if down is None else round(float(down["t"]), 2),
+            "low_battery_s": round(low, 2),
+        }
+
+
+class _LockstepMisses(logging.Handler):
+    """Counts the frames the simulator stepped past without their detections (under load)."""
+
+    def __init__(self) -> None:
+        super().__init__(logging.WARNING)
+        self.count = 0
+
+    def emit(self, record: logging.LogRecord) -> None:
+        if "got no detections" in record.getMessage():
+            self.count += 1
+
+
+def _adverse(scenario: Any, timeline: Timeline, t: float) -> bool:
+    """A condition in force at ``t``: a phenomenon or a fault (a rate off the nominal one)."""
+    if timeline.phenomena(t):
+        return True
+    nominal = {
+        "camera": scenario.camera.rate,
+        "ultrasonic": scenario.ultrasonic.rate,
+        "gps": scenario.mission.gps_rate,
+        "battery": scenario.mission.battery_rate,
+    }
+    return any(
+        f["fault"] != "rate" or f["rate"] != nominal.get(f.get("sensor"))
+        for f in timeline.faults(t)
+    )
+
+
 def _phases(scenario: Any) -> list[tuple[float, float, str]]:
     """The adverse phases: (onset, end, label) per group of events starting together."""
     starts = sorted({e.at for e in scenario.phenomena})
@@ -201,26 +387,43 @@ def _phases(scenario: Any) -> list[tuple[float, float, str]]:
     return out
 
 
-def run_once(case: Case, manager: str, seed: int, until: float | None) -> dict[str, Any]:
-    """One run of ``case`` under ``manager`` with the scenario drawn from ``seed``."""
+def run_once(
+    case: Case, manager: str, seed: int, until: float | None, scenario_file: Path | None = None
+) -> dict[str, Any]:
+    """One run of ``case`` under ``manager`` with the scenario drawn from ``seed``.
+
+    ``scenario_file`` replaces the launch's scenario (the quick mode's shortened one). A UAV
+    run ends at the touch-down after its flight (or at ``until``, the scenario's end).
+    """
     launch = load_launch(case.launch)
     assert isinstance(launch.managed, SimKind), f"{case.launch}: not a 'managed: sim' launch"
-    options = launch.managed.options.model_copy(
-        update={"scenario_seed": seed, "report": False, "scorer": SCORER}
-    )
+    update: dict[str, Any] = {"scenario_seed": seed, "report": False, "scorer": SCORER}
+    if scenario_file is not None:
+        update["scenario"] = str(scenario_file)
+    options = launch.managed.options.model_copy(update=update)
     launch.managed.options = options
-    launch = dataclasses.replace(launch, utu=launch.utu.model_copy(update={"notify": {}}))
+    utu = launch.utu.model_copy(update={"notify": {}, "watchdog": WATCHDOG})
+    launch = dataclasses.replace(launch, utu=utu)
     scenario = draw_scenario(load_scenario(options.scenario), seed)
     end = scenario.duration if until is None else min(until, scenario.duration)
-    recorder = _Recorder(scenario.camera.width, scenario.camera.height)
+    recorder: _Recorder | _UavRecorder
+    stop: threading.Event | None = None
+    if case.platform == "uav":
+        recorder = _UavRecorder(scenario.mission.home)
+        stop = recorder.landed
+    else:
+        recorder = _Recorder(scenario.camera.width, scenario.camera.height)
     report_path = Path(os.environ.get("TMPDIR", "/tmp")) / f"case-{os.getpid()}-{seed}.json"
     launch.managed.with_reports(report=str(report_path), plot=None)
+    misses = _LockstepMisses()
+    logging.getLogger("anunnaki.managed").addHandler(misses)
     t0 = time.perf_counter()
     try:
         result = run_launch(
             launch,
             speed=FAST,
             until=end,
+            stop=stop,
             out=io.StringIO(),
             handle_signals=False,
             on_bus=recorder.attach,
@@ -229,6 +432,7 @@ def run_once(case: Case, manager: str, seed: int, until: float | None) -> dict[s
         )
     finally:
         recorder.close()
+        logging.getLogger("anunnaki.managed").removeHandler(misses)
     wall = time.perf_counter() - t0
     report = json.loads(report_path.read_text(encoding="utf-8"))
     report_path.unlink(missing_ok=True)
@@ -252,7 +456,10 @@ def run_once(case: Case, manager: str, seed: int, until: float | None) -> dict[s
                 d.t
                 for d in adaptive
                 if onset <= d.t < phase_end
-                and (d.data.get("type") == "change_mode" or d.data.get("domain") in domains)
+                and (
+                    (d.data.get("type") == "change_mode" and d.tactic.startswith(case.failsafe))
+                    or d.data.get("domain") in domains
+                )
             ),
             None,
         )
@@ -265,7 +472,7 @@ def run_once(case: Case, manager: str, seed: int, until: float | None) -> dict[s
         )
 
     def calm(t: float) -> bool:
-        return not any(timeline.phenomena(max(0.0, t - dt)) for dt in (0.0, 0.5, 1.0))
+        return not any(_adverse(scenario, timeline, max(0.0, t - dt)) for dt in (0.0, 0.5, 1.0))
 
     alarms = [
         d
@@ -299,7 +506,8 @@ def run_once(case: Case, manager: str, seed: int, until: float | None) -> dict[s
         "frames": len(report["frames"]),
         "wall_s": round(wall, 2),
         **recorder.counts(),
-        "collisions": len(report["collisions"]),
+        **({"collisions": len(report["collisions"])} if case.platform == "rover" else {}),
+        **({"lockstep_misses": misses.count} if case.platform == "uav" else {}),
         "onset_delays": delays,
         "false_alarms": len(alarms),
         "false_alarm_tactics": [f"{d.tactic}@{d.t:.1f}" for d in alarms],
@@ -337,20 +545,42 @@ MEASURES = (
     "false_alarms",
     "decisions",
 )
+#: The UAV's measures: the mission's outcome first (``mission_time_s`` over the runs that
+#: landed), then the common ones.
+UAV_MEASURES = (
+    "delivered",
+    "landed_home",
+    "battery_at_landing",
+    "mission_time_s",
+    "low_battery_s",
+    "degraded_frames",
+    "false_alarms",
+    "decisions",
+)
 
 
-def summarise(runs: list[dict[str, Any]]) -> dict[str, Any]:
+def measures_of(case: Case) -> tuple[str, ...]:
+    """The measures summarised for ``case``'s platform."""
+    return UAV_MEASURES if case.platform == "uav" else MEASURES
+
+
+def summarise(runs: list[dict[str, Any]], measures: tuple[str, ...] = MEASURES) -> dict[str, Any]:
     """Mean and spread per measure, onset delays pooled over phases and seeds."""
-    out: dict[str, Any] = {m: _spread([float(r[m]) for r in runs]) for m in MEASURES}
+    out: dict[str, Any] = {
+        m: _spread([float(r[m]) for r in runs if r[m] is not None]) for m in measures
+    }
     delays = [p["delay_s"] for r in runs for p in r["onset_delays"]]
     known = [float(d) for d in delays if d is not None]
     out["onset_delay_s"] = {**_spread(known), "p95": _p95(known)}
     out["phases_without_adaptation"] = sum(1 for d in delays if d is None)
     out["phases"] = len(delays)
+    if "landing" in (runs[0] if runs else {}):
+        landings = [r["landing"] for r in runs]
+        out["landings"] = ", ".join(f"{w} ×{landings.count(w)}" for w in sorted(set(landings)))
     return out
 
 
-def table(summary: dict[str, dict[str, Any]]) -> str:
+def table(summary: dict[str, dict[str, Any]], measures: tuple[str, ...] = MEASURES) -> str:
     """The managers side by side (mean ± std [min–max])."""
 
     def cell(s: dict[str, Any]) -> str:
@@ -359,7 +589,7 @@ def table(summary: dict[str, dict[str, Any]]) -> str:
         return f"{s['mean']:.2f} ± {s['std']:.2f} [{s['min']:g}–{s['max']:g}]"
 
     rows = [f"{'measure':<22} " + " ".join(f"{m:<30}" for m in summary)]
-    for measure in (*MEASURES, "onset_delay_s"):
+    for measure in (*measures, "onset_delay_s"):
         rows.append(
             f"{measure:<22} " + " ".join(f"{cell(s[measure]):<30}" for s in summary.values())
         )
@@ -371,7 +601,64 @@ def table(summary: dict[str, dict[str, Any]]) -> str:
         f"{'phases not adapted':<22} "
         + " ".join(f"{s['phases_without_adaptation']}/{s['phases']:<28}" for s in summary.values())
     )
+    if all("landings" in s for s in summary.values()):
+        rows.append(
+            f"{'landings':<22} " + " ".join(f"{s['landings']:<30}" for s in summary.values())
+        )
     return "\n".join(rows)
+
+
+def quick_scenario(case: Case, folder: Path) -> Path | None:
+    """``case``'s scenario with its ``quick`` fields replaced, written in ``folder``."""
+    if not case.quick:
+        return None
+    launch = load_launch(case.launch)
+    assert isinstance(launch.managed, SimKind), f"{case.launch}: not a 'managed: sim' launch"
+    base = load_scenario(launch.managed.options.scenario).model_dump(mode="json")
+    scenario = Scenario.model_validate({**base, **case.quick})
+    path = folder / f"{case.launch.parent.name}-quick.yaml"
+    path.write_text(json.dumps(scenario.model_dump(mode="json"), indent=1), encoding="utf-8")
+    return path
+
+
+def _order(run: dict[str, Any]) -> tuple[int, int]:
+    return (MANAGERS.index(run["manager"]), int(run["seed"]))
+
+
+def write(doc: dict[str, Any], path: Path, *, merge: bool) -> None:
+    """Write ``doc`` to ``path``; with ``merge``, into what the file holds (under a lock).
+
+    Merging keeps the file's other cases and, within a case, the runs of the (manager, seed)
+    pairs this run did not run (so managers and seeds can run in separate processes); the
+    case's summary is computed again over its runs.
+    """
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with open(path, "a+", encoding="utf-8") as f:
+        fcntl.flock(f, fcntl.LOCK_EX)
+        f.seek(0)
+        text = f.read()
+        if merge and text.strip():
+            old = json.loads(text)
+            for name, case in doc["cases"].items():
+                before = old.get("cases", {}).get(name)
+                if before is not None:
+                    ran = {_order(r) for r in case["runs"]}
+                    runs = [r for r in before["runs"] if _order(r) not in ran] + case["runs"]
+                    runs.sort(key=_order)
+                    managers = [m for m in MANAGERS if any(r["manager"] == m for r in runs)]
+                    seeds = max(sum(r["manager"] == m for r in runs) for m in managers)
+                    case["runs"] = runs
+                    case["settings"] = {**case["settings"], "managers": managers, "seeds": seeds}
+                    measures = measures_of(CASES[name])
+                    case["summary"] = {
+                        m: summarise([r for r in runs if r["manager"] == m], measures)
+                        for m in managers
+                    }
+                old.setdefault("cases", {})[name] = case
+            doc = old
+        f.seek(0)
+        f.truncate()
+        f.write(json.dumps(doc, indent=1) + "\n")
 
 
 def main() -> None:
@@ -379,12 +666,19 @@ def main() -> None:
     ap.add_argument("--cases", default=",".join(CASES), help="comma-separated (default: all)")
     ap.add_argument("--managers", default=",".join(MANAGERS), help="comma-separated")
     ap.add_argument("--seeds", type=int, help="seeds per manager (10; quick: 1)")
+    ap.add_argument("--first-seed", type=int, default=0, help="seeds from this one (0)")
     ap.add_argument("--until", type=float, help="simulated seconds per run (the scenario's)")
-    ap.add_argument("--quick", action="store_true", help="1 seed, 14 simulated seconds")
+    ap.add_argument(
+        "--quick", action="store_true", help="1 seed; the rover's first 14 s, a short UAV mission"
+    )
     ap.add_argument("--output", type=Path, default=RESULTS)
+    ap.add_argument(
+        "--merge",
+        action="store_true",
+        help="write into the output file: keep its other cases and other managers' runs",
+    )
     args = ap.parse_args()
     seeds = args.seeds if args.seeds is not None else (1 if args.quick else 10)
-    until = args.until if args.until is not None else (14.0 if args.quick else None)
     logging.getLogger("anunnaki.utu.notify").setLevel(logging.CRITICAL)
     managers = [m for m in args.managers.split(",") if m]
     doc: dict[str, Any] = {
@@ -395,36 +689,94 @@ def main() -> None:
             "cpus": os.cpu_count(),
             "load_average_before": list(os.getloadavg()),
         },
-        "settings": {"seeds": seeds, "until": until, "quick": args.quick, "managers": managers},
+        "settings": {
+            "seeds": seeds,
+            "until": args.until,
+            "quick": args.quick,
+            "managers": managers,
+        },
         "cases": {},
     }
-    for name in (c for c in args.cases.split(",") if c):
-        case = CASES[name]
-        runs = []
-        for manager in managers:
-            for seed in range(seeds):
-                run = run_once(case, manager, seed, until)
-                runs.append(run)
-                print(
-                    f"{name} {manager:<6} seed {seed}: {run['frames']} frames in "
-                    f"{run['wall_s']:.0f} s; degraded {run['degraded_frames']}, missed "
-                    f"{run['pedestrian_misses']}, collisions {run['collisions']}, "
-                    f"{run['distance_m']:.1f} m ({run['final_mode']}), delays "
-                    f"{[p['delay_s'] for p in run['onset_delays']]}, false alarms "
-                    f"{run['false_alarms']}, decisions {run['decisions']}",
-                    flush=True,
-                )
-        summary = {m: summarise([r for r in runs if r["manager"] == m]) for m in managers}
-        doc["cases"][name] = {
-            "launch": str(case.launch.relative_to(ROOT)),
-            "summary": summary,
-            "runs": runs,
-        }
-        print(f"\n{name}:\n{table(summary)}\n")
+    with tempfile.TemporaryDirectory(prefix="case-studies-") as tmp:
+        for name in (c for c in args.cases.split(",") if c):
+
+            def save(entry: dict[str, Any], name: str = name) -> None:
+                write({**doc, "cases": {name: entry}}, args.output, merge=True)
+
+            doc["cases"][name] = run_case(
+                CASES[name], name, args, managers, seeds, Path(tmp), save if args.merge else None
+            )
     doc["machine"]["load_average_after"] = list(os.getloadavg())
-    args.output.parent.mkdir(parents=True, exist_ok=True)
-    args.output.write_text(json.dumps(doc, indent=1) + "\n", encoding="utf-8")
+    write(doc, args.output, merge=args.merge)
     print(f"wrote {args.output}")
+
+
+def run_case(
+    case: Case,
+    name: str,
+    args: argparse.Namespace,
+    managers: list[str],
+    seeds: int,
+    tmp: Path,
+    save: Callable[[dict[str, Any]], None] | None = None,
+) -> dict[str, Any]:
+    """``case`` under each manager over ``seeds`` seeds: its entry of the JSON's ``cases``.
+
+    ``save`` is called with the entry so far after each run (``--merge``: an interrupted
+    comparison keeps the runs it made).
+    """
+    until = args.until if args.until is not None else (case.quick_until if args.quick else None)
+    scenario_file = quick_scenario(case, tmp) if args.quick else None
+    load_before = list(os.getloadavg())
+    measures = measures_of(case)
+    runs: list[dict[str, Any]] = []
+
+    def entry() -> dict[str, Any]:
+        ran = [m for m in managers if any(r["manager"] == m for r in runs)]
+        return {
+            "launch": str(case.launch.relative_to(ROOT)),
+            "summary": {
+                m: summarise([r for r in runs if r["manager"] == m], measures) for m in ran
+            },
+            "runs": list(runs),
+            "settings": {
+                "seeds": seeds,
+                "until": until,
+                "scenario": "quick" if scenario_file is not None else "the launch's",
+                "managers": ran,
+                "date": time.strftime("%Y-%m-%d %H:%M:%S"),
+                "load_average": [load_before, list(os.getloadavg())],
+            },
+        }
+
+    for manager in managers:
+        for seed in range(args.first_seed, args.first_seed + seeds):
+            run = run_once(case, manager, seed, until, scenario_file)
+            runs.append(run)
+            print(f"{name} {manager:<6} seed {seed}: {_line(run)}", flush=True)
+            if save is not None:
+                save(entry())
+    done = entry()
+    print(f"\n{name}:\n{table(done['summary'], measures)}\n")
+    return done
+
+
+def _line(run: dict[str, Any]) -> str:
+    """One run's figures in a line."""
+    delays = [p["delay_s"] for p in run["onset_delays"]]
+    common = f"delays {delays}, false alarms {run['false_alarms']}, decisions {run['decisions']}"
+    if "landing" in run:
+        return (
+            f"{run['frames']} frames in {run['wall_s']:.0f} s; delivered {run['delivered']}, "
+            f"landing {run['landing']} at {run['mission_time_s']} s with "
+            f"{run['battery_at_landing']:.1f} %, {run['low_battery_s']:.1f} s below "
+            f"{UAV_LOW_BATTERY:g} %, degraded {run['degraded_frames']}, {common}"
+        )
+    return (
+        f"{run['frames']} frames in {run['wall_s']:.0f} s; degraded {run['degraded_frames']}, "
+        f"missed {run['pedestrian_misses']}, collisions {run['collisions']}, "
+        f"{run['distance_m']:.1f} m ({run['final_mode']}), {common}"
+    )
 
 
 if __name__ == "__main__":

@@ -431,8 +431,10 @@ def managers_section(path: Path) -> list[str]:
         summary: dict[str, dict[str, Any]] = case.get("summary", {})
         managers = list(summary)
         measures = [k for k, v in next(iter(summary.values()), {}).items() if isinstance(v, dict)]
+        own = case.get("settings")  # a case run on its own (--merge) says when and how
+        when = f"; {own.get('seeds', '?')} seed(s), {own.get('date', '?')}" if own else ""
         out += [
-            f"**{name}** (`{case.get('launch', '?')}`)",
+            f"**{name}** (`{case.get('launch', '?')}`{when})",
             "",
             "| measure | " + " | ".join(managers) + " |",
             "|---|" + "---|" * len(managers),
@@ -456,6 +458,9 @@ def managers_section(path: Path) -> list[str]:
                 )
                 + " |"
             )
+        if all("landings" in summary[mgr] for mgr in managers):
+            cells = " | ".join(str(summary[mgr]["landings"]) for mgr in managers)
+            out.append(f"| landings | {cells} |")
         out.append("")
     return out
 

@@ -96,3 +96,26 @@ def test_every_paper_figure_is_cited(bench: Any) -> None:
     assert len(bench.PAPER) == 9
     assert all(f.cite.startswith("§4.") for f in bench.PAPER)
     assert {f.what for f in bench.PAPER} == {"clean", "domain", "oracle"}
+
+
+def test_the_managers_table_has_a_row_per_uav_measure(bench: Any, tmp_path: Path) -> None:
+    spread = {"mean": 0.5, "std": 0.5, "min": 0.0, "max": 1.0}
+    uav = {"delivered": spread, "battery_at_landing": spread, "landings": "home ×1, forced ×1"}
+    path = tmp_path / "case-studies.json"
+    doc = {
+        "date": "2026-11-27 12:00:00",
+        "settings": {"seeds": 10},
+        "cases": {
+            "uav": {
+                "launch": "examples/uav/sim.yaml",
+                "summary": {"utu": uav, "none": uav},
+                "settings": {"seeds": 2, "date": "2026-11-27 14:00:00"},
+            }
+        },
+    }
+    path.write_text(json.dumps(doc), encoding="utf-8")
+    lines = bench.managers_section(path)
+    assert "**uav** (`examples/uav/sim.yaml`; 2 seed(s), 2026-11-27 14:00:00)" in lines
+    assert "| delivered | 0.50 ± 0.50 [0–1] | 0.50 ± 0.50 [0–1] |" in lines
+    assert "| battery_at_landing | 0.50 ± 0.50 [0–1] | 0.50 ± 0.50 [0–1] |" in lines
+    assert "| landings | home ×1, forced ×1 | home ×1, forced ×1 |" in lines

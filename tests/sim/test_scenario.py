@@ -187,6 +187,43 @@ def test_a_draw_moves_phases_objects_and_strengths_within_the_bounds() -> None:
     assert draw_scenario(sc, 4) != draw_scenario(sc, 5)
 
 
+def test_a_draw_moves_each_sensors_faults_together_and_scales_the_battery_drain() -> None:
+    from anunnaki.sim import draw_scenario
+
+    sc = parse_scenario(
+        {
+            "platform": "uav",
+            "phenomena": [{"at": 16, "phenomenon": "fog", "strength": 0.7, "ramp": 4}],
+            "faults": [
+                {"at": 21, "fault": "rate", "sensor": "gps", "rate": 4},
+                {"at": 25, "fault": "rate", "sensor": "gps", "rate": 10},
+                {"at": 30, "fault": "dropout", "sensor": "link", "duration": 6},
+                {"at": 1, "fault": "battery_drain", "rate": 1.0},
+            ],
+            "vary": {"timing": 2, "strength": 0.3, "fault_timing": 2, "drain": 0.25},
+        }
+    )
+    shifts = set()
+    for seed in range(20):
+        d = draw_scenario(sc, seed)
+        (fog,) = d.phenomena
+        assert abs(fog.at - 16) <= 2 and 0.49 - 1e-9 <= (fog.strength or 0) <= 0.7
+        slow, back, link, drain = d.faults
+        assert abs(slow.at - 21) <= 2 and back.at - slow.at == pytest.approx(4)  # one sensor
+        assert abs(link.at - 30) <= 2 and link.duration == 6  # a dropout keeps its length
+        assert 0.0 <= drain.at <= 3 and 0.75 - 1e-9 <= (drain.rate or 0) <= 1.25 + 1e-9
+        assert (slow.rate, back.rate) == (4, 10)  # only battery drains are scaled
+        shifts.add((round(slow.at - 21, 6), round(link.at - 30, 6)))
+    assert len(shifts) == 20 and all(a != b for a, b in shifts)  # a draw per sensor, per seed
+    # the faults' draws come after the rest: the phases are drawn as without them
+    assert sc.vary is not None
+    plain = sc.model_copy(
+        update={"vary": sc.vary.model_copy(update={"fault_timing": 0.0, "drain": 0.0})}
+    )
+    assert draw_scenario(plain, 3).phenomena == draw_scenario(sc, 3).phenomena
+    assert draw_scenario(plain, 3).faults == sc.faults
+
+
 def test_without_vary_a_draw_only_sets_the_seed() -> None:
     from anunnaki.sim import draw_scenario
 

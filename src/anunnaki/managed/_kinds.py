@@ -273,7 +273,7 @@ class SimConfig(_Strict):
             launch file.
         scenario_seed: Draw the scenario again from this seed as its ``vary:`` section says
             (:func:`~anunnaki.sim.draw_scenario`: phase timing, object placement, condition
-            strength); ``None`` runs it as written.
+            strength, fault timing, battery drain); ``None`` runs it as written.
 
     """
 

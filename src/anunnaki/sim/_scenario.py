@@ -183,12 +183,20 @@ class Variation(_Strict):
         strength: Each phenomenon event's target moves towards the identity by a fraction
             drawn uniformly in ``[0, strength]`` (0: as written; 0.3: as weak as 70 % of
             it); events that start together share the draw.
+        fault_timing: Seconds: the faults of one sensor (``battery_drain``: of the battery)
+            move together by a shift drawn uniformly in ``[-fault_timing, fault_timing]``
+            (not below 0), so a rate fault and the later one that restores the rate keep
+            their interval; a dropout keeps its ``duration``.
+        drain: Each ``battery_drain`` fault's extra drain is scaled by a factor drawn
+            uniformly in ``[1 - drain, 1 + drain]`` (one draw for all of them).
 
     """
 
     timing: float = Field(0.0, ge=0.0, le=30.0)
     placement: float = Field(0.0, ge=0.0, le=20.0)
     strength: float = Field(0.0, ge=0.0, le=1.0)
+    fault_timing: float = Field(0.0, ge=0.0, le=30.0)
+    drain: float = Field(0.0, ge=0.0, le=1.0)
 
 
 class Scenario(_Strict):
@@ -257,8 +265,10 @@ def _weaker(event: PhenomenonEvent, fraction: float) -> dict[str, Any]:
 def draw_scenario(scenario: Scenario, seed: int) -> Scenario:
     """The scenario drawn again from ``seed`` as its ``vary:`` section says.
 
-    Phase timing, object placement and condition strength are drawn with one generator
-    seeded by ``seed`` (the same seed, the same scenario); the drawn scenario's ``seed`` is
+    Phase timing, object placement, condition strength, fault timing and battery drain are
+    drawn with one generator seeded by ``seed`` (the same seed, the same scenario; the faults'
+    draws come last, so a ``vary`` without fault fields draws the rest as it always did);
+    the drawn scenario's ``seed`` is
     ``seed`` too, and it has no ``vary`` (drawing it again changes nothing). Without
     ``vary`` the scenario comes back with only its ``seed`` replaced.
     """
@@ -289,8 +299,31 @@ def draw_scenario(scenario: Scenario, seed: int) -> Scenario:
             fields["walk_to"] = (o.walk_to[0] + dx, o.walk_to[1])
         objects.append(ObjectSpec.model_validate(fields))
     return scenario.model_copy(
-        update={"seed": seed, "vary": None, "objects": objects, "phenomena": phenomena}
+        update={
+            "seed": seed,
+            "vary": None,
+            "objects": objects,
+            "phenomena": phenomena,
+            "faults": _drawn_faults(scenario.faults, v, rng),
+        }
     )
+
+
+def _drawn_faults(faults: list[FaultEvent], v: Variation, rng: Any) -> list[FaultEvent]:
+    """``faults`` moved per sensor by ``v.fault_timing``, battery drains scaled by ``v.drain``."""
+    if not faults or (v.fault_timing == 0.0 and v.drain == 0.0):
+        return faults
+    groups = sorted({f.sensor or "battery" for f in faults})
+    shift = {g: float(rng.uniform(-v.fault_timing, v.fault_timing)) for g in groups}
+    scale = float(rng.uniform(1.0 - v.drain, 1.0 + v.drain))
+    out = []
+    for f in faults:
+        fields = f.model_dump(exclude_none=True)
+        fields["at"] = max(0.0, f.at + shift[f.sensor or "battery"])
+        if f.fault == "battery_drain" and f.rate is not None:
+            fields["rate"] = f.rate * scale
+        out.append(FaultEvent.model_validate(fields))
+    return out
 
 
 def parse_scenario(data: Any, *, lines: Any = None, path: str | Path | None = None) -> Scenario:
