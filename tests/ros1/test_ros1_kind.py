@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -90,7 +91,10 @@ with open_bus("zenoh") as bus:
     ctx = ManagedContext(bus=bus, stop=threading.Event(), speed=1.0, until=None, say=print,
                          on_instant=None, taken=None, watched=frozenset())
     link = kind.connect(ctx)
-    print(f"bridge pid {link.proc.pid}", flush=True)
+    # one write: a print is two (text, then newline), and the context's own say=print lines,
+    # from the bridge's threads, could land between them
+    sys.stdout.write(f"bridge pid {link.proc.pid}\\n")
+    sys.stdout.flush()
     threading.Event().wait()
 """
 
@@ -102,7 +106,9 @@ def test_the_bridge_process_ends_with_the_launch_that_started_it(ros: RosSetup) 
     parent = Proc([sys.executable, "-c", PARENT, str(ROVER)], ros.env, "launch")
     ros.procs.append(parent)
     line = parent.wait_for("bridge pid ")
-    bridge = int(line.split()[-1])
+    found = re.search(r"bridge pid (\d+)", line)
+    assert found, line
+    bridge = int(found.group(1))
     assert running(bridge)
     os.kill(parent.p.pid, signal.SIGKILL)
     assert parent.p.wait(timeout=DEADLINE) == -signal.SIGKILL
