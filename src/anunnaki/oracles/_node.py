@@ -336,10 +336,14 @@ class OracleNode(Node):
         if not isinstance(result, Assessment):
             self._error("assess returned %s, not an Assessment", type(result).__name__)
             return
+        # Counted before the put, as the LEC node counts its detections: a subscriber may act
+        # on the assessment (and read these counters) before this thread runs again.
+        with self._lock:
+            self._published += 1
         try:
             self._output.put(result)
         except AnunnakiError as exc:
+            with self._lock:
+                self._published -= 1
             self._error("could not publish: %s", exc)
             return
-        with self._lock:
-            self._published += 1
