@@ -41,8 +41,10 @@ def test_case_studies_benchmark(tmp_path: Path) -> None:
         # the misses' companion: metres driven autonomously, misses per 10 of them
         assert 0 <= r["autonomous_m"] <= r["distance_m"] + 0.05
         if r["autonomous_m"] > 0:
-            expected = 10 * r["pedestrian_misses"] / r["autonomous_m"]
-            assert r["misses_per_10_autonomous_m"] == pytest.approx(expected, abs=0.01)
+            # from the unrounded metres: within what rounding them to 0.01 m allows
+            misses, metres = r["pedestrian_misses"], r["autonomous_m"]
+            low, high = 10 * misses / (metres + 0.005), 10 * misses / max(metres - 0.005, 1e-9)
+            assert low - 0.0005 <= r["misses_per_10_autonomous_m"] <= high + 0.0005, r
     utu, none = runs["utu"], runs["none"]
     # the adaptation happened, in the HSL phase, and its postcondition held
     swap = next(a for a in utu["adaptations"] if a["tactic"] == "swap-to-hsl-model")

@@ -69,6 +69,41 @@ def test_every_frame_is_detected_in_lockstep_and_fog_lowers_f1(bus: Any, tmp_pat
     assert "0.0–  5.0 s" in table and "fog" in table and f"{clear.f1:.2f}" in table
 
 
+def test_in_lockstep_the_clock_moves_on_only_once_utu_is_settled(bus: Any) -> None:
+    """Each instant waits for ``settled()`` (Utu done with it) before ``on_time`` moves on."""
+    events: list[tuple[str, float]] = []
+    asked = {"n": 0}
+
+    def settled() -> bool:  # busy twice at each instant, then done
+        asked["n"] += 1
+        done = asked["n"] % 3 == 0
+        events.append(("settled" if done else "busy", system.platform.t))
+        return done
+
+    system = SimulatedSystem(
+        bus, fog_scene("settle", duration=1, fog_at=5), oracle=None, settled=settled,
+        on_time=lambda t: events.append(("clock", t)),
+    )  # fmt: skip
+    with system:
+        system.run(threading.Event(), speed=0)
+    clocks = [k for k, (what, _) in enumerate(events) if what == "clock"]
+    assert len(clocks) == 41  # t = 0 and each 1/40 s to 1 s
+    for k in clocks[1:]:  # every move of the clock right after a "settled", at that instant
+        assert events[k - 1] == ("settled", events[k][1]) and events[k - 2][0] == "busy"
+    assert system.unsettled == 0
+
+
+def test_a_utu_that_never_settles_holds_each_instant_only_its_timeout(bus: Any) -> None:
+    system = SimulatedSystem(
+        bus, fog_scene("stuck", duration=0.5, fog_at=5), oracle=None,
+        settled=lambda: False, lockstep_timeout=0.01,
+    )  # fmt: skip
+    with system:
+        system.run(threading.Event(), speed=0)
+        assert system.platform.t == pytest.approx(0.5)
+    assert system.unsettled == 20  # counted (and logged once), never fatal
+
+
 LAUNCH = """
 anunnaki: launch/1
 name: sim-test

@@ -16,7 +16,7 @@ from typing import Any
 import pytest
 
 from anunnaki.bus import open_bus
-from anunnaki.clock import WallClock
+from anunnaki.clock import SimClock, WallClock
 from anunnaki.goals import load_binding, parse_goal_model
 from anunnaki.messages import AnalysisState, MonitorBatch
 from anunnaki.tactics import load_tactics
@@ -267,3 +267,52 @@ def test_a_live_run_that_ends_normally_replays_without_a_cut_step(tmp_path: Path
     report = replay(db)
     assert not [n for n in report.notes if "mid-step" in n], report.notes
     assert report.identical, report.notes
+
+
+def test_settled_says_when_a_simulation_may_move_its_clock_on() -> None:
+    """``settled()``: every message taken at the present instant, a step run at it.
+
+    The race it closes: a message that comes while the spinning thread holds the step is
+    left for that thread's next round; a simulation that moved its clock on meanwhile had
+    it stamped an instant late (a 10 Hz GPS then looked slower than 10 Hz, and the UAV
+    hovered before take-off). A simulation in lockstep waits for ``settled()`` first.
+    """
+    model = parse_goal_model(
+        (ROVER / "goals.yaml").read_text(), binding=load_binding(ROVER / "binding.yaml")
+    )
+    clock = SimClock()
+    clock.update(1.0)
+    with open_bus("inproc") as bus:
+        m = AutonomicManager(
+            model,
+            load_tactics(ROVER / "tactics.xml"),
+            bus=bus,
+            actuator=RecordingActuator(),
+            clock=clock,
+            failsafe="fail-safe",
+            warmup=2.0,
+            rate=20.0,
+        )
+        assert m.settled()  # not running live: nothing would come
+        stop = threading.Event()
+        spinner = threading.Thread(target=m.spin, args=(stop,), daemon=True)
+        spinner.start()
+        try:
+            assert wait_for(m.settled)
+            assert m.now == 1.0
+            # the spinning thread holds the step: the message waits in its queue
+            with m._step_lock:
+                bus.publish("/rover/ultrasonic", {"range": 3.0})
+                assert not m.settled()
+            assert wait_for(m.settled)
+            ultrasonic = m.monitor.snapshot(m.now)["/rover/ultrasonic"]
+            assert ultrasonic["count"] == 1 and ultrasonic["last_t"] == 1.0  # this instant's
+            clock.update(1.025)  # the simulation moves on: a step must run at the new time
+            assert not m.settled()
+            assert wait_for(m.settled) and m.now == 1.025
+        finally:
+            stop.set()
+            m.wake()
+            spinner.join(5.0)
+            m.close()
+    assert m.settled()  # closed

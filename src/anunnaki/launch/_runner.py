@@ -169,6 +169,13 @@ def _taken_here(
     return _counter(bus, (node.name for node in nodes if isinstance(node, UtuNode)))
 
 
+def _settled_here(
+    nodes: Sequence[UtuNode | AutonomicManager],
+) -> Callable[[], bool] | None:
+    """In one process, the composed manager's ``settled`` (separate nodes cannot tell)."""
+    return next((n.settled for n in nodes if isinstance(n, AutonomicManager)), None)
+
+
 @dataclass
 class RunResult:
     """What a run did.
@@ -375,11 +382,13 @@ class _Runner:
         bus: Bus,
         on_instant: Callable[[float], object] | None = None,
         taken: Callable[[int], bool] | None = None,
+        settled: Callable[[], bool] | None = None,
     ) -> ManagedRun | None:
         """Start the managed system (a plugin) in its own thread.
 
         ``on_instant(t)`` runs before an instant's messages go out; ``taken(n)`` tells
-        whether Utu has taken ``n`` inputs so far (lockstep).
+        whether Utu has taken ``n`` inputs so far, ``settled()`` whether it is done with the
+        present (lockstep).
         """
         if self.managed is None:
             return None
@@ -395,6 +404,7 @@ class _Runner:
             on_instant=on_instant,
             taken=taken,
             watched=watched,
+            settled=settled,
         )
         self.running = self.managed.start(ctx)
         return self.running
@@ -506,7 +516,10 @@ class _Runner:
             printer = _Printer(self.out, tail)
             t_run = time.monotonic()
             managed = self._start_managed(
-                bus, sim.update if sim is not None else None, _taken_here(nodes, bus)
+                bus,
+                sim.update if sim is not None else None,
+                _taken_here(nodes, bus),
+                _settled_here(nodes),
             )
             code, reason = self._watch(
                 printer, managed.thread if managed else None, lambda: crashed[0] if crashed else ""

@@ -356,6 +356,7 @@ class SimKind:
             scorer=cfg.scorer,
             lockstep=cfg.lockstep,
             on_time=ctx.on_instant,
+            settled=ctx.settled,
         )
         sc = system.scenario
         end = sc.duration if ctx.until is None else ctx.until

@@ -167,6 +167,11 @@ class SimulatedSystem(Closing):
             time).
         lockstep_timeout: The longest a frame waits for its detections and assessments.
         on_time: Called with the simulation time before each physics chunk (Utu's clock).
+        settled: ``settled()``, whether Utu is done with the present (the composed
+            manager's :meth:`~anunnaki.utu.AutonomicManager.settled`): in lockstep the
+            clock moves on only once it is (bounded by ``lockstep_timeout``), so that Utu
+            takes every message at the instant it was sent and the run repeats itself
+            however loaded the machine is; ``None``: the clock does not wait for Utu.
         stop_without_utu: Seconds a Utu node the platform has seen may be gone before it
             stops (rover) or lands (UAV) by itself (``None``: never).
         scorer: A second oracle's options, run beside the first as its live scorer (e.g.
@@ -192,11 +197,14 @@ class SimulatedSystem(Closing):
         on_time: Callable[[float], object] | None = None,
         stop_without_utu: float | None = 0.2,
         scorer: Mapping[str, Any] | None = None,
+        settled: Callable[[], bool] | None = None,
     ) -> None:
         self.bus = bus
         self.lockstep = lockstep
         self.lockstep_timeout = lockstep_timeout
         self.on_time = on_time
+        self.settled = settled
+        self.unsettled = 0  # instants the clock moved on before Utu was done (timed out)
         self._lock = threading.Condition()
         self._last_seq = -1
         self._truth: dict[int, tuple[float, np.ndarray, list[str], np.ndarray]] = {}
@@ -364,6 +372,27 @@ class SimulatedSystem(Closing):
                     self.lockstep_timeout,
                 )
 
+    def _settle(self) -> None:
+        """In lockstep, wait until Utu is done with the present before the clock moves on."""
+        if not self.lockstep or self.settled is None:
+            return
+        settled = self.settled
+        deadline = time.monotonic() + self.lockstep_timeout
+        while not settled():
+            if self._stopping.is_set():
+                return
+            if time.monotonic() > deadline:
+                self.unsettled += 1
+                if self.unsettled == 1:
+                    log.warning(
+                        "sim: Utu was not done with t = %.3f s within %.1f s; the clock "
+                        "moves on without it (counted, logged once)",
+                        self.platform.t,
+                        self.lockstep_timeout,
+                    )
+                return
+            self._stopping.wait(0.0002)
+
     # -- running -------------------------------------------------------------------------------
     def run(
         self,
@@ -391,6 +420,7 @@ class SimulatedSystem(Closing):
 
         def tick(sim: SimPlatform) -> None:
             nonlocal collisions, next_call
+            self._settle()
             if self.on_time is not None:
                 self.on_time(sim.t)
             now = int(getattr(sim, "collisions", 0))

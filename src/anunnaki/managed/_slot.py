@@ -91,6 +91,10 @@ class ManagedContext:
         taken: ``taken(n)`` — whether Utu has taken (and acted on) ``n`` inputs on the
             watched topics so far: a lockstep system waits for it; ``None``: no lockstep.
         watched: The topics Utu monitors (the goal model's binding).
+        settled: ``settled()`` — whether Utu is done with the present (every message sent
+            so far taken, every action back, a step run at the present time): a simulation
+            in lockstep waits for it before it moves the clock on; ``None``: Utu cannot
+            tell (its parts in other threads or processes), nothing waits.
 
     """
 
@@ -102,6 +106,7 @@ class ManagedContext:
     on_instant: Callable[[float], object] | None
     taken: Callable[[int], bool] | None
     watched: frozenset[str]
+    settled: Callable[[], bool] | None = None
 
 
 class ManagedRun(Protocol):
