@@ -96,7 +96,7 @@ from pathlib import Path
 from typing import Any
 
 from anunnaki import topics
-from anunnaki.launch import load_launch, run_launch
+from anunnaki.launch import Launch, load_launch, run_launch
 from anunnaki.managed import SimKind
 from anunnaki.messages import Assessment, Detections, body_of
 from anunnaki.sim import Scenario, StopRule, Timeline, draw_scenario, load_scenario
@@ -174,21 +174,38 @@ CASES: dict[str, Case] = {
 UAV_LOW_BATTERY = 20.0
 
 
+@dataclass(kw_only=True)
+class _Heard:
+    """What both recorders keep: the ground-truth scorer's category per frame (under
+    ``lock``, which guards the subclasses' fields too) and their subscriptions."""
+
+    lock: threading.Lock = field(default_factory=threading.Lock)
+    scorer: dict[int, int] = field(default_factory=dict)  # seq -> ground-truth category
+    subs: list[Any] = field(default_factory=list)
+
+    def _on_scorer(self, sample: Any) -> None:
+        message = sample.message
+        if isinstance(message, Assessment) and message.frame_seq is not None:
+            with self.lock:
+                self.scorer[message.frame_seq] = message.category
+
+    def close(self) -> None:
+        for sub in self.subs:
+            sub.close()
+
+
 @dataclass
-class _Recorder:
+class _Recorder(_Heard):
     """What a run publishes, heard on its bus (public topics only)."""
 
     width: int
     height: int
-    lock: threading.Lock = field(default_factory=threading.Lock)
     truth: dict[int, list[list[float]]] = field(default_factory=dict)  # seq -> pedestrian boxes
     ahead: dict[int, bool] = field(default_factory=dict)  # seq -> the detector saw one ahead
-    scorer: dict[int, int] = field(default_factory=dict)  # seq -> ground-truth category
     mode: dict[int, str] = field(default_factory=dict)  # seq -> rover mode when detected
     current_mode: str = "autonomous"
     x: float = 0.0
     autonomous_m: float = 0.0  # metres driven in autonomous mode
-    subs: list[Any] = field(default_factory=list)
     rule: StopRule = field(default_factory=StopRule)
 
     def attach(self, bus: Any) -> None:
@@ -224,12 +241,6 @@ class _Recorder:
             self.ahead[det.frame_seq] = seen
             self.mode[det.frame_seq] = self.current_mode
 
-    def _on_scorer(self, sample: Any) -> None:
-        message = sample.message
-        if isinstance(message, Assessment) and message.frame_seq is not None:
-            with self.lock:
-                self.scorer[message.frame_seq] = message.category
-
     def _on_status(self, sample: Any) -> None:
         body = body_of(sample.message)
         mode, x = body.get("mode"), body.get("x")
@@ -240,10 +251,6 @@ class _Recorder:
                 if self.current_mode == "autonomous":
                     self.autonomous_m += max(0.0, float(x) - self.x)
                 self.x = float(x)
-
-    def close(self) -> None:
-        for sub in self.subs:
-            sub.close()
 
     def counts(self) -> dict[str, Any]:
         with self.lock:
@@ -264,7 +271,7 @@ class _Recorder:
 
 
 @dataclass
-class _UavRecorder:
+class _UavRecorder(_Heard):
     """What a UAV run publishes, heard on its bus: its frames' categories and its flight.
 
     A frame counts as handled by the detector while the UAV flies on it (airborne in
@@ -276,16 +283,13 @@ class _UavRecorder:
     """
 
     home: tuple[float, float]
-    lock: threading.Lock = field(default_factory=threading.Lock)
     landed: threading.Event = field(default_factory=threading.Event)
-    scorer: dict[int, int] = field(default_factory=dict)  # seq -> ground-truth category
     flying: dict[int, bool] = field(default_factory=dict)  # seq -> flying on the detector
     status: dict[str, Any] = field(default_factory=dict)  # the last /uav/status
     airborne_at: float | None = None
     touchdown: dict[str, Any] | None = None  # t, battery, x, y, forced
     forced: bool = False
     low_battery_s: float = 0.0
-    subs: list[Any] = field(default_factory=list)
 
     def attach(self, bus: Any) -> None:
         self.subs = [
@@ -301,9 +305,6 @@ class _UavRecorder:
                 s = self.status
                 airborne = float(s.get("altitude", 0.0)) > 0.05
                 self.flying[det.frame_seq] = airborne and s.get("mode") in ("auto", "return_home")
-
-    _on_scorer = _Recorder._on_scorer  # the same fields: lock, scorer
-    close = _Recorder.close  # subs
 
     def _on_status(self, sample: Any) -> None:
         body = body_of(sample.message)
@@ -370,7 +371,7 @@ def _adverse(scenario: Any, timeline: Timeline, t: float) -> bool:
         "battery": scenario.mission.battery_rate,
     }
     return any(
-        f["fault"] != "rate" or f["rate"] != nominal.get(f.get("sensor"))
+        f["fault"] != "rate" or f["rate"] != nominal.get(f.get("sensor", ""))
         for f in timeline.faults(t)
     )
 
@@ -387,6 +388,14 @@ def _phases(scenario: Any) -> list[tuple[float, float, str]]:
     return out
 
 
+def _sim_launch(case: Case) -> tuple[Launch, SimKind]:
+    """The case's launch and its simulated system."""
+    launch = load_launch(case.launch)
+    managed = launch.managed
+    assert isinstance(managed, SimKind), f"{case.launch}: not a 'managed: sim' launch"
+    return launch, managed
+
+
 def run_once(
     case: Case, manager: str, seed: int, until: float | None, scenario_file: Path | None = None
 ) -> dict[str, Any]:
@@ -395,13 +404,12 @@ def run_once(
     ``scenario_file`` replaces the launch's scenario (the quick mode's shortened one). A UAV
     run ends at the touch-down after its flight (or at ``until``, the scenario's end).
     """
-    launch = load_launch(case.launch)
-    assert isinstance(launch.managed, SimKind), f"{case.launch}: not a 'managed: sim' launch"
+    launch, managed = _sim_launch(case)  # managed: the same object in the launch replaced below
     update: dict[str, Any] = {"scenario_seed": seed, "report": False, "scorer": SCORER}
     if scenario_file is not None:
         update["scenario"] = str(scenario_file)
-    options = launch.managed.options.model_copy(update=update)
-    launch.managed.options = options
+    options = managed.options.model_copy(update=update)
+    managed.options = options
     utu = launch.utu.model_copy(update={"notify": {}, "watchdog": WATCHDOG})
     launch = dataclasses.replace(launch, utu=utu)
     scenario = draw_scenario(load_scenario(options.scenario), seed)
@@ -414,7 +422,7 @@ def run_once(
     else:
         recorder = _Recorder(scenario.camera.width, scenario.camera.height)
     report_path = Path(os.environ.get("TMPDIR", "/tmp")) / f"case-{os.getpid()}-{seed}.json"
-    launch.managed.with_reports(report=str(report_path), plot=None)
+    managed.with_reports(report=str(report_path), plot=None)
     misses = _LockstepMisses()
     logging.getLogger("anunnaki.managed").addHandler(misses)
     t0 = time.perf_counter()
@@ -437,8 +445,8 @@ def run_once(
     report = json.loads(report_path.read_text(encoding="utf-8"))
     report_path.unlink(missing_ok=True)
     timeline = Timeline(scenario)
-    adaptive = [
-        d
+    adaptive = [  # (t, tactic, data) of the adaptation actions
+        (d.t, d.tactic, d.data)
         for d in result.decisions
         if d.kind == "action"
         and d.tactic is not None
@@ -453,12 +461,12 @@ def run_once(
         domains = {dict(case.fits).get(p) for p in label.split("+")}
         first = next(
             (
-                d.t
-                for d in adaptive
-                if onset <= d.t < phase_end
+                t
+                for t, tactic, data in adaptive
+                if onset <= t < phase_end
                 and (
-                    (d.data.get("type") == "change_mode" and d.tactic.startswith(case.failsafe))
-                    or d.data.get("domain") in domains
+                    (data.get("type") == "change_mode" and tactic.startswith(case.failsafe))
+                    or data.get("domain") in domains
                 )
             ),
             None,
@@ -612,9 +620,8 @@ def quick_scenario(case: Case, folder: Path) -> Path | None:
     """``case``'s scenario with its ``quick`` fields replaced, written in ``folder``."""
     if not case.quick:
         return None
-    launch = load_launch(case.launch)
-    assert isinstance(launch.managed, SimKind), f"{case.launch}: not a 'managed: sim' launch"
-    base = load_scenario(launch.managed.options.scenario).model_dump(mode="json")
+    _, managed = _sim_launch(case)
+    base = load_scenario(managed.options.scenario).model_dump(mode="json")
     scenario = Scenario.model_validate({**base, **case.quick})
     path = folder / f"{case.launch.parent.name}-quick.yaml"
     path.write_text(json.dumps(scenario.model_dump(mode="json"), indent=1), encoding="utf-8")

@@ -53,25 +53,24 @@ def main() -> None:
     )  # fmt: skip
     checkpoints = [int(c) for c in args.checkpoints.split(",") if int(c) <= args.budget]
     results: dict[str, dict[str, object]] = {}
+    cells: dict[str, dict[str, dict[int, int]]] = {}  # search -> n -> category -> cells
     for search in ("enlil", "random", "sobol"):
         start = time.perf_counter()
         outcome = run_search(
             job, tmp / search, search=search, budget=args.budget, seed=args.seed,
             workers=args.workers,
         )  # fmt: skip
+        seconds = round(time.perf_counter() - start, 1)
         arch = outcome.archive
+        cells[search] = {str(n): occupied_cells(arch, n) for n in checkpoints}
         results[search] = {
-            "seconds": round(time.perf_counter() - start, 1),
-            "cells": {str(n): occupied_cells(arch, n) for n in checkpoints},
+            "seconds": seconds,
+            "cells": cells[search],
             "counts": outcome.summary["counts"],
         }
         print(search, results[search], flush=True)
     ratio = {
-        str(n): (
-            results["enlil"]["cells"][str(n)][1]  # type: ignore[index]
-            / max(1, results["random"]["cells"][str(n)][1])  # type: ignore[index]
-        )
-        for n in checkpoints
+        str(n): cells["enlil"][str(n)][1] / max(1, cells["random"][str(n)][1]) for n in checkpoints
     }
     report = {
         "phenomenon": args.phenomenon,

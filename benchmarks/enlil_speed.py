@@ -211,8 +211,14 @@ def _phenomenon(name: str) -> Any:
     """A phenomenon by name, in this tree or a baseline's (the slot or the old function)."""
     import anunnaki.phenomena as phenomena
 
-    slot = getattr(phenomena, "PHENOMENA", None)  # the baseline may predate the slot
-    return slot.create(name) if slot is not None else phenomena.get_phenomenon(name)
+    # Both looked up by name: the baseline may predate the slot, and this tree has no function.
+    slot = getattr(phenomena, "PHENOMENA", None)
+    if slot is not None:
+        return slot.create(name)
+    make = getattr(phenomena, "get_phenomenon", None)
+    if make is None:
+        raise RuntimeError(f"{phenomena.__file__}: neither PHENOMENA nor get_phenomenon")
+    return make(name)
 
 
 def run_step(step: str, args: argparse.Namespace) -> dict[str, Any]:

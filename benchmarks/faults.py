@@ -78,6 +78,7 @@ from __future__ import annotations
 import argparse
 import contextlib
 import datetime
+import functools
 import gc
 import inspect
 import itertools
@@ -264,7 +265,8 @@ def handed_over(rover: Platform, bus: Bus) -> bool:
         return False
     state = _state(bus)
     g3 = ((state or {}).get("nodes") or {}).get("G3") or [None, None]
-    return g3[1] == "satisfied"
+    g3_status: object = g3[1]
+    return g3_status == "satisfied"
 
 
 def wait_until(predicate: Callable[[], Any], timeout: float, pause: float = 0.05) -> Any:
@@ -336,6 +338,14 @@ class Launch:
     def pids(self) -> dict[str, int]:
         found = (re.match(r"node (\w+): pid (\d+)$", ln) for ln in self.lines)
         return {m.group(1): int(m.group(2)) for m in found if m}
+
+    def pid(self) -> int:
+        assert self.proc is not None, "start() first"
+        return self.proc.pid
+
+    def said(self, line: str) -> bool:
+        """Whether the child printed exactly ``line``."""
+        return line in self.lines
 
     def ready(self) -> bool:
         if any(ln.startswith("ready:") for ln in self.lines):
@@ -501,7 +511,7 @@ def kill_trial(deployment: str, victim: str, delay: float, deadline: float) -> d
                 raise RuntimeError("no hand-over to manual mode:\n" + launch.tail())
             rover.arm()
             threading.Event().wait(delay)
-            pid = launch.pids()[victim] if deployment != "one-process" else launch.proc.pid  # type: ignore[union-attr]
+            pid = launch.pids()[victim] if deployment != "one-process" else launch.pid()
             killed_mono = time.monotonic()
             killed = time.perf_counter()
             os.kill(pid, signal.SIGKILL)
@@ -681,7 +691,7 @@ def loop_trial(victim: str, delay: float, deadline: float) -> dict[str, Any]:
             for child in children.values():
                 child.start()
             for kind, child in children.items():
-                if not wait_until(lambda c=child: "ready" in c.lines, 90):
+                if not wait_until(functools.partial(child.said, "ready"), 90):
                     raise RuntimeError(f"{kind} not ready:\n" + child.tail())
             with open_bus("zenoh", connect=[endpoint], name="platform") as bus:
                 system = SimulatedSystem(
@@ -792,6 +802,7 @@ def flood(seconds: float, rate: float) -> dict[str, Any]:
         open_bus("inproc", hub=hub, name="flood") as flood_bus,
     ):
         manager = _TimedManager.from_config(cfg, bus=utu_bus)
+        assert isinstance(manager, _TimedManager)  # from_config builds its own class
         manager.stamps, manager.spans = [], []
         spinner = threading.Thread(
             target=manager.spin, args=(halt,), kwargs={"rate": 1 / period}, daemon=True
@@ -917,6 +928,10 @@ class _Live:
         malformed = sum(self.bus.stats().malformed.values())
         return malformed + sum(getattr(n, "foreign", 0) for n in self.nodes)
 
+    def counted_past(self, before: int) -> bool:
+        """Whether the counters went past ``before`` (a message refused since)."""
+        return self.counters() > before
+
     def deaths(self) -> int:
         dead = sum(1 for t in self.threads if not t.is_alive())
         for name in NODE_NAMES:
@@ -979,7 +994,7 @@ def corpus(deployment: str) -> dict[str, Any]:
                     pub = forger.publisher(topic)
                     pub.put_raw(message) if raw else pub.put(message)
                     sent += 1
-                    if wait_until(lambda c=counted: live.counters() > c, COUNTED, pause=0.01):
+                    if wait_until(functools.partial(live.counted_past, counted), COUNTED, 0.01):
                         refused += 1
                 threading.Event().wait(1.0)  # the platform's next messages go through
                 steered = len(live.decisions()) - len(before)

@@ -63,7 +63,9 @@ def detectors(model: str | None, width: int) -> dict[str, CenterNetDetector]:
     }
 
 
-def measure(dets: dict[str, CenterNetDetector], runs: int, warmup: int) -> dict:
+def measure(
+    dets: dict[str, CenterNetDetector], runs: int, warmup: int
+) -> dict[str, dict[str, dict[str, float]]]:
     rng = np.random.default_rng(0)
     cases = []
     for label, (w, h) in SIZES.items():
@@ -77,7 +79,7 @@ def measure(dets: dict[str, CenterNetDetector], runs: int, warmup: int) -> dict:
             dets[label].detect(frames)
             if round_ >= warmup:
                 times[label, batch].append((time.perf_counter_ns() - start) / 1e6 / batch)
-    out: dict[str, dict] = {}
+    out: dict[str, dict[str, dict[str, float]]] = {}
     for (label, batch), samples in times.items():
         out.setdefault(label, {})[f"batch{batch}"] = {
             "median_ms_per_frame": round(statistics.median(samples), 3),
@@ -87,7 +89,7 @@ def measure(dets: dict[str, CenterNetDetector], runs: int, warmup: int) -> dict:
     return out
 
 
-def training_throughput(n_images: int, threads: int) -> dict:
+def training_throughput(n_images: int, threads: int) -> dict[str, str | float]:
     """Images per second of the second of two training epochs on synthetic frames."""
     rng = np.random.default_rng(1)
     images, boxes, labels, ignore, ignore_labels = [], [], [], [], []

@@ -214,6 +214,11 @@ def train_grid(args: argparse.Namespace, model: str) -> dict[str, Path]:
 
     registry = load_registry(MODELS / "rover.yaml")
     spec = registry.get(model)
+    if spec.sha256 is None:
+        raise SystemExit(
+            f"{MODELS / 'rover.yaml'}: model {model} has no sha256, which the oracles it "
+            "trains must pin: add the model file's sha256 to its entry"
+        )
     sets = [contexts_from_archive(a) for a in args.train_archive]
     out: dict[str, Path] = {}
     for arch in args.architectures.split(","):
@@ -373,6 +378,7 @@ def _retest(detector: Any, test: Any, held: Any, batch_images: int, seed: int) -
 
     again = retest_contexts(detector, test, held, batch_images=batch_images, seed=seed)
     r = again.retest
+    assert r is not None  # retest_contexts sets it
     return {
         "drops": r.drops.tolist(),
         "categories": r.categories.tolist(),

@@ -459,8 +459,8 @@ def managers_section(path: Path) -> list[str]:
                 + " |"
             )
         if all("landings" in summary[mgr] for mgr in managers):
-            cells = " | ".join(str(summary[mgr]["landings"]) for mgr in managers)
-            out.append(f"| landings | {cells} |")
+            landings = " | ".join(str(summary[mgr]["landings"]) for mgr in managers)
+            out.append(f"| landings | {landings} |")
         out.append("")
     return out
 

@@ -25,6 +25,7 @@ import sys
 import time
 from importlib.metadata import version
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -35,7 +36,9 @@ EXTRA = ["fog+raindrop", "raindrop+raindrop+raindrop"]
 DEFAULT_OUTPUT = Path(__file__).parent / "results" / "phenomena.json"
 
 
-def measure(names: list[str], runs: int, warmup: int, strength: float) -> dict:
+def measure(
+    names: list[str], runs: int, warmup: int, strength: float
+) -> dict[str, dict[str, dict[str, Any]]]:
     """Time every (phenomenon, size) once per round, round-robin, so that load from other
     processes spreads over all of them instead of spoiling one."""
     cases = []
@@ -51,7 +54,7 @@ def measure(names: list[str], runs: int, warmup: int, strength: float) -> dict:
             phenomenon.apply(image, params, seed=round_)
             if round_ >= warmup:
                 times[name, label].append((time.perf_counter_ns() - start) / 1e6)
-    results: dict[str, dict] = {}
+    results: dict[str, dict[str, dict[str, Any]]] = {}
     for name, label, _, _, params in cases:
         samples = times[name, label]
         results.setdefault(name, {})[label] = {
@@ -63,7 +66,7 @@ def measure(names: list[str], runs: int, warmup: int, strength: float) -> dict:
     return results
 
 
-def main(argv: list[str] | None = None) -> dict:
+def main(argv: list[str] | None = None) -> dict[str, Any]:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--runs", type=int, default=100)
     parser.add_argument("--warmup", type=int, default=5)

@@ -330,6 +330,10 @@ class FakeRover:
         with self._cond:
             return self._cond.wait_for(predicate, timeout)
 
+    def wait_set_mode(self, before: int) -> bool:
+        """Wait until ``/rover/set_mode`` requests number more than ``before``."""
+        return self.wait(lambda: len(self.set_mode_ns) > before)
+
     def wait_state(self, predicate: Callable[[dict[str, Any] | None], bool]) -> bool:
         """Wait until the manager's latest analysis satisfies ``predicate``."""
         return self.wait(lambda: predicate(self.state))
@@ -384,7 +388,7 @@ class FakeRover:
         """One trial: (ns until ``/rover/set_mode`` arrived or None on timeout, whether the
         fail-safe then completed and the rover is back to nominal)."""
         t0, n0 = self.violate()
-        if not self.wait(lambda: len(self.set_mode_ns) > n0):
+        if not self.wait_set_mode(n0):
             return None, False
         latency = self.set_mode_ns[n0] - t0
         return latency, self.wait_state(_handed_over) and self.reset()
@@ -841,7 +845,7 @@ def run_breakdown(trials: int, tmp: Path, tactics: Path, seed: int) -> dict[str,
             act.stamps.clear()
             act.armed = True
             t0, k = rover.violate()
-            ok = rover.wait(lambda k=k: len(rover.set_mode_ns) > k)  # type: ignore[misc]
+            ok = rover.wait_set_mode(k)
             act.armed = False
             if ok and i >= 10 and act.stamps:
                 step_t, action_t = act.stamps[0]
@@ -918,14 +922,7 @@ def run_step_only(trials: int, tmp: Path, tactics: Path) -> dict[str, Any]:
         nominal_inputs("manual", VIOLATION)  # the rover obeyed: postcondition verified
         nominal_inputs("manual", CLEAR)
     m.close()
-    table: dict[Any, Any] = pstats.Stats(profiler, stream=io.StringIO()).stats  # type: ignore[attr-defined]
-    rows = sorted(
-        (
-            (tt, ct, nc, f"{Path(f).name}:{line}({func})")
-            for (f, line, func), (_cc, nc, tt, ct, _) in table.items()
-        ),
-        reverse=True,
-    )
+    rows = _profile_rows(profiler)
     return {
         "violation_step_to_action": summary_ms(ns),
         "whole_violation_step_profiled_us": round(
@@ -1141,15 +1138,23 @@ def profile_bus(
     return _own_time_rows(profiler, len(messages), "msg", 18)
 
 
-def _own_time_rows(profiler: cProfile.Profile, per: int, unit: str, n: int) -> list[dict[str, Any]]:
-    table: dict[Any, Any] = pstats.Stats(profiler, stream=io.StringIO()).stats  # type: ignore[attr-defined]
-    rows = sorted(
+def _profile_rows(profiler: cProfile.Profile) -> list[tuple[float, float, int, str]]:
+    """(own s, cumulative s, calls, ``file:line(function)``) per function, most own time first."""
+    # typeshed's pstats.Stats leaves out ``stats``, the table pstats prints from (a dict of
+    # (file, line, function) to (primitive calls, calls, own s, cumulative s, callers)).
+    table: dict[tuple[str, int, str], tuple[int, int, float, float, Any]]
+    table = pstats.Stats(profiler, stream=io.StringIO()).stats  # type: ignore[attr-defined]
+    return sorted(
         (
             (tt, ct, nc, f"{Path(f).name}:{line}({func})")
             for (f, line, func), (_cc, nc, tt, ct, _) in table.items()
         ),
         reverse=True,
     )
+
+
+def _own_time_rows(profiler: cProfile.Profile, per: int, unit: str, n: int) -> list[dict[str, Any]]:
+    rows = _profile_rows(profiler)
     total = sum(r[0] for r in rows)
     out: list[dict[str, Any]] = [
         {
@@ -1346,7 +1351,7 @@ def main(argv: list[str] | None = None) -> int:
         }
         if c_fast is not None:
             reaction["c_fast"] = c_fast
-    baseline = {
+    baseline: dict[str, dict[str, Any]] = {
         "zenoh": {
             "setup": "the same two zenoh sessions as (b): this process <-> the manager's child",
             "request_rtt": summary_ms(samples.ns.get("zr", [])),

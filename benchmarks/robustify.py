@@ -309,7 +309,8 @@ def region_box(phen: Any, region: dict[str, tuple[float, float]]) -> npt.NDArray
 def inside(units: npt.ArrayLike, box: npt.NDArray[np.float64]) -> npt.NDArray[np.bool_]:
     """Which ``[n, d]`` normalised contexts lie in the box."""
     u = np.atleast_2d(np.asarray(units, np.float64))
-    return np.all((u >= box[:, 0]) & (u <= box[:, 1]), axis=1)
+    within: npt.NDArray[np.bool_] = np.all((u >= box[:, 0]) & (u <= box[:, 1]), axis=1)
+    return within
 
 
 def augmenter_reaches(phen: Any, box: npt.NDArray[np.float64], steps: int = 401) -> bool:
@@ -370,7 +371,7 @@ def _uniform_outside_class() -> Any:
     from anunnaki.enki import UniformContexts
     from anunnaki.enlil import to_phenomenon_vector
 
-    class UniformOutside(UniformContexts):  # type: ignore[misc]
+    class UniformOutside(UniformContexts):
         """Random-context augmentation over the domain's space minus the held-out box."""
 
         kind = "uniform"
@@ -1293,7 +1294,8 @@ def merge(
 
 
 def _settings_json(s: Settings) -> dict[str, Any]:
-    return json.loads(json.dumps(asdict(s)))
+    plain: dict[str, Any] = json.loads(json.dumps(asdict(s)))
+    return plain
 
 
 # -- the report (docs/enki.md) ----------------------------------------------------------------

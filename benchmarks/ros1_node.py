@@ -46,13 +46,13 @@ class Trip:
         self.pub = rospy.Publisher(out, out_type, queue_size=100)
         self.sub = rospy.Subscriber(back, back_type, self.on_back, queue_size=100)
 
-    def key(self, msg: object) -> str:
+    def key(self, msg: String | Image | CompressedImage) -> str:
         data = getattr(msg, "data", None)
         if isinstance(data, str):
             return data
         return str(msg.header.frame_id)  # rospy numbers header.seq itself
 
-    def on_back(self, msg: object) -> None:
+    def on_back(self, msg: String | Image | CompressedImage) -> None:
         now = time.perf_counter()
         with self.lock:
             t0 = self.sent.pop(self.key(msg), None)
@@ -60,10 +60,14 @@ class Trip:
                 self.rtt.append((now - t0) * 1000.0)
             self.got.notify_all()
 
-    def send(self, key: str, msg: object) -> None:
+    def send(self, key: str, msg: String | Image) -> None:
         with self.lock:
             self.sent[key] = time.perf_counter()
         self.pub.publish(msg)
+
+    def wait_more(self, before: int, timeout: float) -> None:
+        """Wait (``lock`` held) until more than ``before`` round trips are in."""
+        self.got.wait_for(lambda: len(self.rtt) > before, timeout)
 
     def wait_connected(self, timeout: float) -> bool:
         end = time.monotonic() + timeout
@@ -88,7 +92,7 @@ def ping_pong(trip: Trip, n: int, timeout: float) -> None:
             before = len(trip.rtt)
         trip.send(f"p{i}", String(data=f"p{i}"))
         with trip.lock:
-            trip.got.wait_for(lambda n=before: len(trip.rtt) > n, timeout)
+            trip.wait_more(before, timeout)
 
 
 def images(
@@ -108,7 +112,7 @@ def images(
         trip.send(str(i), frame(i))
         if one_at_a_time:
             with trip.lock:
-                trip.got.wait_for(lambda n=before: len(trip.rtt) > n, timeout)
+                trip.wait_more(before, timeout)
     end = time.monotonic() + timeout
     with trip.lock:
         trip.got.wait_for(lambda: not trip.sent or time.monotonic() > end, timeout)

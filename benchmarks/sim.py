@@ -31,13 +31,14 @@ from pathlib import Path
 from typing import Any
 
 from anunnaki.bus import open_bus
-from anunnaki.sim import RoverSim, Scene, UavSim, dataset_frames
+from anunnaki.sim import Platform, RoverSim, Scene, UavSim, dataset_frames
 
 SIZES = ((128, 128), (320, 240))
+PLATFORMS: tuple[Platform, ...] = ("rover", "uav")
 RESULTS = Path(__file__).parent / "results" / "sim.json"
 
 
-def render_fps(platform_name: str, width: int, height: int, n: int) -> float:
+def render_fps(platform_name: Platform, width: int, height: int, n: int) -> float:
     frames = dataset_frames(platform_name, layout=0, seed=0, n=n + 1, width=width, height=height)
     next(iter(frames))  # the scene is built before the first frame: not timed
     t0 = time.perf_counter()
@@ -45,14 +46,14 @@ def render_fps(platform_name: str, width: int, height: int, n: int) -> float:
     return count / (time.perf_counter() - t0)
 
 
-def build_seconds(platform_name: str) -> float:
+def build_seconds(platform_name: Platform) -> float:
     t0 = time.perf_counter()
-    Scene(platform_name, 0).close()  # type: ignore[arg-type]
+    Scene(platform_name, 0).close()
     return time.perf_counter() - t0
 
 
 def platform_run(
-    platform_name: str, width: int, height: int, n: int, rate: float
+    platform_name: Platform, width: int, height: int, n: int, rate: float
 ) -> tuple[float, float]:
     """(frames per wall second, simulated seconds per wall second) for ``n`` frames."""
     scenario: dict[str, Any] = {
@@ -90,7 +91,7 @@ def main() -> None:
         "repeats": args.repeats,
         "platforms": {},
     }
-    for name in ("rover", "uav"):
+    for name in PLATFORMS:
         entry: dict[str, Any] = {
             "build_s": round(statistics.median(build_seconds(name) for _ in range(args.repeats)), 3)
         }

@@ -22,6 +22,7 @@ Run: ``.venv/bin/python benchmarks/swap.py [--rounds 20]``
 from __future__ import annotations
 
 import argparse
+import functools
 import itertools
 import json
 import platform
@@ -80,6 +81,11 @@ def stats(values: list[float]) -> dict[str, float]:
     }
 
 
+def _first_from(got: list[tuple[float, Detections]], model: str, t0: float) -> float | None:
+    """When the first detections of ``model`` at or after ``t0`` arrived, if they have."""
+    return next((t for t, d in got if d.model_id == model and t >= t0), None)
+
+
 def run(registry: ModelRegistry, *, cache: int, rounds: int) -> dict[str, Any]:
     frames = [
         cv2.imencode(".jpg", cv2.cvtColor(synthetic_scene(SIZE, SIZE, seed=i), cv2.COLOR_RGB2BGR))[
@@ -131,10 +137,9 @@ def run(registry: ModelRegistry, *, cache: int, rounds: int) -> dict[str, Any]:
             body = reply.to_body()["body"]
             model = body["model"]
             with cond:
-                cond.wait_for(
-                    lambda m=model, t0=t0: any(d.model_id == m and t >= t0 for t, d in got), 30
-                )
-                first = next(t for t, d in got if d.model_id == model and t >= t0)
+                first = cond.wait_for(functools.partial(_first_from, got, model, t0), 30)
+            if first is None:
+                raise RuntimeError(f"no detections from {model} within 30 s of the swap")
             reply_ms.append((t1 - t0) * 1000)
             load_ms.append(float(body["load_ms"]))
             first_ms.append((first - t0) * 1000)
