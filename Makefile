@@ -23,7 +23,7 @@ demo: setup
 test: setup
 	$(PY) -m ruff check src tests benchmarks examples
 	$(PY) -m ruff format --check src tests benchmarks examples
-	$(PY) -m mypy src benchmarks
+	$(PY) -m mypy
 	.venv/bin/lint-imports
 	$(PY) -m pytest -q -n 2 --dist loadfile --durations=30
 
