@@ -26,7 +26,12 @@ measured from the run's public topics (``on_bus``), its decisions and its report
   simulated seconds from its onset (the event's ``at``) to the first adaptation action in
   it that fits it (a swap of the detector's model to the domain for one of the phase's
   phenomena, :attr:`Case.fits`, or the fail-safe's mode change), or ``null`` when none came
-  before the phase ended (a swap to another domain is no adaptation to the phase);
+  before the phase ended (a swap to another domain is no adaptation to the phase); beside
+  it, ``degraded_at``, the first frame in the phase on which the ground-truth scorer found
+  the *active* model degraded (category >= 1), and ``after_degraded_s``, the seconds from
+  that frame to the adaptation (0 when the adaptation came first; ``null`` when none came):
+  a condition ramps in, and the model in use may cope with its start (the UAV's rain model
+  with thin fog), so the onset delay counts time in which nothing needed doing;
 * ``false_alarms``: adaptation tactics started (swap to a robust model, fail-safe) while no
   adverse condition was in force nor had been in the last second;
 * ``decisions``: tactics started (any);
@@ -60,8 +65,9 @@ fail-safe's e-mail fails at once as not configured, recorded as a decision, its 
 kept off the output): a benchmark must not mail whatever listens on the demo's port.
 
 The summary gives per manager the mean, standard deviation, min and max over seeds, and the
-onset delays' p95 over all phases of all seeds. A case is one entry of :data:`CASES`: a
-launch file whose managed system is ``kind: sim``, whose scenario has a ``vary:`` section;
+onset delays' p95 over all phases of all seeds (and the delays after degradation's). A case
+is one entry of :data:`CASES`: a launch file whose managed system is ``kind: sim``, whose
+scenario has a ``vary:`` section;
 the UAV (examples/uav) is the second. Writes ``benchmarks/results/case-studies.json``::
 
     .venv/bin/python benchmarks/case_studies.py                 # 10 seeds per manager
@@ -181,13 +187,33 @@ class _Heard:
 
     lock: threading.Lock = field(default_factory=threading.Lock)
     scorer: dict[int, int] = field(default_factory=dict)  # seq -> ground-truth category
+    times: dict[int, float] = field(default_factory=dict)  # seq -> simulated time
     subs: list[Any] = field(default_factory=list)
+
+    def _hear_frames(self, bus: Any) -> list[Any]:
+        """The subscriptions both recorders make: the scorer and each frame's time."""
+        return [
+            bus.subscribe(topics.SCORER, self._on_scorer, queue=1024),
+            bus.subscribe(topics.PHENOMENA, self._on_frame, queue=1024),
+        ]
 
     def _on_scorer(self, sample: Any) -> None:
         message = sample.message
         if isinstance(message, Assessment) and message.frame_seq is not None:
             with self.lock:
                 self.scorer[message.frame_seq] = message.category
+
+    def _on_frame(self, sample: Any) -> None:
+        body = body_of(sample.message)
+        with self.lock:
+            self.times[int(body["seq"])] = float(body["t"])
+
+    def degraded_times(self) -> list[float]:
+        """Simulated times of the frames the scorer put in category >= 1, in order."""
+        with self.lock:
+            return sorted(
+                self.times[s] for s, c in self.scorer.items() if c >= 1 and s in self.times
+            )
 
     def close(self) -> None:
         for sub in self.subs:
@@ -212,8 +238,8 @@ class _Recorder(_Heard):
         self.subs = [
             bus.subscribe(topics.GROUND_TRUTH, self._on_truth, queue=1024),
             bus.subscribe(topics.DETECTIONS, self._on_detections, queue=1024),
-            bus.subscribe(topics.SCORER, self._on_scorer, queue=1024),
             bus.subscribe("/rover/status", self._on_status, queue=1024),
+            *self._hear_frames(bus),
         ]
 
     def _box_ahead(self, box: list[float]) -> bool:
@@ -294,8 +320,8 @@ class _UavRecorder(_Heard):
     def attach(self, bus: Any) -> None:
         self.subs = [
             bus.subscribe(topics.DETECTIONS, self._on_detections, queue=1024),
-            bus.subscribe(topics.SCORER, self._on_scorer, queue=1024),
             bus.subscribe("/uav/status", self._on_status, queue=1024),
+            *self._hear_frames(bus),
         ]
 
     def _on_detections(self, sample: Any) -> None:
@@ -454,6 +480,7 @@ def run_once(
         and d.data.get("type") in ("swap_model", "change_mode")
     ]
     started = [d for d in result.decisions if d.kind == "started" and d.tactic is not None]
+    degraded_at = recorder.degraded_times()
     delays: list[dict[str, Any]] = []
     for onset, phase_end, label in _phases(scenario):
         if onset >= end:
@@ -471,11 +498,18 @@ def run_once(
             ),
             None,
         )
+        # the first frame in the phase the ground truth found the active model degraded on
+        hurt = next((t for t in degraded_at if onset <= t < phase_end), None)
+        after: float | None = None
+        if first is not None:
+            after = 0.0 if hurt is None or hurt > first else round(first - hurt, 3)
         delays.append(
             {
                 "onset": round(onset, 3),
                 "phase": label,
                 "delay_s": None if first is None else round(first - onset, 3),
+                "degraded_at": None if hurt is None else round(hurt, 3),
+                "after_degraded_s": after,
             }
         )
 
@@ -580,6 +614,13 @@ def summarise(runs: list[dict[str, Any]], measures: tuple[str, ...] = MEASURES) 
     delays = [p["delay_s"] for r in runs for p in r["onset_delays"]]
     known = [float(d) for d in delays if d is not None]
     out["onset_delay_s"] = {**_spread(known), "p95": _p95(known)}
+    after = [
+        float(p["after_degraded_s"])
+        for r in runs
+        for p in r["onset_delays"]
+        if p.get("after_degraded_s") is not None
+    ]
+    out["after_degraded_s"] = {**_spread(after), "p95": _p95(after)}
     out["phases_without_adaptation"] = sum(1 for d in delays if d is None)
     out["phases"] = len(delays)
     if "landing" in (runs[0] if runs else {}):
@@ -597,13 +638,17 @@ def table(summary: dict[str, dict[str, Any]], measures: tuple[str, ...] = MEASUR
         return f"{s['mean']:.2f} ± {s['std']:.2f} [{s['min']:g}–{s['max']:g}]"
 
     rows = [f"{'measure':<22} " + " ".join(f"{m:<30}" for m in summary)]
-    for measure in (*measures, "onset_delay_s"):
+    for measure in (*measures, "onset_delay_s", "after_degraded_s"):
         rows.append(
             f"{measure:<22} " + " ".join(f"{cell(s[measure]):<30}" for s in summary.values())
         )
     rows.append(
         f"{'onset delay p95 (s)':<22} "
         + " ".join(f"{s['onset_delay_s']['p95']!s:<30}" for s in summary.values())
+    )
+    rows.append(
+        f"{'after degraded p95 (s)':<22} "
+        + " ".join(f"{s['after_degraded_s']['p95']!s:<30}" for s in summary.values())
     )
     rows.append(
         f"{'phases not adapted':<22} "

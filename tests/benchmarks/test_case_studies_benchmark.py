@@ -50,8 +50,21 @@ def test_case_studies_benchmark(tmp_path: Path) -> None:
     swap = next(a for a in utu["adaptations"] if a["tactic"] == "swap-to-hsl-model")
     assert swap["postcondition"] == "ok", utu
     assert utu["onset_delays"][0]["delay_s"] is not None
+    # from the first frame the ground truth found the active model degraded in the phase
+    # (the onset's ramp may leave the model in use fine for a while) to the adaptation
+    p = utu["onset_delays"][0]
+    assert p["degraded_at"] is None or p["degraded_at"] >= p["onset"]
+    assert 0.0 <= p["after_degraded_s"] <= p["delay_s"]
+    if p["degraded_at"] is not None and p["degraded_at"] < p["onset"] + p["delay_s"]:
+        assert p["after_degraded_s"] == pytest.approx(
+            p["onset"] + p["delay_s"] - p["degraded_at"], abs=0.002
+        )
     assert none["adaptations"] == [] and none["decisions"] == 0
     assert none["onset_delays"][0]["delay_s"] is None
+    assert none["onset_delays"][0]["after_degraded_s"] is None
+    assert (
+        none["onset_delays"][0]["degraded_at"] is not None
+    )  # the default model, left in the shift
     # none is worse on the documented measure
     assert none["degraded_frames"] > utu["degraded_frames"], (none, utu)
     summary = rover["summary"]
@@ -66,6 +79,7 @@ def test_case_studies_benchmark(tmp_path: Path) -> None:
             "false_alarms",
         }
         assert s["onset_delay_s"].keys() >= {"mean", "std", "min", "max", "p95"}
+        assert s["after_degraded_s"].keys() >= {"mean", "std", "min", "max", "p95"}
 
 
 def _run(manager: str, seed: int, degraded: int) -> dict[str, object]:

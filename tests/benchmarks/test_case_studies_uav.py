@@ -37,6 +37,15 @@ def test_case_studies_uav_quick(tmp_path: Path) -> None:
     assert outcome.get("swap-to-robust-model") == "ok", utu
     assert outcome.get("return-home") == "ok", utu
     assert utu["onset_delays"][0]["delay_s"] is not None
+    # from the first frame the ground truth found the active model degraded in the phase
+    # (the onset's ramp may leave the model in use fine for a while) to the adaptation
+    p = utu["onset_delays"][0]
+    assert p["degraded_at"] is None or p["degraded_at"] >= p["onset"]
+    assert 0.0 <= p["after_degraded_s"] <= p["delay_s"]
+    if p["degraded_at"] is not None and p["degraded_at"] < p["onset"] + p["delay_s"]:
+        assert p["after_degraded_s"] == pytest.approx(
+            p["onset"] + p["delay_s"] - p["degraded_at"], abs=0.002
+        )
     assert utu["false_alarms"] == 0
     # the run ends at the touch-down: at home, with battery in hand
     assert utu["landing"] == "home" and utu["landed_home"] == 1
@@ -54,4 +63,5 @@ def test_case_studies_uav_quick(tmp_path: Path) -> None:
     for s in summary.values():
         assert set(s) >= {"delivered", "battery_at_landing", "mission_time_s", "false_alarms"}
         assert s["onset_delay_s"].keys() >= {"mean", "std", "min", "max", "p95"}
+        assert s["after_degraded_s"].keys() >= {"mean", "std", "min", "max", "p95"}
     assert summary["utu"]["landings"] == "home ×1"
