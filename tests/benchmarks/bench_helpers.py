@@ -41,3 +41,16 @@ def script_module(script: str, name: str) -> ModuleType:
     sys.modules[name] = module
     spec.loader.exec_module(module)
     return module
+
+
+def check_after_degraded(phase: dict[str, Any]) -> None:
+    """A phase of case_studies.py's ``onset_delays`` that was adapted to: its delay after the
+    ground truth first found the active model degraded in it (the onset's ramp may leave the
+    model in use fine for a while) is measured from that frame, 0 when the action came first.
+    """
+    assert phase["delay_s"] is not None, phase
+    hurt, acted = phase["degraded_at"], phase["onset"] + phase["delay_s"]
+    assert hurt is None or hurt >= phase["onset"], phase
+    assert 0.0 <= phase["after_degraded_s"] <= phase["delay_s"], phase
+    expected = 0.0 if hurt is None or hurt > acted else acted - hurt
+    assert abs(phase["after_degraded_s"] - expected) <= 0.002, phase
