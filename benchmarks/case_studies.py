@@ -84,6 +84,7 @@ what it measured); the case's summary is computed again. Each case records its o
 from __future__ import annotations
 
 import argparse
+import bisect
 import dataclasses
 import fcntl
 import io
@@ -182,20 +183,43 @@ UAV_LOW_BATTERY = 20.0
 
 @dataclass(kw_only=True)
 class _Heard:
-    """What both recorders keep: the ground-truth scorer's category per frame (under
-    ``lock``, which guards the subclasses' fields too) and their subscriptions."""
+    """What both recorders keep: each frame's simulated time and ground-truth category, the
+    statuses in order (all under ``lock``, which guards the subclasses' fields too), and
+    their subscriptions.
+
+    Everything is heard *in the publisher's thread* (pull subscribers drained by their
+    ``on_ready``, as Utu hears its inputs), and a frame's mode is the one of the last status
+    at or before the frame's simulated time. Before, callbacks on the bus's dispatcher
+    threads attributed a frame to whatever status the status thread had reached, which a
+    loaded machine put behind (the same seed counted 39 and 56 degraded frames), and the
+    run's last messages could still be queued when it ended.
+    """
 
     lock: threading.Lock = field(default_factory=threading.Lock)
     scorer: dict[int, int] = field(default_factory=dict)  # seq -> ground-truth category
     times: dict[int, float] = field(default_factory=dict)  # seq -> simulated time
+    statuses: list[dict[str, Any]] = field(default_factory=list)  # in order of their "t"
+    status_t: list[float] = field(default_factory=list)  # their "t"
     subs: list[Any] = field(default_factory=list)
 
-    def _hear_frames(self, bus: Any) -> list[Any]:
-        """The subscriptions both recorders make: the scorer and each frame's time."""
-        return [
-            bus.subscribe(topics.SCORER, self._on_scorer, queue=1024),
-            bus.subscribe(topics.PHENOMENA, self._on_frame, queue=1024),
-        ]
+    def _hear(self, bus: Any, topic: str, handle: Callable[[Any], None]) -> None:
+        """Hear ``topic`` in its publisher's thread, every message in order."""
+        box: list[Any] = []
+        order = threading.Lock()  # one drain at a time: messages handled in their order
+
+        def drain() -> None:
+            with order:
+                while box and (sample := box[0].try_recv()) is not None:
+                    handle(sample)
+
+        box.append(bus.subscribe(topic, queue=1024, on_ready=drain))
+        self.subs.append(box[0])
+
+    def _hear_frames(self, bus: Any, status: str) -> None:
+        """The subscriptions both recorders make: the scorer, each frame's time, the status."""
+        self._hear(bus, topics.SCORER, self._on_scorer)
+        self._hear(bus, topics.PHENOMENA, self._on_frame)
+        self._hear(bus, status, self._on_status)
 
     def _on_scorer(self, sample: Any) -> None:
         message = sample.message
@@ -207,6 +231,20 @@ class _Heard:
         body = body_of(sample.message)
         with self.lock:
             self.times[int(body["seq"])] = float(body["t"])
+
+    def _on_status(self, sample: Any) -> None:
+        with self.lock:
+            self._keep_status(body_of(sample.message))
+
+    def _keep_status(self, body: dict[str, Any]) -> None:
+        self.statuses.append(body)
+        self.status_t.append(float(body["t"]))
+
+    def status_at(self, seq: int) -> dict[str, Any]:
+        """The last status at or before frame ``seq``'s time (``{}``: none yet); under lock."""
+        t = self.times.get(seq)
+        k = 0 if t is None else bisect.bisect_right(self.status_t, t)
+        return self.statuses[k - 1] if k else {}
 
     def degraded_times(self) -> list[float]:
         """Simulated times of the frames the scorer put in category >= 1, in order."""
@@ -228,19 +266,12 @@ class _Recorder(_Heard):
     height: int
     truth: dict[int, list[list[float]]] = field(default_factory=dict)  # seq -> pedestrian boxes
     ahead: dict[int, bool] = field(default_factory=dict)  # seq -> the detector saw one ahead
-    mode: dict[int, str] = field(default_factory=dict)  # seq -> rover mode when detected
-    current_mode: str = "autonomous"
-    x: float = 0.0
-    autonomous_m: float = 0.0  # metres driven in autonomous mode
     rule: StopRule = field(default_factory=StopRule)
 
     def attach(self, bus: Any) -> None:
-        self.subs = [
-            bus.subscribe(topics.GROUND_TRUTH, self._on_truth, queue=1024),
-            bus.subscribe(topics.DETECTIONS, self._on_detections, queue=1024),
-            bus.subscribe("/rover/status", self._on_status, queue=1024),
-            *self._hear_frames(bus),
-        ]
+        self._hear(bus, topics.GROUND_TRUTH, self._on_truth)
+        self._hear(bus, topics.DETECTIONS, self._on_detections)
+        self._hear_frames(bus, "/rover/status")
 
     def _box_ahead(self, box: list[float]) -> bool:
         return self.rule.box_ahead(box, self.width, self.height)
@@ -265,27 +296,22 @@ class _Recorder(_Heard):
         )
         with self.lock:
             self.ahead[det.frame_seq] = seen
-            self.mode[det.frame_seq] = self.current_mode
-
-    def _on_status(self, sample: Any) -> None:
-        body = body_of(sample.message)
-        mode, x = body.get("mode"), body.get("x")
-        with self.lock:
-            if isinstance(mode, str):
-                self.current_mode = mode
-            if isinstance(x, int | float):
-                if self.current_mode == "autonomous":
-                    self.autonomous_m += max(0.0, float(x) - self.x)
-                self.x = float(x)
 
     def counts(self) -> dict[str, Any]:
         with self.lock:
-            auto = {s for s, m in self.mode.items() if m == "autonomous"}
+            auto = {
+                s for s in self.ahead if self.status_at(s).get("mode", "autonomous") == "autonomous"
+            }
             degraded = sum(1 for s, c in self.scorer.items() if c >= 1 and s in auto)
             misses = sum(
                 1 for s, boxes in self.truth.items() if boxes and s in auto and not self.ahead[s]
             )
-            x, mode, auto_m = self.x, self.current_mode, self.autonomous_m
+            x, mode, auto_m = 0.0, "autonomous", 0.0
+            for status in self.statuses:  # metres driven while autonomous, status by status
+                mode = str(status.get("mode", mode))
+                if mode == "autonomous":
+                    auto_m += max(0.0, float(status["x"]) - x)
+                x = float(status["x"])
         return {
             "degraded_frames": degraded,
             "pedestrian_misses": misses,
@@ -301,45 +327,39 @@ class _UavRecorder(_Heard):
     """What a UAV run publishes, heard on its bus: its frames' categories and its flight.
 
     A frame counts as handled by the detector while the UAV flies on it (airborne in
-    ``auto`` or ``return_home``; hovering or landing it waits). The flight is read from
-    ``/uav/status``: take-off, the last touch-down (time, battery, where, and whether the
-    battery had forced it), seconds airborne below O2's 20 %, the package's ``delivered``.
-    ``landed`` is set at the touch-down after a flight (the run can stop there: nothing of
-    the mission changes after it).
+    ``auto`` or ``return_home`` at the frame's time; hovering or landing it waits). The
+    flight is read from ``/uav/status``: take-off, the last touch-down (time, battery,
+    where, and whether the battery had forced it), seconds airborne below O2's 20 %, the
+    package's ``delivered``. ``landed`` is set at the touch-down after a flight (the run
+    can stop there: nothing of the mission changes after it).
     """
 
     home: tuple[float, float]
     landed: threading.Event = field(default_factory=threading.Event)
-    flying: dict[int, bool] = field(default_factory=dict)  # seq -> flying on the detector
-    status: dict[str, Any] = field(default_factory=dict)  # the last /uav/status
+    detected: set[int] = field(default_factory=set)  # frames the detector handled
     airborne_at: float | None = None
     touchdown: dict[str, Any] | None = None  # t, battery, x, y, forced
     forced: bool = False
     low_battery_s: float = 0.0
 
     def attach(self, bus: Any) -> None:
-        self.subs = [
-            bus.subscribe(topics.DETECTIONS, self._on_detections, queue=1024),
-            bus.subscribe("/uav/status", self._on_status, queue=1024),
-            *self._hear_frames(bus),
-        ]
+        self._hear(bus, topics.DETECTIONS, self._on_detections)
+        self._hear_frames(bus, "/uav/status")
 
     def _on_detections(self, sample: Any) -> None:
         det = sample.message
         if isinstance(det, Detections):
             with self.lock:
-                s = self.status
-                airborne = float(s.get("altitude", 0.0)) > 0.05
-                self.flying[det.frame_seq] = airborne and s.get("mode") in ("auto", "return_home")
+                self.detected.add(det.frame_seq)
 
     def _on_status(self, sample: Any) -> None:
         body = body_of(sample.message)
         t, altitude, battery = float(body["t"]), float(body["altitude"]), float(body["battery"])
         with self.lock:
-            last = self.status
+            last = self.statuses[-1] if self.statuses else {}
             if last and float(last["altitude"]) > 0.05 and float(last["battery"]) < UAV_LOW_BATTERY:
                 self.low_battery_s += max(0.0, t - float(last["t"]))
-            self.status = body
+            self._keep_status(body)
             if altitude > 0.05:
                 if self.airborne_at is None:
                     self.airborne_at = t
@@ -349,10 +369,19 @@ class _UavRecorder(_Heard):
                 self.touchdown = {"t": t, "battery": battery, "x": body["x"], "y": body["y"]}
                 self.landed.set()
 
+    def _flying(self, seq: int) -> bool:
+        s = self.status_at(seq)
+        return float(s.get("altitude", 0.0)) > 0.05 and s.get("mode") in ("auto", "return_home")
+
     def counts(self) -> dict[str, Any]:
         with self.lock:
-            degraded = sum(1 for s, c in self.scorer.items() if c >= 1 and self.flying.get(s))
-            last, down = dict(self.status), self.touchdown
+            degraded = sum(
+                1
+                for s, c in self.scorer.items()
+                if c >= 1 and s in self.detected and self._flying(s)
+            )
+            last = dict(self.statuses[-1]) if self.statuses else {}
+            down = self.touchdown
             low, forced, airborne_at = self.low_battery_s, self.forced, self.airborne_at
         if airborne_at is None:
             landing = "ground"

@@ -249,3 +249,36 @@ def test_the_demo_swaps_in_the_fog_model_and_back_without_oscillation(run_demo: 
     runs = [m for k, m in enumerate(models) if k == 0 or m != models[k - 1]]
     fog = load_registry(MODEL.parent / "rover.yaml").for_domain("fog").id  # rover-fog-enki
     assert runs == ["rover-default", fog, "rover-default", "rover-low_light"]
+
+
+def test_the_rover_acts_on_each_frame_s_detections_at_that_frame_s_time(
+    bus: Any, tmp_path: Path
+) -> None:
+    """A slow subscriber thread does not make the stop rule see detections late.
+
+    The rover takes detections on a bus thread; before, the simulation stepped on as soon as
+    its own subscriber had them, and on a loaded machine the rover took them some ticks
+    later (its trajectory, and every figure after it, then changed with the load). Here the
+    rover's thread is made slow on purpose; each frame's detections are still taken at that
+    frame's time.
+    """
+    taken: list[tuple[float, int]] = []
+    with SimulatedSystem(
+        bus,
+        fog_scene("slow-rover", duration=2, fog_at=5),
+        models=load_registry(write_registry(tmp_path / "m.yaml")),
+        oracle=None,
+    ) as system:
+        rover: Any = system.platform
+        observe = rover.observe_detections
+
+        def slow(det: Detections) -> None:
+            threading.Event().wait(0.03)  # a descheduled thread, 3 frames of 10 ms wall
+            taken.append((rover.t, det.frame_seq))
+            observe(det)
+
+        rover.observe_detections = slow
+        system.run(threading.Event(), speed=0)
+    frame_t = {seq: seq / 10.0 for _, seq in taken}  # camera at 10 Hz from t = 0
+    assert len(taken) == 20
+    assert all(t == pytest.approx(frame_t[seq], abs=1e-9) for t, seq in taken), taken

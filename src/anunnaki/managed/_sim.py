@@ -359,6 +359,11 @@ class SimulatedSystem(Closing):
                 self._lock.wait(min(left, 0.05))
         if self._stopping.is_set():
             return
+        # ... taken by the platform (the rover's stop rule), at this frame's time ...
+        if not sim.wait_for(
+            lambda: sim.took_detections(frame.seq), max(0.0, deadline - time.monotonic())
+        ):
+            log.warning("sim: the platform did not take frame %d's detections in time", frame.seq)
         # ... and its assessments: an oracle that fell behind would drop frames from its
         # queue and report late, in simulated time, what a real-time one reports at once.
         for node in (self.oracle, self.scorer):
@@ -371,6 +376,9 @@ class SimulatedSystem(Closing):
                     node.node,
                     self.lockstep_timeout,
                 )
+        # ... and acted on by Utu (its reaction to the assessment, actions included) before
+        # the platform moves: a mode change lands at this frame's tick, not a few ticks on.
+        self._settle()
 
     def _settle(self) -> None:
         """In lockstep, wait until Utu is done with the present before the clock moves on."""
