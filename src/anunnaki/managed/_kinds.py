@@ -18,7 +18,7 @@ from pydantic import BaseModel, ConfigDict, Field
 
 from anunnaki.errors import AnunnakiError, ModelFileError
 from anunnaki.managed._camera import check_camera_chain
-from anunnaki.managed._slot import DecisionLike, ManagedContext, UtuSettings
+from anunnaki.managed._slot import DecisionLike, ManagedContext, UtuSettings, wait_for_utu
 from anunnaki.trace import Record, read_trace
 
 __all__ = ["ScriptedConfig", "ScriptedKind", "SimConfig", "SimKind"]
@@ -212,18 +212,14 @@ class ScriptedKind:
             total += n
             if taken is None or not n:
                 return
-            deadline = time.monotonic() + sc.sync_timeout
-            while not taken(total) and not ctx.stop.is_set():
-                if time.monotonic() > deadline:
-                    late += 1
-                    if late == 1:
-                        log.warning(
-                            "sync: Utu did not take the messages of an instant within "
-                            "%.1f s; the replay goes on without waiting for it",
-                            sc.sync_timeout,
-                        )
-                    return
-                ctx.stop.wait(0.0005)
+            if not wait_for_utu(lambda: taken(total), ctx.stop, sc.sync_timeout, pause=0.0005):
+                late += 1
+                if late == 1:
+                    log.warning(
+                        "sync: Utu did not take the messages of an instant within "
+                        "%.1f s; the replay goes on without waiting for it",
+                        sc.sync_timeout,
+                    )
 
         def run() -> None:
             try:

@@ -36,6 +36,7 @@ from anunnaki import topics
 from anunnaki._closing import Closing
 from anunnaki.bus import LivelinessGuard, Sample
 from anunnaki.managed._camera import CameraChain
+from anunnaki.managed._slot import wait_for_utu
 from anunnaki.messages import Assessment, Detections, body_of
 from anunnaki.sim import (
     FrameScore,
@@ -384,22 +385,15 @@ class SimulatedSystem(Closing):
         """In lockstep, wait until Utu is done with the present before the clock moves on."""
         if not self.lockstep or self.settled is None:
             return
-        settled = self.settled
-        deadline = time.monotonic() + self.lockstep_timeout
-        while not settled():
-            if self._stopping.is_set():
-                return
-            if time.monotonic() > deadline:
-                self.unsettled += 1
-                if self.unsettled == 1:
-                    log.warning(
-                        "sim: Utu was not done with t = %.3f s within %.1f s; the clock "
-                        "moves on without it (counted, logged once)",
-                        self.platform.t,
-                        self.lockstep_timeout,
-                    )
-                return
-            self._stopping.wait(0.0002)
+        if not wait_for_utu(self.settled, self._stopping, self.lockstep_timeout):
+            self.unsettled += 1
+            if self.unsettled == 1:
+                log.warning(
+                    "sim: Utu was not done with t = %.3f s within %.1f s; the clock "
+                    "moves on without it (counted, logged once)",
+                    self.platform.t,
+                    self.lockstep_timeout,
+                )
 
     # -- running -------------------------------------------------------------------------------
     def run(

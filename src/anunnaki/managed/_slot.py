@@ -27,6 +27,7 @@ This layer sits below Utu: a kind sees Utu's settings through :class:`UtuSetting
 from __future__ import annotations
 
 import threading
+import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any, ClassVar, Protocol, runtime_checkable
@@ -107,6 +108,22 @@ class ManagedContext:
     taken: Callable[[int], bool] | None
     watched: frozenset[str]
     settled: Callable[[], bool] | None = None
+
+
+def wait_for_utu(
+    done: Callable[[], bool], stop: threading.Event, timeout: float, *, pause: float = 0.0002
+) -> bool:
+    """A lockstep system's wait for Utu: poll ``done()`` until it holds or ``stop`` is set.
+
+    ``False`` only when ``timeout`` seconds of wall time passed first (the system then goes
+    on without Utu, and says so); a stop ends the wait quietly.
+    """
+    deadline = time.monotonic() + timeout
+    while not done() and not stop.is_set():
+        if time.monotonic() > deadline:
+            return False
+        stop.wait(pause)
+    return True
 
 
 class ManagedRun(Protocol):

@@ -410,8 +410,7 @@ class AutonomicManager(Closing):
             return False
         if self._step_lock.locked():
             return False
-        actions = self._execute.actions
-        if isinstance(actions, ThreadRunner) and actions.in_flight:
+        if isinstance(self.actions, ThreadRunner) and self.actions.in_flight:
             return False
         if self.now < self.clock.now():
             self._wake.set()
