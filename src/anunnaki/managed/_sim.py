@@ -179,6 +179,9 @@ class SimulatedSystem(Closing):
             ``{"name": "ground_truth", "window": 30}`` beside a learned ``enlil`` oracle);
             it publishes on ``topics.SCORER`` (node ``/scorer_<name>``), which Utu does
             not read, and the report compares the two (:func:`~anunnaki.sim.compare_assessors`).
+        shadow: A shadow oracle's options (``name``, the oracle's own, and ``domain`` or
+            ``model``): that model's oracle on every frame whichever model is active, on
+            ``topics.SHADOW_ORACLE`` (see :class:`~anunnaki.managed.CameraChain`).
 
     The detector, the oracle and the scorer are the camera chain every kind shares
     (:class:`~anunnaki.managed.CameraChain`): an oracle that takes what it needs from the
@@ -199,6 +202,7 @@ class SimulatedSystem(Closing):
         stop_without_utu: float | None = 0.2,
         scorer: Mapping[str, Any] | None = None,
         settled: Callable[[], bool] | None = None,
+        shadow: Mapping[str, Any] | None = None,
     ) -> None:
         self.bus = bus
         self.lockstep = lockstep
@@ -255,6 +259,7 @@ class SimulatedSystem(Closing):
                 scorer=scorer,
                 classes=self.platform.scene.classes,
                 default_oracle="ground_truth",
+                shadow=shadow,
             )
             self._closing.append(chain)
             self.chain = chain
@@ -262,6 +267,7 @@ class SimulatedSystem(Closing):
             self.lec: Any = chain.lec
             self.oracle: Any = chain.oracle
             self.scorer: Any = chain.scorer
+            self.shadow: Any = chain.shadow
             self.detections_topic = chain.detections_topic
             self._subs = [
                 bus.subscribe(topics.GROUND_TRUTH, self._on_truth, queue=256),
@@ -367,7 +373,7 @@ class SimulatedSystem(Closing):
             log.warning("sim: the platform did not take frame %d's detections in time", frame.seq)
         # ... and its assessments: an oracle that fell behind would drop frames from its
         # queue and report late, in simulated time, what a real-time one reports at once.
-        for node in (self.oracle, self.scorer):
+        for node in (self.oracle, self.scorer, self.shadow):
             if node is not None and not node.wait_for_frame(
                 frame.seq, max(0.0, deadline - time.monotonic())
             ):
