@@ -173,6 +173,35 @@ def test_an_unknown_phenomenon_reads_the_same_from_run_and_check(
     ]
 
 
+def test_a_utu_configuration_is_checked_as_run_takes_it(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    rover = EXAMPLES / "rover"
+    utu = tmp_path / "utu.yaml"
+    utu.write_text(
+        f"anunnaki: utu/1\ngoal_model: {rover / 'goals.yaml'}\nbinding: {rover / 'binding.yaml'}\n"
+        f"tactics: {rover / 'tactics.yaml'}\nfailsafe: fail-safe\n"
+    )
+    assert checked(capsys, str(utu)) == (0, [])
+    edit(utu, "failsafe: fail-safe", "failsafe: nope")
+    exc = refused(utu)
+    assert (exc.path, exc.line, exc.element) == (str(utu), 5, "failsafe")
+    assert checked(capsys, str(utu)) == (1, [as_finding(exc)])
+
+
+def test_tactics_given_with_a_launch_file_replace_the_ones_it_names(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    d = copy_example(tmp_path, "rover")
+    other = d / "other-tactics.yaml"
+    shutil.copy(d / "tactics-lm.yaml", other)
+    line = edit(other, "        domain: fog", "        domain: nosuch") - 2
+    assert checked(capsys, str(d / "demo.yaml")) == (0, [])
+    code, findings = checked(capsys, str(d / "demo.yaml"), "--tactics", str(other))
+    assert code == 1
+    assert [(f["path"], f["line"]) for f in findings] == [(str(other), line)]
+
+
 def test_a_bad_tactic_domain_exits_1_whether_checked_by_launch_or_by_files(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:

@@ -47,7 +47,11 @@ def add_parser(sub: Any) -> None:
         ),
         epilog=_EXIT_CODES,
     )
-    p.add_argument("model", help="goal-model YAML file, or a launch file (anunnaki: launch/1)")
+    p.add_argument(
+        "model",
+        help="goal-model YAML file, or what 'anunnaki run' takes: a launch file "
+        "(anunnaki: launch/1) or a Utu configuration (utu/1)",
+    )
     p.add_argument("files", nargs="*", metavar="BINDING|TACTICS", help="binding and/or tactics")
     p.add_argument(
         "--binding",
@@ -143,11 +147,11 @@ def _check(args: argparse.Namespace) -> CheckResult:
     return check_launch(args.model, binding=args.binding, tactics=args.tactics, modes=modes)
 
 
-_LAUNCH_TAG = re.compile(r"""^anunnaki:[ \t]*['"]?launch/1\b""", re.MULTILINE)
+_LAUNCH_TAG = re.compile(r"""^anunnaki:[ \t]*['"]?(?:launch|utu)/1\b""", re.MULTILINE)
 
 
 def _is_launch(path: str) -> bool:
-    """Whether *path* is a launch file (its format tag); unreadable files are not."""
+    """Whether *path* is what ``run`` takes: a launch file or a Utu configuration (its tag)."""
     try:
         with Path(path).open("rb") as fh:
             head = fh.read(4096).decode("utf-8", errors="replace")
