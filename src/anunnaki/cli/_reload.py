@@ -26,6 +26,7 @@ from pydantic import ValidationError
 
 from anunnaki import topics
 from anunnaki.bus import BusConfig, BusError, ServiceError, open_bus
+from anunnaki.errors import validation_message
 from anunnaki.messages import ServiceReply
 from anunnaki.tokens import OPERATOR_TOKEN_ENV, client_operator_token, default_token_file
 
@@ -217,7 +218,9 @@ def _bus_config(args: argparse.Namespace) -> BusConfig | str:
             }
         )
     except ValidationError as exc:
-        return "; ".join(f"{'.'.join(map(str, e['loc']))}: {e['msg']}" for e in exc.errors())
+        return "; ".join(
+            f"{'.'.join(map(str, e['loc']))}: {validation_message(e)}" for e in exc.errors()
+        )
 
 
 def _wait_outcome(bus: Any, after: int, timeout: float) -> tuple[str, dict[str, Any]] | None:

@@ -26,7 +26,7 @@ import numpy as np
 import numpy.typing as npt
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
-from anunnaki.errors import AnunnakiError, ModelFileError
+from anunnaki.errors import AnunnakiError, ModelFileError, validation_message
 from anunnaki.plugins import Registry
 
 __all__ = [
@@ -516,7 +516,10 @@ def read_card(path: str | Path) -> ModelCard:
         err = exc.errors()[0]
         where = ".".join(str(p) for p in err["loc"])
         raise DetectorLoadError(
-            err["msg"], path=spath, element=where, hint="fix the field or re-save the model"
+            validation_message(err),
+            path=spath,
+            element=where,
+            hint="fix the field or re-save the model",
         ) from None
 
 

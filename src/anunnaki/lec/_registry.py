@@ -31,7 +31,7 @@ from typing import Any
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
 
 from anunnaki._safeyaml import LineMap
-from anunnaki.errors import AnunnakiError, MissingExtraError, ModelFileError
+from anunnaki.errors import AnunnakiError, MissingExtraError, ModelFileError, validation_message
 from anunnaki.lec._detector import (
     ARCHITECTURES,
     Detector,
@@ -258,7 +258,9 @@ class ModelRegistry:
             except ValidationError as exc:
                 first = exc.errors(include_url=False)[0]
                 where = ".".join(str(p) for p in first["loc"]) or "model"
-                raise ModelRegistryError(f"model entry {where}: {first['msg']}") from None
+                raise ModelRegistryError(
+                    f"model entry {where}: {validation_message(first)}"
+                ) from None
         if spec.loader is not None and spec.loader not in ARCHITECTURES:
             raise ModelRegistryError(
                 f"model {spec.id!r}: {ARCHITECTURES.unknown(spec.loader)}; install the "

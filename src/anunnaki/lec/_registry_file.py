@@ -38,7 +38,7 @@ from typing import Annotated, Any, Literal
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
 from anunnaki._safeyaml import LineMap, load_yaml, validation_error
-from anunnaki.errors import AnunnakiError, ModelFileError
+from anunnaki.errors import AnunnakiError, ModelFileError, validation_message
 from anunnaki.lec._detector import (
     ARCHITECTURES,
     Detector,
@@ -184,7 +184,7 @@ def _build(  # noqa: C901
             first = exc.errors(include_url=False)[0]
             field = str(first["loc"][0]) if first["loc"] else None
             raise _entry_error(
-                str(first["msg"]).removeprefix("Value error, "),
+                validation_message(first),
                 lines=lines,
                 path=source,
                 index=i,

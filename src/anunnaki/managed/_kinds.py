@@ -310,6 +310,10 @@ class SimKind:
         )
         self.speed = self.options.speed
 
+    def model_registry(self) -> str | None:
+        """The detector's model registry (:class:`~anunnaki.managed.ServesModels` hook)."""
+        return self.options.models
+
     def with_reports(self, *, report: str | None, plot: str | None) -> None:
         """Keep the run as data (``report``, JSON) and draw it (``plot``) at the end."""
         update = {k: v for k, v in (("report_file", report), ("plot_file", plot)) if v}
