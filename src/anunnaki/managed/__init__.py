@@ -55,7 +55,9 @@ if TYPE_CHECKING:
         SimulatedSystem,
         format_phases,
         format_scoring,
+        phase_spans,
         scenario_phases,
+        score_phases,
     )
 
 __all__ = [
@@ -79,7 +81,9 @@ __all__ = [
     "check_camera_chain",
     "format_phases",
     "format_scoring",
+    "phase_spans",
     "scenario_phases",
+    "score_phases",
 ]
 
 _LAZY = {
@@ -87,7 +91,9 @@ _LAZY = {
     "SimulatedSystem",
     "format_phases",
     "format_scoring",
+    "phase_spans",
     "scenario_phases",
+    "score_phases",
 }
 
 
