@@ -49,6 +49,11 @@ TRACK_RATE = 2.0
 _METRES_PER_DEGREE = 111_320.0
 
 
+def _ms(t: float | None) -> float | None:
+    """A time to the millisecond (``None`` stays)."""
+    return None if t is None else round(t, 3)
+
+
 class UavSim(SimPlatform):
     """The simulated UAV on the bus.
 
@@ -332,10 +337,10 @@ class UavSim(SimPlatform):
             hx, hy = self.scenario.mission.home
             landed = self.landed_at
             return {
-                "took_off": self.airborne_at,
+                "took_off": _ms(self.airborne_at),
                 "delivered": self.delivered,
-                "delivered_at": self.delivered_at,
-                "landed": landed,
+                "delivered_at": _ms(self.delivered_at),
+                "landed": _ms(landed),
                 "landed_xy": None if landed is None else [round(self.x, 2), round(self.y, 2)],
                 "landed_home": None
                 if landed is None
