@@ -423,7 +423,7 @@ def _shade_phases(report: RunReport, axes: Sequence[Axes]) -> None:
             )
 
 
-def stack_labels(spans: Sequence[tuple[float, float]], *, gap: float = 0.0) -> list[int]:
+def _stack_labels(spans: Sequence[tuple[float, float]], *, gap: float = 0.0) -> list[int]:
     """The row of each label so that no two in a row overlap: ``spans`` are ``(left, right)``.
 
     Greedy, left to right (by left edge): each label takes the lowest row whose last label
@@ -469,7 +469,7 @@ def _label_phases(report: RunReport, ax: Axes) -> list[Any]:
         texts.append((text, a, b, centre))
         spans.append((centre - half, centre + half))
     pad = 4.0  # px between two labels in a row
-    rows = stack_labels(spans, gap=pad)
+    rows = _stack_labels(spans, gap=pad)
     axes_px = ax.get_window_extent(renderer)
     row_height = (max(t.get_window_extent(renderer).height for t, *_ in texts) + 6.0) / max(
         axes_px.height, 1.0
