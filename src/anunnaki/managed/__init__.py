@@ -57,7 +57,9 @@ if TYPE_CHECKING:
         SimulatedSystem,
         format_phases,
         format_scoring,
+        phase_spans,
         scenario_phases,
+        score_phases,
     )
 
 __all__ = [
@@ -82,7 +84,9 @@ __all__ = [
     "check_camera_chain",
     "format_phases",
     "format_scoring",
+    "phase_spans",
     "scenario_phases",
+    "score_phases",
 ]
 
 _LAZY = {
@@ -90,7 +94,9 @@ _LAZY = {
     "SimulatedSystem",
     "format_phases",
     "format_scoring",
+    "phase_spans",
     "scenario_phases",
+    "score_phases",
 }
 
 
