@@ -8,6 +8,7 @@ import math
 from typing import Any
 
 from anunnaki.cli._detector import add_model_options, classes_counted, classes_line, shared_view
+from anunnaki.cli._text import plain
 
 __all__ = ["add_parser"]
 
@@ -17,7 +18,7 @@ def add_parser(sub: Any) -> None:
     p: argparse.ArgumentParser = sub.add_parser(
         "oracle",
         help="learned behavior oracles (Enlil): train, evaluate, architecture",
-        description=__doc__,
+        description=plain(__doc__),
     )
     osub = p.add_subparsers(dest="oracle_command", metavar="SUBCOMMAND")
     osub.required = True
