@@ -24,6 +24,7 @@ from typing import Any
 from rich.console import Console
 from rich.table import Table
 
+from anunnaki._names import check_domain, check_name
 from anunnaki.errors import AnunnakiError
 
 _CATEGORY = {0: "unaffected", 1: "degraded", 2: "compromised"}
@@ -349,6 +350,12 @@ def _run_train(args: argparse.Namespace) -> int:
     out = Path(args.out)
     if out.suffix != ".safetensors":
         raise AnunnakiError(f"--out {out}: a model file ends in .safetensors")
+    if args.model_id is not None:
+        check_name(args.model_id, what="--model-id")
+    else:
+        check_name(out.stem, what=f"the model id (--out {out.name} without .safetensors)",
+                   fix="give one with --model-id NAME, or another --out file name")  # fmt: skip
+    check_domain(args.domain, what="--domain")
     console = _console()
     train = load_split(args.data, "train", cache=True)
     val = load_split(args.data, "val", cache=True)
