@@ -320,6 +320,32 @@ def test_tampered_weights_are_refused_by_registry_and_by_sidecar(
         load_detector(weights)  # and the sidecar's own hash catches it too
 
 
+def test_a_pinned_file_whose_sidecar_names_other_weights_is_refused(
+    real_models: Path, tmp_path: Path
+) -> None:
+    """Issue 34 item 2: the registry pins uav-default.safetensors, and its sidecar, edited,
+    names uav-fog.safetensors (with that file's hash): the unpinned file was loaded."""
+    import json
+    import shutil
+
+    for name in ("uav-default", "uav-fog"):
+        for suffix in (".safetensors", ".json"):
+            shutil.copy(real_models / f"{name}{suffix}", tmp_path / f"{name}{suffix}")
+    pinned = tmp_path / "uav-default.safetensors"
+    (tmp_path / "registry.yaml").write_text(
+        "anunnaki: models/1\nmodels:\n  - file: uav-default.safetensors\n"
+        f"    sha256: {sha256_file(pinned)}\n"
+    )
+    card = json.loads((tmp_path / "uav-default.json").read_text())
+    card.update(weights="uav-fog.safetensors", sha256=sha256_file(tmp_path / "uav-fog.safetensors"))
+    (tmp_path / "uav-default.json").write_text(json.dumps(card))
+    reg = load_registry(tmp_path / "registry.yaml")
+    with pytest.raises(ModelLoadError, match=r"names the weights 'uav-fog\.safetensors', not "
+                       r"'uav-default\.safetensors'") as info:  # fmt: skip
+        reg.load("uav-default")
+    assert "uav-default.json" in str(info.value)
+
+
 def test_a_bad_sidecar_is_reported_at_the_registry_line(real_models: Path, tmp_path: Path) -> None:
     (tmp_path / "m.safetensors").write_bytes(b"weights")
     (tmp_path / "m.json").write_text("{not json")

@@ -131,7 +131,12 @@ def run_train(args: argparse.Namespace) -> int:
             config=config,
             progress=progress,
         )
-    report: dict[str, Any] = {"model_id": model.model_id, "architecture": args.architecture}
+    report: dict[str, Any] = {
+        "model_id": model.model_id,
+        "model_file": str(model.file),
+        "model_sha256": model.sha256,
+        "architecture": args.architecture,
+    }
     report["contexts"] = oracles[0].card.training["contexts"]
     if len(seeds) == 1:
         sha = oracles[0].save(args.out)
@@ -468,6 +473,8 @@ def run_evaluate(args: argparse.Namespace) -> int:
     )
     report = {
         "model_id": model.model_id,
+        "model_file": str(model.file),
+        "model_sha256": model.sha256,
         "data": str(args.data),
         "split": args.split,
         "seed": args.seed,
