@@ -26,6 +26,7 @@ from pydantic import ValidationError
 
 from anunnaki import topics
 from anunnaki.bus import BusConfig, BusError, ServiceError, open_bus
+from anunnaki.cli._text import plain
 from anunnaki.errors import validation_message
 from anunnaki.messages import ServiceReply
 from anunnaki.tokens import OPERATOR_TOKEN_ENV, client_operator_token, default_token_file
@@ -38,7 +39,7 @@ def add_parser(sub: Any) -> None:
     p: argparse.ArgumentParser = sub.add_parser(
         "reload",
         help="swap a running Utu's goal model, binding or tactics (applied or refused)",
-        description=__doc__,
+        description=plain(__doc__),
     )
     p.add_argument("--goal-model", type=Path, metavar="FILE", help="the new goal model")
     p.add_argument("--binding", type=Path, metavar="FILE", help="the new platform binding")

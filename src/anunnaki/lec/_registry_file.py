@@ -43,6 +43,7 @@ from anunnaki.lec._detector import (
     ARCHITECTURES,
     Detector,
     architecture_files,
+    checked_weights,
     read_card,
     sha256_file,
 )
@@ -412,8 +413,11 @@ class ResolvedModel:
         source: What was given (``NAME.safetensors``, ``NAME.json`` or ``REG.yaml``).
         model_id: The registry's id of the model, or the model file's own.
         domain: Its operating domain.
-        file: The model file.
-        sha256: Hex sha256 of ``file`` (checked against the registry's pins, if any).
+        file: The model file: the registry entry's ``file``, or the weights
+            (``NAME.safetensors``) of a model file given as ``NAME.safetensors`` or
+            ``NAME.json`` — the file :meth:`load` reads.
+        sha256: Hex sha256 of ``file`` (checked against the registry's pins, if any): what
+            a report states was measured.
         spec: The registry entry (``None`` for a model file).
         registry: The registry (``None`` for a model file).
 
@@ -476,4 +480,5 @@ def resolve_model(source: str | Path, model_id: str | None = None) -> ResolvedMo
             "model file; drop --model, or name the registry"
         )
     card = read_card(path)
-    return ResolvedModel(str(source), card.model_id, card.domain, path, sha256_file(path))
+    weights = checked_weights(path, card)  # the file given is the file loaded
+    return ResolvedModel(str(source), card.model_id, card.domain, weights, sha256_file(weights))
