@@ -35,6 +35,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from anunnaki import topics
 from anunnaki._findings import Finding
 from anunnaki._safeyaml import read_text_limited
 from anunnaki.errors import ExpressionError, ModelFileError
@@ -101,7 +102,7 @@ class ModelCatalogue:
     ids: tuple[str, ...]
     domains: tuple[str, ...]
     source: str = ""
-    service: str = "/lm_manager/swap"
+    service: str = topics.SWAP
 
 
 @dataclass
