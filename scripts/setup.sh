@@ -66,6 +66,9 @@ fi
 want=$(tr , '\n' <<< "$EXTRAS,$have" | sed '/^$/d' | sort -u | paste -sd, -)
 echo "==> installing anunnaki[$want] (torch, when asked for, is pinned by constraints.txt)"
 # constraints.txt pins torch to the CPU build on disk; an unpinned torch would pull a 5 GB CUDA build.
-NO_ALBUMENTATIONS_UPDATE=1 "$VENV/bin/python" -m pip install --quiet \
+# --no-compile: Python compiles a module when it is first imported; compiling all of torch,
+# scipy and the rest at install doubled the demo profile's CPU time (73 s against 35 s) and
+# tripled its time (374 s against 117 s; one measurement each at load 6-10, issue #34).
+NO_ALBUMENTATIONS_UPDATE=1 "$VENV/bin/python" -m pip install --quiet --no-compile \
   -c constraints.txt -e ".[$want]"
 echo "$hash $want" > "$stamp"
