@@ -1,22 +1,40 @@
 #!/usr/bin/env bash
 # Set up a fresh machine for Anunnaki: a virtual environment in .venv with the package
-# installed in editable mode and the extras named in $ANUNNAKI_EXTRAS (default: what the
-# demo and the test suite need). Idempotent: re-running after no change to pyproject.toml
-# or constraints.txt installs nothing.
+# installed in editable mode and the extras of a profile.
 #
-#   scripts/setup.sh            # demo + tests
-#   ANUNNAKI_EXTRAS=all scripts/setup.sh
+#   scripts/setup.sh demo   # make demo, make demo-uav: what the demos import, nothing as root
+#   scripts/setup.sh test   # make test (the default): every extra the suite tests, and, as
+#                           # root, Debian's Chromium and ROS 1 for the browser and ROS 1 tests
+#   ANUNNAKI_EXTRAS=all scripts/setup.sh        # these extras instead of the profile's
+#
+# Idempotent: nothing is installed when the extras asked for are already in .venv and
+# pyproject.toml and constraints.txt have not changed since (the stamp .venv/.anunnaki-setup
+# lists the extras installed); `make test` after `make demo` adds only what the tests need.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
-# Chromium for the dashboard's browser tests (apt, as root; otherwise it says what to do).
-scripts/setup-browser.sh
+# The profiles (tests/cli/test_make_demo.py checks the demo's against what it imports, and
+# the README's wording against both).
+DEMO_EXTRAS=vision,dashboard,plot,mail,oracle
+TEST_EXTRAS=dev,bus,vision,dashboard,plot,enlil,ros,mail
 
-# Debian's ROS 1 Python packages for the ROS 1 bridge's tests (apt, as root; issue #14).
-scripts/setup-ros.sh
+PROFILE=${1:-test}
+case $PROFILE in
+  demo) EXTRAS=${ANUNNAKI_EXTRAS:-$DEMO_EXTRAS} ;;
+  test)
+    EXTRAS=${ANUNNAKI_EXTRAS:-$TEST_EXTRAS}
+    # Chromium for the dashboard's browser tests (apt, as root; otherwise it says what to do).
+    scripts/setup-browser.sh
+    # Debian's ROS 1 Python packages for the ROS 1 bridge's tests (apt, as root; issue #14).
+    scripts/setup-ros.sh
+    ;;
+  *)
+    echo "usage: scripts/setup.sh [demo|test] (got '$PROFILE')" >&2
+    exit 2
+    ;;
+esac
 
 PYTHON=${PYTHON:-python3}
-EXTRAS=${ANUNNAKI_EXTRAS:-dev,bus,vision,dashboard,plot,enlil,ros}
 VENV=.venv
 
 if ! "$PYTHON" -c 'import sys; sys.exit(sys.version_info < (3, 11))'; then
@@ -29,13 +47,28 @@ if [[ ! -x $VENV/bin/python ]]; then
   "$VENV/bin/python" -m pip install --quiet --upgrade pip
 fi
 
+# The stamp: the hash of pyproject.toml and constraints.txt, then the extras installed.
 stamp="$VENV/.anunnaki-setup"
-want="$EXTRAS $(cat pyproject.toml constraints.txt | sha256sum | cut -c1-16)"
-if [[ -f $stamp && "$(cat "$stamp")" == "$want" ]]; then
+hash=$(cat pyproject.toml constraints.txt | sha256sum | cut -c1-16)
+have=""
+if [[ -f $stamp ]]; then
+  read -r stamped_hash stamped_extras < "$stamp" || true
+  if [[ ${stamped_hash:-} == "$hash" ]]; then
+    have=${stamped_extras:-}
+  fi
+fi
+# Every extra asked for already there: nothing to do.
+missing=$(comm -23 <(tr , '\n' <<< "$EXTRAS" | sort -u) <(tr , '\n' <<< "$have" | sort -u))
+if [[ -f $stamp && -z $missing ]]; then
   exit 0
 fi
-echo "==> installing anunnaki[$EXTRAS] (torch, when asked for, is pinned by constraints.txt)"
+# Install what is asked for with what is there (pip keeps them consistent).
+want=$(tr , '\n' <<< "$EXTRAS,$have" | sed '/^$/d' | sort -u | paste -sd, -)
+echo "==> installing anunnaki[$want] (torch, when asked for, is pinned by constraints.txt)"
 # constraints.txt pins torch to the CPU build on disk; an unpinned torch would pull a 5 GB CUDA build.
-NO_ALBUMENTATIONS_UPDATE=1 "$VENV/bin/python" -m pip install --quiet \
-  -c constraints.txt -e ".[$EXTRAS]"
-echo "$want" > "$stamp"
+# --no-compile: Python compiles a module when it is first imported; compiling all of torch,
+# scipy and the rest at install doubled the demo profile's CPU time (73 s against 35 s) and
+# tripled its time (374 s against 117 s; one measurement each at load 6-10, issue #34).
+NO_ALBUMENTATIONS_UPDATE=1 "$VENV/bin/python" -m pip install --quiet --no-compile \
+  -c constraints.txt -e ".[$want]"
+echo "$hash $want" > "$stamp"

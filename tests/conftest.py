@@ -18,11 +18,12 @@ settings.load_profile("anunnaki")
 
 
 #: Session fixtures whose setup pytest-timeout counts against the first test that uses them,
-#: with a timeout that holds it (and the other xdist worker's wait for it), per folder under
-#: tests/: the LEC session model trains in about 40 s quiet and passed the suite's 120 s at
-#: load 23; Enki's tiny rendered dataset takes seconds quiet and passed 120 s at load 35.
+#: with a timeout that holds it, per folder under tests/: the LEC tests' 60 rendered frames
+#: for the shipped model and Enki's tiny rendered dataset take seconds quiet; Enki's passed
+#: the suite's 120 s at load 35. (The LEC session model, trained in this fixture until issue
+#: #34, is now the shipped one; the one training test has its own timeout.)
 SLOW_FIXTURES: Mapping[tuple[str, str], int] = {
-    ("lec", "trained"): 900,
+    ("lec", "trained"): 600,
     ("enki", "rover_data"): 600,
 }
 

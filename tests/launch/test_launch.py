@@ -547,3 +547,29 @@ def test_a_launch_run_stops_the_platform_when_a_node_started_by_hand_dies(
     assert len(died) == 1, died
     assert died[0].data["by"] == "execute" and died[0].data["ok"] is True
     assert "/utu_monitor" in died[0].data["problem"]
+
+
+def test_a_run_closes_its_dashboard_observer_before_its_bus_with_every_decision_shown(
+    caplog: pytest.LogCaptureFixture,
+) -> None:
+    """Issue #34, item 9: the observer ``run --dashboard`` attaches is closed when the run ends,
+    while Utu still answers, so the page holds the run's last decisions and nothing of the
+    dashboard asks the bus after it closed (the warning 'knowledge … does not answer (bus …
+    is closed)' at the end of ``make demo``)."""
+    pytest.importorskip("fastapi")
+    from anunnaki.cli._dashboard import dashboard_for_launch
+
+    launch = load_launch(EXAMPLE)
+    dash = dashboard_for_launch(launch, port=0)  # not started: the page itself is not needed
+    try:
+        with caplog.at_level("WARNING", logger="anunnaki"):
+            result = run_launch(
+                launch, speed=50, out=io.StringIO(), handle_signals=False, on_bus=dash.attach
+            )
+        observer = dash.observer
+        assert observer is not None and observer.closed
+        shown = [(d["kind"], d["tactic"]) for d in dash.state.snapshot()["decisions"]]
+        assert shown == story(result) == ROVER_STORY
+        assert not [r for r in caplog.records if "does not answer" in r.getMessage()]
+    finally:
+        dash.close()

@@ -1,21 +1,18 @@
-"""The session model of the LEC tests: settings, cache key and training (see conftest.py).
+"""The LEC tests' models: the shipped rover detector on a few rendered frames, and training.
 
-A small rover detector, trained once and cached.
-
-The model is trained on a reduced simulated rover dataset (12 + 2 + 3 layouts of 25 frames
-at 96 × 96, 10 epochs) in about 25 s from scratch on the 2-core VM — inside the issue's 60 s
-even when the machine is shared; 96 rather than 128 px and 10 rather than 12 epochs halved
-the time (see ``test_lec_train.F1_FLOOR``). It is cached under pytest's cache directory
-(``.pytest_cache/d/anunnaki-lec/KEY``), keyed by a hash of the settings and of the source of
-``anunnaki.lec``, ``anunnaki.datasets`` and ``anunnaki.sim``: editing any of them retrains,
-otherwise later sessions load the cached files in well under a second. With
-``-p no:cacheprovider`` it trains into a temporary folder.
+Most tests need *a* trained detector and frames to run it on, not training itself: the
+``trained`` fixture (conftest.py) is the shipped ``examples/models/rover-default`` with 20
+validation and 40 test frames of its own held-out layouts (44-46), rendered at its 128 × 128
+in a few seconds. One test trains from scratch (``test_lec_train.py``, marked ``training``):
+:func:`train_session_model` renders a reduced simulated rover dataset (12 + 2 + 3 layouts of
+25 frames at 96 × 96, 10 epochs) and trains it, about 25 s on the 2-core VM when it is quiet.
+Until issue #34 every test here waited for that training in a session fixture, 456 s at load
+5-9 on a fresh clone (the cache it had was per checkout, so CI always trained).
 """
 
 from __future__ import annotations
 
-import hashlib
-import json
+import shutil
 import threading
 import time
 from collections.abc import Callable
@@ -23,14 +20,27 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-import anunnaki
 from anunnaki.bus import Bus, Sample
 
 #: How long a test waits for something that should happen at once: a deadline against a
 #: hung test on a loaded machine, never a measurement.
 DEADLINE = 30.0
 
-#: Data and training settings of the session model (part of the cache key).
+#: The shipped rover detector (trained at 128 x 128 on layouts 0-39; 40-53 held out).
+SHIPPED = Path(__file__).resolve().parents[2] / "examples" / "models" / "rover-default"
+
+#: The frames the shipped model is tested on here: layouts it never saw in training.
+SHIPPED_DATA: dict[str, Any] = {
+    "train_layouts": [],
+    "val_layouts": [44],
+    "test_layouts": [45, 46],
+    "per_layout": 20,
+    "width": 128,
+    "height": 128,
+    "seed": 0,
+}
+
+#: Data and training settings of the model trained from scratch.
 SETTINGS: dict[str, Any] = {
     "platform": "rover",
     "width": 96,
@@ -49,31 +59,39 @@ SETTINGS: dict[str, Any] = {
 
 @dataclass(frozen=True)
 class Trained:
-    """The session model and its data."""
+    """A trained model and frames to run it on.
+
+    Attributes:
+        model: The weights file (its sidecar beside it).
+        data: A dataset folder with ``val`` and ``test`` splits (and ``train`` when trained).
+        metrics: ``{"test": {"f1": …, …}}``: the model on ``data``'s test split.
+    """
 
     model: Path
     data: Path
     metrics: dict[str, Any]
-    seconds: float
-    cached: bool
 
 
-def cache_key() -> str:
-    """Hash of the settings and of the code the model depends on."""
-    h = hashlib.sha256(json.dumps(SETTINGS, sort_keys=True).encode())
-    pkg = Path(anunnaki.__file__).parent
-    for part in ("lec", "datasets", "sim"):
-        for file in sorted((pkg / part).glob("*.py")):
-            h.update(file.name.encode())
-            h.update(file.read_bytes())
-    import torch
+def shipped_model(root: Path) -> Trained:
+    """A copy of the shipped rover detector in ROOT, with its held-out frames in ROOT/data."""
+    from anunnaki.datasets import load_split
+    from anunnaki.lec import evaluate_detector, load_detector
+    from anunnaki.sim import make_dataset
 
-    h.update(torch.__version__.encode())
-    return h.hexdigest()[:16]
+    root.mkdir(parents=True, exist_ok=True)
+    model = root / "rover-default.safetensors"
+    for suffix in (".safetensors", ".json"):
+        shutil.copy(SHIPPED.with_suffix(suffix), model.with_suffix(suffix))
+    make_dataset("rover", root / "data", workers=1, overwrite=True, **SHIPPED_DATA)
+    test = evaluate_detector(load_detector(model), load_split(root / "data", "test"))
+    return Trained(model, root / "data", {"test": test.as_dict()})
 
 
-def train_session_model(root: Path) -> tuple[dict[str, Any], float]:
-    """Render the reduced dataset into ROOT/data, train, save ROOT/model.safetensors."""
+def train_session_model(root: Path) -> tuple[Trained, float]:
+    """Render the reduced dataset into ROOT/data, train, save ROOT/model.safetensors.
+
+    Returns the model and the seconds it took, rendering included.
+    """
     from anunnaki.datasets import load_split
     from anunnaki.lec import TrainConfig, save_detector, train_detector
     from anunnaki.sim import make_dataset
@@ -104,7 +122,8 @@ def train_session_model(root: Path) -> tuple[dict[str, Any], float]:
     )
     result = train_detector(splits[0], splits[1], config=config, test=splits[2])
     save_detector(result.detector, root / "model.safetensors")
-    return result.detector.metrics, time.perf_counter() - start
+    trained = Trained(root / "model.safetensors", root / "data", result.detector.metrics)
+    return trained, time.perf_counter() - start
 
 
 class Collector:

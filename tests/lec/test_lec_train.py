@@ -1,11 +1,14 @@
-"""Training: the session model reaches a measured floor; training and inference repeat exactly."""
+"""Training: a model trained from scratch reaches a measured floor; training and inference
+repeat exactly."""
 
 from __future__ import annotations
+
+from pathlib import Path
 
 import numpy as np
 import pytest
 import torch
-from lec_helpers import Trained
+from lec_helpers import Trained, train_session_model
 
 from anunnaki.datasets import Dataset, load_split
 from anunnaki.lec import (
@@ -24,16 +27,23 @@ from anunnaki.lec._train import _zoom
 from anunnaki.phenomena import PHENOMENA
 
 #: Measured with ignore boxes (the rover's minimum labelled height, ignore-aware loss and F1):
-#: the session model (300 training images of 96 x 96 with 435 boxes and 892 ignore boxes,
-#: 10 epochs) scores test F1 0.805, 0.791 and 0.816 with training seeds 0, 1, 2 on its own
-#: 75-image test split (120 boxes); rendering took 6 s and training 17-19 s on the 2-core VM
-#: at load average 2 (22-25 s in all, where the earlier 128 x 128, 12-epoch model took 38-45 s
-#: and 65-76 s under heavier load). The floor leaves a margin of 0.1 under the lowest seed
-#: for platform differences in rendering and BLAS.
+#: the model trained from scratch here (300 training images of 96 x 96 with 435 boxes and 892
+#: ignore boxes, 10 epochs) scores test F1 0.805, 0.791 and 0.816 with training seeds 0, 1, 2
+#: on its own 75-image test split (120 boxes); rendering took 6 s and training 17-19 s on the
+#: 2-core VM at load average 2 (22-25 s in all, where the earlier 128 x 128, 12-epoch model
+#: took 38-45 s and 65-76 s under heavier load). The floor leaves a margin of 0.1 under the
+#: lowest seed for platform differences in rendering and BLAS.
 F1_FLOOR = 0.69
 
 
-def test_session_model_reaches_floor(trained: Trained) -> None:
+@pytest.mark.training
+# 25 s on a quiet 2-core VM; 456 s was seen at load 5-9 (issue #34): the suite's 120 s would
+# fail it on a shared machine, so it gets what the training fixture had.
+@pytest.mark.timeout(900)
+def test_a_model_trained_from_scratch_reaches_the_floor(tmp_path: Path) -> None:
+    """The one test of the suite that trains a detector from scratch (render, train, save)."""
+    pytest.importorskip("pybullet")
+    trained, _seconds = train_session_model(tmp_path)  # pytest --durations shows the time
     det = load_detector(trained.model)
     assert isinstance(det, CenterNetDetector)
     test = load_split(trained.data, "test")
@@ -43,6 +53,15 @@ def test_session_model_reaches_floor(trained: Trained) -> None:
     assert det.metrics["test"]["f1"] == pytest.approx(m.f1, abs=1e-9)
     assert 0.05 <= det.score_threshold <= 1.0
     assert det.training["epochs"] > 0 and det.training["train_images"] > 0
+
+
+def test_the_shipped_model_finds_the_rovers_objects(trained: Trained) -> None:
+    """The fixture's model (the shipped one) on 40 frames it never saw: what the tests below
+    lean on, a real F1 (0.895 here, 51 of 59 boxes; 0.92 on its full test split)."""
+    det = load_detector(trained.model)
+    m = evaluate_detector(det, load_split(trained.data, "test"))
+    assert m.f1 == pytest.approx(trained.metrics["test"]["f1"], abs=1e-9)
+    assert m.f1 >= F1_FLOOR and m.tp >= 20, m
 
 
 def test_inference_is_deterministic(trained: Trained) -> None:

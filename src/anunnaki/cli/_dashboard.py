@@ -15,6 +15,7 @@ import os
 import sys
 import threading
 import time
+from collections.abc import Callable
 from typing import Any
 
 from pydantic import ValidationError
@@ -30,6 +31,7 @@ __all__ = [
     "announce",
     "dashboard_for_launch",
     "joining_bus",
+    "linger",
     "run",
     "token_from",
     "wait_for_signal",
@@ -124,7 +126,8 @@ def add_run_options(p: argparse.ArgumentParser) -> None:
         "--dashboard-linger",
         type=float,
         metavar="S",
-        help="after the run ends, keep the page up S seconds, then exit (default: until Ctrl-C)",
+        help="after the run ends, keep the page up S seconds, then exit, saying every 10 s "
+        "how long is left (default: until Ctrl-C)",
     )
 
 
@@ -202,6 +205,42 @@ def wait_for_signal(stop: threading.Event | None = None, timeout: float | None =
             left = 0.5 if deadline is None else min(0.5, deadline - time.monotonic())
             if left <= 0 or stop.wait(left):
                 return
+
+
+def linger(
+    url: str,
+    seconds: float | None,
+    *,
+    say: Callable[[str], None],
+    every: float = 10.0,
+    stop: threading.Event | None = None,
+    wait: Callable[[threading.Event, float | None], None] | None = None,
+) -> None:
+    """After the run: keep the page up ``seconds`` (``None``: until Ctrl-C), saying so.
+
+    The first line says where the page is and for how long; every ``every`` seconds a
+    line says it is still up and for how long more, so a terminal that seems idle says what
+    it waits for. Ctrl-C or SIGTERM (or ``stop``) ends it at once. ``wait(stop, timeout)``
+    is :func:`wait_for_signal` (a test gives its own).
+    """
+    stop = stop or threading.Event()
+    wait = wait or (lambda event, timeout: wait_for_signal(event, timeout=timeout))
+    with signals_to(stop):  # also between two waits
+        if seconds is None:
+            say(f"dashboard: the run has ended; {url} keeps showing its last state until Ctrl-C")
+            wait(stop, None)
+            return
+        say(
+            f"dashboard: the run has ended; {url} keeps showing its last state for {seconds:g} s "
+            "(Ctrl-C to leave now)"
+        )
+        left = seconds
+        while left > 0 and not stop.is_set():
+            step = min(every, left)
+            wait(stop, step)
+            left -= step
+            if left > 0 and not stop.is_set():
+                say(f"dashboard: still up at {url} for {left:g} s more; Ctrl-C to leave")
 
 
 def joining_bus(

@@ -203,13 +203,7 @@ def run(args: argparse.Namespace) -> int:
         if sink is not None:
             _print_mail(sink, result.decisions)
         if dashboard is not None and result.reason != "stopped by a signal":
-            linger = args.dashboard_linger
-            print(
-                f"dashboard: the run has ended; {dashboard.url} keeps showing its last state "
-                + ("(Ctrl-C to quit)" if linger is None else f"for {linger:g} s (Ctrl-C: now)"),
-                flush=True,
-            )
-            _dashboard.wait_for_signal(timeout=linger)
+            _dashboard.linger(dashboard.url, args.dashboard_linger, say=_say)
     finally:
         if dashboard is not None:
             dashboard.close()

@@ -224,6 +224,7 @@ class BusObserver(Closing):
         self._doorbell = threading.Event()  # Utu wrote decisions: fetch them from its service
         self._last_id = 0
         self._fetch_failed = False
+        self._fetch_lock = threading.Lock()
         c = self.config
         try:
             if sim is not None:
@@ -290,13 +291,22 @@ class BusObserver(Closing):
 
     def _fetch_decisions(self) -> None:
         """Fetch the decisions written since the last one shown: on each ring, and every 2 s."""
-        c = self.config
         self._seeded.wait()
         while not self._closed.is_set():
             self._doorbell.wait(2.0)
             if self._closed.is_set():
                 return
             self._doorbell.clear()
+            self._fetch()
+
+    def _fetch(self, *, wait_for_service: bool = True) -> None:
+        """Ask Utu's knowledge service for the decisions after the last one shown.
+
+        One fetch at a time (the fetcher's, or :meth:`close`'s last). A bus that has closed,
+        or an observer closing, ends the run for this observer: no warning then.
+        """
+        c = self.config
+        with self._fetch_lock:
             try:
                 while True:
                     reply = body_of(
@@ -304,6 +314,7 @@ class BusObserver(Closing):
                             c.query,
                             {"what": "decisions", "after": self._last_id, "limit": 2000},
                             timeout=c.query_timeout,
+                            wait_for_service=wait_for_service,
                         )
                     )
                     rows = reply.get("decisions")
@@ -313,7 +324,9 @@ class BusObserver(Closing):
                     if len(rows) < 2000:
                         break
             except (BusError, AnunnakiError) as exc:
-                if not self._closed.is_set() and not self._fetch_failed:
+                if self._closed.is_set() or self.bus.closed:
+                    log.debug("dashboard: %s at the end of the run: %s", c.query, exc)
+                elif not self._fetch_failed:
                     self._fetch_failed = True
                     log.warning(
                         "dashboard: %s does not answer (%s): decisions are shown only from "
@@ -452,10 +465,24 @@ class BusObserver(Closing):
             raise OperatorError(f"{service} refused: {reply.get('error') or 'no reason given'}")
         return reply
 
+    @property
+    def closed(self) -> bool:
+        """Whether :meth:`close` was called (the page keeps what it was shown)."""
+        return self._closed.is_set()
+
     def close(self) -> None:
-        """Withdraw the subscriptions and stop the ticker. Idempotent."""
+        """Fetch the last decisions, withdraw the subscriptions and stop the ticker. Idempotent.
+
+        The last fetch asks Utu once more, while it may still answer (``anunnaki run
+        --dashboard`` closes the observer after the run, before Utu's nodes stop and the bus
+        closes): the page then shows the run's decisions to the end. A Utu that is not up
+        fails it at once; a bus already closed skips it.
+        """
+        first = not self._closed.is_set()
         self._closed.set()
         self._doorbell.set()  # wakes the decision fetcher, which then ends
+        if first and self._seeded.is_set() and not self.bus.closed:
+            self._fetch(wait_for_service=False)
         for obj in reversed(self._declared):
             try:
                 obj.close()

@@ -73,7 +73,7 @@ def _ndtr(x: np.ndarray) -> np.ndarray:
     try:
         from scipy.special import ndtr
     except ImportError as exc:  # pragma: no cover - depends on the environment
-        raise MissingExtraError("the oracle's context lookup (scipy)", "enlil") from exc
+        raise MissingExtraError("the oracle's context lookup (scipy)", "oracle") from exc
     out: np.ndarray = ndtr(x)
     return out
 
@@ -145,7 +145,7 @@ def fit_kernel(params: npt.ArrayLike, drops: npt.ArrayLike) -> Kernel:
         from scipy.linalg import LinAlgError, cho_factor, cho_solve
         from scipy.optimize import minimize
     except ImportError as exc:  # pragma: no cover - depends on the environment
-        raise MissingExtraError("the oracle's context lookup (scipy)", "enlil") from exc
+        raise MissingExtraError("the oracle's context lookup (scipy)", "oracle") from exc
     x = np.asarray(params, np.float64)
     y = _targets(drops)
     if x.ndim != 2 or len(x) != len(y) or len(x) < 3:

@@ -25,6 +25,7 @@ from pathlib import Path
 from typing import Any, TextIO
 
 from anunnaki import topics
+from anunnaki._closing import Closing
 from anunnaki.bus import Bus, BusConfig, open_bus
 from anunnaki.clock import SimClock
 from anunnaki.launch._managed import clock_publisher
@@ -246,7 +247,11 @@ def run_launch(
         err: Where the nodes' error output goes (default stderr).
         handle_signals: Turn SIGINT/SIGTERM into a clean stop (main thread only).
         on_bus: Called with the launch's bus once it is open, before any node starts (e.g.
-            to attach a dashboard); what it declares on the bus closes with the bus.
+            to attach a dashboard); what it declares on the bus closes with the bus. What it
+            returns, when that is a :class:`~anunnaki._closing.Closing` (a dashboard's
+            observer, a subscriber), is closed when the run ends, before Utu's nodes stop and
+            the bus closes: a dashboard fetches the run's last decisions then, and nothing of
+            it asks the bus after the bus has closed.
         manager: Who chooses the tactics: ``utu``, or a baseline, ``none`` or ``random``
             (overrides the Utu configuration's ``manager``; docs/whole-loop.md).
         manager_seed: The random manager's seed (overrides ``manager_seed``).
@@ -302,6 +307,7 @@ class _Runner:
     ) -> None:
         self.launch = launch
         self.on_bus = on_bus
+        self.attached: object = None  # what on_bus returned: closed by _detach
         self.processes = processes
         self.managed = launch.managed
         default_speed = self.managed.speed if self.managed is not None else 1.0
@@ -506,7 +512,7 @@ class _Runner:
         launch = self.launch
         bus = open_bus(launch.bus, name=f"{launch.name}-launch")
         if self.on_bus is not None:
-            self.on_bus(bus)
+            self.attached = self.on_bus(bus)
         nodes: list[UtuNode | AutonomicManager] = []
         threads: list[threading.Thread] = []
         halt = threading.Event()
@@ -551,6 +557,7 @@ class _Runner:
             if managed is not None:
                 managed.thread.join(timeout=5.0)
             _halt(halt, nodes, threads)
+            self._detach()  # the nodes are quiet; knowledge still answers
             ran = time.monotonic() - t_run
             self._finish(printer, code, reason, ran)
             pid = os.getpid()
@@ -559,6 +566,7 @@ class _Runner:
             )
         finally:
             self.stop.set()
+            self._detach()
             if peers is not None:
                 peers.close()
             _halt(halt, nodes, threads)
@@ -570,6 +578,12 @@ class _Runner:
                 with contextlib.suppress(sqlite3.Error):  # the manager may have closed it
                     kb.close()
             bus.close()
+
+    def _detach(self) -> None:
+        """Close what ``on_bus`` returned (once), while Utu still answers on the bus."""
+        attached, self.attached = self.attached, None
+        if isinstance(attached, Closing):
+            attached.close()
 
     def _watch_peers(self, bus: Bus) -> PeerWatch | None:
         """Watch the Utu nodes this launch does not run (started by hand elsewhere).
@@ -639,7 +653,7 @@ class _Runner:
             parent_config = BusConfig(kind="zenoh", namespace=parent_config.namespace)
         bus = open_bus(parent_config, name=f"{launch.name}-launch")
         if self.on_bus is not None:
-            self.on_bus(bus)
+            self.attached = self.on_bus(bus)
         children = Children(self.out, self.err)
         managed = None
         peers: PeerWatch | None = None
@@ -687,6 +701,7 @@ class _Runner:
                 # tokens going now is the end of the run, not a death (a real death was
                 # caught above, by ``failed`` or the guard, and the fail-safe sent).
                 managed.close()
+            self._detach()  # before the knowledge node stops
             children.stop(launch.config.stop_timeout)
             ran = time.monotonic() - t_run
             bad = [(n, rc) for n, rc in children.died() if rc not in (0, -signal.SIGTERM)]
@@ -698,6 +713,7 @@ class _Runner:
             return RunResult(code, reason, printer.decisions, ready_after, ran, pids)
         finally:
             self.stop.set()
+            self._detach()
             if peers is not None:
                 peers.close()
             children.stop(launch.config.stop_timeout)
