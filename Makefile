@@ -56,3 +56,12 @@ demo-uav: setup
 	$(PY) -m anunnaki.cli.main check $(UAV)/sim.yaml
 	$(PY) -m anunnaki.cli.main run $(UAV)/sim.yaml --dashboard --dashboard-linger 60 \
 		--report runs/demo-uav.json --plot runs/demo-uav.png
+
+# Every picture README.md and docs/ show, remade from the current demos (the dashboards of
+# make demo / make demo-uav stopped at a chosen simulated instant, in headless Chromium; the
+# runs' plots) and from the committed measurements (4 CPU-minutes): docs/images/pictures.yaml
+# says what makes each. results-paper-*.png are made by make results only.
+.PHONY: pictures
+pictures: setup
+	@scripts/setup-browser.sh
+	$(PY) scripts/pictures.py

@@ -452,12 +452,21 @@ def _sim_launch(case: Case) -> tuple[Launch, SimKind]:
 
 
 def run_once(
-    case: Case, manager: str, seed: int, until: float | None, scenario_file: Path | None = None
+    case: Case,
+    manager: str,
+    seed: int,
+    until: float | None,
+    scenario_file: Path | None = None,
+    *,
+    measure: Callable[[dict[str, Any], Any, Any], dict[str, Any]] | None = None,
 ) -> dict[str, Any]:
     """One run of ``case`` under ``manager`` with the scenario drawn from ``seed``.
 
     ``scenario_file`` replaces the launch's scenario (the quick mode's shortened one). A UAV
     run ends at the touch-down after its flight (or at ``until``, the scenario's end).
+    ``measure(report, scenario, result)``, when given, adds its measures to the run's (the
+    report is the run's ``sim-report/1`` JSON, the scenario the drawn one, the result the
+    launch's, with its decisions).
     """
     launch, managed = _sim_launch(case)  # managed: the same object in the launch replaced below
     update: dict[str, Any] = {"scenario_seed": seed, "report": False, "scorer": SCORER}
@@ -585,6 +594,7 @@ def run_once(
         "decisions": len(started),
         "adaptations": adaptations,
         "tactics": [f"{d.tactic}@{d.t:.1f}" for d in started],
+        **(measure(report, scenario, result) if measure is not None else {}),
     }
 
 

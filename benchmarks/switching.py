@@ -537,8 +537,9 @@ def switch_by_truth(stream: dict[str, Any]) -> dict[str, Any]:
 
 
 def f1_of(c: npt.NDArray[np.int64]) -> float | None:
+    """Pooled F1; ``None`` without a ground-truth object (``anunnaki.sim.f1_score``'s rule)."""
     tp, fp, fn = (int(x) for x in c.sum(axis=0))
-    if tp + fp + fn == 0:
+    if tp + fn == 0:
         return None
     return round(2 * tp / (2 * tp + fp + fn), 5)
 
@@ -1005,7 +1006,7 @@ def write_plot(doc: dict[str, Any], images: Path) -> Path | None:
         k = np.ones(window)
         tp, fp, fn = (np.convolve(c[:, j], k, mode="same") for j in range(3))
         den = 2 * tp + fp + fn
-        f1 = np.divide(2 * tp, den, out=np.full(n, np.nan), where=den > 0)
+        f1 = np.divide(2 * tp, den, out=np.full(n, np.nan), where=tp + fn > 0)  # gap: no object
         ax1.plot(t, f1, color=colors[arm], lw=1.2, label=LABELS[arm])
     ax1.set_ylabel(f"F1 over {window / rate:g} s")
     ax1.set_xlabel("time (s)")

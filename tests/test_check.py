@@ -180,15 +180,13 @@ def test_warnings_alone_exit_1(files: dict[str, Path], capsys: pytest.CaptureFix
     ("setup", "message"),
     [
         ("missing-model", "cannot read file"),
-        ("bad-yaml-model", "invalid YAML"),
+        ("folder-model", "not a regular file"),
         ("missing-extra", "cannot read file"),
         ("unrecognised-extra", "cannot tell whether this is a binding or a tactics file"),
-        ("bad-binding", "unknown field 'bogus'"),
-        ("bad-tactics", "missing field 'preconditions'"),
         ("two-bindings", "a second binding file"),
     ],
 )
-def test_an_unreadable_file_exits_2(
+def test_a_file_named_that_cannot_be_read_exits_2(
     setup: str,
     message: str,
     files: dict[str, Path],
@@ -198,18 +196,13 @@ def test_an_unreadable_file_exits_2(
     model, args = files["model"], [str(files["binding"])]
     if setup == "missing-model":
         model = tmp_path / "nope.yaml"
-    elif setup == "bad-yaml-model":
-        model.write_text("anunnaki: goal-model/1\ngoals: [\n")
+    elif setup == "folder-model":
+        model = tmp_path
     elif setup == "missing-extra":
         args = [str(tmp_path / "missing.yaml")]
     elif setup == "unrecognised-extra":
         (tmp_path / "notes.yaml").write_text("hello: world\n")
         args = [str(tmp_path / "notes.yaml")]
-    elif setup == "bad-binding":
-        files["binding"].write_text(BINDING + "bogus: 1\n")
-    elif setup == "bad-tactics":
-        (tmp_path / "t.yaml").write_text("anunnaki: tactics/1\ntactics: [{name: x}]\n")
-        args.append(str(tmp_path / "t.yaml"))
     elif setup == "two-bindings":
         args.append(str(files["binding"]))
     result = check_files(model, *args)
@@ -218,11 +211,46 @@ def test_an_unreadable_file_exits_2(
     assert any(message in f.message for f in result.findings), rendered(result.findings)
     assert main(["check", str(model), *args]) == 2
     captured = capsys.readouterr()
-    assert "a file could not be read" in captured.out
+    assert "nothing checked: a file could not be read" in captured.out
     assert "Traceback" not in captured.out + captured.err
 
 
-def test_an_unreadable_binding_does_not_bury_its_error_under_consequences(
+@pytest.mark.parametrize(
+    ("setup", "message"),
+    [
+        ("bad-yaml-model", "invalid YAML"),
+        ("bad-binding", "unknown field 'bogus'"),
+        ("bad-tactics", "missing field 'preconditions'"),
+    ],
+)
+def test_a_file_read_but_invalid_is_a_finding_exit_1(
+    setup: str,
+    message: str,
+    files: dict[str, Path],
+    tmp_path: Path,
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    # exit 2 says "nothing could be checked"; a file that is read but does not fit its
+    # format is what check is for: a finding, located, exit 1 (docs/goal-models.md#checks)
+    model, args = files["model"], [str(files["binding"])]
+    if setup == "bad-yaml-model":
+        model.write_text("anunnaki: goal-model/1\ngoals: [\n")
+    elif setup == "bad-binding":
+        files["binding"].write_text(BINDING + "bogus: 1\n")
+    elif setup == "bad-tactics":
+        (tmp_path / "t.yaml").write_text("anunnaki: tactics/1\ntactics: [{name: x}]\n")
+        args.append(str(tmp_path / "t.yaml"))
+    result = check_files(model, *args)
+    assert (result.exit_code, result.unreadable) == (1, False)
+    assert any(message in f.message for f in result.errors), rendered(result.findings)
+    assert main(["check", str(model), *args]) == 1
+    captured = capsys.readouterr()
+    assert "1 error(s), 0 warning(s)" in captured.out
+    assert "could not be read" not in captured.out
+    assert "Traceback" not in captured.out + captured.err
+
+
+def test_an_invalid_binding_does_not_bury_its_error_under_consequences(
     files: dict[str, Path],
 ) -> None:
     files["binding"].write_text(BINDING.replace("platform: test\n", ""))
@@ -231,7 +259,7 @@ def test_an_unreadable_binding_does_not_bury_its_error_under_consequences(
     assert rendered(result.findings) == [
         f"{files['binding']}:1: error: platform: missing required field 'platform'"
     ]
-    assert result.exit_code == 2
+    assert result.exit_code == 1
 
 
 def test_more_than_two_positional_files_is_a_usage_error(
@@ -785,9 +813,14 @@ def test_check_a_launch_file_takes_the_modes_of_its_simulated_platform(
     assert main(["check", str(EXAMPLES / "rover" / "sim.yaml")]) == 0
     capsys.readouterr()
     uav = _uav_files(tmp_path, LOITER)
-    # with the binding's enum the launch does not load: its first error, as 'run' says it
-    assert main(["check", str(uav / "sim.yaml")]) == 2
-    assert "field 'mode' of /uav/set_mode must be one of" in capsys.readouterr().out
+    # the binding's enum and the platform's modes both say it: findings, as for the files
+    assert main(["check", str(uav / "sim.yaml")]) == 1
+    out = capsys.readouterr().out
+    assert "field 'mode' of /uav/set_mode must be one of" in out
+    assert "requests mode 'loiter', which the uav platform does not declare" in out
+    files = [str(uav / name) for name in ("goals.yaml", "binding.yaml", "tactics.yaml")]
+    assert main(["check", *files, "--platform", "uav"]) == 1
+    assert capsys.readouterr().out == out
     binding = uav / "binding.yaml"  # a binding that does not say which modes there are
     binding.write_text(
         binding.read_text().replace(
@@ -826,3 +859,70 @@ def test_check_platform_option_and_a_launchs_declared_modes(
     out = capsys.readouterr().out
     assert "requests mode 'return_home', which the scripted platform does not declare" in out
     assert f"{launch}: managed.scripted.modes" in out
+
+
+# -- model swaps and the fail-safe (what a launch file's check adds) ------------------------
+SWAPS = """\
+anunnaki: tactics/1
+tactics:
+  - name: to-fog
+    preconditions: [{goal: G4, state: unsatisfied}]
+    actions:
+      - {type: swap_model, domain: fog}
+      - {type: swap_model, model: rover-fog-v9}
+      - {type: swap_model, lec: camera2, domain: fog}
+      - {type: swap_model, domain: dusk}
+      - {type: swap_model, domain: dusk, service: /other/swap}
+"""
+
+
+def test_swaps_the_model_manager_would_refuse_are_warnings(tmp_path: Path) -> None:
+    from anunnaki.check import ModelCatalogue, check_failsafe, check_swaps
+    from anunnaki.goals import load_binding, load_goal_model
+    from anunnaki.tactics import load_tactics
+
+    (tmp_path / "t.yaml").write_text(SWAPS)
+    rover = EXAMPLES / "rover"
+    model = load_goal_model(rover / "goals-lm.yaml", load_binding(rover / "binding-lm.yaml"))
+    ts = load_tactics(tmp_path / "t.yaml")
+    models = ModelCatalogue(
+        "detector", ("rover-default", "rover-fog"), ("default", "fog"), "r.yaml"
+    )
+    found = check_swaps(model, ts, "t.yaml", models)
+    assert {f.severity for f in found} == {"warning"}
+    assert [(f.element, f.message.split(":")[0]) for f in found] == [
+        (
+            "tactics[to-fog].actions[1].model",
+            "tactic 'to-fog' swaps to model 'rover-fog-v9', which the model registry does not have",
+        ),
+        (
+            "tactics[to-fog].actions[2].lec",
+            "tactic 'to-fog' swaps a model of lec 'camera2', but the model manager serves lec "
+            "'detector'",
+        ),
+        (
+            "tactics[to-fog].actions[3].domain",
+            "tactic 'to-fog' swaps to domain 'dusk', for which the model registry has no model",
+        ),
+    ]  # the swap sent to another service is another manager's business
+    assert found[2].hint == (
+        "the registry's domains (r.yaml): default, fog; name one of them, or add a model "
+        "for the domain to the registry"
+    )
+    assert check_failsafe(ts, "t.yaml", "to-fog") == []
+    (missing,) = check_failsafe(ts, "t.yaml", "fail-safe")
+    assert (missing.severity, missing.element, missing.hint) == (
+        "error",
+        "failsafe",
+        "name one of the tactics (to-fog)",
+    )
+
+
+def test_check_help_says_what_each_exit_code_means(capsys: pytest.CaptureFixture[str]) -> None:
+    with pytest.raises(SystemExit) as done:
+        main(["check", "--help"])
+    assert done.value.code == 0
+    text = " ".join(capsys.readouterr().out.split())
+    assert "Exit codes: 0 nothing found; 1 findings (errors or warnings)" in text
+    assert "2 nothing could be checked: a usage error, or a file named on the command line" in text
+    assert "everything 'anunnaki run' would load" in text

@@ -148,6 +148,23 @@ def test_entry_points_load_lazily_and_broken_ones_are_skipped(
     assert calls == ["anunnaki.test"]  # once
 
 
+def test_offers_tells_a_plugins_name_without_importing_it(monkeypatch: pytest.MonkeyPatch) -> None:
+    eps = [EntryPoint("gadget", "anunnaki_no_such_module:Gadget", "anunnaki.test")]
+    monkeypatch.setattr(
+        plugins, "entry_points", lambda *, group: [e for e in eps if e.group == group]
+    )
+    reg: Registry[Widget] = Registry("widget", group="anunnaki.test")
+    reg.register(Widget)
+    reg.register_lazy("lazy", "anunnaki_no_such_module:Lazy")
+    # built-ins, lazy ones and installed plugins by their entry point, none imported
+    assert reg.offers("widget") and reg.offers("lazy") and reg.offers("gadget")
+    assert not reg.offers("gizmo")
+    # 'in' imports the plugins to know their names: the broken one is skipped
+    assert "gadget" not in reg
+    assert not reg.offers("gadget")  # once they are loaded, what loaded is the answer
+    assert not Registry("widget").offers("gadget")  # no group: no plugins
+
+
 def test_combined_names_use_the_slots_combine_hook() -> None:
     built: list[list[str]] = []
 

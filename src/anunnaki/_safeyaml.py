@@ -27,7 +27,7 @@ from yaml.events import AliasEvent, CollectionStartEvent, ScalarEvent
 from yaml.nodes import MappingNode, Node, ScalarNode, SequenceNode
 from yaml.reader import ReaderError
 
-from anunnaki.errors import ModelFileError
+from anunnaki.errors import ModelFileError, validation_message
 
 __all__ = ["MAX_BYTES", "MAX_DEPTH", "LineMap", "load_yaml", "read_text_limited"]
 
@@ -341,7 +341,7 @@ def validation_error(
     errors = exc.errors(include_url=False)
     first = errors[0]
     real, element = describe_path(data, first["loc"])
-    msg = str(first["msg"])
+    msg = validation_message(first)
     if first["type"] == "extra_forbidden":
         msg = f"unknown field '{first['loc'][-1]}'"
         hint = hint or "check the spelling; see the format in docs/"

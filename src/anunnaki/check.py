@@ -16,9 +16,16 @@ Every finding names the file, the line and the element, and most carry a hint. C
   resolutions of obstacles are exempt;
 * given the modes the platform declares (``anunnaki check --platform uav``, or a launch file,
   whose managed platform says them), every mode a ``change_mode`` action requests is one of
-  them.
+  them;
+* (warning) given the models a model manager serves (a launch file's model registry),
+  every ``swap_model`` action asks for a model id or domain it has, of the LEC it serves;
+* given the fail-safe tactic a Utu configuration names, it is in the tactics file.
 
-Exit codes of the command: 0 clean, 1 findings (errors or warnings), 2 a file unreadable.
+Exit codes of the command (one meaning each, docs/goal-models.md#checks): 0 nothing found;
+1 findings (errors or warnings) in what was checked — a file that is not valid YAML or does
+not fit its format is a finding too; 2 the command cannot check: a usage error, or a file
+named on the command line cannot be read at all (missing, a folder, not UTF-8 text, too
+large) or is not a kind ``check`` knows.
 """
 
 from __future__ import annotations
@@ -29,6 +36,7 @@ from pathlib import Path
 from typing import Any
 
 from anunnaki._findings import Finding
+from anunnaki._safeyaml import read_text_limited
 from anunnaki.errors import ExpressionError, ModelFileError
 from anunnaki.goals import (
     Binding,
@@ -43,11 +51,21 @@ from anunnaki.tactics import (
     ChangeModeAction,
     EndpointReference,
     GoalState,
+    SwapModelAction,
     TacticSet,
     load_tactics,
 )
 
-__all__ = ["CheckResult", "PlatformModes", "check_files", "check_modes", "check_tactics"]
+__all__ = [
+    "CheckResult",
+    "ModelCatalogue",
+    "PlatformModes",
+    "check_failsafe",
+    "check_files",
+    "check_modes",
+    "check_swaps",
+    "check_tactics",
+]
 
 
 @dataclass(frozen=True)
@@ -66,18 +84,49 @@ class PlatformModes:
     declared: str = ""
 
 
+@dataclass(frozen=True)
+class ModelCatalogue:
+    """The models a model manager serves: what a ``swap_model`` action may ask it for.
+
+    Attributes:
+        lec: The LEC it serves (a registry's ``lec``, e.g. ``detector``).
+        ids: Its model ids.
+        domains: The domains it has a model for.
+        source: Where they are listed (the registry file), for the hint.
+        service: The swap service it answers.
+
+    """
+
+    lec: str
+    ids: tuple[str, ...]
+    domains: tuple[str, ...]
+    source: str = ""
+    service: str = "/lm_manager/swap"
+
+
 @dataclass
 class CheckResult:
-    """What :func:`check_files` found."""
+    """What :func:`check_files` (or ``anunnaki.launch.check_launch``) found.
+
+    Attributes:
+        findings: Every problem found, in the order found.
+        unreadable: The check could not be done: a file named on the command line cannot be
+            read at all, or is not a kind the check knows (exit code 2).
+        model: The goal model, when it loaded.
+        tactics: The tactics, when they loaded.
+        checked: What else was checked, for the summary line (``scenario …``).
+
+    """
 
     findings: list[Finding] = field(default_factory=list)
     unreadable: bool = False
     model: GoalModel | None = None
     tactics: TacticSet | None = None
+    checked: list[str] = field(default_factory=list)
 
     @property
     def exit_code(self) -> int:
-        """0 clean, 1 findings, 2 a file could not be read."""
+        """0 nothing found, 1 findings, 2 a file named could not be read (or a usage error)."""
         if self.unreadable:
             return 2
         return 1 if self.findings else 0
@@ -130,31 +179,39 @@ def check_files(
     binding: str | Path | None = None,
     tactics: str | Path | None = None,
     modes: PlatformModes | None = None,
+    failsafe: str | None = None,
 ) -> CheckResult:
     """Check a goal model with an optional binding and tactics file.
 
     ``extra`` files are recognised by their format tag (``binding/1``, ``tactics/1``) or
     extension (``.xml`` = tactics), so ``check MODEL TACTICS`` works without a binding.
     With ``modes``, the tactics' ``change_mode`` actions are checked against the platform's
-    declared modes (:func:`check_modes`).
+    declared modes (:func:`check_modes`); with ``failsafe``, that the tactic is there
+    (:func:`check_failsafe`).
+
+    A file that cannot be read at all, or an extra file of no known kind, makes the result
+    ``unreadable`` (exit code 2); a file that is read but invalid is a finding (exit code 1).
     """
     result = CheckResult()
     binding, tactics = _sort_extra(result, extra, binding, tactics)
+    for path in (model_path, binding, tactics):
+        if path is not None and not _readable(result, path):
+            result.unreadable = True
+    if result.unreadable:
+        return result
     loaded_binding: Binding | None = None
     if binding is not None:
         try:
             loaded_binding = load_binding(binding)
         except ModelFileError as exc:
             result.findings.append(Finding.from_error(exc))
-            result.unreadable = True
     try:
         model = load_goal_model(model_path, loaded_binding, strict=False)
     except ModelFileError as exc:
         result.findings.append(Finding.from_error(exc))
-        result.unreadable = True
         return result
     result.model = model
-    if result.unreadable:
+    if result.findings:
         # Without its binding every agent looks unobserved and every endpoint unknown: a
         # list of such findings would only hide the one that matters.
         return result
@@ -165,10 +222,18 @@ def check_files(
         except ModelFileError as exc:
             result.findings.append(Finding.from_error(exc))
     if tactics is not None:
-        _check_tactics_file(result, model, tactics)
-        if modes is not None and result.tactics is not None:
-            result.findings.extend(check_modes(result.tactics, str(tactics), modes))
+        _check_tactics_file(result, model, tactics, modes=modes, failsafe=failsafe)
     return result
+
+
+def _readable(result: CheckResult, path: str | Path) -> bool:
+    """Whether ``path`` can be read as text at all; if not, the finding says why."""
+    try:
+        read_text_limited(path)
+    except ModelFileError as exc:
+        result.findings.append(Finding.from_error(exc))
+        return False
+    return True
 
 
 def _sort_extra(
@@ -203,18 +268,28 @@ def _sort_extra(
     return binding, tactics
 
 
-def _check_tactics_file(result: CheckResult, model: GoalModel, tactics: str | Path) -> None:
+def _check_tactics_file(
+    result: CheckResult,
+    model: GoalModel,
+    tactics: str | Path,
+    *,
+    modes: PlatformModes | None,
+    failsafe: str | None,
+) -> None:
     """Load the tactics file and add what is wrong with it to ``result``."""
     try:
         ts = load_tactics(tactics)
     except ModelFileError as exc:
         result.findings.append(Finding.from_error(exc))
-        result.unreadable = True
         return
     result.tactics = ts
     found = check_tactics(model, ts, str(tactics))
     result.findings.extend(sorted(found, key=lambda f: f.line or 0))
     result.findings.extend(_unaddressed(model, ts))
+    if modes is not None:
+        result.findings.extend(check_modes(ts, str(tactics), modes))
+    if failsafe is not None:
+        result.findings.extend(check_failsafe(ts, str(tactics), failsafe))
 
 
 def check_tactics(model: GoalModel, ts: TacticSet, path: str | None) -> list[Finding]:
@@ -252,6 +327,84 @@ def check_modes(ts: TacticSet, path: str | None, modes: PlatformModes) -> list[F
                 )
             )
     return out
+
+
+def check_failsafe(ts: TacticSet, path: str | None, failsafe: str) -> list[Finding]:
+    """An error when the fail-safe tactic a Utu configuration names is not a tactic.
+
+    Utu runs the fail-safe when no other tactic can help; a name that is not in the
+    tactics file stops a run at bring-up.
+    """
+    names = sorted(t.name for t in ts.tactics)
+    if failsafe in names:
+        return []
+    return [
+        Finding(
+            "error",
+            f"the fail-safe tactic {failsafe!r} is not in the tactics file",
+            path,
+            None,
+            "failsafe",
+            f"name one of the tactics ({', '.join(names) or 'none'})",
+        )
+    ]
+
+
+def check_swaps(
+    model: GoalModel, ts: TacticSet, path: str | None, models: ModelCatalogue
+) -> list[Finding]:
+    """A warning for every ``swap_model`` action the model manager would refuse.
+
+    Only actions sent to the manager's swap service count (a tactic may address another
+    manager). The manager refuses a swap for another LEC, to a model id it does not have, or
+    to a domain it has no model for: the tactic then fails when it is needed, and Utu
+    escalates. A warning, not an error: one tactics file may serve registries that do not
+    (yet) have a model for every domain it names.
+    """
+    out: list[Finding] = []
+    for tactic in ts.tactics:
+        for i, action in enumerate(tactic.actions):
+            if not isinstance(action, SwapModelAction):
+                continue
+            if model.endpoint_name(action.service) != models.service:
+                continue
+            refused = _refused_swap(tactic.name, action, models)
+            if refused is not None:
+                key, message, hint = refused
+                element = f"tactics[{tactic.name}].actions[{i}].{key}"
+                out.append(Finding("warning", message, path, action.source.line, element, hint))
+    return out
+
+
+def _refused_swap(
+    tactic: str, action: SwapModelAction, models: ModelCatalogue
+) -> tuple[str, str, str] | None:
+    """Why the model manager would refuse ``action``: (field, message, hint), or ``None``."""
+    listed = f" ({models.source})" if models.source else ""
+    if action.lec != models.lec:
+        return (
+            "lec",
+            f"tactic '{tactic}' swaps a model of lec '{action.lec}', but the model manager "
+            f"serves lec '{models.lec}': it will refuse the swap",
+            f"write 'lec: {models.lec}', the registry's lec{listed}",
+        )
+    if action.model is not None and action.model not in models.ids:
+        return (
+            "model",
+            f"tactic '{tactic}' swaps to model '{action.model}', which the model registry "
+            "does not have: the model manager will refuse the swap",
+            f"the registry's models{listed}: {', '.join(models.ids) or 'none'}; name one of "
+            "them, or add the model to the registry",
+        )
+    if action.domain is not None and action.domain not in models.domains:
+        return (
+            "domain",
+            f"tactic '{tactic}' swaps to domain '{action.domain}', for which the model "
+            "registry has no model: the model manager will refuse the swap",
+            f"the registry's domains{listed}: {', '.join(models.domains) or 'none'}; name "
+            "one of them, or add a model for the domain to the registry",
+        )
+    return None
 
 
 def _goal_findings(model: GoalModel, ts: TacticSet, path: str | None) -> list[Finding]:

@@ -8,7 +8,9 @@ the file, the line, the element and a hint on what to do, and render as one
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from pathlib import Path
+from typing import Any
 
 __all__ = [
     "AnunnakiError",
@@ -16,7 +18,12 @@ __all__ = [
     "MissingExtraError",
     "ModelFileError",
     "render_location",
+    "validation_message",
 ]
+
+#: What pydantic puts before the text of an exception a validator raised: its wording,
+#: not ours (``Value error, unknown phenomenon 'smog'``).
+_PYDANTIC_PREFIXES = ("Value error, ", "Assertion failed, ")
 
 
 def render_location(
@@ -45,6 +52,20 @@ def render_location(
     if hint:
         text += ("\n" if "\n" in message else " ") + f"(hint: {hint})"
     return text
+
+
+def validation_message(error: Mapping[str, Any]) -> str:
+    """The message of one pydantic validation error (an item of ``exc.errors()``), as we say it.
+
+    Every message built from a pydantic ``ValidationError`` goes through here: a validator's
+    own text is printed as it was written, without the library's ``Value error,`` (or
+    ``Assertion failed,``) in front.
+    """
+    msg = str(error.get("msg", ""))
+    for prefix in _PYDANTIC_PREFIXES:
+        if msg.startswith(prefix):
+            return msg[len(prefix) :]
+    return msg
 
 
 class AnunnakiError(Exception):

@@ -289,6 +289,25 @@ class Registry(Generic[T]):
         names = self.names()
         return all(key in names for key in keys)
 
+    def offers(self, name: str) -> bool:
+        """Whether ``name`` is registered or an installed plugin's entry point, importing none.
+
+        For checks of a configuration before a run (``anunnaki check``): ``in`` imports every
+        plugin of the group to know their names, and a plugin may pull in a heavy framework
+        (Enlil's oracle, torch). An entry point's name is its plugin's name (the registry
+        warns when they differ), so this is the answer ``in`` gives, short of a plugin that
+        fails to import; :meth:`factory` then says why.
+        """
+        key = name.strip()
+        if self._registered(key):
+            return True
+        with self._lock:
+            if self._plugins_loaded:
+                return False
+        return self.group is not None and any(
+            ep.name == key for ep in entry_points(group=self.group)
+        )
+
     def unknown(self, name: object) -> AnunnakiError:
         """The error for an unknown name: it lists the valid ones."""
         valid = ", ".join(self.names()) or "none registered"

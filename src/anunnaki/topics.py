@@ -59,6 +59,7 @@ __all__ = [
     "RESUME",
     "RUN_STOP",
     "SCORER",
+    "SHADOW_ORACLE",
     "SWAP",
     "UTU_NODES",
     "UTU_NODE_PREFIX",
@@ -113,6 +114,9 @@ UTU_NODE_PREFIX: Final = "/utu_"
 ORACLE_OUTPUT: Final = "/utu/oracle/output"
 #: Where a live scorer beside the oracle publishes (not Utu's input: no agent reads it).
 SCORER: Final = "/sim/oracle/scorer"
+#: Where a shadow oracle publishes: one model's oracle (the default's) assessing every frame
+#: whichever model is active, so Utu can tell that model would cope now before swapping to it.
+SHADOW_ORACLE: Final = "/utu/oracle/shadow"
 
 # -- the learning model manager ----------------------------------------------------------------
 LM_MANAGER: Final = "/lm_manager"

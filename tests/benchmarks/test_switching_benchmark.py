@@ -138,6 +138,9 @@ def test_scores_pool_counts_per_phase_and_count_wrong_models(bench: Any) -> None
     assert r["wrong_detail"] == {"adverse_in_default": 1, "clean_in_domain_model": 1,
                                  "adverse_in_other_domain_model": 1}  # fmt: skip
     assert bench.score(counts, stream, None)["wrong_frames"] is None
+    # a phase with false positives and nothing to find has no F1 (not 0): issue 34, item 5
+    only_fp = bench.score(np.array([[0, 2, 0]]), {"condition": ["hsl"]}, None)
+    assert only_fp["f1"]["hsl"] is None
     truth = bench.switch_by_truth({"condition": ["clean", "fog", "fog", "clean"]})
     assert truth["active"] == ["default", "fog", "fog", "default"] and len(truth["swaps"]) == 2
 

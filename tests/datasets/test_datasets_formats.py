@@ -288,3 +288,21 @@ def test_yolo_missing_classes(tmp_path: Path) -> None:
 def test_load_split_explains_what_it_looked_for(tmp_path: Path) -> None:
     with pytest.raises(DatasetError, match=r"no 'test' split here.*expected test\.json"):
         load_split(tmp_path, "test")
+
+
+def test_an_image_name_that_leaves_the_image_folder_is_not_written(tmp_path: Path) -> None:
+    """A COCO file_name of '../../evil.png' is read where it points, but an export writes
+    every image inside its own image folder (issue 34 item 1)."""
+    src = toy(2).to_coco(tmp_path / "src" / "a" / "d.json")
+    data = json.loads(src.read_text())
+    first = tmp_path / "src" / "a" / "images" / data["images"][0]["file_name"]
+    first.rename(tmp_path / "src" / "evil.png")
+    data["images"][0]["file_name"] = "../../evil.png"
+    src.write_text(json.dumps(data))
+    ds = Dataset.from_coco(src)
+    assert ds.records[0].file_name == "../../evil.png" and ds.image(0).shape == (32, 40, 3)
+    with pytest.raises(AnunnakiError, match=r"image '\.\./\.\./evil\.png' .* would be written "
+                       "outside its folder"):  # fmt: skip
+        ds.to_coco(tmp_path / "out" / "d.json")
+    assert not (tmp_path / "evil.png").exists()
+    assert [p.name for p in (tmp_path / "out").rglob("*")] == ["images"]

@@ -88,3 +88,63 @@ def test_a_registry_that_would_refuse_the_model_fails_before_any_work(
     assert reg.read_text(encoding="utf-8") == before
     for work in (tmp_path / "w1", tmp_path / "w2"):  # no stage ran
         assert not list(work.glob("stages/*.json"))
+
+
+#: Names that would put the new model's files elsewhere than the work folder (issue 34 item 1).
+NO_NAMES = ["fog/../x y", "../x", "/tmp/x", "a/b", "a\\b", "a\x00b", "", ".."]
+
+
+@pytest.mark.parametrize("option", ["--domain", "--id"])
+@pytest.mark.parametrize("value", NO_NAMES)
+def test_a_domain_or_an_id_that_is_no_name_is_refused_before_any_work(
+    models: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str], option: str, value: str
+) -> None:
+    """``--domain 'fog/../x y'`` ran the chain and wrote OUT/rover-fog/../x y.safetensors."""
+    args = argv(models / "rover-default.safetensors", tmp_path / "data", tmp_path / "w")
+    args[args.index(option) + 1] = value
+    err = _fails(args, capsys)
+    rule = "a domain must be an identifier" if option == "--domain" else "a name is 1 to 128"
+    assert err.startswith(f"error: {option} {value!r} is not allowed: {rule}")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["models"]  # nothing written
+
+
+def test_an_id_made_from_the_models_own_id_is_checked_too(
+    models: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Without --id the new id is MODEL_ID-DOMAIN, and a sidecar's id can be anything."""
+    import json
+
+    sidecar = models / "rover-default.json"
+    card = json.loads(sidecar.read_text())
+    sidecar.write_text(json.dumps(card | {"model_id": "../../evil"}))
+    args = argv(models / "rover-default.safetensors", tmp_path / "data", tmp_path / "w")
+    del args[args.index("--id") : args.index("--id") + 2]
+    err = _fails(args, capsys)
+    assert "the new model's id (from model '../../evil' and domain 'low_light') " in err
+    assert "'../../evil-low_light' is not allowed" in err and "--id NAME" in err
+    out = argv(models / "rover-default.safetensors", tmp_path / "data", tmp_path / "w")
+    del out[out.index("--out") : out.index("--out") + 2]  # the default --out is robustify/ID
+    del out[out.index("--id") : out.index("--id") + 2]
+    assert "'../../evil-low_light' is not allowed" in _fails(out, capsys)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["models"]
+
+
+def test_the_library_refuses_them_as_the_command_does(models: Path, tmp_path: Path) -> None:
+    from anunnaki.enki import EnkiError, RobustifyConfig, new_model_id, robustify
+
+    for value in NO_NAMES:
+        with pytest.raises(EnkiError, match=r"--domain .* is not allowed"):
+            RobustifyConfig(phenomenon="fog", domain=value)
+        with pytest.raises(EnkiError, match=r"--id .* is not allowed"):
+            RobustifyConfig(phenomenon="fog", domain="fog", model_id=value)
+        with pytest.raises(EnkiError, match=r"the new model's id .* is not allowed"):
+            new_model_id(value, "fog")
+    assert new_model_id("rover-default", "fog") == "rover-fog"
+    config = RobustifyConfig(phenomenon="fog", domain="fog", model_id=None)
+    text = (models / "rover-default.json").read_text()
+    text = text.replace('"rover-default"', '"a/b"').replace("rover-default.", "x.")
+    (models / "x.json").write_text(text)  # x.safetensors, whose own id is a/b
+    (models / "x.safetensors").write_bytes((models / "rover-default.safetensors").read_bytes())
+    with pytest.raises(EnkiError, match=r"'a/b-fog' is not allowed"):
+        robustify(models / "x.safetensors", tmp_path / "data", tmp_path / "w", config)
+    assert not (tmp_path / "w").exists()

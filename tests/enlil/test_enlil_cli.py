@@ -80,3 +80,44 @@ def test_kill_9_then_resume_loses_and_repeats_nothing(tiny: Path, tmp_path: Path
     straight = read_archive(tmp_path / "straight")
     assert np.array_equal(resumed.params, straight.params)
     assert np.array_equal(resumed.f1, straight.f1)
+
+
+def test_the_default_archive_folder_is_a_name_that_stays_in_assess(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Without --out the archive goes to assess/MODEL-P-SEARCH-sSEED: a --search (or a model
+    file name) with '..' in it made that folder elsewhere (issue 34 item 1)."""
+    from anunnaki.datasets import Dataset
+
+    rng = np.random.default_rng(0)
+    images = [rng.integers(0, 255, (64, 64, 3), dtype=np.uint8) for _ in range(2)]
+    toy = Dataset.from_arrays(images, [[[8.0, 8.0, 30.0, 50.0]]] * 2, [[0]] * 2,
+                              ("pedestrian", "deer"))  # fmt: skip
+    toy.to_coco(tmp_path / "data" / "val.json")
+    work = tmp_path / "a" / "b"
+    work.mkdir(parents=True)
+    monkeypatch.chdir(work)
+    before = sorted(str(p) for p in tmp_path.rglob("*"))
+    capsys.readouterr()
+    code = main(["assess", str(MODEL), "--data", str(tmp_path / "data"), "--phenomenon", "fog",
+                 "--budget", "1", "--search", "../../../x"])  # fmt: skip
+    assert code == 2
+    err = capsys.readouterr().err
+    assert err.startswith("error: the archive folder's name 'rover-default-fog-../../../x-s0' "
+                          "is not allowed: a name is") and "--out DIR" in err  # fmt: skip
+    assert sorted(str(p) for p in tmp_path.rglob("*")) == before  # nothing written anywhere
+
+
+def test_a_misspelt_model_is_named_not_its_sidecar(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Issue 34 item 12: 'rover-defualt.json: model sidecar not found' for a typo'd model."""
+    typo = MODEL.with_name("rover-defualt.safetensors")
+    capsys.readouterr()
+    code = main(["assess", str(typo), "--data", str(tmp_path), "--phenomenon", "fog",
+                 "--budget", "1", "--out", str(tmp_path / "out")])  # fmt: skip
+    assert code == 2
+    assert capsys.readouterr().err.strip() == (
+        f"error: {typo}: model file not found (hint: did you mean {MODEL}?)"
+    )
+    assert not (tmp_path / "out").exists()

@@ -24,6 +24,22 @@ def run(launch_path: Path, **kw) -> RunResult:  # type: ignore[no-untyped-def]
     return run_launch(load_launch(launch_path), out=io.StringIO(), handle_signals=False, **kw)
 
 
+def run_printed(launch_path: Path, **kw) -> tuple[RunResult, str]:  # type: ignore[no-untyped-def]
+    out = io.StringIO()
+    result = run_launch(load_launch(launch_path), out=out, handle_signals=False, **kw)
+    return result, out.getvalue()
+
+
+def decision_kinds(printed: str) -> set[str]:
+    """The kinds of the decision lines printed (``   25.000  started   fail-safe …``)."""
+    kinds = set()
+    for line in printed.splitlines():
+        words = line.split()
+        if len(words) >= 2 and words[0].replace(".", "", 1).isdigit():
+            kinds.add(words[1])
+    return kinds
+
+
 def started(result: RunResult) -> list[tuple[float, str | None]]:
     return [(d.t, d.tactic) for d in result.decisions if d.kind == "started"]
 
@@ -35,21 +51,31 @@ def free_port() -> int:
 
 
 def test_none_runs_the_trace_without_adapting() -> None:
-    result = run(EXAMPLE, speed=50, manager="none")
+    """It prints what it did, nothing adapted, and none of Utu's choices (issue 34, item 6)."""
+    result, printed = run_printed(EXAMPLE, speed=50, manager="none")
     assert result.exit_code == 0 and result.reason == "trace ended"
     assert started(result) == []
-    # the goal model was evaluated as with Utu: the fail-safe was selected, never started
-    assert ("selected", "fail-safe") in [(d.kind, d.tactic) for d in result.decisions]
+    assert "manager: none, the baseline without adaptation" in printed
+    assert "manager none: nothing adapted (no tactic started)" in printed
+    assert decision_kinds(printed) == set(), printed  # no "selected fail-safe", no "deferred"
+    # with Utu the same trace selects and starts the fail-safe, and says so
+    _, said = run_printed(EXAMPLE, speed=50)
+    assert {"selected", "started"} <= decision_kinds(said) and "manager: " not in said
 
 
 def test_random_draws_where_utu_decides() -> None:
     utu = run(EXAMPLE, speed=50)
-    rnd = run(EXAMPLE, speed=50, manager="random", manager_seed=2)
+    rnd, printed = run_printed(EXAMPLE, speed=50, manager="random", manager_seed=2)
     draws = [d for d in rnd.decisions if d.kind == "random_draw"]
     assert draws, rnd.decisions
     first_utu = started(utu)[0][0]
     assert draws[0].t == pytest.approx(first_utu)  # the same instant, a drawn tactic
     assert [tac for _, tac in started(rnd)][: len(draws)] == [d.tactic for d in draws]
+    # what it printed: its draws and what they did, never the planner's own choices
+    kinds = decision_kinds(printed)
+    assert {"random_draw", "started"} <= kinds and not kinds & {"selected", "deferred"}, printed
+    assert "manager: random (seed 2)" in printed
+    assert f"manager random: started {draws[0].tactic} at " in printed
 
 
 def test_a_manager_override_needs_one_process() -> None:

@@ -4,12 +4,16 @@ from __future__ import annotations
 
 import json
 import re
+import shutil
 from pathlib import Path
 
+import numpy as np
 import pytest
 from lec_helpers import Trained
 
 from anunnaki.cli.main import main
+
+MODELS = Path(__file__).resolve().parents[2] / "examples" / "models"
 
 
 @pytest.fixture(scope="module")
@@ -124,7 +128,7 @@ def test_evaluate_detector_errors(
         main(["evaluate-detector", str(tmp_path / "nope.safetensors"), "--data", str(trained.data)])
         == 2
     )
-    assert "nope.json: model sidecar not found" in capsys.readouterr().err
+    assert "nope.safetensors: model file not found" in capsys.readouterr().err
     base = ["evaluate-detector", str(trained.model), "--data", str(trained.data)]
     assert main([*base, "--strength", "0.5"]) == 2
     assert "need --phenomenon" in capsys.readouterr().err
@@ -170,3 +174,133 @@ def test_evaluate_detector_contexts_errors(
     assert "write random:N with N >= 1" in capsys.readouterr().err
     assert main([*base, "-p", "fog", "--contexts", "random:2", "--thresholds", "0.2", "0.1"]) == 2
     assert "degraded drop must be below" in capsys.readouterr().err
+
+
+# -- which file is measured, and names (issue 34 items 1, 2 and 12) --------------------------
+
+
+@pytest.fixture
+def rover(tmp_path: Path) -> Path:
+    """A copy of the shipped rover-default model (weights and sidecar) in a fresh folder."""
+    folder = tmp_path / "models"
+    folder.mkdir()
+    for suffix in (".safetensors", ".json"):
+        shutil.copy(MODELS / f"rover-default{suffix}", folder / f"rover-default{suffix}")
+    return folder / "rover-default.safetensors"
+
+
+@pytest.fixture
+def toy_data(tmp_path: Path) -> Path:
+    """A four-image test split of the rover's classes (noise images: measuring is what counts)."""
+    from anunnaki.datasets import Dataset
+
+    rng = np.random.default_rng(0)
+    images = [rng.integers(0, 255, (64, 64, 3), dtype=np.uint8) for _ in range(4)]
+    boxes = [[[8.0, 8.0, 30.0, 50.0]] for _ in range(4)]
+    ds = Dataset.from_arrays(images, boxes, [[0]] * 4, ("pedestrian", "deer"))
+    ds.to_coco(tmp_path / "data" / "test.json")
+    return tmp_path / "data"
+
+
+def test_evaluate_detector_json_states_the_file_and_hash_it_measured(
+    rover: Path, toy_data: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    from anunnaki.lec import sha256_file
+
+    capsys.readouterr()
+    digest = sha256_file(rover)
+    for given in (rover, rover.with_suffix(".json")):
+        assert main(["evaluate-detector", str(given), "--data", str(toy_data), "--json"]) == 0
+        report = json.loads(capsys.readouterr().out)
+        assert report["model"] == str(given)
+        assert (report["model_file"], report["model_sha256"]) == (str(rover), digest)
+    registry = rover.parent / "rover.yaml"
+    registry.write_text(
+        f"anunnaki: models/1\nmodels:\n  - file: rover-default.safetensors\n    sha256: {digest}\n"
+    )
+    assert main(["evaluate-detector", str(registry), "--data", str(toy_data), "--json"]) == 0
+    report = json.loads(capsys.readouterr().out)
+    assert (report["model_file"], report["model_sha256"]) == (str(rover), digest)
+
+
+def test_evaluate_detector_refuses_a_copied_sidecar(
+    rover: Path, toy_data: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Issue 34 item 2: corrupt-header.safetensors beside a copy of rover-default.json was
+    reported as F1 1.000: the sidecar's weights field loaded rover-default.safetensors."""
+    corrupt = rover.with_name("corrupt-header.safetensors")
+    corrupt.write_bytes(b"\xff\xff\xff\xff\xff\xff\xff\x7f{corrupt")
+    shutil.copy(rover.with_suffix(".json"), corrupt.with_suffix(".json"))
+    capsys.readouterr()
+    code = main(["evaluate-detector", str(corrupt), "--data", str(toy_data), "--json"])
+    out, err = capsys.readouterr()
+    assert code == 2 and out == ""
+    assert err.startswith(f"error: {corrupt.with_suffix('.json')}: weights: the sidecar names "
+                          "the weights 'rover-default.safetensors', not "
+                          "'corrupt-header.safetensors'")  # fmt: skip
+    assert "Traceback" not in err
+    # with its own sidecar (its name, its hash) the corrupt file is read, and refused
+    from anunnaki.lec import sha256_file
+
+    card = json.loads(corrupt.with_suffix(".json").read_text())
+    card.update(weights=corrupt.name, sha256=sha256_file(corrupt))
+    corrupt.with_suffix(".json").write_text(json.dumps(card))
+    assert main(["evaluate-detector", str(corrupt), "--data", str(toy_data)]) == 2
+    err = capsys.readouterr().err
+    assert (
+        err.startswith(f"error: {corrupt}: not a valid safetensors file") and "Traceback" not in err
+    )
+
+
+def test_a_misspelt_model_file_is_named_with_a_close_name(
+    rover: Path, toy_data: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Issue 34 item 12: rover-defualt.safetensors was reported as 'rover-defualt.json: model
+    sidecar not found'."""
+    typo = rover.with_name("rover-defualt.safetensors")
+    capsys.readouterr()
+    assert main(["evaluate-detector", str(typo), "--data", str(toy_data)]) == 2
+    err = capsys.readouterr().err
+    assert err.strip() == (f"error: {typo}: model file not found (hint: did you mean {rover}?)")
+    nowhere = rover.parent / "gone" / "rover-default.safetensors"
+    assert main(["evaluate-detector", str(nowhere), "--data", str(toy_data)]) == 2
+    err = capsys.readouterr().err
+    assert f"{nowhere}: model file not found" in err and f"no folder {nowhere.parent}" in err
+    rover.unlink()  # the weights gone, the sidecar there: the weights are named
+    assert main(["evaluate-detector", str(rover), "--data", str(toy_data)]) == 2
+    assert f"error: {rover}: model weights not found" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize(
+    ("option", "value"),
+    [("--model-id", "../x"), ("--model-id", "/tmp/x"), ("--model-id", "a\\b"),
+     ("--model-id", "a\x00b"), ("--model-id", ""), ("--domain", "fog/../x y"),
+     ("--domain", "heavy-fog"), ("--domain", "")],
+)  # fmt: skip
+def test_train_detector_refuses_an_id_or_domain_that_is_no_name(
+    tmp_path: Path, option: str, value: str, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """The id and the domain become file names later (robustify, registries)."""
+    out = tmp_path / "m.safetensors"
+    capsys.readouterr()
+    code = main(["train-detector", "--data", str(tmp_path / "no-data"), "--out", str(out),
+                 option, value])  # fmt: skip
+    assert code == 2
+    assert f"error: {option} {value!r} is not allowed: a " in capsys.readouterr().err
+    assert list(tmp_path.iterdir()) == []
+    code = main(["train-detector", "--data", "d", "--out", str(tmp_path / "my model.safetensors")])
+    assert code == 2
+    err = capsys.readouterr().err
+    assert "the model id (--out my model.safetensors without .safetensors) 'my model'" in err
+    assert "--model-id NAME" in err
+
+
+def test_train_config_refuses_them_as_train_detector_does() -> None:
+    from anunnaki.lec import DetectorError, TrainConfig
+
+    with pytest.raises(DetectorError, match=r"TrainConfig: model id '\.\./x' is not allowed"):
+        TrainConfig(model_id="../x")
+    with pytest.raises(DetectorError, match=r"TrainConfig: domain 'a/b' is not allowed"):
+        TrainConfig(domain="a/b")
+    assert TrainConfig(model_id="rover-fog", domain="fog").model_id == "rover-fog"
+    assert TrainConfig(domain="rover-hsl").domain == "rover-hsl"  # a label; registries want fog

@@ -94,12 +94,50 @@ def test_corrupt_weights_with_matching_hash_refused(saved: Path) -> None:
 def test_weights_of_another_model_refused(tmp_path: Path, saved: Path) -> None:
     other = CenterNetDetector.create(("a", "b", "c"), input_size=(64, 48), width=8)
     save_detector(other, tmp_path / "other.safetensors")
+    (tmp_path / "other.safetensors").replace(saved)  # another net's weights, hash matching
     card = json.loads(saved.with_suffix(".json").read_text())
-    card["weights"] = "other.safetensors"
-    card["sha256"] = sha256_file(tmp_path / "other.safetensors")
+    card["sha256"] = sha256_file(saved)
     saved.with_suffix(".json").write_text(json.dumps(card))
-    with pytest.raises(DetectorLoadError, match=r"other\.safetensors: heat\.2\.weight: tensor"):
+    with pytest.raises(DetectorLoadError, match=r"m\.safetensors: heat\.2\.weight: tensor"):
         load_detector(saved)
+
+
+@pytest.mark.parametrize("given", ["copy.safetensors", "copy.json", "copy"])
+def test_a_copied_sidecar_does_not_load_the_weights_it_names(
+    tmp_path: Path, saved: Path, given: str
+) -> None:
+    """Issue 34 item 2: copy.safetensors (corrupt) with m.json copied next to it as copy.json
+    loaded m.safetensors, the file the sidecar names, and measured that model instead."""
+    (tmp_path / "copy.safetensors").write_bytes(b"\xff" * 64)  # corrupt: not even a header
+    (tmp_path / "copy.json").write_bytes(saved.with_suffix(".json").read_bytes())
+    with pytest.raises(DetectorLoadError) as info:
+        load_detector(tmp_path / given)
+    text = str(info.value)
+    assert text.startswith(f"{tmp_path / 'copy.json'}: weights: the sidecar names the weights "
+                           "'m.safetensors', not 'copy.safetensors'")  # fmt: skip
+    assert "nothing was loaded" in text and "give m.safetensors" in text
+
+
+@pytest.mark.parametrize(
+    ("damage", "pattern"),
+    [
+        (lambda b: b[:20], r"not a valid safetensors file"),  # cut short
+        (lambda b: b"\xff" * 8 + b[8:], r"not a valid safetensors file"),  # header length
+        (lambda b: b[:8] + b"#" + b[9:], r"not a valid safetensors file"),  # header JSON
+        (lambda b: b"", r"not a valid safetensors file"),
+    ],
+)
+def test_a_corrupt_weights_file_gets_an_error_naming_it(  # type: ignore[no-untyped-def]
+    saved: Path, damage, pattern: str
+) -> None:
+    """Corrupt weights whose sidecar states their hash: a clear error, no traceback."""
+    saved.write_bytes(damage(saved.read_bytes()))
+    card = json.loads(saved.with_suffix(".json").read_text())
+    card["sha256"] = sha256_file(saved)
+    saved.with_suffix(".json").write_text(json.dumps(card))
+    with pytest.raises(DetectorLoadError, match=pattern) as info:
+        load_detector(saved)
+    assert info.value.path == str(saved)
 
 
 @pytest.mark.parametrize(

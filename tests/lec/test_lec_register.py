@@ -104,3 +104,23 @@ def test_a_second_model_for_a_served_domain_is_refused(tmp_path: Path) -> None:
     assert not (tmp_path / "reg" / "rover-hsl.safetensors").exists()  # nothing copied
     register_model(reg, _model(tmp_path / "m", "rover-hsl"))  # its own domain: welcome
     assert load_registry(reg).for_domain("hsl").id == "rover-hsl"
+
+
+@pytest.mark.parametrize(
+    ("field", "value"),
+    [("model_id", "../x"), ("model_id", "a\nb"), ("model_id", "/tmp/x"), ("model_id", "a\\b"),
+     ("model_id", "a\x00b"), ("domain", "fog/../x y"), ("domain", "heavy-fog")],
+)  # fmt: skip
+def test_an_id_or_domain_that_is_no_name_is_refused_before_the_registry_is_touched(
+    tmp_path: Path, field: str, value: str
+) -> None:
+    """An id becomes an entry's text and a file name: a line break would even add an entry."""
+    reg = tmp_path / "reg" / "r.yaml"
+    register_model(reg, _model(tmp_path / "m", "rover-default"), create=True)
+    before = reg.read_text()
+    what = "model id" if field == "model_id" else "domain"
+    with pytest.raises(ModelRegistryError, match=f"^{what} .* is not allowed"):
+        register_model(reg, _model(tmp_path / "m", FOG), **{field: value})
+    assert reg.read_text() == before
+    assert sorted(p.name for p in (tmp_path / "reg").iterdir()) == [
+        "r.yaml", "rover-default.json", "rover-default.safetensors"]  # fmt: skip

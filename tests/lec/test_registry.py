@@ -223,6 +223,13 @@ def test_load_a_registry_file(tmp_path: Path, models: dict[str, tuple[Path, str]
          "'default'"),
         (lambda t: t.replace("domain: default", "domain: clear"), 4, "no model for the domain"),
         (lambda t: t.replace("domain: fog", "domain: heavy-fog"), 11, "must be an identifier"),
+        (lambda t: t.replace("domain: fog", "domain: fog/../x"), 11,
+         r"domain 'fog/\.\./x' is not allowed: a domain must be an identifier"),
+        (lambda t: t.replace("id: det-fog", "id: ../det-fog"), 10,
+         r"model id '\.\./det-fog' is not allowed: a name is 1 to 128 characters"),
+        (lambda t: t.replace("id: det-fog", "id: /tmp/det-fog"), 10, "is not allowed: a name"),
+        (lambda t: t.replace("id: det-fog", 'id: "det\\\\fog"'), 10, "is not allowed: a name"),
+        (lambda t: t.replace("id: det-fog", 'id: "det\\0fog"'), 10, "is not allowed: a name"),
         (lambda t: t.replace("    domain: fog\n", ""), 10, "missing required field 'domain'"),
         (lambda t: t.replace("- id: det-fog", "- id:"), 10, "missing required field 'id'"),
         (lambda t: t.replace("metrics: {f1: 0.96}", "metrics: [1]"), 9, "valid dictionary"),
@@ -311,6 +318,32 @@ def test_tampered_weights_are_refused_by_registry_and_by_sidecar(
     assert info.value.line == 3 and sha256_file(weights) in str(info.value)
     with pytest.raises(DetectorLoadError, match="sha256 mismatch"):
         load_detector(weights)  # and the sidecar's own hash catches it too
+
+
+def test_a_pinned_file_whose_sidecar_names_other_weights_is_refused(
+    real_models: Path, tmp_path: Path
+) -> None:
+    """Issue 34 item 2: the registry pins uav-default.safetensors, and its sidecar, edited,
+    names uav-fog.safetensors (with that file's hash): the unpinned file was loaded."""
+    import json
+    import shutil
+
+    for name in ("uav-default", "uav-fog"):
+        for suffix in (".safetensors", ".json"):
+            shutil.copy(real_models / f"{name}{suffix}", tmp_path / f"{name}{suffix}")
+    pinned = tmp_path / "uav-default.safetensors"
+    (tmp_path / "registry.yaml").write_text(
+        "anunnaki: models/1\nmodels:\n  - file: uav-default.safetensors\n"
+        f"    sha256: {sha256_file(pinned)}\n"
+    )
+    card = json.loads((tmp_path / "uav-default.json").read_text())
+    card.update(weights="uav-fog.safetensors", sha256=sha256_file(tmp_path / "uav-fog.safetensors"))
+    (tmp_path / "uav-default.json").write_text(json.dumps(card))
+    reg = load_registry(tmp_path / "registry.yaml")
+    with pytest.raises(ModelLoadError, match=r"names the weights 'uav-fog\.safetensors', not "
+                       r"'uav-default\.safetensors'") as info:  # fmt: skip
+        reg.load("uav-default")
+    assert "uav-default.json" in str(info.value)
 
 
 def test_a_bad_sidecar_is_reported_at_the_registry_line(real_models: Path, tmp_path: Path) -> None:

@@ -111,3 +111,38 @@ def test_bring_up_checks_name_the_element() -> None:
         check_camera_chain(models=None, oracle={"window": 3}, where="managed.x")
     assert err2.value.element == "managed.x.oracle.name"
     check_camera_chain(models=None, oracle={"window": 3}, default_oracle="ground_truth")
+
+
+def test_a_shadow_oracle_assesses_the_default_model_on_its_own_topic(oracles: None) -> None:
+    with (
+        open_bus("inproc") as bus,
+        CameraChain(
+            bus,
+            camera="/rover/camera/image",
+            models=MODELS,
+            oracle={"name": "chain_plain"},
+            shadow={"name": "chain_plain", "domain": "default"},
+        ) as chain,
+    ):
+        default = chain.registry.default.id
+        assert chain.shadow.model_id == default
+        assert chain.shadow.node == "/shadow_chain_plain"
+        assert chain.shadow._topics["output"] == topics.SHADOW_ORACLE == "/utu/oracle/shadow"
+        assert f"shadowed by chain_plain for {default}" in chain.describe()
+        assert "domain" not in chain.shadow.oracle.options  # the chain's, not the oracle's
+
+
+def test_a_shadow_names_one_known_model() -> None:
+    check_camera_chain(
+        models=str(MODELS), oracle=None, shadow={"name": "ground_truth", "domain": "default"}
+    )
+    with pytest.raises(ModelFileError, match="say which model") as err:
+        check_camera_chain(models=str(MODELS), oracle=None, shadow={"name": "ground_truth"})
+    assert err.value.element == "managed.shadow"
+    with pytest.raises(ModelFileError, match="smog") as err2:
+        check_camera_chain(
+            models=str(MODELS), oracle=None, shadow={"name": "ground_truth", "domain": "smog"}
+        )
+    assert err2.value.element == "managed.shadow.domain"
+    with pytest.raises(ModelFileError, match="needs the detector's models"):
+        check_camera_chain(models=None, oracle=None, shadow={"domain": "default"})

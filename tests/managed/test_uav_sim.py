@@ -207,7 +207,9 @@ def test_low_battery_sends_the_uav_home(short_run: dict[str, Any]) -> None:
     assert after and all(s["mode"] == "return_home" for s in after)  # it flies home
     assert min(s["battery"] for s in statuses if s["t"] <= home[0]) < 30.0  # G11 had failed
     # the mission's outcome, printed under the per-phase table
-    assert "mission: package not delivered; still airborne" in short_run["log"]
+    assert (
+        "mission: took off at t = 0.0 s; package not delivered; still airborne" in short_run["log"]
+    )
 
 
 @pytest.mark.timeout(600)

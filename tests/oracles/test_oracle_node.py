@@ -102,10 +102,10 @@ class Spy(GroundTruthAssessor):
 class Outputs:
     """Assessments on /utu/oracle/output; ``wait_for(seq)`` returns the one about a frame."""
 
-    def __init__(self, bus: Bus) -> None:
+    def __init__(self, bus: Bus, topic: str = "/utu/oracle/output") -> None:
         self.items: list[Assessment] = []
         self.cond = threading.Condition()
-        bus.subscribe("/utu/oracle/output", self._on, queue=1024)
+        bus.subscribe(topic, self._on, queue=1024)
 
     def _on(self, sample: Sample) -> None:
         assert isinstance(sample.message, Assessment)
@@ -352,3 +352,23 @@ def test_a_lockstep_simulation_waits_until_a_frame_is_handled(bus: Bus) -> None:
         assert node.stats().assessments == 1  # its assessment is out when the wait ends
         assert outputs.wait_for(5).model_id == "m1"
         assert node.wait_for_frame(3, timeout=0.0)  # an earlier frame counts as handled
+
+
+def test_a_shadow_oracle_assesses_its_model_whichever_is_active(bus: Bus) -> None:
+    """``model=``: the default model's oracle on every frame while another model runs."""
+    oracle = Recorder()
+    outputs = Outputs(bus, "/utu/oracle/shadow")
+    with (
+        OracleNode(
+            bus, oracle, camera=CAMERA, model="m-default", output="/utu/oracle/shadow"
+        ) as node,
+        OracleNode(bus, Recorder(), camera=CAMERA, node="/plain") as plain,
+    ):
+        assert node.model_id == "m-default"  # known from the start: nothing withheld
+        bus.publish("/lm_manager/active", {"lec": "detector", "model": "m-fog", "domain": "fog"})
+        assert until(lambda: plain.model_id == "m-fog")  # the announcement is out
+        bus.publish(CAMERA, Image(encoding="png", width=32, height=32, data=CLEAR_PNG, seq=0))
+        assert outputs.wait_for(0).model_id == "m-default"
+        assert oracle.models == ["m-default"] and node.model_id == "m-default"
+    with pytest.raises(ValueError, match="model must be a model id"):
+        OracleNode(bus, Recorder(), model="")

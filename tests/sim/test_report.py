@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import builtins
 import json
+import math
 import struct
 from pathlib import Path
 from types import SimpleNamespace
@@ -18,6 +19,8 @@ from anunnaki.sim import (
     RunReport,
     TacticEvent,
     compare_assessors,
+    draw_report,
+    f1_score,
     load_report,
     plot_report,
     rolling_f1,
@@ -157,3 +160,123 @@ def test_report_keeps_the_scoring(tmp_path: Path) -> None:
     plain = RunReport("s", "rover", 1.0)
     assert "scoring" not in plain.as_dict()
     assert load_report(plain.write(tmp_path / "p.json")).scoring is None
+
+
+# -- issue 34 item 5: F1 is undefined where there is no ground-truth object ------------------
+def test_a_window_without_ground_truth_has_no_f1() -> None:
+    """One false positive and nothing to find: no F1 (not 0), so the plot leaves a gap."""
+    fs = frames((0.0, 1, 0, 1), (0.5, 0, 1, 0), (2.0, 0, 1, 0), (3.0, 0, 0, 2))
+    f1 = rolling_f1(fs, window=1.0)
+    assert f1[0] == pytest.approx(2 / 3)
+    assert f1[1] == pytest.approx(2 / 4)  # (−0.5, 0.5]: tp 1, fp 1, fn 1
+    assert f1[2] is None  # (1.0, 2.0]: one false positive, no object → undefined
+    assert f1[3] == 0.0  # (2.0, 3.0]: two objects missed → F1 0, defined
+    assert f1_score(0, 1, 0) is None and f1_score(0, 0, 0) is None
+    assert f1_score(0, 0, 2) == 0.0 and f1_score(2, 1, 1) == pytest.approx(4 / 6)
+
+
+def f1_lines(fig: Any) -> dict[str, Any]:
+    ax = fig.axes[0]
+    return {
+        line.get_label(): line for line in ax.get_lines() if not line.get_label().startswith("_")
+    }
+
+
+def test_the_plot_leaves_a_gap_where_f1_is_undefined() -> None:
+    report = RunReport(
+        "gap",
+        "rover",
+        3.0,
+        frames=frames(*[(0.1 * k, 1, 0, 0) for k in range(10)], (1.05, 0, 0, 0), (2.5, 0, 1, 0)),
+    )
+    fig = draw_report(report)
+    ys = list(f1_lines(fig)["m"].get_ydata())
+    assert ys[:10] == [1.0] * 10
+    assert math.isnan(ys[-1])  # (1.5, 2.5]: a false positive alone, no F1: a gap, not 0
+    assert 0.0 not in ys
+
+
+# -- issue 34 item 7: the phases' labels never overlap; the flight panel ----------------------
+def crowded_report() -> RunReport:
+    """The UAV demo's phases: 10–11 s and 11–14.5 s rain+brightness, 14.5–16 clear, fog."""
+    spans = [
+        (0, 10, "clear"),
+        (10, 11, "rain+brightness"),
+        (11, 14.5, "rain+brightness"),
+        (14.5, 16, "clear"),
+        (16, 20, "fog"),
+        (20, 49.5, "fog"),
+        (49.5, 75, "on the ground"),
+    ]
+    return RunReport(
+        "crowded",
+        "uav",
+        75.0,
+        frames=frames(*[(0.1 * k, 1, 0, 0) for k in range(750)]),
+        phases=[{"start": a, "end": b, "label": label} for a, b, label in spans],
+    )
+
+
+def label_boxes(fig: Any) -> list[Any]:
+    renderer = fig.canvas.get_renderer()
+    texts = [t for ax in fig.axes for t in ax.texts if t.get_gid() == "phase-label"]
+    return [t.get_window_extent(renderer) for t in texts]
+
+
+@pytest.mark.parametrize("width", [11.0, 6.0])
+def test_phase_labels_never_overlap(width: float) -> None:
+    report = crowded_report()
+    fig = draw_report(report, width=width)
+    boxes = label_boxes(fig)
+    assert len(boxes) == len(report.phases)
+    for i, a in enumerate(boxes):
+        for b in boxes[i + 1 :]:
+            assert not a.overlaps(b), (a, b)
+    # each label stays within the figure
+    fig_box = fig.bbox
+    assert all(b.x0 >= fig_box.x0 and b.x1 <= fig_box.x1 for b in boxes)
+
+
+def flight_report() -> RunReport:
+    modes = ["auto"] * 40 + ["hover"] * 10 + ["auto"] * 16 + ["return_home"] * 30 + ["land"] * 4
+    track = [
+        {"t": 0.5 * k, "x": float(k), "y": 0.0, "altitude": min(30.0, 3.0 * k),
+         "battery": 100.0 - 0.5 * k, "mode": mode}
+        for k, mode in enumerate(modes)
+    ]  # fmt: skip
+    return RunReport(
+        "flight",
+        "uav",
+        50.0,
+        frames=frames(*[(0.1 * k, 1, 0, 0) for k in range(500)]),
+        phases=[{"start": 0.0, "end": 50.0, "label": "clear"}],
+        flight={
+            "took_off": 0.0,
+            "delivered": False,
+            "delivered_at": None,
+            "landed": 49.5,
+            "landed_xy": [0.0, 0.0],
+            "landed_home": True,
+            "battery_at_landing": 50.5,
+            "track": track,
+        },
+    )
+
+
+def test_the_flight_is_kept_and_drawn(tmp_path: Path) -> None:
+    report = flight_report()
+    assert load_report(report.write(tmp_path / "f.json")) == report
+    assert "flight" not in sample_report().as_dict()  # a rover has none
+    fig = draw_report(report)
+    panel = next(ax for ax in fig.axes if ax.get_ylabel().startswith("altitude"))
+    (altitude,) = [line for line in panel.get_lines() if line.get_label() == "altitude"]
+    assert list(altitude.get_ydata()) == [row["altitude"] for row in report.flight["track"]]
+    battery = next(ax for ax in fig.axes if ax.get_ylabel().startswith("battery"))
+    assert [line.get_label() for line in battery.get_lines()] == ["battery"]
+    # one band per stretch of a mode: auto, hover, auto, return_home, land
+    bands = [p for p in panel.patches if p.get_gid() and p.get_gid().startswith("mode:")]
+    assert [p.get_gid() for p in bands] == [
+        "mode:auto", "mode:hover", "mode:auto", "mode:return_home", "mode:land"
+    ]  # fmt: skip
+    out = plot_report(report, tmp_path / "f.png")
+    assert png_size(out)[1] > png_size(plot_report(sample_report(), tmp_path / "s.png"))[1]

@@ -131,3 +131,28 @@ def test_clean_frames_are_published_when_asked(bus) -> None:
             before, after = renders[seq].to_array(), frame.to_array()
             assert renders[seq].encoding == frame.encoding and before.shape == after.shape
             assert after.mean() > before.mean() + 20  # the fog lightens the frame, not its render
+
+
+def test_the_flight_is_logged_take_off_delivery_touch_down_and_track(bus) -> None:
+    """What the report keeps of a flight (issue 34, item 7): the touch-down ends its phases."""
+    with UavSim(bus, FAST) as uav:
+        before = uav.flight()
+        assert before["took_off"] is None and before["landed"] is None
+        assert uav.summary() == "mission: never took off; package not delivered; battery 100.0 %"
+        uav.step(24.0)
+        flight = uav.flight()
+        summary = uav.summary()
+    assert flight["took_off"] == pytest.approx(0.0, abs=0.01) and flight["delivered"]
+    assert flight["delivered_at"] is not None and 0 < flight["delivered_at"] < flight["landed"]
+    assert flight["landed_xy"] == [0.0, 0.0] and flight["landed_home"] is True
+    assert flight["battery_at_landing"] == pytest.approx(flight["battery"])  # none drawn since
+    track = flight["track"]
+    assert [row["t"] for row in track] == [0.5 * k for k in range(48)]  # 2 Hz over 24 s
+    assert set(track[0]) == {"t", "x", "y", "altitude", "battery", "mode"}
+    assert max(row["altitude"] for row in track) == 16.0 and track[-1]["altitude"] == 0.0
+    assert all(row["mode"] == "auto" for row in track)
+    assert summary == (
+        f"mission: took off at t = 0.0 s; package delivered at t = {flight['delivered_at']:.1f} s; "
+        f"landed at home (0.0, 0.0) at t = {flight['landed']:.1f} s with battery "
+        f"{flight['battery_at_landing']:.1f} %"
+    )

@@ -74,11 +74,34 @@ def test_none_starts_nothing_whatever_the_goals_say() -> None:
     drive(m, 1.1, 3.0, 1)
     assert started(m) == []
     assert act.calls == []
-    # the planner still selected them: the goal model was evaluated as with Utu
-    assert {d.tactic for d in m.knowledge.decisions() if d.kind == "selected"} >= {
-        "beep",
-        "hand-over",
-    }
+    # the planner's own choices are not the baseline's: none of them is recorded (issue 34)
+    assert planners_words(m) == []
+    # ... though the planner kept its queue: the goal model was evaluated as with Utu
+    queued = {q["tactic"] for q in m.plan_stage.planner.queue() if q["state"] == "queued"}
+    assert queued == {"beep", "hand-over"}
+
+
+def planners_words(m: AutonomicManager) -> list[tuple[str, str | None]]:
+    """The planner's own decisions: what it selected, deferred, asked an operator about."""
+    own = {"selected", "deferred", "pending_approval", "withdrawn"}
+    return [(d.kind, d.tactic) for d in m.knowledge.decisions() if d.kind in own]
+
+
+def test_a_baseline_asks_no_operator_to_approve() -> None:
+    """A tactic that needs approval: Utu asks for it; a baseline, which would not start it, not."""
+    text = TACTICS.replace("    priority: 50\n", "    priority: 50\n    requires_approval: true\n")
+    for manager, expected in (("utu", [("pending_approval", "beep")]), ("none", [])):
+        binding = load_binding(ROVER / "binding.yaml")
+        model = parse_goal_model((ROVER / "goals.yaml").read_text(), binding=binding)
+        m = AutonomicManager(
+            model, parse_tactics_yaml(text), actuator=RecordingActuator(), warmup=0.5
+        )
+        m.plan_stage.planner.select = baseline(manager)
+        drive(m, 0, 1.0, 0)
+        drive(m, 1.1, 2.0, 1)
+        assert [w for w in planners_words(m) if w[0] == "pending_approval"] == expected, manager
+        pending = [q["tactic"] for q in m.plan_stage.planner.queue() if q["state"] == "pending"]
+        assert pending == [tactic for _, tactic in expected], manager
 
 
 def test_random_starts_one_draw_when_the_planner_would_start() -> None:
@@ -92,6 +115,7 @@ def test_random_starts_one_draw_when_the_planner_would_start() -> None:
     assert [tac for _, tac in started(m)] == [draws[0].tactic]
     # the planner's choices it displaced are consumed, not retried at the next step
     assert set(draws[0].data["displaced"]) == {"beep", "hand-over"} - {draws[0].tactic}
+    assert planners_words(m) == []  # the draw is the decision; the planner's are not logged
 
 
 def test_random_is_seeded() -> None:

@@ -99,6 +99,7 @@ from anunnaki.bus._keys import (
 from anunnaki.bus._kinds import BUS_KINDS
 from anunnaki.bus._node import Node
 from anunnaki.bus._qos import PRIORITIES, QOS_TABLE, QoS, TopicClass, qos_for
+from anunnaki.errors import validation_message
 
 __all__ = [
     "BUS_KINDS",
@@ -188,5 +189,5 @@ def open_bus(
         where = ".".join(str(p) for p in first["loc"]) or "config"
         more = len(exc.errors()) - 1
         extra = f" (and {more} more problem{'s' if more > 1 else ''})" if more else ""
-        raise BusConfigError(f"bus option {where}: {first['msg']}{extra}") from None
+        raise BusConfigError(f"bus option {where}: {validation_message(first)}{extra}") from None
     return BUS_KINDS.factory(config.kind)(config, clock=clock, hub=hub)

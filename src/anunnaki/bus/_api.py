@@ -54,6 +54,7 @@ from anunnaki.bus._keys import (
 )
 from anunnaki.bus._qos import Priority, QoS, qos_for
 from anunnaki.bus._queue import DropPolicy, PriorityQueue
+from anunnaki.errors import validation_message
 from anunnaki.messages import Generic, Message, MessageError, ServiceReply
 
 __all__ = [
@@ -108,7 +109,7 @@ def as_message(obj: object) -> Message:
         except ValidationError as exc:
             first = exc.errors(include_url=False)[0]
             where = ".".join(str(p) for p in first["loc"][1:]) or "data"
-            raise MessageError(f"not a JSON object: {where}: {first['msg']}") from None
+            raise MessageError(f"not a JSON object: {where}: {validation_message(first)}") from None
     raise MessageError(
         f"expected an anunnaki.messages.Message or a mapping, got {type(obj).__name__}"
     )

@@ -37,6 +37,7 @@ from typing import Any, cast
 from pydantic import ValidationError
 
 from anunnaki.bus._errors import MalformedMessage
+from anunnaki.errors import validation_message
 from anunnaki.messages import MESSAGES, Generic, Message, MessageError
 
 __all__ = ["Envelope", "decode_envelope", "encode_envelope"]
@@ -205,7 +206,9 @@ def decode_envelope(data: bytes | bytearray | memoryview) -> Envelope:
     except ValidationError as exc:
         first = exc.errors(include_url=False)[0]
         where = ".".join(str(p) for p in first["loc"]) or "body"
-        raise MalformedMessage(f"invalid {name} body: {where}: {first['msg']}") from None
+        raise MalformedMessage(
+            f"invalid {name} body: {where}: {validation_message(first)}"
+        ) from None
     return Envelope(
         message=message, t=float(header["t"]), seq=header["seq"], sender=header["sender"]
     )

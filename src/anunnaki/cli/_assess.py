@@ -67,10 +67,14 @@ def add_parser(sub: Any) -> None:
 
 
 def _out(args: argparse.Namespace, model: Any) -> Path:
+    """``--out``, or ``assess/MODEL-P-SEARCH-sSEED`` (a name: it must follow the rule)."""
+    from anunnaki._names import check_name
+
     if args.out:
         return Path(args.out)
     stem = model.model_id if model.spec is not None else Path(args.model).stem
     name = f"{stem}-{args.phenomenon.replace('+', '_')}-{args.search}-s{args.seed}"
+    check_name(name, what="the archive folder's name", fix="give the folder with --out DIR")
     return Path("assess") / name
 
 
@@ -116,7 +120,8 @@ def _run_assess(args: argparse.Namespace) -> int:
             meta_extra={"classes": counted} if args.shared_classes else None,
         )
     summary = {**outcome.summary, "archive": str(out), "resumed": outcome.resumed}
-    summary |= {"model_id": model.model_id, **counted}
+    summary |= {"model_id": model.model_id, "model_file": str(model.file),
+                "model_sha256": model.sha256, **counted}  # fmt: skip
     if args.plot:
         from anunnaki.enlil import plot_archive
 

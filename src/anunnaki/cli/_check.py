@@ -1,8 +1,8 @@
-"""``anunnaki check MODEL [BINDING] [TACTICS]``: static checks with file:line messages.
+"""``anunnaki check MODEL [BINDING] [TACTICS]`` or ``anunnaki check LAUNCH``: static checks.
 
-``anunnaki check LAUNCH`` checks the goal model, binding and tactics a launch file names,
-with the modes its managed system declares; ``--platform rover|uav`` checks the tactics'
-modes against a simulated platform's.
+``anunnaki check LAUNCH`` checks everything ``anunnaki run LAUNCH`` would load, with the
+loader ``run`` uses (:func:`anunnaki.launch.check_launch`), and starts nothing;
+``--platform rover|uav`` checks the tactics' modes against a simulated platform's.
 """
 
 from __future__ import annotations
@@ -19,24 +19,51 @@ from rich.text import Text
 
 from anunnaki._findings import Finding
 from anunnaki.check import CheckResult, PlatformModes, check_files
-from anunnaki.errors import ModelFileError
+
+_EXIT_CODES = (
+    "Exit codes: 0 nothing found; 1 findings (errors or warnings) in what was checked, a file "
+    "that is not valid YAML or does not fit its format included; 2 nothing could be checked: "
+    "a usage error, or a file named on the command line cannot be read at all (missing, a "
+    "folder, not UTF-8 text, too large) or is of no kind check knows."
+)
 
 
 def add_parser(sub: Any) -> None:
     """Register the sub-command."""
     p: argparse.ArgumentParser = sub.add_parser(
         "check",
-        help="check a goal model, its binding and tactics; exit 0 clean, 1 findings, 2 unreadable",
+        help="check a goal model, binding and tactics, or everything a launch file loads; "
+        "exit 0 clean, 1 findings, 2 cannot check",
         description=(
-            "Static checks of a goal model with an optional platform binding and tactics file "
-            "(recognised by their 'anunnaki:' tag or the .xml extension). Each finding names "
-            "file, line and element. Exit 0 clean, 1 findings, 2 a file is unreadable."
+            "Static checks, each finding with file, line and element. Given a goal model, "
+            "with an optional platform binding and tactics file (recognised by their "
+            "'anunnaki:' tag or the .xml extension): the three files. Given a launch file "
+            "(anunnaki: launch/1): everything 'anunnaki run' would load, with the code run "
+            "loads it with: the Utu configuration, bus and notify settings, the goal model, "
+            "binding and tactics, the fail-safe, the managed system's files (scenario and its "
+            "phenomena, model registry with its models' and oracles' files, oracle names, "
+            "trace or bridge) and the tactics' model swaps against the registry; nothing is "
+            "started and no weights are loaded."
         ),
+        epilog=_EXIT_CODES,
     )
-    p.add_argument("model", help="goal-model YAML file, or a launch file (anunnaki: launch/1)")
+    p.add_argument(
+        "model",
+        help="goal-model YAML file, or what 'anunnaki run' takes: a launch file "
+        "(anunnaki: launch/1) or a Utu configuration (utu/1)",
+    )
     p.add_argument("files", nargs="*", metavar="BINDING|TACTICS", help="binding and/or tactics")
-    p.add_argument("--binding", "-b", help="platform-binding file (instead of positional)")
-    p.add_argument("--tactics", help="tactics file, XML or YAML (instead of positional)")
+    p.add_argument(
+        "--binding",
+        "-b",
+        help="platform-binding file (instead of positional; with a launch file, instead of "
+        "the one it names)",
+    )
+    p.add_argument(
+        "--tactics",
+        help="tactics file, XML or YAML (instead of positional; with a launch file, instead "
+        "of the one it names)",
+    )
     p.add_argument(
         "--platform",
         choices=["rover", "uav"],
@@ -76,7 +103,7 @@ def run(args: argparse.Namespace) -> int:
         console.print(Text(f.render(), style=style))
     n_err, n_warn = len(result.errors), len(result.warnings)
     if result.unreadable:
-        console.print(Text("a file could not be read", style="bold red"))
+        console.print(Text("nothing checked: a file could not be read", style="bold red"))
     elif not result.findings:
         model = result.model
         parts = (
@@ -89,6 +116,7 @@ def run(args: argparse.Namespace) -> int:
         )
         if result.tactics is not None:
             parts.append(f"{len(result.tactics.tactics)} tactics")
+        parts.extend(result.checked)
         console.print(Text(f"ok: {'; '.join(parts)}", style="green"))
     else:
         console.print(f"{n_err} error(s), {n_warn} warning(s)")
@@ -96,34 +124,34 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _check(args: argparse.Namespace) -> CheckResult:
-    """Check the files given, or those a launch file names (with its platform's modes)."""
+    """Check the files given, or everything a launch file names (with its platform's modes)."""
     modes = _simulated(args.platform) if args.platform else None
     if not _is_launch(args.model):
         return check_files(
             args.model, *args.files, binding=args.binding, tactics=args.tactics, modes=modes
         )
-    from anunnaki.launch import load_launch
+    from anunnaki.launch import check_launch
 
-    try:
-        launch = load_launch(args.model, read_records=False)
-    except ModelFileError as exc:
-        return CheckResult(findings=[Finding.from_error(exc)], unreadable=True)
-    utu = launch.utu
-    if modes is None and launch.managed is not None:
-        modes = _managed_modes(launch.managed, args.model)
-    return check_files(
-        utu.goal_model,
-        binding=args.binding or utu.binding,
-        tactics=args.tactics or utu.tactics,
-        modes=modes,
-    )
+    if args.files:  # the launch names its binding and tactics; --binding/--tactics replace them
+        return CheckResult(
+            findings=[
+                Finding(
+                    "error",
+                    "a launch file names its own binding and tactics",
+                    args.files[0],
+                    hint="check the launch file alone, or replace one with --binding/--tactics",
+                )
+            ],
+            unreadable=True,
+        )
+    return check_launch(args.model, binding=args.binding, tactics=args.tactics, modes=modes)
 
 
-_LAUNCH_TAG = re.compile(r"""^anunnaki:[ \t]*['"]?launch/1\b""", re.MULTILINE)
+_LAUNCH_TAG = re.compile(r"""^anunnaki:[ \t]*['"]?(?:launch|utu)/1\b""", re.MULTILINE)
 
 
 def _is_launch(path: str) -> bool:
-    """Whether *path* is a launch file (its format tag); unreadable files are not."""
+    """Whether *path* is what ``run`` takes: a launch file or a Utu configuration (its tag)."""
     try:
         with Path(path).open("rb") as fh:
             head = fh.read(4096).decode("utf-8", errors="replace")
@@ -137,21 +165,3 @@ def _simulated(platform: str) -> PlatformModes:
 
     cls = {"rover": "RoverSim", "uav": "UavSim"}[platform]
     return PlatformModes(platform, PLATFORM_MODES[platform], f"anunnaki.sim.{cls}.modes")
-
-
-def _managed_modes(managed: Any, launch: str) -> PlatformModes | None:
-    """The modes a launch's managed system declares: a simulated platform's, or its option."""
-    options = getattr(managed, "options", None)
-    scenario = getattr(options, "scenario", None)
-    if getattr(managed, "name", None) == "sim" and scenario is not None:
-        from anunnaki.sim import load_scenario
-
-        try:
-            return _simulated(load_scenario(scenario).platform)
-        except (ModelFileError, KeyError):
-            return None  # the run reports the scenario; the files are still checked
-    declared = getattr(options, "modes", None)
-    if declared:
-        name = getattr(managed, "name", "managed")
-        return PlatformModes(name, tuple(declared), f"{launch}: managed.{name}.modes")
-    return None

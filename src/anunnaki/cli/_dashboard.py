@@ -20,6 +20,7 @@ from typing import Any
 from pydantic import ValidationError
 
 from anunnaki.bus import BusConfig, BusConfigError, on_loopback, open_bus
+from anunnaki.errors import validation_message
 from anunnaki.launch import Launch, load_launch, signals_to
 
 __all__ = [
@@ -254,7 +255,7 @@ def joining_bus(
     except ValidationError as exc:
         first = exc.errors(include_url=False)[0]
         where = ".".join(str(p) for p in first["loc"]) or "bus"
-        raise BusConfigError(f"bus option {where}: {first['msg']}") from None
+        raise BusConfigError(f"bus option {where}: {validation_message(first)}") from None
 
 
 def run(args: argparse.Namespace) -> int:

@@ -24,6 +24,7 @@ from typing import Any
 from rich.console import Console
 from rich.table import Table
 
+from anunnaki._names import check_domain, check_name
 from anunnaki.errors import AnunnakiError
 
 _CATEGORY = {0: "unaffected", 1: "degraded", 2: "compromised"}
@@ -349,6 +350,12 @@ def _run_train(args: argparse.Namespace) -> int:
     out = Path(args.out)
     if out.suffix != ".safetensors":
         raise AnunnakiError(f"--out {out}: a model file ends in .safetensors")
+    if args.model_id is not None:
+        check_name(args.model_id, what="--model-id")
+    else:
+        check_name(out.stem, what=f"the model id (--out {out.name} without .safetensors)",
+                   fix="give one with --model-id NAME, or another --out file name")  # fmt: skip
+    check_domain(args.domain, what="--domain")
     console = _console()
     train = load_split(args.data, "train", cache=True)
     val = load_split(args.data, "val", cache=True)
@@ -491,15 +498,19 @@ def _add_evaluate(sub: Any) -> None:
     p.set_defaults(run=_run_evaluate)
 
 
-def _report_head(
-    args: argparse.Namespace, det: Any, model_id: str, domain: str, images: int
-) -> dict[str, Any]:
-    """What every ``evaluate-detector`` report starts with: the model, data and threshold."""
+def _report_head(args: argparse.Namespace, det: Any, model: Any, images: int) -> dict[str, Any]:
+    """What every ``evaluate-detector`` report starts with: the model, data and threshold.
+
+    ``model_file`` and ``model_sha256`` are the file that was loaded and measured (the
+    weights of a model file, the registry entry's file) and its hash.
+    """
     threshold = args.threshold
     return {
         "model": str(args.model),
-        "model_id": model_id,
-        "domain": domain,
+        "model_id": model.model_id,
+        "domain": model.domain,
+        "model_file": str(model.file),
+        "model_sha256": model.sha256,
         "data": str(args.data),
         "split": args.split,
         "images": images,
@@ -509,8 +520,8 @@ def _report_head(
     }
 
 
-def _load_evaluated(args: argparse.Namespace) -> tuple[Any, Path, str, str]:
-    """The model ``evaluate-detector`` measures: ``(detector, file, model id, domain)``."""
+def _load_evaluated(args: argparse.Namespace) -> tuple[Any, Any]:
+    """The model ``evaluate-detector`` measures: ``(detector, resolved model)``."""
     from anunnaki.lec import resolve_model
 
     model = resolve_model(args.model, args.model_id)
@@ -524,7 +535,7 @@ def _load_evaluated(args: argparse.Namespace) -> tuple[Any, Path, str, str]:
         raise AnunnakiError(
             "--update-sidecar records the model's own figures; drop --shared-classes"
         )
-    return model.load(), model.file, model.model_id, model.domain
+    return model.load(), model
 
 
 def _check_evaluate_options(args: argparse.Namespace) -> None:
@@ -557,9 +568,10 @@ def _run_evaluate(args: argparse.Namespace) -> int:
         import torch
 
         torch.set_num_threads(args.threads)
-    det, model_file, model_id, domain = _load_evaluated(args)
+    det, model = _load_evaluated(args)
+    model_id, domain = model.model_id, model.domain
     if args.contexts is not None:
-        return _run_contexts(args, det, model_id, domain)
+        return _run_contexts(args, det, model)
     data = load_split(args.data, args.split)
     threshold = args.threshold
     try:
@@ -568,7 +580,7 @@ def _run_evaluate(args: argparse.Namespace) -> int:
         clean = evaluate_detector(det, data, score_threshold=threshold)
     except DetectorError as exc:
         raise AnunnakiError(f"{args.model}: model {model_id!r}: {exc}") from None
-    report = _report_head(args, det, model_id, domain, len(data))
+    report = _report_head(args, det, model, len(data))
     report |= counted
     report["clean"] = clean.as_dict()
     rows = [("clean", clean)]
@@ -591,7 +603,7 @@ def _run_evaluate(args: argparse.Namespace) -> int:
         report["category"] = category
         rows.append((phen.name, perturbed))
     if args.update_sidecar:
-        report["sidecar"] = _update_sidecar(str(model_file), det, args.data, clean, args.split)
+        report["sidecar"] = _update_sidecar(str(model.file), det, args.data, clean, args.split)
     if args.json:
         print(json.dumps(report))
         return 0
@@ -618,13 +630,14 @@ def _run_evaluate(args: argparse.Namespace) -> int:
     return 0
 
 
-def _run_contexts(args: argparse.Namespace, det: Any, model_id: str, domain: str) -> int:
+def _run_contexts(args: argparse.Namespace, det: Any, model: Any) -> int:
     """``--contexts random:N``: F1 over N uniform contexts on a fixed batch (issue 13, item 1)."""
     import numpy as np
 
     from anunnaki.enlil import draw_contexts, fixed_batch, resolve_phenomenon, to_phenomenon_vector
     from anunnaki.lec import DetectorError, evaluate_detector
 
+    model_id, domain = model.model_id, model.domain
     phen = resolve_phenomenon(args.phenomenon)
     batch = fixed_batch(args.data, args.split, args.batch_images, seed=args.seed)
     thresholds = (float(args.thresholds[0]), float(args.thresholds[1]))
@@ -650,7 +663,7 @@ def _run_contexts(args: argparse.Namespace, det: Any, model_id: str, domain: str
     ]
     f1s = np.asarray([r.f1 for r in drawn.results])
     counts = drawn.counts()
-    report = _report_head(args, det, model_id, domain, len(batch))
+    report = _report_head(args, det, model, len(batch))
     report |= counted
     report |= {
         "phenomenon": phen.name,

@@ -8,6 +8,7 @@ import math
 from typing import Any
 
 from anunnaki.cli._detector import add_model_options, classes_counted, classes_line, shared_view
+from anunnaki.cli._text import plain
 
 __all__ = ["add_parser"]
 
@@ -17,7 +18,7 @@ def add_parser(sub: Any) -> None:
     p: argparse.ArgumentParser = sub.add_parser(
         "oracle",
         help="learned behavior oracles (Enlil): train, evaluate, architecture",
-        description=__doc__,
+        description=plain(__doc__),
     )
     osub = p.add_subparsers(dest="oracle_command", metavar="SUBCOMMAND")
     osub.required = True
@@ -130,7 +131,12 @@ def run_train(args: argparse.Namespace) -> int:
             config=config,
             progress=progress,
         )
-    report: dict[str, Any] = {"model_id": model.model_id, "architecture": args.architecture}
+    report: dict[str, Any] = {
+        "model_id": model.model_id,
+        "model_file": str(model.file),
+        "model_sha256": model.sha256,
+        "architecture": args.architecture,
+    }
     report["contexts"] = oracles[0].card.training["contexts"]
     if len(seeds) == 1:
         sha = oracles[0].save(args.out)
@@ -467,6 +473,8 @@ def run_evaluate(args: argparse.Namespace) -> int:
     )
     report = {
         "model_id": model.model_id,
+        "model_file": str(model.file),
+        "model_sha256": model.sha256,
         "data": str(args.data),
         "split": args.split,
         "seed": args.seed,

@@ -26,6 +26,8 @@ from pydantic import ValidationError
 
 from anunnaki import topics
 from anunnaki.bus import BusConfig, BusError, ServiceError, open_bus
+from anunnaki.cli._text import plain
+from anunnaki.errors import validation_message
 from anunnaki.messages import ServiceReply
 from anunnaki.tokens import OPERATOR_TOKEN_ENV, client_operator_token, default_token_file
 
@@ -37,7 +39,7 @@ def add_parser(sub: Any) -> None:
     p: argparse.ArgumentParser = sub.add_parser(
         "reload",
         help="swap a running Utu's goal model, binding or tactics (applied or refused)",
-        description=__doc__,
+        description=plain(__doc__),
     )
     p.add_argument("--goal-model", type=Path, metavar="FILE", help="the new goal model")
     p.add_argument("--binding", type=Path, metavar="FILE", help="the new platform binding")
@@ -217,7 +219,9 @@ def _bus_config(args: argparse.Namespace) -> BusConfig | str:
             }
         )
     except ValidationError as exc:
-        return "; ".join(f"{'.'.join(map(str, e['loc']))}: {e['msg']}" for e in exc.errors())
+        return "; ".join(
+            f"{'.'.join(map(str, e['loc']))}: {validation_message(e)}" for e in exc.errors()
+        )
 
 
 def _wait_outcome(bus: Any, after: int, timeout: float) -> tuple[str, dict[str, Any]] | None:

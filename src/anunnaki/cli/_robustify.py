@@ -12,6 +12,7 @@ import json
 from typing import Any
 
 from anunnaki.cli._detector import add_model_options
+from anunnaki.cli._text import plain
 
 __all__ = ["add_parser"]
 
@@ -21,7 +22,7 @@ def add_parser(sub: Any) -> None:
     p: argparse.ArgumentParser = sub.add_parser(
         "robustify",
         help="a robustified model for a domain, from the contexts where MODEL fails (Enki)",
-        description=__doc__,
+        description=plain(__doc__),
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     p.add_argument("model", help="model file (NAME.safetensors) or registry (REG.yaml)")
@@ -70,7 +71,8 @@ def add_parser(sub: Any) -> None:
         "--oracle-architecture",
         metavar="NAME",
         help="the oracle's network, e.g. small_cnn or patch_cnn (default: the measured choice, "
-        "as scripts/train-oracles.sh: `anunnaki oracle architecture P --model ID` prints it)",
+        "as scripts/train-oracles.sh makes it; anunnaki oracle architecture P --model ID "
+        "prints it)",
     )
     p.add_argument("--json", action="store_true", help="print the summary as one JSON object")
     p.set_defaults(run=run_robustify)

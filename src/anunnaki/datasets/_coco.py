@@ -22,6 +22,7 @@ from typing import Any
 
 import numpy as np
 
+from anunnaki._names import inside
 from anunnaki.datasets._record import DatasetError, Labelled, Record, write_image
 
 __all__ = ["coco_dict", "coco_records", "write_coco"]
@@ -308,6 +309,10 @@ def write_coco(
     Returns:
         *path*.
 
+    Raises:
+        NameRuleError: A record's ``file_name`` would put its image outside *images_dir*
+            (``..``, an absolute path).
+
     """
     p = Path(path)
     root = Path(images_dir) if images_dir is not None else p.parent / "images"
@@ -317,7 +322,9 @@ def write_coco(
     if len(set(ids)) != len(ids) or 0 in ids:
         records = [replace(r, image_id=k + 1) for k, r in enumerate(records)]
     for i, r in enumerate(records):
-        target = root / r.file_name
+        # a file_name is relative to the image folder; '..' or an absolute one would write
+        # elsewhere
+        target = inside(root, root / r.file_name, what=f"image {r.file_name!r}")
         if r.path is not None and target.exists() and target.resolve() == r.path.resolve():
             continue
         target.parent.mkdir(parents=True, exist_ok=True)

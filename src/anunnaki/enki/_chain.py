@@ -15,6 +15,7 @@ from typing import Any
 
 import numpy as np
 
+from anunnaki._names import NameRuleError, check_domain, check_name, inside
 from anunnaki.datasets import Dataset, load_split
 from anunnaki.enki._errors import EnkiError
 from anunnaki.enki._finetune import Budget, finetune
@@ -81,6 +82,15 @@ class RobustifyConfig:
     oracle: dict[str, int] = field(default_factory=dict)
     oracle_architecture: str | None = None
 
+    def __post_init__(self) -> None:
+        """Refuse a domain or an id that is no name (they become file names: docs/robustify.md)."""
+        try:
+            check_domain(self.domain, what="--domain")
+            if self.model_id is not None:
+                check_name(self.model_id, what="--id")
+        except NameRuleError as exc:
+            raise EnkiError(str(exc)) from None
+
     def options(self) -> dict[str, Any]:
         """The options that decide the results, JSON-safe.
 
@@ -104,9 +114,22 @@ class RobustifyConfig:
 
 
 def new_model_id(model_id: str, domain: str) -> str:
-    """``rover-default`` → ``rover-DOMAIN``; any other id gets ``-DOMAIN`` appended."""
+    """``rover-default`` → ``rover-DOMAIN``; any other id gets ``-DOMAIN`` appended.
+
+    Raises:
+        EnkiError: The result is no name (:data:`anunnaki._names.NAME_RULE`): it would be
+            a file name.
+
+    """
     base = model_id.removesuffix("-default")
-    return f"{base}-{domain}"
+    try:
+        return check_name(
+            f"{base}-{domain}",
+            what=f"the new model's id (from model {model_id!r} and domain {domain!r})",
+            fix="give the new model an id that follows it with --id NAME",
+        )
+    except NameRuleError as exc:
+        raise EnkiError(str(exc)) from None
 
 
 def archive_sha256(path: str | Path) -> str:
@@ -342,7 +365,8 @@ class _Chain:
             "budget": {**asdict(cfg.finetune), "steps": det.training["steps"],
                        "images": len(train)},
         }  # fmt: skip
-        file = self.work.path / f"{self.new_id}.safetensors"
+        file = inside(self.work.path, self.work.path / f"{self.new_id}.safetensors",
+                      what="the new model")  # fmt: skip
         sha = save_detector(det, file)
         return {
             "file": str(file),
@@ -420,7 +444,8 @@ class _Chain:
             model_sha256=finetuned["sha256"], thresholds=self.cfg.thresholds, config=config,
             progress=lambda stage, done, total: self.progress(f"oracle: {stage}", done, total),
         )  # fmt: skip
-        file = self.work.path / f"{self.new_id}.oracle.safetensors"
+        file = inside(self.work.path, self.work.path / f"{self.new_id}.oracle.safetensors",
+                      what="the new model's oracle")  # fmt: skip
         sha = oracle.save(file)
         return {"file": str(file), "sha256": sha, "architecture": oracle.card.architecture,
                 "val": oracle.card.metrics.get("val", {})}  # fmt: skip
@@ -471,13 +496,14 @@ def robustify(
         progress: ``progress(stage, done, total)`` as stages advance.
 
     Raises:
-        EnkiError: Bad input (phenomenon, archive, data, work folder), naming it and the fix.
+        EnkiError: Bad input (phenomenon, archive, data, work folder, a domain or a new id
+            that is no name: docs/model-manager.md#names), naming it and the fix.
 
     """
     _check_phenomenon(config.phenomenon)
     resolved = resolve_model(model, model_in_id)
+    new_id = config.model_id or new_model_id(resolved.model_id, config.domain)  # a name
     splits = _splits(data)  # a missing split fails before any work
-    new_id = config.model_id or new_model_id(resolved.model_id, config.domain)
     oracle_options = _oracle_options(config, new_id)  # a bad network too
     options = config.options() | {
         "model": resolved.model_id,

@@ -36,7 +36,7 @@ from anunnaki.enlil._oracle_lookup import (
     lookup_probabilities,
     mixed_probabilities,
 )
-from anunnaki.errors import MissingExtraError, ModelFileError
+from anunnaki.errors import MissingExtraError, ModelFileError, validation_message
 from anunnaki.lec import sha256_file
 from anunnaki.plugins import Registry
 
@@ -559,7 +559,7 @@ def _read_card(spath: Path) -> OracleCard:
         first = exc.errors(include_url=False)[0]
         where = ".".join(str(x) for x in first["loc"]) or "(top level)"
         raise ModelFileError(
-            f"bad oracle sidecar at {where}: {first['msg']}",
+            f"bad oracle sidecar at {where}: {validation_message(first)}",
             path=str(spath),
             element=where,
             hint=f"an oracle sidecar has format {ORACLE_FORMAT!r} (or "

@@ -13,6 +13,8 @@ oracle::
 
 * :func:`load_launch` / :func:`parse_launch` read and check a launch file (guideline B5:
   every error names file, line and element) into a :class:`Launch`;
+* :func:`check_launch` runs the same loader for ``anunnaki check``: every finding instead
+  of the first, nothing started;
 * :func:`run_launch` runs it: the nodes in this process or one process each (the
   supervisor starts, watches and stops them), readiness (C9), the managed system, one line
   per decision, a clean stop on a signal.
@@ -20,6 +22,7 @@ oracle::
 See docs/running.md.
 """
 
+from anunnaki.launch._check import check_launch
 from anunnaki.launch._mailsink import MailSink, ReceivedMail
 from anunnaki.launch._runner import RunResult, format_decision, run_launch
 from anunnaki.launch._schema import (
@@ -41,6 +44,7 @@ __all__ = [
     "NodeSettings",
     "ReceivedMail",
     "RunResult",
+    "check_launch",
     "child_bus_config",
     "format_decision",
     "load_launch",

@@ -64,6 +64,23 @@ def format_decision(d: Decision, *, t0: float = 0.0) -> str:
     return f"{d.t:9.3f}  {d.kind:<20} {d.tactic or '-':<18} {detail}".rstrip()
 
 
+#: What a baseline manager is, said at the start of its run (``--manager``).
+_BASELINES = {
+    "none": "manager: none, the baseline without adaptation: Utu monitors and analyses, "
+    "no tactic starts",
+    "random": "manager: random (seed {seed}), the baseline that draws one startable tactic "
+    "whenever Utu would start any; each draw is a random_draw line",
+}
+
+
+def _baseline_outcome(manager: str, decisions: Iterable[Decision], *, t0: float = 0.0) -> str:
+    """What a baseline manager did, in one line: the tactics it started, or nothing adapted."""
+    started = [d.shifted(t0) for d in decisions if d.kind == "started"]
+    if not started:
+        return f"manager {manager}: nothing adapted (no tactic started)"
+    return f"manager {manager}: started " + ", ".join(f"{d.tactic} at {d.t:.3f} s" for d in started)
+
+
 class _Printer:
     def __init__(self, out: TextIO, tail: DecisionTail) -> None:
         self.out = out
@@ -362,6 +379,8 @@ class _Runner:
             )
         else:
             self.say(f"knowledge: {self.kb_path}")
+        if utu.manager != "utu":
+            self.say(_BASELINES[utu.manager].format(seed=utu.manager_seed))
         for w in launch.parts.warnings:
             self.say(f"warning: {w.render()}")
         if self.managed is not None:
@@ -477,6 +496,8 @@ class _Runner:
     def _finish(self, printer: _Printer, code: int, reason: str, ran: float) -> None:
         printer.poll()
         self.say(f"stopped ({reason}): {len(printer.decisions)} decisions in {ran:.2f} s")
+        if self.utu.manager != "utu":
+            self.say(_baseline_outcome(self.utu.manager, printer.decisions, t0=printer.t0 or 0.0))
         if self.running is not None:
             self.running.finish(printer.decisions, ran)
 

@@ -20,8 +20,10 @@ at which rates, and optionally a scripted managed system to run them against::
       speed: 1.0
 
 Paths are relative to the launch file. :func:`load_launch` validates everything a node
-needs at bring-up (guideline B5): the launch file itself, the Utu configuration, the goal
-model, binding and tactics, the trace; every error names file and line.
+needs at bring-up (guideline B5): the launch file itself, the Utu configuration, the bus,
+``notify``, the managed system's files (trace, scenario, model registry, oracle names), the
+goal model, binding and tactics, the tactics' model swaps; every error names file and line.
+``anunnaki check`` walks the same steps (:func:`~anunnaki.launch.check_launch`).
 
 :func:`~anunnaki.launch.run_launch` starts the nodes in this process (the composed
 :class:`~anunnaki.utu.AutonomicManager` when all five run) or one process per node
@@ -33,20 +35,24 @@ everything down on a signal, at ``until`` or when the trace ends. See docs/runni
 from __future__ import annotations
 
 import dataclasses
+import os
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Annotated, Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
 
+from anunnaki._findings import Finding
 from anunnaki._safeyaml import LineMap, describe_path, load_yaml, validation_error
 from anunnaki.bus import BusConfig
+from anunnaki.check import ModelCatalogue, check_swaps
 from anunnaki.errors import AnunnakiError, ModelFileError
 from anunnaki.launch._managed import resolve_kind, split_managed
-from anunnaki.managed import MANAGED, ManagedKind
+from anunnaki.managed import MANAGED, ManagedKind, ServesModels
 from anunnaki.utu import NODE_NAMES, UtuConfig, load_config
 from anunnaki.utu.cycle import UtuParts, load_parts
-from anunnaki.utu.host import NodeName
+from anunnaki.utu.host import NodeName, NotifyConfig
 
 __all__ = ["Launch", "LaunchConfig", "LaunchError", "NodeSettings", "load_launch", "parse_launch"]
 
@@ -227,50 +233,104 @@ def _resolve(
     data: Any, lines: LineMap, path: Path, *, read_records: bool, where: str | None = None
 ) -> Launch:
     """The launch read from ``path`` (or text named ``where``), checked and resolved."""
-    where = str(path) if where is None else where
-    tag = data.get("anunnaki") if isinstance(data, dict) else None
-    if tag == "utu/1":
-        data = {"anunnaki": "launch/1", "utu": str(path.resolve())}
-        lines = LineMap()
-    elif tag != "launch/1":
-        raise ModelFileError(
-            "not a launch file",
-            path=where,
-            line=1,
-            hint="start it with 'anunnaki: launch/1' (or give a Utu configuration, utu/1)",
-        )
-    try:
-        config = LaunchConfig.model_validate(data)
-    except ValidationError as exc:
-        raise validation_error(_Prefixed(exc, ()), data, lines, where) from None
-    base = path.resolve().parent
-    utu, src = _utu_of(config, _Source(data, lines, where, ()), base)
-    if config.knowledge is not None:
-        kb = config.knowledge
-        utu = utu.model_copy(update={"knowledge": kb if kb == ":memory:" else str(_here(base, kb))})
+    return _Loader(data, lines, path, read_records=read_records, where=where).load()
 
-    # The bus: the launch file's, else the Utu configuration's.
-    if config.bus is not None:
-        bus = config.bus
-    else:
+
+class _Loader:
+    """Loading a launch, step by step: what ``run`` loads is what ``check`` checks.
+
+    A run stops at the first problem (:meth:`fail` raises it); ``anunnaki check`` uses a
+    subclass (``anunnaki.launch._check``) that records it and goes on with the steps that
+    do not depend on the one that failed, and lists every finding of the goal model,
+    binding and tactics before they are loaded here as a run loads them (:meth:`review`).
+    Nothing here starts anything: no bus, no simulator, no weights.
+    """
+
+    def __init__(
+        self, data: Any, lines: LineMap, path: Path, *, read_records: bool, where: str | None
+    ) -> None:
+        self.data = data
+        self.lines = lines
+        self.path = path
+        self.read_records = read_records
+        self.where = str(path) if where is None else where
+
+    def fail(self, exc: ModelFileError) -> None:
+        """A step found a problem: a run stops here."""
+        raise exc
+
+    def found(self, findings: list[Finding]) -> None:
+        """A step's findings: a run stops at the first error (it prints warnings at start)."""
+        errors = [f for f in findings if f.severity == "error"]
+        if errors:
+            raise errors[0].to_error()
+
+    def review(self, utu: UtuConfig, src: _Source, managed: ManagedKind | None) -> UtuConfig:
+        """Before the goal model, binding and tactics load (a run: nothing to do)."""
+        return utu
+
+    def parts(self, utu: UtuConfig, src: _Source) -> UtuParts:
+        """The goal model, binding and tactics, loaded and checked as every node loads them."""
+        return _parts_of(utu, src)
+
+    def _step(self, step: Callable[[], object]) -> bool:
+        """Run a step; whether it passed (a run: it raised otherwise)."""
         try:
-            bus = BusConfig.model_validate(utu.bus)
-        except ValidationError as exc:
-            raise validation_error(
-                _Prefixed(exc, (*src.prefix, "bus")), src.data, src.lines, src.where
-            ) from None
+            step()
+        except ModelFileError as exc:
+            self.fail(exc)
+            return False
+        return True
 
-    # Nodes and rates.
-    rates: dict[str, float] = {
-        n: (s.rate if s is not None and s.rate is not None else utu.rate)
-        for n, s in config.nodes.items()
-    }
-    nodes: dict[str, float] = {n: rates[n] for n in NODE_NAMES if n in rates}  # cycle order
-    parts = _parts_of(utu, src)
-    managed = _managed(config.managed, data, lines, where, base)
-    if managed is not None and read_records:
-        _check_managed(managed, utu, _Source(data, lines, where, ()))
-    return Launch(config, path, utu, parts, bus, nodes, managed, lines)
+    def load(self) -> Launch:
+        """Every step, in order; the loaded launch."""
+        data, lines, path, where = self.data, self.lines, self.path, self.where
+        tag = data.get("anunnaki") if isinstance(data, dict) else None
+        if tag == "utu/1":
+            data = {"anunnaki": "launch/1", "utu": str(path.resolve())}
+            lines = LineMap()
+        elif tag != "launch/1":
+            raise ModelFileError(
+                "not a launch file",
+                path=where,
+                line=1,
+                hint="start it with 'anunnaki: launch/1' (or give a Utu configuration, utu/1)",
+            )
+        try:
+            config = LaunchConfig.model_validate(data)
+        except ValidationError as exc:
+            raise validation_error(_Prefixed(exc, ()), data, lines, where) from None
+        base = path.resolve().parent
+        launch_src = _Source(data, lines, where, ())
+        utu, src = _utu_of(config, launch_src, base)
+        if config.knowledge is not None:
+            kb = config.knowledge
+            utu = utu.model_copy(
+                update={"knowledge": kb if kb == ":memory:" else str(_here(base, kb))}
+            )
+        bus = _bus_of(config, utu, src)
+        _check_notify(utu, src)
+        # Nodes and rates.
+        rates: dict[str, float] = {
+            n: (s.rate if s is not None and s.rate is not None else utu.rate)
+            for n, s in config.nodes.items()
+        }
+        nodes: dict[str, float] = {n: rates[n] for n in NODE_NAMES if n in rates}  # cycle order
+        managed = _managed(config.managed, data, lines, where, base)
+        utu = self.review(utu, src, managed)
+        # The managed system's own files (scenario, registry, oracles), then the goal model,
+        # binding and tactics, then the tactics' model swaps against the registry.
+        checked = (
+            managed is not None
+            and self.read_records
+            and self._step(lambda: _check_managed(managed, utu, launch_src))
+        )
+        parts = self.parts(utu, src)
+        if managed is not None and checked:
+            swaps = _swap_findings(managed, parts)
+            self.found(swaps)
+            parts = dataclasses.replace(parts, warnings=[*parts.warnings, *swaps])
+        return Launch(config, path, utu, parts, bus, nodes, managed, lines)
 
 
 @dataclass(frozen=True)
@@ -306,6 +366,30 @@ def _utu_of(config: LaunchConfig, launch: _Source, base: Path) -> tuple[UtuConfi
     return utu, dataclasses.replace(launch, prefix=("utu",))
 
 
+def _bus_of(config: LaunchConfig, utu: UtuConfig, src: _Source) -> BusConfig:
+    """The bus: the launch file's, else the Utu configuration's."""
+    if config.bus is not None:
+        return config.bus
+    try:
+        return BusConfig.model_validate(utu.bus)
+    except ValidationError as exc:
+        raise validation_error(
+            _Prefixed(exc, (*src.prefix, "bus")), src.data, src.lines, src.where
+        ) from None
+
+
+def _check_notify(utu: UtuConfig, src: _Source) -> None:
+    """The ``notify:`` section, as the notifier reads it at start (e-mail, webhooks, log)."""
+    if not utu.notify:
+        return
+    try:
+        NotifyConfig.model_validate(utu.notify)
+    except ValidationError as exc:
+        raise validation_error(
+            _Prefixed(exc, (*src.prefix, "notify")), src.data, src.lines, src.where
+        ) from None
+
+
 def _parts_of(utu: UtuConfig, src: _Source) -> UtuParts:
     """The goal model, binding and tactics (B5: fail here, with file and line)."""
     try:
@@ -313,14 +397,38 @@ def _parts_of(utu: UtuConfig, src: _Source) -> UtuParts:
     except ModelFileError as exc:
         if exc.element != "failsafe":
             raise
-        real, element = describe_path(src.data, (*src.prefix, "failsafe"))
-        raise ModelFileError(
-            exc.message,
-            path=src.where,
-            line=src.lines.line(real) if src.lines is not None else None,
-            element=element,
-            hint=exc.hint,
-        ) from None
+        raise _at_failsafe(exc.message, exc.hint, src) from None
+
+
+def _at_failsafe(message: str, hint: str | None, src: _Source) -> ModelFileError:
+    """A problem with the fail-safe, located at ``failsafe`` in the Utu configuration."""
+    real, element = describe_path(src.data, (*src.prefix, "failsafe"))
+    return ModelFileError(
+        message,
+        path=src.where,
+        line=src.lines.line(real) if src.lines is not None else None,
+        element=element,
+        hint=hint,
+    )
+
+
+def _swap_findings(managed: ManagedKind, parts: UtuParts) -> list[Finding]:
+    """The tactics' ``swap_model`` actions the managed system's model manager would refuse.
+
+    Warnings (:func:`~anunnaki.check.check_swaps`): a run prints them at start.
+    """
+    if not isinstance(managed, ServesModels):
+        return []
+    registry_file = managed.model_registry()
+    if registry_file is None:
+        return []
+    from anunnaki.lec import load_registry
+
+    registry = load_registry(registry_file)
+    where = os.path.normpath(registry_file)
+    models = ModelCatalogue(registry.lec, tuple(registry.ids()), tuple(registry.domains()), where)
+    t = parts.sources.get("tactics")
+    return check_swaps(parts.model, parts.tactics, t[0] if t else None, models)
 
 
 def _check_managed(managed: ManagedKind, utu: UtuConfig, launch: _Source) -> None:

@@ -26,7 +26,8 @@ import numpy as np
 import numpy.typing as npt
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
-from anunnaki.errors import AnunnakiError, ModelFileError
+from anunnaki._names import close_file
+from anunnaki.errors import AnunnakiError, ModelFileError, validation_message
 from anunnaki.plugins import Registry
 
 __all__ = [
@@ -422,8 +423,8 @@ def update_metrics(path: str | Path, metrics: Mapping[str, Any]) -> ModelCard:
 
     """
     card = read_card(path)
-    wpath = sidecar_path(path).parent / card.weights
-    if not wpath.is_file() or sha256_file(wpath) != card.sha256:
+    wpath = checked_weights(path, card)
+    if sha256_file(wpath) != card.sha256:
         raise DetectorLoadError(
             "the weights are missing or do not match the sidecar's sha256; metrics not updated",
             path=wpath,
@@ -460,6 +461,9 @@ def read_card(path: str | Path) -> ModelCard:
     """
     spath = sidecar_path(path)
     if not spath.is_file():
+        given = Path(path) if Path(path).suffix in (".safetensors", ".json") else weights_path(path)
+        if not given.exists():  # the file named is missing, not only its sidecar
+            raise model_not_found(given)
         raise DetectorLoadError(
             "model sidecar not found",
             path=spath,
@@ -516,29 +520,39 @@ def read_card(path: str | Path) -> ModelCard:
         err = exc.errors()[0]
         where = ".".join(str(p) for p in err["loc"])
         raise DetectorLoadError(
-            err["msg"], path=spath, element=where, hint="fix the field or re-save the model"
+            validation_message(err),
+            path=spath,
+            element=where,
+            hint="fix the field or re-save the model",
         ) from None
 
 
-def load_detector(path: str | Path) -> Detector:
-    """Load a model file safely: sidecar checked, weights hash checked, then safetensors.
+def model_not_found(path: Path, what: str = "model file") -> DetectorLoadError:
+    """The error for a model file that is not there, with a close name in its folder."""
+    close = close_file(path)
+    if close is not None:
+        hint = f"did you mean {close}?"
+    elif not path.parent.is_dir():
+        hint = f"there is no folder {path.parent}"
+    else:
+        hint = "check the path; a model is NAME.safetensors with its sidecar NAME.json"
+    return DetectorLoadError(f"{what} not found", path=path, hint=hint)
 
-    Args:
-        path: ``NAME.safetensors`` or ``NAME.json`` (the other file must sit next to it).
 
-    Returns:
-        A ready :class:`Detector` in inference mode (our :class:`CenterNetDetector` for the
-        ``centernet`` architecture).
+def checked_weights(path: str | Path, card: ModelCard) -> Path:
+    """The weights file of the model *path* names: ``NAME.safetensors``, and no other.
+
+    A sidecar describes the weights file of its own name (``NAME.json`` ↔
+    ``NAME.safetensors``, as :func:`save_detector` writes them). One whose ``weights``
+    names another file is a copied sidecar: loading what it names would measure another
+    model than the file given, so it is refused.
 
     Raises:
-        DetectorLoadError: A file is missing, the sidecar is invalid, the weights' sha256
-            differs from the sidecar's, the weights are not valid safetensors, or they do not
-            fit the architecture. The message names the file.
+        DetectorLoadError: The sidecar names another file, or the weights are missing.
 
     """
-    card = read_card(path)
     spath = sidecar_path(path)
-    wpath = spath.parent / card.weights
+    wpath = weights_path(path)
     if Path(card.weights).name != card.weights:
         raise DetectorLoadError(
             f"weights {card.weights!r} must be a bare file name next to the sidecar",
@@ -546,10 +560,42 @@ def load_detector(path: str | Path) -> Detector:
             element="weights",
             hint="models are self-contained folders; move the weights next to the sidecar",
         )
-    if not wpath.is_file():
+    if card.weights != wpath.name:
         raise DetectorLoadError(
-            "model weights not found", path=wpath, hint=f"copy it next to {spath.name}"
+            f"the sidecar names the weights {card.weights!r}, not {wpath.name!r}: it is "
+            "another model's sidecar, copied or renamed; nothing was loaded",
+            path=spath,
+            element="weights",
+            hint=f"a model is NAME.safetensors with its own NAME.json; give {card.weights} "
+            f"for the model this sidecar describes, or re-save the model of {wpath.name} "
+            "with anunnaki.lec.save_detector",
         )
+    if not wpath.is_file():
+        raise model_not_found(wpath, "model weights")
+    return wpath
+
+
+def load_detector(path: str | Path) -> Detector:
+    """Load a model file safely: sidecar checked, weights hash checked, then safetensors.
+
+    Args:
+        path: ``NAME.safetensors`` or ``NAME.json`` (the other file must sit next to it).
+            The weights read are ``NAME.safetensors``, always: a sidecar whose ``weights``
+            names another file is refused (a copied sidecar would load another model).
+
+    Returns:
+        A ready :class:`Detector` in inference mode (our :class:`CenterNetDetector` for the
+        ``centernet`` architecture).
+
+    Raises:
+        DetectorLoadError: A file is missing, the sidecar is invalid or names other weights,
+            the weights' sha256 differs from the sidecar's, the weights are not valid
+            safetensors, or they do not fit the architecture. The message names the file.
+
+    """
+    card = read_card(path)
+    spath = sidecar_path(path)
+    wpath = checked_weights(path, card)
     digest = sha256_file(wpath)
     if digest != card.sha256:
         raise DetectorLoadError(

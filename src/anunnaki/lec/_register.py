@@ -17,6 +17,7 @@ import re
 import shutil
 from pathlib import Path
 
+from anunnaki._names import NameRuleError, check_domain, check_name
 from anunnaki.lec._detector import read_card, sha256_file, sidecar_path, weights_path
 from anunnaki.lec._registry import REGISTRY_FORMAT, ModelRegistryError, ModelSpec
 from anunnaki.lec._registry_file import load_registry
@@ -84,16 +85,27 @@ def _write(path: Path, text: str) -> None:
     os.replace(tmp, path)
 
 
+def _check_names(model_id: str, domain: str) -> None:
+    """The entry's id and domain follow the rule for names (before the file is touched)."""
+    try:
+        check_name(model_id, what="model id")
+        check_domain(domain, what="domain")
+    except NameRuleError as exc:
+        raise ModelRegistryError(str(exc)) from None
+
+
 def check_registrable(registry: str | Path, model_id: str, domain: str) -> None:
     """Refuse what :func:`register_model` would refuse in an existing *registry*, up front.
 
     Raises:
         ModelRegistryError: A model with *model_id* is registered already (naming its line),
-            or another model serves *domain* (one model per domain: a swap names a domain).
+            another model serves *domain* (one model per domain: a swap names a domain), or
+            the id or the domain is no name (``anunnaki._names``).
         ModelFileError: The registry is malformed (naming the line).
 
     """
     reg = Path(registry)
+    _check_names(model_id, domain)
     existing = load_registry(reg)
     if model_id in existing:
         entry_re = re.compile(rf"\s*- id: {re.escape(model_id)}\s*")
@@ -136,8 +148,8 @@ def register_model(
 
     Raises:
         ModelRegistryError: The id is registered already, another model serves the domain,
-            the registry is missing (without *create*) or cannot be added to, or a file of
-            the same name is in the way.
+            the id or the domain is no name (``anunnaki._names``), the registry is missing
+            (without *create*) or cannot be added to, or a file of the same name is in the way.
         ModelFileError: The registry is malformed (naming the line) or the result does not
             load (the file is then restored).
 
@@ -148,6 +160,7 @@ def register_model(
     card = read_card(weights)
     model_id = model_id or card.model_id
     domain = domain or card.domain
+    _check_names(model_id, domain)
     if reg.is_file():
         text = reg.read_text(encoding="utf-8")
         check_registrable(reg, model_id, domain)

@@ -30,8 +30,9 @@ from typing import Any
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
 
+from anunnaki._names import check_domain, check_name
 from anunnaki._safeyaml import LineMap
-from anunnaki.errors import AnunnakiError, MissingExtraError, ModelFileError
+from anunnaki.errors import AnunnakiError, MissingExtraError, ModelFileError, validation_message
 from anunnaki.lec._detector import (
     ARCHITECTURES,
     Detector,
@@ -58,8 +59,6 @@ REGISTRY_FORMAT = "models/1"
 #: The domain of the model that runs when no adverse condition is perceived.
 DEFAULT_DOMAIN = "default"
 
-_ID_RE = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.\-]{0,127}$")
-_DOMAIN_RE = re.compile(r"^[A-Za-z_][A-Za-z0-9_]{0,63}$")
 _SHA_RE = re.compile(r"^[0-9a-f]{64}$")
 
 
@@ -157,19 +156,12 @@ class ModelSpec(BaseModel):
     @field_validator("id")
     @classmethod
     def _check_id(cls, value: str) -> str:
-        if not _ID_RE.match(value):
-            raise ValueError(
-                f"model id {value!r} must start with a letter or digit and use letters, "
-                "digits, '_', '.' and '-' (at most 128 characters)"
-            )
-        return value
+        return check_name(value, what="model id")
 
     @field_validator("domain")
     @classmethod
     def _check_domain(cls, value: str) -> str:
-        if not _DOMAIN_RE.match(value):
-            raise ValueError(f"domain {value!r} must be an identifier such as 'fog' or 'low_light'")
-        return value
+        return check_domain(value, what="domain")
 
     @field_validator("sha256")
     @classmethod
@@ -258,7 +250,9 @@ class ModelRegistry:
             except ValidationError as exc:
                 first = exc.errors(include_url=False)[0]
                 where = ".".join(str(p) for p in first["loc"]) or "model"
-                raise ModelRegistryError(f"model entry {where}: {first['msg']}") from None
+                raise ModelRegistryError(
+                    f"model entry {where}: {validation_message(first)}"
+                ) from None
         if spec.loader is not None and spec.loader not in ARCHITECTURES:
             raise ModelRegistryError(
                 f"model {spec.id!r}: {ARCHITECTURES.unknown(spec.loader)}; install the "

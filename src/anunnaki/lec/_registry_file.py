@@ -38,11 +38,12 @@ from typing import Annotated, Any, Literal
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
 from anunnaki._safeyaml import LineMap, load_yaml, validation_error
-from anunnaki.errors import AnunnakiError, ModelFileError
+from anunnaki.errors import AnunnakiError, ModelFileError, validation_message
 from anunnaki.lec._detector import (
     ARCHITECTURES,
     Detector,
     architecture_files,
+    checked_weights,
     read_card,
     sha256_file,
 )
@@ -184,7 +185,7 @@ def _build(  # noqa: C901
             first = exc.errors(include_url=False)[0]
             field = str(first["loc"][0]) if first["loc"] else None
             raise _entry_error(
-                str(first["msg"]).removeprefix("Value error, "),
+                validation_message(first),
                 lines=lines,
                 path=source,
                 index=i,
@@ -412,8 +413,11 @@ class ResolvedModel:
         source: What was given (``NAME.safetensors``, ``NAME.json`` or ``REG.yaml``).
         model_id: The registry's id of the model, or the model file's own.
         domain: Its operating domain.
-        file: The model file.
-        sha256: Hex sha256 of ``file`` (checked against the registry's pins, if any).
+        file: The model file: the registry entry's ``file``, or the weights
+            (``NAME.safetensors``) of a model file given as ``NAME.safetensors`` or
+            ``NAME.json`` — the file :meth:`load` reads.
+        sha256: Hex sha256 of ``file`` (checked against the registry's pins, if any): what
+            a report states was measured.
         spec: The registry entry (``None`` for a model file).
         registry: The registry (``None`` for a model file).
 
@@ -476,4 +480,5 @@ def resolve_model(source: str | Path, model_id: str | None = None) -> ResolvedMo
             "model file; drop --model, or name the registry"
         )
     card = read_card(path)
-    return ResolvedModel(str(source), card.model_id, card.domain, path, sha256_file(path))
+    weights = checked_weights(path, card)  # the file given is the file loaded
+    return ResolvedModel(str(source), card.model_id, card.domain, weights, sha256_file(weights))

@@ -24,6 +24,7 @@ import numpy as np
 import numpy.typing as npt
 import torch
 
+from anunnaki._names import NameRuleError, check_name
 from anunnaki.datasets import Dataset
 from anunnaki.lec._centernet import (
     _PAD,
@@ -181,6 +182,18 @@ class TrainConfig:
     ignore: bool = True
     init: str | Path | CenterNetDetector | None = None
     perturb: Perturb | None = None
+
+    def __post_init__(self) -> None:
+        """The id and the domain are names (``anunnaki._names``): an id becomes file names.
+
+        The domain only has to be a name here; a registry (where models are swapped by
+        domain) also wants it an identifier, and ``train-detector --domain`` asks that.
+        """
+        try:
+            check_name(self.model_id, what="model id")
+            check_name(self.domain, what="domain")
+        except NameRuleError as exc:
+            raise DetectorError(f"TrainConfig: {exc}") from None
 
 
 @dataclass

@@ -23,7 +23,8 @@ with the hook :class:`TakesModels`.
 A kind is a class with ``name``, ``Options`` (a pydantic model of its launch-file keys),
 ``__init__(options, *, base)``, ``speed``, ``relay_clock``, ``check``, ``notes`` and
 ``start(ctx) -> ManagedRun`` (:class:`ManagedKind`); optional hooks are Protocols
-(:class:`WritesReports`). A third party adds one with a module and an entry point::
+(:class:`WritesReports`, :class:`ServesModels`). A third party adds one with a module and an
+entry point::
 
     [project.entry-points."anunnaki.managed"]
     my_robot = "my_package.robot:MyRobotKind"
@@ -45,6 +46,7 @@ from anunnaki.managed._slot import (
     ManagedContext,
     ManagedKind,
     ManagedRun,
+    ServesModels,
     UtuSettings,
     WritesReports,
 )
@@ -55,7 +57,9 @@ if TYPE_CHECKING:
         SimulatedSystem,
         format_phases,
         format_scoring,
+        phase_spans,
         scenario_phases,
+        score_phases,
     )
 
 __all__ = [
@@ -71,6 +75,7 @@ __all__ = [
     "RobotKind",
     "ScriptedKind",
     "ScriptedSystem",
+    "ServesModels",
     "SimKind",
     "SimulatedSystem",
     "TakesModels",
@@ -79,7 +84,9 @@ __all__ = [
     "check_camera_chain",
     "format_phases",
     "format_scoring",
+    "phase_spans",
     "scenario_phases",
+    "score_phases",
 ]
 
 _LAZY = {
@@ -87,7 +94,9 @@ _LAZY = {
     "SimulatedSystem",
     "format_phases",
     "format_scoring",
+    "phase_spans",
     "scenario_phases",
+    "score_phases",
 }
 
 

@@ -5,7 +5,13 @@ robot) wires it here, and only here::
 
     camera ─Image─▶ LecNode (the registry's active model) ─▶ /lec/detector/detections
        ├──────────▶ OracleNode (oracle) ─Assessment─▶ /utu/oracle/output   (Utu's agent A4)
-       └──────────▶ OracleNode (scorer) ─Assessment─▶ /sim/oracle/scorer   (no agent reads it)
+       ├──────────▶ OracleNode (scorer) ─Assessment─▶ /sim/oracle/scorer   (no agent reads it)
+       └──────────▶ OracleNode (shadow) ─Assessment─▶ /utu/oracle/shadow   (e.g. agent A7)
+
+The shadow is one model's oracle assessing every frame whichever model is active (options
+``domain: default`` or ``model: ID`` say which): while a robust model runs, the default
+model's own oracle tells whether the default would cope now, so the way back to it need not
+wait for the scene to *look* clear for a fixed time (docs/whole-loop.md).
 
 The oracle and the scorer are options as a launch file gives them: ``name`` (a plugin of
 the oracle slot) and the oracle's own options (e.g. ``window``). An oracle that takes
@@ -69,28 +75,58 @@ def check_camera_chain(
     scorer: Mapping[str, Any] | None = None,
     default_oracle: str | None = None,
     where: str = "managed",
+    shadow: Mapping[str, Any] | None = None,
 ) -> None:
     """Bring-up checks (B5): load the registry, check the oracles' names.
 
     Errors are :class:`~anunnaki.errors.ModelFileError` naming the element under ``where``
     (e.g. ``managed.oracle.name``), so the launch file's line can be given.
     """
+    registry = None
     if models is not None:
         from anunnaki.lec import load_registry
 
-        load_registry(models)
-    for key, options in (("oracle", oracle), ("scorer", scorer)):
+        registry = load_registry(models)
+    if shadow is not None:
+        _shadow_model(shadow, registry, f"{where}.shadow")
+    for key, options in (("oracle", oracle), ("scorer", scorer), ("shadow", shadow)):
         if options is None:
             continue
         from anunnaki.oracles import ORACLES
 
         name = _oracle_name(options, default_oracle, f"{where}.{key}")
-        if name not in ORACLES.names():
+        if not ORACLES.offers(name):  # imports no plugin: Enlil's would import torch
             raise ModelFileError(
                 f"unknown oracle {name!r}",
                 element=f"{where}.{key}.name",
                 hint=f"known oracles: {', '.join(ORACLES.names())}",
             )
+
+
+def _shadow_model(options: Mapping[str, Any], registry: Any, element: str) -> str:
+    """The model id a shadow oracle assesses: its ``model``, or its ``domain``'s model."""
+    model, domain = options.get("model"), options.get("domain")
+    if registry is None:
+        raise ModelFileError(
+            "a shadow oracle needs the detector's models",
+            element=element,
+            hint="give 'models:' (the registry) beside 'shadow:'",
+        )
+    if (model is None) == (domain is None):
+        raise ModelFileError(
+            "say which model the shadow oracle assesses",
+            element=element,
+            hint="give either 'domain' (e.g. domain: default) or 'model' (a model id), not both",
+        )
+    from anunnaki.lec import UnknownModelError
+
+    try:
+        spec = registry.resolve(model_id=model, domain=domain)
+    except UnknownModelError as exc:
+        raise ModelFileError(
+            str(exc), element=f"{element}.{'model' if model is not None else 'domain'}"
+        ) from None
+    return str(spec.id)
 
 
 class CameraChain(Closing):
@@ -104,6 +140,9 @@ class CameraChain(Closing):
         oracle: The oracle node's options (``name`` and the oracle's own); ``None``: none.
         scorer: A second oracle's options, run beside the first as its live scorer; it
             publishes on ``topics.SCORER`` as node ``/scorer_<name>``; ``None``: none.
+        shadow: A shadow oracle's options: ``name``, the oracle's own, and ``domain`` or
+            ``model``, the model it assesses on every frame whichever is active; it
+            publishes on ``topics.SHADOW_ORACLE`` as node ``/shadow_<name>``; ``None``: none.
         classes: Class names, for ground truth that gives labels as indices.
         default_oracle: The oracle's name when its options give none (``None``: required).
 
@@ -112,6 +151,7 @@ class CameraChain(Closing):
         lec: The LEC node (``None`` without a detector).
         oracle: The oracle node, or ``None``.
         scorer: The scorer's oracle node, or ``None``.
+        shadow: The shadow oracle's node, or ``None``.
         detections_topic: Where the detector's detections go.
 
     """
@@ -126,6 +166,7 @@ class CameraChain(Closing):
         scorer: Mapping[str, Any] | None = None,
         classes: Sequence[str] | None = None,
         default_oracle: str | None = None,
+        shadow: Mapping[str, Any] | None = None,
     ) -> None:
         self.bus = bus
         self.camera = camera
@@ -134,6 +175,7 @@ class CameraChain(Closing):
         self.lec: Any = None
         self.oracle: Any = None
         self.scorer: Any = None
+        self.shadow: Any = None
         self.detections_topic = topics.DETECTIONS
         try:
             if models is not None:
@@ -146,6 +188,12 @@ class CameraChain(Closing):
                 self.detections_topic = self.lec.detections_topic
             self.oracle = self._oracle(oracle, classes, default_oracle)
             self.scorer = self._oracle(scorer, classes, default_oracle, output=topics.SCORER)
+            if shadow is not None:
+                opts = {k: v for k, v in shadow.items() if k != "domain"}
+                opts["model"] = _shadow_model(shadow, self.registry, "shadow")
+                self.shadow = self._oracle(
+                    opts, classes, default_oracle, output=topics.SHADOW_ORACLE, role="shadow"
+                )
         except BaseException:
             self.close()
             raise
@@ -161,6 +209,7 @@ class CameraChain(Closing):
         default: str | None,
         *,
         output: str | None = None,
+        role: str = "scorer",
     ) -> Any:
         """An oracle node from its options, or ``None``."""
         if options is None:
@@ -176,7 +225,7 @@ class CameraChain(Closing):
                 opts.setdefault(key, value)
         if output is not None:
             opts.setdefault("output", output)
-            opts.setdefault("node", f"/scorer_{name}")
+            opts.setdefault("node", f"/{role}_{name}")
         node = OracleNode(
             self.bus,
             name,
@@ -194,6 +243,8 @@ class CameraChain(Closing):
         text += f"oracle {self.oracle.oracle.name}" if self.oracle is not None else "no oracle"
         if self.scorer is not None:
             text += f", scored live by {self.scorer.oracle.name}"
+        if self.shadow is not None:
+            text += f", shadowed by {self.shadow.oracle.name} for {self.shadow.model_id}"
         return text
 
     def close(self) -> None:

@@ -259,6 +259,10 @@ class SimConfig(_Strict):
             ``{name: ground_truth, window: 30}`` beside ``oracle: {name: enlil}``); it
             publishes on ``/sim/oracle/scorer``, which Utu does not read, and the report
             gives their agreement and the delay between their category changes.
+        shadow: A shadow oracle (same form plus ``domain`` or ``model``: which model it
+            assesses, e.g. ``{name: enlil, window: 3, domain: default}``): that model's
+            oracle on every frame whichever model is active, published on
+            ``/utu/oracle/shadow`` for an agent of Utu's (docs/whole-loop.md).
         speed: Simulated seconds per wall second (the detector can hold it back: lockstep).
         lockstep: A frame is not followed by the next before its detections are out.
         report: Print the per-phase table (detector F1, categories, models, tactics) at the end.
@@ -277,6 +281,7 @@ class SimConfig(_Strict):
     models: str | None = None
     oracle: dict[str, Any] | None = Field(default_factory=lambda: {"name": "ground_truth"})
     scorer: dict[str, Any] | None = None
+    shadow: dict[str, Any] | None = None
     speed: Annotated[float, Field(gt=0, le=10_000)] = 1.0
     lockstep: bool = True
     report: bool = True
@@ -305,6 +310,10 @@ class SimKind:
         )
         self.speed = self.options.speed
 
+    def model_registry(self) -> str | None:
+        """The detector's model registry (:class:`~anunnaki.managed.ServesModels` hook)."""
+        return self.options.models
+
     def with_reports(self, *, report: str | None, plot: str | None) -> None:
         """Keep the run as data (``report``, JSON) and draw it (``plot``) at the end."""
         update = {k: v for k, v in (("report_file", report), ("plot_file", plot)) if v}
@@ -328,6 +337,7 @@ class SimKind:
             scorer=sim.scorer,
             default_oracle="ground_truth",
             where="managed.sim",
+            shadow=sim.shadow,
         )
 
     def notes(self, utu: UtuSettings, speed: float) -> list[str]:
@@ -350,6 +360,7 @@ class SimKind:
             models=cfg.models,
             oracle=cfg.oracle,
             scorer=cfg.scorer,
+            shadow=cfg.shadow,
             lockstep=cfg.lockstep,
             on_time=ctx.on_instant,
             settled=ctx.settled,

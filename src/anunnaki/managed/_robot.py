@@ -128,6 +128,10 @@ class RobotKind(ABC):
     def describe(self, ctx: ManagedContext) -> str:
         """How the robot is reached, for the start line (``ROS 1 robot through …``)."""
 
+    def model_registry(self) -> str | None:
+        """The detector's model registry (:class:`~anunnaki.managed.ServesModels` hook)."""
+        return self.options.models
+
     def check(self, utu: UtuSettings) -> None:
         """Load the bridge file, the registry and the oracles' names now (B5)."""
         from anunnaki.ros1 import load_bridge

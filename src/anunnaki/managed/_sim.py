@@ -12,9 +12,11 @@ What ``managed: sim`` in a launch file (``anunnaki run``) starts, on the launch'
 :class:`SimulatedSystem` owns the three, runs the simulation in a thread (live at ``speed``
 × real time, in lockstep with the detector: a frame is not followed by the next before its
 detections are out), and scores what happened per phase of the scenario (:class:`PhaseScore`):
-the active model's F1 against the simulator's ground truth, the categories the oracle
-reported, the models that ran, the tactics Utu started and the collisions. The rover never
-sees the ground truth; only the scorer and the ground-truth oracle do.
+the active model's F1 against the simulator's ground truth (with its counts: a phase with no
+object to find has none), the categories the oracle reported, how often it agreed with its
+live scorer, the models that ran, the tactics Utu started and the collisions. A UAV's phases
+end at its touch-down; the time it then spends on the ground is a row of its own. The rover
+never sees the ground truth; only the scorer and the ground-truth oracle do.
 """
 
 from __future__ import annotations
@@ -25,7 +27,7 @@ import logging
 import threading
 import time
 from collections import Counter
-from collections.abc import Callable, Iterable, Mapping, Sequence
+from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -39,11 +41,14 @@ from anunnaki.managed._camera import CameraChain
 from anunnaki.managed._slot import wait_for_utu
 from anunnaki.messages import Assessment, Detections, body_of
 from anunnaki.sim import (
+    GROUND,
     FrameScore,
     RunReport,
     Scenario,
     SimPlatform,
+    Timeline,
     compare_assessors,
+    f1_score,
     tactic_events,
 )
 
@@ -52,7 +57,9 @@ __all__ = [
     "SimulatedSystem",
     "format_phases",
     "format_scoring",
+    "phase_spans",
     "scenario_phases",
+    "score_phases",
 ]
 
 log = logging.getLogger("anunnaki.managed")
@@ -74,6 +81,8 @@ class PhaseScore:
         models: The models that produced the phase's detections, in order of first use.
         tactics: Tactics started in the phase, with their outcome when known.
         collisions: Collisions counted in the phase.
+        agree: Frames of the phase on which the oracle and its live scorer agreed.
+        compared: Frames of the phase both assessed (0 without a scorer).
 
     """
 
@@ -88,12 +97,18 @@ class PhaseScore:
     models: list[str] = field(default_factory=list)
     tactics: list[str] = field(default_factory=list)
     collisions: int = 0
+    agree: int = 0
+    compared: int = 0
 
     @property
     def f1(self) -> float | None:
-        """The phase's detector F1 (``None`` when it saw neither objects nor detections)."""
-        denominator = 2 * self.tp + self.fp + self.fn
-        return None if denominator == 0 else 2 * self.tp / denominator
+        """The phase's detector F1 (``None`` without a ground-truth object: :func:`f1_score`)."""
+        return f1_score(self.tp, self.fp, self.fn)
+
+    @property
+    def agreement(self) -> float | None:
+        """How often the oracle agreed with its live scorer (``None``: nothing compared)."""
+        return None if self.compared == 0 else self.agree / self.compared
 
     @property
     def category(self) -> int | None:
@@ -115,6 +130,8 @@ class PhaseScore:
             "models": list(self.models),
             "tactics": list(self.tactics),
             "collisions": self.collisions,
+            "agreement": None if self.agreement is None else round(self.agreement, 4),
+            "agreement_frames": self.compared,
         }
 
 
@@ -132,6 +149,74 @@ def scenario_phases(scenario: Scenario, until: float | None = None) -> list[tupl
 
 def _label(phenomena: Sequence[tuple[str, Mapping[str, float]]]) -> str:
     return "+".join(name for name, _ in phenomena) or "clear"
+
+
+def phase_spans(
+    scenario: Scenario, end: float, *, landed: float | None = None
+) -> list[tuple[float, float, str]]:
+    """The table's rows ``(start, end, label)``: the scenario's phases up to ``end``.
+
+    A UAV that touched down (``landed``, simulated s) before ``end`` flew its phases until
+    then; the rest of the run is one last row, :data:`~anunnaki.sim.GROUND`. Labels name the
+    phenomena in force (``clear`` without one).
+    """
+    flown = end if landed is None or landed >= end - 1e-6 else max(landed, 1e-3)
+    timeline = Timeline(scenario)
+    out = [
+        (a, b, _label(timeline.phenomena((a + b) / 2))) for a, b in scenario_phases(scenario, flown)
+    ]
+    if flown < end - 1e-6:
+        out.append((flown, float(end), GROUND))
+    return out
+
+
+def score_phases(
+    spans: Sequence[tuple[float, float, str]],
+    *,
+    frames: Iterable[tuple[float, int, int, int, str]] = (),
+    assessments: Iterable[tuple[float, int]] = (),
+    collisions: Iterable[float] = (),
+    decisions: Iterable[Any] = (),
+    compared: Iterable[tuple[float, int, int]] = (),
+) -> list[PhaseScore]:
+    """Score a run per phase (:func:`phase_spans`); each item counts in the phase of its time.
+
+    Args:
+        spans: ``(start, end, label)`` per phase, in time order.
+        frames: ``(t, tp, fp, fn, model)`` per scored frame.
+        assessments: ``(t, category)`` per assessment of the oracle.
+        collisions: Simulated times of collisions.
+        decisions: Utu's decisions (``t``, ``kind``, ``tactic``).
+        compared: ``(t, oracle category, scorer category)`` per frame both assessed.
+
+    """
+    out = [PhaseScore(a, b, label) for a, b, label in spans]
+    starts = [p.start for p in out]
+
+    def placed(items: Iterable[Any], time: Callable[[Any], float]) -> Iterator[Any]:
+        """``(phase, item)`` for each item whose time falls in a phase."""
+        for item in items:
+            k = bisect.bisect_right(starts, time(item)) - 1
+            if 0 <= k < len(out) and time(item) <= out[k].end + 1e-9:
+                yield out[k], item
+
+    for p, (_, tp, fp, fn, model) in placed(frames, lambda f: f[0]):
+        p.frames += 1
+        p.tp, p.fp, p.fn = p.tp + tp, p.fp + fp, p.fn + fn
+        if model not in p.models:
+            p.models.append(model)
+    for p, (_, category) in placed(assessments, lambda a: a[0]):
+        p.categories[category] += 1
+    for p, _ in placed(collisions, float):
+        p.collisions += 1
+    for p, event in placed(tactic_events(list(decisions)), lambda e: e.t):
+        p.tactics.append(
+            event.tactic if event.outcome is None else f"{event.tactic} ({event.outcome})"
+        )
+    for p, (_, mine, theirs) in placed(compared, lambda c: c[0]):
+        p.compared += 1
+        p.agree += int(mine == theirs)
+    return out
 
 
 def _match(
@@ -179,6 +264,9 @@ class SimulatedSystem(Closing):
             ``{"name": "ground_truth", "window": 30}`` beside a learned ``enlil`` oracle);
             it publishes on ``topics.SCORER`` (node ``/scorer_<name>``), which Utu does
             not read, and the report compares the two (:func:`~anunnaki.sim.compare_assessors`).
+        shadow: A shadow oracle's options (``name``, the oracle's own, and ``domain`` or
+            ``model``): that model's oracle on every frame whichever model is active, on
+            ``topics.SHADOW_ORACLE`` (see :class:`~anunnaki.managed.CameraChain`).
 
     The detector, the oracle and the scorer are the camera chain every kind shares
     (:class:`~anunnaki.managed.CameraChain`): an oracle that takes what it needs from the
@@ -199,6 +287,7 @@ class SimulatedSystem(Closing):
         stop_without_utu: float | None = 0.2,
         scorer: Mapping[str, Any] | None = None,
         settled: Callable[[], bool] | None = None,
+        shadow: Mapping[str, Any] | None = None,
     ) -> None:
         self.bus = bus
         self.lockstep = lockstep
@@ -213,6 +302,7 @@ class SimulatedSystem(Closing):
         self._frames: list[tuple[float, int, int, int, str]] = []  # t, tp, fp, fn, model
         self._assessments: list[tuple[float, int]] = []
         self._seqs: dict[str, list[tuple[int, int]]] = {"oracle": [], "scorer": []}
+        self._seq_t: dict[int, float] = {}  # each frame's simulated time, by its seq
         self._collisions: list[float] = []
         self._closing: list[Any] = []
         self._stopping = threading.Event()
@@ -255,6 +345,7 @@ class SimulatedSystem(Closing):
                 scorer=scorer,
                 classes=self.platform.scene.classes,
                 default_oracle="ground_truth",
+                shadow=shadow,
             )
             self._closing.append(chain)
             self.chain = chain
@@ -262,10 +353,12 @@ class SimulatedSystem(Closing):
             self.lec: Any = chain.lec
             self.oracle: Any = chain.oracle
             self.scorer: Any = chain.scorer
+            self.shadow: Any = chain.shadow
             # a scorer comparing the model on each frame with and without the phenomena
             # (ground_truth, reference: paired) needs the frames as rendered before them
             self.platform.publish_clean = any(
-                node is not None and node.wants_clean_frames for node in (self.oracle, self.scorer)
+                node is not None and node.wants_clean_frames
+                for node in (self.oracle, self.scorer, self.shadow)
             )
             self.detections_topic = chain.detections_topic
             self._subs = [
@@ -292,6 +385,7 @@ class SimulatedSystem(Closing):
             log.warning("sim: a ground-truth message without seq/boxes/labels; skipped")
             return
         with self._lock:
+            self._seq_t[seq] = t
             early = self._early.pop(seq, None)
             if early is not None:  # its detections came first (another subscriber's thread)
                 self._score(early, (t, boxes, labels, ignore))
@@ -372,7 +466,7 @@ class SimulatedSystem(Closing):
             log.warning("sim: the platform did not take frame %d's detections in time", frame.seq)
         # ... and its assessments: an oracle that fell behind would drop frames from its
         # queue and report late, in simulated time, what a real-time one reports at once.
-        for node in (self.oracle, self.scorer):
+        for node in (self.oracle, self.scorer, self.shadow):
             if node is not None and not node.wait_for_frame(
                 frame.seq, max(0.0, deadline - time.monotonic())
             ):
@@ -457,46 +551,37 @@ class SimulatedSystem(Closing):
                 log.exception("sim: closing %r failed", obj)
 
     # -- scoring ---------------------------------------------------------------------------------
+    def _compared(self) -> list[tuple[float, int, int]]:
+        """``(t, oracle, scorer)`` per frame both assessed (the last word on each frame)."""
+        with self._lock:
+            mine, theirs = dict(sorted(self._seqs["oracle"])), dict(sorted(self._seqs["scorer"]))
+            times = dict(self._seq_t)
+        both = sorted(set(mine) & set(theirs) & set(times))
+        return [(times[seq], mine[seq], theirs[seq]) for seq in both]
+
     def phases(
         self, decisions: Iterable[Any] = (), *, until: float | None = None
     ) -> list[PhaseScore]:
-        """Score the run per phase; ``decisions`` are Utu's (``t``, ``kind``, ``tactic``)."""
+        """Score the run per phase; ``decisions`` are Utu's (``t``, ``kind``, ``tactic``).
+
+        The phases end at a UAV's touch-down (:func:`phase_spans`).
+        """
         end = self.platform.t if until is None else until
-        spans = scenario_phases(self.scenario, max(end, 1e-3))
-        timeline = self.platform.timeline
-        out = [PhaseScore(a, b, _label(timeline.phenomena((a + b) / 2))) for a, b in spans]
-        starts = [p.start for p in out]
-
-        def phase_at(t: float) -> PhaseScore | None:
-            k = bisect.bisect_right(starts, t) - 1
-            return out[k] if 0 <= k < len(out) and t <= out[k].end + 1e-9 else None
-
+        flight = self.platform.flight()
+        landed = None if flight is None else flight.get("landed")
+        spans = phase_spans(self.scenario, max(end, 1e-3), landed=landed)
         with self._lock:
             frames = list(self._frames)
             assessments = list(self._assessments)
             collisions = list(self._collisions)
-        for t, tp, fp, fn, model in frames:
-            p = phase_at(t)
-            if p is not None:
-                p.frames += 1
-                p.tp, p.fp, p.fn = p.tp + tp, p.fp + fp, p.fn + fn
-                if model not in p.models:
-                    p.models.append(model)
-        for t, category in assessments:
-            p = phase_at(t)
-            if p is not None:
-                p.categories[category] += 1
-        for t in collisions:
-            p = phase_at(t)
-            if p is not None:
-                p.collisions += 1
-        for event in tactic_events(list(decisions)):
-            p = phase_at(event.t)
-            if p is not None:
-                p.tactics.append(
-                    event.tactic if event.outcome is None else f"{event.tactic} ({event.outcome})"
-                )
-        return out
+        return score_phases(
+            spans,
+            frames=frames,
+            assessments=assessments,
+            collisions=collisions,
+            decisions=decisions,
+            compared=self._compared(),
+        )
 
     def report(self, decisions: Iterable[Any] = (), *, until: float | None = None) -> RunReport:
         """The run as data: every scored frame, assessment, tactic and the phase table.
@@ -521,23 +606,34 @@ class SimulatedSystem(Closing):
             collisions=collisions,
             phases=[p.as_dict() for p in phases],
             scoring=self.scoring(),
+            flight=self.platform.flight(),
         )
 
 
 def format_phases(phases: Sequence[PhaseScore]) -> str:
-    """A plain-text table of :meth:`SimulatedSystem.phases` (one row per phase)."""
-    header = ("phase", "conditions", "frames", "F1", "category", "models", "tactics", "coll.")
-    rows = [header]
+    """A plain-text table of :meth:`SimulatedSystem.phases` (one row per phase).
+
+    F1 is ``–`` where the phase had no ground-truth object (its TP/FP/FN say what the
+    detector did there); the ``agree`` column, the oracle's agreement with its live scorer
+    over the frames both assessed, is there when a scorer ran.
+    """
+    scored = any(p.compared for p in phases)
+    header: tuple[str, ...] = ("phase", "conditions", "frames", "F1", "TP/FP/FN", "category")
+    header += ("agree",) * scored + ("models", "tactics", "coll.")
+    rows: list[tuple[str, ...]] = [header]
     for p in phases:
-        f1 = "-" if p.f1 is None else f"{p.f1:.2f}"
+        f1 = "–" if p.f1 is None else f"{p.f1:.2f}"
         cats = ", ".join(f"{k}×{n}" for k, n in sorted(p.categories.items())) or "-"
+        agree = "-" if p.agreement is None else f"{p.agreement:.0%} of {p.compared}"
         rows.append(
             (
                 f"{p.start:5.1f}–{p.end:5.1f} s",
                 p.label,
                 str(p.frames),
                 f1,
+                f"{p.tp}/{p.fp}/{p.fn}",
                 cats,
+                *((agree,) * scored),
                 ", ".join(p.models) or "-",
                 ", ".join(p.tactics) or "-",
                 str(p.collisions),

@@ -18,7 +18,9 @@ a class with
   checks, guideline B5), ``notes`` and ``start``, which returns a :class:`ManagedRun`.
 
 Optional hooks are typed Protocols: :class:`WritesReports` for kinds that can keep the run
-as data and a picture (``anunnaki run --report/--plot``).
+as data and a picture (``anunnaki run --report/--plot``); :class:`ServesModels` for kinds
+whose camera chain runs a model manager, so that the launch checks the tactics' model swaps
+against its registry before the run.
 
 This layer sits below Utu: a kind sees Utu's settings through :class:`UtuSettings` (which
 ``anunnaki.utu.UtuConfig`` satisfies) and Utu's decisions as :class:`DecisionLike`.
@@ -44,6 +46,7 @@ __all__ = [
     "ManagedContext",
     "ManagedKind",
     "ManagedRun",
+    "ServesModels",
     "UtuSettings",
     "WritesReports",
 ]
@@ -174,6 +177,19 @@ class WritesReports(Protocol):
 
     def with_reports(self, *, report: str | None, plot: str | None) -> None:
         """Write the run's report and plot to these files at the end."""
+        ...
+
+
+@runtime_checkable
+class ServesModels(Protocol):
+    """Optional: a kind that runs a model manager (the LEC node answering ``/lm_manager/swap``).
+
+    The launch loads the registry it names and checks every ``swap_model`` action of the
+    tactics against it (the model ids and domains it has, the LEC it serves) at bring-up.
+    """
+
+    def model_registry(self) -> str | None:
+        """The model registry file its model manager serves (``None``: it runs no detector)."""
         ...
 
 

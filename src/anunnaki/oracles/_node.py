@@ -142,6 +142,9 @@ class OracleNode(Node):
         node: The liveliness token (default ``/oracle_<name>``).
         classes: Class names for ground truth given as indices.
         every: Assess every n-th frame (guideline C5: a configurable rate).
+        model: Assess this model id on every frame, whichever model the LEC runs (a
+            *shadow* oracle: the default model's, telling whether the default would cope
+            now); ``None`` (the default) assesses the active model.
         frame_queue: Frames that may wait; the oldest are dropped beyond it.
         registry: Where a name is looked up (default: :data:`~anunnaki.oracles.ORACLES`).
         **options: The oracle's options when it is given by name (e.g. ``window=30``).
@@ -164,12 +167,15 @@ class OracleNode(Node):
         node: str | None = None,
         classes: Sequence[str] | None = None,
         every: int = 1,
+        model: str | None = None,
         frame_queue: int = 16,
         registry: Registry[Oracle] | None = None,
         **options: Any,
     ) -> None:
         if not isinstance(every, int) or every < 1:
             raise ValueError(f"every must be a whole number >= 1, got {every!r}")
+        if model is not None and (not isinstance(model, str) or not model):
+            raise ValueError(f"model must be a model id, got {model!r}")
         self.oracle: Oracle = (registry or ORACLES).create(oracle, **options)
         self.bus = bus
         self.lec = lec
@@ -178,7 +184,8 @@ class OracleNode(Node):
         self.node = node or f"/oracle_{self.oracle.name}"
         self._oracle_lock = threading.Lock()
         self._lock = threading.Lock()
-        self._model_id: str | None = None
+        self._fixed = model
+        self._model_id: str | None = model
         self._frames = self._published = self._withheld = self._errors = 0
         self._handled = threading.Condition()  # frames handled, for a lockstep simulation
         self._handled_seq = -1
@@ -249,6 +256,8 @@ class OracleNode(Node):
 
     # -- inputs ------------------------------------------------------------------------------
     def _on_active(self, sample: Sample) -> None:
+        if self._fixed is not None:
+            return
         body = sample.message.to_body()
         if body.get("lec", self.lec) != self.lec:
             return
@@ -261,7 +270,7 @@ class OracleNode(Node):
         dets = sample.message
         assert isinstance(dets, Detections)
         with self._lock:
-            if self._model_id is None:
+            if self._model_id is None and self._fixed is None:
                 self._model_id = dets.model_id
         if self._on_dets is not None:
             self._call(self._on_dets.observe_detections, dets)

@@ -51,10 +51,13 @@ from anunnaki.sim._groundtruth import (
 from anunnaki.sim._layout import ROVER_CLASSES, UAV_CLASSES, Placement, Platform, layout_placements
 from anunnaki.sim._platform import SimPlatform
 from anunnaki.sim._report import (
+    GROUND,
     FrameScore,
     RunReport,
     TacticEvent,
     compare_assessors,
+    draw_report,
+    f1_score,
     load_report,
     plot_report,
     require_plot_extra,
@@ -87,6 +90,7 @@ PLATFORM_MODES: dict[str, tuple[str, ...]] = {"rover": RoverSim.modes, "uav": Ua
 __all__ = [
     "CAMERA_FOV",
     "CAMERA_HEIGHT",
+    "GROUND",
     "MIN_BOX_SIZE",
     "MIN_IN_FRAME",
     "MIN_LABEL_HEIGHT",
@@ -125,7 +129,9 @@ __all__ = [
     "boxes_from_mask",
     "compare_assessors",
     "dataset_frames",
+    "draw_report",
     "draw_scenario",
+    "f1_score",
     "layout_placements",
     "load_report",
     "load_scenario",

@@ -326,6 +326,14 @@ class SimPlatform(Closing):
         """The status message (subclasses)."""
         raise NotImplementedError
 
+    def flight(self) -> dict[str, Any] | None:
+        """A flying platform's flight so far (the UAV's); ``None`` for one that does not fly.
+
+        The keys :attr:`RunReport.flight <anunnaki.sim.RunReport>` describes: the touch-down
+        (``landed``) ends a run's phases (:func:`anunnaki.managed.phase_spans`).
+        """
+        return None
+
     # -- commands -------------------------------------------------------------------------
     def _notify(self) -> None:
         """Wake :meth:`wait_for` callers (a command or a detection arrived)."""

@@ -34,12 +34,15 @@ from anunnaki.errors import AnunnakiError, MissingExtraError
 
 if TYPE_CHECKING:
     from matplotlib.axes import Axes
+    from matplotlib.figure import Figure
 
 __all__ = [
     "FrameScore",
     "RunReport",
     "TacticEvent",
     "compare_assessors",
+    "draw_report",
+    "f1_score",
     "load_report",
     "plot_report",
     "require_plot_extra",
@@ -49,7 +52,28 @@ __all__ = [
 
 FORMAT = "sim-report/1"
 CATEGORY_NAMES = {0: "nominal", 1: "degraded", 2: "compromised"}
+#: The label of the phase after a UAV's touch-down (the table's and the plot's last row).
+GROUND = "on the ground"
+#: The UAV's modes in the flight panel, in the order of its legend.
+MODE_COLOURS = {
+    "auto": "#d6eaf8",
+    "hover": "#fcf3cf",
+    "return_home": "#fadbd8",
+    "land": "#e8daef",
+    "stopped": "#d5d8dc",
+}
 _OUTCOMES = {"postcondition_ok": "ok", "postcondition_failed": "failed", "completed": "done"}
+
+
+def f1_score(tp: int, fp: int, fn: int) -> float | None:
+    """F1 of pooled counts, 2·TP / (2·TP + FP + FN); ``None`` with no ground-truth object.
+
+    Where there is nothing to find (TP + FN = 0) recall is undefined and so is F1: a false
+    positive there is no F1 of 0 (the counts tell it), and two objects missed are.
+    """
+    if tp + fn == 0:
+        return None
+    return 2 * tp / (2 * tp + fp + fn)
 
 
 @dataclass(frozen=True)
@@ -89,6 +113,11 @@ class RunReport:
         scoring: When a live scorer ran beside the oracle (``managed.sim.scorer``): how
             often they agreed and the delay between their category changes
             (:func:`compare_assessors`); ``None`` otherwise (and absent from the file).
+        flight: A UAV's flight (:meth:`UavSim.flight <anunnaki.sim.UavSim.flight>`):
+            ``took_off``, ``delivered``, ``delivered_at``, ``landed`` (the touch-down, s),
+            ``landed_xy``, ``landed_home``, ``battery_at_landing`` and ``track``, rows of
+            ``{t, x, y, altitude, battery, mode}`` at 2 Hz; ``None`` for a rover (and absent
+            from the file).
 
     """
 
@@ -101,6 +130,7 @@ class RunReport:
     collisions: list[float] = field(default_factory=list)
     phases: list[dict[str, Any]] = field(default_factory=list)
     scoring: dict[str, Any] | None = None
+    flight: dict[str, Any] | None = None
 
     def as_dict(self) -> dict[str, Any]:
         """JSON-ready form (the file format)."""
@@ -117,6 +147,8 @@ class RunReport:
         }
         if self.scoring is not None:
             doc["scoring"] = self.scoring
+        if self.flight is not None:
+            doc["flight"] = self.flight
         return doc
 
     def write(self, path: str | Path) -> Path:
@@ -145,6 +177,7 @@ class RunReport:
                 collisions=[float(t) for t in doc["collisions"]],
                 phases=list(doc["phases"]),
                 scoring=dict(doc["scoring"]) if doc.get("scoring") is not None else None,
+                flight=dict(doc["flight"]) if doc.get("flight") is not None else None,
             )
         except (KeyError, TypeError, ValueError) as exc:
             raise AnunnakiError(f"{source}: malformed simulation report: {exc!r}") from None
@@ -245,25 +278,24 @@ def tactic_events(decisions: Sequence[Any]) -> list[TacticEvent]:
 
 
 def rolling_f1(frames: Sequence[FrameScore], window: float = 1.0) -> list[float | None]:
-    """F1 over the frames in ``(t - window, t]`` for each frame (``None``: nothing to score).
+    """F1 over the frames in ``(t - window, t]`` for each frame (``None``: nothing to find).
 
-    True positives, false positives and misses are pooled over the window (2·TP / (2·TP +
-    FP + FN)), as in the phase table; frames must be in time order.
+    True positives, false positives and misses are pooled over the window (:func:`f1_score`),
+    as in the phase table: a window without a ground-truth object has no F1, false positives
+    or not. Frames must be in time order.
     """
     if window <= 0:
         raise ValueError(f"window must be > 0 s, got {window}")
     times = [f.t for f in frames]
-    tp = [0]
-    bad = [0]
+    sums = [(0, 0, 0)]  # running TP, FP, FN
     for f in frames:
-        tp.append(tp[-1] + f.tp)
-        bad.append(bad[-1] + f.fp + f.fn)
+        tp, fp, fn = sums[-1]
+        sums.append((tp + f.tp, fp + f.fp, fn + f.fn))
     out: list[float | None] = []
     for k, f in enumerate(frames):
         first = bisect.bisect_right(times, f.t - window, 0, k + 1)
-        t_sum = tp[k + 1] - tp[first]
-        denominator = 2 * t_sum + bad[k + 1] - bad[first]
-        out.append(None if denominator == 0 else 2 * t_sum / denominator)
+        (tp1, fp1, fn1), (tp0, fp0, fn0) = sums[k + 1], sums[first]
+        out.append(f1_score(tp1 - tp0, fp1 - fp0, fn1 - fn0))
     return out
 
 
@@ -310,6 +342,27 @@ def plot_report(
         MissingExtraError: matplotlib is not installed.
 
     """
+    fig = draw_report(report, window=window, title=title)
+    import matplotlib.pyplot as plt
+
+    out = Path(path)
+    try:
+        out.parent.mkdir(parents=True, exist_ok=True)
+        fig.savefig(out, dpi=110)
+    finally:
+        plt.close(fig)
+    return out
+
+
+def draw_report(
+    report: RunReport, *, window: float = 1.0, title: str | None = None, width: float = 11.0
+) -> Figure:
+    """The figure :func:`plot_report` saves (``width`` inches wide); close it when done.
+
+    Raises:
+        MissingExtraError: matplotlib is not installed.
+
+    """
     try:
         import matplotlib
 
@@ -318,45 +371,121 @@ def plot_report(
     except ImportError:
         raise MissingExtraError("matplotlib", "plot") from None
 
-    fig, (ax_f1, ax_cat, ax_tac) = plt.subplots(
-        3,
+    track = (report.flight or {}).get("track") or []
+    ratios = [3.2, 1.2]
+    if track:
+        ratios.append(1.8)
+    ratios.append(max(1.0, 0.45 * len(report.tactics) + 0.4))
+    fig, axes = plt.subplots(
+        len(ratios),
         1,
-        figsize=(11, 6.4),
+        figsize=(width, 6.4 + (1.8 if track else 0.0)),
         sharex=True,
-        gridspec_kw={"height_ratios": [3.2, 1.2, max(1.0, 0.45 * len(report.tactics) + 0.4)]},
+        gridspec_kw={"height_ratios": ratios},
+        squeeze=False,
     )
+    panels = list(axes[:, 0])
+    ax_f1, ax_cat, ax_tac = panels[0], panels[1], panels[-1]
     end = max(report.duration, 1e-3)
-    _draw_phases(report, ax_f1, (ax_f1, ax_cat, ax_tac))
+    _shade_phases(report, panels)
     _draw_f1(report, ax_f1, window)
     _draw_categories(report, ax_cat, end)
+    if track:
+        _draw_flight(report.flight or {}, track, panels[2], end)
     _draw_tactics(report, ax_tac, end)
     ax_tac.set_xlim(0, end)
     ax_tac.set_xlabel("simulated time (s)")
     fig.suptitle(title or f"{report.platform} — {report.name}", fontsize=11)
     fig.tight_layout()
-    out = Path(path)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(out, dpi=110)
-    plt.close(fig)
+    # The labels are measured in the layout they make room for: placed, laid out, placed again.
+    placed = _label_phases(report, ax_f1)
+    fig.tight_layout()
+    for artist in placed:
+        artist.remove()
+    _label_phases(report, ax_f1)
+    return fig
+
+
+def _shade_phases(report: RunReport, axes: Sequence[Axes]) -> None:
+    """Shade the scenario's phases on every panel (hatched: on the ground after touch-down)."""
+    shades = ("#f4f4f4", "#ffffff")
+    for k, phase in enumerate(report.phases):
+        ground = phase.get("label") == GROUND
+        for ax in axes:
+            ax.axvspan(
+                phase["start"],
+                phase["end"],
+                facecolor="#eeeeee" if ground else shades[k % 2],
+                hatch="//" if ground else None,
+                edgecolor="#d5d5d5" if ground else "none",
+                zorder=0,
+                lw=0,
+            )
+
+
+def _stack_labels(spans: Sequence[tuple[float, float]], *, gap: float = 0.0) -> list[int]:
+    """The row of each label so that no two in a row overlap: ``spans`` are ``(left, right)``.
+
+    Greedy, left to right (by left edge): each label takes the lowest row whose last label
+    ends at least ``gap`` before it starts. Labels that fit side by side stay in row 0.
+    """
+    rows: list[float] = []  # each row's right edge so far
+    out = [0] * len(spans)
+    for k in sorted(range(len(spans)), key=lambda i: spans[i][0]):
+        left, right = spans[k]
+        row = next((r for r, edge in enumerate(rows) if edge + gap <= left), len(rows))
+        if row == len(rows):
+            rows.append(right)
+        else:
+            rows[row] = right
+        out[k] = row
     return out
 
 
-def _draw_phases(report: RunReport, labelled: Axes, axes: Sequence[Axes]) -> None:
-    """Shade the scenario's phases on every panel; label them above ``labelled``."""
-    shades = ("#f4f4f4", "#ffffff")
-    for k, phase in enumerate(report.phases):
-        for ax in axes:
-            ax.axvspan(phase["start"], phase["end"], color=shades[k % 2], zorder=0, lw=0)
-        labelled.text(
-            (phase["start"] + phase["end"]) / 2,
-            1.01,
-            phase["label"],
-            ha="center",
-            va="bottom",
-            fontsize=8,
-            color="#555555",
-            transform=labelled.get_xaxis_transform(),
-        )
+def _label_phases(report: RunReport, ax: Axes) -> list[Any]:
+    """Label the phases above ``ax``, stacked in rows where they would overlap.
+
+    Each label is measured as drawn, centred over its phase (moved in where it would run past
+    either end of the axis), and put in the lowest row where it overlaps no other; a bracket
+    under it spans its phase, so that a label in an upper row still says which phase it names.
+    """
+    if not report.phases:
+        return []
+    fig = ax.get_figure()
+    assert fig is not None
+    renderer = fig.canvas.get_renderer()  # type: ignore[attr-defined]
+    to_px = ax.transData
+    x_lo, x_hi = (to_px.transform((x, 0))[0] for x in ax.get_xlim())
+    texts, spans = [], []
+    for phase in report.phases:
+        text = ax.text(
+            0.0, 1.0, phase["label"], ha="center", va="bottom", fontsize=8, color="#555555",
+            transform=ax.get_xaxis_transform(), gid="phase-label",
+        )  # fmt: skip
+        box = text.get_window_extent(renderer)
+        a, b = (to_px.transform((x, 0))[0] for x in (phase["start"], phase["end"]))
+        half = box.width / 2
+        centre = min(max((a + b) / 2, x_lo + half), x_hi - half)
+        texts.append((text, a, b, centre))
+        spans.append((centre - half, centre + half))
+    pad = 4.0  # px between two labels in a row
+    rows = _stack_labels(spans, gap=pad)
+    axes_px = ax.get_window_extent(renderer)
+    row_height = (max(t.get_window_extent(renderer).height for t, *_ in texts) + 6.0) / max(
+        axes_px.height, 1.0
+    )
+    to_data = ax.transData.inverted()
+    artists: list[Any] = []
+    for (text, a, b, centre), row in zip(texts, rows, strict=True):
+        y = 1.012 + row * row_height
+        text.set_position((to_data.transform((centre, 0))[0], y + 0.012))
+        artists.append(text)
+        x0, x1 = (to_data.transform((v, 0))[0] for v in (a + 1.0, b - 1.0))
+        artists += ax.plot(
+            [x0, x1], [y, y], color="#aaaaaa", lw=0.8, clip_on=False,
+            transform=ax.get_xaxis_transform(), solid_capstyle="butt",
+        )  # fmt: skip
+    return artists
 
 
 def _draw_f1(report: RunReport, ax: Axes, window: float) -> None:
@@ -419,3 +548,45 @@ def _draw_tactics(report: RunReport, ax: Axes, end: float) -> None:
     ax.set_ylim(-0.6, max(len(report.tactics), 1) - 0.1)
     ax.set_yticks([])
     ax.set_ylabel("tactics")
+
+
+def _draw_flight(flight: dict[str, Any], track: list[dict[str, Any]], ax: Axes, end: float) -> None:
+    """Panel 3 (a UAV): altitude and battery over time, the mode as coloured bands."""
+    from matplotlib.lines import Line2D
+    from matplotlib.patches import Patch
+
+    ts = [float(row["t"]) for row in track]
+    seen: list[str] = []
+    k = 0
+    while k < len(track):  # one band per stretch of a mode, to the next sample's time
+        mode = str(track[k]["mode"])
+        j = k
+        while j + 1 < len(track) and track[j + 1]["mode"] == mode:
+            j += 1
+        stop = ts[j + 1] if j + 1 < len(track) else end
+        ax.axvspan(
+            ts[k], stop, ymin=0.0, ymax=0.12, color=MODE_COLOURS.get(mode, "#eeeeee"),
+            lw=0, zorder=1, gid=f"mode:{mode}",
+        )  # fmt: skip
+        if mode not in seen:
+            seen.append(mode)
+        k = j + 1
+    ax.plot(ts, [row["altitude"] for row in track], color="#1f618d", lw=1.6, label="altitude")
+    ax.set_ylabel("altitude (m)", fontsize=9)
+    top = max([float(row["altitude"]) for row in track] + [1.0])
+    ax.set_ylim(-0.14 * top, top * 1.5)  # room for the mode bands below, the legend above
+    twin = ax.twinx()
+    twin.plot(ts, [row["battery"] for row in track], color="#b9770e", lw=1.3, label="battery")
+    twin.set_ylim(-14, 150)
+    twin.set_yticks([0, 25, 50, 75, 100])
+    twin.set_ylabel("battery (%)", fontsize=9)
+    landed = flight.get("landed")
+    handles: list[Any] = [
+        Line2D([], [], color="#1f618d", lw=2, label="altitude"),
+        Line2D([], [], color="#b9770e", lw=2, label="battery"),
+    ]
+    if landed is not None:
+        ax.axvline(float(landed), color="#555555", lw=1.0, ls="--")
+        handles.append(Line2D([], [], color="#555555", ls="--", label="touch-down"))
+    handles += [Patch(color=MODE_COLOURS.get(m, "#eeeeee"), label=m) for m in seen]
+    ax.legend(handles=handles, loc="upper center", fontsize=7, ncol=len(handles), framealpha=0.9)

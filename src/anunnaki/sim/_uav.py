@@ -34,7 +34,7 @@ from anunnaki.sim._scenario import Scenario
 from anunnaki.sim._scene import Scene
 from anunnaki.sim._world import Camera
 
-__all__ = ["CAMERA_DOWN", "UAV_CAMERA_FOV", "UavMode", "UavSim"]
+__all__ = ["CAMERA_DOWN", "TRACK_RATE", "UAV_CAMERA_FOV", "UavMode", "UavSim"]
 
 log = logging.getLogger("anunnaki.sim")
 
@@ -44,7 +44,14 @@ UAV_CAMERA_FOV = 32.0
 CAMERA_DOWN = 50.0
 """How far below the horizon the UAV's camera looks (degrees)."""
 DELIVER_ALTITUDE = 10.0
+TRACK_RATE = 2.0
+"""How often (Hz of simulated time) the flight's track is sampled (:meth:`UavSim.flight`)."""
 _METRES_PER_DEGREE = 111_320.0
+
+
+def _ms(t: float | None) -> float | None:
+    """A time to the millisecond (``None`` stays)."""
+    return None if t is None else round(t, 3)
 
 
 class UavSim(SimPlatform):
@@ -114,6 +121,7 @@ class UavSim(SimPlatform):
             self.speed = 0.0
             self.battery = float(m.battery)
             self.delivered = False
+            self.delivered_at: float | None = None  # when the package was dropped
             self.airborne_at: float | None = None  # first take-off (simulated s)
             self.landed_at: float | None = None  # last touch-down after a flight
             self.landed_battery: float | None = None  # battery (%) at that touch-down
@@ -123,6 +131,7 @@ class UavSim(SimPlatform):
             self._hold = 0.0
             self.legs = self._plan()
             self.commands: list[tuple[float, str, dict[str, Any]]] = []
+            self._track: list[dict[str, Any]] = []  # sampled at TRACK_RATE (flight())
             self._declared = [
                 bus.service(f"{self.prefix}/set_mode", self._srv_set_mode),
                 bus.service(f"{self.prefix}/stop", self._srv_stop),
@@ -251,7 +260,7 @@ class UavSim(SimPlatform):
             self.speed = 0.0
             self._hold += h
             if self._hold >= self.scenario.mission.deliver_time:
-                self.delivered = True
+                self.delivered, self.delivered_at = True, self.t
                 self.leg += 1
         elif self._fly_to(tx, ty, tz, h):
             self.leg += 1
@@ -278,6 +287,17 @@ class UavSim(SimPlatform):
 
     def _sensors(self) -> None:
         t, m = self.t, self.scenario.mission
+        if self._due("track", TRACK_RATE):  # the flight's log, not a sensor: no dropout
+            self._track.append(
+                {
+                    "t": round(t, 3),
+                    "x": round(self.x, 2),
+                    "y": round(self.y, 2),
+                    "altitude": round(self.z, 2),
+                    "battery": round(self.battery, 2),
+                    "mode": self.mode,
+                }
+            )
         if self._due("gps", self.timeline.rate("gps", m.gps_rate, t)):
             lat, lon = self.gps()
             self._publish(
@@ -301,23 +321,64 @@ class UavSim(SimPlatform):
         target = (self.x + reach * c, self.y + reach * s, 0.0)
         return Camera(eye, target, fov=UAV_CAMERA_FOV, near=0.3, far=250.0)
 
-    def summary(self) -> str:
-        """The mission's outcome in one line: delivered, where and when it landed, battery."""
+    def flight(self) -> dict[str, Any]:
+        """The flight so far: take-off, delivery, touch-down and the track at 2 Hz.
+
+        Returns:
+            ``took_off`` (first take-off, s, or ``None``), ``delivered`` (bool),
+            ``delivered_at`` (s or ``None``), ``landed`` (the last touch-down after a
+            flight, s; ``None`` while airborne or before take-off), ``landed_xy`` ([x, y]
+            in metres, or ``None``), ``landed_home`` (within 1 m of home, or ``None``),
+            ``battery_at_landing`` (%, or ``None``), ``battery`` (% now) and ``track``:
+            ``{t, x, y, altitude, battery, mode}`` every 0.5 s of simulated time.
+
+        """
         with self._lock:
             hx, hy = self.scenario.mission.home
-            away = math.hypot(self.x - hx, self.y - hy)
-            if self.airborne_at is None:
-                where = "never took off;"
-            elif self.landed_at is None:
-                where = f"still airborne at {self.z:.1f} m ({self.phase});"
-            else:
-                place = "at home" if away < 1.0 else f"{away:.0f} m from home"
-                where = f"landed {place} at t = {self.landed_at:.1f} s with"
-            level = self.battery if self.landed_battery is None else self.landed_battery
-            return (
-                f"mission: package {'delivered' if self.delivered else 'not delivered'}; "
-                f"{where} battery {level:.1f} %"
+            landed = self.landed_at
+            return {
+                "took_off": _ms(self.airborne_at),
+                "delivered": self.delivered,
+                "delivered_at": _ms(self.delivered_at),
+                "landed": _ms(landed),
+                "landed_xy": None if landed is None else [round(self.x, 2), round(self.y, 2)],
+                "landed_home": None
+                if landed is None
+                else math.hypot(self.x - hx, self.y - hy) < 1.0,
+                "battery_at_landing": None
+                if self.landed_battery is None
+                else round(self.landed_battery, 2),
+                "battery": round(self.battery, 2),
+                "track": [dict(row) for row in self._track],
+            }
+
+    def summary(self) -> str:
+        """The flight in one line: take-off, delivery, where and when it landed, battery."""
+        f = self.flight()
+        with self._lock:
+            z, phase = self.z, self.phase
+        hx, hy = self.scenario.mission.home
+        took_off, delivered_at, landed = f["took_off"], f["delivered_at"], f["landed"]
+        parts = [
+            "never took off" if took_off is None else f"took off at t = {took_off:.1f} s",
+            "package not delivered"
+            if delivered_at is None
+            else f"package delivered at t = {delivered_at:.1f} s",
+        ]
+        if landed is not None:
+            x, y = f["landed_xy"]
+            place = (
+                "at home" if f["landed_home"] else f"{math.hypot(x - hx, y - hy):.0f} m from home"
             )
+            parts.append(
+                f"landed {place} ({x:.1f}, {y:.1f}) at t = {landed:.1f} s with battery "
+                f"{f['battery_at_landing']:.1f} %"
+            )
+        elif took_off is not None:
+            parts.append(f"still airborne at {z:.1f} m ({phase}) with battery {f['battery']:.1f} %")
+        else:
+            parts.append(f"battery {f['battery']:.1f} %")
+        return "mission: " + "; ".join(parts)
 
     @property
     def altitude(self) -> float:

@@ -12,7 +12,7 @@ from pydantic import (
 )
 
 from anunnaki._safeyaml import LineMap, element_path
-from anunnaki.errors import ModelFileError
+from anunnaki.errors import ModelFileError, validation_message
 from anunnaki.tactics._schema import (
     ACTION_CLASSES,
     ExpressionCondition,
@@ -147,7 +147,7 @@ def _message(err: Mapping[str, Any], loc: Sequence[str | int]) -> str:
         return f"unknown field {loc[-1]!r}"
     if kind == "missing":
         return f"missing field {loc[-1]!r}"
-    return str(err["msg"])
+    return validation_message(err)
 
 
 def validation_error(

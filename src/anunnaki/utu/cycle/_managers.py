@@ -16,6 +16,10 @@ the fail-safe) and the knowledge base stay Utu's, so a comparison isolates the c
   are consumed as if started (their episode has fired, and they wait out their deadline and
   cooldown), so the random manager does not start more often than Utu would. Each draw is
   recorded as a ``random_draw`` decision naming the displaced tactics.
+
+Under either, the decision log (and ``anunnaki run``'s output) holds what the baseline did,
+not what Utu would have done: the planner records none of its own choices (``selected``,
+``deferred``) and asks no operator to approve a tactic the baseline would not start.
 """
 
 from __future__ import annotations

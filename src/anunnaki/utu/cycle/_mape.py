@@ -285,6 +285,9 @@ class Planner:
         self.runtimes: dict[str, TacticRuntime] = {}
         #: A baseline manager in place of the planner's choice (``anunnaki run --manager``):
         #: given the planner, the tactics it would start and the time, what starts instead.
+        #: With one, the planner still keeps its queue (a baseline acts at its instants) but
+        #: records none of its own choices (``selected``, ``deferred``) and asks no operator
+        #: to approve a tactic: the decision log holds what the baseline did.
         self.select: Callable[[Planner, list[TacticRuntime], float], list[TacticRuntime]] | None
         self.select = None
         self.set_tactics(tactics)
@@ -359,11 +362,16 @@ class Planner:
                 continue
             if rt.eligible_since is None:
                 rt.eligible_since = now
-                self.knowledge.record_decision(now, "selected", name, priority=rt.tactic.priority)
+                if self.select is None:  # a baseline's choice is its own, not this one
+                    self.knowledge.record_decision(
+                        now, "selected", name, priority=rt.tactic.priority
+                    )
             if rt.state != "idle" or now - rt.eligible_since < self.dwell - 1e-12:
                 continue
             if rt.fired and rt.tactic.cooldown <= 0:
                 continue  # once per episode: it re-arms when its preconditions clear
+            if rt.tactic.requires_approval and self.select is not None:
+                continue  # a baseline asks no operator: it would not start the tactic
             if rt.tactic.requires_approval:
                 rt.state = "pending"
                 self._save(rt)
@@ -391,7 +399,8 @@ class Planner:
             if reason is not None:
                 if rt.blocked_logged != reason:
                     rt.blocked_logged = reason
-                    self.knowledge.record_decision(now, "deferred", rt.name, reason=reason)
+                    if self.select is None:  # the planner's queue, not a baseline's
+                        self.knowledge.record_decision(now, "deferred", rt.name, reason=reason)
                 continue
             start.append(rt)
         return start

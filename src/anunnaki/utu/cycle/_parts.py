@@ -13,7 +13,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from anunnaki._findings import Finding
-from anunnaki.check import check_tactics
+from anunnaki.check import check_failsafe, check_tactics
 from anunnaki.errors import AnunnakiError, ModelFileError
 from anunnaki.goals import GoalModel, parse_binding, parse_goal_model
 from anunnaki.tactics import TacticSet, parse_tactics_xml, parse_tactics_yaml
@@ -70,20 +70,13 @@ def check_parts(parts: UtuParts) -> UtuParts:
     t = parts.sources.get("tactics")
     path = t[0] if t else None
     findings = check_tactics(parts.model, parts.tactics, path)
+    failsafe = parts.config.failsafe
+    if failsafe is not None:
+        findings += check_failsafe(parts.tactics, path, failsafe)
     errors = [f for f in findings if f.severity == "error"]
     if errors:
         raise errors[0].to_error()
-    names = {tac.name for tac in parts.tactics.tactics}
-    failsafe = parts.config.failsafe
-    if failsafe is not None and failsafe not in names:
-        known = ", ".join(sorted(names)) or "none"
-        raise ModelFileError(
-            f"the fail-safe tactic {failsafe!r} is not in the tactics file",
-            path=path,
-            element="failsafe",
-            hint=f"name one of the tactics ({known})",
-        )
-    return dataclasses.replace(parts, warnings=[f for f in findings if f not in errors])
+    return dataclasses.replace(parts, warnings=findings)
 
 
 def parts_from_sources(config: UtuConfig, sources: dict[str, tuple[str | None, str]]) -> UtuParts:
