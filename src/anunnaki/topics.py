@@ -39,6 +39,7 @@ __all__ = [
     "ANALYSIS",
     "APPROVE",
     "BAG_DECISIONS",
+    "CLEAN_FRAMES",
     "CLOCK",
     "CYCLE_DONE",
     "DECISIONS",
@@ -129,6 +130,9 @@ DETECTIONS: Final = "/lec/detector/detections"
 GROUND_TRUTH: Final = "/sim/ground_truth"
 #: What the scenario applied to each frame: ``{t, seq, phenomena: [{name, params}], faults}``.
 PHENOMENA: Final = "/sim/phenomena"
+#: Each camera frame as rendered before the scenario's phenomena (an ``Image``, the camera
+#: frame's ``seq``), for a scorer that compares the model on both (``reference: paired``).
+CLEAN_FRAMES: Final = "/sim/camera/clean"
 
 
 def ready_service(node: str) -> str:

@@ -17,6 +17,7 @@ from typing import Any
 import pytest
 from managed_helpers import fog_scene
 
+from anunnaki import topics
 from anunnaki.errors import ModelFileError
 from anunnaki.launch import parse_launch, run_launch
 from anunnaki.lec import load_registry, sha256_file
@@ -67,6 +68,35 @@ def test_every_frame_is_detected_in_lockstep_and_fog_lowers_f1(bus: Any, tmp_pat
     assert clear.models == fog.models == ["rover-default"]
     table = format_phases(phases)
     assert "0.0–  5.0 s" in table and "fog" in table and f"{clear.f1:.2f}" in table
+
+
+def test_a_paired_scorer_gets_the_clean_renders_of_the_frames(bus: Any, tmp_path: Path) -> None:
+    """A scorer with ``reference: paired`` switches the platform's clean frames on and
+    scores the model on both: no drop before the fog (the frames are their clean renders),
+    compromised in it (the model finds the pedestrian and the deer only in the renders)."""
+    registry = load_registry(write_registry(tmp_path / "m.yaml"))
+    scorer = {"window": 10, "min_frames": 5, "reference": "paired", "sparse": "withhold"}
+    categories: list[tuple[int, int]] = []
+    bus.subscribe(
+        topics.SCORER,
+        lambda s: categories.append((s.message.frame_seq, s.message.category)),
+        queue=512,
+    )
+    with SimulatedSystem(
+        bus, fog_scene("paired", duration=8, fog_at=4), models=registry, scorer=scorer
+    ) as system:
+        assert system.platform.publish_clean
+        system.run(threading.Event(), speed=1000.0)
+        window = system.scorer.oracle.metrics()
+    assert window is not None and window.clean_f1 is not None and window.clean_f1 > window.f1
+    by_frame = dict(categories)
+    assert [by_frame[s] for s in range(20, 40) if s in by_frame] == [0] * 20  # no phenomenon
+    assert all(by_frame[s] == 2 for s in range(60, 80) if s in by_frame)  # 2 s into the fog
+    assert sum(1 for s in range(60, 80) if s in by_frame) >= 10
+    with SimulatedSystem(
+        bus, fog_scene("plain", duration=1, fog_at=4), models=registry, scorer={"window": 10}
+    ) as plain:
+        assert not plain.platform.publish_clean  # nobody asked for the renders
 
 
 def test_in_lockstep_the_clock_moves_on_only_once_utu_is_settled(bus: Any) -> None:

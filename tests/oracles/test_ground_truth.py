@@ -10,10 +10,11 @@ from typing import Any
 import numpy as np
 import pytest
 
-from anunnaki.lec import ModelRegistry
+from anunnaki.lec import DetectionResult, ModelRegistry
 from anunnaki.messages import Detections
 from anunnaki.oracles import (
     GroundTruthAssessor,
+    ObservesCleanFrames,
     OracleError,
     WindowMetrics,
     category_for_drop,
@@ -135,6 +136,117 @@ def test_too_few_objects_show_no_drop() -> None:
     assert many is not None and many.category == 2 and many.confidence == 1.0
 
 
+def test_sparse_withhold_says_nothing_without_evidence() -> None:
+    """A live scorer (``sparse: withhold``) says nothing for a window of too few objects,
+    rather than "no impact" (the UAV demo's scorer counted 255 frames on the ground, with no
+    one in view, as agreeing with the oracle); with enough objects it assesses as before."""
+    a = GroundTruthAssessor(clean_f1=1.0, window=10, min_frames=1, min_objects=8, sparse="withhold")
+    for seq in range(10):  # objects in four frames, one of them missed, six empty
+        if seq < 4:
+            feed(a, seq, found=seq != 2)
+        else:
+            a.observe_ground_truth(seq, np.zeros((0, 4)), [])
+            a.observe_detections(dets(seq, [], []))
+    assert a.assess(FRAME, seq=9, model_id="m") is None
+    for seq in range(10, 20):
+        feed(a, seq, found=seq % 2 == 0)
+    many = a.assess(FRAME, seq=19, model_id="m")
+    assert many is not None and many.category == 2 and many.confidence == 1.0
+
+
+class Seen:
+    """A detector that finds the object in a frame whose first pixel is 1 (a clean render)."""
+
+    classes = ("car",)
+    domain = "default"
+
+    def __init__(self, model_id: str) -> None:
+        self.model_id = model_id
+        self.frames = 0
+
+    def detect(self, images: Any) -> list[DetectionResult]:
+        self.frames += len(images)
+        found = [int(image[0, 0, 0] == 1) for image in images]
+        return [DetectionResult(np.array([BOX] * n), [0] * n, [0.9] * n) for n in found]
+
+
+def clean_frame(found: bool) -> np.ndarray:
+    frame = np.zeros((40, 40, 3), np.uint8)
+    frame[0, 0, 0] = int(found)
+    return frame
+
+
+def paired(**options: Any) -> tuple[GroundTruthAssessor, dict[str, Seen]]:
+    loaded: dict[str, Seen] = {}
+
+    def load(model_id: str) -> Seen:
+        loaded[model_id] = Seen(model_id)
+        return loaded[model_id]
+
+    return GroundTruthAssessor(reference="paired", models=load, **options), loaded
+
+
+def test_paired_reference_is_the_same_frames_rendered_clean() -> None:
+    """The UAV demo's case: uav-fog scores 0.894 on its test split (the registry's clean F1)
+    and 0.95 on the flight's frames without fog. 20 frames of one object each, the model
+    finds every one on the clean renders and misses 4 in the fog: F1 0.889. Against the
+    registry the drop is 0.6 % ("no impact"); against the same frames clean it is 11 %."""
+    registry = GroundTruthAssessor(clean_f1=0.894, window=20)
+    scorer, loaded = paired(clean_f1=0.894, window=20)
+    for seq in range(20):
+        scorer.observe_clean_frame(seq, clean_frame(found=True))
+        for a in (registry, scorer):
+            feed(a, seq, found=seq >= 4)
+    before = registry.assess(FRAME, seq=20, model_id="m")
+    after = scorer.assess(FRAME, seq=20, model_id="m")
+    assert before is not None and before.category == 0
+    assert after is not None and after.category == 2
+    window = scorer.metrics()
+    assert window is not None and window.clean_f1 == 1.0
+    assert window.f1 == pytest.approx(2 * 16 / (2 * 16 + 4))
+    assert list(loaded) == ["m"] and loaded["m"].frames == 20  # loaded once, run per frame
+
+
+def test_paired_reference_forgives_what_the_model_misses_anyway() -> None:
+    """A miss on the clean render too is not the phenomenon's doing: the same 4 misses in
+    both, no drop (against a clean F1 of 1.0 it would be 11 %, compromised)."""
+    scorer, _ = paired(clean_f1=1.0, window=20)
+    for seq in range(20):
+        scorer.observe_clean_frame(seq, clean_frame(found=seq >= 4))
+        feed(scorer, seq, found=seq >= 4)
+    result = scorer.assess(FRAME, seq=20, model_id="m")
+    assert result is not None and result.category == 0
+    window = scorer.metrics()
+    assert window is not None and window.clean_f1 == window.f1
+
+
+def test_paired_frames_wait_for_their_clean_render_in_any_order() -> None:
+    """A frame is scored once its truth, detections and clean render are all in, whichever
+    comes last; each model is run on the clean renders of its own frames."""
+    scorer, loaded = paired(window=10, min_frames=1)
+    feed(scorer, 0, found=False, model="a")
+    assert scorer.metrics() is None  # no clean render yet
+    scorer.observe_clean_frame(0, clean_frame(found=True))
+    assert scorer.metrics() == WindowMetrics("a", 1, 0, 0, 1, 0.0, 1.0)
+    scorer.observe_clean_frame(1, clean_frame(found=False))  # the render first
+    scorer.observe_ground_truth(1, np.array([BOX]), ["car"])
+    scorer.observe_detections(dets(1, [BOX], ["car"], model="b"))  # a swap
+    assert scorer.metrics() == WindowMetrics("b", 1, 1, 0, 0, 1.0, 0.0)
+    assert sorted(loaded) == ["a", "b"]
+    result = scorer.assess(FRAME, seq=1, model_id="b")  # found nothing even clean: no drop
+    assert result is not None and result.category == 0
+
+
+def test_a_paired_scorer_asks_for_clean_frames() -> None:
+    scorer, _ = paired()
+    assert isinstance(scorer, ObservesCleanFrames) and scorer.clean_frames is True
+    plain = GroundTruthAssessor(clean_f1=1.0)
+    assert plain.clean_frames is False  # the node sends it none
+    plain.observe_clean_frame(0, clean_frame(found=True))  # and would ignore them
+    feed(plain, 0, found=True)
+    assert plain.metrics() == WindowMetrics("m", 1, 1, 0, 0, 1.0)
+
+
 def test_a_model_change_starts_a_fresh_window() -> None:
     a = GroundTruthAssessor(clean_f1={"old": 1.0, "new": 1.0}, window=10, min_frames=3)
     for seq in range(10):
@@ -189,6 +301,8 @@ def test_clean_f1_sources(tmp_path: Path, caplog: pytest.LogCaptureFixture) -> N
         [{"id": "m", "domain": "default", "file": tmp_path / "m", "metrics": {"f1": 0.8}}]
     )
     assert GroundTruthAssessor(clean_f1=registry.clean_f1).clean_f1("m") == 0.8
+    given = GroundTruthAssessor.options_from_models(registry)  # a launch's camera chain
+    assert given == {"clean_f1": registry.clean_f1, "models": registry}
     assert GroundTruthAssessor(clean_f1={"m": 0.7}).clean_f1("m") == 0.7
     assert GroundTruthAssessor(clean_f1=0.6).clean_f1("x") == 0.6
     for bad in (None, 0.0, math.nan, True, {"other": 0.5}, lambda m: None):
@@ -219,6 +333,9 @@ def test_context_is_the_phenomena_ground_truth() -> None:
         ({"thresholds": (0.1, 0.05)}, "thresholds must be"),
         ({"iou": 0.0}, "iou must be"),
         ({"min_objects": -1}, "min_objects must be"),
+        ({"sparse": "drop"}, "sparse must be 'nominal'"),
+        ({"reference": "test"}, "reference must be 'clean_f1'"),
+        ({"reference": "paired"}, "reference 'paired' runs the assessed model"),
     ],
 )
 def test_bad_options_are_refused(options: dict[str, Any], message: str) -> None:

@@ -266,8 +266,10 @@ def test_unmatched_hook_input_is_bounded(name: str) -> None:
     sizes = container_sizes(oracle)
     assert sizes, "no container found to measure"
     assert max(sizes.values()) < 1000, sizes
-    if name == "ground_truth":  # the buffers reach their bound (4 x window), the window its own
-        assert max(sizes.values()) == 4 * OPTIONS[name]()["window"]
+    if name == "ground_truth":  # the waiting frames reach their bound (4 x window; the last
+        # matched frame left it), the window its own
+        bound = 4 * OPTIONS[name]()["window"]
+        assert bound - 1 <= max(sizes.values()) <= bound
         assert [len(v) for v in vars(oracle).values() if isinstance(v, deque)] == [8]
 
 

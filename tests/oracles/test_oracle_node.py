@@ -13,6 +13,7 @@ import cv2
 import numpy as np
 import pytest
 
+from anunnaki import topics
 from anunnaki.bus import Bus, Sample, open_bus
 from anunnaki.lec import LecNode, ModelRegistry
 from anunnaki.lec._detector import DetectionResult
@@ -195,6 +196,66 @@ def test_assessments_follow_fog_and_the_model_swap(bus: Bus, registry: ModelRegi
     assert stats.assessments + stats.withheld == stats.frames
     assert all(a.assessor == "ground_truth" for a in outputs.items)
     assert "/oracle_ground_truth" not in bus.alive_nodes()
+
+
+class PairedSpy(Spy):
+    """The paired ground-truth assessor, telling the test which clean renders it has."""
+
+    def __init__(self, **options: Any) -> None:
+        super().__init__(**options)
+        self.clean: set[int] = set()
+
+    def observe_clean_frame(self, seq: int, frame: np.ndarray) -> None:
+        super().observe_clean_frame(seq, frame)
+        with self.cond:
+            self.clean.add(seq)
+            self.cond.notify_all()
+
+    def wait_matched(self, seq: int, timeout: float = 5.0) -> None:
+        super().wait_matched(seq, timeout)
+        with self.cond:
+            assert self.cond.wait_for(lambda: seq in self.clean, timeout), f"no clean {seq}"
+
+
+def test_a_paired_scorer_is_fed_the_clean_frames(bus: Bus, registry: ModelRegistry) -> None:
+    """A paired ground-truth scorer gets the simulator's clean renders and runs the active
+    model on them. Every other frame is bright without any fog (its clean render is as
+    bright) and det-default sees nothing there: the same F1 on the frames and on their clean
+    renders, no drop; a plain scorer (clean F1 1.0) calls it compromised, and asks for no
+    clean frames."""
+    outputs = Outputs(bus)
+    spy = PairedSpy(reference="paired", models=registry, window=10, min_frames=5)
+    with (
+        LecNode(bus, registry, camera=CAMERA, active_period=None),
+        OracleNode(bus, spy, camera=CAMERA, classes=("person", "car")) as node,
+        OracleNode(
+            bus, "ground_truth", camera=CAMERA, classes=("person", "car"), clean_f1=1.0,
+            window=10, min_frames=5, node="/plain", output="/plain/output",
+        ) as plain,
+    ):  # fmt: skip
+        assert node.wants_clean_frames and not plain.wants_clean_frames
+        plains: list[Assessment] = []
+        bus.subscribe("/plain/output", lambda sample: plains.append(sample.message), queue=64)
+        sim = Sim(bus)
+        for k in range(11):
+            data = FOG_PNG if k % 2 else CLEAR_PNG
+            bus.publish(
+                topics.CLEAN_FRAMES, Image(encoding="png", width=32, height=32, data=data, seq=k)
+            )
+            assert sim.frame(data) == k
+            if k < 10:
+                spy.wait_matched(k)
+        probe = outputs.wait_for(10)  # the window of frames 0-9
+        assert (probe.assessor, probe.model_id, probe.category) == (
+            "ground_truth",
+            "det-default",
+            0,
+        )
+        window = spy.metrics()
+        assert window is not None and window.f1 == window.clean_f1 == pytest.approx(2 / 3)
+        assert until(lambda: any(a.frame_seq == 10 for a in plains))
+        assert next(a for a in plains if a.frame_seq == 10).category == 2
+        assert node.stats().errors == 0
 
 
 class Flaky:

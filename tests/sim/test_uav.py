@@ -6,6 +6,7 @@ import math
 
 import pytest
 
+from anunnaki import topics
 from anunnaki.sim import UavSim
 
 FAST = {
@@ -105,6 +106,31 @@ def test_gps_is_metres_around_the_origin(bus) -> None:
         uav.step(0.5)
         assert set(gps.recv(timeout=2.0).message.data) == {"lat", "lon", "alt"}
         assert uav.published["/uav/gps"] == 5  # 10 Hz
+
+
+def test_clean_frames_are_published_when_asked(bus) -> None:
+    """``publish_clean``: each camera frame also as rendered before the scenario's phenomena,
+    under the same seq, for a scorer that compares the model on both (off by default)."""
+    foggy = {**FAST, "phenomena": [{"at": 0, "phenomenon": "fog", "strength": 0.7}]}
+    for wanted in (False, True):
+        with UavSim(bus, foggy) as uav:
+            uav.publish_clean = wanted
+            clean = bus.subscribe(topics.CLEAN_FRAMES, queue=64)
+            camera = bus.subscribe("/uav/camera/image", queue=64)
+            uav.step(3.0)
+            frames = {s.message.seq: s.message for s in iter(camera.try_recv, None)}
+            renders = {s.message.seq: s.message for s in iter(clean.try_recv, None)}
+            clean.close()
+            camera.close()
+        assert len(frames) >= 5
+        if not wanted:
+            assert renders == {}
+            continue
+        assert sorted(renders) == sorted(frames)
+        for seq, frame in frames.items():
+            before, after = renders[seq].to_array(), frame.to_array()
+            assert renders[seq].encoding == frame.encoding and before.shape == after.shape
+            assert after.mean() > before.mean() + 20  # the fog lightens the frame, not its render
 
 
 def test_the_flight_is_logged_take_off_delivery_touch_down_and_track(bus) -> None:

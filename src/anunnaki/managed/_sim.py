@@ -354,6 +354,12 @@ class SimulatedSystem(Closing):
             self.oracle: Any = chain.oracle
             self.scorer: Any = chain.scorer
             self.shadow: Any = chain.shadow
+            # a scorer comparing the model on each frame with and without the phenomena
+            # (ground_truth, reference: paired) needs the frames as rendered before them
+            self.platform.publish_clean = any(
+                node is not None and node.wants_clean_frames
+                for node in (self.oracle, self.scorer, self.shadow)
+            )
             self.detections_topic = chain.detections_topic
             self._subs = [
                 bus.subscribe(topics.GROUND_TRUTH, self._on_truth, queue=256),

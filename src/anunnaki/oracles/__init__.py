@@ -21,7 +21,8 @@ Using one::
 The plugin slot (:class:`Oracle`): anything with a ``name`` and
 ``assess(frame, *, seq, model_id) -> Assessment | None``; optional hooks
 ``observe_ground_truth(seq, boxes, labels)``, ``observe_detections(detections)`` and
-``observe_context(context)`` are fed by the node when an oracle defines them. Every slot takes
+``observe_context(context)`` and, for a simulator's scorer, ``observe_clean_frame(seq,
+frame)`` are fed by the node when an oracle defines them. Every slot takes
 a name or an object: the slot :data:`ORACLES` (a :class:`~anunnaki.plugins.Registry`;
 ``ORACLES.create("ground_truth")`` or an instance). Third parties register a class with
 ``@ORACLES.register`` or through an entry point in the ``anunnaki.oracles`` group (see
@@ -37,6 +38,7 @@ from anunnaki.oracles._base import (
     CLEAR,
     HOOKS,
     Frame,
+    ObservesCleanFrames,
     ObservesContext,
     ObservesDetections,
     ObservesGroundTruth,
@@ -62,6 +64,7 @@ __all__ = [
     "CleanF1",
     "Frame",
     "GroundTruthAssessor",
+    "ObservesCleanFrames",
     "ObservesContext",
     "ObservesDetections",
     "ObservesGroundTruth",

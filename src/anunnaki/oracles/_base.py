@@ -9,8 +9,8 @@ measures it against a simulator's ground truth. Both are plugins of one slot.
 Why a ``Protocol``: an oracle is anything with a ``name`` and an ``assess`` method; a third
 party implements it without inheriting from Anunnaki. Each optional hook is a typed
 ``Protocol`` of its own (:class:`ObservesGroundTruth`, :class:`ObservesIgnoreBoxes`,
-:class:`ObservesDetections`, :class:`ObservesContext`), checked with ``isinstance``: an
-oracle that needs no ground truth is never sent any.
+:class:`ObservesDetections`, :class:`ObservesContext`, :class:`ObservesCleanFrames`),
+checked with ``isinstance``: an oracle that needs no ground truth is never sent any.
 """
 
 from __future__ import annotations
@@ -29,6 +29,7 @@ __all__ = [
     "CLEAR",
     "HOOKS",
     "Frame",
+    "ObservesCleanFrames",
     "ObservesContext",
     "ObservesDetections",
     "ObservesGroundTruth",
@@ -145,6 +146,23 @@ class ObservesContext(Protocol):
         ...
 
 
+@runtime_checkable
+class ObservesCleanFrames(Protocol):
+    """Optional: each camera frame as a simulator rendered it, before the scenario's phenomena.
+
+    An oracle opts in by saying so (``clean_frames = True``); the node then passes it every
+    frame published on ``topics.CLEAN_FRAMES`` (``(H, W, 3)`` ``uint8`` RGB, decoded as the
+    camera frame is, under the camera frame's ``seq``), and a simulated system that runs it
+    publishes them. A real robot has no such frames.
+    """
+
+    clean_frames: bool
+
+    def observe_clean_frame(self, seq: int, frame: Frame) -> None:
+        """Take frame ``seq`` as rendered before any phenomenon; do not modify it."""
+        ...
+
+
 #: The optional hooks an oracle may implement, as the Protocols the oracle node checks with
 #: ``isinstance``; it feeds an oracle only the hooks it has.
 HOOKS: tuple[type, ...] = (
@@ -152,6 +170,7 @@ HOOKS: tuple[type, ...] = (
     ObservesIgnoreBoxes,
     ObservesDetections,
     ObservesContext,
+    ObservesCleanFrames,
 )
 
 

@@ -11,6 +11,23 @@ category (§4.1.2), relative to the model's F1 on clean data::
     confidence = frames in the window / window size
     context = the phenomena ground truth, e.g. {"phenomenon": "fog", "params": {...}}
 
+Where ``clean_f1`` comes from is the ``reference``:
+
+* ``clean_f1`` (the default): one number per model, its F1 on clean data as given (the model
+  registry's: its test split's). It is measured on other images than the window's: a
+  simulated flight whose frames are easier than the test split (the UAV demo's: uav-fog 0.95
+  on the flight's frames without fog, 0.894 on its test split) understates every drop.
+* ``paired``: the same model's F1 over the same window of frames *as rendered without the
+  phenomena* (the simulator's clean frames, ``topics.CLEAN_FRAMES``; the assessor runs the
+  model on them itself, loaded from ``models``): the drop is the phenomena's alone, as
+  Enlil labels a context (the same batch, clean and perturbed). Simulation only.
+
+With ``min_objects``, a window holding fewer labelled objects shows no drop: by default
+(``sparse: nominal``) it is assessed as category 0 with its confidence scaled down, which
+keeps an agent bound to the assessor fresh; ``sparse: withhold`` publishes nothing for it,
+as a live scorer should (a window with nothing to find is no evidence of either category,
+and an oracle compared with it would be marked against a guess).
+
 The rule of a match is the detector's own (``anunnaki.lec.f1_at_iou``): per frame,
 class-aware greedy matching in descending score order at IoU ≥ 0.5, and a detection that
 matches nothing but lies mostly inside one of the frame's *ignore boxes* (objects seen but
@@ -30,23 +47,36 @@ import threading
 from collections import OrderedDict, deque
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, Literal
 
 import numpy as np
 import numpy.typing as npt
 from pydantic import JsonValue
 
-from anunnaki.lec import DetectionResult, ModelRegistry, match_image
+from anunnaki.lec import DetectionResult, Detector, ModelRegistry, match_image
 from anunnaki.messages import Assessment, Detections
 from anunnaki.oracles._base import Frame, OracleError
 
-__all__ = ["CleanF1", "GroundTruthAssessor", "WindowMetrics", "category_for_drop"]
+__all__ = [
+    "CleanF1",
+    "GroundTruthAssessor",
+    "Reference",
+    "Sparse",
+    "WindowMetrics",
+    "category_for_drop",
+]
 
 log = logging.getLogger("anunnaki.oracles")
 
 #: Where the clean F1 of a model comes from: one number for every model, a mapping from model
 #: id, or a function (e.g. ``ModelRegistry.clean_f1``) returning ``None`` when unknown.
 CleanF1 = float | Mapping[str, float] | Callable[[str], float | None]
+#: What a window's F1 is compared against: the model's clean F1 as given, or the model's F1
+#: on the same frames rendered without the phenomena (a simulator's clean frames).
+Reference = Literal["clean_f1", "paired"]
+#: A window with fewer than ``min_objects`` objects: category 0 at a lower confidence, or
+#: no assessment.
+Sparse = Literal["nominal", "withhold"]
 
 
 def category_for_drop(drop: float, thresholds: tuple[float, float] = (0.05, 0.10)) -> int:
@@ -74,6 +104,8 @@ class WindowMetrics:
         fp: False positives.
         fn: False negatives.
         f1: ``2 tp / (2 tp + fp + fn)`` (1.0 when there was nothing to find or predict).
+        clean_f1: With ``reference: paired``, the same model's F1 over the same frames as
+            rendered without the phenomena (1.0 likewise); ``None`` otherwise.
 
     """
 
@@ -83,6 +115,7 @@ class WindowMetrics:
     fp: int
     fn: int
     f1: float
+    clean_f1: float | None = None
 
 
 class GroundTruthAssessor:
@@ -100,12 +133,23 @@ class GroundTruthAssessor:
         iou: IoU a detection needs to match a truth.
         score_threshold: Detections scoring lower are ignored (published detections are
             already thresholded by their detector, hence 0).
-        buffer: Frames of unmatched truth or detections kept while waiting for the other
-            half (default ``4 * window``).
+        buffer: Frames kept while waiting for their other parts (truth, detections and,
+            paired, the clean render; default ``4 * window``), the oldest dropped first.
         min_objects: Labelled objects the window needs before an F1 drop is believed: with
             fewer, one or two misses swing the F1 by tens of percent, so the assessment is
             category 0 (no drop shown) with its confidence scaled by ``objects /
-            min_objects``. 0 (the default) always believes the window.
+            min_objects`` (or none: ``sparse``). 0 (the default) always believes the window.
+        sparse: What a window with fewer than ``min_objects`` objects gets: ``nominal``
+            (category 0, lower confidence) or ``withhold`` (no assessment: a live scorer's
+            choice, so that an oracle is compared only where there was evidence).
+        reference: What the window's F1 is compared against: ``clean_f1`` (the model's clean
+            F1 as given) or ``paired`` (the model's F1 on the window's frames as rendered
+            without the phenomena; needs ``models`` and a simulator that publishes its clean
+            frames, ``topics.CLEAN_FRAMES``).
+        models: With ``reference: paired``, where the assessed models come from: the
+            detector's :class:`~anunnaki.lec.ModelRegistry` (each model is loaded once, its
+            sha256 checked) or a function from model id to a loaded
+            :class:`~anunnaki.lec.Detector`.
 
     """
 
@@ -125,6 +169,9 @@ class GroundTruthAssessor:
         score_threshold: float = 0.0,
         buffer: int | None = None,
         min_objects: int = 0,
+        sparse: Sparse = "nominal",
+        reference: Reference = "clean_f1",
+        models: ModelRegistry | Callable[[str], Detector] | None = None,
     ) -> None:
         if not isinstance(window, int) or window < 1:
             raise OracleError(f"window must be a whole number of frames >= 1, got {window!r}")
@@ -146,26 +193,50 @@ class GroundTruthAssessor:
         if not isinstance(min_objects, int) or min_objects < 0:
             raise OracleError(f"min_objects must be a whole number >= 0, got {min_objects!r}")
         self.min_objects = min_objects
+        if sparse not in ("nominal", "withhold"):
+            raise OracleError(
+                f"sparse must be 'nominal' (category 0 at a lower confidence) or 'withhold' "
+                f"(no assessment), got {sparse!r}"
+            )
+        self.sparse: Sparse = sparse
+        if reference not in ("clean_f1", "paired"):
+            raise OracleError(
+                f"reference must be 'clean_f1' (the model's clean F1 as given) or 'paired' "
+                f"(the same frames rendered without the phenomena), got {reference!r}"
+            )
+        if reference == "paired" and models is None:
+            raise OracleError(
+                "reference 'paired' runs the assessed model on each frame's clean render: give "
+                "models= (the detector's model registry; a launch file's camera chain passes it)"
+            )
+        self.reference: Reference = reference
+        #: ``ObservesCleanFrames``: the node feeds the clean frames only to a paired assessor.
+        self.clean_frames = reference == "paired"
+        self._models = models
+        self._detectors: dict[str, Detector] = {}
         self._clean = clean_f1
         self._lock = threading.Lock()
-        self._truth: OrderedDict[
-            int, tuple[npt.NDArray[np.float64], list[str] | None, npt.NDArray[np.float64]]
-        ] = OrderedDict()
-        self._dets: OrderedDict[int, Detections] = OrderedDict()
-        self._counts: deque[tuple[int, int, int]] = deque(maxlen=window)
+        # frames waiting for their other parts: "truth" (boxes, names, ignore), "dets" and,
+        # paired, "clean" (the frame as rendered without the phenomena)
+        self._pending: OrderedDict[int, dict[str, Any]] = OrderedDict()
+        # per frame: tp, fp, fn on the frame, then (paired) on its clean render
+        self._counts: deque[tuple[int, ...]] = deque(maxlen=window)
         self._model: str | None = None
         self._context: dict[str, JsonValue] | None = None
         self._warned: set[str] = set()
 
     @classmethod
     def options_from_models(cls, models: ModelRegistry) -> dict[str, Any]:
-        """Take the clean F1 of the assessed detector's registry (``TakesModels`` hook)."""
-        return {"clean_f1": models.clean_f1}
+        """Take the assessed detector's registry: its clean F1s and models (``TakesModels``).
+
+        The models are loaded only with ``reference: paired``.
+        """
+        return {"clean_f1": models.clean_f1, "models": models}
 
     def __repr__(self) -> str:
         return (
             f"GroundTruthAssessor(window={self.window}, thresholds={self.thresholds}, "
-            f"iou={self.iou})"
+            f"iou={self.iou}, reference={self.reference!r})"
         )
 
     # -- hooks -------------------------------------------------------------------------------
@@ -188,32 +259,50 @@ class GroundTruthAssessor:
             raise OracleError(
                 f"ground truth of frame {seq}: {len(array)} boxes but {len(names)} labels"
             )
-        with self._lock:
-            dets = self._dets.pop(seq, None)
-            if dets is None:
-                self._truth[seq] = (array, names, skip)
-                self._trim(self._truth)
-            else:
-                self._score(dets, array, names, skip)
+        self._offer(seq, "truth", (array, names, skip))
 
     def observe_detections(self, detections: Detections) -> None:
         """Take what the LEC published for one frame."""
-        with self._lock:
-            truth = self._truth.pop(detections.frame_seq, None)
-            if truth is None:
-                self._dets[detections.frame_seq] = detections
-                self._trim(self._dets)
-            else:
-                self._score(detections, *truth)
+        self._offer(detections.frame_seq, "dets", detections)
+
+    def observe_clean_frame(self, seq: int, frame: Frame) -> None:
+        """Take frame ``seq`` as rendered without the phenomena (``reference: paired``).
+
+        The model that handled the frame is run on it when the frame's detections and truth
+        are in (``ObservesCleanFrames``; the node sends them only to a paired assessor).
+        """
+        if self.reference == "paired":
+            self._offer(seq, "clean", frame)
 
     def observe_context(self, context: dict[str, JsonValue]) -> None:
         """Take the phenomena ground truth (reported as the assessments' context)."""
         with self._lock:
             self._context = dict(context)
 
-    def _trim(self, buffer: OrderedDict[int, Any]) -> None:
-        while len(buffer) > self.buffer:
-            buffer.popitem(last=False)
+    def _offer(self, seq: int, part: str, value: Any) -> None:
+        """Keep one part of frame ``seq``; score the frame once it has every part."""
+        needed = ("truth", "dets", "clean") if self.reference == "paired" else ("truth", "dets")
+        with self._lock:
+            entry = self._pending.setdefault(seq, {})
+            entry[part] = value
+            if all(k in entry for k in needed):
+                del self._pending[seq]
+                self._score(entry["dets"], *entry["truth"], clean=entry.get("clean"))
+                return
+            while len(self._pending) > self.buffer:
+                self._pending.popitem(last=False)
+
+    def _detector(self, model_id: str) -> Detector:
+        """The assessed model, loaded once (``reference: paired``)."""
+        detector = self._detectors.get(model_id)
+        if detector is None:
+            source = self._models
+            assert source is not None  # checked in __init__
+            detector = (
+                source.load(model_id) if isinstance(source, ModelRegistry) else source(model_id)
+            )
+            self._detectors[model_id] = detector
+        return detector
 
     def _score(
         self,
@@ -221,25 +310,47 @@ class GroundTruthAssessor:
         boxes: npt.NDArray[np.float64],
         names: list[str] | None,
         ignore: npt.NDArray[np.float64],
+        *,
+        clean: Frame | None = None,
     ) -> None:
         if dets.model_id != self._model:
             self._model = dets.model_id
             self._counts.clear()
+        pred = DetectionResult(
+            np.asarray(dets.boxes, np.float32).reshape(-1, 4),
+            np.zeros(len(dets.labels), np.int64),
+            np.asarray(dets.scores, np.float32),
+        )
+        counts: tuple[int, ...] = self._match(pred, list(dets.labels), boxes, names, ignore)
+        if clean is not None:
+            detector = self._detector(dets.model_id)
+            found = detector.detect([clean])[0]
+            classes = list(detector.classes)
+            counts += self._match(
+                found, [classes[int(k)] for k in found.labels], boxes, names, ignore
+            )
+        self._counts.append(counts)
+
+    def _match(
+        self,
+        pred: DetectionResult,
+        pred_names: list[str],
+        boxes: npt.NDArray[np.float64],
+        names: list[str] | None,
+        ignore: npt.NDArray[np.float64],
+    ) -> tuple[int, int, int]:
+        """``(tp, fp, fn)`` of one frame's predictions (labels given by ``pred_names``)."""
         vocab: dict[str, int] = {}
         if names is None:  # the truth's classes are unknown: match class-agnostically
-            pred_labels = np.zeros(len(dets.labels), np.int64)
+            pred_labels = np.zeros(len(pred_names), np.int64)
             true_labels = np.zeros(len(boxes), np.int64)
         else:
             true_labels = np.array([vocab.setdefault(n, len(vocab)) for n in names], np.int64)
-            pred_labels = np.array([vocab.setdefault(n, len(vocab)) for n in dets.labels], np.int64)
-        pred = DetectionResult(
-            np.asarray(dets.boxes, np.float32).reshape(-1, 4),
-            pred_labels,
-            np.asarray(dets.scores, np.float32),
-        ).above(self.score_threshold)
+            pred_labels = np.array([vocab.setdefault(n, len(vocab)) for n in pred_names], np.int64)
+        pred = DetectionResult(pred.boxes, pred_labels, pred.scores).above(self.score_threshold)
         _, is_tp, n_truth = match_image(pred, boxes, true_labels, iou=self.iou, ignore=ignore)
         tp = int(is_tp.sum())
-        self._counts.append((tp, len(is_tp) - tp, n_truth - tp))
+        return tp, len(is_tp) - tp, n_truth - tp
 
     # -- assessing ---------------------------------------------------------------------------
     def metrics(self) -> WindowMetrics | None:
@@ -247,11 +358,16 @@ class GroundTruthAssessor:
         with self._lock:
             if self._model is None or not self._counts:
                 return None
-            tp = sum(c[0] for c in self._counts)
-            fp = sum(c[1] for c in self._counts)
-            fn = sum(c[2] for c in self._counts)
-            f1 = 2 * tp / (2 * tp + fp + fn) if tp + fp + fn else 1.0
-            return WindowMetrics(self._model, len(self._counts), tp, fp, fn, f1)
+            tp, fp, fn, *clean = (sum(column) for column in zip(*self._counts, strict=True))
+            return WindowMetrics(
+                self._model,
+                len(self._counts),
+                tp,
+                fp,
+                fn,
+                _f1(tp, fp, fn),
+                _f1(*clean) if clean else None,
+            )
 
     def clean_f1(self, model_id: str) -> float | None:
         """The clean F1 this assessor compares ``model_id`` against (``None``: unknown)."""
@@ -273,13 +389,17 @@ class GroundTruthAssessor:
     def assess(self, frame: Frame, *, seq: int, model_id: str) -> Assessment | None:
         """Assess ``model_id`` from the window (the frame's pixels are not looked at).
 
-        Returns ``None`` until the window holds ``min_frames`` frames of ``model_id``, and
-        for a model whose clean F1 is unknown.
+        Returns ``None`` until the window holds ``min_frames`` frames of ``model_id``, for a
+        model whose clean F1 is unknown, and (``sparse: withhold``) for a window with fewer
+        than ``min_objects`` objects.
         """
         window = self.metrics()
         if window is None or window.model_id != model_id or window.frames < self.min_frames:
             return None
-        clean = self.clean_f1(model_id)
+        objects = window.tp + window.fn
+        if objects < self.min_objects and self.sparse == "withhold":
+            return None
+        clean = window.clean_f1 if self.reference == "paired" else self.clean_f1(model_id)
         if clean is None:
             if model_id not in self._warned:
                 self._warned.add(model_id)
@@ -289,9 +409,9 @@ class GroundTruthAssessor:
                     model_id,
                 )
             return None
-        drop = max(0.0, (clean - window.f1) / clean)
+        # a model that finds nothing even on the clean frames cannot drop (paired)
+        drop = max(0.0, (clean - window.f1) / clean) if clean > 0 else 0.0
         confidence = min(1.0, window.frames / self.window)
-        objects = window.tp + window.fn
         if objects < self.min_objects:  # too little evidence to tell a drop
             drop = 0.0
             confidence *= objects / self.min_objects
@@ -305,3 +425,8 @@ class GroundTruthAssessor:
             assessor=self.name,
             frame_seq=seq,
         )
+
+
+def _f1(tp: int, fp: int, fn: int) -> float:
+    """``2 tp / (2 tp + fp + fn)``; 1.0 with nothing to find and nothing found."""
+    return 2 * tp / (2 * tp + fp + fn) if tp + fp + fn else 1.0

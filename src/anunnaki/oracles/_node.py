@@ -9,6 +9,7 @@ subscribe to the same sensor data received by managed LECs"; each is a node of i
     /lec/detector/detections ──▶ oracle.observe_detections      (if defined)
     /sim/ground_truth ─────────▶ oracle.observe_ground_truth    (if defined)
     /sim/phenomena ────────────▶ oracle.observe_context         (if defined)
+    /sim/camera/clean ─Image─▶ decode ─▶ oracle.observe_clean_frame   (if it asks: clean_frames)
     /lm_manager/active ────────▶ the model id handed to assess
 
 It holds a liveliness token (``/oracle_<name>``), so a goal model can bind A4 to it with
@@ -37,6 +38,7 @@ from anunnaki.errors import AnunnakiError
 from anunnaki.lec import decode_image, detections_topic
 from anunnaki.messages import Assessment, Detections, Image
 from anunnaki.oracles._base import (
+    ObservesCleanFrames,
     ObservesContext,
     ObservesDetections,
     ObservesGroundTruth,
@@ -133,6 +135,8 @@ class OracleNode(Node):
         detections: Its detections topic (default ``/lec/<lec>/detections``).
         ground_truth: The simulator's ground-truth topic.
         phenomena: The simulator's phenomena topic.
+        clean: The simulator's clean frames (each frame before the phenomena), fed to an
+            oracle that asks for them (:class:`~anunnaki.oracles.ObservesCleanFrames`).
         active: The model manager's announcements (``{lec, model, domain}``).
         output: Where assessments are published.
         node: The liveliness token (default ``/oracle_<name>``).
@@ -157,6 +161,7 @@ class OracleNode(Node):
         detections: str | None = None,
         ground_truth: str = topics.GROUND_TRUTH,
         phenomena: str = topics.PHENOMENA,
+        clean: str = topics.CLEAN_FRAMES,
         active: str = topics.ACTIVE_MODEL,
         output: str = topics.ORACLE_OUTPUT,
         node: str | None = None,
@@ -190,11 +195,17 @@ class OracleNode(Node):
         self._on_dets = oracle if isinstance(oracle, ObservesDetections) else None
         self._on_gt = oracle if isinstance(oracle, ObservesGroundTruth) else None
         self._on_ctx = oracle if isinstance(oracle, ObservesContext) else None
+        self._on_clean_frame = (
+            oracle
+            if isinstance(oracle, ObservesCleanFrames) and oracle.clean_frames is True
+            else None
+        )
         self._topics = {
             "camera": camera,
             "detections": detections or detections_topic(lec),
             "ground_truth": ground_truth,
             "phenomena": phenomena,
+            "clean": clean,
             "active": active,
             "output": output,
         }
@@ -213,12 +224,19 @@ class OracleNode(Node):
             self.own(bus.subscribe(topic["ground_truth"], self._on_truth, queue=256))
         if self._on_ctx is not None:
             self.own(bus.subscribe(topic["phenomena"], self._on_phenomena, queue=16))
+        if self._on_clean_frame is not None:
+            self.own(bus.subscribe(topic["clean"], self._on_clean, queue=256, expect=Image))
         self.own(
             bus.subscribe(topic["camera"], self._on_frame, queue=self._frame_queue, expect=Image)
         )
 
     def __repr__(self) -> str:
         return f"OracleNode({self.oracle.name!r}, node={self.node!r})"
+
+    @property
+    def wants_clean_frames(self) -> bool:
+        """Whether the oracle takes the simulator's clean frames (a simulation publishes them)."""
+        return self._on_clean_frame is not None
 
     @property
     def model_id(self) -> str | None:
@@ -283,6 +301,17 @@ class OracleNode(Node):
             self._call(
                 self._on_ctx.observe_context, context_from_phenomena(sample.message.to_body())
             )
+
+    def _on_clean(self, sample: Sample) -> None:
+        message = sample.message
+        assert isinstance(message, Image) and self._on_clean_frame is not None
+        try:
+            frame = decode_image(message)
+        except (ValueError, AnunnakiError) as exc:
+            self._error("clean frame %d: %s", message.seq, exc)
+            return
+        frame.flags.writeable = False  # an oracle must not modify what it is shown
+        self._call(self._on_clean_frame.observe_clean_frame, message.seq, frame)
 
     def _call(self, hook: Callable[..., Any], *args: Any, **kwargs: Any) -> Any:
         try:

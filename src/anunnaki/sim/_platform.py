@@ -92,6 +92,11 @@ class SimPlatform(Closing):
 
     Subclasses implement :meth:`_tick` (one physics step), :meth:`_camera` (the camera pose)
     and :meth:`_sensors` (publish what is due besides the camera); the framework calls them.
+
+    ``publish_clean`` (default ``False``): also publish each camera frame as rendered before
+    the scenario's phenomena, on ``topics.CLEAN_FRAMES`` (same ``seq`` and encoding, just
+    before the camera frame), for a scorer that compares the model on both (a simulated
+    system turns it on when its oracle or scorer asks for them).
     """
 
     prefix = "/sim"
@@ -117,6 +122,7 @@ class SimPlatform(Closing):
         self.clock_rate = clock_rate
         self.status_rate = status_rate
         self.publish_ground_truth = publish_ground_truth
+        self.publish_clean = False
         self.frame_hook = frame_hook
         self.tick = 0
         self.frames = 0
@@ -260,6 +266,17 @@ class SimPlatform(Closing):
             },
         )
         if not self.timeline.silent("camera", t):
+            if self.publish_clean:
+                self._publish(
+                    topics.CLEAN_FRAMES,
+                    Image.from_array(
+                        frame.image,
+                        encoding=cam.encoding,
+                        quality=cam.quality,
+                        frame_id=f"{self.platform}_camera",
+                        seq=seq,
+                    ),
+                )
             self._publish(
                 f"{self.prefix}/camera/image",
                 Image.from_array(
