@@ -45,7 +45,6 @@ import os
 import platform
 import re
 import shutil
-import statistics
 import sys
 import tempfile
 import time
@@ -53,7 +52,7 @@ from pathlib import Path
 from typing import Any
 
 sys.path.insert(0, str(Path(__file__).parent))
-from case_studies import CASES, Case, run_once
+from case_studies import CASES, Case, _spread, run_once
 
 from anunnaki.sim import Timeline
 
@@ -202,17 +201,6 @@ def measure(report: dict[str, Any], scenario: Any, result: Any) -> dict[str, Any
         "clear_f1": None if f1 is None else round(f1, 4),
         "clear_robust_frames": sum(1 for f in clear if f["model"] != default),
         "back_s": back,
-    }
-
-
-def _spread(values: list[float]) -> dict[str, float | None]:
-    if not values:
-        return {"mean": None, "std": None, "min": None, "max": None}
-    return {
-        "mean": round(statistics.fmean(values), 3),
-        "std": round(statistics.stdev(values), 3) if len(values) > 1 else 0.0,
-        "min": round(min(values), 3),
-        "max": round(max(values), 3),
     }
 
 

@@ -302,16 +302,25 @@ class OracleNode(Node):
                 self._on_ctx.observe_context, context_from_phenomena(sample.message.to_body())
             )
 
-    def _on_clean(self, sample: Sample) -> None:
-        message = sample.message
-        assert isinstance(message, Image) and self._on_clean_frame is not None
+    def _decoded(self, message: Image, what: str) -> np.ndarray | None:
+        """The frame, read-only: an oracle must not modify what it is shown.
+
+        ``None`` (logged and counted) when it cannot be decoded.
+        """
         try:
             frame = decode_image(message)
         except (ValueError, AnunnakiError) as exc:
-            self._error("clean frame %d: %s", message.seq, exc)
-            return
-        frame.flags.writeable = False  # an oracle must not modify what it is shown
-        self._call(self._on_clean_frame.observe_clean_frame, message.seq, frame)
+            self._error("%s %d: %s", what, message.seq, exc)
+            return None
+        frame.flags.writeable = False
+        return frame
+
+    def _on_clean(self, sample: Sample) -> None:
+        message = sample.message
+        assert isinstance(message, Image) and self._on_clean_frame is not None
+        frame = self._decoded(message, "clean frame")
+        if frame is not None:
+            self._call(self._on_clean_frame.observe_clean_frame, message.seq, frame)
 
     def _call(self, hook: Callable[..., Any], *args: Any, **kwargs: Any) -> Any:
         try:
@@ -355,12 +364,9 @@ class OracleNode(Node):
                 self._withheld += 1
         if not due or model_id is None:
             return
-        try:
-            frame = decode_image(message)
-        except (ValueError, AnunnakiError) as exc:
-            self._error("frame %d: %s", message.seq, exc)
+        frame = self._decoded(message, "frame")
+        if frame is None:
             return
-        frame.flags.writeable = False  # an oracle must not modify what it is shown
         try:
             with self._oracle_lock:
                 result = self.oracle.assess(frame, seq=message.seq, model_id=model_id)
