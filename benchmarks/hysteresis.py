@@ -54,7 +54,7 @@ from typing import Any
 sys.path.insert(0, str(Path(__file__).parent))
 from case_studies import CASES, Case, _spread, run_once
 
-from anunnaki.sim import Timeline
+from anunnaki.sim import Timeline, f1_score
 
 ROOT = Path(__file__).parents[1]
 RESULTS = Path(__file__).parent / "results" / "hysteresis.json"
@@ -154,13 +154,6 @@ def prepare(variant: str, folder: Path) -> Path:
     return rover / "demo.yaml"
 
 
-def _pooled_f1(frames: list[dict[str, Any]]) -> float | None:
-    tp = sum(f["tp"] for f in frames)
-    fp = sum(f["fp"] for f in frames)
-    fn = sum(f["fn"] for f in frames)
-    return None if tp + fp + fn == 0 else 2 * tp / (2 * tp + fp + fn)
-
-
 def measure(report: dict[str, Any], scenario: Any, result: Any) -> dict[str, Any]:
     """The hysteresis measures of one run (see the module's docstring)."""
     timeline = Timeline(scenario)
@@ -186,14 +179,13 @@ def measure(report: dict[str, Any], scenario: Any, result: Any) -> dict[str, Any
         for d in result.decisions
         if d.kind == "action" and d.data.get("type") == "swap_model"
     ]
-    flaps, domain = 0, "default"
-    history: list[tuple[float, str, Any]] = []  # (t, from, to)
-    for t, to in swaps:
-        if history and t - history[-1][0] <= FLAP_S and to == history[-1][1]:
-            flaps += 1
-        history.append((t, domain, to))
-        domain = to
-    f1 = _pooled_f1(clear)
+    left = ["default", *(to for _, to in swaps)]  # left[k]: the domain swap k left
+    flaps = sum(  # swap k undoes swap k - 1: back, within FLAP_S, to what k - 1 left
+        1
+        for k in range(1, len(swaps))
+        if swaps[k][0] - swaps[k - 1][0] <= FLAP_S and swaps[k][1] == left[k - 1]
+    )
+    f1 = f1_score(*(sum(f[n] for f in clear) for n in ("tp", "fp", "fn")))
     return {
         "swaps": len(swaps),
         "flaps": flaps,
