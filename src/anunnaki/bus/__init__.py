@@ -45,6 +45,13 @@ Kinds
     ``"inproc"`` and ``"zenoh"`` built in, others by the entry-point group
     ``anunnaki.buses``.
 
+One thread of delivery
+    An in-process bus opened with an :class:`Executor` (``open_bus("inproc",
+    executor=ex)``) has no threads of its own: every message is delivered on the executor's
+    thread in publication order, services are answered in the same drain, and
+    ``ex.spin_until_idle()`` runs until nothing is pending. A simulated run is then one
+    deterministic program (:mod:`anunnaki.bus._executor`, docs/architecture.md).
+
 Robustness (guidelines S1, S2, S4)
     Subscribers have bounded queues (latest-value: the oldest, least urgent message goes
     first, and is counted); callbacks run on one thread per subscriber, never on the network
@@ -84,6 +91,7 @@ from anunnaki.bus._errors import (
     ServiceError,
     TopicNameError,
 )
+from anunnaki.bus._executor import Executor, ExecutorOverrun
 from anunnaki.bus._guard import LivelinessGuard
 from anunnaki.bus._inproc import InprocBus, InprocHub
 from anunnaki.bus._keys import (
@@ -117,6 +125,8 @@ __all__ = [
     "BusStats",
     "BusTimeout",
     "Envelope",
+    "Executor",
+    "ExecutorOverrun",
     "InprocBus",
     "InprocHub",
     "LivelinessGuard",
@@ -154,6 +164,7 @@ def open_bus(
     *,
     clock: Callable[[], float] | None = None,
     hub: InprocHub | None = None,
+    executor: Executor | None = None,
     **options: Any,
 ) -> Bus:
     """Open a bus.
@@ -164,6 +175,9 @@ def open_bus(
         clock: Returns the time written into envelopes (default ``time.time``).
         hub: For ``"inproc"``: the :class:`InprocHub` to join (buses on one hub meet);
             default a new private hub.
+        executor: For ``"inproc"``: deliver on this :class:`Executor`'s thread, in
+            publication order, instead of the bus's own threads (a simulated run; a new
+            hub is made for it unless ``hub`` is given, which must then have it).
         **options: :class:`BusConfig` fields (``mode``, ``listen``, ``connect``,
             ``multicast_scouting``, ``tls``, ``access_control``, ``namespace``, ``name``,
             ``zenoh``), overriding those of a given config.
@@ -190,4 +204,14 @@ def open_bus(
         more = len(exc.errors()) - 1
         extra = f" (and {more} more problem{'s' if more > 1 else ''})" if more else ""
         raise BusConfigError(f"bus option {where}: {validation_message(first)}{extra}") from None
+    if executor is not None:
+        if config.kind != "inproc":
+            raise BusConfigError(
+                f"only the inproc bus delivers on an executor; a {config.kind} bus has the "
+                "transport's threads (leave executor out)"
+            )
+        if hub is None:
+            hub = InprocHub(executor=executor)
+        elif hub.executor is not executor:
+            raise BusConfigError("this hub delivers on another executor: give the hub's own")
     return BUS_KINDS.factory(config.kind)(config, clock=clock, hub=hub)

@@ -43,6 +43,7 @@ from anunnaki.bus._errors import (
     MalformedMessage,
     ServiceError,
 )
+from anunnaki.bus._executor import Executor
 from anunnaki.bus._keys import (
     NODE_SEGMENT,
     lenient_name,
@@ -403,8 +404,9 @@ class Subscriber(_Declared):
         self._lock = threading.Lock()
         self.dropped = 0
         self._thread: threading.Thread | None = None
+        self._executor = bus.executor
         self._link = bus._declare_receiver(self.key, self._on_data)
-        if callback is not None:
+        if callback is not None and self._executor is None:
             self._thread = threading.Thread(
                 target=self._dispatch, name=f"anunnaki-bus-sub:{self.pattern}", daemon=True
             )
@@ -427,11 +429,13 @@ class Subscriber(_Declared):
 
     def _on_data(self, key: str, payload: bytes, rank: int) -> None:
         victim = self._queue.push((key, payload), rank)
-        if self._on_ready is not None:
-            try:
-                self._on_ready()
-            except Exception:  # a doorbell must never break delivery
-                self._bus._stats.count("errors", self.pattern)
+        if self._executor is not None:  # one thread of delivery: the executor's, in order
+            if self._callback is not None:
+                self._executor.post(self._deliver_one)
+            elif self._on_ready is not None:
+                self._executor.post(self._ring)
+        elif self._on_ready is not None:
+            self._ring()
         if victim is not None and not self._queue.closed:
             topic = lenient_name(victim[0], self._bus._prefix)
             with self._lock:
@@ -444,6 +448,13 @@ class Subscriber(_Declared):
                 self._queue.maxlen,
                 topic,
             )
+
+    def _ring(self) -> None:
+        assert self._on_ready is not None
+        try:
+            self._on_ready()
+        except Exception:  # a doorbell must never break delivery
+            self._bus._stats.count("errors", self.pattern)
 
     def _next(self, timeout: float | None) -> Sample | None:
         deadline = None if timeout is None else time.monotonic() + timeout
@@ -465,23 +476,31 @@ class Subscriber(_Declared):
             return Sample(topic, env.message, env.t, env.seq, env.sender, key)
 
     def _dispatch(self) -> None:
-        callback = self._callback
-        assert callback is not None
         while True:
             sample = self._next(None)
             if sample is None:
                 return
-            try:
-                callback(sample)
-            except Exception:
-                self._bus._stats.count("errors", sample.topic)
-                self._bus._log.warning(
-                    ("callback", self.pattern),
-                    "subscriber %s: callback raised on a message of %s",
-                    self.pattern,
-                    sample.topic,
-                    exc=True,
-                )
+            self._call(sample)
+
+    def _deliver_one(self) -> None:
+        """The executor's work item: the next queued message to the callback, if any is left."""
+        if not self._closed and (sample := self._next(0.0)) is not None:
+            self._call(sample)
+
+    def _call(self, sample: Sample) -> None:
+        callback = self._callback
+        assert callback is not None
+        try:
+            callback(sample)
+        except Exception:
+            self._bus._stats.count("errors", sample.topic)
+            self._bus._log.warning(
+                ("callback", self.pattern),
+                "subscriber %s: callback raised on a message of %s",
+                self.pattern,
+                sample.topic,
+                exc=True,
+            )
 
     def _pull_check(self) -> None:
         if self._callback is not None:
@@ -560,11 +579,14 @@ class Service(_Declared):
         self._seq = 0
         self._closed = False
         self._lock = threading.Lock()
+        self._executor = bus.executor
+        self._thread: threading.Thread | None = None
         self._link = bus._declare_queryable(self.key, self._on_query)
-        self._thread = threading.Thread(
-            target=self._serve, name=f"anunnaki-bus-srv:{self.name}", daemon=True
-        )
-        self._thread.start()
+        if self._executor is None:
+            self._thread = threading.Thread(
+                target=self._serve, name=f"anunnaki-bus-srv:{self.name}", daemon=True
+            )
+            self._thread.start()
 
     @property
     def pending(self) -> int:
@@ -579,6 +601,15 @@ class Service(_Declared):
         return encode_envelope(Envelope(reply, self._bus._now(), seq, self._bus.name))
 
     def _on_query(self, payload: bytes, reply: ReplyFn) -> None:
+        executor = self._executor
+        if executor is not None:  # answered in the same drain (see anunnaki.bus._executor)
+            if self._closed:
+                _safe_reply(reply, self._error_reply("service closed"), self.name)
+            elif executor.on_thread:  # a direct call, nested in the requester's
+                _safe_reply(reply, self._answer(payload), self.name)
+            else:  # another thread asks: the executor's next drain answers
+                executor.post(lambda: _safe_reply(reply, self._answer(payload), self.name))
+            return
         refused = self._queue.push((payload, reply), 0)
         if refused is not None:
             busy = "service closed" if self._queue.closed else "service busy: request refused"
@@ -673,10 +704,13 @@ class LivelinessWatch(_Declared):
         self._events: PriorityQueue[tuple[str, bool]] = PriorityQueue(65536, "newest")
         self._closed = False
         self._lock = threading.Lock()
-        self._thread = threading.Thread(
-            target=self._dispatch, name="anunnaki-bus-liveliness", daemon=True
-        )
-        self._thread.start()
+        self._executor = bus.executor
+        self._thread: threading.Thread | None = None
+        if self._executor is None:
+            self._thread = threading.Thread(
+                target=self._dispatch, name="anunnaki-bus-liveliness", daemon=True
+            )
+            self._thread.start()
         try:
             self._link = bus._declare_token_watch(self._prefix + "/**", self._on_change)
         except BaseException:
@@ -685,19 +719,28 @@ class LivelinessWatch(_Declared):
 
     def _on_change(self, key: str, alive: bool) -> None:
         self._events.push((lenient_name(key, self._prefix + "/"), alive), 0)
+        if self._executor is not None:
+            self._executor.post(self._deliver_one)
 
     def _dispatch(self) -> None:
         while True:
             item = self._events.pop(None)
             if item is None:
                 return
-            try:
-                self._callback(*item)
-            except Exception:
-                self._bus._stats.count("errors", "<liveliness>")
-                self._bus._log.warning(
-                    ("callback", "<liveliness>"), "liveliness callback raised", exc=True
-                )
+            self._call(item)
+
+    def _deliver_one(self) -> None:
+        if not self._closed and (item := self._events.pop(0.0)) is not None:
+            self._call(item)
+
+    def _call(self, item: tuple[str, bool]) -> None:
+        try:
+            self._callback(*item)
+        except Exception:
+            self._bus._stats.count("errors", "<liveliness>")
+            self._bus._log.warning(
+                ("callback", "<liveliness>"), "liveliness callback raised", exc=True
+            )
 
     def close(self) -> None:
         """Stop watching."""
@@ -754,6 +797,14 @@ class Bus(ABC, Closing):
         atexit.register(self._atexit_hook)
 
     # -- properties
+
+    @property
+    def executor(self) -> Executor | None:
+        """The executor that delivers this bus's messages (``None``: its own threads).
+
+        Only the in-process bus can have one (:mod:`anunnaki.bus._executor`).
+        """
+        return None
 
     @property
     def namespace(self) -> str:

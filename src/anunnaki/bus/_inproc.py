@@ -14,6 +14,8 @@ from collections import Counter
 from collections.abc import Callable
 
 from anunnaki.bus._api import Bus, DataCallback, QueryCallback, TokenCallback
+from anunnaki.bus._errors import BusConfigError
+from anunnaki.bus._executor import Executor
 from anunnaki.bus._keys import key_matches
 from anunnaki.bus._qos import QoS
 
@@ -61,9 +63,16 @@ class InprocHub:
 
     Create one and pass it to every bus that should meet (``open_bus("inproc", hub=hub)``),
     or reuse ``bus.hub``.
+
+    Args:
+        executor: Deliver every message of the hub's buses on this executor's thread, in
+            publication order, instead of the buses' own threads (a simulated run,
+            :mod:`anunnaki.bus._executor`).
+
     """
 
-    def __init__(self) -> None:
+    def __init__(self, *, executor: Executor | None = None) -> None:
+        self.executor = executor
         self._lock = threading.Lock()
         self._receivers: tuple[_Receiver, ...] = ()
         # key -> the receivers matching it, for the receivers of this snapshot (a new dict
@@ -193,6 +202,7 @@ class InprocBus(Bus):
         namespace: Key prefix of this system.
         name: This bus's name in envelopes.
         clock: The clock written into envelopes.
+        executor: Deliver on this executor (a new hub's; see :class:`InprocHub`).
 
     """
 
@@ -205,9 +215,20 @@ class InprocBus(Bus):
         namespace: str = "anunnaki",
         name: str | None = None,
         clock: Callable[[], float] | None = None,
+        executor: Executor | None = None,
     ) -> None:
-        self._hub = hub if hub is not None else InprocHub()
+        if hub is not None and executor is not None and hub.executor is not executor:
+            raise BusConfigError(
+                "this hub delivers on another executor (or its buses' threads): give the "
+                "executor to the hub (InprocHub(executor=...)) and none to the bus"
+            )
+        self._hub = hub if hub is not None else InprocHub(executor=executor)
         super().__init__(namespace=namespace, name=name, clock=clock)
+
+    @property
+    def executor(self) -> Executor | None:
+        """The hub's executor (``None``: each subscriber and service has its thread)."""
+        return self._hub.executor
 
     @property
     def hub(self) -> InprocHub:

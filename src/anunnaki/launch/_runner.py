@@ -26,7 +26,7 @@ from typing import Any, TextIO
 
 from anunnaki import topics
 from anunnaki._closing import Closing
-from anunnaki.bus import Bus, BusConfig, open_bus
+from anunnaki.bus import Bus, BusConfig, Executor, open_bus
 from anunnaki.clock import SimClock
 from anunnaki.launch._managed import clock_publisher
 from anunnaki.launch._schema import Launch, LaunchError, _StoppedDuringBringUp
@@ -408,12 +408,14 @@ class _Runner:
         on_instant: Callable[[float], object] | None = None,
         taken: Callable[[int], bool] | None = None,
         settled: Callable[[], bool] | None = None,
+        *,
+        executor: Executor | None = None,
     ) -> ManagedRun | None:
         """Start the managed system (a plugin) in its own thread.
 
         ``on_instant(t)`` runs before an instant's messages go out; ``taken(n)`` tells
         whether Utu has taken ``n`` inputs so far, ``settled()`` whether it is done with the
-        present (lockstep).
+        present (lockstep); ``executor``: the run's one thread of delivery, if it has one.
         """
         if self.managed is None:
             return None
@@ -430,6 +432,7 @@ class _Runner:
             taken=taken,
             watched=watched,
             settled=settled,
+            executor=executor,
         )
         self.running = self.managed.start(ctx)
         return self.running
@@ -508,9 +511,26 @@ class _Runner:
             self.running.finish(printer.decisions, ran)
 
     # -- one process
+    def _deterministic(self) -> bool:
+        """Whether this run is one deterministic program on an executor (issue #30).
+
+        So it is when everything it runs is simulated and in this process: an in-process
+        bus, Utu composed on sim time, and a managed system that drains the executor at
+        each instant (``deterministic`` on its kind: ``sim``). Anything live keeps the
+        bus's threads.
+        """
+        launch = self.launch
+        return (
+            launch.bus.kind == "inproc"
+            and set(launch.nodes) == set(NODE_NAMES)
+            and self.utu.clock == "sim"
+            and bool(getattr(self.managed, "deterministic", False))
+        )
+
     def _run_here(self) -> RunResult:
         launch = self.launch
-        bus = open_bus(launch.bus, name=f"{launch.name}-launch")
+        executor = Executor() if self._deterministic() else None
+        bus = open_bus(launch.bus, name=f"{launch.name}-launch", executor=executor)
         if self.on_bus is not None:
             self.attached = self.on_bus(bus)
         nodes: list[UtuNode | AutonomicManager] = []
@@ -535,7 +555,7 @@ class _Runner:
             # records (a clock fed from the bus arrives on another thread: racy).
             sim = SimClock(max_jump=self.utu.max_time_jump) if self.utu.clock == "sim" else None
             nodes.extend(self._build_nodes(bus, kb, sim, composed=all_five))
-            threads.extend(_spin(nodes, halt, crashed))
+            detach = _drive(nodes, executor, halt, crashed, threads)
             wait_ready(bus, list(launch.nodes), timeout=launch.config.ready_timeout, stop=self.stop)
             peers = self._watch_peers(bus)
             ready_after = time.monotonic() - self.t_start
@@ -545,8 +565,9 @@ class _Runner:
             managed = self._start_managed(
                 bus,
                 sim.update if sim is not None else None,
-                _taken_here(nodes, bus),
-                _settled_here(nodes),
+                None if executor is not None else _taken_here(nodes, bus),
+                None if executor is not None else _settled_here(nodes),
+                executor=executor,
             )
             code, reason = self._watch(
                 printer, managed.thread if managed else None, lambda: crashed[0] if crashed else ""
@@ -556,6 +577,7 @@ class _Runner:
             self.stop.set()
             if managed is not None:
                 managed.thread.join(timeout=5.0)
+            detach()
             _halt(halt, nodes, threads)
             self._detach()  # the nodes are quiet; knowledge still answers
             ran = time.monotonic() - t_run
@@ -722,6 +744,36 @@ class _Runner:
             if kb is not None:
                 kb.close()
             bus.close()
+
+
+def _drive(
+    nodes: list[UtuNode | AutonomicManager],
+    executor: Executor | None,
+    halt: threading.Event,
+    crashed: list[str],
+    threads: list[threading.Thread],
+) -> Callable[[], None]:
+    """Set the nodes going: on the run's executor, else each on a thread (:func:`_spin`).
+
+    Returns what ends them on the executor once the simulation is over: the manager's last
+    step, delivered from the calling thread (nothing for spinning nodes: ``_halt``).
+    """
+    if executor is None:
+        threads.extend(_spin(nodes, halt, crashed))
+        return lambda: None
+    ends = [n.run_on(executor) for n in nodes if isinstance(n, AutonomicManager)]
+
+    def detach() -> None:
+        for end in ends:
+            end()
+        try:
+            executor.spin_until_idle()
+        except RuntimeError:  # the simulation's thread has not ended (it was told to)
+            log.warning("the simulation did not end in time; its last messages stay undelivered")
+            return
+        executor.release()
+
+    return detach
 
 
 def _spin(

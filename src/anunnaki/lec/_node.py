@@ -33,8 +33,10 @@ Models registered while it runs
 
 The active model is announced on ``/lm_manager/active`` on every change and once a
 ``active_period`` (1 s) otherwise, so Utu's agent for the model manager (A6 in the UAV model)
-never goes stale. Inactive models that were loaded stay in a small cache (``cache``), so
-swapping back to the default model is instant.
+never goes stale: on a thread of its own, or, on a bus delivered by a deterministic executor
+(a simulated run), at each ``active_period`` of the simulation's ``/clock``. Inactive models
+that were loaded stay in a small cache (``cache``), so swapping back to the default model is
+instant.
 """
 
 from __future__ import annotations
@@ -342,7 +344,13 @@ class LecNode(Node):
             self.close()
             raise
         self._heartbeat: threading.Thread | None = None
-        if active_period is not None:
+        self._beat_at: float | None = None  # on an executor: the sim time of the last beat
+        if active_period is not None and getattr(bus, "executor", None) is not None:
+            # One thread of delivery (a simulated run): the beat keeps the run's own time,
+            # the simulation's /clock, as an rclpy timer on sim time does; never a wall thread.
+            self._period = active_period
+            self.own(bus.subscribe(topics.CLOCK, self._on_clock, queue=4))
+        elif active_period is not None:
             self._heartbeat = threading.Thread(
                 target=self._beat, args=(active_period,), name=f"lec-active:{self.lec}",
                 daemon=True,
@@ -392,6 +400,16 @@ class LecNode(Node):
             self.bus.publish(self.active_topic, self.active_message())
         except AnunnakiError as exc:  # the bus closed under us: nothing to announce to
             log.debug("lec %s: could not announce the active model: %s", self.lec, exc)
+
+    def _on_clock(self, sample: Sample) -> None:
+        t = getattr(sample.message, "time", None)
+        if not isinstance(t, int | float):
+            return
+        if self._beat_at is None or t < self._beat_at:
+            self._beat_at = float(t)
+        elif t - self._beat_at >= self._period - 1e-9:
+            self._beat_at = float(t)
+            self.publish_active()
 
     def _beat(self, period: float) -> None:
         while not self._stop.wait(period):

@@ -296,6 +296,9 @@ class SimKind:
     name: ClassVar[str] = "sim"
     Options: ClassVar[type[BaseModel]] = SimConfig
     relay_clock = False  # the platform publishes /clock itself
+    #: In one process, the run is one program on the executor: the simulation drains it at
+    #: every frame and instant and moves its clock on only then (anunnaki.bus._executor).
+    deterministic = True
 
     def __init__(self, options: BaseModel, *, base: Path) -> None:
         assert isinstance(options, SimConfig)

@@ -290,6 +290,7 @@ class SimulatedSystem(Closing):
         shadow: Mapping[str, Any] | None = None,
     ) -> None:
         self.bus = bus
+        self.executor = getattr(bus, "executor", None)
         self.lockstep = lockstep
         self.lockstep_timeout = lockstep_timeout
         self.on_time = on_time
@@ -443,6 +444,9 @@ class SimulatedSystem(Closing):
         return {"oracle": self.oracle.oracle.name, "scorer": self.scorer.oracle.name, **out}
 
     def _frame_hook(self, sim: SimPlatform, frame: Any, image: Any) -> None:
+        if self.executor is not None:  # every node takes the frame, in order, before the next
+            self.executor.spin_until_idle()
+            return
         if not self.lockstep or self.lec is None:
             return
         deadline = time.monotonic() + self.lockstep_timeout
@@ -521,6 +525,8 @@ class SimulatedSystem(Closing):
 
         def tick(sim: SimPlatform) -> None:
             nonlocal collisions, next_call
+            if executor is not None:  # the present's messages all delivered and acted on
+                executor.spin_until_idle()
             self._settle()
             if self.on_time is not None:
                 self.on_time(sim.t)
@@ -533,9 +539,17 @@ class SimulatedSystem(Closing):
                 next_call += every
                 callback(sim)
 
-        if self.on_time is not None:
-            self.on_time(self.platform.t)
-        self.platform.run(stop, speed=speed, until=end, every=1.0 / 40.0, callback=tick)
+        executor = self.executor
+        if executor is not None:
+            executor.bind()  # this thread delivers every message of the run
+        try:
+            if self.on_time is not None:
+                self.on_time(self.platform.t)
+            self.platform.run(stop, speed=speed, until=end, every=1.0 / 40.0, callback=tick)
+        finally:
+            if executor is not None:
+                executor.spin_until_idle()
+                executor.release()
 
     def close(self) -> None:
         """Stop listening and close the oracle, the LEC node and the platform (idempotent)."""

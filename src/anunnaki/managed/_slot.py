@@ -36,7 +36,7 @@ from typing import Any, ClassVar, Protocol, runtime_checkable
 
 from pydantic import BaseModel
 
-from anunnaki.bus import Bus
+from anunnaki.bus import Bus, Executor
 from anunnaki.errors import ModelFileError
 from anunnaki.plugins import Registry
 
@@ -99,6 +99,10 @@ class ManagedContext:
             so far taken, every action back, a step run at the present time): a simulation
             in lockstep waits for it before it moves the clock on; ``None``: Utu cannot
             tell (its parts in other threads or processes), nothing waits.
+        executor: The deterministic executor every node of the run is delivered on (a
+            simulated run in one process, :mod:`anunnaki.bus._executor`): a kind whose
+            ``deterministic`` is true drains it after each instant and moves its clock on
+            only then; ``None``: the bus's own threads deliver.
 
     """
 
@@ -111,6 +115,7 @@ class ManagedContext:
     taken: Callable[[int], bool] | None
     watched: frozenset[str]
     settled: Callable[[], bool] | None = None
+    executor: Executor | None = None
 
 
 def wait_for_utu(

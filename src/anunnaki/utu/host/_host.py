@@ -164,6 +164,17 @@ class ExecuteSide:
         """Build the stage again on the knowledge, as a restarted execute node does."""
         self.stage = take_up(self.knowledge, "execute", self._build, restarted=True)
 
+    def run_inline(self) -> None:
+        """Perform requests in the step itself: on an executor they are answered in its drain.
+
+        What a manager on a deterministic executor does (:meth:`AutonomicManager.run_on`):
+        a worker thread's request would wait for the very thread that waits for it.
+        """
+        if self.actions is not None:
+            self.actions.close()
+        self.actions = None
+        self.stage.executor.runner = None
+
     def go_live(self, clock: Clock) -> None:
         """A live loop on the wall clock holds a cycle only briefly for a request's reply.
 

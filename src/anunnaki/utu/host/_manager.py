@@ -47,6 +47,7 @@ from typing import Any
 
 from anunnaki import topics
 from anunnaki._closing import Closing
+from anunnaki.bus import Executor as BusExecutor
 from anunnaki.bus import InprocBus
 from anunnaki.clock import Clock, WallClock
 from anunnaki.errors import AnunnakiError
@@ -651,6 +652,47 @@ class AutonomicManager(Closing):
                 self.step()  # a normal end ends the step its last reactions began
         finally:
             self._live = False
+
+    def run_on(self, executor: BusExecutor) -> Callable[[], None]:
+        """Run on a deterministic executor (a simulated run) instead of :meth:`spin`.
+
+        Nothing waits and no thread of the manager's runs (:mod:`anunnaki.bus._executor`):
+
+        * a monitored message's doorbell is a work item of the executor, so the reaction
+          step runs in publication order, on the executor's thread;
+        * whenever the executor's queue is empty (the present instant's messages all
+          delivered), the manager steps once at the clock's present time, if it has not
+          yet, and takes any input or operator call still waiting: the time-driven checks
+          run at every instant the simulation passes through;
+        * actions run in the step: their requests are answered in the same drain.
+
+        Returns the detach call: it ends the step the last reactions began (as a normal end
+        of :meth:`spin` does) and removes the idle hook. Liveliness and the watchdog are a
+        live loop's (:meth:`spin`); a run on an executor has no loop that could stall.
+        """
+        self._execute.run_inline()
+        self._inline = True
+        self._live = True
+        remove = executor.on_idle(self._at_present)
+
+        def detach() -> None:
+            remove()
+            try:
+                if self.analyze_stage.reacted and not self._closed:
+                    self.step()
+            finally:
+                self._live = False
+
+        return detach
+
+    def _at_present(self) -> bool:
+        """The executor's idle hook: one step at the present instant (see :meth:`run_on`)."""
+        if self._closed or not (
+            self._pull.pending or self._inputs or self.desk.pending or self.now < self.clock.now()
+        ):
+            return False
+        self._round(None)
+        return True
 
     def _round(self, on_step: Callable[[AutonomicManager], None] | None) -> None:
         self.step()
