@@ -2,7 +2,9 @@
 
 Five parts, composed by :class:`AutonomicManager`:
 
-* :class:`Monitor` takes the messages of every topic the goal model's binding names;
+* the monitor takes the messages of every topic the goal model's binding names, stamps each
+  cycle, and keeps in a :class:`TopicWatch` what is known of each topic (freshness, last
+  value, rate);
 * :class:`Analyzer` evaluates the goal model on every change (incrementally) and selects the
   tactics whose preconditions hold;
 * :class:`Planner` keeps the priority-sorted queue (dwell/hysteresis, cooldown, conflicts,
@@ -49,9 +51,9 @@ from anunnaki.utu.cycle import (
     DecisionTail,
     Executor,
     Knowledge,
-    Monitor,
     NodeConfigError,
     Planner,
+    TopicWatch,
     UtuParts,
     VerdictRow,
     load_parts,
@@ -84,7 +86,6 @@ __all__ = [
     "DecisionTail",
     "Executor",
     "Knowledge",
-    "Monitor",
     "NodeConfigError",
     "NodeName",
     "NotifyConfig",
@@ -94,6 +95,7 @@ __all__ = [
     "ReplayReport",
     "RunLogError",
     "RunStopConfig",
+    "TopicWatch",
     "UtuConfig",
     "UtuNode",
     "UtuParts",

@@ -1,4 +1,4 @@
-"""The four MAPE parts of Utu: Monitor, Analyzer, Planner, Executor.
+"""The MAPE parts of Utu: TopicWatch, Analyzer, Planner, Executor.
 
 Each part is a plain class with its dependencies passed in; the
 :class:`~anunnaki.utu.AutonomicManager` composes them with the Knowledge base and owns the
@@ -40,9 +40,9 @@ __all__ = [
     "Actuator",
     "Analyzer",
     "Executor",
-    "Monitor",
     "Planner",
     "TacticRuntime",
+    "TopicWatch",
 ]
 
 log = logging.getLogger("anunnaki.utu")
@@ -50,9 +50,9 @@ log = logging.getLogger("anunnaki.utu")
 TacticState = Literal["idle", "pending", "queued", "running", "awaiting", "rejected"]
 
 
-# -- Monitor -------------------------------------------------------------------------------
+# -- TopicWatch ----------------------------------------------------------------------------
 class TopicStats(TopicFreshness):
-    """What the Monitor knows of one topic: its freshness, last value and recent messages.
+    """What the topic watch knows of one topic: its freshness, last value and recent messages.
 
     Freshness (last arrival, count, rate, staleness) is :class:`~anunnaki.goals.TopicFreshness`,
     the same definition the goal model's ``rate(A)`` and staleness use.
@@ -72,11 +72,13 @@ class TopicStats(TopicFreshness):
         self.recent.append((t, body))
 
 
-class Monitor:
-    """Takes the managed system's messages on the topics the goal model's binding names.
+class TopicWatch:
+    """What is known of each monitored topic: freshness, last value, rate; inputs recorded.
 
-    The topics come from the model (``GoalModel.topic_routes``), never from code. Each
-    message is recorded in Knowledge (every input except images) and handed on.
+    The topics come from the model (``GoalModel.topic_routes``), never from code. The analyze
+    stage hands it each input of the monitor stage's batch (:class:`MonitorStage` takes what
+    arrived and stamps the cycle; this keeps what the inputs say of their topics): each is
+    recorded in Knowledge (every input except images) and counted for its topic's freshness.
     """
 
     def __init__(self, model: GoalModel, knowledge: Knowledge) -> None:
@@ -621,3 +623,8 @@ class Executor:
         self.knowledge.record_decision(now, kind, rt.name, note=note, **data)
         if not ok:
             self.on_failure(rt, now)
+
+
+#: The name :class:`TopicWatch` had; ``utu/host/_manager.py`` still imports it. It goes when
+#: that file imports ``TopicWatch`` (one line), so the name says one thing.
+Monitor = TopicWatch
