@@ -109,8 +109,15 @@ from anunnaki.bus._zenoh import free_port
 from anunnaki.managed import ScriptedSystem
 from anunnaki.messages import Generic
 from anunnaki.trace import Record
-from anunnaki.utu import NODE_NAMES, AutonomicManager, RunLogError, build_node, parse_config, replay
-from anunnaki.utu.cycle import load_parts
+from anunnaki.utu import (
+    NODE_NAMES,
+    AutonomicManager,
+    RunLogError,
+    build_node,
+    load_parts,
+    parse_config,
+    replay,
+)
 from anunnaki.utu.runlog import open_run
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -523,8 +523,7 @@ def _oracle_node(bus: Any, sim: Any, camera: str) -> tuple[Any, _Acks]:
 
 def _utu(bus: Any, launch: Launch, closing: list[Any]) -> Callable[[], dict[str, Any]]:
     """Utu's five nodes composed in this process (the launch's ``nodes``), spinning."""
-    from anunnaki.utu import AutonomicManager
-    from anunnaki.utu.cycle import open_knowledge
+    from anunnaki.utu import AutonomicManager, open_knowledge
 
     kb = open_knowledge(":memory:")
     manager = AutonomicManager.from_config(launch.parts, bus=bus, knowledge=kb, nodes=launch.nodes)

@@ -5,10 +5,11 @@ from __future__ import annotations
 import math
 
 import pytest
+from pydantic import JsonValue
 from sim_helpers import rover_scenario
 
 from anunnaki import topics
-from anunnaki.messages import Detections, ModeRequest
+from anunnaki.messages import Detections, Message, ModeRequest, body_of
 from anunnaki.sim import CAMERA_FOV, RoverSim, StopRule
 
 NO_ULTRASONIC = [{"at": 0, "fault": "dropout", "sensor": "ultrasonic", "duration": 1e6}]
@@ -222,3 +223,20 @@ def test_publishes_what_the_binding_names(bus) -> None:
         assert counts["/clock"] == 40
         msg = image.recv(timeout=2.0).message
         assert msg.encoding == "jpeg" and (msg.width, msg.height) == (64, 48)
+
+
+class _ModeWithData(Message):
+    """A message type with a mapping field called ``data`` beside the fields a handler reads."""
+
+    mode: str
+    data: dict[str, JsonValue]
+
+
+def test_a_typed_message_with_a_data_field_is_read_whole(bus) -> None:
+    # The platforms had a body_of of their own that read such a message as its ``data`` alone
+    # (here {"note": …}: no mode, refused); they read it as every other part does now.
+    message = _ModeWithData(mode="manual", data={"note": "from a plugin's message type"})
+    assert body_of(message) == {"mode": "manual", "data": {"note": "from a plugin's message type"}}
+    with RoverSim(bus, rover_scenario(), mode="autonomous", clear_layout=True) as rover:
+        assert rover._srv_set_mode(message) == {"ok": True, "mode": "manual"}
+        assert rover.mode == "manual"

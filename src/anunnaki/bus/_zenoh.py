@@ -26,10 +26,11 @@ from anunnaki.bus._api import Bus, DataCallback, QueryCallback, TokenCallback, l
 from anunnaki.bus._config import BusConfig
 from anunnaki.bus._diagnose import diagnose_connect
 from anunnaki.bus._errors import BusClosedError, BusConfigError, BusConnectError, BusError
+from anunnaki.bus._inproc import InprocHub
 from anunnaki.bus._qos import QoS
 from anunnaki.errors import MissingExtraError
 
-__all__ = ["ZenohBus", "free_port"]
+__all__ = ["ZenohBus", "free_port", "open_zenoh"]
 
 # zenoh Priority as an int (REAL_TIME=1 … BACKGROUND=7) -> our rank (0 critical … 3 low).
 _RANK_OF_ZPRIORITY = {1: 0, 2: 1, 3: 1, 4: 2, 5: 2, 6: 3, 7: 3}
@@ -301,3 +302,12 @@ class ZenohBus(Bus):
 
     def _close_transport(self) -> None:
         self._session.close()
+
+
+def open_zenoh(
+    config: BusConfig, *, clock: Callable[[], float] | None = None, hub: InprocHub | None = None
+) -> Bus:
+    """The ``"zenoh"`` kind: a zenoh session (eclipse-zenoh is imported when one is opened)."""
+    if hub is not None:
+        raise BusConfigError("hub only applies to the inproc bus")
+    return ZenohBus(config, clock=clock)

@@ -31,8 +31,7 @@ from rich.table import Table
 from rich.text import Text
 
 from anunnaki.errors import AnunnakiError
-from anunnaki.utu import Decision, Knowledge, RunLogError, replay
-from anunnaki.utu.cycle import VerdictRow
+from anunnaki.utu import Decision, Knowledge, RunLogError, VerdictRow, replay
 from anunnaki.utu.runlog import (
     KINDS,
     export_trace,

@@ -23,9 +23,7 @@ from anunnaki.cli import _dashboard
 from anunnaki.launch import MailSink, load_launch, run_launch, signals_to
 from anunnaki.managed import WritesReports
 from anunnaki.tokens import OPERATOR_TOKEN_ENV, user_operator_token
-from anunnaki.utu import NODE_NAMES, NodeConfigError, build_node
-from anunnaki.utu.cycle import MANAGERS
-from anunnaki.utu.host import PeerWatch
+from anunnaki.utu import MANAGERS, NODE_NAMES, NodeConfigError, PeerWatch, build_node
 
 __all__ = ["add_parser", "run", "run_node"]
 

@@ -2,7 +2,7 @@
 
 One row per topic the binding names, with the agents that publish on it. Freshness (last
 arrival, count, rate, staleness) is :class:`anunnaki.goals.TopicFreshness`, the definition
-the goal model's ``rate(A)`` and Utu's Monitor use, so the pane shows the rate the goal
+the goal model's ``rate(A)`` and Utu's TopicWatch use, so the pane shows the rate the goal
 model judges. The store calls it with its lock held.
 """
 

@@ -1,6 +1,6 @@
 """When a topic last spoke, how often it speaks, and whether it is stale: one definition.
 
-The evaluator (what a goal's ``rate(A)`` and staleness mean), Utu's Monitor and the
+The evaluator (what a goal's ``rate(A)`` and staleness mean), Utu's TopicWatch and the
 dashboard's monitor pane all read a topic's freshness through this module, so a rate
 shown on the dashboard is the rate a RELAX-ed goal was judged on.
 

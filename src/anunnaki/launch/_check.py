@@ -22,8 +22,7 @@ from anunnaki.check import CheckResult, PlatformModes, check_files
 from anunnaki.errors import ModelFileError
 from anunnaki.launch._schema import _at_failsafe, _Loader, _Source
 from anunnaki.managed import ManagedKind
-from anunnaki.utu import UtuConfig
-from anunnaki.utu.cycle import UtuParts
+from anunnaki.utu import UtuConfig, UtuParts
 
 __all__ = ["check_launch"]
 

@@ -38,9 +38,21 @@ from anunnaki.launch._supervisor import (
     wait_ready,
 )
 from anunnaki.managed import ManagedContext, ManagedRun
-from anunnaki.utu import NODE_NAMES, AutonomicManager, Decision, Knowledge, UtuNode, build_node
-from anunnaki.utu.cycle import MANAGERS, DecisionTail, UtuParts, open_knowledge
-from anunnaki.utu.host import ACT_ORDER, PeerWatch, stop_platform
+from anunnaki.utu import (
+    ACT_ORDER,
+    MANAGERS,
+    NODE_NAMES,
+    AutonomicManager,
+    Decision,
+    DecisionTail,
+    Knowledge,
+    PeerWatch,
+    UtuNode,
+    UtuParts,
+    build_node,
+    open_knowledge,
+    stop_platform,
+)
 
 __all__ = ["RunResult", "format_decision", "run_launch"]
 
@@ -611,8 +623,8 @@ class _Runner:
         """Watch the Utu nodes this launch does not run (started by hand elsewhere).
 
         The launch run-stops the platform when one of its own nodes dies; when one of the
-        others does, the launch's first node in :data:`~anunnaki.utu.host.ACT_ORDER` acts, as the
-        survivors started by hand do for one another (:class:`~anunnaki.utu.host.PeerWatch`).
+        others does, the launch's first node in :data:`~anunnaki.utu.ACT_ORDER` acts, as the
+        survivors started by hand do for one another (:class:`~anunnaki.utu.PeerWatch`).
         ``None`` when the launch runs all five.
         """
         ours = [n for n in ACT_ORDER if n in self.launch.nodes]

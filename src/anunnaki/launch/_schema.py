@@ -50,9 +50,15 @@ from anunnaki.check import ModelCatalogue, check_swaps
 from anunnaki.errors import AnunnakiError, ModelFileError
 from anunnaki.launch._managed import resolve_kind, split_managed
 from anunnaki.managed import MANAGED, ManagedKind, ServesModels
-from anunnaki.utu import NODE_NAMES, UtuConfig, load_config
-from anunnaki.utu.cycle import UtuParts, load_parts
-from anunnaki.utu.host import NodeName, NotifyConfig
+from anunnaki.utu import (
+    NODE_NAMES,
+    NodeName,
+    NotifyConfig,
+    UtuConfig,
+    UtuParts,
+    load_config,
+    load_parts,
+)
 
 __all__ = ["Launch", "LaunchConfig", "LaunchError", "NodeSettings", "load_launch", "parse_launch"]
 

@@ -30,7 +30,7 @@ import numpy as np
 
 from anunnaki import topics
 from anunnaki._closing import Closing
-from anunnaki.messages import Clock, Detections, Image
+from anunnaki.messages import Clock, Detections, Image, body_of
 from anunnaki.sim._groundtruth import Frame
 from anunnaki.sim._scenario import Scenario, Timeline, load_scenario
 from anunnaki.sim._scene import Scene
@@ -66,20 +66,6 @@ def as_scenario(
     if sc.platform != platform:
         raise ValueError(f"the scenario is for the {sc.platform}, not the {platform}")
     return sc
-
-
-def body_of(message: Any) -> dict[str, Any]:
-    """The JSON body of a bus message (a Generic's data, or a mapping)."""
-    if isinstance(message, Mapping):
-        return dict(message)
-    data = getattr(message, "data", None)
-    if isinstance(data, Mapping):
-        return dict(data)
-    to_body = getattr(message, "to_body", None)
-    if callable(to_body):
-        body = to_body()
-        return dict(body) if isinstance(body, Mapping) else {}
-    return {}
 
 
 @dataclass

@@ -33,10 +33,10 @@ from typing import Any, Literal
 import numpy as np
 
 from anunnaki import topics
-from anunnaki.messages import Detections
+from anunnaki.messages import Detections, body_of
 from anunnaki.sim._layout import Placement, layout_placements
 from anunnaki.sim._models import _lite_urdf
-from anunnaki.sim._platform import SimPlatform, as_scenario, body_of
+from anunnaki.sim._platform import SimPlatform, as_scenario
 from anunnaki.sim._scenario import ObjectSpec, Scenario
 from anunnaki.sim._scene import ROBOT_GROUP, Scene
 from anunnaki.sim._world import Camera, pybullet

@@ -27,8 +27,9 @@ from pathlib import Path
 from typing import Any, Literal
 
 from anunnaki import topics
+from anunnaki.messages import body_of
 from anunnaki.sim._layout import layout_placements
-from anunnaki.sim._platform import SimPlatform, as_scenario, body_of
+from anunnaki.sim._platform import SimPlatform, as_scenario
 from anunnaki.sim._rover import _placement
 from anunnaki.sim._scenario import Scenario
 from anunnaki.sim._scene import Scene

@@ -26,9 +26,18 @@ DTDs and entities, YAML aliases and language tags, over 4 MB, nested over
 :data:`MAX_DEPTH`) are refused before anything is expanded.
 
 The model: :class:`TacticSet` holds :class:`Tactic` objects; a :data:`Precondition` is a
-:class:`GoalState` or an :class:`ExpressionCondition`; an :data:`Action` is one of
-:class:`PublishAction`, :class:`RequestAction`, :class:`ChangeModeAction`,
-:class:`SwapModelAction`, :class:`NotifyAction`. ``priority`` — higher runs first.
+:class:`GoalState` or an :class:`ExpressionCondition`; an :data:`Action` is an instance of a
+:class:`TacticAction` registered in :data:`ACTIONS` — built in: :class:`PublishAction`,
+:class:`RequestAction`, :class:`ChangeModeAction`, :class:`SwapModelAction`,
+:class:`NotifyAction`. ``priority`` — higher runs first.
+
+An action owns its behaviour: :meth:`TacticAction.send` says what it sends (a
+:class:`ServiceRequest` with its timeout, a :class:`Publication` or a :class:`Notice`; together
+:data:`Send`) and :meth:`TacticAction.describe` what the decision log says of it. A new action
+type is one subclass with its tag, registered with ``@ACTIONS.register`` (or by the
+entry-point group ``anunnaki.actions``); both file forms read and write it from its fields.
+:data:`EndpointName` is the type of a topic or service field (a logical name the binding
+maps, or a ROS-style name).
 
 Where things were written: every element keeps a private :class:`SourceRef` (file, line),
 read through its ``source`` property. It is not a field: it takes no part in equality
@@ -48,16 +57,24 @@ from pathlib import Path
 
 from anunnaki._safeyaml import read_text_limited
 from anunnaki.errors import ModelFileError
-from anunnaki.tactics._schema import (
+from anunnaki.tactics._actions import (
+    ACTIONS,
     Action,
     ChangeModeAction,
-    ExpressionCondition,
-    GoalState,
+    Notice,
     NotifyAction,
-    Precondition,
+    Publication,
     PublishAction,
     RequestAction,
+    Send,
+    ServiceRequest,
     SwapModelAction,
+    TacticAction,
+)
+from anunnaki.tactics._schema import (
+    ExpressionCondition,
+    GoalState,
+    Precondition,
     Tactic,
     TacticSet,
 )
@@ -68,6 +85,7 @@ from anunnaki.tactics._values import (
     MAX_DEPTH,
     MAX_PAYLOAD_DEPTH,
     NOTIFY_CHANNELS,
+    EndpointName,
     EndpointReference,
     ExpressionReference,
     GoalReference,
@@ -77,6 +95,7 @@ from anunnaki.tactics._xml import FIELD_TYPES, dump_tactics_xml, parse_tactics_x
 from anunnaki.tactics._yaml import dump_tactics_yaml, parse_tactics_yaml
 
 __all__ = [
+    "ACTIONS",
     "ACTION_TYPES",
     "FIELD_TYPES",
     "FORMAT_TAG",
@@ -86,18 +105,24 @@ __all__ = [
     "NOTIFY_CHANNELS",
     "Action",
     "ChangeModeAction",
+    "EndpointName",
     "EndpointReference",
     "ExpressionCondition",
     "ExpressionReference",
     "GoalReference",
     "GoalState",
+    "Notice",
     "NotifyAction",
     "Precondition",
+    "Publication",
     "PublishAction",
     "RequestAction",
+    "Send",
+    "ServiceRequest",
     "SourceRef",
     "SwapModelAction",
     "Tactic",
+    "TacticAction",
     "TacticSet",
     "dump_tactics_xml",
     "dump_tactics_yaml",

@@ -13,8 +13,8 @@ from pydantic import (
 
 from anunnaki._safeyaml import LineMap, element_path
 from anunnaki.errors import ModelFileError, validation_message
+from anunnaki.tactics._actions import action_class, action_hint
 from anunnaki.tactics._schema import (
-    ACTION_CLASSES,
     ExpressionCondition,
     GoalState,
     Tactic,
@@ -22,7 +22,6 @@ from anunnaki.tactics._schema import (
     _precondition_form,
 )
 from anunnaki.tactics._values import (
-    ACTION_HINT,
     CHANNEL_HINT,
     FORMAT_TAG,
     STATE_HINT,
@@ -38,17 +37,15 @@ __all__ = [
 
 
 def _without_tags(loc: Sequence[str | int]) -> tuple[str | int, ...]:
-    """Drop the union tag pydantic puts after ``tactics[i].actions[j]`` (and preconditions)."""
+    """Drop the union tag pydantic puts after ``tactics[i].preconditions[j]``."""
     out = tuple(loc)
     if (
         len(out) > 4
         and out[0] == "tactics"
         and isinstance(out[1], int)
         and isinstance(out[3], int)
-        and (
-            (out[2] == "actions" and out[4] in ACTION_CLASSES)
-            or (out[2] == "preconditions" and out[4] in ("goal", "expression"))
-        )
+        and out[2] == "preconditions"
+        and out[4] in ("goal", "expression")
     ):
         return (*out[:4], *out[5:])
     return out
@@ -72,7 +69,8 @@ def _model_at(loc: Sequence[str | int], data: Any) -> type[BaseModel] | None:
     if loc[2] == "preconditions":
         return ExpressionCondition if _precondition_form(node) == "expression" else GoalState
     if loc[2] == "actions" and isinstance(node, Mapping):
-        return ACTION_CLASSES.get(str(node.get("type")))
+        tag = node.get("type")
+        return action_class(tag) if isinstance(tag, str) else None
     return None
 
 
@@ -113,9 +111,10 @@ def _hint(err: Mapping[str, Any], loc: Sequence[str | int], data: Any) -> str | 
     if kind in ("union_tag_invalid", "union_tag_not_found") or (
         kind == "model_attributes_type" and len(loc) == 4 and loc[2] == "actions"
     ):
-        return ACTION_HINT + " (each action says which in 'type')"
+        return action_hint() + " (each action says which in 'type')"
     if kind == "literal_error":
-        return {"state": STATE_HINT, "channel": CHANNEL_HINT, "type": ACTION_HINT}.get(last)
+        hints = {"state": STATE_HINT, "channel": CHANNEL_HINT}
+        return action_hint() if last == "type" else hints.get(last)
     if kind == "missing":
         return f"add '{last}'"
     if kind == "extra_forbidden":

@@ -1,4 +1,6 @@
-"""What a tactic is: preconditions, actions, postconditions, the tactic and the tactic set.
+"""What a tactic is: preconditions, postconditions, the tactic and the tactic set.
+
+The actions are in :mod:`anunnaki.tactics._actions`, one class each.
 
 Both file forms (XML as in the paper's Fig. 10, and YAML) are read into the same plain data
 (dicts, lists, scalars) together with a :class:`~anunnaki._safeyaml.LineMap` from element paths
@@ -13,48 +15,35 @@ validation from the same element-path → line map that locates their errors.
 
 from __future__ import annotations
 
-import re
 from collections.abc import Iterator, Mapping
 from typing import Annotated, Any, Final, Literal
 
 from pydantic import (
     Discriminator,
     Field,
-    JsonValue,
     Tag,
     model_validator,
 )
 
-from anunnaki import topics
+from anunnaki.tactics._actions import Action
 from anunnaki.tactics._values import (
-    _EMAIL,
-    _URL,
-    EndpointName,
     EndpointReference,
     ExpressionReference,
     Filled,
     GoalId,
     GoalReference,
     Line,
-    Payload,
     Seconds,
     Text,
-    Token,
     _error,
     _Model,
     tactic_element,
 )
 
 __all__ = [
-    "Action",
-    "ChangeModeAction",
     "ExpressionCondition",
     "GoalState",
-    "NotifyAction",
     "Precondition",
-    "PublishAction",
-    "RequestAction",
-    "SwapModelAction",
     "Tactic",
     "TacticSet",
 ]
@@ -111,145 +100,6 @@ Precondition = Annotated[
     ),
 ]
 """A precondition: a :class:`GoalState` or an :class:`ExpressionCondition`."""
-
-
-# --------------------------------------------------------------------------- actions
-
-
-class PublishAction(_Model):
-    """Publish one message on a topic of the managed system."""
-
-    type: Literal["publish"] = "publish"
-    topic: EndpointName
-    payload: Payload
-
-    def endpoint(self) -> tuple[Literal["topic", "service"], str, dict[str, JsonValue]]:
-        """Return ``(kind, name, payload)`` of what this action sends."""
-        return "topic", self.topic, dict(self.payload)
-
-
-class RequestAction(_Model):
-    """Call a service of the managed system and wait up to ``timeout`` seconds for the reply."""
-
-    type: Literal["request"] = "request"
-    service: EndpointName
-    payload: Payload = Field(default_factory=dict)
-    timeout: Annotated[Seconds, Field(gt=0)] = 2.0
-
-    def endpoint(self) -> tuple[Literal["topic", "service"], str, dict[str, JsonValue]]:
-        """Return ``(kind, name, payload)`` of what this action sends."""
-        return "service", self.service, dict(self.payload)
-
-
-class ChangeModeAction(_Model):
-    """Ask the managed system to change mode: a request ``{"mode": mode}`` to ``service``."""
-
-    type: Literal["change_mode"] = "change_mode"
-    mode: Token
-    service: EndpointName
-
-    def endpoint(self) -> tuple[Literal["topic", "service"], str, dict[str, JsonValue]]:
-        """Return ``(kind, name, payload)`` of what this action sends."""
-        return "service", self.service, {"mode": self.mode}
-
-
-class SwapModelAction(_Model):
-    """Ask the model manager to swap the model of a learning-enabled component.
-
-    Give exactly one of ``model`` (a model id in the registry) or ``domain`` (the manager picks
-    the model robustified for that domain, e.g. ``fog``).
-    """
-
-    type: Literal["swap_model"] = "swap_model"
-    lec: Token = "detector"
-    model: Token | None = None
-    domain: Token | None = None
-    service: EndpointName = topics.SWAP
-
-    @model_validator(mode="after")
-    def _one_target(self) -> SwapModelAction:
-        if (self.model is None) == (self.domain is None):
-            both = self.model is not None
-            raise _error(
-                "swap_target",
-                "give either 'model' or 'domain', not both"
-                if both
-                else "say what to swap to: 'model' or 'domain'",
-                hint="model is a model id (e.g. detector-fog-v2); domain lets the manager pick "
-                "(e.g. fog)",
-            )
-        return self
-
-    def endpoint(self) -> tuple[Literal["topic", "service"], str, dict[str, JsonValue]]:
-        """Return ``(kind, name, payload)`` of what this action sends."""
-        payload: dict[str, JsonValue] = {"lec": self.lec}
-        if self.model is not None:
-            payload["model"] = self.model
-        else:
-            payload["domain"] = self.domain
-        return "service", self.service, payload
-
-
-#: The channels that need a recipient: its pattern, the wording of the error, an example.
-_RECIPIENTS: Final[dict[str, tuple[re.Pattern[str], str, str, str]]] = {
-    "email": (_EMAIL, "an email notification", "an e-mail address", "operator@example.com"),
-    "webhook": (
-        _URL,
-        "a webhook notification",
-        "an http(s) URL",
-        "https://hooks.example.com/rover",
-    ),
-}
-
-
-class NotifyAction(_Model):
-    """Tell a person: an e-mail, a webhook call, or a log record.
-
-    ``to`` is required for ``email`` (an address) and ``webhook`` (an http(s) URL); for ``log``
-    it optionally names the logger.
-    """
-
-    type: Literal["notify"] = "notify"
-    channel: Literal["email", "webhook", "log"]
-    to: Token | None = None
-    subject: Line = ""
-    message: Annotated[Text, Filled]
-
-    @model_validator(mode="after")
-    def _recipient(self) -> NotifyAction:
-        rule = _RECIPIENTS.get(self.channel)
-        if rule is None:
-            return self
-        pattern, notification, what, example = rule
-        if self.to is None or not pattern.fullmatch(self.to):
-            raise _error(
-                "notify_to",
-                f"{notification} needs 'to': {what}"
-                if self.to is None
-                else f"{self.to!r} is not {what}",
-                hint=f"e.g. to: {example}",
-                where=("to",),
-            )
-        return self
-
-    def endpoint(self) -> None:
-        """Return ``None``: a notification uses no topic or service of the managed system."""
-        return None
-
-
-Action = Annotated[
-    PublishAction | RequestAction | ChangeModeAction | SwapModelAction | NotifyAction,
-    Field(discriminator="type"),
-]
-"""An action, told apart by its ``type``."""
-
-ACTION_CLASSES: Final[dict[str, type[_Model]]] = {
-    "publish": PublishAction,
-    "request": RequestAction,
-    "change_mode": ChangeModeAction,
-    "swap_model": SwapModelAction,
-    "notify": NotifyAction,
-}
 
 
 # --------------------------------------------------------------------------- tactics

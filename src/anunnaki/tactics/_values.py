@@ -41,7 +41,8 @@ GOAL_STATES: Final = ("satisfied", "unsatisfied", "unknown")
 """The states a goal can be required to be in."""
 
 ACTION_TYPES: Final = ("publish", "request", "change_mode", "swap_model", "notify")
-"""The action types, in the order the docs present them."""
+"""The built-in action types, in the order the docs present them (others register in
+:data:`~anunnaki.tactics.ACTIONS`)."""
 
 NOTIFY_CHANNELS: Final = ("email", "webhook", "log")
 """Where a :class:`NotifyAction` sends its message."""
@@ -62,7 +63,6 @@ _URL = re.compile(r"https?://[^\s/?#]+\S*")
 _BAD_CHARS = re.compile(r"[\x00-\x08\x0b-\x1f\x7f-\x9f\ud800-\udfff\ufffe\uffff]")
 _BAD_LINE_CHARS = re.compile(r"[\x00-\x1f\x7f-\x9f\ud800-\udfff\ufffe\uffff]")
 
-ACTION_HINT: Final = "valid action types: " + ", ".join(ACTION_TYPES)
 STATE_HINT: Final = "valid states: " + ", ".join(GOAL_STATES)
 CHANNEL_HINT: Final = "valid channels: " + ", ".join(NOTIFY_CHANNELS)
 ROS_HINT: Final = (

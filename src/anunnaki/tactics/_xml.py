@@ -30,24 +30,17 @@ from pydantic import JsonValue
 
 from anunnaki._safeyaml import MAX_BYTES, LineMap, element_path
 from anunnaki.errors import ModelFileError
+from anunnaki.tactics._actions import TacticAction, action_class, action_hint, action_types
 from anunnaki.tactics._load import (
     build_tactic_set,
 )
 from anunnaki.tactics._schema import (
-    Action,
-    ChangeModeAction,
     ExpressionCondition,
     GoalState,
-    NotifyAction,
-    PublishAction,
-    RequestAction,
-    SwapModelAction,
     Tactic,
     TacticSet,
 )
 from anunnaki.tactics._values import (
-    ACTION_HINT,
-    ACTION_TYPES,
     MAX_DEPTH,
     tactic_element,
 )
@@ -64,17 +57,10 @@ _HOSTILE_HINT = (
     "declaration and write values out in full"
 )
 
-# XML attribute → data key, per element; attributes in the second set are required.
-_ACTION_ATTRS: Final[dict[str, tuple[dict[str, str], tuple[str, ...]]]] = {
-    "publish": ({"topic": "topic"}, ("topic",)),
-    "request": ({"service": "service", "timeout": "timeout"}, ("service",)),
-    "change_mode": ({"service": "service", "mode": "mode"}, ("service", "mode")),
-    "swap_model": (
-        {"lec": "lec", "model": "model", "domain": "domain", "service": "service"},
-        (),
-    ),
-    "notify": ({"channel": "channel", "to": "to", "subject": "subject"}, ("channel",)),
-}
+
+def _attributes(cls: type[TacticAction]) -> list[str]:
+    """An action element's attributes: its class's fields but the tag, payload and text."""
+    return [n for n in cls.model_fields if n not in ("type", "payload", cls.XML_TEXT)]
 
 
 @dataclass
@@ -350,7 +336,7 @@ class _Reader:
                 self.attrs(child, sub, {})
                 out["actions"] = [
                     self.action(c, (*sub, j))
-                    for j, c in enumerate(self.children(child, sub, ACTION_TYPES, ACTION_HINT))
+                    for j, c in enumerate(self.children(child, sub, action_types(), action_hint()))
                 ]
             elif child.tag == "postconditions":
                 out.update(self.attrs(child, sub, {"deadline": "deadline"}))
@@ -393,13 +379,16 @@ class _Reader:
 
     def action(self, node: _Node, path: tuple[str | int, ...]) -> dict[str, Any]:
         self.lines.add(path, node.line)
-        allowed, required = _ACTION_ATTRS[node.tag]
+        cls = action_class(node.tag)
+        assert cls is not None  # children() let only the registered types through
+        allowed = {name: name for name in _attributes(cls)}
+        required = [name for name in allowed if cls.model_fields[name].is_required()]
         out: dict[str, Any] = {"type": node.tag}
         out.update(self.attrs(node, path, allowed, required))
-        if node.tag in ("publish", "request"):
+        if "payload" in cls.model_fields:
             out["payload"] = self.payload(node, (*path, "payload"))
-        elif node.tag == "notify":
-            out["message"] = self.leaf(node, path)
+        elif cls.XML_TEXT is not None:
+            out[cls.XML_TEXT] = self.leaf(node, path)
         else:
             self.no_text(node, path)
             self.leaf(node, path)
@@ -545,43 +534,29 @@ def _tactic(parent: ET.Element, tactic: Tactic) -> None:
             ET.SubElement(conflicts, "tactic", name=name)
 
 
-def _action(parent: ET.Element, action: Action) -> None:
+def _attribute(value: object) -> str:
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, float):
+        return _number(value)
+    return str(value)
+
+
+def _action(parent: ET.Element, action: TacticAction) -> None:
+    """Write an action as its class says: the tag, the attributes set, payload, text."""
+    cls = type(action)
     act = ET.SubElement(parent, action.type)
-    if isinstance(action, PublishAction):
-        act.set("topic", action.topic)
-    elif isinstance(action, RequestAction):
-        act.set("service", action.service)
-        if action.timeout != RequestAction.model_fields["timeout"].default:
-            act.set("timeout", _number(action.timeout))
-    elif isinstance(action, ChangeModeAction):
-        act.set("service", action.service)
-        act.set("mode", action.mode)
-    elif isinstance(action, SwapModelAction):
-        _swap_model(act, action)
-    else:
-        assert isinstance(action, NotifyAction)
-        _notify(act, action)
-    if isinstance(action, PublishAction | RequestAction):
-        for name, value in action.payload.items():
+    for name in _attributes(cls):
+        value = getattr(action, name)
+        info = cls.model_fields[name]
+        if value is not None and (info.is_required() or value != info.default):
+            act.set(name, _attribute(value))
+    if "payload" in cls.model_fields:
+        payload: dict[str, JsonValue] = getattr(action, "payload", {})
+        for name, value in payload.items():
             _field(act, name, value)
-
-
-def _swap_model(act: ET.Element, action: SwapModelAction) -> None:
-    act.set("lec", action.lec)
-    if action.model is not None:
-        act.set("model", action.model)
-    if action.domain is not None:
-        act.set("domain", action.domain)
-    act.set("service", action.service)
-
-
-def _notify(act: ET.Element, action: NotifyAction) -> None:
-    act.set("channel", action.channel)
-    if action.to is not None:
-        act.set("to", action.to)
-    if action.subject:
-        act.set("subject", action.subject)
-    act.text = action.message
+    if cls.XML_TEXT is not None:
+        act.text = getattr(action, cls.XML_TEXT)
 
 
 def dump_tactics_xml(tactic_set: TacticSet) -> str:

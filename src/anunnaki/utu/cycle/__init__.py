@@ -29,8 +29,8 @@ Who owns what, one module each:
 * ``_knowledge_stage``: queries, and the decisions written since the last publication;
 * ``_entries``: what they share — the markers in Knowledge, operator entries, restarts,
   reloads, and which fields of a tactic's runtime plan or execute owns;
-* ``_mape``: the parts the stages run — :class:`Monitor`, :class:`Analyzer`,
-  :class:`Planner`, :class:`Executor`;
+* ``_mape``: the parts the stages run — :class:`TopicWatch` (what is known of each monitored
+  topic, kept by the analyze stage), :class:`Analyzer`, :class:`Planner`, :class:`Executor`;
 * ``_actions``: the :class:`Actuator` actions go through and how an outcome comes back
   (:class:`ActionRunner`, the replay's :class:`ReplayRunner`);
 * ``_knowledge``: the store (SQLite, WAL) every stage writes, the single source of truth
@@ -52,7 +52,7 @@ from anunnaki.utu.cycle._execute import ExecuteStage
 from anunnaki.utu.cycle._knowledge import Decision, InputRow, Knowledge, TacticRow, VerdictRow
 from anunnaki.utu.cycle._knowledge_stage import DecisionTail, KnowledgeStage
 from anunnaki.utu.cycle._managers import MANAGERS, baseline
-from anunnaki.utu.cycle._mape import Analyzer, Executor, Monitor, Planner, TacticRuntime
+from anunnaki.utu.cycle._mape import Analyzer, Executor, Planner, TacticRuntime, TopicWatch
 from anunnaki.utu.cycle._monitor import MonitorStage
 from anunnaki.utu.cycle._parts import (
     NodeConfigError,
@@ -78,7 +78,6 @@ __all__ = [
     "InputRow",
     "Knowledge",
     "KnowledgeStage",
-    "Monitor",
     "MonitorStage",
     "NodeConfigError",
     "PlanStage",
@@ -87,6 +86,7 @@ __all__ = [
     "ReplayRunner",
     "TacticRow",
     "TacticRuntime",
+    "TopicWatch",
     "UtuParts",
     "VerdictRow",
     "baseline",

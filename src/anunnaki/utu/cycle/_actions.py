@@ -2,8 +2,9 @@
 
 A live loop must never wait on the managed system: a mode change to a robot that is alive
 but does not answer held every cycle for its 2 s timeout, and monitoring and analysis
-stopped with it. The :class:`~anunnaki.utu.Executor` hands each request (a ``request``,
-``change_mode`` or ``swap_model`` action) to an :class:`ActionRunner` and goes on; the
+stopped with it. The :class:`~anunnaki.utu.Executor` hands each request (any action whose
+``send()`` gives a :class:`~anunnaki.tactics.ServiceRequest`: ``request``, ``change_mode``,
+``swap_model``, …) to an :class:`ActionRunner` and goes on; the
 tactic stays ``running`` while its action is in flight, and the next cycle that finds the
 outcome records it (``action`` decision) and continues with the tactic's next action — or
 fails the tactic and escalates when the action was refused, timed out or met a dead service.
@@ -24,7 +25,7 @@ from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass
 from typing import Any, Protocol
 
-from anunnaki.tactics import NotifyAction
+from anunnaki.tactics import Notice
 
 __all__ = [
     "ActionOutcome",
@@ -56,8 +57,8 @@ class Actuator(Protocol):
         """Request a service and wait for the reply."""
         ...
 
-    def notify(self, action: NotifyAction, tactic: str, now: float) -> ActionOutcome:
-        """Send a notification (may complete in the background)."""
+    def notify(self, action: Notice, tactic: str, now: float) -> ActionOutcome:
+        """Send a notice (what a ``notify`` action sends; may complete in the background)."""
         ...
 
 

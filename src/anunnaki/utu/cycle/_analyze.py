@@ -19,7 +19,7 @@ from anunnaki.utu.cycle._entries import (
     resuming,
 )
 from anunnaki.utu.cycle._knowledge import Knowledge
-from anunnaki.utu.cycle._mape import Analyzer, Monitor
+from anunnaki.utu.cycle._mape import Analyzer, TopicWatch
 from anunnaki.utu.cycle._parts import UtuParts
 
 __all__ = [
@@ -45,7 +45,7 @@ class AnalyzeStage:
         self.knowledge = knowledge
         self.origin = origin
         self.execute_alive: Callable[[], bool] | None = None  # per-node: is execute up?
-        self.monitor = Monitor(parts.model, knowledge)
+        self.topic_watch = TopicWatch(parts.model, knowledge)
         self.analyzer = Analyzer(parts.model, parts.tactics, knowledge)
         self.now = 0.0
         self.started_at: float | None = None
@@ -82,7 +82,7 @@ class AnalyzeStage:
         for row in kb.inputs(since=last - RESTORE_WINDOW):
             if row.topic.startswith("__"):
                 continue
-            ts = self.monitor.topics.get(row.topic)
+            ts = self.topic_watch.topics.get(row.topic)
             if ts is not None:
                 ts.take(row.t, dict(row.msg))
                 a.observe(row.topic, row.msg, row.t)
@@ -120,7 +120,7 @@ class AnalyzeStage:
         a.warming_up = t - self.warm_from < self.parts.config.warmup
         for item in inputs:
             at = min(max(item.t, self.now), t)
-            if self.monitor.take(item.topic, item.msg, at):
+            if self.topic_watch.take(item.topic, item.msg, at):
                 a.observe(item.topic, item.msg, at)
         self.taken += len(inputs)
         self.now = t
@@ -215,7 +215,7 @@ class AnalyzeStage:
         recent = sorted(
             (
                 (arrived, topic, body)
-                for topic, stats in self.monitor.topics.items()
+                for topic, stats in self.topic_watch.topics.items()
                 for arrived, body in stats.recent
             ),
             key=lambda x: x[0],
@@ -226,7 +226,7 @@ class AnalyzeStage:
         analyzer.record_changes(t)
         analyzer.warming_up = self.analyzer.warming_up
         self.parts, self.analyzer = parts, analyzer
-        self.monitor.set_model(parts.model)
+        self.topic_watch.set_model(parts.model)
         for kind, (path, text) in parts.sources.items():
             self.knowledge.record_model(t, kind, path, text)
         return {"sources": {k: [p, text] for k, (p, text) in parts.sources.items()}}

@@ -1,4 +1,4 @@
-"""The four MAPE parts of Utu: Monitor, Analyzer, Planner, Executor.
+"""The MAPE parts of Utu: TopicWatch, Analyzer, Planner, Executor.
 
 Each part is a plain class with its dependencies passed in; the
 :class:`~anunnaki.utu.AutonomicManager` composes them with the Knowledge base and owns the
@@ -22,14 +22,14 @@ from anunnaki.goals import (
     status_name,
 )
 from anunnaki.tactics import (
-    ChangeModeAction,
     ExpressionCondition,
     GoalState,
-    NotifyAction,
-    PublishAction,
-    RequestAction,
-    SwapModelAction,
+    Notice,
+    Publication,
+    Send,
+    ServiceRequest,
     Tactic,
+    TacticAction,
     TacticSet,
 )
 from anunnaki.utu.cycle._actions import ActionOutcome, ActionRunner, Actuator
@@ -40,9 +40,9 @@ __all__ = [
     "Actuator",
     "Analyzer",
     "Executor",
-    "Monitor",
     "Planner",
     "TacticRuntime",
+    "TopicWatch",
 ]
 
 log = logging.getLogger("anunnaki.utu")
@@ -50,9 +50,9 @@ log = logging.getLogger("anunnaki.utu")
 TacticState = Literal["idle", "pending", "queued", "running", "awaiting", "rejected"]
 
 
-# -- Monitor -------------------------------------------------------------------------------
+# -- TopicWatch ----------------------------------------------------------------------------
 class TopicStats(TopicFreshness):
-    """What the Monitor knows of one topic: its freshness, last value and recent messages.
+    """What the topic watch knows of one topic: its freshness, last value and recent messages.
 
     Freshness (last arrival, count, rate, staleness) is :class:`~anunnaki.goals.TopicFreshness`,
     the same definition the goal model's ``rate(A)`` and staleness use.
@@ -72,11 +72,13 @@ class TopicStats(TopicFreshness):
         self.recent.append((t, body))
 
 
-class Monitor:
-    """Takes the managed system's messages on the topics the goal model's binding names.
+class TopicWatch:
+    """What is known of each monitored topic: freshness, last value, rate; inputs recorded.
 
-    The topics come from the model (``GoalModel.topic_routes``), never from code. Each
-    message is recorded in Knowledge (every input except images) and handed on.
+    The topics come from the model (``GoalModel.topic_routes``), never from code. The analyze
+    stage hands it each input of the monitor stage's batch (:class:`MonitorStage` takes what
+    arrived and stamps the cycle; this keeps what the inputs say of their topics): each is
+    recorded in Knowledge (every input except images) and counted for its topic's freshness.
     """
 
     def __init__(self, model: GoalModel, knowledge: Knowledge) -> None:
@@ -536,21 +538,33 @@ class Executor:
             type=action.type,
             ok=outcome.ok,
             detail=outcome.detail,
-            **_describe(action, self.resolve),
+            **self._describe(action, rt.name),
         )
         if not outcome.ok:  # refused, timed out or no service: failed, whatever follows
             self._finish(rt, now, ok=False, note="action failed", action=i)
             return False
         return True
 
+    def _describe(self, action: TacticAction, tactic: str) -> dict[str, Any]:
+        """What the decision log says of ``action``, as its class says it (resolved names)."""
+        try:
+            return dict(action.describe(self.resolve))
+        except Exception as exc:  # a broken description must not cost the decision
+            log.warning("the description of %s's %s action raised %r", tactic, action.type, exc)
+            return {}
+
     def _dispatch(
-        self, action: Any, tactic: str, index: int, now: float, attempt: int = 0
+        self, action: TacticAction, tactic: str, index: int, now: float, attempt: int = 0
     ) -> ActionOutcome | None:
         """Perform ``action``: on the loop, or through the runner for a request."""
-        request = _request_of(action, self.resolve)
-        if request is None or self.runner is None:
-            return self._perform(action, tactic, now)
-        service, payload, timeout = request
+        try:
+            sent = action.send()
+        except Exception as exc:  # an action that cannot say what it sends: failed, never fatal
+            log.warning("the %s action of %s raised %r", action.type, tactic, exc)
+            return ActionOutcome(False, f"{type(exc).__name__}: {exc}")
+        if not isinstance(sent, ServiceRequest) or self.runner is None:
+            return self._perform(sent, action, tactic, now)
+        service, payload, timeout = self.resolve(sent.service), dict(sent.payload), sent.timeout
         actuator = self.actuator
 
         def call() -> ActionOutcome:
@@ -562,19 +576,25 @@ class Executor:
             log.warning("action of %s could not start: %r", tactic, exc)
             return ActionOutcome(False, f"{type(exc).__name__}: {exc}")
 
-    def _perform(self, action: Any, tactic: str, now: float) -> ActionOutcome:
+    def _perform(self, sent: Send, action: TacticAction, tactic: str, now: float) -> ActionOutcome:
+        """Hand what an action sends to the actuator, on the loop."""
         try:
-            request = _request_of(action, self.resolve)
-            if request is not None:
-                return self.actuator.request(*request)
-            if isinstance(action, PublishAction):
-                return self.actuator.publish(self.resolve(action.topic), action.payload)
-            if isinstance(action, NotifyAction):
-                return self.actuator.notify(action, tactic, now)
+            if isinstance(sent, ServiceRequest):
+                return self.actuator.request(
+                    self.resolve(sent.service), dict(sent.payload), sent.timeout
+                )
+            if isinstance(sent, Publication):
+                return self.actuator.publish(self.resolve(sent.topic), dict(sent.payload))
+            if isinstance(sent, Notice):
+                return self.actuator.notify(sent, tactic, now)
         except Exception as exc:  # an actuator must never kill the loop
             log.warning("action of %s raised %r", tactic, exc)
             return ActionOutcome(False, f"{type(exc).__name__}: {exc}")
-        return ActionOutcome(False, f"unknown action type {type(action).__name__}")
+        return ActionOutcome(
+            False,
+            f"the {action.type} action sent {type(sent).__name__}, not a ServiceRequest, "
+            "Publication or Notice",
+        )
 
     def check(self, rt: TacticRuntime, analyzer: Analyzer, now: float) -> None:
         """Check an awaiting tactic's postconditions: verified, still waiting, or failed."""
@@ -603,41 +623,3 @@ class Executor:
         self.knowledge.record_decision(now, kind, rt.name, note=note, **data)
         if not ok:
             self.on_failure(rt, now)
-
-
-def _request_of(
-    action: Any, resolve: Callable[[str], str]
-) -> tuple[str, dict[str, Any], float] | None:
-    """A service request's (resolved service, payload, timeout), or ``None`` for another action."""
-    if isinstance(action, RequestAction):
-        return resolve(action.service), dict(action.payload), action.timeout
-    if isinstance(action, ChangeModeAction):
-        return resolve(action.service), {"mode": action.mode}, 2.0
-    if isinstance(action, SwapModelAction):
-        payload: dict[str, Any] = {"lec": action.lec}
-        if action.model is not None:
-            payload["model"] = action.model
-        if action.domain is not None:
-            payload["domain"] = action.domain
-        return resolve(action.service), payload, 5.0
-    return None
-
-
-def _describe(action: Any, resolve: Callable[[str], str]) -> dict[str, Any]:
-    """What the decision log says of an action: the topic or service it went to, resolved."""
-    if isinstance(action, PublishAction):
-        return {"topic": resolve(action.topic), "payload": action.payload}
-    if isinstance(action, RequestAction):
-        return {"service": resolve(action.service), "payload": action.payload}
-    if isinstance(action, ChangeModeAction):
-        return {"service": resolve(action.service), "mode": action.mode}
-    if isinstance(action, SwapModelAction):
-        return {
-            "service": resolve(action.service),
-            "lec": action.lec,
-            "model": action.model,
-            "domain": action.domain,
-        }
-    if isinstance(action, NotifyAction):
-        return {"channel": action.channel, "to": action.to, "subject": action.subject}
-    return {}

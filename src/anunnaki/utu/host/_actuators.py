@@ -10,7 +10,7 @@ from typing import Any
 from anunnaki import topics
 from anunnaki.errors import AnunnakiError
 from anunnaki.messages import RunStop, body_of
-from anunnaki.tactics import NotifyAction
+from anunnaki.tactics import Notice
 from anunnaki.utu._config import UtuConfig
 from anunnaki.utu.cycle._actions import ActionOutcome
 
@@ -56,7 +56,7 @@ class RecordingActuator:
         self.calls.append(("request", service, dict(payload)))
         return self._outcome("replied", dict(self.replies.get(service, {})))
 
-    def notify(self, action: NotifyAction, tactic: str, now: float) -> ActionOutcome:
+    def notify(self, action: Notice, tactic: str, now: float) -> ActionOutcome:
         """Record a notification."""
         self.calls.append(("notify", action.channel, {"to": action.to, "subject": action.subject}))
         return self._outcome("recorded")
@@ -103,7 +103,7 @@ class BusActuator:
             body = inner
         return ActionOutcome(True, f"{service} replied", body)
 
-    def notify(self, action: NotifyAction, tactic: str, now: float) -> ActionOutcome:
+    def notify(self, action: Notice, tactic: str, now: float) -> ActionOutcome:
         """Send through the notifier in the background (the loop never waits on SMTP)."""
         if self.notifier is None:
             log.info(

@@ -61,7 +61,7 @@ from anunnaki.utu.cycle._analyze import AnalyzeStage
 from anunnaki.utu.cycle._execute import ExecuteStage
 from anunnaki.utu.cycle._knowledge import Knowledge
 from anunnaki.utu.cycle._knowledge_stage import KnowledgeStage
-from anunnaki.utu.cycle._mape import Actuator, Analyzer, Executor, Monitor, Planner
+from anunnaki.utu.cycle._mape import Actuator, Analyzer, Executor, Planner, TopicWatch
 from anunnaki.utu.cycle._monitor import MonitorStage
 from anunnaki.utu.cycle._parts import UtuParts, load_parts, record_run
 from anunnaki.utu.cycle._plan import PlanStage
@@ -316,9 +316,9 @@ class AutonomicManager(Closing):
         return self.execute_stage.parts.tactics
 
     @property
-    def monitor(self) -> Monitor:
+    def monitor(self) -> TopicWatch:
         """What is known of each monitored topic."""
-        return self.analyze_stage.monitor
+        return self.analyze_stage.topic_watch
 
     @property
     def analyzer(self) -> Analyzer:

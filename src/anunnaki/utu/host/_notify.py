@@ -60,7 +60,7 @@ from pydantic import (
 )
 
 from anunnaki._closing import Closing
-from anunnaki.tactics import NotifyAction
+from anunnaki.tactics import Notice, NotifyAction
 
 __all__ = [
     "LOGGER_NAME",
@@ -293,7 +293,7 @@ class Notification:
     @classmethod
     def from_action(
         cls,
-        action: NotifyAction,
+        action: NotifyAction | Notice,
         *,
         tactic: str,
         t: float,
