@@ -74,7 +74,7 @@ from typing import IO, Any
 import torch
 
 from anunnaki import topics
-from anunnaki.bus import BusConfig, open_bus
+from anunnaki.bus import BusConfig, Executor, open_bus
 from anunnaki.launch import Launch, load_launch, run_launch
 from anunnaki.managed import SimKind, SimulatedSystem
 
@@ -186,13 +186,12 @@ def stage(
             "cpu_ms_per_frame": round(cpu_ms, 1),
             "decisions": len(result.decisions),
         }
-    with open_bus("inproc") as bus:
+    with open_bus("inproc", executor=Executor()) as bus:
         system = SimulatedSystem(
             bus,
             sim.scenario,
             models=sim.models if name in ("detector", "oracle") else None,
             oracle=sim.oracle if name == "oracle" else None,
-            lockstep=True,
         )
         with system:
             t0, cpu0 = time.perf_counter(), time.process_time()

@@ -1,8 +1,11 @@
 """A managed-system kind in one module: a toy robot closing in on a wall (docs/architecture.md).
 
 It publishes ``/toy/status`` (``range`` to the wall in m, ``buzzer``) ``rate`` times per
-second of its own time, which the launch relays on ``/clock`` (``relay_clock``), and obeys
-``/toy/buzzer`` (``{on}``). A third party registers it with one entry point::
+second of its own time, that time on ``/clock``, and obeys ``/toy/buzzer`` (``{on}``). In one
+process on sim time the run is one deterministic program (``deterministic``): the robot's
+thread delivers every message of the run, draining the launch's executor after each instant
+(``ctx.executor``), so Utu has acted on an instant before the robot moves on. A third party
+registers it with one entry point::
 
     [project.entry-points."anunnaki.managed"]
     toy_robot = "toy_robot:ToyRobotKind"
@@ -20,7 +23,7 @@ from typing import Any, ClassVar
 from pydantic import BaseModel, ConfigDict, Field
 
 from anunnaki.managed import ManagedContext
-from anunnaki.messages import body_of
+from anunnaki.messages import Clock, body_of
 
 
 class ToyOptions(BaseModel):
@@ -48,16 +51,28 @@ class ToyRun:
         self.buzzer = bool(body_of(sample.message).get("on", False))
 
     def _drive(self, ctx: ManagedContext, o: ToyOptions) -> None:
+        executor = ctx.executor
+        if executor is not None:
+            executor.bind()  # this thread delivers every message of the run
+        try:
+            self._instants(ctx, o)
+        finally:
+            if executor is not None:
+                executor.spin_until_idle()
+                executor.release()
+
+    def _instants(self, ctx: ManagedContext, o: ToyOptions) -> None:
         wall0, k = time.monotonic(), 0
         end = o.seconds if ctx.until is None else min(o.seconds, ctx.until)
         while (t := k / o.rate) <= end:
             delay = wall0 + t / ctx.speed - time.monotonic() if ctx.speed > 0 else 0.0
             if ctx.stop.wait(max(delay, 0.0)):
                 return
-            if ctx.on_instant is not None:
-                ctx.on_instant(t)  # the launch moves /clock first
+            ctx.bus.publish("/clock", Clock(time=t))  # Utu's time (clock: sim)
             distance = max(o.start - o.approach * t, 0.0)
             ctx.bus.publish("/toy/status", {"range": distance, "buzzer": self.buzzer})
+            if ctx.executor is not None:
+                ctx.executor.spin_until_idle()  # every node takes the instant first
             k += 1
 
     def finish(self, decisions: Any, ran: float) -> None:
@@ -73,7 +88,7 @@ class ToyRobotKind:
 
     name: ClassVar[str] = "toy_robot"
     Options: ClassVar[type[BaseModel]] = ToyOptions
-    relay_clock = True  # its time is the launch's /clock
+    deterministic = True  # in one process on sim time, it drains the run's executor
     speed = 1.0
 
     def __init__(self, options: BaseModel, *, base: Path) -> None:

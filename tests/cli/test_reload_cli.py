@@ -163,7 +163,9 @@ def test_reload_reaches_every_node_of_a_launch_split_into_processes(
     text = text.replace(
         "  failsafe: fail-safe\n", f"  failsafe: fail-safe\n  reload_dirs: [{tmp_path}]\n"
     )
-    launch.write_text(text.replace("    sync: true", "    sync: true\n    loop: true"))
+    launch.write_text(
+        text.replace("    publish_clock: true", "    publish_clock: true\n    loop: true")
+    )
     db = tmp_path / "run.db"
     proc = subprocess.Popen(
         [*ANUNNAKI, "run", str(launch), "--processes", "--speed", "5", "--knowledge", str(db)],

@@ -10,14 +10,17 @@ from typing import Any
 
 import pytest
 
-from anunnaki.bus import open_bus
+from anunnaki.bus import Executor, open_bus
 from anunnaki.launch import load_launch, run_launch
 from anunnaki.managed import SimKind
 
 
 @pytest.fixture
 def bus() -> Iterator[Any]:
-    with open_bus("inproc") as b:
+    """An in-process bus delivered by a deterministic executor, as ``anunnaki run`` opens
+    for a simulated run: the simulation's thread delivers every message (drain it by hand,
+    ``b.executor.spin_until_idle()``, outside a run)."""
+    with open_bus("inproc", executor=Executor()) as b:
         yield b
 
 

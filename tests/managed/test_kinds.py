@@ -10,7 +10,7 @@ from typing import Any, ClassVar
 import pytest
 from pydantic import BaseModel
 
-from anunnaki.bus import open_bus
+from anunnaki.bus import Executor, open_bus
 from anunnaki.errors import ModelFileError
 from anunnaki.launch import load_launch, parse_launch, run_launch
 from anunnaki.managed import (
@@ -47,37 +47,47 @@ def test_the_built_in_kinds_are_registered() -> None:
     assert MANAGED.factory("scripted") is ScriptedKind and MANAGED.factory("sim") is SimKind
 
 
+@pytest.mark.parametrize("on_executor", [False, True], ids=["threads", "executor"])
 @pytest.mark.parametrize("kind", sorted(BUILTIN_OPTIONS))
-def test_contract_every_kind_checks_starts_ends_and_closes(kind: str) -> None:
+def test_contract_every_kind_checks_starts_ends_and_closes(kind: str, on_executor: bool) -> None:
+    """A kind runs on the bus's threads, or (``deterministic``) drains the run's executor."""
     cls = MANAGED.factory(kind)
     managed = cls(cls.Options.model_validate(BUILTIN_OPTIONS[kind]), base=ROVER)  # type: ignore[attr-defined]
     utu = parse_config(f"anunnaki: utu/1\ngoal_model: {ROVER}/goals.yaml\nclock: sim\n")
     managed.check(utu)  # B5: everything it needs is loaded now
-    assert managed.speed > 0 and isinstance(managed.relay_clock, bool)
+    assert managed.speed > 0 and managed.deterministic is True
     assert all(isinstance(n, str) for n in managed.notes(utu, 2.0))
     said: list[str] = []
-    instants: list[float] = []
-    with open_bus("inproc") as bus:
-        heard = threading.Event()
-        bus.subscribe("/rover/status", lambda s: heard.set())
+    heard: list[str] = []
+    clocks: list[float] = []
+    executor = Executor() if on_executor else None
+    with open_bus("inproc", executor=executor) as bus:
+        seen = threading.Event()
+        bus.subscribe(
+            "/rover/status", lambda s: (heard.append(threading.current_thread().name), seen.set())
+        )
+        bus.subscribe("/clock", lambda s: clocks.append(s.message.time))
         ctx = ManagedContext(
             bus=bus,
             stop=threading.Event(),
             speed=1000.0,
             until=2.0,
             say=said.append,
-            on_instant=instants.append,
-            taken=None,
-            watched=frozenset({"/rover/status"}),
+            executor=executor,
         )
         run = managed.start(ctx)
         try:
             run.thread.join(timeout=120)
             assert not run.thread.is_alive()  # it ends by itself at `until`
-            assert heard.wait(10.0)  # it spoke the rover's topics (heard on another thread)
+            assert seen.wait(10.0)  # it spoke the rover's topics
             assert said and said[0].startswith("managed: ")
-            assert instants and max(instants) <= 2.0 + 1e-9
             assert isinstance(run.ended, str) and run.ended
+            if on_executor:  # every message delivered on the kind's thread, its /clock too
+                assert set(heard) == {run.thread.name}
+                assert clocks and max(clocks) <= 2.0 + 1e-9
+                assert clocks == sorted(clocks)
+            else:
+                assert run.thread.name not in heard  # the bus's own threads deliver
             run.finish([], 1.0)
         finally:
             run.close()
@@ -112,8 +122,6 @@ class _Silent:
 
     class Options(BaseModel):
         seconds: float = 0.01
-
-    relay_clock = False
 
     def __init__(self, options: Any, *, base: Path) -> None:
         self.options = options

@@ -2,7 +2,8 @@
 
 The detector is the committed rover default model (examples/models), so these tests run the
 real CenterNet on rendered frames. What they assert does not depend on how good the model is:
-lockstep (every frame gets its detections before the next), scoring against ground truth
+one thread of delivery (every frame gets its detections before the next, and a run repeats
+itself), scoring against ground truth
 per scenario phase, a heavy fog lowering the F1, the launch file's ``managed: sim`` section,
 and the hand-over when a swapped-in model does not help.
 """
@@ -40,7 +41,7 @@ def test_phases_split_at_phenomena() -> None:
     assert scenario_phases(sc, 9.0) == [(0, 8), (8, 9)]
 
 
-def test_every_frame_is_detected_in_lockstep_and_fog_lowers_f1(bus: Any, tmp_path: Path) -> None:
+def test_every_frame_is_detected_and_fog_lowers_f1(bus: Any, tmp_path: Path) -> None:
     seen: list[int] = []
     bus.subscribe(
         "/lec/detector/detections",
@@ -99,39 +100,53 @@ def test_a_paired_scorer_gets_the_clean_renders_of_the_frames(bus: Any, tmp_path
         assert not plain.platform.publish_clean  # nobody asked for the renders
 
 
-def test_in_lockstep_the_clock_moves_on_only_once_utu_is_settled(bus: Any) -> None:
-    """Each instant waits for ``settled()`` (Utu done with it) before ``on_time`` moves on."""
-    events: list[tuple[str, float]] = []
-    asked = {"n": 0}
+def test_each_instant_is_delivered_before_the_clock_moves_on(bus: Any) -> None:
+    """On the executor every message of an instant reaches its subscribers, on the
+    simulation's thread, before ``on_time`` moves the clock past that instant."""
+    events: list[tuple[str, float, str]] = []
 
-    def settled() -> bool:  # busy twice at each instant, then done
-        asked["n"] += 1
-        done = asked["n"] % 3 == 0
-        events.append(("settled" if done else "busy", system.platform.t))
-        return done
+    def heard(sample: Any) -> None:
+        events.append(("delivered", sample.message.time, threading.current_thread().name))
 
+    bus.subscribe(topics.CLOCK, heard, queue=4)
     system = SimulatedSystem(
-        bus, fog_scene("settle", duration=1, fog_at=5), oracle=None, settled=settled,
-        on_time=lambda t: events.append(("clock", t)),
+        bus, fog_scene("instants", duration=1, fog_at=5), oracle=None,
+        on_time=lambda t: events.append(("clock", t, threading.current_thread().name)),
     )  # fmt: skip
     with system:
-        system.run(threading.Event(), speed=0)
-    clocks = [k for k, (what, _) in enumerate(events) if what == "clock"]
-    assert len(clocks) == 41  # t = 0 and each 1/40 s to 1 s
-    for k in clocks[1:]:  # every move of the clock right after a "settled", at that instant
-        assert events[k - 1] == ("settled", events[k][1]) and events[k - 2][0] == "busy"
-    assert system.unsettled == 0
+        runner = threading.Thread(target=system.run, args=(threading.Event(),), name="sim")
+        runner.start()
+        runner.join(60)
+    delivered = [t for what, t, _ in events if what == "delivered"]
+    assert len(delivered) == 40 and delivered == sorted(delivered)  # /clock at 40 Hz, 0–0.975
+    assert {thread for *_, thread in events} == {"sim"}  # one thread of delivery
+    moved = -1.0
+    for what, t, _ in events:
+        if what == "clock":
+            moved = max(moved, t)
+        else:  # delivered before the clock moved past its instant
+            assert t >= moved - 1e-9
+    assert bus.executor.pending == 0
 
 
-def test_a_utu_that_never_settles_holds_each_instant_only_its_timeout(bus: Any) -> None:
-    system = SimulatedSystem(
-        bus, fog_scene("stuck", duration=0.5, fog_at=5), oracle=None,
-        settled=lambda: False, lockstep_timeout=0.01,
-    )  # fmt: skip
-    with system:
-        system.run(threading.Event(), speed=0)
-        assert system.platform.t == pytest.approx(0.5)
-    assert system.unsettled == 20  # counted (and logged once), never fatal
+def test_the_same_scenario_runs_the_same_twice(tmp_path: Path) -> None:
+    """Two runs of one scenario give the same frames, detections and assessments."""
+    from anunnaki.bus import Executor, open_bus
+
+    registry = load_registry(write_registry(tmp_path / "m.yaml"))
+    reports = []
+    for _ in range(2):
+        with (
+            open_bus("inproc", executor=Executor()) as b,
+            SimulatedSystem(
+                b, fog_scene("twice", duration=2, fog_at=1), models=registry,
+                oracle={"window": 5}, scorer={"window": 5},
+            ) as system,
+        ):  # fmt: skip
+            system.run(threading.Event(), speed=0)
+            reports.append(system.report().as_dict())
+    assert reports[0]["frames"] and reports[0]["assessments"]
+    assert reports[0] == reports[1]
 
 
 LAUNCH = """

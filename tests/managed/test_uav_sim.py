@@ -68,7 +68,7 @@ SHORT: dict[str, Any] = {
 
 
 def run_short(tmp: Path, scenario: dict[str, Any]) -> dict[str, Any]:
-    """examples/uav/sim.yaml on *scenario* at 1000× (lockstep): result, log, UAV statuses."""
+    """examples/uav/sim.yaml on *scenario* at 1000× (one thread): result, log, UAV statuses."""
     (tmp / "scenario.yaml").write_text(yaml.safe_dump(scenario))
     launch = load_launch(UAV / "sim.yaml")
     assert isinstance(launch.managed, SimKind)

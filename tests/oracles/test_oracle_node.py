@@ -336,24 +336,6 @@ def test_options_go_to_a_named_oracle_only(bus: Bus) -> None:
         OracleNode(bus, Flaky(), every=0)
 
 
-def test_a_lockstep_simulation_waits_until_a_frame_is_handled(bus: Bus) -> None:
-    """``wait_for_frame``: true once the frame was handled, assessed or withheld."""
-    oracle = Recorder()
-    outputs = Outputs(bus)
-    with OracleNode(bus, oracle, camera=CAMERA) as node:
-        assert not node.wait_for_frame(0, timeout=0.05)  # nothing arrived yet
-        bus.publish(CAMERA, Image(encoding="png", width=32, height=32, data=CLEAR_PNG, seq=0))
-        assert node.wait_for_frame(0, timeout=10.0)
-        assert node.stats().withheld == 1  # no model known: handled, not assessed
-        bus.publish("/lm_manager/active", {"lec": "detector", "model": "m1", "domain": "default"})
-        assert until(lambda: node.model_id == "m1")
-        bus.publish(CAMERA, Image(encoding="png", width=32, height=32, data=CLEAR_PNG, seq=5))
-        assert node.wait_for_frame(5, timeout=10.0)
-        assert node.stats().assessments == 1  # its assessment is out when the wait ends
-        assert outputs.wait_for(5).model_id == "m1"
-        assert node.wait_for_frame(3, timeout=0.0)  # an earlier frame counts as handled
-
-
 def test_a_shadow_oracle_assesses_its_model_whichever_is_active(bus: Bus) -> None:
     """``model=``: the default model's oracle on every frame while another model runs."""
     oracle = Recorder()

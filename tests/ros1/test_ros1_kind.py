@@ -31,16 +31,13 @@ def kind(**options: object):  # type: ignore[no-untyped-def]
 
 
 def context(bus: Any, say: Callable[[str], None]) -> ManagedContext:
-    """What a launch gives a managed system it starts (no clock relay, no lockstep)."""
+    """What a launch gives a managed system it starts (no executor: a live robot)."""
     return ManagedContext(
         bus=bus,
         stop=threading.Event(),
         speed=1.0,
         until=None,
         say=say,
-        on_instant=None,
-        taken=None,
-        watched=frozenset(),
     )
 
 
@@ -88,8 +85,7 @@ from anunnaki.managed import MANAGED, ManagedContext
 cls = MANAGED.factory("ros1")
 kind = cls(cls.Options.model_validate({"bridge": "ros1/bridge.yaml"}), base=Path(sys.argv[1]))
 with open_bus("zenoh") as bus:
-    ctx = ManagedContext(bus=bus, stop=threading.Event(), speed=1.0, until=None, say=print,
-                         on_instant=None, taken=None, watched=frozenset())
+    ctx = ManagedContext(bus=bus, stop=threading.Event(), speed=1.0, until=None, say=print)
     link = kind.connect(ctx)
     # one write: a print is two (text, then newline), and the context's own say=print lines,
     # from the bridge's threads, could land between them

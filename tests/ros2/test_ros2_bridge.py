@@ -165,9 +165,6 @@ def test_the_ros2_launch_kind_bridges_a_robots_zenoh(bus: Bus, ros2_side: Any) -
         speed=1.0,
         until=None,
         say=said.append,
-        on_instant=None,
-        taken=None,
-        watched=frozenset(),
     )
     run = kind.start(ctx)  # no connect: the robot's zenoh joins the launch's session
     try:

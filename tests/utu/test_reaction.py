@@ -15,10 +15,10 @@ from typing import Any
 
 import pytest
 
-from anunnaki.bus import open_bus
+from anunnaki.bus import Executor, open_bus
 from anunnaki.clock import SimClock, WallClock
 from anunnaki.goals import load_binding, parse_goal_model
-from anunnaki.messages import AnalysisState, MonitorBatch
+from anunnaki.messages import AnalysisState, Clock, MonitorBatch
 from anunnaki.tactics import load_tactics
 from anunnaki.utu import (
     NODE_NAMES,
@@ -269,20 +269,22 @@ def test_a_live_run_that_ends_normally_replays_without_a_cut_step(tmp_path: Path
     assert report.identical, report.notes
 
 
-def test_settled_says_when_a_simulation_may_move_its_clock_on() -> None:
-    """``settled()``: every message taken at the present instant, a step run at it.
+def test_on_an_executor_every_message_is_taken_at_its_instant() -> None:
+    """``run_on(executor)``: Utu steps in the executor's drain, once at each new instant.
 
-    The race it closes: a message that comes while the spinning thread holds the step is
-    left for that thread's next round; a simulation that moved its clock on meanwhile had
-    it stamped an instant late (a 10 Hz GPS then looked slower than 10 Hz, and the UAV
-    hovered before take-off). A simulation in lockstep waits for ``settled()`` first.
+    The race this replaces: a message that came while the spinning thread held the step was
+    left for that thread's next round; a simulation that had moved its clock on meanwhile
+    had it stamped an instant late (a 10 Hz GPS then looked slower than 10 Hz, and the UAV
+    hovered before take-off). On the executor nothing runs in between: the message is taken
+    in the drain of the instant that published it, and the step at the next instant runs
+    in that instant's drain.
     """
     model = parse_goal_model(
         (ROVER / "goals.yaml").read_text(), binding=load_binding(ROVER / "binding.yaml")
     )
     clock = SimClock()
-    clock.update(1.0)
-    with open_bus("inproc") as bus:
+    executor = Executor()
+    with open_bus("inproc", executor=executor) as bus:
         m = AutonomicManager(
             model,
             load_tactics(ROVER / "tactics.xml"),
@@ -293,26 +295,22 @@ def test_settled_says_when_a_simulation_may_move_its_clock_on() -> None:
             warmup=2.0,
             rate=20.0,
         )
-        assert m.settled()  # not running live: nothing would come
-        stop = threading.Event()
-        spinner = threading.Thread(target=m.spin, args=(stop,), daemon=True)
-        spinner.start()
+        threads = threading.active_count()
+        detach = m.run_on(executor)
         try:
-            assert wait_for(m.settled)
-            assert m.now == 1.0
-            # the spinning thread holds the step: the message waits in its queue
-            with m._step_lock:
-                bus.publish("/rover/ultrasonic", {"range": 3.0})
-                assert not m.settled()
-            assert wait_for(m.settled)
+            bus.publish("/clock", Clock(time=1.0))
+            executor.spin_until_idle()
+            assert m.now == 1.0  # a step at the present instant, in the drain
+            bus.publish("/rover/ultrasonic", {"range": 3.0})
+            assert m.monitor.snapshot(m.now)["/rover/ultrasonic"]["count"] == 0  # not yet
+            executor.spin_until_idle()
             ultrasonic = m.monitor.snapshot(m.now)["/rover/ultrasonic"]
             assert ultrasonic["count"] == 1 and ultrasonic["last_t"] == 1.0  # this instant's
-            clock.update(1.025)  # the simulation moves on: a step must run at the new time
-            assert not m.settled()
-            assert wait_for(m.settled) and m.now == 1.025
+            bus.publish("/clock", Clock(time=1.025))  # the simulation moves on
+            executor.spin_until_idle()
+            assert m.now == 1.025
+            assert executor.spin_until_idle() == 0  # nothing left: no step without a cause
+            assert threading.active_count() == threads  # no thread of the manager's ran
         finally:
-            stop.set()
-            m.wake()
-            spinner.join(5.0)
+            detach()
             m.close()
-    assert m.settled()  # closed

@@ -92,12 +92,6 @@ def add_parser(sub: Any) -> None:
         "default ground_truth)",
     )
     p.add_argument(
-        "--no-lockstep",
-        action="store_true",
-        help="let the simulation run ahead of the detector (default: each frame waits for "
-        "its detections)",
-    )
-    p.add_argument(
         "--report",
         metavar="FILE.json",
         help="with --models: write the run as data (every scored frame, assessment and tactic)",
@@ -177,9 +171,7 @@ def _run_loop(
     from anunnaki.sim import save_run
 
     oracle = None if args.oracle == "none" else {"name": args.oracle}
-    with SimulatedSystem(
-        bus, scenario, models=args.models, oracle=oracle, lockstep=not args.no_lockstep
-    ) as system:
+    with SimulatedSystem(bus, scenario, models=args.models, oracle=oracle) as system:
         print(
             f"detector {system.lec.active.id} ({system.lec.active.domain}) on "
             f"{system.lec.camera}; oracle {args.oracle}",
@@ -204,7 +196,7 @@ def _run_loop(
 
 def run(args: argparse.Namespace) -> int:
     """Run the simulation until ``--until``, the scenario's duration, or Ctrl-C."""
-    from anunnaki.bus import open_bus
+    from anunnaki.bus import Executor, open_bus
 
     if args.speed < 0:
         print("error: --speed must be >= 0", file=sys.stderr)
@@ -229,6 +221,10 @@ def run(args: argparse.Namespace) -> int:
     if in_main:
         signal.signal(signal.SIGINT, lambda *_: stop.set())
     try:
+        # In one process the run is one deterministic program: its nodes are delivered on
+        # the simulation's thread (anunnaki.bus.Executor); a networked bus has its threads.
+        if args.bus == "inproc" and args.models:
+            options["executor"] = Executor()
         with open_bus(args.bus, **options) as bus:
             if bus.endpoints:  # a networked kind: where the others join it
                 print(f"{args.bus} peer listening on {', '.join(bus.endpoints)}", flush=True)

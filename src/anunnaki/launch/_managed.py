@@ -7,17 +7,14 @@ validated options, and relays a managed system's time on ``/clock`` when the kin
 
 from __future__ import annotations
 
-from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
 from pydantic import BaseModel
 
-from anunnaki.bus import Bus
 from anunnaki.managed import MANAGED, ManagedKind
-from anunnaki.messages import Clock
 
-__all__ = ["clock_publisher", "resolve_kind", "split_managed"]
+__all__ = ["resolve_kind", "split_managed"]
 
 
 def split_managed(raw: Any) -> tuple[str | None, dict[str, Any], tuple[str, ...]]:
@@ -52,18 +49,3 @@ def resolve_kind(name: str, options: BaseModel, base: Path) -> ManagedKind:
     factory = MANAGED.factory(name)
     kind: ManagedKind = factory(options, base=base)
     return kind
-
-
-def clock_publisher(bus: Bus, topic: str) -> Callable[[float], None]:
-    """Publish the simulation time before each instant, ahead of the instant's records.
-
-    The scripted system publishes ``/clock`` at normal priority; assessments travel at
-    high priority and could overtake it. Published here at high priority first, the
-    time of an instant always reaches a node before the instant's messages.
-    """
-    pub = bus.publisher(topic, priority="high")
-
-    def publish(t: float) -> None:
-        pub.put(Clock(time=max(t, 0.0)))
-
-    return publish

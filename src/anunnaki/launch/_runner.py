@@ -19,16 +19,14 @@ import sys
 import tempfile
 import threading
 import time
-from collections.abc import Callable, Iterable, Sequence
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, TextIO
 
-from anunnaki import topics
 from anunnaki._closing import Closing
 from anunnaki.bus import Bus, BusConfig, Executor, open_bus
 from anunnaki.clock import SimClock
-from anunnaki.launch._managed import clock_publisher
 from anunnaki.launch._schema import Launch, LaunchError, _StoppedDuringBringUp
 from anunnaki.launch._supervisor import (
     Children,
@@ -58,7 +56,7 @@ __all__ = ["RunResult", "format_decision", "run_launch"]
 
 log = logging.getLogger("anunnaki.launch")
 
-#: ``--speed 0``: as fast as possible (the managed system's own lockstep holds it back).
+#: ``--speed 0``: as fast as the work allows (rendering, inference and Utu's steps).
 _AS_FAST_AS_POSSIBLE = 10_000.0
 
 
@@ -113,97 +111,6 @@ class _Printer:
         self.decisions += rows
         for d in rows:
             self.say(format_decision(d, t0=self.t0 or 0.0))
-
-
-# -- lockstep ----------------------------------------------------------------------------------
-class _InputCounter:
-    """Across processes: count the inputs the monitor node has republished."""
-
-    def __init__(self, bus: Bus) -> None:
-        self.seen = 0
-        self._lock = threading.Lock()
-        self.sub = bus.subscribe(topics.MONITOR_INPUT, self._on_batch, queue=1024)
-
-    def _on_batch(self, sample: Any) -> None:
-        inputs = sample.message.to_body().get("inputs", [])
-        with self._lock:
-            self.seen += len(inputs) if isinstance(inputs, list) else 0
-
-    def __call__(self, n: int) -> bool:
-        with self._lock:
-            return self.seen >= n
-
-
-class _CycleCounter:
-    """Across processes: whether Utu has taken ``n`` inputs and acted on them.
-
-    The analyze node reports the inputs taken so far (``taken`` in its state); with an
-    execute node, the cycle that took them must be done too (its actions are out).
-    """
-
-    def __init__(self, bus: Bus, *, wait_done: bool) -> None:
-        self._lock = threading.Lock()
-        self._cycles: list[tuple[int, int]] = []  # (seq, taken) of recent cycles
-        self._done = -1
-        self._wait_done = wait_done
-        self._declared = [bus.subscribe(topics.ANALYSIS, self._on_state, queue=1024)]
-        if wait_done:
-            self._declared.append(bus.subscribe(topics.CYCLE_DONE, self._on_done, queue=1024))
-
-    def _on_state(self, sample: Any) -> None:
-        body = sample.message.to_body()
-        seq, taken = body.get("seq"), body.get("taken")
-        if isinstance(seq, int) and isinstance(taken, int):
-            with self._lock:
-                self._cycles.append((seq, taken))
-                del self._cycles[:-256]
-
-    def _on_done(self, sample: Any) -> None:
-        seq = sample.message.to_body().get("seq")
-        if isinstance(seq, int):
-            with self._lock:
-                self._done = max(self._done, seq)
-
-    def __call__(self, n: int) -> bool:
-        with self._lock:
-            seq = next((s for s, taken in self._cycles if taken >= n), None)
-            return seq is not None and (not self._wait_done or self._done >= seq)
-
-
-def _counter(bus: Bus, nodes: Iterable[str]) -> Callable[[int], bool] | None:
-    """Whether Utu has taken ``n`` inputs so far, from what its nodes report on the bus."""
-    names = set(nodes)
-    if "analyze" in names:
-        return _CycleCounter(bus, wait_done="execute" in names)
-    if "monitor" in names:
-        return _InputCounter(bus)
-    return None
-
-
-def _taken_here(
-    nodes: Sequence[UtuNode | AutonomicManager], bus: Bus
-) -> Callable[[int], bool] | None:
-    """In one process: whether Utu's analysis has taken ``n`` inputs so far (lockstep).
-
-    Counted, never read off empty input queues: a step drains the queues first and reads
-    the clock after, and in between the next instant would move the clock on and the
-    inputs be stamped one instant late (whenever the step runs on a thread of its own:
-    the nodes, or the composed manager on a bus other than the in-process one). The
-    composed manager counts in its analysis; separate nodes report on the bus, as across
-    processes.
-    """
-    for node in nodes:
-        if isinstance(node, AutonomicManager):
-            manager = node
-            return lambda n: manager.analyze_stage.taken >= n
-    return _counter(bus, (node.name for node in nodes if isinstance(node, UtuNode)))
-
-
-def _settled_here(
-    nodes: Sequence[UtuNode | AutonomicManager],
-) -> Callable[[], bool] | None:
-    """In one process, the composed manager's ``settled`` (separate nodes cannot tell)."""
-    return next((n.settled for n in nodes if isinstance(n, AutonomicManager)), None)
 
 
 @dataclass
@@ -414,36 +321,19 @@ class _Runner:
                 "over)"
             )
 
-    def _start_managed(
-        self,
-        bus: Bus,
-        on_instant: Callable[[float], object] | None = None,
-        taken: Callable[[int], bool] | None = None,
-        settled: Callable[[], bool] | None = None,
-        *,
-        executor: Executor | None = None,
-    ) -> ManagedRun | None:
+    def _start_managed(self, bus: Bus, executor: Executor | None = None) -> ManagedRun | None:
         """Start the managed system (a plugin) in its own thread.
 
-        ``on_instant(t)`` runs before an instant's messages go out; ``taken(n)`` tells
-        whether Utu has taken ``n`` inputs so far, ``settled()`` whether it is done with the
-        present (lockstep); ``executor``: the run's one thread of delivery, if it has one.
+        ``executor``: the run's one thread of delivery, if it has one (the system drains it).
         """
         if self.managed is None:
             return None
-        watched = frozenset(
-            tb.topic for agent in self.parts.model.agents.values() for tb in agent.topics
-        )
         ctx = ManagedContext(
             bus=bus,
             stop=self.stop,
             speed=self.speed,
             until=self.until,
             say=self.say,
-            on_instant=on_instant,
-            taken=taken,
-            watched=watched,
-            settled=settled,
             executor=executor,
         )
         self.running = self.managed.start(ctx)
@@ -508,12 +398,6 @@ class _Runner:
                 )
                 kb.flush()
 
-    def _clock_publisher(self, bus: Bus) -> Callable[[float], None] | None:
-        """The launch's relay of the managed system's time, ahead of each instant."""
-        if self.managed is None or not self.managed.relay_clock:
-            return None
-        return clock_publisher(bus, self.utu.clock_topic)
-
     def _finish(self, printer: _Printer, code: int, reason: str, ran: float) -> None:
         printer.poll()
         self.say(f"stopped ({reason}): {len(printer.decisions)} decisions in {ran:.2f} s")
@@ -574,13 +458,7 @@ class _Runner:
             self.say(f"ready: {', '.join(launch.nodes)} after {ready_after:.2f} s")
             printer = _Printer(self.out, tail)
             t_run = time.monotonic()
-            managed = self._start_managed(
-                bus,
-                sim.update if sim is not None else None,
-                None if executor is not None else _taken_here(nodes, bus),
-                None if executor is not None else _settled_here(nodes),
-                executor=executor,
-            )
+            managed = self._start_managed(bus, executor)
             code, reason = self._watch(
                 printer, managed.thread if managed else None, lambda: crashed[0] if crashed else ""
             )
@@ -676,10 +554,6 @@ class _Runner:
         peers = [n for n in ("plan", "execute") if n in self.launch.nodes]
         return ["--expect", ",".join(peers)] if name == "analyze" and peers else []
 
-    def _taken_counter(self, bus: Bus) -> Callable[[int], bool] | None:
-        """How the managed system learns that Utu took an instant (lockstep), if it can."""
-        return _counter(bus, self.launch.nodes)
-
     def _run_processes(self) -> RunResult:
         launch = self.launch
         parent_config = launch.bus
@@ -700,7 +574,6 @@ class _Runner:
             kb = open_knowledge(self.kb_path)
             self._resuming(kb)
             tail = DecisionTail(kb)
-            taken = self._taken_counter(bus)
             for name in launch.nodes:
                 config = child_bus_config(parent_config, bus.endpoints, f"{launch.name}-{name}")
                 proc = children.start(name, self._node_argv(name, config))
@@ -717,7 +590,7 @@ class _Runner:
             self.say(f"ready: {', '.join(launch.nodes)} after {ready_after:.2f} s")
             printer = _Printer(self.out, tail)
             t_run = time.monotonic()
-            managed = self._start_managed(bus, self._clock_publisher(bus), taken)
+            managed = self._start_managed(bus)
 
             def failed() -> str:
                 dead = children.died()

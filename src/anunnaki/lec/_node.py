@@ -453,17 +453,13 @@ class LecNode(Node):
                 exc,
             )
             return
-        # Counted before the put: a subscriber may act on the detections (and read this node's
-        # counters) before this thread runs again; the count never lags what was received.
-        with self._lock:
-            self._published += 1
         try:
             self._detections.put(out)
         except AnunnakiError as exc:
-            with self._lock:
-                self._published -= 1
             self._count_failure("frame %d: could not publish: %s", message.seq, exc)
             return
+        with self._lock:
+            self._published += 1
 
     def _count_failure(self, fmt: str, *args: Any) -> None:
         with self._lock:

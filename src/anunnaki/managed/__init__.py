@@ -8,8 +8,8 @@ name to a kind:
   bus and obeys mode changes, run-stop and buzzer commands; the stand-in robot of tests
   and examples;
 * ``sim`` (:class:`SimKind`) — :class:`SimulatedSystem`: a pybullet rover or UAV with its
-  camera chain, in lockstep, scored per phase of its scenario (needs the ``vision`` extra,
-  imported on first use);
+  camera chain, one deterministic program on an executor's bus, scored per phase of its
+  scenario (needs the ``vision`` extra, imported on first use);
 * ``ros1`` and ``ros2`` — a real robot through the ROS 1 bridge process
   (:mod:`anunnaki.ros1`) or over zenoh (:mod:`anunnaki.ros2`); both are a
   :class:`RobotKind` and differ only in how they reach the robot.
@@ -21,7 +21,7 @@ has a camera; an oracle that takes something from the detector's model registry 
 with the hook :class:`TakesModels`.
 
 A kind is a class with ``name``, ``Options`` (a pydantic model of its launch-file keys),
-``__init__(options, *, base)``, ``speed``, ``relay_clock``, ``check``, ``notes`` and
+``__init__(options, *, base)``, ``speed``, ``check``, ``notes`` and
 ``start(ctx) -> ManagedRun`` (:class:`ManagedKind`); optional hooks are Protocols
 (:class:`WritesReports`, :class:`ServesModels`). A third party adds one with a module and an
 entry point::

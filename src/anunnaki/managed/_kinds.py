@@ -18,7 +18,7 @@ from pydantic import BaseModel, ConfigDict, Field
 
 from anunnaki.errors import AnunnakiError, ModelFileError
 from anunnaki.managed._camera import check_camera_chain
-from anunnaki.managed._slot import DecisionLike, ManagedContext, UtuSettings, wait_for_utu
+from anunnaki.managed._slot import DecisionLike, ManagedContext, UtuSettings
 from anunnaki.trace import Record, read_trace
 
 __all__ = ["ScriptedConfig", "ScriptedKind", "SimConfig", "SimKind"]
@@ -46,12 +46,13 @@ class ScriptedConfig(_Strict):
         modes: The modes ``set_mode`` accepts.
         speed: Replay speed: 1.0 real time, 10 ten times faster.
         loop: Start over at the end (trace time keeps increasing), until stopped.
-        publish_clock: Publish the trace time on ``/clock`` (for ``clock: sim``).
-        sync: Lockstep with Utu: after each instant, wait (at most ``sync_timeout`` s)
-            until Utu has taken that instant's messages before moving time on, as a
-            simulator waits for its controller. With ``clock: sim`` every input is then
-            stamped with exactly its instant, at any ``speed``.
-        sync_timeout: The longest wait per instant, in wall seconds.
+        publish_clock: Publish the trace time on ``/clock`` (for ``clock: sim``; always so
+            when the run is one program on an executor, where it is Utu's only clock).
+
+    In one process on sim time (``clock: sim``, Utu's five parts composed) the replay is one
+    deterministic program: after each instant the replay drains the run's executor (every
+    node takes that instant's messages, Utu acts on them) before it moves time on, at any
+    ``speed`` (``anunnaki.bus.Executor``, docs/running.md).
 
     """
 
@@ -62,8 +63,6 @@ class ScriptedConfig(_Strict):
     speed: Annotated[float, Field(gt=0, le=10_000)] = 1.0
     loop: bool = False
     publish_clock: bool = False
-    sync: bool = False
-    sync_timeout: Annotated[float, Field(gt=0)] = 1.0
 
 
 def drive(
@@ -73,16 +72,12 @@ def drive(
     speed: float,
     loop: bool,
     until: float | None,
-    on_instant: Callable[[float], object] | None = None,
-    after_instant: Callable[[int], None] | None = None,
-    watched: frozenset[str] = frozenset(),
+    after_instant: Callable[[], object] | None = None,
 ) -> None:
     """Publish the scripted system's trace live: record time / ``speed`` after the start.
 
-    ``on_instant(t)`` is called before the records of instant ``t`` go out (it moves an
-    in-process simulation clock, so no record is taken before its time has come), and
-    ``after_instant(n)`` after them, with ``n`` the number of records on ``watched``
-    topics (it waits until Utu has taken them: lockstep).
+    ``after_instant()`` is called after the records of each instant went out (the run's
+    executor drains there: every node takes them before time moves on).
     """
     base = list(system.records)
     instants = system.instants()
@@ -93,7 +88,6 @@ def drive(
     span = instants[-1] - first + gap
     wall0 = time.monotonic()
     offset = 0.0
-    cursor = 0  # the first record not yet counted for after_instant
     while True:
         for instant in instants:
             t = instant + offset
@@ -102,16 +96,9 @@ def drive(
             delay = wall0 + (t - first) / speed - time.monotonic()
             if (delay > 0 and stop.wait(delay)) or stop.is_set():
                 return
-            if on_instant is not None:
-                on_instant(t)
             system.step(t)
             if after_instant is not None:
-                n = 0
-                records = system.records
-                while cursor < len(records) and records[cursor].t <= t:
-                    n += records[cursor].topic in watched
-                    cursor += 1
-                after_instant(n)
+                after_instant()
         if not loop:
             return
         offset += span
@@ -146,12 +133,13 @@ class ScriptedKind:
 
     name: ClassVar[str] = "scripted"
     Options: ClassVar[type[BaseModel]] = ScriptedConfig
+    #: In one process on sim time, the replay is one program on the run's executor.
+    deterministic = True
 
     def __init__(self, options: BaseModel, *, base: Path) -> None:
         assert isinstance(options, ScriptedConfig)
         self.options = options.model_copy(update={"trace": _here(base, options.trace)})
         self.speed = self.options.speed
-        self.relay_clock = self.options.publish_clock
         self.records: list[Record] = []
 
     def check(self, utu: UtuSettings) -> None:
@@ -182,46 +170,32 @@ class ScriptedKind:
         return out
 
     def start(self, ctx: ManagedContext) -> _Running:
-        """Replay the trace in a thread (in lockstep with Utu when ``sync``)."""
+        """Replay the trace in a thread (on the run's executor, if it has one)."""
         from anunnaki.managed import ScriptedSystem
 
         sc = self.options
         if not self.records:
             self._read()
+        executor = ctx.executor
         system = ScriptedSystem(
             ctx.bus,
             list(self.records),
             prefix=sc.prefix,
             status_topic=sc.status_topic,
             modes=tuple(sc.modes),
-            publish_clock=sc.publish_clock,
+            publish_clock=sc.publish_clock or executor is not None,
         )
         recs = self.records
         ctx.say(
             f"managed: scripted {sc.prefix} from {sc.trace} ({len(recs)} records, "
             f"t {recs[0].t:g}–{recs[-1].t:g} s) at {ctx.speed:g}× "
             + ("looping" if sc.loop else "once")
-            + (", in lockstep with Utu" if sc.sync else "")
+            + (", one thread of delivery" if executor is not None else "")
         )
-        total = 0
-        late = 0
-        taken = ctx.taken
-
-        def after(n: int) -> None:
-            nonlocal total, late
-            total += n
-            if taken is None or not n:
-                return
-            if not wait_for_utu(lambda: taken(total), ctx.stop, sc.sync_timeout, pause=0.0005):
-                late += 1
-                if late == 1:
-                    log.warning(
-                        "sync: Utu did not take the messages of an instant within "
-                        "%.1f s; the replay goes on without waiting for it",
-                        sc.sync_timeout,
-                    )
 
         def run() -> None:
+            if executor is not None:
+                executor.bind()  # this thread delivers every message of the run
             try:
                 drive(
                     system,
@@ -229,15 +203,17 @@ class ScriptedKind:
                     speed=ctx.speed,
                     loop=sc.loop,
                     until=ctx.until,
-                    on_instant=ctx.on_instant,
-                    after_instant=after if sc.sync else None,
-                    watched=ctx.watched,
+                    after_instant=None if executor is None else executor.spin_until_idle,
                 )
             except AnunnakiError as exc:
                 if not ctx.stop.is_set():
                     log.warning("scripted system stopped: %s", exc)
             except Exception:  # a bug: say so; the run then ends as after the trace
                 log.exception("the scripted system failed")
+            finally:
+                if executor is not None:
+                    executor.spin_until_idle()
+                    executor.release()
 
         thread = threading.Thread(target=run, name="anunnaki-scripted", daemon=True)
         thread.start()
@@ -263,8 +239,7 @@ class SimConfig(_Strict):
             assesses, e.g. ``{name: enlil, window: 3, domain: default}``): that model's
             oracle on every frame whichever model is active, published on
             ``/utu/oracle/shadow`` for an agent of Utu's (docs/whole-loop.md).
-        speed: Simulated seconds per wall second (the detector can hold it back: lockstep).
-        lockstep: A frame is not followed by the next before its detections are out.
+        speed: Simulated seconds per wall second (0: as fast as the work allows).
         report: Print the per-phase table (detector F1, categories, models, tactics) at the end.
         report_file: Also write the run as data (``sim-report/1`` JSON: every scored frame,
             assessment and tactic); relative to the launch file.
@@ -283,7 +258,6 @@ class SimConfig(_Strict):
     scorer: dict[str, Any] | None = None
     shadow: dict[str, Any] | None = None
     speed: Annotated[float, Field(gt=0, le=10_000)] = 1.0
-    lockstep: bool = True
     report: bool = True
     report_file: str | None = None
     plot_file: str | None = None
@@ -295,7 +269,6 @@ class SimKind:
 
     name: ClassVar[str] = "sim"
     Options: ClassVar[type[BaseModel]] = SimConfig
-    relay_clock = False  # the platform publishes /clock itself
     #: In one process, the run is one program on the executor: the simulation drains it at
     #: every frame and instant and moves its clock on only then (anunnaki.bus._executor).
     deterministic = True
@@ -364,16 +337,13 @@ class SimKind:
             oracle=cfg.oracle,
             scorer=cfg.scorer,
             shadow=cfg.shadow,
-            lockstep=cfg.lockstep,
-            on_time=ctx.on_instant,
-            settled=ctx.settled,
         )
         sc = system.scenario
         end = sc.duration if ctx.until is None else ctx.until
         ctx.say(
             f"managed: simulated {sc.platform} '{sc.name}' from {cfg.scenario} "
             f"(t 0–{end:g} s) at {ctx.speed:g}×"
-            + (", in lockstep with the detector" if cfg.lockstep and system.lec else "")
+            + (", one thread of delivery" if system.executor is not None else "")
             + f"; {system.chain.describe()}"
         )
 

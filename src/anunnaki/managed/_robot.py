@@ -104,7 +104,6 @@ class RobotKind(ABC):
 
     name: ClassVar[str]
     speed = 1.0
-    relay_clock = False  # a robot lives in real time
     options: RobotConfig
 
     def __init__(self, options: BaseModel, *, base: Path) -> None:

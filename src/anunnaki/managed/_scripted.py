@@ -45,7 +45,8 @@ class ScriptedSystem(Closing):
         status_topic: The topic whose messages carry ``mode``/``buzzer`` (default
             ``<prefix>/status``).
         modes: The modes ``set_mode`` accepts.
-        publish_clock: Publish the trace time on ``/clock`` before each instant.
+        publish_clock: Publish the trace time on ``/clock`` before each instant (at high
+            priority, so that it reaches a node before the instant's messages).
         stop_without_utu: Seconds a Utu node it has seen may be gone before the system
             stops by itself (``None``: never), as a real platform should
             (docs/running.md#failure-behaviour).
@@ -71,6 +72,9 @@ class ScriptedSystem(Closing):
         self.status_topic = status_topic or f"{prefix}/status"
         self.modes = modes
         self.publish_clock = publish_clock
+        # At high priority: assessments travel high and, across processes, could overtake
+        # it; the time of an instant must reach a node before the instant's messages.
+        self._clock = bus.publisher(topics.CLOCK, priority="high") if publish_clock else None
         self.overrides: dict[str, Any] = {}
         self.commands: list[tuple[float, str, dict[str, Any]]] = []
         self.teleop = 0
@@ -157,8 +161,8 @@ class ScriptedSystem(Closing):
             rec = self.records[self._next]
             if rec.t != self.t:
                 self.t = rec.t
-                if self.publish_clock:
-                    self.bus.publish(topics.CLOCK, Clock(time=max(rec.t, 0.0)))
+                if self._clock is not None:
+                    self._clock.put(Clock(time=max(rec.t, 0.0)))
             self.bus.publish(rec.topic, self.message(rec))
             self._next += 1
             n += 1

@@ -10,13 +10,21 @@ What ``managed: sim`` in a launch file (``anunnaki run``) starts, on the launch'
         └── /rover/set_mode, /rover/stop ◀── Utu's tactics ──▶ /lm_manager/swap ─▶ LecNode
 
 :class:`SimulatedSystem` owns the three, runs the simulation in a thread (live at ``speed``
-× real time, in lockstep with the detector: a frame is not followed by the next before its
-detections are out), and scores what happened per phase of the scenario (:class:`PhaseScore`):
+× real time) and scores what happened per phase of the scenario (:class:`PhaseScore`):
 the active model's F1 against the simulator's ground truth (with its counts: a phase with no
 object to find has none), the categories the oracle reported, how often it agreed with its
 live scorer, the models that ran, the tactics Utu started and the collisions. A UAV's phases
 end at its touch-down; the time it then spends on the ground is a row of its own. The rover
 never sees the ground truth; only the scorer and the ground-truth oracle do.
+
+On a bus delivered by a deterministic executor (``open_bus("inproc", executor=ex)``, what
+``anunnaki run`` opens for a simulated run in one process) the simulation's thread is the
+run's one thread of delivery: after each camera frame and at each instant (1/40 s) it drains
+the executor — the detector, the oracles, the scorer, the platform's own subscriptions and
+Utu take what was published, in publication order, and Utu's actions are answered — and only
+then moves its clock on. The run is one deterministic program: the same scenario, seed and
+manager give the same report, loaded or not. On any other bus the nodes run on the bus's
+threads and the simulation does not wait for them (a live deployment).
 """
 
 from __future__ import annotations
@@ -25,7 +33,6 @@ import bisect
 import itertools
 import logging
 import threading
-import time
 from collections import Counter
 from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
@@ -38,7 +45,6 @@ from anunnaki import topics
 from anunnaki._closing import Closing
 from anunnaki.bus import LivelinessGuard, Sample
 from anunnaki.managed._camera import CameraChain
-from anunnaki.managed._slot import wait_for_utu
 from anunnaki.messages import Assessment, Detections, body_of
 from anunnaki.sim import (
     GROUND,
@@ -248,16 +254,7 @@ class SimulatedSystem(Closing):
             runs no detector (the platform then has only its other sensors).
         oracle: The oracle's options (``name`` defaults to ``ground_truth``; the others go to
             the oracle, e.g. ``window``); ``None`` runs no oracle.
-        lockstep: Hold each frame's successor until its detections and the oracle's and
-            scorer's assessments are out (bounded by ``lockstep_timeout`` seconds of wall
-            time).
-        lockstep_timeout: The longest a frame waits for its detections and assessments.
-        on_time: Called with the simulation time before each physics chunk (Utu's clock).
-        settled: ``settled()``, whether Utu is done with the present (the composed
-            manager's :meth:`~anunnaki.utu.AutonomicManager.settled`): in lockstep the
-            clock moves on only once it is (bounded by ``lockstep_timeout``), so that Utu
-            takes every message at the instant it was sent and the run repeats itself
-            however loaded the machine is; ``None``: the clock does not wait for Utu.
+        on_time: Called with the simulation time before each physics chunk.
         stop_without_utu: Seconds a Utu node the platform has seen may be gone before it
             stops (rover) or lands (UAV) by itself (``None``: never).
         scorer: A second oracle's options, run beside the first as its live scorer (e.g.
@@ -281,23 +278,15 @@ class SimulatedSystem(Closing):
         *,
         models: Any = None,
         oracle: Mapping[str, Any] | None = None,
-        lockstep: bool = True,
-        lockstep_timeout: float = 2.0,
         on_time: Callable[[float], object] | None = None,
         stop_without_utu: float | None = 0.2,
         scorer: Mapping[str, Any] | None = None,
-        settled: Callable[[], bool] | None = None,
         shadow: Mapping[str, Any] | None = None,
     ) -> None:
         self.bus = bus
         self.executor = getattr(bus, "executor", None)
-        self.lockstep = lockstep
-        self.lockstep_timeout = lockstep_timeout
         self.on_time = on_time
-        self.settled = settled
-        self.unsettled = 0  # instants the clock moved on before Utu was done (timed out)
-        self._lock = threading.Condition()
-        self._last_seq = -1
+        self._lock = threading.Lock()
         self._truth: dict[int, tuple[float, np.ndarray, list[str], np.ndarray]] = {}
         self._early: dict[int, Detections] = {}  # detections ahead of their truth
         self._frames: list[tuple[float, int, int, int, str]] = []  # t, tp, fp, fn, model
@@ -407,8 +396,6 @@ class SimulatedSystem(Closing):
                 self._early[det.frame_seq] = det
                 while len(self._early) > 512:
                     del self._early[min(self._early)]
-            self._last_seq = max(self._last_seq, det.frame_seq)
-            self._lock.notify_all()
 
     def _score(
         self, det: Detections, truth: tuple[float, np.ndarray, list[str], np.ndarray]
@@ -446,57 +433,6 @@ class SimulatedSystem(Closing):
     def _frame_hook(self, sim: SimPlatform, frame: Any, image: Any) -> None:
         if self.executor is not None:  # every node takes the frame, in order, before the next
             self.executor.spin_until_idle()
-            return
-        if not self.lockstep or self.lec is None:
-            return
-        deadline = time.monotonic() + self.lockstep_timeout
-        with self._lock:
-            while self._last_seq < frame.seq and not self._stopping.is_set():
-                left = deadline - time.monotonic()
-                if left <= 0:
-                    log.warning(
-                        "sim: frame %d got no detections within %.1f s",
-                        frame.seq,
-                        self.lockstep_timeout,
-                    )
-                    return
-                self._lock.wait(min(left, 0.05))
-        if self._stopping.is_set():
-            return
-        # ... taken by the platform (the rover's stop rule), at this frame's time ...
-        if not sim.wait_for(
-            lambda: sim.took_detections(frame.seq), max(0.0, deadline - time.monotonic())
-        ):
-            log.warning("sim: the platform did not take frame %d's detections in time", frame.seq)
-        # ... and its assessments: an oracle that fell behind would drop frames from its
-        # queue and report late, in simulated time, what a real-time one reports at once.
-        for node in (self.oracle, self.scorer, self.shadow):
-            if node is not None and not node.wait_for_frame(
-                frame.seq, max(0.0, deadline - time.monotonic())
-            ):
-                log.warning(
-                    "sim: frame %d got no assessment from %s within %.1f s",
-                    frame.seq,
-                    node.node,
-                    self.lockstep_timeout,
-                )
-        # ... and acted on by Utu (its reaction to the assessment, actions included) before
-        # the platform moves: a mode change lands at this frame's tick, not a few ticks on.
-        self._settle()
-
-    def _settle(self) -> None:
-        """In lockstep, wait until Utu is done with the present before the clock moves on."""
-        if not self.lockstep or self.settled is None:
-            return
-        if not wait_for_utu(self.settled, self._stopping, self.lockstep_timeout):
-            self.unsettled += 1
-            if self.unsettled == 1:
-                log.warning(
-                    "sim: Utu was not done with t = %.3f s within %.1f s; the clock "
-                    "moves on without it (counted, logged once)",
-                    self.platform.t,
-                    self.lockstep_timeout,
-                )
 
     # -- running -------------------------------------------------------------------------------
     def run(
@@ -527,7 +463,6 @@ class SimulatedSystem(Closing):
             nonlocal collisions, next_call
             if executor is not None:  # the present's messages all delivered and acted on
                 executor.spin_until_idle()
-            self._settle()
             if self.on_time is not None:
                 self.on_time(sim.t)
             now = int(getattr(sim, "collisions", 0))

@@ -14,8 +14,9 @@ a class with
 * ``name`` and ``Options`` (a pydantic model: the section's other keys, validated with file
   and line like the rest of the launch file);
 * ``__init__(options, *, base)`` — paths are relative to ``base`` (the launch file's folder);
-* what :class:`ManagedKind` lists: ``speed``, ``relay_clock``, ``check`` (bring-up
-  checks, guideline B5), ``notes`` and ``start``, which returns a :class:`ManagedRun`.
+* what :class:`ManagedKind` lists: ``speed``, ``check`` (bring-up checks, guideline B5),
+  ``notes`` and ``start``, which returns a :class:`ManagedRun`; ``deterministic`` (optional,
+  default false) says that the kind drains the run's executor (:class:`ManagedContext`).
 
 Optional hooks are typed Protocols: :class:`WritesReports` for kinds that can keep the run
 as data and a picture (``anunnaki run --report/--plot``); :class:`ServesModels` for kinds
@@ -29,7 +30,6 @@ This layer sits below Utu: a kind sees Utu's settings through :class:`UtuSetting
 from __future__ import annotations
 
 import threading
-import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any, ClassVar, Protocol, runtime_checkable
@@ -90,19 +90,11 @@ class ManagedContext:
         speed: Simulated or replayed seconds per wall second.
         until: Stop at this time of the system's own clock (``None``: at its end).
         say: Print one line of the launch's output.
-        on_instant: Call before the messages of each instant go out, with its time (it
-            moves Utu's simulation clock first); ``None`` when nothing needs it.
-        taken: ``taken(n)`` — whether Utu has taken (and acted on) ``n`` inputs on the
-            watched topics so far: a lockstep system waits for it; ``None``: no lockstep.
-        watched: The topics Utu monitors (the goal model's binding).
-        settled: ``settled()`` — whether Utu is done with the present (every message sent
-            so far taken, every action back, a step run at the present time): a simulation
-            in lockstep waits for it before it moves the clock on; ``None``: Utu cannot
-            tell (its parts in other threads or processes), nothing waits.
-        executor: The deterministic executor every node of the run is delivered on (a
-            simulated run in one process, :mod:`anunnaki.bus._executor`): a kind whose
-            ``deterministic`` is true drains it after each instant and moves its clock on
-            only then; ``None``: the bus's own threads deliver.
+        executor: The run's one thread of delivery, when it is one deterministic program
+            (a simulated run in one process, :mod:`anunnaki.bus._executor`): a kind whose
+            ``deterministic`` is true binds it to its thread, drains it after each instant
+            (every node takes that instant's messages, Utu acts on them) and moves its
+            clock on only then; ``None``: the bus's own threads deliver, nothing waits.
 
     """
 
@@ -111,27 +103,7 @@ class ManagedContext:
     speed: float
     until: float | None
     say: Callable[[str], None]
-    on_instant: Callable[[float], object] | None
-    taken: Callable[[int], bool] | None
-    watched: frozenset[str]
-    settled: Callable[[], bool] | None = None
     executor: Executor | None = None
-
-
-def wait_for_utu(
-    done: Callable[[], bool], stop: threading.Event, timeout: float, *, pause: float = 0.0002
-) -> bool:
-    """A lockstep system's wait for Utu: poll ``done()`` until it holds or ``stop`` is set.
-
-    ``False`` only when ``timeout`` seconds of wall time passed first (the system then goes
-    on without Utu, and says so); a stop ends the wait quietly.
-    """
-    deadline = time.monotonic() + timeout
-    while not done() and not stop.is_set():
-        if time.monotonic() > deadline:
-            return False
-        stop.wait(pause)
-    return True
 
 
 class ManagedRun(Protocol):
@@ -158,10 +130,6 @@ class ManagedKind(Protocol):
     Options: ClassVar[type[BaseModel]]
     #: The default speed (``anunnaki run --speed`` overrides it).
     speed: float
-    #: Whether the launch relays its simulation time on ``/clock`` at high priority, ahead
-    #: of each instant's messages (nodes in other processes then never take a message
-    #: before its time has come).
-    relay_clock: bool
 
     def check(self, utu: UtuSettings) -> None:
         """Bring-up checks (B5): load what it needs now, raise a ModelFileError if it can't."""

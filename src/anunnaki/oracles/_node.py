@@ -25,7 +25,6 @@ from __future__ import annotations
 
 import logging
 import threading
-import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -187,8 +186,6 @@ class OracleNode(Node):
         self._fixed = model
         self._model_id: str | None = model
         self._frames = self._published = self._withheld = self._errors = 0
-        self._handled = threading.Condition()  # frames handled, for a lockstep simulation
-        self._handled_seq = -1
         self._agnostic_warned = False
         # The optional hooks, found by the Protocols they implement (never by signature).
         oracle = self.oracle
@@ -330,30 +327,10 @@ class OracleNode(Node):
             self._error("%s raised %s: %s", hook.__name__, type(exc).__name__, exc)
             return None
 
-    def wait_for_frame(self, seq: int, timeout: float) -> bool:
-        """Wait until frame ``seq`` has been handled (assessed, withheld or skipped).
-
-        A simulation in lockstep calls it so that a frame's assessment is out before the
-        next frame; ``False`` if ``timeout`` seconds passed first.
-        """
-        deadline = time.monotonic() + timeout
-        with self._handled:
-            while self._handled_seq < seq:
-                left = deadline - time.monotonic()
-                if left <= 0:
-                    return False
-                self._handled.wait(left)
-            return True
-
     def _on_frame(self, sample: Sample) -> None:
         message = sample.message
         assert isinstance(message, Image)
-        try:
-            self._assess_frame(message)
-        finally:
-            with self._handled:
-                self._handled_seq = max(self._handled_seq, message.seq)
-                self._handled.notify_all()
+        self._assess_frame(message)
 
     def _assess_frame(self, message: Image) -> None:
         with self._lock:
@@ -380,14 +357,10 @@ class OracleNode(Node):
         if not isinstance(result, Assessment):
             self._error("assess returned %s, not an Assessment", type(result).__name__)
             return
-        # Counted before the put, as the LEC node counts its detections: a subscriber may act
-        # on the assessment (and read these counters) before this thread runs again.
-        with self._lock:
-            self._published += 1
         try:
             self._output.put(result)
         except AnunnakiError as exc:
-            with self._lock:
-                self._published -= 1
             self._error("could not publish: %s", exc)
             return
+        with self._lock:
+            self._published += 1

@@ -335,16 +335,6 @@ class SimPlatform(Closing):
             return self._changed.wait_for(predicate, timeout)
 
     # -- detections -----------------------------------------------------------------------
-    def took_detections(self, seq: int) -> bool:
-        """Whether the platform has taken the detector's output for frame ``seq``.
-
-        A simulation in lockstep waits for it before it steps on, so that a platform acting
-        on detections (the rover's stop rule) acts on frame ``seq``'s at that frame's time
-        however late its subscriber's thread runs. A platform that does not act on
-        detections has nothing to take: always ``True``.
-        """
-        return True
-
     @staticmethod
     def detections_of(message: Any) -> Detections | None:
         """A :class:`Detections` from a bus message (or its JSON body), else ``None``."""

@@ -398,11 +398,6 @@ class RoverSim(SimPlatform):
             self.detections_received += 1
         self._notify()
 
-    def took_detections(self, seq: int) -> bool:
-        """Whether the stop rule has frame ``seq``'s detections (or a later frame's)."""
-        with self._lock:
-            return self._detections is not None and self._detections[1].frame_seq >= seq
-
     # -- physics ----------------------------------------------------------------------------
     def _pose(self) -> tuple[float, float, float]:
         pos, orn = pybullet.getBasePositionAndOrientation(

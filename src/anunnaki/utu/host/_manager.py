@@ -387,37 +387,6 @@ class AutonomicManager(Closing):
         if not self._wake.is_set():
             self._wake.set()
 
-    def settled(self) -> bool:
-        """Whether the manager is done with the present: a managed system in lockstep asks.
-
-        True when no monitored message waits (queued or fed), no step is under way (its
-        actions came back), no action is in flight, and a step has run at the clock's
-        present time. A simulation that waits for this before it moves the clock on gets
-        every message taken at the instant it was sent and every time-driven check made at
-        every instant: the run repeats itself however loaded the machine is. Before, a
-        message that came while the spinning thread held the step was taken a round later
-        — after the simulation had moved the clock on, so a 10 Hz topic's arrivals were
-        stamped unevenly and its rate misjudged (a UAV hovered before take-off).
-
-        When no step has run at the present time, the spinning thread is woken to run one.
-        A manager not running live (or closed) is always settled: nothing would come.
-        """
-        if self._closed or not self._live:
-            return True
-        # In this order: a step that started after the queues were found empty had nothing
-        # new to take; one that had drained them still holds the lock.
-        if self._pull.pending or self._inputs or self.desk.pending:
-            self._wake.set()
-            return False
-        if self._step_lock.locked():
-            return False
-        if isinstance(self.actions, ThreadRunner) and self.actions.in_flight:
-            return False
-        if self.now < self.clock.now():
-            self._wake.set()
-            return False
-        return True
-
     def _drain(self) -> None:
         """Take what waits on each monitored topic, at most ``intake`` messages per step.
 
@@ -661,9 +630,10 @@ class AutonomicManager(Closing):
         * a monitored message's doorbell is a work item of the executor, so the reaction
           step runs in publication order, on the executor's thread;
         * whenever the executor's queue is empty (the present instant's messages all
-          delivered), the manager steps once at the clock's present time, if it has not
-          yet, and takes any input or operator call still waiting: the time-driven checks
-          run at every instant the simulation passes through;
+          delivered), the manager steps once at the present time (the simulation's
+          ``/clock``), if it has not yet, and takes any input or operator call still
+          waiting: the time-driven checks run at every instant the simulation passes
+          through;
         * actions run in the step: their requests are answered in the same drain.
 
         Returns the detach call: it ends the step the last reactions began (as a normal end
@@ -687,8 +657,13 @@ class AutonomicManager(Closing):
 
     def _at_present(self) -> bool:
         """The executor's idle hook: one step at the present instant (see :meth:`run_on`)."""
+        clock = self._clock_sub is not None and self._clock_sub.pending
         if self._closed or not (
-            self._pull.pending or self._inputs or self.desk.pending or self.now < self.clock.now()
+            self._pull.pending
+            or self._inputs
+            or self.desk.pending
+            or clock
+            or self.now < self.clock.now()
         ):
             return False
         self._round(None)
