@@ -1,0 +1,139 @@
+"""A simulated run repeats itself: the same launch, three times, one beside a busy process.
+
+Issue #30. ``anunnaki run LAUNCH --speed 0 --until S --report R`` three times (runs 1 and 3
+quiet, run 2 beside a process that keeps one core busy), each with its own knowledge base;
+then the report files and the decision logs compared byte for byte, and ``anunnaki replay``
+of the first run's knowledge. The rover demo's first 30 s and the UAV's whole mission by
+default. Each run's wall time gives the simulated seconds per wall second.
+
+Writes ``benchmarks/results/determinism.json`` (one entry per launch, replaced when run
+again) and prints one line per launch::
+
+    .venv/bin/python benchmarks/determinism.py                  # rover 30 s and the UAV mission
+    .venv/bin/python benchmarks/determinism.py --cases rover --runs 2
+"""
+
+from __future__ import annotations
+
+import argparse
+import hashlib
+import json
+import os
+import platform
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+from typing import Any
+
+ROOT = Path(__file__).parents[1]
+RESULTS = Path(__file__).parent / "results" / "determinism.json"
+
+#: name → (launch file, simulated seconds; None: the scenario's whole length)
+CASES: dict[str, tuple[str, float | None]] = {
+    "rover": ("examples/rover/demo.yaml", 30.0),
+    "uav": ("examples/uav/sim.yaml", None),
+}
+
+
+def _run(launch: str, until: float | None, folder: Path, k: int) -> dict[str, Any]:
+    report, kb = folder / f"run{k}.json", folder / f"run{k}.db"
+    argv = [sys.executable, "-m", "anunnaki.cli.main", "run", str(ROOT / launch), "--speed", "0"]
+    argv += ["--report", str(report), "--knowledge", str(kb)]
+    if until is not None:
+        argv += ["--until", str(until)]
+    t0 = time.perf_counter()
+    proc = subprocess.run(argv, capture_output=True, text=True, check=False)
+    wall = time.perf_counter() - t0
+    if proc.returncode != 0:
+        raise SystemExit(f"{launch}: run {k} exited {proc.returncode}:\n{proc.stderr[-2000:]}")
+    log = subprocess.run(
+        [sys.executable, "-m", "anunnaki.cli.main", "log", str(kb), "--json"],
+        capture_output=True,
+        text=True,
+        check=True,
+    ).stdout
+    simulated = json.loads(report.read_text())["duration"]
+    return {
+        "wall_s": round(wall, 2),
+        "simulated_s": simulated,
+        "sim_per_wall": round(simulated / wall, 3),
+        "report_sha256": hashlib.sha256(report.read_bytes()).hexdigest(),
+        "log_sha256": hashlib.sha256(log.encode()).hexdigest(),
+        "decisions": len(log.splitlines()),
+        "load": [round(x, 2) for x in os.getloadavg()],
+    }
+
+
+def measure(name: str, runs: int) -> dict[str, Any]:
+    """``runs`` runs of case ``name``; the middle one beside a busy process."""
+    launch, until = CASES[name]
+    out: list[dict[str, Any]] = []
+    with tempfile.TemporaryDirectory(prefix="determinism-") as tmp:
+        folder = Path(tmp)
+        for k in range(runs):
+            loaded = k == 1
+            busy = subprocess.Popen([sys.executable, "-c", "while True: pass"]) if loaded else None
+            try:
+                row = _run(launch, until, folder, k)
+            finally:
+                if busy is not None:
+                    busy.kill()
+                    busy.wait()
+            row["beside_busy"] = loaded
+            out.append(row)
+            print(f"  {name} run {k + 1}: {row}", flush=True)
+        replay = subprocess.run(
+            [sys.executable, "-m", "anunnaki.cli.main", "replay", str(folder / "run0.db")],
+            capture_output=True,
+            text=True,
+            check=False,
+        )
+    return {
+        "launch": launch,
+        "until": until,
+        "runs": out,
+        "identical_reports": len({r["report_sha256"] for r in out}) == 1,
+        "identical_logs": len({r["log_sha256"] for r in out}) == 1,
+        "replay_exit_code": replay.returncode,
+        "replay": replay.stdout.strip().splitlines()[-1:] or replay.stderr.strip()[-300:],
+    }
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--cases", default="rover,uav", help="comma-separated: rover, uav")
+    ap.add_argument("--runs", type=int, default=3, help="runs per case (the 2nd is loaded)")
+    args = ap.parse_args(argv)
+    names = [c for c in args.cases.split(",") if c]
+    unknown = [c for c in names if c not in CASES]
+    if unknown:
+        ap.error(f"unknown case(s) {unknown}: choose from {sorted(CASES)}")
+    doc = json.loads(RESULTS.read_text()) if RESULTS.is_file() else {"cases": {}}
+    doc.update(
+        benchmark="determinism",
+        date=time.strftime("%Y-%m-%d %H:%M:%S"),
+        machine={"python": platform.python_version(), "cpus": os.cpu_count()},
+    )
+    for name in names:
+        print(f"{name}: {args.runs} runs", flush=True)
+        doc["cases"][name] = measure(name, args.runs)
+        RESULTS.parent.mkdir(parents=True, exist_ok=True)
+        RESULTS.write_text(json.dumps(doc, indent=1) + "\n")
+        c = doc["cases"][name]
+        print(
+            f"{name}: reports identical {c['identical_reports']}, decision logs identical "
+            f"{c['identical_logs']}, replay exit {c['replay_exit_code']}",
+            flush=True,
+        )
+    ok = all(
+        c["identical_reports"] and c["identical_logs"] and c["replay_exit_code"] == 0
+        for n, c in doc["cases"].items()
+        if n in names
+    )
+    return 0 if ok else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())
