@@ -30,15 +30,22 @@ from anunnaki.enki._errors import EnkiError
 from anunnaki.enki._finetune import Budget, finetune
 from anunnaki.enki._select import Selection, SelectionRule, select_contexts
 from anunnaki.enki._sources import (
+    CONTEXT_SOURCES,
     ArchiveContexts,
+    ArchiveMix,
     ContextSource,
     CorruptionMix,
     MixedContexts,
+    SourceSpec,
     UniformContexts,
+    WorstOfK,
+    make_source,
 )
 
 __all__ = [
+    "CONTEXT_SOURCES",
     "ArchiveContexts",
+    "ArchiveMix",
     "Budget",
     "ContextSource",
     "CorruptionMix",
@@ -47,9 +54,12 @@ __all__ = [
     "RobustifyConfig",
     "Selection",
     "SelectionRule",
+    "SourceSpec",
     "UniformContexts",
+    "WorstOfK",
     "archive_sha256",
     "finetune",
+    "make_source",
     "new_model_id",
     "robustify",
     "select_contexts",
