@@ -23,6 +23,18 @@ with one :class:`~anunnaki.enki.Budget`); only what perturbs a training frame di
   budget (the rover's: 504 steps, as today's), for the decision whether Enki models replace
   today's (:func:`decide`).
 
+``--arms`` adds the recipe arms of issue 33's ablation (:data:`RECIPES`), by letter or name:
+A ``random`` and B ``enki`` are the arms above; A+c ``random_c`` (random plus the consistency
+loss, λ ``--consistency``); C ``archive_mix`` (Enki's selection as a distribution: jittered
+elites, ``--jitter``, mixed with uniform contexts at ``--share``); D ``archive_mix_wok`` (C
+with worst-of-``--k``); E ``random_wok`` (uniform with worst-of-k, no archive); F
+``archive_mix_wok_c`` (D plus the consistency loss); G ``archive_mix_rok`` (D with a random
+pick among the k: the same rendering, no selection); ``mix`` is the corruption mix. Every
+draw of every arm stays outside the held-out box. The budget records each arm's forward
+passes beside its steps (``budget.forwards``: worst-of-k's scoring passes, the consistency
+loss's clean views, the candidates rendered); ``--ema`` gives every trained arm a weight
+average alike.
+
 Each trained arm runs with ``--seeds`` (3 by default). Every model is measured on the same
 **test** images (never used in training or in any search), with its own score threshold
 (chosen on val), under the conditions:
@@ -92,8 +104,58 @@ DOC = ROOT / "docs" / "enki.md"
 IMAGES = ROOT / "docs" / "images"
 MODELS = ROOT / "examples" / "models"
 
-ARMS = ("default", "enki", "random", "corruption_mix", "today", "shipped")
+ARMS = (
+    "default", "enki", "random", "corruption_mix", "today", "shipped",
+    "random_c", "archive_mix", "archive_mix_wok", "random_wok", "archive_mix_wok_c",
+    "archive_mix_rok",
+)  # fmt: skip
+#: The trained arms every run has (``--arms`` adds recipe arms to them).
 TRAINED = ("enki", "random", "corruption_mix")
+
+
+@dataclass(frozen=True)
+class Recipe:
+    """A trained arm's recipe (issue 33): its source by name, worst-of-k, consistency.
+
+    Attributes:
+        source: :data:`anunnaki.enki.CONTEXT_SOURCES`' name (the benchmark keeps every draw
+            out of the held-out box: :func:`source_for`).
+        worst: Wrap it in worst-of-k with ``Settings.k`` candidates.
+        select: Worst-of-k's pick (``random``: the same rendering, no selection).
+        consistency: Add the consistency loss with λ = ``Settings.consistency``.
+
+    """
+
+    source: str
+    worst: bool = False
+    select: str = "hardest"
+    consistency: bool = False
+
+
+#: Every trained arm's recipe, by its JSON and folder name.
+RECIPES = {
+    "random": Recipe("uniform"),
+    "random_c": Recipe("uniform", consistency=True),
+    "enki": Recipe("archive"),
+    "archive_mix": Recipe("archive_mix"),
+    "archive_mix_wok": Recipe("archive_mix", worst=True),
+    "random_wok": Recipe("uniform", worst=True),
+    "archive_mix_wok_c": Recipe("archive_mix", worst=True, consistency=True),
+    "archive_mix_rok": Recipe("archive_mix", worst=True, select="random"),
+    "corruption_mix": Recipe("corruption_mix"),
+}
+#: The ablation's letters (issue 33) → arm names; ``--arms`` takes either.
+LETTERS = {
+    "A": "random",
+    "A+c": "random_c",
+    "B": "enki",
+    "C": "archive_mix",
+    "D": "archive_mix_wok",
+    "E": "random_wok",
+    "F": "archive_mix_wok_c",
+    "G": "archive_mix_rok",
+    "mix": "corruption_mix",
+}
 #: Trained arms that do not depend on the domain: one model per platform and seed.
 SHARED = ("corruption_mix",)
 LABELS = {
@@ -103,6 +165,12 @@ LABELS = {
     "corruption_mix": "corruption mix",
     "today": "today's --augment",
     "shipped": "shipped Enki",
+    "random_c": "random + consistency",
+    "archive_mix": "archive mix",
+    "archive_mix_wok": "archive mix, worst-of-k",
+    "random_wok": "random, worst-of-k",
+    "archive_mix_wok_c": "archive mix, worst-of-k + consistency",
+    "archive_mix_rok": "archive mix, random of k",
 }
 #: The issue's aims: Enki on random contexts >= 0.9 x the default's clean F1; Enki's clean
 #: F1 at most 0.02 below the default's; Enki beats random augmentation on the hardest
@@ -261,14 +329,34 @@ class Settings:
     hard_seed: int = 200
     eval_seed: int = 300
     data_seed: int = 0
+    k: int = 4
+    share: float = 0.5
+    jitter: float = 0.1
+    consistency: float = 1.0
+    ema: float = 0.0
 
     def finetune_budget(self) -> Any:
         """The one :class:`anunnaki.enki.Budget` of every trained arm."""
         from anunnaki.enki import Budget
 
         return Budget(
-            epochs=self.epochs, batch_size=self.batch_size, lr=self.lr, threads=self.threads
-        )
+            epochs=self.epochs, batch_size=self.batch_size, lr=self.lr, threads=self.threads,
+            ema=self.ema,
+        )  # fmt: skip
+
+
+#: The recipe settings (issue 33), recorded only where they differ from their defaults: work
+#: folders and results made before them continue and merge as they were.
+RECIPE_SETTINGS = ("k", "share", "jitter", "consistency", "ema")
+
+
+def settings_record(s: Settings) -> dict[str, Any]:
+    """*s* as recorded (JSON-safe; the recipe settings only where not at their default)."""
+    plain: dict[str, Any] = json.loads(json.dumps(asdict(s)))
+    for key in RECIPE_SETTINGS:
+        if plain[key] == Settings.__dataclass_fields__[key].default:
+            del plain[key]
+    return plain
 
 
 QUICK = Settings(
@@ -727,17 +815,55 @@ def measure(
 
 
 def source_for(arm: str, domain: Domain, prep: dict[str, Any], s: Settings) -> Any:
-    """The arm's context source."""
-    from anunnaki.enki import ArchiveContexts, CorruptionMix
+    """The arm's context source (:data:`RECIPES`), every draw outside the held-out box.
 
+    The uniform draws come from the benchmark's ``UniformOutside``, the archive mix's from
+    :class:`anunnaki.enki.ArchiveMix` with the box excluded, the elites are Enki's
+    selection (its archive rows in the box dropped); worst-of-k wraps the arm's source.
+    """
+    from anunnaki.enki import ArchiveContexts, ArchiveMix, CorruptionMix, WorstOfK
+
+    recipe = RECIPES[arm]
     box = np.asarray(prep["box"])
-    if arm == "enki":
-        return ArchiveContexts(domain.phenomenon, prep["enki_selection"]["contexts"], clean=s.clean)
-    if arm == "random":
-        return _uniform_outside_class()(domain.phenomenon, box, s.clean)
-    if arm == "corruption_mix":
-        return CorruptionMix(exclude=s.families, clean=s.clean)
-    raise ValueError(arm)
+    elites = prep["enki_selection"]["contexts"]
+    base: Any
+    if recipe.source == "archive":
+        base = ArchiveContexts(domain.phenomenon, elites, clean=s.clean)
+    elif recipe.source == "uniform":
+        base = _uniform_outside_class()(domain.phenomenon, box, s.clean)
+    elif recipe.source == "archive_mix":
+        base = ArchiveMix(domain.phenomenon, elites, share=s.share, jitter=s.jitter,
+                          clean=s.clean, exclude=box)  # fmt: skip
+    elif recipe.source == "corruption_mix":
+        base = CorruptionMix(exclude=s.families, clean=s.clean)
+    else:
+        raise ValueError(arm)
+    if not recipe.worst:
+        return base
+    return WorstOfK(base, k=s.k, select=recipe.select, clean=s.clean)  # type: ignore[arg-type]
+
+
+def consistency_for(arm: str, s: Settings) -> float:
+    """The arm's consistency weight λ (0: off)."""
+    return s.consistency if RECIPES[arm].consistency else 0.0
+
+
+def parse_arms(text: str | None) -> tuple[str, ...]:
+    """``--arms``: letters or names, comma-separated, added to :data:`TRAINED` (in order).
+
+    Raises:
+        SystemExit: An unknown arm, naming the valid letters and names.
+
+    """
+    out = list(TRAINED)
+    for item in [] if not text else [t.strip() for t in text.split(",") if t.strip()]:
+        name = LETTERS.get(item, item)
+        if name not in RECIPES:
+            valid = ", ".join(f"{k} ({v})" for k, v in LETTERS.items())
+            raise SystemExit(f"--arms: unknown arm {item!r}; valid: {valid}")
+        if name not in out:
+            out.append(name)
+    return tuple(out)
 
 
 def loadavg() -> list[float]:
@@ -790,6 +916,7 @@ def _tune(arm: str, seed: int, domain: Domain, ctx: dict[str, Any], folder: Path
     who = f"{domain.platform} (shared)" if shared else domain.name
     label = f"{who} {arm} seed {seed}: fine-tune"
     load0, t0 = loadavg(), time.perf_counter()
+    lam = consistency_for(arm, s)
     tuned = finetune(
         MODELS / f"{domain.model}.safetensors",
         ctx["train"],
@@ -801,10 +928,13 @@ def _tune(arm: str, seed: int, domain: Domain, ctx: dict[str, Any], folder: Path
         domain=f"{domain.platform}-{arm}" if shared else domain.name,
         checkpoints=folder / "finetune",
         on_step=lambda step, total, info: bars.update(label, step, total),
+        consistency=lam,
     )
     bars.finish(label)
+    spent = {k: int(tuned.counts.get(k, 0)) for k in FORWARDS}
     training = {
         "steps": int(tuned.detector.training["steps"]),
+        **({"forwards": spent, "consistency": lam} if lam or spent["candidates"] else {}),
         "images": len(ctx["train"]),
         "seconds": round(time.perf_counter() - t0, 1),
         "train_loop_seconds": round(tuned.seconds, 1),
@@ -841,7 +971,7 @@ def run_jobs(domain: Domain, ctx: dict[str, Any]) -> dict[str, list[dict[str, An
     if domain.shipped is not None and (MODELS / f"{domain.shipped}.safetensors").is_file():
         jobs.append(("shipped", None))
     # seed by seed: a run stopped early has whole seeds (every trained arm) done
-    jobs += [(arm, seed) for seed in s.seeds for arm in TRAINED]
+    jobs += [(arm, seed) for seed in s.seeds for arm in ctx.get("arms", TRAINED)]
     done: dict[tuple[str, int | None], dict[str, Any]] = {}
     for blocking in (False, True):
         for arm, seed in jobs:
@@ -874,7 +1004,7 @@ def run_arm(arm: str, seed: int | None, domain: Domain, ctx: dict[str, Any]) -> 
         bars.log(f"  {domain.name} {folder.name}: done before")
         return dict(done)
     result: dict[str, Any] = {"arm": arm, "seed": seed}
-    if arm in TRAINED:
+    if arm in RECIPES:
         assert seed is not None
         # the corruption mix does not depend on the domain: trained once per platform and
         # seed (in the platform's shared folder), measured under each domain's conditions
@@ -992,7 +1122,13 @@ def domain_figures(
         arms[arm]["measure_seconds"] = [r["measure_seconds"] for r in runs]
         if "model" in runs[0]:
             arms[arm]["model"] = runs[0]["model"]
-    steps = {arm: [r["training"]["steps"] for r in results[arm]] for arm in TRAINED}
+    trained = [arm for arm in results if arm in RECIPES]
+    steps = {arm: [r["training"]["steps"] for r in results[arm]] for arm in trained}
+    forwards = {
+        arm: [r["training"]["forwards"] for r in results[arm]]
+        for arm in trained
+        if "forwards" in results[arm][0]["training"]
+    }
     flat = {x for v in steps.values() for x in v}
     if len(flat) != 1:
         raise SystemExit(f"{domain.name}: the arms made different numbers of steps: {steps}")
@@ -1058,13 +1194,26 @@ def domain_figures(
         "budget": {
             "steps": steps,
             "equal": True,
-            **asdict(s.finetune_budget()),
+            **_budget_record(s),
             "train_images": s.train_images,
-        },
+        }
+        | ({"forwards": forwards} if forwards else {}),
         "enki_vs_random": margins,
         "aims": aims,
         "paper": domain.paper,
     }
+
+
+#: What a fine-tune spends beside its optimiser steps (``TrainResult.counts``).
+FORWARDS = ("train_forwards", "select_forwards", "consistency_forwards", "candidates")
+
+
+def _budget_record(s: Settings) -> dict[str, Any]:
+    """The fine-tune budget as recorded (the EMA decay only when it is on)."""
+    budget = asdict(s.finetune_budget())
+    if not budget["ema"]:
+        del budget["ema"]
+    return budget
 
 
 def _mix_names(s: Settings) -> list[str]:
@@ -1090,14 +1239,22 @@ def _today_augment(domain: Domain) -> list[str]:
 
 
 def run_domain(
-    domain: Domain, data: Path, work_root: Path, s: Settings, bars: Bars, *, quick: bool
+    domain: Domain,
+    data: Path,
+    work_root: Path,
+    s: Settings,
+    bars: Bars,
+    *,
+    quick: bool,
+    arms: tuple[str, ...] = TRAINED,
 ) -> dict[str, Any]:
     work = work_root / domain.name
-    claim(work, asdict(s) | {"domain": domain.name, "data": str(data.resolve()), "quick": quick})
+    record = settings_record(s)
+    claim(work, record | {"domain": domain.name, "data": str(data.resolve()), "quick": quick})
     shared = work_root / f"{domain.platform}-shared" / "corruption_mix"
     claim(
         shared,
-        asdict(s) | {"platform": domain.platform, "data": str(data.resolve()), "quick": quick},
+        record | {"platform": domain.platform, "data": str(data.resolve()), "quick": quick},
     )
     bars.log(f"{domain.name}: searches and conditions")
     with _TrainLock(work / "searches"):  # one process searches, the others wait for it
@@ -1114,6 +1271,7 @@ def run_domain(
         "perturbed": None,
         "shared": shared,
         "data": data,
+        "arms": arms,
     }
     ctx["perturbed"] = Perturbed(ctx["test"], s.eval_seed)
     return domain_figures(domain, prep, run_jobs(domain, ctx), s)
@@ -1181,6 +1339,20 @@ def main(argv: Sequence[str] | None = None) -> int:
         )
     p.add_argument("--lr", type=float, default=None)
     p.add_argument(
+        "--arms",
+        help="recipe arms added to enki, random and corruption_mix, comma-separated letters "
+        "or names: " + ", ".join(f"{k} ({v})" for k, v in LETTERS.items()),
+    )
+    p.add_argument("--k", type=int, default=None, help=f"worst-of-k's candidates ({defaults.k})")
+    for name, what in (
+        ("share", "archive mix: share of perturbed frames from the elites"),
+        ("jitter", "archive mix: the elites' jitter (normalised units)"),
+        ("consistency", "λ of the consistency arms"),
+        ("ema", "EMA decay of every trained arm's saved weights (0: off)"),
+    ):
+        p.add_argument(f"--{name}", type=float, default=None,
+                       help=f"{what} ({getattr(defaults, name)})")  # fmt: skip
+    p.add_argument(
         "--lr-choice",
         type=Path,
         help="--merge: a JSON record of how the merged domains' learning rate was chosen on "
@@ -1188,6 +1360,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     )
     p.add_argument("--clean", type=float, default=None)
     args = p.parse_args(argv)
+    arms = parse_arms(args.arms)
     if args.report:
         write_report(json.loads(args.output.read_text(encoding="utf-8")), args.doc, args.images)
         return 0
@@ -1239,7 +1412,7 @@ def main(argv: Sequence[str] | None = None) -> int:
                     f"anunnaki make-dataset {domain.platform} --out {data}"
                 )
             t0, load0 = time.perf_counter(), loadavg()
-            entry = run_domain(domain, data, args.work, s, bars, quick=args.quick)
+            entry = run_domain(domain, data, args.work, s, bars, quick=args.quick, arms=arms)
             entry["settings"] = _settings_json(s)
             entry["run"] = {
                 "date": time.strftime("%Y-%m-%d", time.gmtime()),
@@ -1294,8 +1467,7 @@ def merge(
 
 
 def _settings_json(s: Settings) -> dict[str, Any]:
-    plain: dict[str, Any] = json.loads(json.dumps(asdict(s)))
-    return plain
+    return settings_record(s)
 
 
 # -- the report (docs/enki.md) ----------------------------------------------------------------
@@ -1393,6 +1565,7 @@ def render_report(doc: dict[str, Any]) -> str:
     lines += _paper_table(domains)
     for name, d in domains.items():
         lines += _domain_section(name, d)
+    lines += _recipe_arms(domains)
     lines += ["## How to regenerate", "", "```"]
     for own, names in groups or [(s, [])]:
         lines += [
@@ -1421,6 +1594,39 @@ def render_report(doc: dict[str, Any]) -> str:
         "",
     ]
     return "\n".join(lines)
+
+
+def _recipe_arms(domains: dict[str, Any]) -> list[str]:
+    """The recipe arms ``--arms`` adds (issue 33's ablation), and which domains have them."""
+    measured = sorted({a for d in domains.values() for a in d["arms"]} - set(ARMS[:6]))
+    defaults = Settings()
+    return [
+        "## The recipe arms (`--arms`)",
+        "",
+        "The ablation of Enki's training recipe adds arms to the three above, by letter or "
+        "name (`--arms A+c,C,D,E,F,G`), at the same budget and on the same images: **A** "
+        "`random` and **B** `enki` are the arms above; **A+c** `random_c`, random contexts "
+        f"plus the consistency loss (λ `--consistency`, {defaults.consistency}); **C** "
+        "`archive_mix`, Enki's selection as a distribution (each elite jittered by Gaussian "
+        f"noise of σ `--jitter` {defaults.jitter} in the normalised space, mixed with "
+        f"uniform contexts, `--share` {defaults.share} from the elites); **D** "
+        f"`archive_mix_wok`, C with worst-of-k (`--k` {defaults.k} candidates per perturbed "
+        "frame, the one with the highest loss under the network being trained kept); **E** "
+        "`random_wok`, uniform contexts with worst-of-k (no archive: the selection alone); "
+        "**F** `archive_mix_wok_c`, D plus the consistency loss; **G** `archive_mix_rok`, "
+        "D with a random pick among the k (the same rendering, no selection); **mix** the "
+        "corruption mix. Every draw of every arm stays outside the held-out box. The budget "
+        "of each run records, beside its optimiser steps, the images worst-of-k scored "
+        "(no-grad forward passes), the clean views of the consistency loss and the "
+        "candidates rendered (`budget.forwards` in the JSON); `--ema DECAY` gives every "
+        "trained arm a weight average alike. The recipe is described in "
+        "[robustify.md](robustify.md#recipe).",
+        "",
+        "Measured here: "
+        + (", ".join(f"`{a}`" for a in measured) if measured else "none yet")
+        + ".",
+        "",
+    ]
 
 
 def _scale(who: str, s: dict[str, Any], quick: str) -> str:

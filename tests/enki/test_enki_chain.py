@@ -173,6 +173,52 @@ def test_resume_after_an_interruption_mid_fine_tune(chain: dict[str, Any]) -> No
     assert summary["metrics"] == chain["summary"]["metrics"]
 
 
+def test_the_recipe_options_parse_and_only_a_changed_recipe_is_recorded(tmp_path: Path) -> None:
+    from anunnaki.cli._robustify import _config
+
+    model = MODELS / "rover-default.safetensors"
+    default = _config(build_parser().parse_args(argv(model, tmp_path, tmp_path / "w")))
+    assert (default.source, default.k, default.consistency, default.finetune.ema) == (
+        "archive", 1, 0.0, 0.0,
+    )  # fmt: skip
+    assert "recipe" not in default.options()  # folders made before the recipe continue
+    assert "ema" not in default.options()["finetune"]
+    more = ["--source", "archive_mix", "--k", "3", "--select", "random", "--share", "0.4",
+            "--jitter", "0.05", "--consistency", "0.5", "--ema", "0.9"]  # fmt: skip
+    config = _config(build_parser().parse_args(argv(model, tmp_path, tmp_path / "w", *more)))
+    assert config.recipe() == {"source": "archive_mix", "k": 3, "select": "random",
+                               "share": 0.4, "jitter": 0.05, "consistency": 0.5,
+                               "ema": 0.9}  # fmt: skip
+    assert config.options()["recipe"] == config.recipe()
+
+
+def test_a_recipe_fine_tune_records_its_forward_passes(chain: dict[str, Any]) -> None:
+    """archive_mix, worst-of-2, consistency and EMA: the fine-tune stage reports its spending."""
+    from anunnaki.cli._robustify import _config
+
+    work = chain["tmp"] / "recipe"
+    more = ["--archive", chain["summary"]["archive"]["path"], "--source", "archive_mix",
+            "--k", "2", "--consistency", "0.5", "--ema", "0.9", "--epochs", "1"]  # fmt: skip
+    config = _config(build_parser().parse_args(argv(chain["model"], chain["data"], work, *more)))
+
+    def stop(stage: str, done: int, total: int) -> None:
+        if stage.startswith("measure"):
+            raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt):
+        robustify(chain["model"], chain["data"], work, config, progress=stop)
+    tuned = json.loads((work / "stages" / "finetune.json").read_text("utf-8"))
+    assert tuned["steps"] == 2 and tuned["train_forwards"] == 8
+    assert tuned["select_forwards"] == tuned["candidates"] > 0
+    assert tuned["consistency_forwards"] > 0
+    assert tuned["source"]["kind"] == "worst_of_k"
+    assert tuned["source"]["inner"]["kind"] == "archive_mix"
+    card = read_card(tuned["file"]).training
+    assert card["enki"]["recipe"]["source"] == "archive_mix" and card["ema"] == 0.9
+    assert card["enki"]["budget"]["select_forwards"] == tuned["select_forwards"]
+    assert json.loads((work / "robustify.json").read_text("utf-8"))["options"]["recipe"]["k"] == 2
+
+
 def test_kill_9_mid_fine_tune_then_the_same_command_continues(chain: dict[str, Any]) -> None:
     """kill -9 once a fine-tune checkpoint is on disk; the rerun matches a straight run."""
 

@@ -148,3 +148,22 @@ def test_the_library_refuses_them_as_the_command_does(models: Path, tmp_path: Pa
     with pytest.raises(EnkiError, match=r"'a/b-fog' is not allowed"):
         robustify(models / "x.safetensors", tmp_path / "data", tmp_path / "w", config)
     assert not (tmp_path / "w").exists()
+
+
+def test_an_unknown_source_lists_the_valid_ones_before_any_work(
+    models: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    work = tmp_path / "w"
+    args = [*argv(models / "rover-default.safetensors", tmp_path, work), "--source", "archive-mix"]
+    err = _fails(args, capsys)
+    assert "--source archive-mix" in err
+    assert "valid names: archive, archive_mix, corruption_mix, uniform" in err
+    assert not work.exists()
+    for bad, word in ((["--k", "0"], "--k"), (["--share", "2"], "--share"),
+                      (["--ema", "1.5"], "ema")):  # fmt: skip
+        err = _fails([*argv(models / "rover-default.safetensors", tmp_path, work), *bad], capsys)
+        assert word in err
+    with pytest.raises(SystemExit):  # argparse's own choices
+        main([*argv(models / "rover-default.safetensors", tmp_path, work), "--select", "worst"])
+    err = capsys.readouterr().err
+    assert "--select: invalid choice: 'worst'" in err and "hardest" in err and "random" in err

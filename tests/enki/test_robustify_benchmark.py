@@ -332,3 +332,83 @@ def test_a_shipped_model_without_a_rival_is_kept_only_for_a_gain_on_its_own_cont
     today["arms"]["today"] = arm(0.9, 0.5, 0.4)
     assert bench.keep_shipped(today) is None
     assert bench.keep_shipped({"arms": {"enki": {}}, "conditions": {}}) is None
+
+
+def test_recipe_arms_are_chosen_by_letter_or_name(bench: Any) -> None:
+    assert bench.parse_arms(None) == bench.TRAINED == ("enki", "random", "corruption_mix")
+    assert bench.parse_arms("A+c, D,archive_mix_rok,B") == (
+        *bench.TRAINED, "random_c", "archive_mix_wok", "archive_mix_rok",
+    )  # fmt: skip
+    with pytest.raises(SystemExit, match=r"unknown arm 'H'; valid: A \(random\), A\+c"):
+        bench.parse_arms("H")
+    for name in bench.LETTERS.values():
+        assert name in bench.RECIPES and name in bench.LABELS and name in bench.ARMS
+
+
+def test_every_recipe_arm_builds_its_source_outside_the_held_out_box(bench: Any) -> None:
+    from anunnaki.enki import ArchiveContexts, ArchiveMix, CorruptionMix, WorstOfK
+
+    box = np.array([[0.0, 1.0], [0.0, 1.0], [0.8, 1.0]])
+    prep = {"box": box.tolist(), "enki_selection": {"contexts": [[0.5, 0.5, 0.5]]}}
+    domain = bench.DOMAINS["rover-hsl"]
+    s = bench.Settings(k=3, consistency=0.7)
+
+    def source(letter: str) -> Any:
+        return bench.source_for(bench.LETTERS[letter], domain, prep, s)
+
+    assert isinstance(source("B"), ArchiveContexts) and isinstance(source("mix"), CorruptionMix)
+    assert source("A").describe()["excluded_box"] == box.tolist()
+    c = source("C")
+    assert isinstance(c, ArchiveMix) and c.describe()["excluded_box"] == box.tolist()
+    assert (c.share, c.jitter, c.clean) == (0.5, 0.1, 0.3)
+    wrapped = [("D", ArchiveMix, "hardest"), ("E", object, "hardest"),
+               ("F", ArchiveMix, "hardest"), ("G", ArchiveMix, "random")]  # fmt: skip
+    for letter, inner, select in wrapped:
+        worst = source(letter)
+        assert isinstance(worst, WorstOfK) and isinstance(worst.inner, inner)
+        assert worst.k == 3 and worst.select == select
+    assert source("E").inner.describe()["kind"] == "uniform"
+    lam = {k: bench.consistency_for(v, s) for k, v in bench.LETTERS.items()}
+    assert lam == {"A": 0.0, "A+c": 0.7, "B": 0.0, "C": 0.0, "D": 0.0, "E": 0.0, "F": 0.7,
+                   "G": 0.0, "mix": 0.0}  # fmt: skip
+
+
+def test_recipe_settings_are_recorded_only_when_changed(bench: Any) -> None:
+    """Work folders and results made before the recipe arms continue and merge as they were."""
+    plain = bench.settings_record(bench.Settings())
+    assert not set(bench.RECIPE_SETTINGS) & set(plain)
+    doc = json.loads((ROOT / "benchmarks" / "results" / "robustify.json").read_text("utf-8"))
+    assert set(plain) == set(doc["settings"])
+    assert bench.settings_record(bench.Settings(k=2, ema=0.99)) == plain | {"k": 2, "ema": 0.99}
+
+
+@pytest.mark.slow
+@pytest.mark.timeout(600)
+def test_quick_run_with_recipe_arms_counts_their_forward_passes(
+    bench: Any, rover_data: Path, tmp_path: Path
+) -> None:
+    pytest.importorskip("torch")
+    work, out = tmp_path / "work", tmp_path / "robustify.json"
+    argv = ["--quick", "--rover-data", str(rover_data), "--work", str(work), "--output", str(out),
+            "--arms", "A+c,D,G", "--seeds", "0", "--k", "2", "--quiet"]  # fmt: skip
+    run = _run(*argv)
+    assert run.returncode == 0, run.stdout[-2000:] + run.stderr[-4000:]
+    doc = json.loads(out.read_text("utf-8"))
+    assert doc["settings"]["k"] == 2 and "share" not in doc["settings"]
+    d = doc["domains"]["rover-hsl"]
+    trained = ["enki", "random", "corruption_mix", "random_c", "archive_mix_wok", "archive_mix_rok"]
+    assert [a for a in d["arms"] if a in bench.RECIPES] == trained
+    steps = d["budget"]["steps"]
+    assert set(steps) == set(trained) and len({s for v in steps.values() for s in v}) == 1
+    spent = {arm: v[0] for arm, v in d["budget"]["forwards"].items()}
+    assert set(spent) == {"random_c", "archive_mix_wok", "archive_mix_rok"}
+    hard, rand = spent["archive_mix_wok"], spent["archive_mix_rok"]
+    assert hard["select_forwards"] == hard["candidates"] == rand["candidates"] > 0
+    assert rand["select_forwards"] == 0 and spent["random_c"]["consistency_forwards"] > 0
+    assert hard["train_forwards"] == rand["train_forwards"] == spent["random_c"]["train_forwards"]
+    source = d["arms"]["archive_mix_rok"]["training"][0]["source"]
+    assert source["kind"] == "worst_of_k" and source["select"] == "random"
+    assert (
+        source["inner"]["excluded_box"]
+        == json.loads((work / "rover-hsl" / "conditions.json").read_text("utf-8"))["box"]
+    )

@@ -404,11 +404,16 @@ def _run_train(args: argparse.Namespace) -> int:
                 task, completed=step, total=total, epoch=int(info["epoch"]), loss=info["loss"]
             )
 
+        spent: list[float] = []
+
         def on_epoch(info: dict[str, float]) -> None:
             bar.update(task, val_f1=f"{info['val_f1']:.3f}")
+            spent.append(info["seconds"])
+            left = int(info["epochs"]) - int(info["epoch"])
+            eta = f", about {sum(spent) / len(spent) * left:.0f} s left" if left > 0 else ""
             console.print(
                 f"epoch {int(info['epoch'])}/{int(info['epochs'])}: loss {info['loss']:.3f}, "
-                f"val F1 {info['val_f1']:.3f} ({info['seconds']:.0f} s)"
+                f"val F1 {info['val_f1']:.3f} ({info['seconds']:.0f} s{eta})"
             )
 
         result = train_detector(

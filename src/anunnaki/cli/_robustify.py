@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import time
 from typing import Any
 
 from anunnaki.cli._detector import add_model_options
@@ -60,6 +61,30 @@ def add_parser(sub: Any) -> None:
     f.add_argument("--lr", type=float, default=2e-3, help="peak learning rate (2e-3)")
     f.add_argument("--threads", type=int, default=2, help="torch threads (2)")
     f.add_argument("--seed", type=int, default=0, help="the one seed of every stage (0)")
+    f.add_argument("--ema", type=float, default=0.0, metavar="DECAY",
+                   help="save a moving average of the weights with this decay, e.g. 0.99 "
+                   "(0: off, the last weights)")  # fmt: skip
+    r = p.add_argument_group("training recipe (docs/robustify.md#recipe; the default is B, "
+                             "the selected contexts)")  # fmt: skip
+    r.add_argument("--source", default="archive", metavar="NAME",
+                   help="what perturbs the training frames: archive (the selected contexts), "
+                   "archive_mix (jittered selected contexts mixed with uniform ones), uniform, "
+                   "corruption_mix, or a plugin's name (archive)")  # fmt: skip
+    r.add_argument("--k", type=int, default=1,
+                   help="candidates per perturbed frame; above 1, worst-of-k keeps the one "
+                   "with the highest loss under the network being trained (1: off)")  # fmt: skip
+    r.add_argument("--select", choices=("hardest", "random"), default="hardest",
+                   help="worst-of-k's pick; random renders as many candidates and picks one "
+                   "at random (the control) (hardest)")  # fmt: skip
+    r.add_argument("--share", type=float, default=0.5,
+                   help="archive_mix: share of perturbed frames from the selected contexts, "
+                   "the rest uniform (0.5)")  # fmt: skip
+    r.add_argument("--jitter", type=float, default=0.1,
+                   help="archive_mix: standard deviation of the selected contexts' Gaussian "
+                   "jitter in the normalised space (0.1)")  # fmt: skip
+    r.add_argument("--consistency", type=float, default=0.0, metavar="LAMBDA",
+                   help="weight of the consistency loss between the heat maps of each "
+                   "perturbed frame and its clean view (0: off)")  # fmt: skip
     o = p.add_argument_group("measurement and oracle")
     o.add_argument("--measure-contexts", type=int, default=32,
                    help="archive contexts both models are measured on (32)")  # fmt: skip
@@ -98,12 +123,22 @@ def _config(args: argparse.Namespace) -> Any:
         rule=SelectionRule(contexts=args.contexts, weights=tuple(args.weights)),
         clean=args.clean,
         finetune=Budget(
-            epochs=args.epochs, batch_size=args.batch_size, lr=args.lr, threads=args.threads
+            epochs=args.epochs,
+            batch_size=args.batch_size,
+            lr=args.lr,
+            threads=args.threads,
+            ema=args.ema,
         ),
         seed=args.seed,
         measure_contexts=args.measure_contexts,
         oracle=oracle,
         oracle_architecture=args.oracle_architecture,
+        source=args.source,
+        k=args.k,
+        select=args.select,
+        share=args.share,
+        jitter=args.jitter,
+        consistency=args.consistency,
     )
 
 
@@ -118,6 +153,7 @@ def run_robustify(args: argparse.Namespace) -> int:
         Progress,
         TextColumn,
         TimeElapsedColumn,
+        TimeRemainingColumn,
     )
 
     from anunnaki.enki import EnkiError, new_model_id, robustify
@@ -132,15 +168,19 @@ def run_robustify(args: argparse.Namespace) -> int:
         out = str(Path("robustify") / (args.new_id or new_model_id(model.model_id, args.domain)))
     console = Console(stderr=True, highlight=False)
     columns = (TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn())
-    with Progress(*columns, TimeElapsedColumn(), console=console, disable=args.json) as bar:
+    eta = TimeRemainingColumn()  # the current stage's time left
+    with Progress(*columns, TimeElapsedColumn(), eta, console=console, disable=args.json) as bar:
         task = bar.add_task("robustify", total=None)
-        last = {"stage": ""}
+        last: dict[str, Any] = {"stage": "", "done": 0, "total": 0, "start": time.monotonic()}
 
         def progress(stage: str, done: int, total: int) -> None:
+            if done < last["done"] or total != last["total"]:  # a new count: a new ETA
+                bar.reset(task, total=total or None, completed=done, description=stage)
+                last["start"] = time.monotonic()
             bar.update(task, description=stage, completed=done, total=total or None)
             if not console.is_terminal and not args.json and stage != last["stage"]:
-                console.print(stage)  # a log gets a line per stage
-            last["stage"] = stage
+                console.print(stage + _eta(done, total, time.monotonic() - last["start"]))
+            last.update(stage=stage, done=done, total=total)
 
         summary = robustify(
             args.model, args.data, out, config, model_in_id=args.model_id,
@@ -151,6 +191,33 @@ def run_robustify(args: argparse.Namespace) -> int:
         return 0
     _print(summary)
     return 0
+
+
+def _spent(finetune: dict[str, Any]) -> str:
+    """The forward passes beside the steps, and the recipe when it is not the default."""
+    recipe = finetune.get("recipe", {})
+    parts = []
+    if recipe.get("source", "archive") != "archive" or recipe.get("k", 1) > 1:
+        parts.append(f"source {recipe['source']}" + (
+            f", worst-of-{recipe['k']} ({recipe['select']})" if recipe.get("k", 1) > 1 else ""
+        ))  # fmt: skip
+    if finetune.get("select_forwards"):
+        parts.append(f"{finetune['select_forwards']} scoring forward passes")
+    if finetune.get("consistency_forwards"):
+        parts.append(
+            f"{finetune['consistency_forwards']} clean views (consistency "
+            f"{recipe.get('consistency')})"
+        )
+    if recipe.get("ema"):
+        parts.append(f"EMA {recipe['ema']}")
+    return f"; {', '.join(parts)}" if parts else ""
+
+
+def _eta(done: int, total: int, seconds: float) -> str:
+    """`` (about N s left)`` at the rate so far, for a log's line (a terminal has the bar's)."""
+    if done <= 0 or total <= done or seconds <= 0:
+        return ""
+    return f" (about {seconds / done * (total - done):.0f} s left in this stage)"
 
 
 def _print(summary: dict[str, Any]) -> None:
@@ -182,7 +249,7 @@ def _print(summary: dict[str, Any]) -> None:
         f"{'/'.join(map(str, a['counts']))}{', reused' if a['reused'] else ''})",
         f"selection: {sum(sel['counts'])} contexts, categories {'/'.join(map(str, sel['counts']))}",
         f"fine-tune: {t['epochs']} epochs, {t['steps']} optimizer steps on {t['images']} "
-        f"images, seed {summary['seed']}",
+        f"images, seed {summary['seed']}" + _spent(t),
         f"model: {model['file']} (sha256 {model['sha256'][:16]}…)",
         f"oracle: {summary['oracle']['file']} ({summary['oracle'].get('architecture', '?')}, "
         f"sha256 {summary['oracle']['sha256'][:16]}…)",

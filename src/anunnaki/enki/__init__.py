@@ -22,7 +22,12 @@ comparison runs every arm with the same images, epochs, optimiser steps and seed
 
 :class:`CorruptionMix` is the third source: each frame a random phenomenon of the library at
 a random strength. :class:`MixedContexts` draws each frame's source from several (one model
-for several domains: benchmarks/switching.py). Needs the ``vision`` and ``enlil`` extras.
+for several domains: benchmarks/switching.py). The recipe's parts (docs/robustify.md#recipe):
+:class:`ArchiveMix` (the archive as a distribution: jittered elites mixed with uniform
+contexts), :class:`WorstOfK` (the candidate with the highest loss under the network being
+trained), ``finetune(..., consistency=λ)`` and ``Budget(ema=DECAY)``; by name through
+:data:`CONTEXT_SOURCES` and :func:`make_source` (``robustify --source``). Needs the
+``vision`` and ``enlil`` extras.
 """
 
 from anunnaki.enki._chain import RobustifyConfig, archive_sha256, new_model_id, robustify
@@ -30,15 +35,22 @@ from anunnaki.enki._errors import EnkiError
 from anunnaki.enki._finetune import Budget, finetune
 from anunnaki.enki._select import Selection, SelectionRule, select_contexts
 from anunnaki.enki._sources import (
+    CONTEXT_SOURCES,
     ArchiveContexts,
+    ArchiveMix,
     ContextSource,
     CorruptionMix,
     MixedContexts,
+    SourceSpec,
     UniformContexts,
+    WorstOfK,
+    make_source,
 )
 
 __all__ = [
+    "CONTEXT_SOURCES",
     "ArchiveContexts",
+    "ArchiveMix",
     "Budget",
     "ContextSource",
     "CorruptionMix",
@@ -47,9 +59,12 @@ __all__ = [
     "RobustifyConfig",
     "Selection",
     "SelectionRule",
+    "SourceSpec",
     "UniformContexts",
+    "WorstOfK",
     "archive_sha256",
     "finetune",
+    "make_source",
     "new_model_id",
     "robustify",
     "select_contexts",

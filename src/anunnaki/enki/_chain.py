@@ -11,7 +11,7 @@ import hashlib
 from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
 import numpy as np
 
@@ -20,7 +20,7 @@ from anunnaki.datasets import Dataset, load_split
 from anunnaki.enki._errors import EnkiError
 from anunnaki.enki._finetune import Budget, finetune
 from anunnaki.enki._select import Selection, SelectionRule, select_contexts
-from anunnaki.enki._sources import ArchiveContexts
+from anunnaki.enki._sources import CONTEXT_SOURCES, SourceSpec, make_source
 from anunnaki.enki._work import WorkFolder, write_json
 from anunnaki.enlil import Archive, read_archive
 from anunnaki.errors import AnunnakiError
@@ -30,6 +30,13 @@ __all__ = ["RobustifyConfig", "archive_sha256", "new_model_id", "robustify"]
 
 #: ``progress(stage, done, total)``: a stage's advance (``total`` 0 while unknown).
 Progress = Callable[[str, int, int], None]
+
+#: The fields of :class:`RobustifyConfig` that make the training recipe (with the budget's EMA).
+RECIPE = ("source", "k", "select", "share", "jitter", "consistency")
+
+#: What a fine-tune spends beside its optimiser steps (images through the network, and the
+#: worst-of-k candidates rendered): recorded with the steps (docs/robustify.md, "Budget").
+FORWARDS = ("train_forwards", "select_forwards", "consistency_forwards", "candidates")
 
 
 @dataclass(frozen=True)
@@ -57,6 +64,20 @@ class RobustifyConfig:
         oracle_architecture: The oracle's network; ``None``: the measured choice
             (:func:`anunnaki.enlil.oracle_architecture` of the phenomenon and the new
             model's id), as ``scripts/train-oracles.sh`` chooses it.
+        source: The fine-tune's context source by name (:data:`CONTEXT_SOURCES`:
+            ``archive``, the selected contexts, as before; ``archive_mix``; ``uniform``;
+            ``corruption_mix``).
+        k: Candidates per perturbed frame; above 1 the source is wrapped in worst-of-k
+            (:class:`~anunnaki.enki.WorstOfK`).
+        select: Worst-of-k's choice: ``hardest`` (the highest loss under the network being
+            trained) or ``random`` (the control with the same rendering).
+        share: ``archive_mix``: share of perturbed frames from the selected contexts.
+        jitter: ``archive_mix``: standard deviation of their jitter (normalised units).
+        consistency: λ of the consistency loss (0: off).
+
+    The recipe's options (``source`` … ``consistency``, and ``finetune.ema``) are recorded
+    in the work folder only where they differ from the defaults, so that a folder made
+    before they existed continues as it was.
 
     The oracle's options (``oracle``, ``oracle_architecture``) are the oracle stage's own:
     when they change, a rerun into the same work folder trains the oracle again and reuses
@@ -81,25 +102,63 @@ class RobustifyConfig:
     measure_contexts: int = 32
     oracle: dict[str, int] = field(default_factory=dict)
     oracle_architecture: str | None = None
+    source: str = "archive"
+    k: int = 1
+    select: Literal["hardest", "random"] = "hardest"
+    share: float = 0.5
+    jitter: float = 0.1
+    consistency: float = 0.0
 
     def __post_init__(self) -> None:
-        """Refuse a domain or an id that is no name (they become file names: docs/robustify.md)."""
+        """Refuse a domain or an id that is no name (they become file names: docs/robustify.md).
+
+        And an unknown source (listing the valid ones) or recipe options out of range.
+        """
         try:
             check_domain(self.domain, what="--domain")
             if self.model_id is not None:
                 check_name(self.model_id, what="--id")
         except NameRuleError as exc:
             raise EnkiError(str(exc)) from None
+        try:
+            CONTEXT_SOURCES.factory(self.source)
+        except AnunnakiError as exc:
+            raise EnkiError(f"--source {self.source}: {exc}") from None
+        if self.k < 1 or self.select not in ("hardest", "random"):
+            raise EnkiError(
+                f"--k is the number of candidates per frame (1: no worst-of-k), --select "
+                f"hardest or random; got --k {self.k}, --select {self.select}"
+            )
+        if not 0 <= self.share <= 1 or self.jitter < 0 or self.consistency < 0:
+            raise EnkiError(
+                f"--share must be in [0, 1], --jitter and --consistency >= 0; got "
+                f"{self.share}, {self.jitter}, {self.consistency}"
+            )
+
+    def recipe(self) -> dict[str, Any]:
+        """The training recipe: source, worst-of-k, mix, consistency and EMA."""
+        return {key: getattr(self, key) for key in RECIPE} | {"ema": self.finetune.ema}
 
     def options(self) -> dict[str, Any]:
         """The options that decide the results, JSON-safe.
 
-        All but ``workers`` and the oracle stage's own (:meth:`oracle_options`).
+        All but ``workers`` and the oracle stage's own (:meth:`oracle_options`); the
+        recipe's only as ``recipe`` and only when it is not the default one.
         """
         data = asdict(self)
-        for key in ("workers", "oracle", "oracle_architecture"):
+        for key in ("workers", "oracle", "oracle_architecture", *RECIPE):
             del data[key]
+        del data["finetune"]["ema"]
+        if self.recipe() != RobustifyConfig.default_recipe():
+            data["recipe"] = self.recipe()
         return data
+
+    @staticmethod
+    def default_recipe() -> dict[str, Any]:
+        """The recipe a config gets when none of its options are given."""
+        return {key: RobustifyConfig.__dataclass_fields__[key].default for key in RECIPE} | {
+            "ema": Budget().ema
+        }
 
     def oracle_options(self, model_id: str | None = None) -> dict[str, Any]:
         """The oracle stage's options: the overrides and the network.
@@ -335,7 +394,9 @@ class _Chain:
 
         train, val, test = self.splits
         cfg = self.cfg
-        source = ArchiveContexts(cfg.phenomenon, selection.params, clean=cfg.clean)
+        spec = SourceSpec(cfg.phenomenon, selection.params, clean=cfg.clean, share=cfg.share,
+                          jitter=cfg.jitter)  # fmt: skip
+        source = make_source(cfg.source, spec, k=cfg.k, select=cfg.select)
         epochs = cfg.finetune.epochs
         self.progress("fine-tune", 0, cfg.finetune.steps(len(train)))
         last = {"text": ""}
@@ -351,9 +412,10 @@ class _Chain:
             on_step=lambda step, total, info: self.progress(
                 f"fine-tune, epoch {int(info['epoch'])}/{epochs}{last['text']}", step, total
             ),
-            on_epoch=on_epoch,
+            on_epoch=on_epoch, consistency=cfg.consistency,
         )  # fmt: skip
         det = result.detector
+        counts = {k: int(det.training[k]) for k in FORWARDS}
         det.training["enki"] = {
             "domain": cfg.domain,
             "phenomenon": cfg.phenomenon,
@@ -363,7 +425,8 @@ class _Chain:
             "seeds": {"search": cfg.seed, "finetune": cfg.seed, "measure": cfg.seed,
                       "assess": cfg.seed, "oracle": cfg.seed},
             "budget": {**asdict(cfg.finetune), "steps": det.training["steps"],
-                       "images": len(train)},
+                       "images": len(train), **counts},
+            "recipe": cfg.recipe(),
         }  # fmt: skip
         file = inside(self.work.path, self.work.path / f"{self.new_id}.safetensors",
                       what="the new model")  # fmt: skip
@@ -375,6 +438,8 @@ class _Chain:
             "epochs": epochs,
             "steps": det.training["steps"],
             "images": len(train),
+            **counts,
+            "source": source.describe(),
             "seconds": round(result.seconds, 1),
             "history": result.history,
             "val": result.val.as_dict(),
@@ -536,7 +601,9 @@ def robustify(
         "phenomenon": config.phenomenon,
         "archive": search,
         "selection": {"counts": picked["counts"], "rule": asdict(config.rule)},
-        "finetune": {k: tuned[k] for k in ("epochs", "steps", "images", "seconds")},
+        "finetune": {k: tuned[k] for k in ("epochs", "steps", "images", "seconds")}
+        | {k: tuned.get(k, 0) for k in FORWARDS}
+        | {"recipe": config.recipe()},
         "metrics": metrics,
         "assessment": assess,
         "oracle": oracle,

@@ -38,6 +38,12 @@ class Budget:
         batch_size: Images per optimiser step.
         lr: Peak learning rate (AdamW; the training loop's warm-up and cosine decay).
         threads: torch threads (results repeat bit for bit with the same count).
+        ema: Decay of the weight average the saved model gets (0: off, the last weights;
+            ``TrainConfig.ema``): like the learning rate, the same for every arm.
+
+    The forward passes a source or a consistency loss adds (worst-of-k's scoring, the clean
+    views) are not part of the budget's settings; they are counted and reported beside the
+    optimiser steps (``detector.training``: ``select_forwards``, ``consistency_forwards``).
 
     """
 
@@ -45,12 +51,13 @@ class Budget:
     batch_size: int = 32
     lr: float = 2e-3
     threads: int | None = 2
+    ema: float = 0.0
 
     def __post_init__(self) -> None:
-        if self.epochs < 1 or self.batch_size < 1 or self.lr <= 0:
+        if self.epochs < 1 or self.batch_size < 1 or self.lr <= 0 or not 0 <= self.ema < 1:
             raise EnkiError(
-                f"a fine-tune budget needs epochs >= 1, batch size >= 1 and lr > 0; got "
-                f"{self.epochs}, {self.batch_size}, {self.lr}"
+                f"a fine-tune budget needs epochs >= 1, batch size >= 1, lr > 0 and ema in "
+                f"[0, 1); got {self.epochs}, {self.batch_size}, {self.lr}, {self.ema}"
             )
 
     def steps(self, images: int) -> int:
@@ -59,9 +66,15 @@ class Budget:
 
 
 def _record(
-    model: Path, train: Dataset, source: ContextSource, budget: Budget, seed: int
+    model: Path,
+    train: Dataset,
+    source: ContextSource,
+    budget: Budget,
+    *,
+    seed: int,
+    consistency: float,
 ) -> dict[str, Any]:
-    return {
+    record: dict[str, Any] = {
         "model_sha256": sha256_file(weights_path(model)),
         "train": train.name,
         "train_images": len(train),
@@ -69,6 +82,11 @@ def _record(
         "budget": asdict(budget),
         "seed": seed,
     }
+    if not budget.ema:  # folders made before the weight average keep their record
+        del record["budget"]["ema"]
+    if consistency:
+        record["consistency"] = consistency
+    return record
 
 
 def _latest(folder: Path) -> Path | None:
@@ -84,12 +102,12 @@ def _prepare(folder: Path, record: dict[str, Any]) -> Any:
     marker = folder / "finetune.json"
     if marker.is_file():
         old = json.loads(marker.read_text(encoding="utf-8"))
-        changed = [k for k in record if old.get(k) != record[k]]
+        changed = [k for k in [*record, *old] if old.get(k) != record.get(k)]
         if changed:
             key = changed[0]
             raise EnkiError(
                 f"{folder}: its checkpoints are of a fine-tune with {key}={old.get(key)!r}, "
-                f"this one has {key}={record[key]!r}; give another folder (--out) or the "
+                f"this one has {key}={record.get(key)!r}; give another folder (--out) or the "
                 "same settings"
             )
     else:
@@ -114,6 +132,7 @@ def finetune(
     checkpoints: str | Path | None = None,
     on_step: Any = None,
     on_epoch: Any = None,
+    consistency: float = 0.0,
 ) -> TrainResult:
     """Fine-tune a copy of *model* on *train* perturbed by *source*; threshold chosen on *val*.
 
@@ -130,10 +149,13 @@ def finetune(
         checkpoints: Folder for per-epoch checkpoints (resume; see the module docstring).
         on_step: ``on_step(step, total, info)`` after every optimiser step.
         on_epoch: ``on_epoch(info)`` after every epoch (``epoch``, ``loss``, ``val_f1`` …).
+        consistency: λ of the consistency loss between each perturbed frame's heat map and
+            its clean view's (0: off; ``TrainConfig.consistency``).
 
     Returns:
         :func:`anunnaki.lec.train_detector`'s result; ``detector.training`` also holds
-        ``steps``, ``source`` and ``budget``.
+        ``steps``, the extra forward passes (``select_forwards``, ``consistency_forwards``),
+        ``source`` and ``budget``.
 
     Raises:
         EnkiError: The checkpoint folder is of another fine-tune.
@@ -158,11 +180,15 @@ def finetune(
         domain=domain,
         init=path,
         perturb=source,
+        consistency=consistency,
+        ema=budget.ema,
     )
     resume, save = None, None
     if checkpoints is not None:
         folder = Path(checkpoints)
-        resume = _prepare(folder, _record(path, train, source, budget, seed))
+        resume = _prepare(
+            folder, _record(path, train, source, budget, seed=seed, consistency=consistency)
+        )
 
         def save(state: Any) -> None:
             state.save(folder / f"epoch-{state.epoch:03d}.pt")

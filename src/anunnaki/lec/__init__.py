@@ -100,6 +100,7 @@ from anunnaki.lec._registry_reload import RegistryChange
 
 if TYPE_CHECKING:
     from anunnaki.lec._centernet import CenterNet, CenterNetArchitecture, CenterNetDetector
+    from anunnaki.lec._recipe import CandidatePerturb
     from anunnaki.lec._train import (
         Augmenter,
         EpochHook,
@@ -122,6 +123,7 @@ __all__ = [
     "SIDECAR_FORMAT",
     "Augmenter",
     "BuildsFromCard",
+    "CandidatePerturb",
     "CenterNet",
     "CenterNetArchitecture",
     "CenterNetDetector",
@@ -182,6 +184,7 @@ __all__ = [
 ]
 
 _LAZY = {
+    "CandidatePerturb": "anunnaki.lec._recipe",
     "CenterNet": "anunnaki.lec._centernet",
     "CenterNetArchitecture": "anunnaki.lec._centernet",
     "CenterNetDetector": "anunnaki.lec._centernet",

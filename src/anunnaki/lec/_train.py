@@ -36,6 +36,13 @@ from anunnaki.lec._centernet import (
 )
 from anunnaki.lec._detector import DetectionResult, Detector, DetectorError
 from anunnaki.lec._metrics import Metrics, choose_threshold, f1_at_iou
+from anunnaki.lec._recipe import (
+    CandidatePerturb,
+    WeightAverage,
+    candidate_losses,
+    consistency_loss,
+    pick,
+)
 from anunnaki.phenomena import PHENOMENA, Phenomenon
 
 __all__ = [
@@ -159,7 +166,18 @@ class TrainConfig:
         perturb: ``perturb(image, rng) -> image`` (:data:`Perturb`) applied to every
             training image last, after ``augment``, with a random stream of its own: two
             trainings that differ only in it see the same images, zooms, flips and order
-            (Enki's context sources, ``anunnaki.enki``).
+            (Enki's context sources, ``anunnaki.enki``). A :class:`CandidatePerturb`
+            offers several candidates per image and the loop keeps one (worst-of-k: the
+            highest loss under the network being trained; ``anunnaki.lec._recipe``).
+        consistency: λ of the consistency loss (0: off): each step adds λ × the
+            Jensen-Shannon divergence between the heat maps of the perturbed images and of
+            their clean views (the same image after zoom, flip and recolouring, before
+            ``perturb``), the clean views' output detached (:func:`consistency_loss`). The
+            clean views of the perturbed images go through the network in the same batch
+            (one forward pass, so BatchNorm normalises both alike; each counted).
+        ema: Decay of an exponential moving average of the weights (0: off). On, the saved
+            model has the averaged weights, and the val threshold (and the per-epoch val
+            F1) is chosen with them (:class:`WeightAverage`).
 
     """
 
@@ -182,6 +200,8 @@ class TrainConfig:
     ignore: bool = True
     init: str | Path | CenterNetDetector | None = None
     perturb: Perturb | None = None
+    consistency: float = 0.0
+    ema: float = 0.0
 
     def __post_init__(self) -> None:
         """The id and the domain are names (``anunnaki._names``): an id becomes file names.
@@ -189,6 +209,11 @@ class TrainConfig:
         The domain only has to be a name here; a registry (where models are swapped by
         domain) also wants it an identifier, and ``train-detector --domain`` asks that.
         """
+        if not self.consistency >= 0.0 or not 0.0 <= self.ema < 1.0:
+            raise DetectorError(
+                f"TrainConfig: consistency must be >= 0 and ema in [0, 1); got "
+                f"{self.consistency} and {self.ema}"
+            )
         try:
             check_name(self.model_id, what="model id")
             check_name(self.domain, what="domain")
@@ -213,6 +238,8 @@ class TrainState:
         rngs: The bit-generator states of the batch order, augmentation and perturbation
             streams, and torch's generator state.
         history: The per-epoch figures so far (as :attr:`TrainResult.history`).
+        ema: The weight average (:meth:`WeightAverage.as_dict`), when ``TrainConfig.ema``.
+        counts: The forward passes and candidates so far (as :attr:`TrainResult.counts`).
 
     """
 
@@ -222,6 +249,8 @@ class TrainState:
     optimizer: dict[str, Any]
     rngs: dict[str, Any]
     history: list[dict[str, float]]
+    ema: dict[str, Any] | None = None
+    counts: dict[str, int] = field(default_factory=dict)
 
     def save(self, path: str | Path) -> None:
         """Write the state to *path* atomically (a temporary file renamed into place)."""
@@ -261,7 +290,13 @@ class TrainResult:
         test: Metrics on the test split, when one was given.
         seconds: Wall-clock time of the epochs (without any evaluation; a resumed training
             counts the epochs done before too).
-        history: Per epoch: ``epoch``, ``loss``, ``heat``, ``box`` (mean losses), ``seconds``.
+        history: Per epoch: ``epoch``, ``loss``, ``heat``, ``box`` (mean losses; also
+            ``consistency`` when it is on), ``seconds``.
+        counts: What the training spent beside its optimiser steps, in images through the
+            network: ``train_forwards`` (with gradient, the steps' batches),
+            ``select_forwards`` (no-grad passes scoring worst-of-k candidates),
+            ``consistency_forwards`` (clean views beside the perturbed ones) and
+            ``candidates`` (candidate images rendered by a :class:`CandidatePerturb`).
 
     """
 
@@ -271,6 +306,7 @@ class TrainResult:
     test: Metrics | None
     seconds: float
     history: list[dict[str, float]] = field(default_factory=list)
+    counts: dict[str, int] = field(default_factory=dict)
 
 
 #: ``on_step(step, total_steps, info)`` — info has ``epoch`` and the running ``loss``.
@@ -657,8 +693,9 @@ def train_detector(
             if checkpoint is not None:
                 checkpoint(loop.state())
             if on_epoch is not None:
-                on_epoch(loop.history[-1] | {"epochs": cfg.epochs, "val_f1": _val_f1(det, val)})
+                on_epoch(loop.history[-1] | {"epochs": cfg.epochs, "val_f1": loop.val_f1(val)})
         seconds = loop.seconds
+        loop.finish()
         det.network.eval()
         threshold, val_m, test_m = _measure(det, val, test)
     finally:
@@ -671,8 +708,8 @@ def train_detector(
     history = loop.history
     det.training = _training_record(
         cfg, train, val=val, test=test, start_from=start_from, seconds=seconds, history=history
-    ) | {"steps": loop.step}
-    return TrainResult(det, threshold, val_m, test_m, seconds, history)
+    ) | {"steps": loop.step, **loop.counts, "consistency": cfg.consistency, "ema": cfg.ema}
+    return TrainResult(det, threshold, val_m, test_m, seconds, history, dict(loop.counts))
 
 
 class _Loop:
@@ -704,6 +741,10 @@ class _Loop:
         self.epoch = 0
         self.step = 0
         self.seconds = 0.0
+        self.ema = WeightAverage(det.network, cfg.ema) if cfg.ema > 0 else None
+        self.counts = dict.fromkeys(
+            ("train_forwards", "select_forwards", "consistency_forwards", "candidates"), 0
+        )
 
     def state(self) -> TrainState:
         """The state after the last epoch (see :class:`TrainState`)."""
@@ -717,6 +758,8 @@ class _Loop:
             self.opt.state_dict(),
             rngs,
             [dict(h) for h in self.history],
+            None if self.ema is None else self.ema.as_dict(),
+            dict(self.counts),
         )
 
     def restore(self, state: TrainState) -> None:
@@ -737,6 +780,14 @@ class _Loop:
         self.seconds = float(state.rngs.get("seconds", 0.0))
         self.epoch, self.step = state.epoch, state.step
         self.history = [dict(h) for h in state.history]
+        if (self.ema is None) != (state.ema is None):
+            raise DetectorError(
+                f"the checkpoint was made with ema {'on' if state.ema else 'off'}, this "
+                f"training has it {'on' if self.ema else 'off'}: delete it to start over"
+            )
+        if self.ema is not None and state.ema is not None:
+            self.ema.restore(state.ema)
+        self.counts |= {k: int(v) for k, v in state.counts.items()}
 
     def run_epoch(self, epoch: int, on_step: ProgressHook | None) -> None:
         """One pass over the data in a fresh random order."""
@@ -744,22 +795,28 @@ class _Loop:
         net.train()
         t0 = time.perf_counter()
         sums = {"loss": 0.0, "heat": 0.0, "box": 0.0}
+        if cfg.consistency > 0:
+            sums["consistency"] = 0.0
         perm = self.rngs["order"].permutation(len(self.data))
         for b in range(self.steps_per_epoch):
-            samples = [
+            drawn = [
                 self._sample(int(idx))
                 for idx in perm[b * cfg.batch_size : (b + 1) * cfg.batch_size]
             ]
+            samples = self._choose(drawn)
             x, heat_t, box_t, weight = _batch_tensors(
                 samples, self.size, self.num_classes, net.stride
             )
             for group in self.opt.param_groups:
                 group["lr"] = self.lr_at(self.step)
-            loss, parts = centernet_loss(net(x), heat_t, box_t, weight)
+            loss, parts = self._loss((x, heat_t, box_t, weight), samples, drawn)
             self.opt.zero_grad(set_to_none=True)
             loss.backward()  # type: ignore[no-untyped-call]
             torch.nn.utils.clip_grad_norm_(net.parameters(), 10.0)
             self.opt.step()
+            if self.ema is not None:
+                self.ema.update(net)
+            self.counts["train_forwards"] += len(samples)
             self.step += 1
             sums["loss"] += float(loss.detach())
             for k, v in parts.items():
@@ -774,12 +831,85 @@ class _Loop:
         )
         self.epoch = epoch + 1
 
-    def _sample(self, index: int) -> _Sample:
+    def _sample(self, index: int) -> _Drawn:
+        """The augmented sample and its perturbed candidates (one, unless worst-of-k)."""
         sample = _augmented(self.data[index], self.cfg, self.size, self.rngs["aug"], self.augmenter)
-        if self.cfg.perturb is None:
-            return sample
-        image, boxes, labels, ignore = sample
-        return self.cfg.perturb(image, self.rngs["perturb"]), boxes, labels, ignore
+        perturb, rng = self.cfg.perturb, self.rngs["perturb"]
+        if perturb is None:
+            return sample, [sample[0]], 0
+        if isinstance(perturb, CandidatePerturb):
+            found = perturb.candidates(sample[0], rng)
+            if not found:
+                raise DetectorError(f"{type(perturb).__name__}.candidates gave no image")
+            # drawn whatever the selection, so that arms differing only in it stay paired
+            drawn = int(rng.integers(len(found))) if len(found) > 1 else 0
+            return sample, list(found), drawn
+        return sample, [perturb(sample[0], rng)], 0
+
+    def _choose(self, drawn: list[_Drawn]) -> list[_Sample]:
+        """Each image with its kept candidate (worst-of-k: scored as the network stands)."""
+        select = getattr(self.cfg.perturb, "select", "random")
+        kept = [d[2] for d in drawn]
+        scored = [i for i, d in enumerate(drawn) if len(d[1]) > 1 and select == "hardest"]
+        self.counts["candidates"] += sum(len(d[1]) for d in drawn if len(d[1]) > 1)
+        if scored:
+            flat = [(c, *drawn[i][0][1:]) for i in scored for c in drawn[i][1]]
+            x, heat_t, box_t, weight = _batch_tensors(
+                flat, self.size, self.num_classes, self.det.network.stride
+            )
+            losses = candidate_losses(
+                self.det.network, x, heat_t, box_t, weight, batch_size=self.cfg.batch_size
+            )
+            self.counts["select_forwards"] += len(flat)
+            at = 0
+            for i in scored:
+                n = len(drawn[i][1])
+                kept[i] = pick(losses[at : at + n], kept[i], "hardest")
+                at += n
+        return [(d[1][k], *d[0][1:]) for d, k in zip(drawn, kept, strict=True)]
+
+    def _loss(
+        self,
+        batch: tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor],
+        samples: list[_Sample],
+        drawn: list[_Drawn],
+    ) -> tuple[torch.Tensor, dict[str, float]]:
+        """The detector loss, plus λ × the consistency loss of the perturbed images."""
+        x, heat_t, box_t, weight = batch
+        net, lam = self.det.network, self.cfg.consistency
+        views = [
+            i for i, (s, d) in enumerate(zip(samples, drawn, strict=True))
+            if lam > 0 and not np.array_equal(s[0], d[0][0])
+        ]  # fmt: skip
+        if not views:
+            loss, parts = centernet_loss(net(x), heat_t, box_t, weight)
+            return loss, parts | ({"consistency": 0.0} if lam > 0 else {})
+        clean, *_ = _batch_tensors(
+            [drawn[i][0] for i in views], self.size, self.num_classes, net.stride
+        )
+        heat, box = net(torch.cat([x, clean]))
+        n = len(x)
+        loss, parts = centernet_loss((heat[:n], box[:n]), heat_t, box_t, weight)
+        extra = consistency_loss(heat[torch.as_tensor(views)], heat[n:])
+        self.counts["consistency_forwards"] += len(views)
+        return loss + lam * extra, parts | {"consistency": float(extra.detach())}
+
+    def val_f1(self, val: Dataset) -> float:
+        """F1 on *val* at its best threshold now, with the weights that would be saved."""
+        if self.ema is None:
+            return _val_f1(self.det, val)
+        net = self.det.network
+        current = {k: v.detach().clone() for k, v in net.state_dict().items()}
+        net.load_state_dict(self.ema.state)
+        try:
+            return _val_f1(self.det, val)
+        finally:
+            net.load_state_dict(current)
+
+    def finish(self) -> None:
+        """Put the saved weights in the network: the average, when there is one."""
+        if self.ema is not None:
+            self.det.network.load_state_dict(self.ema.state)
 
 
 def _new_detector(
@@ -831,6 +961,9 @@ def _measure(
 
 _Sample = tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]
 """One training image with its boxes, labels and ignore boxes."""
+
+_Drawn = tuple[_Sample, list[np.ndarray], int]
+"""A sample as augmented, its perturbed candidates and the index drawn among them."""
 
 
 def _check_splits(train: Dataset, val: Dataset, test: Dataset | None, cfg: TrainConfig) -> None:
