@@ -35,8 +35,9 @@ from anunnaki.lec._centernet import (
     encode_targets,
 )
 from anunnaki.lec._detector import DetectionResult, Detector, DetectorError
+from anunnaki.lec._hidden import hide_boxes
 from anunnaki.lec._metrics import Metrics, choose_threshold, f1_at_iou
-from anunnaki.phenomena import PHENOMENA, Phenomenon
+from anunnaki.phenomena import PHENOMENA, Mask, Phenomenon
 
 __all__ = [
     "Augmenter",
@@ -60,8 +61,10 @@ Boxes = npt.NDArray[np.float32]
 Labels = npt.NDArray[np.int64]
 
 #: ``perturb(image, rng) -> image`` (``TrainConfig.perturb``): ``uint8`` ``(H, W, 3)`` in and
-#: out, drawing only from *rng*.
-Perturb = Callable[[Image, np.random.Generator], Image]
+#: out, drawing only from *rng*. It may return ``(image, mask)`` instead, with the
+#: phenomenon's occlusion mask (``Phenomenon.occlusion``, or ``None``): boxes it hides then
+#: become ignore boxes (``anunnaki.lec.hide_boxes``).
+Perturb = Callable[[Image, np.random.Generator], "Image | tuple[Image, Mask | None]"]
 
 
 class Augmenter:
@@ -118,11 +121,20 @@ class Augmenter:
 
     def __call__(self, image: Image, rng: np.random.Generator) -> Image:
         """Return *image* perturbed (or unchanged, with probability 1 - *probability*)."""
+        return self.occluded(image, rng)[0]
+
+    def occluded(self, image: Image, rng: np.random.Generator) -> tuple[Image, Mask | None]:
+        """As calling it, with the phenomenon's occlusion mask (``None``: nothing hidden).
+
+        The same draws from *rng* as a call, so the two give the same image.
+        """
         if not self.phenomena or rng.random() >= self.probability:
-            return image
+            return image, None
         phenomenon = self.phenomena[int(rng.integers(len(self.phenomena)))]
         params = self.sample_params(phenomenon, rng)
-        return phenomenon.apply(image, params, seed=int(rng.integers(2**31 - 1)))
+        seed = int(rng.integers(2**31 - 1))
+        out = phenomenon.apply(image, params, seed=seed)
+        return out, phenomenon.occlusion(image.shape, params, seed)
 
 
 @dataclass(frozen=True)
@@ -151,8 +163,10 @@ class TrainConfig:
             of its F1 when the frame is dimmed by 9 % (measured on the rover).
         model_id: The trained model's id.
         domain: The trained model's domain.
-        ignore: Honour the data's ignore boxes (no background loss inside them); off, an
-            unlabelled object is background like any other pixel.
+        ignore: Honour the data's ignore boxes (no background loss inside them), and make
+            a box that a phenomenon hides (``augment`` or ``perturb`` with an occlusion mask,
+            mean over the box at least ``anunnaki.phenomena.HIDDEN``) one too; off, an
+            unlabelled object is background like any other pixel and a hidden one a target.
         init: Start from this model's weights (a model file or a detector) instead of
             random ones — fine-tuning a domain model from the default one. Its classes,
             width and stride must match; ``width``/``stride`` are then taken from it.
@@ -779,7 +793,11 @@ class _Loop:
         if self.cfg.perturb is None:
             return sample
         image, boxes, labels, ignore = sample
-        return self.cfg.perturb(image, self.rngs["perturb"]), boxes, labels, ignore
+        out = self.cfg.perturb(image, self.rngs["perturb"])
+        image, mask = out if isinstance(out, tuple) else (out, None)
+        if self.cfg.ignore:
+            boxes, labels, ignore = hide_boxes(boxes, labels, ignore, mask)
+        return image, boxes, labels, ignore
 
 
 def _new_detector(
@@ -889,7 +907,9 @@ def _augmented(
     if cfg.photometric > 0:
         image = _photometric(image, rng, cfg.photometric)
     if augmenter is not None:
-        image = augmenter(image, rng)
+        image, mask = augmenter.occluded(image, rng)
+        if cfg.ignore:
+            boxes, labels, ignore = hide_boxes(boxes, labels, ignore, mask)
     return image, boxes, labels, ignore
 
 
