@@ -447,7 +447,10 @@ def _add_evaluate(sub: Any) -> None:
             "Measure MODEL on a split of DATA with the F1 rule of docs/detector.md (IoU >= 0.5, "
             "class-aware greedy matching, the model's own score threshold). With --phenomenon, "
             "every image is perturbed first (at --strength or --params) and the drop relative "
-            "to clean data is printed with its behaviour category (0 < 5 %, 1 > 5 %, 2 > 10 %)."
+            "to clean data is printed with its behaviour category (0 < 5 %, 1 > 5 %, 2 > 10 %). "
+            "A phenomenon that hides objects (raindrop) also gets F1 on the visible boxes "
+            "(those less than half hidden) and the ceiling: the F1 of a detector that finds "
+            "every visible box and nothing else."
         ),
     )
     p.add_argument(
@@ -573,35 +576,20 @@ def _run_evaluate(args: argparse.Namespace) -> int:
     if args.contexts is not None:
         return _run_contexts(args, det, model)
     data = load_split(args.data, args.split)
-    threshold = args.threshold
     try:
         counted = classes_counted(det, data)
         det, data = shared_view(args, det, data)
-        clean = evaluate_detector(det, data, score_threshold=threshold)
+        clean = evaluate_detector(det, data, score_threshold=args.threshold)
+        report = _report_head(args, det, model, len(data))
+        report |= counted
+        report["clean"] = clean.as_dict()
+        rows = [("clean", clean)]
+        if phen is not None:
+            rows += _perturbed(
+                args, det, data, phen=phen, params=params, clean=clean, report=report
+            )
     except DetectorError as exc:
         raise AnunnakiError(f"{args.model}: model {model_id!r}: {exc}") from None
-    report = _report_head(args, det, model, len(data))
-    report |= counted
-    report["clean"] = clean.as_dict()
-    rows = [("clean", clean)]
-    if phen is not None:
-        used = (
-            params
-            if params is not None
-            else phen.strength_params(1.0 if args.strength is None else args.strength)
-        )
-        perturbed = evaluate_detector(
-            det, data, phenomenon=phen, params=used, seed=args.seed, score_threshold=threshold
-        )
-        drop = clean.f1 - perturbed.f1
-        rel = drop / clean.f1 if clean.f1 > 0 else 0.0
-        category = 2 if rel > args.thresholds[1] else 1 if rel > args.thresholds[0] else 0
-        report["phenomenon"] = {"name": phen.name, "params": used, "seed": args.seed}
-        report["perturbed"] = perturbed.as_dict()
-        report["f1_drop"] = drop
-        report["f1_drop_relative"] = rel
-        report["category"] = category
-        rows.append((phen.name, perturbed))
     if args.update_sidecar:
         report["sidecar"] = _update_sidecar(str(model.file), det, args.data, clean, args.split)
     if args.json:
@@ -621,13 +609,67 @@ def _run_evaluate(args: argparse.Namespace) -> int:
     if args.update_sidecar:
         console.print(f"updated the metrics in {report['sidecar']}")
     if phen is not None:
-        params_text = ", ".join(f"{k}={v:g}" for k, v in report["phenomenon"]["params"].items())
-        console.print(
-            f"{phen.name} ({params_text}): F1 drop {report['f1_drop']:.3f} "
-            f"({100 * report['f1_drop_relative']:.1f} % of clean) → category "
-            f"{report['category']} ({_CATEGORY[report['category']]})"
-        )
+        _print_perturbed(console, phen.name, report)
     return 0
+
+
+def _perturbed(
+    args: argparse.Namespace,
+    det: Any,
+    data: Any,
+    *,
+    phen: Any,
+    params: dict[str, float] | None,
+    clean: Any,
+    report: dict[str, Any],
+) -> list[tuple[str, Any]]:
+    """Measure under the phenomenon into *report*; the table rows (visible boxes if hidden)."""
+    from anunnaki.lec import evaluate_visible
+
+    used = (
+        params
+        if params is not None
+        else phen.strength_params(1.0 if args.strength is None else args.strength)
+    )
+    measured = evaluate_visible(
+        det, data, phenomenon=phen, params=used, seed=args.seed, score_threshold=args.threshold
+    )
+    perturbed = measured.all
+    drop = clean.f1 - perturbed.f1
+    rel = drop / clean.f1 if clean.f1 > 0 else 0.0
+    category = 2 if rel > args.thresholds[1] else 1 if rel > args.thresholds[0] else 0
+    report["phenomenon"] = {"name": phen.name, "params": used, "seed": args.seed}
+    report["perturbed"] = perturbed.as_dict()
+    report["f1_drop"] = drop
+    report["f1_drop_relative"] = rel
+    report["category"] = category
+    rows = [(phen.name, perturbed)]
+    if measured.visible is not None:  # the phenomenon hides objects: visible boxes too
+        report["perturbed_visible"] = measured.visible.as_dict()
+        report["occlusion"] = {
+            "boxes": measured.boxes,
+            "hidden_boxes": measured.hidden,
+            "hidden_threshold": measured.threshold,
+            "ceiling_f1": measured.ceiling,
+        }
+        rows.append((f"{phen.name}, visible boxes", measured.visible))
+    return rows
+
+
+def _print_perturbed(console: Any, name: str, report: dict[str, Any]) -> None:
+    params_text = ", ".join(f"{k}={v:g}" for k, v in report["phenomenon"]["params"].items())
+    console.print(
+        f"{name} ({params_text}): F1 drop {report['f1_drop']:.3f} "
+        f"({100 * report['f1_drop_relative']:.1f} % of clean) → category "
+        f"{report['category']} ({_CATEGORY[report['category']]})"
+    )
+    if "occlusion" in report:
+        occ = report["occlusion"]
+        console.print(
+            f"{occ['hidden_boxes']} of {occ['boxes']} boxes at least "
+            f"{100 * occ['hidden_threshold']:.0f} % hidden (ignore boxes on the visible row); "
+            f"a detector finding every visible box and nothing else: F1 {occ['ceiling_f1']:.3f}"
+        )
 
 
 def _run_contexts(args: argparse.Namespace, det: Any, model: Any) -> int:
