@@ -28,7 +28,13 @@ for several domains: benchmarks/switching.py). Needs the ``vision`` and ``enlil`
 from anunnaki.enki._chain import RobustifyConfig, archive_sha256, new_model_id, robustify
 from anunnaki.enki._errors import EnkiError
 from anunnaki.enki._finetune import Budget, finetune
-from anunnaki.enki._select import Selection, SelectionRule, select_contexts
+from anunnaki.enki._select import (
+    LEARNABLE_F1,
+    Selection,
+    SelectionRule,
+    select_contexts,
+    unlearnable_rows,
+)
 from anunnaki.enki._sources import (
     ArchiveContexts,
     ContextSource,
@@ -38,6 +44,7 @@ from anunnaki.enki._sources import (
 )
 
 __all__ = [
+    "LEARNABLE_F1",
     "ArchiveContexts",
     "Budget",
     "ContextSource",
@@ -53,4 +60,5 @@ __all__ = [
     "new_model_id",
     "robustify",
     "select_contexts",
+    "unlearnable_rows",
 ]

@@ -19,7 +19,7 @@ from anunnaki._names import NameRuleError, check_domain, check_name, inside
 from anunnaki.datasets import Dataset, load_split
 from anunnaki.enki._errors import EnkiError
 from anunnaki.enki._finetune import Budget, finetune
-from anunnaki.enki._select import Selection, SelectionRule, select_contexts
+from anunnaki.enki._select import LEARNABLE_F1, Selection, SelectionRule, select_contexts
 from anunnaki.enki._sources import ArchiveContexts
 from anunnaki.enki._work import WorkFolder, write_json
 from anunnaki.enlil import Archive, read_archive
@@ -99,6 +99,8 @@ class RobustifyConfig:
         data = asdict(self)
         for key in ("workers", "oracle", "oracle_architecture"):
             del data[key]
+        if data["rule"]["learnable"] == LEARNABLE_F1:  # as recorded before the cap existed
+            del data["rule"]["learnable"]
         return data
 
     def oracle_options(self, model_id: str | None = None) -> dict[str, Any]:
