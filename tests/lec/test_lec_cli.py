@@ -168,6 +168,18 @@ def test_evaluate_detector_random_contexts(
         rel = item["drop"]
         assert item["category"] == (2 if rel > 0.2 else 1 if rel > 0.02 else 0)
     assert report["f1"] == pytest.approx(sum(i["f1"] for i in items) / 4)
+    assert "f1_visible" not in report and "f1_visible" not in items[0]  # fog hides nothing
+    drops = [*base, "-p", "raindrop", "--contexts", "random:3", "--batch-images", "6", "--json"]
+    assert main(drops) == 0
+    report = json.loads(capsys.readouterr().out)
+    for item in report["contexts"]:  # the same measurement, hidden boxes ignored
+        assert 0.0 <= item["ceiling_f1"] <= 1.0 and item["hidden_boxes"] >= 0
+        if item["hidden_boxes"] == 0:
+            assert item["f1_visible"] == pytest.approx(item["f1"])
+    assert report["f1_visible"] == pytest.approx(
+        sum(i["f1_visible"] for i in report["contexts"]) / 3
+    )
+    assert report["hidden_threshold"] == 0.5
     # the same seed draws the same contexts; the table shows them
     assert main(args) == 0
     text = capsys.readouterr().out

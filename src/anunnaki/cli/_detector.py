@@ -705,6 +705,7 @@ def _run_contexts(args: argparse.Namespace, det: Any, model: Any) -> int:
     ]
     f1s = np.asarray([r.f1 for r in drawn.results])
     counts = drawn.counts()
+    visible = _visible_contexts(args, det, batch, phen=phen, results=drawn.results, items=items)
     report = _report_head(args, det, model, len(batch))
     report |= counted
     report |= {
@@ -721,6 +722,7 @@ def _run_contexts(args: argparse.Namespace, det: Any, model: Any) -> int:
         "category_fraction": [c / len(items) for c in counts],
         "contexts": items,
     }
+    report |= visible
     if args.json:
         print(json.dumps(report))
         return 0
@@ -742,8 +744,60 @@ def _run_contexts(args: argparse.Namespace, det: Any, model: Any) -> int:
         f"clean F1 {clean.f1:.3f}; mean F1 under {phen.name} {report['f1']:.3f} "
         f"(min {report['f1_min']:.3f}); categories 0/1/2: {counts[0]}/{counts[1]}/{counts[2]}"
     )
+    if visible:
+        console.print(
+            f"visible boxes (less than half hidden): mean F1 {visible['f1_visible']:.3f}; a "
+            f"detector finding every visible box and nothing else: {visible['ceiling_f1']:.3f}"
+        )
     console.print(classes_line(counted))
     return 0
+
+
+def _visible_contexts(
+    args: argparse.Namespace,
+    det: Any,
+    batch: Any,
+    *,
+    phen: Any,
+    results: list[Any],
+    items: list[dict[str, Any]],
+) -> dict[str, Any]:
+    """For a phenomenon that hides objects: each context's F1 on visible boxes and ceiling.
+
+    Adds ``f1_visible``, ``ceiling_f1`` and ``hidden_boxes`` to each of *items*; returns the
+    means for the report (empty when the phenomenon has no mask).
+    """
+    import numpy as np
+
+    from anunnaki.enlil import to_phenomenon_vector
+    from anunnaki.lec import evaluate_visible
+    from anunnaki.phenomena import HIDDEN
+
+    if not results:
+        return {}
+    first = phen.from_vector(to_phenomenon_vector(phen, results[0].params))
+    if phen.occlusion((8, 8), first, args.seed) is None:
+        return {}
+    for r, item in zip(results, items, strict=True):
+        params = phen.from_vector(to_phenomenon_vector(phen, r.params))
+        m = evaluate_visible(
+            det, batch, phenomenon=phen, params=params, seed=args.seed,
+            score_threshold=args.threshold,
+        )  # fmt: skip
+        assert m.visible is not None and m.ceiling is not None
+        item |= {"f1_visible": m.visible.f1, "ceiling_f1": m.ceiling, "hidden_boxes": m.hidden}
+    return {
+        "f1_visible": float(np.mean([i["f1_visible"] for i in items])),
+        "ceiling_f1": float(np.mean([i["ceiling_f1"] for i in items])),
+        "hidden_share": float(
+            np.sum([i["hidden_boxes"] for i in items]) / max(1, len(items) * _boxes(batch))
+        ),
+        "hidden_threshold": HIDDEN,
+    }
+
+
+def _boxes(data: Any) -> int:
+    return sum(len(r.labels) for r in data.records)
 
 
 def _update_sidecar(model: str, det: Any, data: str, measured: Any, split: str) -> str:
