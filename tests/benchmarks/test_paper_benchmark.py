@@ -67,7 +67,15 @@ def test_quick_page_regenerates_from_measurements(tiny_rover: Path, tmp_path: Pa
         assert re.search(rf"\| {re.escape(figure)} \| {re.escape(section)}", text), figure
     # ours: the figures the work folder's measurements hold, nothing else
     figures = json.loads((work / "figures.json").read_text(encoding="utf-8"))["figures"]
-    assert len(figures) == 5 and all(0.0 <= f["ours"] <= 1.0 for f in figures)
+    assert len(figures) == 6 and all(0.0 <= f["ours"] <= 1.0 for f in figures)
+    # raindrops like for like: the paper's one drop, and three drops with visible boxes
+    one, three = (f for f in figures if "raindrops" in f["label"])
+    assert one["phenomenon"] == "raindrop" and one["paper"] == 0.05
+    assert three["phenomenon"] == "raindrop+raindrop+raindrop" and three["paper"] is None
+    for row in (one, three):
+        assert 0.0 <= row["visible"] <= 1.0 and 0.0 <= row["ceiling"] <= 1.0
+        assert 0.0 <= row["visible_robust"] <= 1.0
+    assert "visible boxes" in text and "The ceiling" in text
     hsl = next(f for f in figures if "HSL variations" in f["label"])
     assert hsl["robust_model"] == "rover-hsl" and hsl["phenomenon"] == "hsl"
     assert f"{100 * hsl['ours_robust']:.1f} % (`rover-hsl`)" in text
