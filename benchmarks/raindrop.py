@@ -28,6 +28,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import shutil
 import subprocess
 import sys
 import tempfile
@@ -43,6 +44,8 @@ DEMO = ROOT / "examples" / "rover" / "demo.yaml"
 OUT = ROOT / "benchmarks" / "results" / "raindrop.json"
 PHENOMENA = {"one drop": "raindrop", "three drops": "raindrop+raindrop+raindrop"}
 MODELS = ("rover-default", "rover-raindrop")
+#: Utu's watchdog in the runs (wall seconds; benchmarks/case_studies.py's, for the same reason).
+WATCHDOG = 120.0
 #: What the JSON keeps of a phase row (``anunnaki.managed.PhaseScore.as_dict``).
 PHASE_KEYS = (
     "start", "end", "label", "frames", "f1", "tp", "fp", "fn", "f1_visible", "visible",
@@ -86,11 +89,18 @@ def contexts(data: Path, n: int, images: int, seed: int) -> dict[str, Any]:
 
 
 def _absolute(launch: Path, swapped_registry: Path | None, folder: Path) -> Path:
-    """A copy of the launch file with absolute paths (and the registry swapped, if given)."""
+    """A copy of the launch file with absolute paths (and the registry swapped, if given).
+
+    Utu's wall-time watchdog gets :data:`WATCHDOG` and the ``notify`` section is dropped, as
+    benchmarks/case_studies.py does: a loaded machine would trip the 3-s watchdog at the
+    start and stop the rover for the host's load, and a benchmark sends no e-mail.
+    """
     doc = yaml.safe_load(launch.read_text(encoding="utf-8"))
     base = launch.parent
     for key in ("goal_model", "binding", "tactics"):
         doc["utu"][key] = str((base / doc["utu"][key]).resolve())
+    doc["utu"]["watchdog"] = WATCHDOG
+    doc["utu"].pop("notify", None)
     sim = doc["managed"]["sim"]
     sim["scenario"] = str((base / sim["scenario"]).resolve())
     sim["models"] = str(swapped_registry or (base / sim["models"]).resolve())
@@ -100,13 +110,18 @@ def _absolute(launch: Path, swapped_registry: Path | None, folder: Path) -> Path
 
 
 def _swapped_registry(folder: Path) -> Path:
-    """The registry with rover-raindrop as the default model (and rover-default as raindrop)."""
+    """The registry with rover-raindrop as the default model (and rover-default as raindrop).
+
+    A registry's files lie in its folder, so the models are copied beside the copy.
+    """
     doc = yaml.safe_load(REGISTRY.read_text(encoding="utf-8"))
     swap = {"rover-default": "raindrop", "rover-raindrop": "default"}
     for m in doc["models"]:
-        m["file"] = str(REGISTRY.parent / m["file"])
-        if m.get("oracle"):
-            m["oracle"]["file"] = str(REGISTRY.parent / m["oracle"]["file"])
+        files = [m["file"], *([m["oracle"]["file"]] if m.get("oracle") else [])]
+        for name in files:
+            for f in (REGISTRY.parent / name, (REGISTRY.parent / name).with_suffix(".json")):
+                if f.exists():
+                    shutil.copy2(f, folder / f.name)
         m["domain"] = swap.get(m["id"], m["domain"])
     out = folder / "rover-swapped.yaml"
     out.write_text(yaml.safe_dump(doc, sort_keys=False), encoding="utf-8")

@@ -1703,6 +1703,44 @@ def _paper_table(domains: dict[str, Any]) -> list[str]:
         "|---|---|---|---|---|---|---|---|",
         *rows,
         "",
+        *_raindrop_lines(),
+    ]
+
+
+#: Raindrops on all and on visible boxes (benchmarks/raindrop.py), quoted beside the paper.
+RAINDROP = Path(__file__).resolve().parent / "results" / "raindrop.json"
+
+
+def _raindrop_lines(path: Path = RAINDROP) -> list[str]:
+    """The raindrop rows like for like: one drop as the paper's, visible boxes, the ceiling."""
+    if not path.exists():
+        return []
+    doc = json.loads(path.read_text(encoding="utf-8"))
+    if doc.get("quick"):
+        return []
+    s = doc["setting"]
+    rows = []
+    for label, row in doc["contexts"].items():
+        d, r = row["rover-default"], row["rover-raindrop"]
+        rows.append(
+            f"| {label} (`{row['phenomenon']}`) | {100 * d['f1']:.1f} | "
+            f"{100 * d['f1_visible']:.1f} | {100 * r['f1']:.1f} | {100 * r['f1_visible']:.1f} | "
+            f"{100 * d['ceiling_f1']:.1f} | {100 * d['hidden_share']:.0f} % |"
+        )
+    return [
+        "**Raindrops like for like** (`benchmarks/raindrop.py`, "
+        f"`benchmarks/results/raindrop.json`, {doc['date']}): the rover-raindrop rows above are "
+        "one drop on all boxes. A drop hides what is behind it, so each figure is also given "
+        "on the *visible* boxes (a box at least half under a drop is an ignore box) beside the "
+        "*ceiling*, the F1 on all boxes of a detector that finds every visible box and nothing "
+        f"else. The shipped models, {s['contexts']} random contexts × {s['batch_images']} test "
+        f"images (seed {s['seed']}), F1 %:",
+        "",
+        "| contexts | `rover-default` | visible | `rover-raindrop` | visible | ceiling "
+        "| boxes hidden |",
+        "|---|---|---|---|---|---|---|",
+        *rows,
+        "",
     ]
 
 
