@@ -166,6 +166,12 @@ def demo(until: float | None) -> dict[str, Any]:
     return out
 
 
+def _shown(path: Path) -> str:
+    """*path* relative to the repository when it lies inside it (the JSON is committed)."""
+    resolved = path.resolve()
+    return str(resolved.relative_to(ROOT)) if resolved.is_relative_to(ROOT) else str(path)
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="1 context of 2 images, one 2-s demo run")
@@ -190,7 +196,7 @@ def main(argv: list[str] | None = None) -> int:
     doc: dict[str, Any] = old | {
         "date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()),
         "quick": args.quick,
-        "setting": {"contexts": n, "batch_images": images, "seed": seed, "data": str(args.data)},
+        "setting": {"contexts": n, "batch_images": images, "seed": seed, "data": _shown(args.data)},
         "hidden_threshold": 0.5,
     }
     if "contexts" in parts:
