@@ -287,6 +287,8 @@ def measure(fig: Figure, data: Path, setting: Setting, work: Work, threads: int)
         hashes(robust),
     )
     arch = side.get("metrics", {}).get("enki", {}).get("archive_contexts")
+    if phen != side["training"]["enki"]["phenomenon"]:
+        arch = None  # the sidecar's search contexts are of the model's own phenomenon
     out |= {
         "robust_model": robust["id"],
         "ours_robust": r["f1"],
