@@ -67,7 +67,15 @@ def test_quick_page_regenerates_from_measurements(tiny_rover: Path, tmp_path: Pa
         assert re.search(rf"\| {re.escape(figure)} \| {re.escape(section)}", text), figure
     # ours: the figures the work folder's measurements hold, nothing else
     figures = json.loads((work / "figures.json").read_text(encoding="utf-8"))["figures"]
-    assert len(figures) == 5 and all(0.0 <= f["ours"] <= 1.0 for f in figures)
+    assert len(figures) == 6 and all(0.0 <= f["ours"] <= 1.0 for f in figures)
+    # raindrops like for like: the paper's one drop, and three drops with visible boxes
+    one, three = (f for f in figures if "raindrops" in f["label"])
+    assert one["phenomenon"] == "raindrop" and one["paper"] == 0.05
+    assert three["phenomenon"] == "raindrop+raindrop+raindrop" and three["paper"] is None
+    for row in (one, three):
+        assert 0.0 <= row["visible"] <= 1.0 and 0.0 <= row["ceiling"] <= 1.0
+        assert 0.0 <= row["visible_robust"] <= 1.0
+    assert "visible boxes" in text and "The ceiling" in text
     hsl = next(f for f in figures if "HSL variations" in f["label"])
     assert hsl["robust_model"] == "rover-hsl" and hsl["phenomenon"] == "hsl"
     assert f"{100 * hsl['ours_robust']:.1f} % (`rover-hsl`)" in text
@@ -78,7 +86,7 @@ def test_quick_page_regenerates_from_measurements(tiny_rover: Path, tmp_path: Pa
     _case_studies(tmp_path / "case-studies.json")
     run("paper.py", *args, timeout=900)
     again = page.read_text(encoding="utf-8")
-    assert "(0 measurements made, 7 reused" in again
+    assert "(0 measurements made, 9 reused" in again
     assert "| degraded_frames | 2.00 ± 0.50 [1–3] | 2.00 ± 0.50 [1–3] |" in again
     assert "| phases not adapted | 1/4 | 1/4 |" in again
 
@@ -93,8 +101,11 @@ def test_a_domain_without_its_model_says_so(bench: Any) -> None:
 
 
 def test_every_paper_figure_is_cited(bench: Any) -> None:
-    assert len(bench.PAPER) == 9
-    assert all(f.cite.startswith("§4.") for f in bench.PAPER)
+    assert len(bench.PAPER) == 10
+    assert all(f.cite.startswith("§4.") for f in bench.PAPER if f.paper is not None)
+    # ours without a paper figure: the three-drop row, which says the paper has none
+    (extra,) = (f for f in bench.PAPER if f.paper is None)
+    assert extra.cite.startswith("none") and "three" in extra.label
     assert {f.what for f in bench.PAPER} == {"clean", "domain", "oracle"}
 
 

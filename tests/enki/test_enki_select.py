@@ -5,7 +5,14 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from anunnaki.enki import EnkiError, Selection, SelectionRule, select_contexts
+from anunnaki.enki import (
+    LEARNABLE_F1,
+    EnkiError,
+    Selection,
+    SelectionRule,
+    select_contexts,
+    unlearnable_rows,
+)
 from anunnaki.enlil import Archive, ArchiveMeta
 
 
@@ -85,3 +92,60 @@ def test_bad_rules_and_empty_archives() -> None:
     zeros = _archive(np.array([[0.1], [0.5]]), np.array([0, 0]))
     with pytest.raises(EnkiError, match="weight 0"):
         select_contexts(zeros, SelectionRule(weights=(0, 1, 1)))
+
+
+# -- the learnability cap ---------------------------------------------------------------------
+
+
+def _with_black_frames() -> tuple[Archive, np.ndarray]:
+    """The grid archive, its corner x, y < 0.1 a black frame: F1 0 for its model."""
+    archive = _grid_archive()
+    black = np.flatnonzero(np.maximum(archive.params[:, 0], archive.params[:, 1]) < 0.1)
+    f1 = archive.f1.copy()
+    f1[black] = 0.0
+    drop = archive.drop.copy()
+    drop[black] = 1.0  # the largest drops: the first pick without a cap
+    archive = Archive(
+        archive.meta, archive.evals, archive.iterations, archive.params, f1, drop,
+        archive.categories,
+    )  # fmt: skip
+    return archive, black
+
+
+def test_a_context_every_model_fails_is_dropped() -> None:
+    archive, black = _with_black_frames()
+    assert LEARNABLE_F1 == 0.05
+    uncapped = select_contexts(archive, SelectionRule(contexts=40))
+    assert np.isin(uncapped.rows, black).any()  # without a second opinion: kept
+    assert uncapped.cap == "one model" and len(uncapped.unlearnable) == 0
+    other = np.full(len(archive), 0.8)
+    other[black] = 0.01  # another model fails there too: unlearnable
+    capped = select_contexts(archive, SelectionRule(contexts=40), others=[other])
+    assert not np.isin(capped.rows, black).any()
+    assert sorted(capped.unlearnable.tolist()) == sorted(black.tolist())
+    assert capped.cap == "applied" and capped.models == 2 and sum(capped.counts()) == 40
+    back = Selection.from_dict(capped.as_dict())
+    assert np.array_equal(back.unlearnable, capped.unlearnable) and back.cap == "applied"
+
+
+def test_a_context_one_model_learns_is_kept() -> None:
+    archive, black = _with_black_frames()
+    learnt = np.full(len(archive), 0.8)
+    learnt[black[1:]] = 0.0
+    learnt[black[0]] = 0.78  # the dark hsl context: 0 for the default, 0.78 for another
+    np.testing.assert_array_equal(unlearnable_rows(archive, [learnt]), black[1:])
+    unmeasured = np.full(len(archive), np.nan)  # a model not measured there has no say
+    np.testing.assert_array_equal(unlearnable_rows(archive, [learnt, unmeasured]), black[1:])
+    off = select_contexts(archive, SelectionRule(contexts=40, learnable=0.0), others=[learnt])
+    assert off.cap == "off" and len(off.unlearnable) == 0
+
+
+def test_cap_errors() -> None:
+    archive, _ = _with_black_frames()
+    with pytest.raises(EnkiError, match="learnability floor"):
+        SelectionRule(learnable=1.0)
+    with pytest.raises(EnkiError, match="one per archive row"):
+        unlearnable_rows(archive, [np.zeros(3)])
+    black_only = _archive(np.array([[0.1], [0.5]]), np.array([2, 2]), drops=np.ones(2))
+    with pytest.raises(EnkiError, match="nothing is learnable"):
+        select_contexts(black_only, others=[np.zeros(2)])

@@ -114,10 +114,21 @@ def test_evaluate_detector(trained: Trained, capsys: pytest.CaptureFixture[str])
     assert report["clean"]["f1"] == pytest.approx(trained.metrics["test"]["f1"])
     assert report["phenomenon"]["name"] == "fog" and report["category"] in (0, 1, 2)
     assert report["f1_drop"] == pytest.approx(report["clean"]["f1"] - report["perturbed"]["f1"])
+    assert "perturbed_visible" not in report and "occlusion" not in report  # fog hides nothing
     assert main([*base, "--split", "val", "--phenomenon", "raindrop", "--params",
                  "x=0.5,y=0.6,radius=0.3"]) == 0  # fmt: skip
     text = capsys.readouterr().out
     assert "clean" in text and "raindrop" in text and "F1 drop" in text and "category" in text
+    assert "raindrop, visible boxes" in text and "a detector finding every visible box" in text
+    assert main([*base, "--phenomenon", "raindrop", "--params", "x=0.5,y=0.6,radius=0.3",
+                 "--json"]) == 0  # fmt: skip
+    report = json.loads(capsys.readouterr().out)
+    occ, visible = report["occlusion"], report["perturbed_visible"]
+    assert occ["hidden_threshold"] == 0.5 and 0 < occ["hidden_boxes"] < occ["boxes"]
+    assert visible["tp"] + visible["fn"] == occ["boxes"] - occ["hidden_boxes"]
+    assert report["perturbed"]["tp"] + report["perturbed"]["fn"] == occ["boxes"]
+    assert visible["fp"] <= report["perturbed"]["fp"]  # a detection on a hidden box is no FP
+    assert 0.0 < occ["ceiling_f1"] < 1.0  # what the drop leaves to be found
 
 
 def test_evaluate_detector_errors(
@@ -157,6 +168,18 @@ def test_evaluate_detector_random_contexts(
         rel = item["drop"]
         assert item["category"] == (2 if rel > 0.2 else 1 if rel > 0.02 else 0)
     assert report["f1"] == pytest.approx(sum(i["f1"] for i in items) / 4)
+    assert "f1_visible" not in report and "f1_visible" not in items[0]  # fog hides nothing
+    drops = [*base, "-p", "raindrop", "--contexts", "random:3", "--batch-images", "6", "--json"]
+    assert main(drops) == 0
+    report = json.loads(capsys.readouterr().out)
+    for item in report["contexts"]:  # the same measurement, hidden boxes ignored
+        assert 0.0 <= item["ceiling_f1"] <= 1.0 and item["hidden_boxes"] >= 0
+        if item["hidden_boxes"] == 0:
+            assert item["f1_visible"] == pytest.approx(item["f1"])
+    assert report["f1_visible"] == pytest.approx(
+        sum(i["f1_visible"] for i in report["contexts"]) / 3
+    )
+    assert report["hidden_threshold"] == 0.5
     # the same seed draws the same contexts; the table shows them
     assert main(args) == 0
     text = capsys.readouterr().out

@@ -87,3 +87,34 @@ def test_each_phase_gives_the_oracle_s_agreement_with_the_scorer() -> None:
     assert agree == ["100% of 100", "25% of 100", "-"]
     # without a scorer the column is left out
     assert "agree" not in format_phases(score_phases(spans, frames=[(1.0, 1, 0, 0, "m")]))
+
+
+def test_a_phase_under_drops_gives_f1_on_the_visible_boxes() -> None:
+    """Issue 33: under a raindrop the table also counts hidden boxes as ignore boxes."""
+    spans = [(0.0, 10.0, "clear"), (10.0, 20.0, "raindrop")]
+    frames = [(0.1 * k, 2, 0, 0, "m") for k in range(100)]
+    frames += [(10.0 + 0.1 * k, 1, 0, 1, "m") for k in range(100)]  # one of two boxes missed
+    visible = [(10.0 + 0.1 * k, 1, 0, 0, 1) for k in range(100)]  # ... the hidden one
+    clear, drops = score_phases(spans, frames=frames, visible=visible)
+    assert clear.f1_visible is None and clear.as_dict()["visible"] is None
+    assert drops.f1 == pytest.approx(2 / 3) and drops.f1_visible == 1.0
+    assert drops.as_dict()["visible"] == {"frames": 100, "tp": 100, "fp": 0, "fn": 0, "hidden": 100}
+    table = rows(format_phases([clear, drops]))
+    cells = dict(zip(table[0], table[2], strict=True))
+    assert cells["F1"] == "0.67" and cells["F1 visible"] == "1.00"
+    assert dict(zip(table[0], table[1], strict=True))["F1 visible"] == "–"
+    # no phenomenon with a mask: no column
+    assert "F1 visible" not in format_phases(score_phases(spans, frames=frames))
+
+
+def test_hidden_boxes_move_to_the_ignore_boxes_of_the_frame() -> None:
+    import numpy as np
+
+    from anunnaki.managed._sim import _visible_truth
+
+    boxes = np.array([[0, 0, 10, 10], [20, 20, 30, 30]], float)
+    t, kept, labels, ignore = _visible_truth(
+        (1.0, boxes, ["pedestrian", "deer"], np.zeros((0, 4))), np.array([True, False])
+    )
+    assert t == 1.0 and labels == ["deer"] and kept.tolist() == [[20, 20, 30, 30]]
+    assert ignore.tolist() == [[0, 0, 10, 10]]

@@ -241,3 +241,29 @@ def test_random_parameters_within_bounds_never_crash(ph: Phenomenon, data: st.Da
             assert params[spec.name] == pytest.approx(vector[ph.param_names.index(spec.name)])
         else:
             assert float(params[spec.name]).is_integer()
+
+
+# -- occlusion masks -------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("strength", [0.0, 0.5, 1.0])
+def test_occlusion_is_none_or_a_mask_of_the_frame(ph: Phenomenon, strength: float) -> None:
+    params = ph.strength_params(strength)
+    mask = ph.occlusion((48, 40), params, seed=3)
+    if mask is None:
+        return
+    assert mask.shape == (48, 40) and mask.dtype == np.float32
+    assert float(mask.min()) >= 0.0 and float(mask.max()) <= 1.0
+    np.testing.assert_array_equal(mask, ph.occlusion((48, 40, 3), params, seed=3))
+    if strength == 0.0:  # the identity hides nothing
+        assert not mask.any()
+
+
+def test_occlusion_validates_like_apply(ph: Phenomenon) -> None:
+    params = ph.strength_params(0.5)
+    with pytest.raises(PhenomenonError, match="seed"):
+        ph.occlusion((8, 8), params, seed=-1)
+    with pytest.raises(PhenomenonError, match="height, width"):
+        ph.occlusion((0, 8), params, seed=0)
+    with pytest.raises(PhenomenonError, match="unknown parameter"):
+        ph.occlusion((8, 8), {**params, "nope": 1.0}, seed=0)

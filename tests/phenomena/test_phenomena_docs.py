@@ -87,3 +87,11 @@ def test_figure_is_in_the_doc_and_the_script_writes_it(tmp_path: Path) -> None:
         capture_output=True,
     )
     assert output.read_bytes().startswith(b"\x89PNG")
+
+
+def test_occlusion_example_runs_as_documented() -> None:
+    namespace: dict[str, object] = {}
+    exec(code_block_after("drops.occlusion(frame.shape"), namespace)
+    mask = namespace["mask"]
+    assert isinstance(mask, np.ndarray) and mask.shape == (96, 128)
+    assert isinstance(namespace["hidden"], np.bool_ | bool)

@@ -452,7 +452,10 @@ def _add_evaluate(sub: Any) -> None:
             "Measure MODEL on a split of DATA with the F1 rule of docs/detector.md (IoU >= 0.5, "
             "class-aware greedy matching, the model's own score threshold). With --phenomenon, "
             "every image is perturbed first (at --strength or --params) and the drop relative "
-            "to clean data is printed with its behaviour category (0 < 5 %, 1 > 5 %, 2 > 10 %)."
+            "to clean data is printed with its behaviour category (0 < 5 %, 1 > 5 %, 2 > 10 %). "
+            "A phenomenon that hides objects (raindrop) also gets F1 on the visible boxes "
+            "(those less than half hidden) and the ceiling: the F1 of a detector that finds "
+            "every visible box and nothing else."
         ),
     )
     p.add_argument(
@@ -578,35 +581,20 @@ def _run_evaluate(args: argparse.Namespace) -> int:
     if args.contexts is not None:
         return _run_contexts(args, det, model)
     data = load_split(args.data, args.split)
-    threshold = args.threshold
     try:
         counted = classes_counted(det, data)
         det, data = shared_view(args, det, data)
-        clean = evaluate_detector(det, data, score_threshold=threshold)
+        clean = evaluate_detector(det, data, score_threshold=args.threshold)
+        report = _report_head(args, det, model, len(data))
+        report |= counted
+        report["clean"] = clean.as_dict()
+        rows = [("clean", clean)]
+        if phen is not None:
+            rows += _perturbed(
+                args, det, data, phen=phen, params=params, clean=clean, report=report
+            )
     except DetectorError as exc:
         raise AnunnakiError(f"{args.model}: model {model_id!r}: {exc}") from None
-    report = _report_head(args, det, model, len(data))
-    report |= counted
-    report["clean"] = clean.as_dict()
-    rows = [("clean", clean)]
-    if phen is not None:
-        used = (
-            params
-            if params is not None
-            else phen.strength_params(1.0 if args.strength is None else args.strength)
-        )
-        perturbed = evaluate_detector(
-            det, data, phenomenon=phen, params=used, seed=args.seed, score_threshold=threshold
-        )
-        drop = clean.f1 - perturbed.f1
-        rel = drop / clean.f1 if clean.f1 > 0 else 0.0
-        category = 2 if rel > args.thresholds[1] else 1 if rel > args.thresholds[0] else 0
-        report["phenomenon"] = {"name": phen.name, "params": used, "seed": args.seed}
-        report["perturbed"] = perturbed.as_dict()
-        report["f1_drop"] = drop
-        report["f1_drop_relative"] = rel
-        report["category"] = category
-        rows.append((phen.name, perturbed))
     if args.update_sidecar:
         report["sidecar"] = _update_sidecar(str(model.file), det, args.data, clean, args.split)
     if args.json:
@@ -626,13 +614,67 @@ def _run_evaluate(args: argparse.Namespace) -> int:
     if args.update_sidecar:
         console.print(f"updated the metrics in {report['sidecar']}")
     if phen is not None:
-        params_text = ", ".join(f"{k}={v:g}" for k, v in report["phenomenon"]["params"].items())
-        console.print(
-            f"{phen.name} ({params_text}): F1 drop {report['f1_drop']:.3f} "
-            f"({100 * report['f1_drop_relative']:.1f} % of clean) → category "
-            f"{report['category']} ({_CATEGORY[report['category']]})"
-        )
+        _print_perturbed(console, phen.name, report)
     return 0
+
+
+def _perturbed(
+    args: argparse.Namespace,
+    det: Any,
+    data: Any,
+    *,
+    phen: Any,
+    params: dict[str, float] | None,
+    clean: Any,
+    report: dict[str, Any],
+) -> list[tuple[str, Any]]:
+    """Measure under the phenomenon into *report*; the table rows (visible boxes if hidden)."""
+    from anunnaki.lec import evaluate_visible
+
+    used = (
+        params
+        if params is not None
+        else phen.strength_params(1.0 if args.strength is None else args.strength)
+    )
+    measured = evaluate_visible(
+        det, data, phenomenon=phen, params=used, seed=args.seed, score_threshold=args.threshold
+    )
+    perturbed = measured.all
+    drop = clean.f1 - perturbed.f1
+    rel = drop / clean.f1 if clean.f1 > 0 else 0.0
+    category = 2 if rel > args.thresholds[1] else 1 if rel > args.thresholds[0] else 0
+    report["phenomenon"] = {"name": phen.name, "params": used, "seed": args.seed}
+    report["perturbed"] = perturbed.as_dict()
+    report["f1_drop"] = drop
+    report["f1_drop_relative"] = rel
+    report["category"] = category
+    rows = [(phen.name, perturbed)]
+    if measured.visible is not None:  # the phenomenon hides objects: visible boxes too
+        report["perturbed_visible"] = measured.visible.as_dict()
+        report["occlusion"] = {
+            "boxes": measured.boxes,
+            "hidden_boxes": measured.hidden,
+            "hidden_threshold": measured.threshold,
+            "ceiling_f1": measured.ceiling,
+        }
+        rows.append((f"{phen.name}, visible boxes", measured.visible))
+    return rows
+
+
+def _print_perturbed(console: Any, name: str, report: dict[str, Any]) -> None:
+    params_text = ", ".join(f"{k}={v:g}" for k, v in report["phenomenon"]["params"].items())
+    console.print(
+        f"{name} ({params_text}): F1 drop {report['f1_drop']:.3f} "
+        f"({100 * report['f1_drop_relative']:.1f} % of clean) → category "
+        f"{report['category']} ({_CATEGORY[report['category']]})"
+    )
+    if "occlusion" in report:
+        occ = report["occlusion"]
+        console.print(
+            f"{occ['hidden_boxes']} of {occ['boxes']} boxes at least "
+            f"{100 * occ['hidden_threshold']:.0f} % hidden (ignore boxes on the visible row); "
+            f"a detector finding every visible box and nothing else: F1 {occ['ceiling_f1']:.3f}"
+        )
 
 
 def _run_contexts(args: argparse.Namespace, det: Any, model: Any) -> int:
@@ -668,6 +710,7 @@ def _run_contexts(args: argparse.Namespace, det: Any, model: Any) -> int:
     ]
     f1s = np.asarray([r.f1 for r in drawn.results])
     counts = drawn.counts()
+    visible = _visible_contexts(args, det, batch, phen=phen, results=drawn.results, items=items)
     report = _report_head(args, det, model, len(batch))
     report |= counted
     report |= {
@@ -684,6 +727,7 @@ def _run_contexts(args: argparse.Namespace, det: Any, model: Any) -> int:
         "category_fraction": [c / len(items) for c in counts],
         "contexts": items,
     }
+    report |= visible
     if args.json:
         print(json.dumps(report))
         return 0
@@ -705,8 +749,60 @@ def _run_contexts(args: argparse.Namespace, det: Any, model: Any) -> int:
         f"clean F1 {clean.f1:.3f}; mean F1 under {phen.name} {report['f1']:.3f} "
         f"(min {report['f1_min']:.3f}); categories 0/1/2: {counts[0]}/{counts[1]}/{counts[2]}"
     )
+    if visible:
+        console.print(
+            f"visible boxes (less than half hidden): mean F1 {visible['f1_visible']:.3f}; a "
+            f"detector finding every visible box and nothing else: {visible['ceiling_f1']:.3f}"
+        )
     console.print(classes_line(counted))
     return 0
+
+
+def _visible_contexts(
+    args: argparse.Namespace,
+    det: Any,
+    batch: Any,
+    *,
+    phen: Any,
+    results: list[Any],
+    items: list[dict[str, Any]],
+) -> dict[str, Any]:
+    """For a phenomenon that hides objects: each context's F1 on visible boxes and ceiling.
+
+    Adds ``f1_visible``, ``ceiling_f1`` and ``hidden_boxes`` to each of *items*; returns the
+    means for the report (empty when the phenomenon has no mask).
+    """
+    import numpy as np
+
+    from anunnaki.enlil import to_phenomenon_vector
+    from anunnaki.lec import evaluate_visible
+    from anunnaki.phenomena import HIDDEN
+
+    if not results:
+        return {}
+    first = phen.from_vector(to_phenomenon_vector(phen, results[0].params))
+    if phen.occlusion((8, 8), first, args.seed) is None:
+        return {}
+    for r, item in zip(results, items, strict=True):
+        params = phen.from_vector(to_phenomenon_vector(phen, r.params))
+        m = evaluate_visible(
+            det, batch, phenomenon=phen, params=params, seed=args.seed,
+            score_threshold=args.threshold,
+        )  # fmt: skip
+        assert m.visible is not None and m.ceiling is not None
+        item |= {"f1_visible": m.visible.f1, "ceiling_f1": m.ceiling, "hidden_boxes": m.hidden}
+    return {
+        "f1_visible": float(np.mean([i["f1_visible"] for i in items])),
+        "ceiling_f1": float(np.mean([i["ceiling_f1"] for i in items])),
+        "hidden_share": float(
+            np.sum([i["hidden_boxes"] for i in items]) / max(1, len(items) * _boxes(batch))
+        ),
+        "hidden_threshold": HIDDEN,
+    }
+
+
+def _boxes(data: Any) -> int:
+    return sum(len(r.labels) for r in data.records)
 
 
 def _update_sidecar(model: str, det: Any, data: str, measured: Any, split: str) -> str:

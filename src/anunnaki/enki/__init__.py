@@ -33,7 +33,13 @@ trained), ``finetune(..., consistency=λ)`` and ``Budget(ema=DECAY)``; by name t
 from anunnaki.enki._chain import RobustifyConfig, archive_sha256, new_model_id, robustify
 from anunnaki.enki._errors import EnkiError
 from anunnaki.enki._finetune import Budget, finetune
-from anunnaki.enki._select import Selection, SelectionRule, select_contexts
+from anunnaki.enki._select import (
+    LEARNABLE_F1,
+    Selection,
+    SelectionRule,
+    select_contexts,
+    unlearnable_rows,
+)
 from anunnaki.enki._sources import (
     CONTEXT_SOURCES,
     ArchiveContexts,
@@ -49,6 +55,7 @@ from anunnaki.enki._sources import (
 
 __all__ = [
     "CONTEXT_SOURCES",
+    "LEARNABLE_F1",
     "ArchiveContexts",
     "ArchiveMix",
     "Budget",
@@ -68,4 +75,5 @@ __all__ = [
     "new_model_id",
     "robustify",
     "select_contexts",
+    "unlearnable_rows",
 ]

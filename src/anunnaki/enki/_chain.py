@@ -19,7 +19,7 @@ from anunnaki._names import NameRuleError, check_domain, check_name, inside
 from anunnaki.datasets import Dataset, load_split
 from anunnaki.enki._errors import EnkiError
 from anunnaki.enki._finetune import Budget, finetune
-from anunnaki.enki._select import Selection, SelectionRule, select_contexts
+from anunnaki.enki._select import LEARNABLE_F1, Selection, SelectionRule, select_contexts
 from anunnaki.enki._sources import CONTEXT_SOURCES, SourceSpec, make_source
 from anunnaki.enki._work import WorkFolder, write_json
 from anunnaki.enlil import Archive, read_archive
@@ -151,6 +151,8 @@ class RobustifyConfig:
         del data["finetune"]["ema"]
         if self.recipe() != RobustifyConfig.default_recipe():
             data["recipe"] = self.recipe()
+        if data["rule"]["learnable"] == LEARNABLE_F1:  # as recorded before the cap existed
+            del data["rule"]["learnable"]
         return data
 
     @staticmethod

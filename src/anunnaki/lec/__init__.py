@@ -26,6 +26,9 @@ e.g. a person detector on data that also labels deer.
 The F1 rule used everywhere (``docs/detector.md``): class-aware greedy matching in
 descending score order at IoU ≥ 0.5, each truth matched at most once, the score threshold
 chosen on the validation split (:func:`choose_threshold`) and F1 reported on the test split.
+Under a phenomenon that hides objects (a raindrop), :func:`hide_boxes` makes a box at least
+half hidden an ignore box, in training and in :func:`evaluate_visible` (F1 on all boxes and
+on the visible ones, and the ceiling a perfect detector of the visible boxes reaches).
 
 Importing this package needs numpy and pydantic only; torch is imported when a CenterNet is
 built, loaded or trained (the ``vision`` extra). It sets ``OMP_WAIT_POLICY=PASSIVE`` unless
@@ -67,6 +70,7 @@ from anunnaki.lec._detector import (
     update_metrics,
     weights_path,
 )
+from anunnaki.lec._hidden import box_occlusion, hide_boxes
 from anunnaki.lec._metrics import (
     Metrics,
     Truth,
@@ -115,6 +119,7 @@ if TYPE_CHECKING:
         shared_classes,
         train_detector,
     )
+    from anunnaki.lec._visible import VisibleMetrics, evaluate_visible
 
 __all__ = [
     "ARCHITECTURES",
@@ -156,16 +161,20 @@ __all__ = [
     "TrainState",
     "Truth",
     "UnknownModelError",
+    "VisibleMetrics",
     "architecture_files",
     "as_image_list",
     "box_iou",
+    "box_occlusion",
     "check_registrable",
     "choose_threshold",
     "class_map",
     "decode_image",
     "detections_topic",
     "evaluate_detector",
+    "evaluate_visible",
     "f1_at_iou",
+    "hide_boxes",
     "load_detector",
     "load_registry",
     "match_image",
@@ -200,6 +209,8 @@ _LAZY = {
     "evaluate_detector": "anunnaki.lec._train",
     "predict": "anunnaki.lec._train",
     "train_detector": "anunnaki.lec._train",
+    "VisibleMetrics": "anunnaki.lec._visible",
+    "evaluate_visible": "anunnaki.lec._visible",
 }
 
 

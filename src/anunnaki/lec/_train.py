@@ -35,6 +35,7 @@ from anunnaki.lec._centernet import (
     encode_targets,
 )
 from anunnaki.lec._detector import DetectionResult, Detector, DetectorError
+from anunnaki.lec._hidden import hide_boxes
 from anunnaki.lec._metrics import Metrics, choose_threshold, f1_at_iou
 from anunnaki.lec._recipe import (
     CandidatePerturb,
@@ -43,7 +44,7 @@ from anunnaki.lec._recipe import (
     consistency_loss,
     pick,
 )
-from anunnaki.phenomena import PHENOMENA, Phenomenon
+from anunnaki.phenomena import PHENOMENA, Mask, Phenomenon
 
 __all__ = [
     "Augmenter",
@@ -67,8 +68,10 @@ Boxes = npt.NDArray[np.float32]
 Labels = npt.NDArray[np.int64]
 
 #: ``perturb(image, rng) -> image`` (``TrainConfig.perturb``): ``uint8`` ``(H, W, 3)`` in and
-#: out, drawing only from *rng*.
-Perturb = Callable[[Image, np.random.Generator], Image]
+#: out, drawing only from *rng*. It may return ``(image, mask)`` instead, with the
+#: phenomenon's occlusion mask (``Phenomenon.occlusion``, or ``None``): boxes it hides then
+#: become ignore boxes (``anunnaki.lec.hide_boxes``).
+Perturb = Callable[[Image, np.random.Generator], "Image | tuple[Image, Mask | None]"]
 
 
 class Augmenter:
@@ -125,11 +128,20 @@ class Augmenter:
 
     def __call__(self, image: Image, rng: np.random.Generator) -> Image:
         """Return *image* perturbed (or unchanged, with probability 1 - *probability*)."""
+        return self.occluded(image, rng)[0]
+
+    def occluded(self, image: Image, rng: np.random.Generator) -> tuple[Image, Mask | None]:
+        """As calling it, with the phenomenon's occlusion mask (``None``: nothing hidden).
+
+        The same draws from *rng* as a call, so the two give the same image.
+        """
         if not self.phenomena or rng.random() >= self.probability:
-            return image
+            return image, None
         phenomenon = self.phenomena[int(rng.integers(len(self.phenomena)))]
         params = self.sample_params(phenomenon, rng)
-        return phenomenon.apply(image, params, seed=int(rng.integers(2**31 - 1)))
+        seed = int(rng.integers(2**31 - 1))
+        out = phenomenon.apply(image, params, seed=seed)
+        return out, phenomenon.occlusion(image.shape, params, seed)
 
 
 @dataclass(frozen=True)
@@ -158,8 +170,10 @@ class TrainConfig:
             of its F1 when the frame is dimmed by 9 % (measured on the rover).
         model_id: The trained model's id.
         domain: The trained model's domain.
-        ignore: Honour the data's ignore boxes (no background loss inside them); off, an
-            unlabelled object is background like any other pixel.
+        ignore: Honour the data's ignore boxes (no background loss inside them), and make
+            a box that a phenomenon hides (``augment`` or ``perturb`` with an occlusion mask,
+            mean over the box at least ``anunnaki.phenomena.HIDDEN``) one too; off, an
+            unlabelled object is background like any other pixel and a hidden one a target.
         init: Start from this model's weights (a model file or a detector) instead of
             random ones — fine-tuning a domain model from the default one. Its classes,
             width and stride must match; ``width``/``stride`` are then taken from it.
@@ -836,15 +850,23 @@ class _Loop:
         sample = _augmented(self.data[index], self.cfg, self.size, self.rngs["aug"], self.augmenter)
         perturb, rng = self.cfg.perturb, self.rngs["perturb"]
         if perturb is None:
-            return sample, [sample[0]], 0
+            return sample, [(sample[0], None)], 0
         if isinstance(perturb, CandidatePerturb):
             found = perturb.candidates(sample[0], rng)
             if not found:
                 raise DetectorError(f"{type(perturb).__name__}.candidates gave no image")
             # drawn whatever the selection, so that arms differing only in it stay paired
             drawn = int(rng.integers(len(found))) if len(found) > 1 else 0
-            return sample, list(found), drawn
-        return sample, [perturb(sample[0], rng)], 0
+            return sample, [_masked(c) for c in found], drawn
+        return sample, [_masked(perturb(sample[0], rng))], 0
+
+    def _hidden(self, sample: _Sample, candidate: _Candidate) -> _Sample:
+        """*sample* with a candidate's image; the boxes its mask hides become ignore boxes."""
+        image, mask = candidate
+        _, boxes, labels, ignore = sample
+        if self.cfg.ignore:
+            boxes, labels, ignore = hide_boxes(boxes, labels, ignore, mask)
+        return image, boxes, labels, ignore
 
     def _choose(self, drawn: list[_Drawn]) -> list[_Sample]:
         """Each image with its kept candidate (worst-of-k: scored as the network stands)."""
@@ -853,7 +875,7 @@ class _Loop:
         scored = [i for i, d in enumerate(drawn) if len(d[1]) > 1 and select == "hardest"]
         self.counts["candidates"] += sum(len(d[1]) for d in drawn if len(d[1]) > 1)
         if scored:
-            flat = [(c, *drawn[i][0][1:]) for i in scored for c in drawn[i][1]]
+            flat = [self._hidden(drawn[i][0], c) for i in scored for c in drawn[i][1]]
             x, heat_t, box_t, weight = _batch_tensors(
                 flat, self.size, self.num_classes, self.det.network.stride
             )
@@ -866,7 +888,7 @@ class _Loop:
                 n = len(drawn[i][1])
                 kept[i] = pick(losses[at : at + n], kept[i], "hardest")
                 at += n
-        return [(d[1][k], *d[0][1:]) for d, k in zip(drawn, kept, strict=True)]
+        return [self._hidden(d[0], d[1][k]) for d, k in zip(drawn, kept, strict=True)]
 
     def _loss(
         self,
@@ -962,7 +984,16 @@ def _measure(
 _Sample = tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]
 """One training image with its boxes, labels and ignore boxes."""
 
-_Drawn = tuple[_Sample, list[np.ndarray], int]
+#: A perturbed candidate: its image and the perturbation's occlusion mask (``None``: none).
+_Candidate = tuple[np.ndarray, Mask | None]
+_Drawn = tuple[_Sample, list[_Candidate], int]
+
+
+def _masked(out: Any) -> _Candidate:
+    """A perturb's output as (image, mask): it may return the image alone (no mask)."""
+    return (out[0], out[1]) if isinstance(out, tuple) else (out, None)
+
+
 """A sample as augmented, its perturbed candidates and the index drawn among them."""
 
 
@@ -1022,7 +1053,9 @@ def _augmented(
     if cfg.photometric > 0:
         image = _photometric(image, rng, cfg.photometric)
     if augmenter is not None:
-        image = augmenter(image, rng)
+        image, mask = augmenter.occluded(image, rng)
+        if cfg.ignore:
+            boxes, labels, ignore = hide_boxes(boxes, labels, ignore, mask)
     return image, boxes, labels, ignore
 
 

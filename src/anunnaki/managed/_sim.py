@@ -89,6 +89,9 @@ class PhaseScore:
         collisions: Collisions counted in the phase.
         agree: Frames of the phase on which the oracle and its live scorer agreed.
         compared: Frames of the phase both assessed (0 without a scorer).
+        visible: ``[frames, tp, fp, fn, hidden]`` over the frames whose ground truth said
+            which boxes a phenomenon hides (``/sim/ground_truth``'s ``hidden``): the hidden
+            boxes are ignore boxes there. Zeros when no phenomenon of the phase has a mask.
 
     """
 
@@ -105,11 +108,18 @@ class PhaseScore:
     collisions: int = 0
     agree: int = 0
     compared: int = 0
+    visible: list[int] = field(default_factory=lambda: [0, 0, 0, 0, 0])
 
     @property
     def f1(self) -> float | None:
         """The phase's detector F1 (``None`` without a ground-truth object: :func:`f1_score`)."""
         return f1_score(self.tp, self.fp, self.fn)
+
+    @property
+    def f1_visible(self) -> float | None:
+        """F1 on the boxes less than half hidden (``None``: no frame said, or nothing to find)."""
+        frames, tp, fp, fn, _ = self.visible
+        return None if frames == 0 else f1_score(tp, fp, fn)
 
     @property
     def agreement(self) -> float | None:
@@ -138,6 +148,10 @@ class PhaseScore:
             "collisions": self.collisions,
             "agreement": None if self.agreement is None else round(self.agreement, 4),
             "agreement_frames": self.compared,
+            "f1_visible": self.f1_visible,
+            "visible": None
+            if self.visible[0] == 0
+            else dict(zip(("frames", "tp", "fp", "fn", "hidden"), self.visible, strict=True)),
         }
 
 
@@ -184,6 +198,7 @@ def score_phases(
     collisions: Iterable[float] = (),
     decisions: Iterable[Any] = (),
     compared: Iterable[tuple[float, int, int]] = (),
+    visible: Iterable[tuple[float, int, int, int, int]] = (),
 ) -> list[PhaseScore]:
     """Score a run per phase (:func:`phase_spans`); each item counts in the phase of its time.
 
@@ -194,6 +209,8 @@ def score_phases(
         collisions: Simulated times of collisions.
         decisions: Utu's decisions (``t``, ``kind``, ``tactic``).
         compared: ``(t, oracle category, scorer category)`` per frame both assessed.
+        visible: ``(t, tp, fp, fn, hidden)`` per scored frame whose ground truth said which
+            boxes are hidden, counted with those as ignore boxes.
 
     """
     out = [PhaseScore(a, b, label) for a, b, label in spans]
@@ -211,6 +228,8 @@ def score_phases(
         p.tp, p.fp, p.fn = p.tp + tp, p.fp + fp, p.fn + fn
         if model not in p.models:
             p.models.append(model)
+    for p, (_, *counts) in placed(visible, lambda f: f[0]):
+        p.visible = [p.visible[0] + 1, *(a + b for a, b in zip(p.visible[1:], counts, strict=True))]
     for p, (_, category) in placed(assessments, lambda a: a[0]):
         p.categories[category] += 1
     for p, _ in placed(collisions, float):
@@ -242,6 +261,15 @@ def _match(
     _, is_tp, n_truth = match_image(pred, truth[1], labels, iou=0.5, ignore=truth[3])
     tp = int(is_tp.sum())
     return tp, len(is_tp) - tp, n_truth - tp
+
+
+def _visible_truth(
+    truth: tuple[float, np.ndarray, list[str], np.ndarray], hidden: np.ndarray
+) -> tuple[float, np.ndarray, list[str], np.ndarray]:
+    """*truth* with the *hidden* boxes moved to its ignore boxes."""
+    t, boxes, labels, ignore = truth
+    kept = [lab for lab, h in zip(labels, hidden, strict=True) if not h]
+    return t, boxes[~hidden], kept, np.concatenate([ignore, boxes[hidden]])
 
 
 class SimulatedSystem(Closing):
@@ -288,6 +316,8 @@ class SimulatedSystem(Closing):
         self.on_time = on_time
         self._lock = threading.Lock()
         self._truth: dict[int, tuple[float, np.ndarray, list[str], np.ndarray]] = {}
+        self._hidden: dict[int, np.ndarray] = {}  # per frame: which boxes a phenomenon hides
+        self._visible: list[tuple[float, int, int, int, int]] = []  # t, tp, fp, fn, hidden
         self._early: dict[int, Detections] = {}  # detections ahead of their truth
         self._frames: list[tuple[float, int, int, int, str]] = []  # t, tp, fp, fn, model
         self._assessments: list[tuple[float, int]] = []
@@ -371,11 +401,19 @@ class SimulatedSystem(Closing):
             labels = [str(v) for v in body.get("labels") or []]
             ignore = np.asarray(body.get("ignore") or [], dtype=np.float64).reshape(-1, 4)
             t = float(body.get("t", 0.0))
+            hidden = body.get("hidden")
+            hidden = None if hidden is None else np.asarray(hidden, dtype=bool).reshape(-1)
+            if hidden is not None and len(hidden) != len(boxes):
+                raise ValueError("one hidden flag per box")
         except (KeyError, TypeError, ValueError):
             log.warning("sim: a ground-truth message without seq/boxes/labels; skipped")
             return
         with self._lock:
             self._seq_t[seq] = t
+            if hidden is not None:
+                self._hidden[seq] = hidden
+                while len(self._hidden) > 512:
+                    del self._hidden[min(self._hidden)]
             early = self._early.pop(seq, None)
             if early is not None:  # its detections came first (another subscriber's thread)
                 self._score(early, (t, boxes, labels, ignore))
@@ -402,6 +440,10 @@ class SimulatedSystem(Closing):
     ) -> None:
         tp, fp, fn = _match(det, truth)
         self._frames.append((truth[0], tp, fp, fn, det.model_id))
+        hidden = self._hidden.pop(det.frame_seq, None)
+        if hidden is not None:
+            vtp, vfp, vfn = _match(det, _visible_truth(truth, hidden))
+            self._visible.append((truth[0], vtp, vfp, vfn, int(hidden.sum())))
 
     def _on_assessment(self, sample: Sample) -> None:
         message = sample.message
@@ -521,11 +563,13 @@ class SimulatedSystem(Closing):
         spans = phase_spans(self.scenario, max(end, 1e-3), landed=landed)
         with self._lock:
             frames = list(self._frames)
+            visible = list(self._visible)
             assessments = list(self._assessments)
             collisions = list(self._collisions)
         return score_phases(
             spans,
             frames=frames,
+            visible=visible,
             assessments=assessments,
             collisions=collisions,
             decisions=decisions,
@@ -563,23 +607,29 @@ def format_phases(phases: Sequence[PhaseScore]) -> str:
     """A plain-text table of :meth:`SimulatedSystem.phases` (one row per phase).
 
     F1 is ``–`` where the phase had no ground-truth object (its TP/FP/FN say what the
-    detector did there); the ``agree`` column, the oracle's agreement with its live scorer
-    over the frames both assessed, is there when a scorer ran.
+    detector did there); ``F1 visible``, there when a phenomenon of the run hides objects (a
+    raindrop), counts the boxes at least half hidden as ignore boxes; the ``agree`` column,
+    the oracle's agreement with its live scorer over the frames both assessed, is there when
+    a scorer ran.
     """
     scored = any(p.compared for p in phases)
-    header: tuple[str, ...] = ("phase", "conditions", "frames", "F1", "TP/FP/FN", "category")
+    masked = any(p.visible[0] for p in phases)
+    header: tuple[str, ...] = ("phase", "conditions", "frames", "F1")
+    header += ("F1 visible",) * masked + ("TP/FP/FN", "category")
     header += ("agree",) * scored + ("models", "tactics", "coll.")
     rows: list[tuple[str, ...]] = [header]
     for p in phases:
         f1 = "–" if p.f1 is None else f"{p.f1:.2f}"
         cats = ", ".join(f"{k}×{n}" for k, n in sorted(p.categories.items())) or "-"
         agree = "-" if p.agreement is None else f"{p.agreement:.0%} of {p.compared}"
+        visible = "–" if p.f1_visible is None else f"{p.f1_visible:.2f}"
         rows.append(
             (
                 f"{p.start:5.1f}–{p.end:5.1f} s",
                 p.label,
                 str(p.frames),
                 f1,
+                *((visible,) * masked),
                 f"{p.tp}/{p.fp}/{p.fn}",
                 cats,
                 *((agree,) * scored),

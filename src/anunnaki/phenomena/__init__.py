@@ -34,6 +34,12 @@ Built-ins (``PHENOMENA.names()``): ``brightness``, ``fog``, ``hsl``, ``motion_bl
 prefixed with the step label (``fog.density``, ``raindrop.x``; repeats become ``raindrop_2``)
 and whose steps get seeds spawned from the one seed.
 
+``occlusion(shape, params, seed)`` → a ``(H, W)`` ``float32`` :data:`Mask` in ``[0, 1]``,
+how much of each pixel ``apply`` replaced with the same parameters and seed, or ``None`` (the
+default: the phenomenon hides nothing). A raindrop reports one; a composition combines its
+steps'. A labelled box whose mean mask is at least :data:`HIDDEN` (0.5) is *hidden*: training
+and evaluation make it an ignore box (``anunnaki.lec.hide_boxes``).
+
 ``with reuse_fog_noise(store):`` keeps a fog's noise layers for the seeds it sees, for work
 that applies many contexts to the same images with the same seeds (Enlil's search).
 
@@ -45,7 +51,7 @@ an entry point in the ``anunnaki.phenomena`` group of your package (see
 missing one raises :class:`~anunnaki.errors.MissingExtraError` naming ``anunnaki[phenomena]``.
 """
 
-from anunnaki.phenomena._base import Image, ParamSpec, Phenomenon, PhenomenonError
+from anunnaki.phenomena._base import HIDDEN, Image, Mask, ParamSpec, Phenomenon, PhenomenonError
 from anunnaki.phenomena._color import HSL, Brightness
 from anunnaki.phenomena._composition import Composition, CompositionStep
 from anunnaki.phenomena._fog import Fog, reuse_fog_noise
@@ -56,6 +62,7 @@ from anunnaki.phenomena._sensor import MotionBlur, Noise, motion_kernel
 from anunnaki.phenomena._weather import Rain, Snow
 
 __all__ = [
+    "HIDDEN",
     "HSL",
     "PHENOMENA",
     "Brightness",
@@ -63,6 +70,7 @@ __all__ = [
     "CompositionStep",
     "Fog",
     "Image",
+    "Mask",
     "MotionBlur",
     "Noise",
     "ParamSpec",

@@ -27,7 +27,9 @@ except ImportError as _exc:  # pragma: no cover - only without the vision extra
     raise MissingExtraError("numpy", "phenomena") from _exc
 
 __all__ = [
+    "HIDDEN",
     "Image",
+    "Mask",
     "ParamSpec",
     "Phenomenon",
     "PhenomenonError",
@@ -39,6 +41,15 @@ __all__ = [
 
 #: An image: ``(height, width, 3)`` ``uint8`` RGB array.
 Image: TypeAlias = npt.NDArray[np.uint8]
+
+#: An occlusion mask: ``(height, width)`` ``float32`` in ``[0, 1]``, the share of each pixel
+#: that a phenomenon replaced (1: the scene behind it is gone, 0: untouched).
+Mask: TypeAlias = npt.NDArray[np.float32]
+
+#: A labelled box is *hidden* when the mean of the occlusion mask over it is at least this:
+#: at least half of it is gone, so neither a detector nor a person can be asked to find it
+#: (docs/phenomena.md, "Occlusion masks"). Training and evaluation make it an ignore box.
+HIDDEN = 0.5
 
 _NAME_RE = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*(\.[A-Za-z_][A-Za-z0-9_]*)*$")
 
@@ -241,7 +252,9 @@ class Phenomenon(ABC):
     * :meth:`perturb` — the effect itself.
 
     Set ``stochastic = False`` when the output does not depend on the seed. Subclasses must
-    be constructible without arguments to be looked up by name.
+    be constructible without arguments to be looked up by name. A phenomenon that replaces
+    pixels (a drop on the lens) also writes :meth:`occlusion_mask`, so that a box it hides
+    is not counted against the detector (:meth:`occlusion`); the others need not.
 
     Images are ``(height, width, 3)`` ``uint8`` RGB arrays. :meth:`apply` is deterministic:
     the same image, parameters and seed give the same bytes, on any machine with the same
@@ -380,10 +393,7 @@ class Phenomenon(ABC):
         """
         checked = check_image(self.name, image)
         valid = self.validate(params)
-        if not isinstance(seed, numbers.Integral) or isinstance(seed, bool) or seed < 0:
-            raise PhenomenonError(
-                f"seed must be a non-negative integer, got {seed!r}", phenomenon=self.name
-            )
+        self._check_seed(seed)
         frozen = checked.view()
         frozen.flags.writeable = False
         out = self.perturb(frozen, valid, int(seed))
@@ -396,6 +406,80 @@ class Phenomenon(ABC):
         if np.shares_memory(out, image) or not out.flags.writeable:
             out = out.copy()
         return out
+
+    def occlusion(self, shape: Sequence[int], params: Mapping[str, Any], seed: int) -> Mask | None:
+        """How much of each pixel :meth:`apply` replaces, or ``None`` when it hides nothing.
+
+        A phenomenon that lays something opaque over the scene (a raindrop on the lens, a
+        smudge) hides what is behind it; training and evaluation turn a box mostly hidden
+        (mean mask over the box at least :data:`HIDDEN`) into an ignore box. The mask belongs
+        to the same draw as :meth:`apply` with the same parameters and seed (same drops).
+
+        Args:
+            shape: The image's ``(height, width)`` (or its full ``shape``).
+            params: Parameter values by name, as for :meth:`apply`.
+            seed: The seed :meth:`apply` is given.
+
+        Returns:
+            A ``(height, width)`` ``float32`` map in ``[0, 1]`` (:data:`Mask`), or ``None``
+            when the phenomenon reports no mask (the default: it only changes how the scene
+            looks, e.g. fog or lighting; third-party phenomena need do nothing).
+
+        Raises:
+            PhenomenonError: Bad shape, parameters or seed, or :meth:`occlusion_mask`
+                returned something that is not such a map.
+
+        """
+        dims = tuple(shape)[:2]
+        if len(dims) != 2 or not all(
+            isinstance(n, numbers.Integral) and not isinstance(n, bool) and n > 0 for n in dims
+        ):
+            raise PhenomenonError(
+                f"shape must start with a positive (height, width), got {tuple(shape)!r}",
+                phenomenon=self.name,
+            )
+        valid = self.validate(params)
+        self._check_seed(seed)
+        height, width = int(dims[0]), int(dims[1])
+        mask = self.occlusion_mask(height, width, valid, int(seed))
+        if mask is None:
+            return None
+        if (
+            not isinstance(mask, np.ndarray)
+            or mask.shape != (height, width)
+            or not np.issubdtype(mask.dtype, np.floating)
+        ):
+            got = (
+                f"{mask.dtype} {mask.shape}"
+                if isinstance(mask, np.ndarray)
+                else type(mask).__name__
+            )
+            raise PhenomenonError(
+                f"occlusion_mask() must return None or a float array of shape "
+                f"{(height, width)}, got {got}",
+                phenomenon=self.name,
+            )
+        return np.clip(mask, 0.0, 1.0).astype(np.float32)
+
+    def occlusion_mask(
+        self, height: int, width: int, params: dict[str, float], seed: int
+    ) -> Mask | None:
+        """The hook behind :meth:`occlusion`; called only by it. Default: no mask (``None``).
+
+        Override it in a phenomenon that replaces pixels. Compute the mask from the same
+        geometry and random draws as :meth:`perturb` (share the code), so that the mask says
+        exactly what the image shows: 1 where the pixel is wholly the phenomenon's, a blend
+        weight on soft edges, 0 where the scene is untouched.
+
+        Args:
+            height: Image height in pixels.
+            width: Image width in pixels.
+            params: The output of :meth:`validate`.
+            seed: Non-negative integer, as :meth:`perturb` gets it.
+
+        """
+        del height, width, params, seed
+        return None
 
     @abstractmethod
     def perturb(self, image: Image, params: dict[str, float], seed: int) -> Image:
@@ -443,6 +527,12 @@ class Phenomenon(ABC):
         if spec.integer:
             value = float(math.floor(value + 0.5))
         return value
+
+    def _check_seed(self, seed: object) -> None:
+        if not isinstance(seed, numbers.Integral) or isinstance(seed, bool) or seed < 0:
+            raise PhenomenonError(
+                f"seed must be a non-negative integer, got {seed!r}", phenomenon=self.name
+            )
 
     def _check_strength(self, strength: object) -> float:
         if not _is_real(strength) or not 0.0 <= float(strength) <= 1.0:  # type: ignore[arg-type]

@@ -14,6 +14,8 @@ A :class:`Composition` is built from phenomena (instances); names are resolved b
 
 Each step gets its own seed, ``SeedSequence(seed).spawn(len(steps))[i]``, so adding or
 changing a step never changes the randomness of the others.
+
+A composition's occlusion mask combines its steps' (:meth:`Composition.occlusion_mask`).
 """
 
 from __future__ import annotations
@@ -25,7 +27,7 @@ from typing import Any, TypeAlias
 
 import numpy as np
 
-from anunnaki.phenomena._base import Image, Phenomenon, PhenomenonError
+from anunnaki.phenomena._base import Image, Mask, Phenomenon, PhenomenonError
 
 __all__ = ["Composition", "CompositionStep", "Step"]
 
@@ -131,6 +133,31 @@ class Composition(Phenomenon):
         for step, child in zip(self.steps, children, strict=True):
             out = step.phenomenon.apply(out, per_step[step.label], _child_seed(child))
         return out
+
+    def occlusion_mask(
+        self, height: int, width: int, params: dict[str, float], seed: int
+    ) -> Mask | None:
+        """The steps' masks combined: a pixel is as hidden as all its steps together hide it.
+
+        Step *i* is asked with the *i*-th spawned seed, as :meth:`perturb` applies it; a pixel
+        that steps hide by shares ``m_i`` is hidden by ``1 - prod(1 - m_i)`` (two drops
+        over it hide it at least as much as either). ``None`` when no step reports a mask.
+        """
+        per_step = self.split(params)
+        children = np.random.SeedSequence(seed).spawn(len(self.steps))
+        combined: Mask | None = None
+        for step, child in zip(self.steps, children, strict=True):
+            mask = step.phenomenon.occlusion(
+                (height, width), per_step[step.label], _child_seed(child)
+            )
+            if mask is None:
+                continue
+            combined = (
+                mask
+                if combined is None
+                else (1.0 - (1.0 - combined) * (1.0 - mask)).astype(np.float32)
+            )
+        return combined
 
     def __repr__(self) -> str:
         parts = [

@@ -13,6 +13,9 @@ focus, with a darker rim. We render exactly that:
 
 One drop has a fixed-length parameter vector (x, y, radius, feather); several drops are a
 composition: ``compose("raindrop", "raindrop", "raindrop")``.
+
+The drop hides the scene behind it: :meth:`Raindrop.occlusion_mask` is the blend weight
+(1 on the disc, the smooth-step on the edge), from the same geometry as the image.
 """
 
 from __future__ import annotations
@@ -21,8 +24,16 @@ import math
 from types import MappingProxyType
 
 import numpy as np
+import numpy.typing as npt
 
-from anunnaki.phenomena._base import Image, ParamSpec, Phenomenon, require_cv2, to_uint8
+from anunnaki.phenomena._base import (
+    Image,
+    Mask,
+    ParamSpec,
+    Phenomenon,
+    require_cv2,
+    to_uint8,
+)
 
 __all__ = ["Raindrop"]
 
@@ -65,30 +76,32 @@ class Raindrop(Phenomenon):
     #: Full strength: a drop covering the middle 60 % of the width.
     strength_target = MappingProxyType({"radius": 0.3})
 
+    def occlusion_mask(
+        self, height: int, width: int, params: dict[str, float], seed: int
+    ) -> Mask | None:
+        """The blend weight of the drop: 1 on the disc, the smooth-step on the edge, 0 outside.
+
+        The drop replaces the scene behind it by a refracted view of its surroundings, so
+        what is under the disc is hidden (and half hidden where the edge blends 50/50).
+        """
+        del seed  # deterministic, as perturb
+        mask = np.zeros((height, width), np.float32)
+        geometry = _geometry(height, width, params)
+        if geometry is not None:
+            (r0, r1, c0, c1), alpha = geometry[0], geometry[1]
+            mask[r0:r1, c0:c1] = alpha
+        return mask
+
     def perturb(self, image: Image, params: dict[str, float], seed: int) -> Image:
         """Blend a refracted, blurred view of the surroundings into the drop's disc."""
         height, width = image.shape[:2]
-        radius = params["radius"] * width
-        feather = params["feather"] * radius
-        outer = radius + feather
-        if radius < _MIN_RADIUS_PX:
+        geometry = _geometry(height, width, params)
+        if geometry is None:
             return image.copy()
-        cx, cy = params["x"] * width, params["y"] * height
-        # Pixel (row, col) has its centre at (col + 0.5, row + 0.5).
-        c0, c1 = max(0, math.floor(cx - outer - 0.5)), min(width, math.ceil(cx + outer + 0.5))
-        r0, r1 = max(0, math.floor(cy - outer - 0.5)), min(height, math.ceil(cy + outer + 0.5))
-        dx = (np.arange(c0, c1, dtype=np.float64) + 0.5 - cx)[None, :]
-        dy = (np.arange(r0, r1, dtype=np.float64) + 0.5 - cy)[:, None]
-        distance = np.hypot(dx, dy)
-        if feather >= _MIN_RADIUS_PX:
-            t = np.clip((distance - radius) / feather, 0.0, 1.0)
-            alpha = 1.0 - t * t * (3.0 - 2.0 * t)
-        else:
-            alpha = (distance <= radius).astype(np.float64)
+        (r0, r1, c0, c1), alpha, distance, dx, dy = geometry
         inside = alpha > 0.0
-        if not inside.any():
-            return image.copy()
-
+        radius = params["radius"] * width
+        cx, cy = params["x"] * width, params["y"] * height
         cv2 = require_cv2()
         rho = np.minimum(distance / radius, 1.0)
         scale = -MAGNIFICATION * (1.0 + 0.35 * rho**2)  # negative: the view is inverted
@@ -104,3 +117,37 @@ class Raindrop(Phenomenon):
         region = out[r0:r1, c0:c1]
         region[inside] = blended[inside]
         return out
+
+
+_Float = npt.NDArray[np.float64]
+
+
+def _geometry(
+    height: int, width: int, params: dict[str, float]
+) -> tuple[tuple[int, int, int, int], _Float, _Float, _Float, _Float] | None:
+    """Where the drop is: ``((r0, r1, c0, c1), alpha, distance, dx, dy)`` over its box.
+
+    ``alpha`` is the blend weight of the drop in each pixel of rows ``r0:r1``, columns
+    ``c0:c1`` (the drop's bounding box clipped to the image); ``None``: no drop at all. The
+    one place both the image (:meth:`Raindrop.perturb`) and the mask come from.
+    """
+    radius = params["radius"] * width
+    feather = params["feather"] * radius
+    outer = radius + feather
+    if radius < _MIN_RADIUS_PX:
+        return None
+    cx, cy = params["x"] * width, params["y"] * height
+    # Pixel (row, col) has its centre at (col + 0.5, row + 0.5).
+    c0, c1 = max(0, math.floor(cx - outer - 0.5)), min(width, math.ceil(cx + outer + 0.5))
+    r0, r1 = max(0, math.floor(cy - outer - 0.5)), min(height, math.ceil(cy + outer + 0.5))
+    dx = (np.arange(c0, c1, dtype=np.float64) + 0.5 - cx)[None, :]
+    dy = (np.arange(r0, r1, dtype=np.float64) + 0.5 - cy)[:, None]
+    distance = np.hypot(dx, dy)
+    if feather >= _MIN_RADIUS_PX:
+        t = np.clip((distance - radius) / feather, 0.0, 1.0)
+        alpha = 1.0 - t * t * (3.0 - 2.0 * t)
+    else:
+        alpha = (distance <= radius).astype(np.float64)
+    if not (alpha > 0.0).any():
+        return None
+    return (r0, r1, c0, c1), alpha, distance, dx, dy

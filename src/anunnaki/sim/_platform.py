@@ -11,8 +11,9 @@ physics tick applies them (pybullet clients are not thread-safe).
 
 The camera pipeline: render the clean frame (ground truth from its segmentation mask) →
 apply the scenario's phenomena in order (:mod:`anunnaki.phenomena`) → encode (JPEG/PNG) →
-publish the image, its info, the clean frame's ground truth (``/sim/ground_truth``) and
-what was applied (``/sim/phenomena``).
+publish the image, its info, the clean frame's ground truth (``/sim/ground_truth``; with
+``hidden``, one flag per labelled box, when a phenomenon reports an occlusion mask: the box is
+at least half hidden, ``anunnaki.phenomena.HIDDEN``) and what was applied (``/sim/phenomena``).
 """
 
 from __future__ import annotations
@@ -236,9 +237,19 @@ class SimPlatform(Closing):
         frame = self.scene.render(self._camera(), light=self._light, t=t, seq=seq)
         applied = self.timeline.phenomena(t)
         image = frame.image
+        hidden: Any = None  # the boxes the phenomena hide, when one of them has a mask
         for k, (name, params) in enumerate(applied):
             seed = (self.scenario.seed * 1_000_003 + seq * 31 + k) % (2**31)
-            image = self._get_phenomenon(name).apply(image, params, seed)
+            phenomenon = self._get_phenomenon(name)
+            mask = phenomenon.occlusion(image.shape, params, seed)
+            if mask is not None:
+                hidden = mask if hidden is None else 1.0 - (1.0 - hidden) * (1.0 - mask)
+            image = phenomenon.apply(image, params, seed)
+        if hidden is not None:
+            from anunnaki.lec import box_occlusion
+            from anunnaki.phenomena import HIDDEN
+
+            hidden = box_occlusion(frame.boxes, hidden) >= HIDDEN
         self.frames += 1
         self.last_frame, self.last_image, self.last_phenomena = frame, image, applied
         cam = self.scenario.camera
@@ -288,7 +299,9 @@ class SimPlatform(Closing):
                         "boxes": [[float(v) for v in b] for b in frame.boxes],
                         "labels": [self.scene.classes[int(i)] for i in frame.labels],
                         "ignore": [[float(v) for v in b] for b in frame.ignore],
-                    },
+                    }
+                    # which boxes a phenomenon hides (at least half): the visible-box F1
+                    | ({} if hidden is None else {"hidden": [bool(h) for h in hidden]}),
                 )
         if self.frame_hook is not None:
             self.frame_hook(self, frame, image)
