@@ -27,7 +27,9 @@ session listens, the other three join it as clients, as ``anunnaki run --process
 its nodes join the launch's session. The platform waits for each frame's detections and its
 assessment (an acknowledgement the oracle's process publishes once its node has handled the
 frame) before the next, as in one process. Every process reports what flowed through it
-(frames rendered, detected, assessed; the oracle's verdicts Utu took in).
+(frames rendered, detected, assessed; the oracle's verdicts Utu took in). Only the
+detector's and the oracle's processes load torch (``torch_threads``: ``null`` for the
+others): the platform and Utu run no network.
 
 The figure of merit is camera frames per wall second of the whole loop (``utu`` in one
 process; ``processes``). Beside it, each run gives the CPU time per frame
@@ -71,8 +73,6 @@ from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import IO, Any
 
-import torch
-
 from anunnaki import topics
 from anunnaki.bus import BusConfig, Executor, open_bus
 from anunnaki.launch import Launch, load_launch, run_launch
@@ -97,6 +97,25 @@ LOCKSTEP_TIMEOUT = 10.0
 BRING_UP = 180.0
 #: A line of the components' protocol on stdout starts with this (anything else is noise).
 TAG = "@loop "
+
+
+def _torch() -> Any:
+    """torch, imported when first asked: a component's process that does not run a network
+    (the platform, Utu) does not load it, as the launch's own nodes do not."""
+    import torch
+
+    return torch
+
+
+def _component_threads(threads: int) -> int | None:
+    """torch's threads in this component's process, set to ``threads`` (> 0) once its
+    bring-up has loaded torch; ``None`` when it did not (the platform's and Utu's)."""
+    if "torch" not in sys.modules:
+        return None
+    torch = _torch()
+    if threads > 0:
+        torch.set_num_threads(threads)
+    return int(torch.get_num_threads())
 
 
 def _launch(path: Path, oracle: Mapping[str, Any] | None = None) -> tuple[Launch, SimKind]:
@@ -409,6 +428,7 @@ def component(
     bus_json: str,
     seconds: float,
     oracle: Mapping[str, Any] | None = None,
+    torch_threads: int = 0,
 ) -> None:
     """One component's process (``--component``): bring up, say ready, run, report.
 
@@ -434,6 +454,7 @@ def component(
             lockstep = _Lockstep(bus, detections_topic(lec))
             system = platform_class(bus, scenario, frame_hook=lockstep)
             closing.extend([lockstep, system])
+            _component_threads(torch_threads)
             _say(ready=True, endpoints=list(bus.endpoints))
             _wait_for("peers")
             want = {"/lm_manager", "/oracle_" + str((sim.oracle or {}).get("name"))}
@@ -475,12 +496,13 @@ def component(
             report = _utu(bus, launch, closing)
         if name != "platform":
             bus.alive_nodes(timeout=5.0)  # our declarations have left (see anunnaki node)
+            _component_threads(torch_threads)
             _say(ready=True)
             _wait_for("go")
             cpu0 = time.process_time()
         _wait_for("stop")
         cpu = time.process_time() - cpu0
-        _say(cpu_s=cpu, torch_threads=torch.get_num_threads(), **report())
+        _say(cpu_s=cpu, torch_threads=_component_threads(0), **report())
         for obj in reversed(closing):
             obj.close()
 
@@ -638,7 +660,7 @@ def profile(
         "cpu_ms_per_frame": ms(cpu),
         "python_threads_ms_per_frame": ms(threads),
         "native_threads_ms_per_frame": round(ms(cpu) - ms(threads), 2),
-        "torch_threads": torch.get_num_threads(),
+        "torch_threads": _torch().get_num_threads(),
         "parts_ms_per_frame": parts,
         "top_inclusive_ms_per_frame": [
             {"function": f"{Path(file).name}:{line}({func})", "ms": ms(v[3]), "calls": v[1]}
@@ -690,6 +712,7 @@ def measure(
     out["camera"] = _camera(as_written)
     out["scorer"] = "off" if as_written.options.scorer is not None else "none"
     out["oracle"] = str((as_written.options.oracle or {}).get("name"))
+    torch = _torch()
     default_threads = torch.get_num_threads()
 
     # (label, torch threads, oracle options): the first is the baseline, as the launch says
@@ -826,13 +849,16 @@ def main() -> None:
     ap.add_argument("--bus-json", help=argparse.SUPPRESS)
     args = ap.parse_args()
     if args.component is not None:  # one component's process of the processes layout
-        threads = int(args.torch_threads)
-        if threads > 0:
-            torch.set_num_threads(threads)
         component(
-            args.component, args.launch, args.bus_json, args.seconds, json.loads(args.oracle_json)
+            args.component,
+            args.launch,
+            args.bus_json,
+            args.seconds,
+            json.loads(args.oracle_json),
+            torch_threads=int(args.torch_threads),
         )
         return
+    torch = _torch()
     loops = _csv(args.loops, ("rover", "uav"), "--loops", ap)
     layouts = tuple(_csv(args.layouts, LAYOUTS, "--layouts", ap))
     try:

@@ -30,7 +30,7 @@ and the model's F1 on the perturbed and the clean frames beside its registry ref
 (every model's, so the swap shows too). ``benchmarks/results/uav-oracle.json``::
 
     .venv/bin/python benchmarks/uav_oracle.py                  # the demo + offline: ~10 min
-    .venv/bin/python benchmarks/uav_oracle.py --quick          # 8 s of flight into fog
+    .venv/bin/python benchmarks/uav_oracle.py --quick          # 6 s of flight into fog
     .venv/bin/python benchmarks/uav_oracle.py --cache runs/uav-oracle            # keep the run
     .venv/bin/python benchmarks/uav_oracle.py --cache runs/uav-oracle --reuse    # analyse it again
 
@@ -79,10 +79,10 @@ LAUNCH = ROOT / "examples" / "uav" / "sim.yaml"
 RESULTS = Path(__file__).parent / "results" / "uav-oracle.json"
 #: Utu's wall-time watchdog for a run in lockstep on a loaded machine (benchmarks/case_studies.py).
 WATCHDOG = 120.0
-#: The quick mode's scenario: 8 s, climbing at 10 m/s to the demo's cruise altitude (objects
+#: The quick mode's scenario: 6 s, climbing at 10 m/s to the demo's cruise altitude (objects
 #: in view from about 2 s), into the demo's fog at 2 s.
 QUICK = {
-    "duration": 8,
+    "duration": 6,
     "phenomena": [{"at": 2, "phenomenon": "fog", "strength": 0.7, "ramp": 0.5}],
     "faults": [],
     "vary": None,
@@ -589,7 +589,7 @@ def dataset_figures(
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--launch", type=Path, default=LAUNCH)
-    ap.add_argument("--quick", action="store_true", help="8 s into fog instead of the demo")
+    ap.add_argument("--quick", action="store_true", help="6 s into fog instead of the demo")
     ap.add_argument("--output", type=Path, default=RESULTS)
     ap.add_argument("--cache", type=Path, help="keep the recorded run here (frames, topics)")
     ap.add_argument("--reuse", action="store_true", help="analyse the run kept in --cache")

@@ -15,7 +15,7 @@
 #
 # The oracle network (`oracle train --architecture`, docs/enlil.md, "Shipped oracles") is
 # the measured choice, written once in code (anunnaki.enlil.oracle_architecture, asked
-# through `anunnaki oracle architecture PHENOMENON... --model ID`; `anunnaki robustify` asks
+# through `anunnaki oracle architecture --batch`, one line a model; `anunnaki robustify` asks
 # it too): the model's own (rover-default patch_cnn, for its false alarms on close
 # pedestrians; rover-low_light patch_cnn, kept as shipped), else the one its phenomena name
 # (none today: hsl, raindrop and fog tie at the shipped scale), else small_cnn. Variables
@@ -24,7 +24,9 @@
 # oracle covers all of its model's phenomena: those named must agree; empty, ARCH_hsl=,
 # drops a table entry); ARCH_<model> (dashes as underscores: ARCH_rover_default) sets one
 # model's network; ARCH the network of a model nothing names. `scripts/train-oracles.sh
-# --print-architectures` prints each model's choice and trains nothing.
+# --print-architectures` prints each model's choice and trains nothing. Every model's network
+# is asked before anything runs, in one call (one interpreter for all: each start took 3-13 s
+# when it imported torch): a conflict stops the script before its first step.
 # Without BUDGET/FRAMES/EPOCHS each model gets the settings its shipped oracle was made with
 # (the table at the end; docs/enlil.md): the shipped files are rebuilt with the same settings.
 # Every step's wall time goes to $RUNS/times.tsv. Assessments resume when re-run (the
@@ -47,10 +49,10 @@ if [[ ${1:-} == --print-architectures ]]; then
   shift
 fi
 TIMES="$RUNS/times.tsv"
-if [[ $PRINT_ARCH == 0 ]]; then
-  mkdir -p "$RUNS"
-  [[ -f $TIMES ]] || printf 'step\tseconds\n' > "$TIMES"
-fi
+# Two passes over the models (oracles, below): plan lists each model's oracle (its
+# `oracle architecture` line) and does nothing else; run trains them (or, with
+# --print-architectures, prints each model's network).
+STAGE=plan
 
 timed() { # timed NAME COMMAND...: run it, append its wall seconds to $TIMES
   local name=$1 start=$SECONDS
@@ -63,7 +65,7 @@ timed() { # timed NAME COMMAND...: run it, append its wall seconds to $TIMES
 dataset() { # dataset NAME [make-dataset options]: NAME is the platform, or rover-open
   local name=$1
   shift
-  if [[ $PRINT_ARCH == 0 && ! -f $DATA/$name/val.json ]]; then
+  if [[ $STAGE == run && $PRINT_ARCH == 0 && ! -f $DATA/$name/val.json ]]; then
     timed "make-dataset $name" "${ANUNNAKI[@]}" make-dataset "${name%-open}" \
       --out "$DATA/$name" --workers "$THREADS" "$@"
   fi
@@ -81,30 +83,61 @@ assess() { # assess MODEL PLATFORM PHENOMENON BUDGET: one Enlil archive
 
 EXTRA=() # more `oracle train` options for the next train (rover-default: --extra-data)
 
-architecture() { # architecture MODEL PHENOMENON...: the network of MODEL's oracle (above)
-  local model=$1 own="ARCH_${1//-/_}" phenomenon var
-  local choose=()
+PLANNED=() # the models, in order
+ASK=()     # one `oracle architecture --batch` line a model (none for one ARCH_<model> names)
+ARCHS=""   # the answers: "MODEL<tab>NETWORK" a line
+plan_architecture() { # plan_architecture MODEL PHENOMENON...: how to choose MODEL's network
+  local model=$1 own="ARCH_${1//-/_}" phenomenon var line
   shift
+  PLANNED+=("$model")
   if [[ -n ${!own:-} ]]; then
-    echo "${!own}"
+    ARCHS+="$model"$'\t'"${!own}"$'\n'
     return
   fi
+  line=$(printf '%q ' "$@" --model "$model")
+  line=${line% }
   for phenomenon in "$@"; do
     var="ARCH_${phenomenon//+/_}" # a composition's: ARCH_rain_brightness for rain+brightness
-    if [[ -n ${!var+set} ]]; then choose+=(--choose "$phenomenon=${!var}"); fi
+    if [[ -n ${!var+set} ]]; then line+=$(printf ' --choose %q' "$phenomenon=${!var}"); fi
   done
-  "${ANUNNAKI[@]}" oracle architecture "$@" --model "$model" "${choose[@]}" \
-    --default "${ARCH:-small_cnn}" || {
-    echo "train-oracles.sh: no oracle network for $model (above): set $own to the one to train" >&2
-    return 1
-  }
+  ASK+=("$line")
+}
+
+ask_architectures() { # every planned model's network, in one interpreter (the rule is in code)
+  local rows="" model
+  if ((${#ASK[@]})); then
+    # the first line that fails stops the answers (its error is on stderr, above)
+    rows=$(printf '%s\n' "${ASK[@]}" |
+      "${ANUNNAKI[@]}" oracle architecture --batch --default "${ARCH:-small_cnn}") || true
+  fi
+  ARCHS+=$rows$'\n'
+  for model in "${PLANNED[@]}"; do
+    if [[ -z $(arch_of "$model") ]]; then
+      echo "train-oracles.sh: no oracle network for $model (above): set ARCH_${model//-/_} to the one to train" >&2
+      return 1
+    fi
+  done
+}
+
+arch_of() { # arch_of MODEL: its network from the answers (empty: none)
+  local model arch
+  while IFS=$'\t' read -r model arch; do
+    if [[ $model == "$1" ]]; then
+      echo "$arch"
+      return
+    fi
+  done <<< "$ARCHS"
 }
 
 train() { # train MODEL PLATFORM REGISTRY BUDGET FRAMES EPOCHS PHENOMENON...
   local model=$1 platform=$2 registry=$3 budget=${BUDGET:-$4} frames=${FRAMES:-$5}
   local epochs=${EPOCHS:-$6} arch
   shift 6
-  arch=$(architecture "$model" "$@") || exit 1
+  if [[ $STAGE == plan ]]; then
+    plan_architecture "$model" "$@"
+    return
+  fi
+  arch=$(arch_of "$model")
   if [[ $PRINT_ARCH == 1 ]]; then
     printf '%s\t%s\n' "$model" "$arch"
     return
@@ -121,49 +154,61 @@ train() { # train MODEL PLATFORM REGISTRY BUDGET FRAMES EPOCHS PHENOMENON...
   "$PY" scripts/pin-oracle.py "$registry" "$model" "$MODELS/$model.oracle.safetensors"
 }
 
-SELECTED=" $* "
-pick() { [[ $SELECTED == "  " || $SELECTED == *" $1 "* ]]; } # no names: all of them
-
-# rover-default: the phenomena of the issue (hsl, raindrop, fog) and brightness, the demo's dusk
-if pick rover-default || pick rover-low_light; then dataset rover; fi
-# ... and, among its frames, bare-ground scenes (no clutter): the look of the demo's
-# background: false (docs/enlil.md, "In the loop", its false alarm)
-if pick rover-default; then
-  dataset rover-open --no-clutter --per-layout 10 --test-layouts ""
-  EXTRA=(--extra-data "$DATA/rover-open")
-fi
-#                                                    budget frames epochs phenomena
-pick rover-default && train rover-default rover "$MODELS/rover.yaml" 600 3000 12 \
-  hsl raindrop fog brightness
-EXTRA=()
-# the --augment domain model, on the phenomena it was fine-tuned for (docs/detector.md)
-pick rover-low_light && train rover-low_light rover "$MODELS/rover.yaml" 400 3000 12 brightness hsl
-if pick uav-default || pick uav-fog || pick uav-rain_brightness; then
-  dataset uav --width 320 --height 240
-fi
-# 176 evaluations (11 rounds) per phenomenon: the first shipped one's search was stopped
-# there for time. fog and rain+brightness: the UAV's domain models (uav-fog,
-# uav-rain_brightness, docs/robustify.md) are swapped in when this oracle names their domain.
-pick uav-default && train uav-default uav "$MODELS/uav.yaml" 176 2000 10 fog rain+brightness
-# The UAV's Enki models (scripts/train-domains.sh makes them, each with an oracle of its own
-# phenomenon only): their oracles learn both of the platform's phenomena, as uav-default's,
-# so that the active model's oracle names the next condition (the demo flies from
-# rain+brightness into fog, docs/uav.md). The settings of their chains' own assessment and
-# oracle: 96 evaluations of 16 images; 1,500 frames x 8 epochs. The archive of the model's
-# own phenomenon is the same search as its chain's assess stage: when $DOMAINS/ID/assess
-# exists (train-domains.sh's work folder), it is copied rather than run again.
-# describe-domain.py then writes the new oracle's val figures into the entry's description.
 DOMAINS=${DOMAINS:-runs/domains}
 domain_oracle() { # domain_oracle ID OWN OTHER: ID's oracle on its phenomenon OWN and OTHER
   local id=$1 own=$2
-  if [[ $PRINT_ARCH == 0 && ! -e $RUNS/$id-$own && -d $DOMAINS/$id/assess ]]; then
+  if [[ $STAGE == run && $PRINT_ARCH == 0 && ! -e $RUNS/$id-$own && -d $DOMAINS/$id/assess ]]; then
     cp -r "$DOMAINS/$id/assess" "$RUNS/$id-$own"
   fi
   train "$id" uav "$MODELS/uav.yaml" 96 1500 8 "$own" "$3"
-  [[ $PRINT_ARCH == 1 ]] || "$PY" scripts/describe-domain.py "$MODELS/uav.yaml" "$id"
+  [[ $STAGE == plan || $PRINT_ARCH == 1 ]] || "$PY" scripts/describe-domain.py "$MODELS/uav.yaml" "$id"
 }
-ASSESS=(--batch-images 16)
-pick uav-fog && domain_oracle uav-fog fog rain+brightness
-pick uav-rain_brightness && domain_oracle uav-rain_brightness rain+brightness fog
-ASSESS=()
+
+SELECTED=" $* "
+pick() { [[ $SELECTED == "  " || $SELECTED == *" $1 "* ]]; } # no names: all of them
+
+oracles() { # the models' oracles (one pass: STAGE above)
+  # rover-default: the phenomena of the issue (hsl, raindrop, fog) and brightness, the demo's dusk
+  if pick rover-default || pick rover-low_light; then dataset rover; fi
+  # ... and, among its frames, bare-ground scenes (no clutter): the look of the demo's
+  # background: false (docs/enlil.md, "In the loop", its false alarm)
+  if pick rover-default; then
+    dataset rover-open --no-clutter --per-layout 10 --test-layouts ""
+    EXTRA=(--extra-data "$DATA/rover-open")
+  fi
+  #                                                    budget frames epochs phenomena
+  pick rover-default && train rover-default rover "$MODELS/rover.yaml" 600 3000 12 \
+    hsl raindrop fog brightness
+  EXTRA=()
+  # the --augment domain model, on the phenomena it was fine-tuned for (docs/detector.md)
+  pick rover-low_light && train rover-low_light rover "$MODELS/rover.yaml" 400 3000 12 brightness hsl
+  if pick uav-default || pick uav-fog || pick uav-rain_brightness; then
+    dataset uav --width 320 --height 240
+  fi
+  # 176 evaluations (11 rounds) per phenomenon: the first shipped one's search was stopped
+  # there for time. fog and rain+brightness: the UAV's domain models (uav-fog,
+  # uav-rain_brightness, docs/robustify.md) are swapped in when this oracle names their domain.
+  pick uav-default && train uav-default uav "$MODELS/uav.yaml" 176 2000 10 fog rain+brightness
+  # The UAV's Enki models (scripts/train-domains.sh makes them, each with an oracle of its own
+  # phenomenon only): their oracles learn both of the platform's phenomena, as uav-default's,
+  # so that the active model's oracle names the next condition (the demo flies from
+  # rain+brightness into fog, docs/uav.md). The settings of their chains' own assessment and
+  # oracle: 96 evaluations of 16 images; 1,500 frames x 8 epochs. The archive of the model's
+  # own phenomenon is the same search as its chain's assess stage: when $DOMAINS/ID/assess
+  # exists (train-domains.sh's work folder), it is copied rather than run again.
+  # describe-domain.py then writes the new oracle's val figures into the entry's description.
+  ASSESS=(--batch-images 16)
+  pick uav-fog && domain_oracle uav-fog fog rain+brightness
+  pick uav-rain_brightness && domain_oracle uav-rain_brightness rain+brightness fog
+  ASSESS=()
+}
+
+oracles
+ask_architectures
+STAGE=run
+if [[ $PRINT_ARCH == 0 ]]; then
+  mkdir -p "$RUNS"
+  [[ -f $TIMES ]] || printf 'step\tseconds\n' > "$TIMES"
+fi
+oracles
 [[ $PRINT_ARCH == 1 ]] || echo "times: $TIMES" >&2

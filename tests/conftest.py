@@ -17,6 +17,32 @@ settings.register_profile("anunnaki", deadline=None)
 settings.load_profile("anunnaki")
 
 
+def _bytecode_outside_the_tree() -> None:
+    """Where ``PYTHONDONTWRITEBYTECODE`` is set, cache bytecode in ``.pytest_cache/pycache``.
+
+    scripts/setup.sh installs without compiling (``pip --no-compile``: Python compiles a
+    module when it is first imported). With the variable set, nothing is ever written, so
+    every interpreter the suite starts (its workers, and the hundreds of processes its tests
+    start: the CLI, benchmarks, component processes) compiled torch, numpy and this package
+    from source again: 2 to 10 s a start on the 2-core machine (issue #34, item 10). Here the
+    variable is dropped for the suite and its processes and the bytecode goes to
+    ``PYTHONPYCACHEPREFIX``, an ignored folder of the clone: still nothing beside a source
+    file. A prefix the user set is kept.
+    """
+    if not os.environ.get("PYTHONDONTWRITEBYTECODE"):
+        return
+    prefix = os.environ.get("PYTHONPYCACHEPREFIX") or str(
+        Path(__file__).resolve().parents[1] / ".pytest_cache" / "pycache"
+    )
+    del os.environ["PYTHONDONTWRITEBYTECODE"]
+    os.environ["PYTHONPYCACHEPREFIX"] = prefix
+    sys.pycache_prefix = prefix  # this process too (its flags were read at its start)
+    sys.dont_write_bytecode = False
+
+
+_bytecode_outside_the_tree()
+
+
 #: Session fixtures whose setup pytest-timeout counts against the first test that uses them,
 #: with a timeout that holds it, per folder under tests/: the LEC tests' 60 rendered frames
 #: for the shipped model and Enki's tiny rendered dataset take seconds quiet; Enki's passed

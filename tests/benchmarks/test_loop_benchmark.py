@@ -43,6 +43,10 @@ def _processes_of(doc: dict[str, Any]) -> None:
     # Utu's process took in the oracle's verdicts (on A4's topic) from across the bus.
     assert 0 < flow["utu"]["oracle_verdicts"] <= flow["oracle"]["assessments"]
     assert flow["utu"]["inputs"] > flow["utu"]["oracle_verdicts"]  # and the platform's topics
+    # torch only where a network runs (the platform's and Utu's processes do not load it)
+    threads = one["torch_threads"]
+    assert threads["platform"] is None and threads["utu"] is None, threads
+    assert threads["detector"] >= 1 and threads["oracle"] >= 1, threads
     by = one["cpu_ms_per_frame_by_process"]
     assert set(by) == set(flow) and all(v > 0 for v in by.values())
     assert one["cpu_ms_per_frame"] == pytest.approx(sum(by.values()), abs=0.2)

@@ -1,4 +1,4 @@
-"""benchmarks/uav_oracle.py in its quick mode: 8 s of the UAV demo's launch, climbing into fog.
+"""benchmarks/uav_oracle.py in its quick mode: 6 s of the UAV demo's launch, climbing into fog.
 
 The quick flight climbs at 10 m/s into the demo's fog at 2 s: the recording must be what the
 live scorer heard (replayed exactly), the clean renders must come with every frame, and the

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import contextlib
 import io
+import subprocess
+import sys
 from types import MappingProxyType
 
 import pytest
@@ -125,3 +127,98 @@ def test_the_cli_prints_the_rule(hsl_patch: None, capsys: pytest.CaptureFixture[
     code, _ = _cli("hsl", "raindrop", "--choose", "hsl=patch_cnn", "--choose", "raindrop=small_cnn")
     assert code != 0
     assert "one oracle covers both" in capsys.readouterr().err
+
+
+def _batch(monkeypatch: pytest.MonkeyPatch, lines: str, *args: str) -> tuple[int, str]:
+    monkeypatch.setattr("sys.stdin", io.StringIO(lines))
+    return _cli("--batch", *args)
+
+
+def test_the_cli_answers_many_oracles_at_once(
+    hsl_patch: None, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    # one line an oracle, as one call's arguments; each answer is ID<tab>network
+    lines = (
+        "hsl raindrop fog brightness --model rover-default\n"
+        "\n"
+        "fog 'rain+brightness' --model uav-default --choose fog=patch_cnn\n"
+        "fog --model uav-fog --default patch_cnn\n"
+        "raindrop --model rover-raindrop\n"
+    )
+    code, out = _batch(monkeypatch, lines)
+    assert code == 0
+    assert out.splitlines() == [
+        "rover-default\tpatch_cnn",
+        "uav-default\tpatch_cnn",
+        "uav-fog\tpatch_cnn",
+        "rover-raindrop\tsmall_cnn",
+    ]
+    # the command line's --choose and --default reach every line, before the line's own
+    code, out = _batch(
+        monkeypatch,
+        "raindrop --model a\nhsl --model b --choose hsl=small_cnn\n",
+        "--default",
+        "patch_cnn",
+        "--choose",
+        "hsl=patch_cnn",
+    )
+    assert (code, out.splitlines()) == (0, ["a\tpatch_cnn", "b\tsmall_cnn"])
+    # the first line that fails stops the answers, naming its line
+    capsys.readouterr()
+    lines = (
+        "fog --model a\n"
+        "hsl raindrop --model b --choose hsl=patch_cnn --choose raindrop=small_cnn\n"
+        "fog --model c\n"
+    )
+    code, out = _batch(monkeypatch, lines)
+    assert (code, out) == (2, "a\tsmall_cnn")
+    err = capsys.readouterr().err
+    assert "stdin line 2" in err and "hsl names patch_cnn and raindrop names small_cnn" in err
+
+
+@pytest.mark.parametrize(
+    ("args", "lines", "message"),
+    [
+        ((), "fog\n", "stdin line 1 ('fog'): no --model"),
+        ((), "fog --model a --nope\n", "unrecognized arguments: --nope"),
+        ((), "--model a\n", "required: phenomenon"),
+        ((), "fog --model 'a\n", "No closing quotation"),
+        ((), "fog --model a --choose fog=no_such_net\n", "'no_such_net': no such oracle"),
+        (("fog",), "", "the command line names none"),
+        (("--model", "a"), "", "the command line names none"),
+    ],
+)
+def test_a_bad_batch_is_refused_naming_the_fix(
+    args: tuple[str, ...],
+    lines: str,
+    message: str,
+    monkeypatch: pytest.MonkeyPatch,
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    capsys.readouterr()
+    code, out = _batch(monkeypatch, lines, *args)
+    assert (code, out) == (2, "")
+    assert message in capsys.readouterr().err
+
+
+def test_the_cli_needs_phenomena_or_a_batch(capsys: pytest.CaptureFixture[str]) -> None:
+    capsys.readouterr()
+    assert _cli() == (2, "")
+    assert "name the oracle's phenomena" in capsys.readouterr().err
+
+
+def test_asking_imports_no_torch() -> None:
+    # scripts/train-oracles.sh and robustify ask before anything is trained: an interpreter
+    # that imports torch for it took 3-13 s on the 2-core machine (issue #34, item 10)
+    probe = (
+        "import contextlib, io, sys\n"
+        "from anunnaki.cli.main import main\n"
+        "with contextlib.redirect_stdout(io.StringIO()):\n"
+        "    code = main(['oracle', 'architecture', 'fog', '--model', 'uav-default'])\n"
+        "import anunnaki.enlil\n"
+        "print(code, 'torch' in sys.modules)\n"
+    )
+    result = subprocess.run(
+        [sys.executable, "-c", probe], capture_output=True, text=True, timeout=300, check=True
+    )
+    assert result.stdout.split() == ["0", "False"], result.stderr

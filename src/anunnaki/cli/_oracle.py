@@ -544,16 +544,14 @@ def _table(part: dict[str, Any], info: dict[str, Any], split: str, who: str) -> 
     return table
 
 
-def _add_architecture(osub: Any) -> None:
-    a: argparse.ArgumentParser = osub.add_parser(
-        "architecture",
-        help="print the oracle network chosen for phenomena (the per-phenomenon rule)",
-        description="Print the network one oracle covering PHENOMENON... gets by the measured "
-        "choice (docs/enlil.md): the model's own (--model), else the architecture the phenomena "
-        "name (they must agree), else --default. scripts/train-oracles.sh and robustify use "
-        "the same rule.",
+def _architecture_arguments(a: argparse.ArgumentParser, *, batch: bool) -> None:
+    """The arguments of one oracle's choice (the command line's, or one ``--batch`` line's)."""
+    a.add_argument(
+        "phenomenon",
+        nargs="*" if batch else "+",
+        help="the oracle's phenomena (a+b: each part)"
+        + ("; none with --batch (each line names its own)" if batch else ""),
     )
-    a.add_argument("phenomenon", nargs="+", help="the oracle's phenomena (a+b: each part)")
     a.add_argument("--model", metavar="ID", help="the oracle's model (a measured per-model choice)")
     a.add_argument(
         "--choose",
@@ -563,15 +561,46 @@ def _add_architecture(osub: Any) -> None:
         help="override the choice of phenomenon P (repeatable; P= drops it)",
     )
     a.add_argument("--default", help="the network when no phenomenon names one (small_cnn)")
+
+
+def _add_architecture(osub: Any) -> None:
+    a: argparse.ArgumentParser = osub.add_parser(
+        "architecture",
+        help="print the oracle network chosen for phenomena (the per-phenomenon rule)",
+        description="Print the network one oracle covering PHENOMENON... gets by the measured "
+        "choice (docs/enlil.md): the model's own (--model), else the architecture the phenomena "
+        "name (they must agree), else --default. scripts/train-oracles.sh and robustify use "
+        "the same rule. With --batch, the oracles come from stdin, one a line: the arguments "
+        "of one call (PHENOMENON... --model ID, and --choose or --default of its own after "
+        "the command line's); each line prints ID, a tab and the network, and the first line "
+        "that fails stops it. One start for many oracles: scripts/train-oracles.sh asks "
+        "for all of its models at once.",
+    )
+    _architecture_arguments(a, batch=True)
+    a.add_argument(
+        "--batch",
+        action="store_true",
+        help="read the oracles from stdin, one a line (PHENOMENON... --model ID [--choose "
+        "P=ARCH]...); print ID<tab>ARCH a line",
+    )
     a.set_defaults(run=run_architecture)
 
 
-def run_architecture(args: argparse.Namespace) -> int:
-    """Print the chosen architecture's name (checked against the registered ones)."""
+class _LineParser(argparse.ArgumentParser):
+    """A ``--batch`` line's parser: a bad line is an error naming it, not an exit."""
+
+    def error(self, message: str) -> Any:  # argparse's hook; it must not return
+        from anunnaki.enlil import EnlilError
+
+        raise EnlilError(message)
+
+
+def _chosen(phenomena: list[str], model: str | None, choose: list[str], default: str | None) -> str:
+    """One oracle's network by the measured choice, checked against the registered ones."""
     from anunnaki.enlil import DEFAULT_ORACLE_ARCHITECTURE, EnlilError, oracle_architecture
 
     choices: dict[str, str | None] = {}
-    for item in args.choose:
+    for item in choose:
         name, sep, arch = item.partition("=")
         if not sep or not name.strip():
             raise EnlilError(
@@ -580,11 +609,53 @@ def run_architecture(args: argparse.Namespace) -> int:
             )
         choices[name.strip()] = arch.strip() or None
     chosen = oracle_architecture(
-        args.phenomenon,
-        model_id=args.model,
+        phenomena,
+        model_id=model,
         choices=choices,
-        default=args.default or DEFAULT_ORACLE_ARCHITECTURE,
+        default=default or DEFAULT_ORACLE_ARCHITECTURE,
     )
     _check_architecture(chosen, "oracle architecture: the chosen network")
-    print(chosen)
+    return chosen
+
+
+def run_architecture(args: argparse.Namespace) -> int:
+    """Print the chosen architecture's name, or with ``--batch`` each stdin line's oracle's."""
+    import sys
+
+    from anunnaki.enlil import EnlilError
+
+    if not args.batch:
+        if not args.phenomenon:
+            raise EnlilError(
+                "oracle architecture: name the oracle's phenomena (oracle architecture fog "
+                "--model uav-default), or give --batch and one oracle a line on stdin"
+            )
+        print(_chosen(args.phenomenon, args.model, args.choose, args.default))
+        return 0
+    if args.phenomenon or args.model:
+        raise EnlilError(
+            "oracle architecture --batch: each stdin line names its oracle's phenomena and "
+            f"--model; the command line names none (it has {args.phenomenon or [args.model]})"
+        )
+    import shlex
+
+    line_parser = _LineParser(prog="oracle architecture --batch line", add_help=False)
+    _architecture_arguments(line_parser, batch=False)
+    for number, text in enumerate(sys.stdin, 1):
+        if not text.strip():
+            continue
+        where = f"oracle architecture --batch: stdin line {number} ({text.strip()!r})"
+        try:
+            line = line_parser.parse_args(shlex.split(text))
+        except (EnlilError, ValueError) as exc:  # shlex: an unclosed quote
+            raise EnlilError(f"{where}: {exc}; a line is PHENOMENON... --model ID") from exc
+        if not line.model:
+            raise EnlilError(f"{where}: no --model; a line is PHENOMENON... --model ID")
+        try:
+            chosen = _chosen(
+                line.phenomenon, line.model, args.choose + line.choose, line.default or args.default
+            )
+        except EnlilError as exc:
+            raise EnlilError(f"{where}: {exc}") from exc
+        print(f"{line.model}\t{chosen}", flush=True)
     return 0

@@ -16,9 +16,10 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
+from anunnaki import lec  # lec.evaluate_detector, lec.predict: torch at first call
 from anunnaki.datasets import Dataset, load_split
 from anunnaki.errors import AnunnakiError
-from anunnaki.lec import Detector, evaluate_detector
+from anunnaki.lec import Detector
 from anunnaki.oracles import category_for_drop
 from anunnaki.phenomena import PHENOMENA, Phenomenon
 
@@ -180,7 +181,7 @@ def evaluate_context(
     phen = resolve_phenomenon(phenomenon)
     unit = _check_unit(phen, vector)
     params = phen.from_vector(to_phenomenon_vector(phen, unit))
-    metrics = evaluate_detector(
+    metrics = lec.evaluate_detector(
         detector, batch, phenomenon=phen, params=params, seed=seed, **kwargs
     )
     f1 = float(metrics.f1)

@@ -29,6 +29,7 @@ from typing import Any, Literal
 import numpy as np
 import numpy.typing as npt
 
+from anunnaki import lec  # lec.evaluate_detector, lec.predict: torch at first call
 from anunnaki.datasets import Dataset
 from anunnaki.enlil._context import (
     ContextResult,
@@ -46,7 +47,7 @@ from anunnaki.enlil._oracle_metrics import (
 )
 from anunnaki.enlil._oracle_net import OracleModel
 from anunnaki.enlil._sweep import ContextSpec, draw_contexts
-from anunnaki.lec import Detector, evaluate_detector, predict
+from anunnaki.lec import Detector
 from anunnaki.phenomena import Phenomenon
 
 __all__ = [
@@ -228,7 +229,7 @@ def held_out_frames(
         raise EnlilError(f"frames per context must be at least 1, got {per_context}")
     phen = resolve_phenomenon(phenomenon)
     batch = fixed_batch(data, n=batch_images, seed=seed)
-    clean_f1 = float(evaluate_detector(detector, batch, **kwargs).f1)
+    clean_f1 = float(lec.evaluate_detector(detector, batch, **kwargs).f1)
     drawn = draw_contexts(
         detector, batch, phen, spec, clean_f1=clean_f1, thresholds=thresholds, seed=seed,
         max_draws=max_draws, margin=margin, **kwargs,
@@ -276,7 +277,7 @@ def retest_contexts(
             "(--no-ceiling)"
         )
     batch = fixed_batch(rest, n=batch_images, seed=seed + 2)
-    clean = float(evaluate_detector(detector, batch, score_threshold=score_threshold).f1)
+    clean = float(lec.evaluate_detector(detector, batch, score_threshold=score_threshold).f1)
     again = [
         evaluate_context(
             detector, batch, held.phenomenon, r.params, clean_f1=clean, thresholds=thresholds,
@@ -468,7 +469,7 @@ def detector_statistic(
     if kind == "box-stability":
         return box_stability(detector, frames, batch_size=batch_size)
     out = np.zeros(len(frames), np.float64)
-    for i, det in enumerate(predict(detector, list(frames), batch_size=batch_size)):
+    for i, det in enumerate(lec.predict(detector, list(frames), batch_size=batch_size)):
         scores = np.asarray(det.scores, np.float64)
         scores = scores[scores >= SCORE_FLOOR]
         if len(scores) == 0:
@@ -544,7 +545,7 @@ def box_stability(
     import torch
 
     net = _torch_network(detector)
-    plain = predict(detector, list(frames), batch_size=batch_size)
+    plain = lec.predict(detector, list(frames), batch_size=batch_size)
     gen = torch.Generator().manual_seed(seed)
 
     def drop(_module: Any, _inputs: Any, output: Any) -> Any:
@@ -555,7 +556,7 @@ def box_stability(
 
     hooks = [child.register_forward_hook(drop) for child in net.children()]
     try:
-        dropped = predict(detector, list(frames), batch_size=batch_size)
+        dropped = lec.predict(detector, list(frames), batch_size=batch_size)
     finally:
         for hook in hooks:
             hook.remove()
@@ -647,7 +648,9 @@ def fit_baseline(
         raise EnlilError(f"unknown baseline {kind!r}; choose one of {list(BASELINES)}")
     atc = 0.5
     if kind == "atc":
-        scores = [np.asarray(d.scores, np.float64) for d in predict(detector, list(clean_frames))]
+        scores = [
+            np.asarray(d.scores, np.float64) for d in lec.predict(detector, list(clean_frames))
+        ]
         flat = np.concatenate(scores) if scores else np.zeros(0)
         atc = _atc_threshold(flat[flat >= SCORE_FLOOR], clean_f1)
     stat = detector_statistic(detector, val.frames, kind, atc_threshold=atc)
@@ -777,7 +780,7 @@ def fit_baselines(
         seed=seed, thresholds=thresholds, score_threshold=score_threshold,
     )  # fmt: skip
     clean = fixed_batch(val, n=4 * batch_images, seed=seed + 1)
-    clean_f1 = float(evaluate_detector(detector, clean, score_threshold=score_threshold).f1)
+    clean_f1 = float(lec.evaluate_detector(detector, clean, score_threshold=score_threshold).f1)
     frames = [clean.image(i) for i in range(len(clean))]
     fits = {
         kind: fit_baseline(kind, detector, frames, clean_f1, held, window=window)

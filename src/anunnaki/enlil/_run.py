@@ -19,11 +19,12 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
+from anunnaki import lec  # lec.evaluate_detector, lec.predict: torch at first call
 from anunnaki.datasets import Dataset
 from anunnaki.enlil._archive import Archive, ArchiveMeta, ArchiveWriter, read_archive
 from anunnaki.enlil._context import ContextResult, EnlilError, evaluate_context, fixed_batch
 from anunnaki.enlil._search import SEARCHES, Search
-from anunnaki.lec import Detector, evaluate_detector
+from anunnaki.lec import Detector
 from anunnaki.phenomena import reuse_fog_noise
 
 __all__ = [
@@ -92,7 +93,7 @@ def _loaded(job: Job) -> tuple[Detector, Dataset, float, dict[Any, Any]]:
         batch = fixed_batch(job.data, job.split, job.batch_images, job.seed)
         if job.shared_classes:
             det, batch = shared_classes(det, batch)
-        _LOADED[key] = (det, batch, float(evaluate_detector(det, batch).f1), {})
+        _LOADED[key] = (det, batch, float(lec.evaluate_detector(det, batch).f1), {})
     return _LOADED[key]
 
 
