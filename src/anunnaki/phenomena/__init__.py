@@ -34,6 +34,11 @@ Built-ins (``PHENOMENA.names()``): ``brightness``, ``fog``, ``hsl``, ``motion_bl
 prefixed with the step label (``fog.density``, ``raindrop.x``; repeats become ``raindrop_2``)
 and whose steps get seeds spawned from the one seed.
 
+``CameraEncoding(90)`` (``CameraEncoding.parse("jpeg:90")``) is what a camera that sends JPEG
+does to a frame after the phenomena: ``apply(image)`` encodes and decodes it. Assessments and
+oracles for such a camera measure and learn through it (``anunnaki assess --encoding
+jpeg:90``; docs/enlil.md).
+
 ``with reuse_fog_noise(store):`` keeps a fog's noise layers for the seeds it sees, for work
 that applies many contexts to the same images with the same seeds (Enlil's search).
 
@@ -48,6 +53,7 @@ missing one raises :class:`~anunnaki.errors.MissingExtraError` naming ``anunnaki
 from anunnaki.phenomena._base import Image, ParamSpec, Phenomenon, PhenomenonError
 from anunnaki.phenomena._color import HSL, Brightness
 from anunnaki.phenomena._composition import Composition, CompositionStep
+from anunnaki.phenomena._encoding import CameraEncoding
 from anunnaki.phenomena._fog import Fog, reuse_fog_noise
 from anunnaki.phenomena._raindrop import Raindrop
 from anunnaki.phenomena._registry import PHENOMENA, StepLike, compose
@@ -59,6 +65,7 @@ __all__ = [
     "HSL",
     "PHENOMENA",
     "Brightness",
+    "CameraEncoding",
     "Composition",
     "CompositionStep",
     "Fog",
