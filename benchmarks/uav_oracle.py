@@ -34,9 +34,19 @@ and the model's F1 on the perturbed and the clean frames beside its registry ref
     .venv/bin/python benchmarks/uav_oracle.py --cache runs/uav-oracle            # keep the run
     .venv/bin/python benchmarks/uav_oracle.py --cache runs/uav-oracle --reuse    # analyse it again
 
+``--oracle MODEL=FILE`` (repeatable) replays another oracle file of MODEL offline on the frames
+MODEL handled, as the live node would (the launch's window), and scores it against the live
+scorer beside the live oracle (``replayed_oracle``): the oracle shipped before on the flight
+the new one made, or the new one on the flight the old one made (the live oracle replayed
+the same way gives what it said live: ``checks.replayed_oracle_mismatched``).
+``--views N`` measures uav-fog under the demo's fog on N views of the demo's town from the
+UAV datasets' camera and from the UAV's own camera in flight, each as rendered and through
+the camera's JPEG (``views``): where its drop comes from.
+
 ``--data DIR`` (repeatable) also measures every model and its oracle on a rendered split under
-the demo's fog at full strength, the same images clean and perturbed: the shipped results used
-the demo's town (layout 0, 100 random views) and the test layouts (44-53, 200 views)::
+the demo's fog at full strength, the same images clean and perturbed, as stored and through
+the scenario camera's encoding (JPEG at 90): the shipped results of 2026-12-02 used the demo's
+town (layout 0, 100 random views) and the test layouts (44-53, 200 views)::
 
     anunnaki make-dataset uav --out data/uav-l0 --width 320 --height 240 --train-layouts 1 \
         --val-layouts 2 --test-layouts 0 --per-layout 100
@@ -44,6 +54,14 @@ the demo's town (layout 0, 100 random views) and the test layouts (44-53, 200 vi
         --val-layouts 1 --test-layouts 44-53 --per-layout 20
     .venv/bin/python benchmarks/uav_oracle.py --cache runs/uav-oracle --reuse \
         --data data/uav-l0 --data data/uav-test
+
+The figures of the oracle retrained through the camera's JPEG (issue 34, item 8; docs/uav.md,
+"The oracle against the ground truth"), the oracle shipped before kept as ``runs/old/``::
+
+    git show 56c340b:examples/models/uav-fog.oracle.json > runs/old/uav-fog.oracle.json  # and
+    # .safetensors; then the demo as shipped, the old oracle replayed on its frames:
+    .venv/bin/python benchmarks/uav_oracle.py --cache runs/uav-oracle \
+        --oracle uav-fog=runs/old/uav-fog.oracle --views 200 --data data/uav-test
 """
 
 from __future__ import annotations
@@ -52,6 +70,7 @@ import argparse
 import bisect
 import dataclasses
 import io
+import itertools
 import json
 import logging
 import os
@@ -72,6 +91,7 @@ from anunnaki.lec import DetectionResult, ModelRegistry, load_registry, match_im
 from anunnaki.managed import SimKind, scenario_phases
 from anunnaki.messages import Assessment, Detections, Image, body_of
 from anunnaki.oracles import GroundTruthAssessor, category_for_drop
+from anunnaki.phenomena import CameraEncoding
 from anunnaki.sim import Scenario, Timeline, load_scenario
 
 ROOT = Path(__file__).parents[1]
@@ -396,6 +416,20 @@ def confusion(
 
 
 # -- the analysis --------------------------------------------------------------------------------
+def _file_sha(path: Path) -> str:
+    """The sha256 of an oracle's weights (``NAME.safetensors``, or ``NAME``)."""
+    import hashlib
+
+    weights = path if path.suffix == ".safetensors" else path.with_name(path.name + ".safetensors")
+    return hashlib.sha256(weights.read_bytes()).hexdigest()
+
+
+def _oracle_sha(registry: ModelRegistry, model_id: str) -> str | None:
+    """The sha256 the registry pins for ``model_id``'s oracle."""
+    spec = next((m for m in registry if m.id == model_id), None)
+    return None if spec is None or spec.oracle is None else spec.oracle.sha256
+
+
 def _mean(values: Sequence[float]) -> float | None:
     return round(float(np.mean(values)), 4) if values else None
 
@@ -412,10 +446,46 @@ def scorer_options(launch: Path) -> dict[str, Any]:
     return options
 
 
+def replay_oracle(
+    tape: Tape,
+    seqs: Sequence[int],
+    model_of: Mapping[int, str],
+    registry: ModelRegistry,
+    oracles: Mapping[str, str | Path],
+    window: int,
+) -> dict[int, int]:
+    """The categories an ``enlil`` oracle node with ``oracles`` (model id -> oracle file, on
+    top of the registry's) gives the run's frames, as the live node would (the camera's
+    frames in order, the model that handled each, ``window`` frames averaged)."""
+    from anunnaki.enlil import EnlilOracle
+
+    node = EnlilOracle(models=registry, oracles=dict(oracles), window=window)
+    out: dict[int, int] = {}
+    for seq in seqs:
+        said = node.assess(decode(tape.images[seq]), seq=seq, model_id=model_of[seq])
+        if said is not None:
+            out[seq] = said.category
+    return out
+
+
+def oracle_window(launch: Path) -> int:
+    """The live ``enlil`` oracle's window (``managed.sim.oracle.window``)."""
+    managed = load_launch(launch).managed
+    assert isinstance(managed, SimKind)
+    return int((managed.options.oracle or {}).get("window", 1))
+
+
 def analyse(
-    tape: Tape, *, scenario: Scenario, registry: ModelRegistry, options: Mapping[str, Any]
+    tape: Tape,
+    *,
+    scenario: Scenario,
+    registry: ModelRegistry,
+    options: Mapping[str, Any],
+    replayed: Mapping[str, str | Path] | None = None,
+    window: int = 3,
 ) -> dict[str, Any]:
-    """The figures of one recorded run (see the module's docstring)."""
+    """The figures of one recorded run (see the module's docstring); with ``replayed``
+    (model id -> oracle file), those oracles too, run offline on the same frames."""
     ids = registry.ids()
     detectors = {m: registry.load(m) for m in ids}
     classes = detectors[ids[0]].classes
@@ -427,6 +497,9 @@ def analyse(
     mismatched = sum(1 for s in seqs if pert[model_of[s]].get(s) != live[s])
     oracle = {s: int(tape.oracle[s]["category"]) for s in seqs if s in tape.oracle}
     scorer = {s: int(tape.scorer[s]["category"]) for s in seqs if s in tape.scorer}
+    # the live oracle replayed offline must give what it said live (the check of the replay)
+    live_again = replay_oracle(tape, seqs, model_of, registry, {}, window)
+    other = replay_oracle(tape, seqs, model_of, registry, replayed, window) if replayed else {}
     before = replay(tape, seqs, {**options, **BEFORE}, registry)
     again = replay(tape, seqs, options, registry)
     paired = options.get("reference") == "paired" and bool(tape.clean)
@@ -452,12 +525,15 @@ def analyse(
             paired_drop[s] = max(0.0, (ref["f1"] - (got["f1"] or 0.0)) / ref["f1"])
 
     def agreements(part: Sequence[int]) -> dict[str, Any]:
-        return {
+        out = {
             "before": confusion(before, oracle, part),
             "after": confusion(scorer, oracle, part),
             "after_x_before": confusion(scorer, before, part),
             "split_half": confusion(halves[0], halves[1], part) if paired else None,
         }
+        if replayed:
+            out["replayed_oracle"] = confusion(scorer, other, part)
+        return out
 
     def block(part: Sequence[int]) -> dict[str, Any]:
         out: dict[str, Any] = {"frames": len(part), **agreements(part)}
@@ -517,6 +593,17 @@ def analyse(
                 1 for s in set(scorer) | set(again) if scorer.get(s) != again.get(s)
             ),
             "clean_frames": len(tape.clean),
+            # frames both assessed, categories apart (the replay is the live node's)
+            "replayed_oracle_mismatched": sum(
+                1 for s in set(oracle) & set(live_again) if oracle[s] != live_again[s]
+            ),
+            # frames the replay assessed and the recording holds no assessment of (the run's
+            # first frame: published before the recorder heard the oracle's topic)
+            "replayed_oracle_unrecorded": len(set(live_again) - set(oracle)),
+        },
+        "oracles": {
+            "live": {m: _oracle_sha(registry, m) for m in ids},
+            "replayed": {m: _file_sha(Path(f)) for m, f in (replayed or {}).items()},
         },
         "clean_f1": {
             m: {
@@ -531,12 +618,18 @@ def analyse(
 
 
 def dataset_figures(
-    data: Path, split: str, scenario: Scenario, registry: ModelRegistry
+    data: Path,
+    split: str,
+    scenario: Scenario,
+    registry: ModelRegistry,
+    encoding: CameraEncoding | None = None,
 ) -> dict[str, Any]:
     """Each model on a rendered split (``anunnaki make-dataset uav``), clean and under the
     phenomena in force at the scenario's end (the demo's fog at full strength; image ``i``
     perturbed with seed ``i``): F1 on both and the relative drop (paired, as Enlil labels a
-    context), and what the model's enlil oracle says of the perturbed images (per image)."""
+    context), and what the model's enlil oracle says of the perturbed images (per image).
+    With ``encoding`` (the scenario camera's), every image, clean or perturbed, goes through
+    it last, as the camera sends it."""
     from anunnaki.datasets import load_split
     from anunnaki.enlil import EnlilOracle
     from anunnaki.phenomena import PHENOMENA
@@ -554,11 +647,15 @@ def dataset_figures(
         for name, params in applied:
             out_image = PHENOMENA.create(name).apply(out_image, params, i)
         perturbed.append(out_image)
+    if encoding is not None:
+        clean_images = [encoding.apply(im) for im in clean_images]
+        perturbed = [encoding.apply(im) for im in perturbed]
     oracle = EnlilOracle(models=registry, window=1)
     out: dict[str, Any] = {
         "data": str(data),
         "split": split,
         "images": len(ds),
+        "encoding": "none" if encoding is None else str(encoding),
         "phenomena": [{"name": n, "params": dict(p)} for n, p in applied],
         "models": {},
     }
@@ -585,6 +682,118 @@ def dataset_figures(
     return out
 
 
+def _flight_camera(
+    scenario: Scenario, rng: np.random.Generator, legs: Sequence[tuple[float, float]]
+) -> Any:
+    """The UAV's camera somewhere along the mission's legs at cruise altitude, looking ahead
+    along the leg :data:`~anunnaki.sim.CAMERA_DOWN` degrees below the horizon (as
+    ``UavSim`` renders it in flight)."""
+    import math
+
+    from anunnaki.sim import CAMERA_DOWN, UAV_CAMERA_FOV, Camera
+
+    pairs = list(itertools.pairwise(legs))
+    lengths = [math.dist(a, b) for a, b in pairs]
+    at = float(rng.uniform(0.0, sum(lengths)))
+    k = 0
+    while at > lengths[k] and k < len(lengths) - 1:
+        at, k = at - lengths[k], k + 1
+    (ax, ay), (bx, by) = pairs[k]
+    f = at / lengths[k] if lengths[k] else 0.0
+    x, y, yaw = ax + f * (bx - ax), ay + f * (by - ay), math.atan2(by - ay, bx - ax)
+    z = float(scenario.mission.cruise_altitude)
+    reach = z / math.tan(math.radians(CAMERA_DOWN))
+    target = (x + reach * math.cos(yaw), y + reach * math.sin(yaw), 0.0)
+    return Camera((x, y, z), target, fov=UAV_CAMERA_FOV, near=0.3, far=250.0)
+
+
+def view_figures(
+    scenario: Scenario, registry: ModelRegistry, n: int, model_id: str = "uav-fog", seed: int = 1
+) -> dict[str, Any]:
+    """``model_id`` under the phenomena in force at the scenario's end, on ``n`` views of the
+    scenario's town from two cameras, each as rendered and through the scenario camera's
+    encoding (image ``i`` perturbed with seed ``i``; the drop paired, as Enlil labels):
+
+    * ``dataset``: the UAV datasets' camera (``make-dataset uav``: 15-40 m up, 35-80 degrees
+      down, aimed near an object eight times in ten, varied daylight and object poses);
+    * ``flight``: the UAV's own camera in flight (cruise altitude, 50 degrees down, looking
+      ahead along the mission's legs, the simulator's daylight), views with nobody in them
+      left out.
+    """
+    from anunnaki.phenomena import PHENOMENA
+    from anunnaki.sim import Scene, layout_placements
+
+    camera = scenario.camera
+    sent = CameraEncoding(camera.quality) if camera.encoding == "jpeg" else None
+    applied = Timeline(scenario).phenomena(float(scenario.duration) - 1e-6)
+    detector = registry.load(model_id)
+    m = scenario.mission
+    legs = [(float(p[0]), float(p[1])) for p in (m.home, *m.waypoints, m.delivery, m.home)]
+    out: dict[str, Any] = {
+        "model": model_id,
+        "layout": scenario.layout,
+        "views": n,
+        "phenomena": [{"name": k, "params": dict(p)} for k, p in applied],
+        "cameras": {},
+    }
+    placements = layout_placements("uav", scenario.layout)
+    with Scene(
+        "uav", scenario.layout, width=camera.width, height=camera.height, placements=placements
+    ) as scene:
+        for kind in ("dataset", "flight"):
+            rng = np.random.default_rng(seed)
+            frames: list[Any] = []
+            while len(frames) < n:
+                if kind == "dataset":
+                    scene.vary(rng)
+                    frame = scene.render(scene.random_camera(rng), light=scene.random_light(rng))
+                else:
+                    frame = scene.render(_flight_camera(scenario, rng, legs))
+                    if len(frame.boxes) == 0:
+                        continue
+                frames.append(frame)
+            truths = [
+                {"boxes": f.boxes, "labels": [detector.classes[int(k)] for k in f.labels],
+                 "ignore": f.ignore}
+                for f in frames
+            ]  # fmt: skip
+            rendered = [f.image for f in frames]
+            perturbed = []
+            for i, image in enumerate(rendered):
+                out_image = image
+                for name, params in applied:
+                    out_image = PHENOMENA.create(name).apply(out_image, params, i)
+                perturbed.append(out_image)
+            heights = np.concatenate([np.asarray(f.boxes).reshape(-1, 4) for f in frames])
+            entry: dict[str, Any] = {
+                "objects_per_view": round(sum(len(f.boxes) for f in frames) / n, 2),
+                "median_box_height_px": float(np.median(heights[:, 3] - heights[:, 1])),
+            }
+            for label, codec in (("rendered", None), ("through_camera", sent)):
+                if label == "through_camera" and codec is None:
+                    continue
+                counts = {}
+                for name, shown in (("clean", rendered), ("perturbed", perturbed)):
+                    images = shown if codec is None else [codec.apply(im) for im in shown]
+                    found: list[DetectionResult] = []
+                    for k in range(0, len(images), 16):
+                        found += detector.detect(images[k : k + 16])
+                    per = {
+                        i: count_frame(f, truths[i], detector.classes) for i, f in enumerate(found)
+                    }
+                    counts[name] = pooled(per, range(len(images)))
+                c, p = counts["clean"]["f1"], counts["perturbed"]["f1"]
+                drop = None if not c or p is None else round(max(0.0, (c - p) / c), 4)
+                entry[label] = {
+                    **counts,
+                    "encoding": "none" if codec is None else str(codec),
+                    "drop": drop,
+                    "category": None if drop is None else category_for_drop(drop),
+                }
+            out["cameras"][kind] = entry
+    return out
+
+
 # -- the script ----------------------------------------------------------------------------------
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
@@ -602,7 +811,26 @@ def main() -> None:
         "the scenario's last phenomena (repeatable)",
     )
     ap.add_argument("--split", default="test", help="the split of --data (test)")
+    ap.add_argument(
+        "--oracle",
+        action="append",
+        default=[],
+        metavar="MODEL=FILE",
+        help="also replay this oracle file of MODEL offline on the frames MODEL handled, "
+        "scored against the live scorer as replayed_oracle (repeatable; e.g. the oracle "
+        "shipped before, beside the one the run used)",
+    )
+    ap.add_argument(
+        "--views",
+        type=int,
+        default=0,
+        metavar="N",
+        help="also measure uav-fog under the scenario's last phenomena on N views of its town "
+        "from the datasets' camera and from the UAV's camera in flight, each as rendered and "
+        "through the camera's encoding",
+    )
     args = ap.parse_args()
+    replayed = dict(item.split("=", 1) for item in args.oracle)
     logging.getLogger("anunnaki.utu.notify").setLevel(logging.CRITICAL)
     load_before = list(os.getloadavg())
     t0 = time.perf_counter()
@@ -628,12 +856,23 @@ def main() -> None:
             tape.save(args.cache)
     registry = load_registry(managed.options.models)
     figures = analyse(
-        tape, scenario=scenario, registry=registry, options=scorer_options(args.launch)
+        tape,
+        scenario=scenario,
+        registry=registry,
+        options=scorer_options(args.launch),
+        replayed=replayed,
+        window=oracle_window(args.launch),
     )
     if args.data:
+        camera = scenario.camera
+        sent = CameraEncoding(camera.quality) if camera.encoding == "jpeg" else None
         figures["datasets"] = [
-            dataset_figures(d, args.split, scenario, registry) for d in args.data
+            dataset_figures(d, args.split, scenario, registry, encoding)
+            for d in args.data
+            for encoding in dict.fromkeys([None, sent])
         ]
+    if args.views:
+        figures["views"] = view_figures(scenario, registry, args.views)
     launch = args.launch.resolve()
     doc = {
         "benchmark": "uav_oracle",
@@ -663,10 +902,11 @@ def summary(doc: Mapping[str, Any]) -> str:
 
     def pair(e: Mapping[str, Any]) -> str:
         b, a = e["before"], e["after"]
-        half = e.get("split_half")
+        half, other = e.get("split_half"), e.get("replayed_oracle")
         return (
             f"before {b['agreement']} of {b['frames']}, after {a['agreement']} of {a['frames']}"
             + (f" (split-half {half['agreement']})" if half else "")
+            + (f"; replayed oracle {other['agreement']} of {other['frames']}" if other else "")
         )
 
     lines = [f"{k:<9} {pair(v)}" for k, v in doc["overall"].items()]

@@ -72,13 +72,14 @@ dataset() { # dataset NAME [make-dataset options]: NAME is the platform, or rove
 }
 
 ASSESS=() # more `assess` options for the next train's archives (the UAV's Enki models: 16 images)
+TAG=""    # appended to the next train's archive folders ($RUNS/MODEL-PHENOMENON$TAG)
 
 assess() { # assess MODEL PLATFORM PHENOMENON BUDGET: one Enlil archive
   local model=$1 platform=$2 phenomenon=$3 budget=$4
   timed "assess $model $phenomenon" "${ANUNNAKI[@]}" assess "$MODELS/$model.safetensors" \
     --data "$DATA/$platform" --phenomenon "$phenomenon" --budget "$budget" --seed "$SEED" \
-    --workers "$THREADS" "${ASSESS[@]}" --out "$RUNS/$model-$phenomenon" --json \
-    > "$RUNS/$model-$phenomenon.json"
+    --workers "$THREADS" "${ASSESS[@]}" --out "$RUNS/$model-$phenomenon$TAG" --json \
+    > "$RUNS/$model-$phenomenon$TAG.json"
 }
 
 EXTRA=() # more `oracle train` options for the next train (rover-default: --extra-data)
@@ -145,7 +146,7 @@ train() { # train MODEL PLATFORM REGISTRY BUDGET FRAMES EPOCHS PHENOMENON...
   local archives=()
   for phenomenon in "$@"; do
     assess "$model" "$platform" "$phenomenon" "$budget"
-    archives+=(--archive "$RUNS/$model-$phenomenon")
+    archives+=(--archive "$RUNS/$model-$phenomenon$TAG")
   done
   timed "oracle train $model" "${ANUNNAKI[@]}" oracle train --models "$registry" \
     --model "$model" --data "$DATA/$platform" "${archives[@]}" \
@@ -157,7 +158,7 @@ train() { # train MODEL PLATFORM REGISTRY BUDGET FRAMES EPOCHS PHENOMENON...
 DOMAINS=${DOMAINS:-runs/domains}
 domain_oracle() { # domain_oracle ID OWN OTHER: ID's oracle on its phenomenon OWN and OTHER
   local id=$1 own=$2
-  if [[ $STAGE == run && $PRINT_ARCH == 0 && ! -e $RUNS/$id-$own && -d $DOMAINS/$id/assess ]]; then
+  if [[ $STAGE == run && $PRINT_ARCH == 0 && -z $TAG && ! -e $RUNS/$id-$own && -d $DOMAINS/$id/assess ]]; then
     cp -r "$DOMAINS/$id/assess" "$RUNS/$id-$own"
   fi
   train "$id" uav "$MODELS/uav.yaml" 96 1500 8 "$own" "$3"
@@ -195,10 +196,19 @@ oracles() { # the models' oracles (one pass: STAGE above)
   # rain+brightness into fog, docs/uav.md). The settings of their chains' own assessment and
   # oracle: 96 evaluations of 16 images; 1,500 frames x 8 epochs. The archive of the model's
   # own phenomenon is the same search as its chain's assess stage: when $DOMAINS/ID/assess
-  # exists (train-domains.sh's work folder), it is copied rather than run again.
+  # exists (train-domains.sh's work folder), it is copied rather than run again, unless the
+  # oracle is assessed through the camera's encoding (a $TAG, below), which that search was not.
   # describe-domain.py then writes the new oracle's val figures into the entry's description.
-  ASSESS=(--batch-images 16)
+  # The UAV's camera sends JPEG at quality 90 (examples/uav/demo-scenario.yaml): uav-fog's
+  # oracle is assessed and trained through it (assess --encoding; oracle train follows the
+  # archives), for in fog the JPEG costs uav-fog more F1 than the fog alone (docs/uav.md, "The
+  # oracle against the ground truth"). Its archives are searched in folders of their own
+  # ($RUNS/uav-fog-fog-jpeg90 …): one assessed without the encoding does not resume into them.
+  ASSESS=(--batch-images 16 --encoding jpeg:90)
+  TAG=-jpeg90
   pick uav-fog && domain_oracle uav-fog fog rain+brightness
+  ASSESS=(--batch-images 16)
+  TAG=""
   pick uav-rain_brightness && domain_oracle uav-rain_brightness rain+brightness fog
   ASSESS=()
 }

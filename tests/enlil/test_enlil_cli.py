@@ -121,3 +121,22 @@ def test_a_misspelt_model_is_named_not_its_sidecar(
         f"error: {typo}: model file not found (hint: did you mean {MODEL}?)"
     )
     assert not (tmp_path / "out").exists()
+
+
+def test_assess_through_the_cameras_encoding_and_train_through_the_same(
+    tiny: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Issue 34 item 8: a camera that sends JPEG is assessed through it (``--encoding``), the
+    archive says so, and ``oracle train`` follows it or refuses frames of another encoding."""
+    args = [*_args(tiny, tmp_path / "j", 2), "--encoding", "jpeg", "--json"]
+    assert main(args) == 0
+    assert json.loads(capsys.readouterr().out)["encoding"] == "jpeg:90"
+    assert read_archive(tmp_path / "j").meta.encoding == "jpeg:90"
+    train = ["oracle", "train", "--models", str(MODEL), "--data", str(tiny),
+             "--archive", str(tmp_path / "j"), "--out", str(tmp_path / "o")]  # fmt: skip
+    assert main([*train, "--encoding", "none"]) == 2
+    err = capsys.readouterr().err
+    assert "was assessed through jpeg:90" in err and "--encoding none" in err
+    assert not list(tmp_path.glob("o*"))
+    assert main([*_args(tiny, tmp_path / "bad", 2), "--encoding", "png"]) == 2
+    assert "PNG is lossless" in capsys.readouterr().err

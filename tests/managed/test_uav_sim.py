@@ -6,9 +6,11 @@ short delivery from the ground: a fast climb, one waypoint, rain under changed l
 (rain+brightness) from t = 3 s to 6 s, dense fog from t = 7 s, and a battery that starts
 draining fast at t = 10 s. The UAV takes off (no tactic keeps it on the ground: G3 applies
 only while it cruises), Utu swaps in the Enki rain+brightness model, then, named by that
-model's own oracle, the fog model (G6 holds again after each), and the draining battery
-makes it return home: G11 (RELAX-ed, utility 0.5 at 30 %) fails on the way to obstacle O2
-(20 %), G8 then holds only through G10.
+model's own oracle, the fog model (G6 holds again after each). In the dense fog at cruise
+uav-fog itself loses over 10 % F1 through the camera's JPEG: its oracle (trained through
+the same encoding, issue 34 item 8) calls it compromised, as the live scorer does, and
+Failsafe F-1 hovers the UAV. The draining battery then makes it return home: G11 (RELAX-ed,
+utility 0.5 at 30 %) fails on the way to obstacle O2 (20 %), G8 then holds only through G10.
 """
 
 from __future__ import annotations
@@ -77,6 +79,7 @@ def run_short(tmp: Path, scenario: dict[str, Any]) -> dict[str, Any]:
     )
     statuses: list[dict[str, Any]] = []
     scored: list[Assessment] = []
+    said: list[Assessment] = []
     clean: list[int] = []
     lock = threading.Lock()
 
@@ -87,6 +90,10 @@ def run_short(tmp: Path, scenario: dict[str, Any]) -> dict[str, Any]:
     def keep_score(sample: Any) -> None:
         with lock:
             scored.append(sample.message)
+
+    def keep_said(sample: Any) -> None:
+        with lock:
+            said.append(sample.message)
 
     def keep_clean(sample: Any) -> None:
         with lock:
@@ -100,6 +107,7 @@ def run_short(tmp: Path, scenario: dict[str, Any]) -> dict[str, Any]:
         dashboard.attach(bus)
         bus.subscribe("/uav/status", keep, queue=1024)
         bus.subscribe(topics.SCORER, keep_score, queue=1024)
+        bus.subscribe(topics.ORACLE_OUTPUT, keep_said, queue=1024)
         bus.subscribe(topics.CLEAN_FRAMES, keep_clean, queue=1024)
 
     out = io.StringIO()
@@ -110,13 +118,14 @@ def run_short(tmp: Path, scenario: dict[str, Any]) -> dict[str, Any]:
     finally:
         dashboard.close()
     with lock:
-        seen, scores, renders = list(statuses), list(scored), list(clean)
+        seen, scores, renders, oracle = list(statuses), list(scored), list(clean), list(said)
     return {
         "result": result,
         "log": out.getvalue(),
         "statuses": seen,
         "snapshot": snapshot,
         "scorer": scores,
+        "oracle": oracle,
         "clean": renders,
     }
 
@@ -171,8 +180,12 @@ def test_fog_near_the_target_swaps_in_uav_fog(short_run: dict[str, Any]) -> None
     verified = [d.tactic for d in result.decisions if d.kind == "postcondition_ok"]
     assert "swap-to-robust-model" in verified, log  # G6 holds again: G9 resolves O1
     assert "uav-fog" in log
-    # no fail-safe: each condition was met by its model, none left the detector untrusted
-    assert "failsafe-f1" not in [tactic for _, tactic in started(short_run)], log
+    # but uav-fog's own oracle then calls the dense fog compromised (the scorer agrees, below):
+    # G5 fails and Failsafe F-1 hovers the UAV, once, soon after the swap
+    failsafe = [t for t, tactic in started(short_run) if tactic == "failsafe-f1"]
+    assert len(failsafe) == 1 and fog[0][0] < failsafe[0] < fog[0][0] + 3.0, log
+    hover = [s["t"] for s in short_run["statuses"] if s["mode"] == "hover"]
+    assert hover and failsafe[0] <= hover[0] < failsafe[0] + 0.5, log
 
 
 @pytest.mark.timeout(600)
@@ -193,6 +206,23 @@ def test_the_live_scorer_compares_uav_fog_with_the_frames_without_fog(
     compromised = [a.frame_seq for a in fog if a.category == 2]
     assert len(compromised) >= 20, [(a.frame_seq, a.category) for a in fog]
     assert all(a.confidence >= 20 / 30 for a in short_run["scorer"])  # min_frames / window
+
+
+@pytest.mark.timeout(600)
+def test_uav_fog_s_oracle_agrees_with_the_scorer_in_the_dense_fog(
+    short_run: dict[str, Any],
+) -> None:
+    """Issue 34 item 8: uav-fog's oracle said "degraded" (a 4 % drop) where its live scorer
+    said compromised: its contexts had been measured, and it had been trained, on frames
+    that never went through the camera's JPEG, which takes more from a fogged frame than
+    the fog alone. Trained through the camera's encoding, it agrees with the scorer on the
+    frames both assessed while uav-fog flew in the dense fog."""
+    scorer = {a.frame_seq: a.category for a in short_run["scorer"] if a.model_id == "uav-fog"}
+    oracle = {a.frame_seq: a.category for a in short_run["oracle"] if a.model_id == "uav-fog"}
+    both = sorted(set(scorer) & set(oracle))
+    assert len(both) >= 30, (scorer, oracle)
+    agree = sum(scorer[s] == oracle[s] for s in both)
+    assert agree >= 0.9 * len(both), [(s, scorer[s], oracle[s]) for s in both]
 
 
 @pytest.mark.timeout(600)

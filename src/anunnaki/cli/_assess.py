@@ -51,6 +51,14 @@ def add_parser(sub: Any) -> None:
     p.add_argument("--split", default="val", help="split of the fixed batch (val)")
     p.add_argument("--batch-images", type=int, default=32, help="images per evaluation (32)")
     p.add_argument("--round", type=int, default=16, help="contexts per search round (16)")
+    p.add_argument(
+        "--encoding",
+        default="",
+        metavar="jpeg:Q|none",
+        help="the camera's encoding every frame goes through after the phenomenon, the clean "
+        "batch's too: jpeg:90 for a camera that sends JPEG at quality 90, as the scenarios' "
+        "(none: the frames as stored; the archive records it, oracle train follows it)",
+    )
     p.add_argument("--workers", type=int, default=2, help="local processes (2)")
     p.add_argument("--dask", help="Dask scheduler address, e.g. tcp://HOST:8786")
     p.add_argument(
@@ -95,6 +103,7 @@ def _run_assess(args: argparse.Namespace) -> int:
         thresholds=(float(args.thresholds[0]), float(args.thresholds[1])),
         model_id=args.model_id,
         shared_classes=args.shared_classes,
+        encoding=args.encoding,
     )
     counted = _counted(args, model)
     out = _out(args, model)
@@ -120,6 +129,7 @@ def _run_assess(args: argparse.Namespace) -> int:
             meta_extra={"classes": counted} if args.shared_classes else None,
         )
     summary = {**outcome.summary, "archive": str(out), "resumed": outcome.resumed}
+    summary["encoding"] = job.encoding or "none"
     summary |= {"model_id": model.model_id, "model_file": str(model.file),
                 "model_sha256": model.sha256, **counted}  # fmt: skip
     if args.plot:

@@ -67,6 +67,13 @@ def add_parser(sub: Any) -> None:
         "e.g. one made by make-dataset --no-clutter",
     )
     t.add_argument(
+        "--encoding",
+        metavar="jpeg:Q|none",
+        help="the camera encoding every frame goes through after its phenomenon, clean ones "
+        "too (default: the one the archives were assessed through, assess --encoding; with "
+        "--random, none)",
+    )
+    t.add_argument(
         "--no-lookup",
         dest="lookup",
         action="store_false",
@@ -97,9 +104,10 @@ def run_train(args: argparse.Namespace) -> int:
     model = resolve_model(args.models, args.model)
     console = _console()
     sets = [contexts_from_archive(a) for a in args.archive]
+    encoding = _encoding(args.encoding, sets)
     counted = None
     if args.random:
-        sets, counted = _random_sets(args, model, console)
+        sets, counted = _random_sets(args, model, console, encoding)
     for warning in _no_degraded(sets):
         console.print(warning, style="yellow", soft_wrap=True)
     config = OracleTrainConfig(
@@ -110,6 +118,7 @@ def run_train(args: argparse.Namespace) -> int:
         threads=args.threads,
         lookup=args.lookup,
         architecture=args.architecture,
+        encoding=encoding,
         extra={"extra_data": list(args.extra_data)} if args.extra_data else {},
     )
     with _bar(console) as bar:
@@ -230,22 +239,58 @@ def _bar(console: Any) -> Any:
     return Progress(*columns, TimeElapsedColumn(), console=console)
 
 
-def _random_sets(args: argparse.Namespace, model: Any, console: Any) -> tuple[list[Any], Any]:
-    """``--random N``: N uniform contexts per phenomenon measured on a val batch (MC baseline)."""
+def _encoding(given: str | None, sets: list[Any]) -> str:
+    """``--encoding``, or the archives' (they must agree): the frames' camera encoding."""
+    from anunnaki.enlil import EnlilError
+    from anunnaki.phenomena import CameraEncoding
+
+    if given is None:
+        found = {s.encoding for s in sets}
+        if len(found) > 1:
+            listed = ", ".join(f"{s.source}: {s.encoding or 'none'}" for s in sets)
+            raise EnlilError(
+                f"oracle train: the archives were assessed through different camera encodings "
+                f"({listed}); assess them again with the same --encoding"
+            )
+        return found.pop() if found else ""
+    parsed = CameraEncoding.parse(given)
+    spec = "" if parsed is None else str(parsed)
+    for s in sets:
+        if s.encoding != spec:
+            raise EnlilError(
+                f"oracle train --encoding {given}: {s.source} was assessed through "
+                f"{s.encoding or 'none'}; its categories hold for that encoding only "
+                f"(leave --encoding out, or assess again with --encoding {given})"
+            )
+    return spec
+
+
+def _random_sets(
+    args: argparse.Namespace, model: Any, console: Any, encoding: str
+) -> tuple[list[Any], Any]:
+    """``--random N``: N uniform contexts per phenomenon measured on a val batch (MC baseline).
+
+    They are measured through the camera's *encoding* (``""``: none).
+    """
     from anunnaki.enlil import fixed_batch, random_contexts
     from anunnaki.lec import DetectorError, evaluate_detector
+    from anunnaki.phenomena import CameraEncoding
+
+    codec = CameraEncoding.parse(encoding)
 
     detector = model.load()
     batch = fixed_batch(args.data, "val", 32, seed=args.seed)
     counted = classes_counted(detector, batch)
     try:
         detector, batch = shared_view(args, detector, batch)
-        clean = float(evaluate_detector(detector, batch).f1)
+        clean = float(evaluate_detector(detector, batch, encoding=codec).f1)
     except DetectorError as exc:
         raise DetectorError(f"{args.models}: model {model.model_id!r}: {exc}") from None
     console.print(classes_line(counted))
     sets = [
-        random_contexts(detector, batch, p, args.random, clean_f1=clean, seed=args.seed)
+        random_contexts(
+            detector, batch, p, args.random, clean_f1=clean, seed=args.seed, encoding=codec
+        )
         for p in args.phenomenon
     ]
     return sets, counted
@@ -401,6 +446,13 @@ def _add_evaluate(osub: Any) -> None:
         "--thresholds", type=float, nargs=2, default=[0.05, 0.10], metavar=("DEG", "COMP")
     )
     e.add_argument("--seed", type=int, default=0)
+    e.add_argument(
+        "--encoding",
+        metavar="jpeg:Q|none",
+        help="the camera encoding every frame goes through after the phenomenon, for the "
+        "contexts' categories and the frames predicted on (default: the one the oracles were "
+        "trained through, oracle train --encoding; none for an oracle trained without)",
+    )
     e.add_argument("--threads", type=int, default=0, help="torch threads (0: torch's default)")
     e.add_argument("--json", action="store_true", help="print one JSON object")
     e.set_defaults(run=run_evaluate)
@@ -433,6 +485,28 @@ def _oracles(args: argparse.Namespace, model: Any) -> dict[str, Any]:
     return out
 
 
+def _trained_encoding(oracle: Any) -> str:
+    """The camera encoding an oracle's frames went through in training (``""``: none)."""
+    return str((oracle.card.training or {}).get("config", {}).get("encoding") or "")
+
+
+def _evaluate_encoding(given: str | None, oracles: dict[str, Any]) -> Any:
+    """``--encoding``, or the one every evaluated oracle was trained through."""
+    from anunnaki.enlil import EnlilError
+    from anunnaki.phenomena import CameraEncoding
+
+    if given is not None:
+        return CameraEncoding.parse(given)
+    trained = {n: _trained_encoding(o) for n, o in oracles.items()}
+    if len(set(trained.values())) > 1:
+        listed = ", ".join(f"{n}: {e or 'none'}" for n, e in trained.items())
+        raise EnlilError(
+            f"oracle evaluate: the oracles were trained through different camera encodings "
+            f"({listed}); say which frames to score them on with --encoding"
+        )
+    return CameraEncoding.parse(next(iter(trained.values()), ""))
+
+
 def run_evaluate(args: argparse.Namespace) -> int:
     """Score the oracle(s) and baselines; print the figures (JSON with --json)."""
     from anunnaki.datasets import load_split
@@ -449,6 +523,7 @@ def run_evaluate(args: argparse.Namespace) -> int:
         torch.set_num_threads(args.threads)
     model = resolve_model(args.models, args.model)
     oracles = _oracles(args, model)
+    encoding = _evaluate_encoding(args.encoding, oracles)
     detector = model.load()
     data = load_split(args.data, args.split)
     counted = classes_counted(detector, data)
@@ -470,6 +545,7 @@ def run_evaluate(args: argparse.Namespace) -> int:
         seed=args.seed,
         ceiling=args.ceiling,
         interior=args.interior,
+        encoding=encoding,
     )
     report = {
         "model_id": model.model_id,

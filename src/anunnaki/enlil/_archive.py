@@ -51,6 +51,7 @@ RESUME_KEYS = (
     "thresholds",
     "search",
     "batch_images",
+    "encoding",
 )
 
 
@@ -81,6 +82,9 @@ class ArchiveMeta:
         batch_images: Images in the fixed batch.
         clean_f1: The model's F1 on the clean batch.
         extra: Anything else a strategy records (JSON-safe).
+        encoding: The camera encoding every frame went through after the phenomenon, the
+            clean batch's too (``jpeg:90``; ``""``: none, the frames as stored;
+            :class:`anunnaki.phenomena.CameraEncoding`).
 
     """
 
@@ -97,6 +101,7 @@ class ArchiveMeta:
     batch_images: int
     clean_f1: float
     extra: Mapping[str, Any] = field(default_factory=dict)
+    encoding: str = ""
 
     def as_dict(self) -> dict[str, Any]:
         """JSON-safe dict (tuples become lists)."""
@@ -133,6 +138,7 @@ class ArchiveMeta:
                 batch_images=int(data["batch_images"]),
                 clean_f1=float(data["clean_f1"]),
                 extra=dict(data.get("extra") or {}),
+                encoding=str(data.get("encoding") or ""),
             )
         except (KeyError, TypeError, ValueError, IndexError) as exc:
             raise EnlilError(

@@ -21,7 +21,7 @@ from anunnaki.datasets import Dataset, load_split
 from anunnaki.errors import AnunnakiError
 from anunnaki.lec import Detector
 from anunnaki.oracles import category_for_drop
-from anunnaki.phenomena import PHENOMENA, Phenomenon
+from anunnaki.phenomena import PHENOMENA, CameraEncoding, Phenomenon
 
 __all__ = [
     "ContextResult",
@@ -160,6 +160,7 @@ def evaluate_context(
     clean_f1: float,
     thresholds: tuple[float, float] = (0.05, 0.10),
     seed: int,
+    encoding: CameraEncoding | None = None,
     **kwargs: Any,
 ) -> ContextResult:
     """Measure one context: the model's F1 on *batch* perturbed by *phenomenon* at *vector*.
@@ -172,6 +173,8 @@ def evaluate_context(
         clean_f1: The model's F1 on the unperturbed batch (the reference of the drop).
         thresholds: Relative drops above which the category is 1 and 2.
         seed: Image *i* of the batch gets the phenomenon with seed ``seed + i``.
+        encoding: The camera's encoding, applied after the phenomenon (*clean_f1* must
+            have been measured through it too).
         **kwargs: Passed to :func:`anunnaki.lec.evaluate_detector` (``iou``, ``batch_size``).
 
     Raises:
@@ -182,7 +185,7 @@ def evaluate_context(
     unit = _check_unit(phen, vector)
     params = phen.from_vector(to_phenomenon_vector(phen, unit))
     metrics = lec.evaluate_detector(
-        detector, batch, phenomenon=phen, params=params, seed=seed, **kwargs
+        detector, batch, phenomenon=phen, params=params, seed=seed, encoding=encoding, **kwargs
     )
     f1 = float(metrics.f1)
     drop = relative_drop(clean_f1, f1)

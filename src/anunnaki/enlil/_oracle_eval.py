@@ -48,7 +48,7 @@ from anunnaki.enlil._oracle_metrics import (
 from anunnaki.enlil._oracle_net import OracleModel
 from anunnaki.enlil._sweep import ContextSpec, draw_contexts
 from anunnaki.lec import Detector
-from anunnaki.phenomena import Phenomenon
+from anunnaki.phenomena import CameraEncoding, Phenomenon
 
 __all__ = [
     "BASELINES",
@@ -207,6 +207,7 @@ def held_out_frames(
     seed: int = 0,
     max_draws: int | None = None,
     margin: float = 0.0,
+    encoding: CameraEncoding | None = None,
     **kwargs: Any,
 ) -> HeldOut:
     """Draw and measure contexts on *data*, then perturb ``per_context`` frames with each.
@@ -222,6 +223,8 @@ def held_out_frames(
         seed: Contexts, frames and phenomenon seeds derive from it.
         max_draws: See :func:`anunnaki.enlil.draw_contexts`.
         margin: For ``interior:N``: how far from a band edge a context's drop must lie.
+        encoding: The camera's encoding, after the phenomenon, on every frame measured or
+            predicted on (the clean batch's too).
         **kwargs: Passed to :func:`anunnaki.lec.evaluate_detector` (``score_threshold``).
 
     """
@@ -229,10 +232,10 @@ def held_out_frames(
         raise EnlilError(f"frames per context must be at least 1, got {per_context}")
     phen = resolve_phenomenon(phenomenon)
     batch = fixed_batch(data, n=batch_images, seed=seed)
-    clean_f1 = float(lec.evaluate_detector(detector, batch, **kwargs).f1)
+    clean_f1 = float(lec.evaluate_detector(detector, batch, encoding=encoding, **kwargs).f1)
     drawn = draw_contexts(
         detector, batch, phen, spec, clean_f1=clean_f1, thresholds=thresholds, seed=seed,
-        max_draws=max_draws, margin=margin, **kwargs,
+        max_draws=max_draws, margin=margin, encoding=encoding, **kwargs,
     )  # fmt: skip
     if not drawn.results:
         raise EnlilError(f"{phen.name}: no context could be drawn for {spec}")
@@ -241,7 +244,8 @@ def held_out_frames(
     for result in drawn.results:
         params = phen.from_vector(to_phenomenon_vector(phen, result.params))
         for i in rng.integers(len(data), size=per_context):
-            frames.append(phen.apply(data.image(int(i)), params, seed=int(rng.integers(2**31))))
+            frame = phen.apply(data.image(int(i)), params, seed=int(rng.integers(2**31)))
+            frames.append(frame if encoding is None else encoding.apply(frame))
     index = np.repeat(np.arange(len(drawn.results)), per_context)
     labels = np.asarray([r.category for r in drawn.results], np.int64)[index]
     return HeldOut(
@@ -259,6 +263,7 @@ def retest_contexts(
     thresholds: tuple[float, float] = (0.05, 0.10),
     seed: int = 0,
     score_threshold: float | None = None,
+    encoding: CameraEncoding | None = None,
 ) -> HeldOut:
     """*held* with its contexts measured once more (:attr:`HeldOut.retest`).
 
@@ -277,11 +282,15 @@ def retest_contexts(
             "(--no-ceiling)"
         )
     batch = fixed_batch(rest, n=batch_images, seed=seed + 2)
-    clean = float(lec.evaluate_detector(detector, batch, score_threshold=score_threshold).f1)
+    clean = float(
+        lec.evaluate_detector(
+            detector, batch, score_threshold=score_threshold, encoding=encoding
+        ).f1
+    )
     again = [
         evaluate_context(
             detector, batch, held.phenomenon, r.params, clean_f1=clean, thresholds=thresholds,
-            seed=seed, score_threshold=score_threshold,
+            seed=seed, score_threshold=score_threshold, encoding=encoding,
         )
         for r in held.contexts
     ]  # fmt: skip
@@ -768,6 +777,7 @@ def fit_baselines(
     thresholds: tuple[float, float] = (0.05, 0.10),
     seed: int = 0,
     score_threshold: float | None = None,
+    encoding: CameraEncoding | None = None,
 ) -> tuple[dict[Baseline, BaselineFit], dict[str, Any]]:
     """Fit the detector-output *baselines* on the val split (see :func:`fit_baseline`).
 
@@ -777,11 +787,17 @@ def fit_baselines(
     """
     held = held_out_frames(
         detector, val, phenomenon, spec, per_context=per_context, batch_images=batch_images,
-        seed=seed, thresholds=thresholds, score_threshold=score_threshold,
+        seed=seed, thresholds=thresholds, score_threshold=score_threshold, encoding=encoding,
     )  # fmt: skip
     clean = fixed_batch(val, n=4 * batch_images, seed=seed + 1)
-    clean_f1 = float(lec.evaluate_detector(detector, clean, score_threshold=score_threshold).f1)
+    clean_f1 = float(
+        lec.evaluate_detector(
+            detector, clean, score_threshold=score_threshold, encoding=encoding
+        ).f1
+    )
     frames = [clean.image(i) for i in range(len(clean))]
+    if encoding is not None:
+        frames = [encoding.apply(f) for f in frames]
     fits = {
         kind: fit_baseline(kind, detector, frames, clean_f1, held, window=window)
         for kind in baselines
@@ -808,6 +824,7 @@ def evaluate_oracles(
     score_threshold: float | None = None,
     ceiling: bool = True,
     interior: bool = True,
+    encoding: CameraEncoding | None = None,
 ) -> dict[str, Any]:
     """Score oracles and detector-output baselines on the same held-out frames.
 
@@ -834,6 +851,9 @@ def evaluate_oracles(
         interior: With *ceiling* and a ``balanced`` *spec*: also a balanced set drawn from
             each category's interior (drops farther from a band edge than the measured
             drop noise), scored the same way, under ``interior``.
+        encoding: The camera's encoding every frame goes through after the phenomenon
+            (contexts measured, frames predicted on, the baselines' fits): the figures for
+            a camera that sends JPEG.
 
     Returns:
         ``{"phenomenon", "test": contexts info, "predictors": name → figures
@@ -845,7 +865,7 @@ def evaluate_oracles(
     phen = resolve_phenomenon(phenomenon)
     kw: dict[str, Any] = {
         "per_context": per_context, "batch_images": batch_images, "thresholds": thresholds,
-        "score_threshold": score_threshold,
+        "score_threshold": score_threshold, "encoding": encoding,
     }  # fmt: skip
     if fits is None and baselines and val is not None:
         fspec = fit_spec or ContextSpec("balanced", spec.n)
@@ -859,7 +879,7 @@ def evaluate_oracles(
         if ceiling:
             held = retest_contexts(
                 detector, test, held, batch_images=batch_images, thresholds=thresholds,
-                seed=seed, score_threshold=score_threshold,
+                seed=seed, score_threshold=score_threshold, encoding=encoding,
             )  # fmt: skip
         part: dict[str, Any] = {"test": _held_info(held, spec)}
         preds = {
@@ -874,6 +894,7 @@ def evaluate_oracles(
 
     held = held_out_frames(detector, test, phen, spec, seed=seed, **kw)
     report: dict[str, Any] = {"phenomenon": phen.name} | score(held)
+    report["encoding"] = "none" if encoding is None else str(encoding)
     if fit_info is not None:
         report["fit"] = fit_info
     if ceiling and interior and spec.kind == "balanced":

@@ -9,6 +9,12 @@ only) and which phenomenon it is (``clear`` or one of those covered: a tactic re
 the perceived context, also when the oracle covers one phenomenon). A temperature fitted on
 val frames (perturbed the same way, with val-split frames and other seeds) calibrates the
 confidence.
+
+An oracle for a camera that sends JPEG learns from frames that went through the same
+encoding after the phenomenon (``OracleTrainConfig.encoding``, clean frames too): its
+contexts' categories must have been measured through it as well (``anunnaki assess
+--encoding``; the archive records it, and :func:`train_oracle` refuses contexts measured
+through another encoding than the frames it trains on).
 """
 
 from __future__ import annotations
@@ -51,6 +57,7 @@ from anunnaki.enlil._oracle_net import (
     frames_to_uint8,
 )
 from anunnaki.lec import Detector
+from anunnaki.phenomena import CameraEncoding
 
 __all__ = [
     "ContextSet",
@@ -85,6 +92,8 @@ class ContextSet:
         source: Where they come from (``archive:PATH``, ``random``).
         drops: ``[N]`` the measured relative F1 drops (what the categories come from), or
             ``None`` when unknown (then the oracle gets no context lookup).
+        encoding: The camera encoding the contexts were measured through (``jpeg:90``;
+            ``""``: none).
 
     """
 
@@ -94,6 +103,7 @@ class ContextSet:
     categories: npt.NDArray[np.int64]
     source: str = ""
     drops: npt.NDArray[np.float64] | None = None
+    encoding: str = ""
 
     def __post_init__(self) -> None:
         if len(self.params) == 0:
@@ -128,6 +138,7 @@ def contexts_from_archive(path: str) -> ContextSet:
         np.asarray(archive.categories, np.int64),
         f"archive:{path}",
         np.asarray(archive.drop, np.float64),
+        archive.meta.encoding,
     )
 
 
@@ -137,11 +148,18 @@ def merge_context_sets(sets: Sequence[ContextSet]) -> list[ContextSet]:
     E.g. an Enlil archive and a random (Monte-Carlo) archive of the same phenomenon.
 
     Raises:
-        EnlilError: Two sets of one phenomenon name different parameters.
+        EnlilError: Two sets of one phenomenon name different parameters, or any two sets
+            were measured through different camera encodings.
 
     """
     merged: dict[str, list[ContextSet]] = {}
     for cset in sets:
+        if cset.encoding != sets[0].encoding:
+            raise EnlilError(
+                f"{cset.source} was measured through the camera encoding "
+                f"{cset.encoding or 'none'!r}, {sets[0].source} through "
+                f"{sets[0].encoding or 'none'!r}; assess them again with the same --encoding"
+            )
         group = merged.setdefault(cset.phenomenon, [])
         if group and group[0].param_names != cset.param_names:
             raise EnlilError(
@@ -162,6 +180,7 @@ def merge_context_sets(sets: Sequence[ContextSet]) -> list[ContextSet]:
             None
             if any(g.drops is None for g in group)
             else np.concatenate([g.drops for g in group if g.drops is not None]),
+            group[0].encoding,
         )
         for name, group in merged.items()
     ]
@@ -176,20 +195,32 @@ def random_contexts(
     clean_f1: float,
     thresholds: tuple[float, float] = (0.05, 0.10),
     seed: int = 0,
+    encoding: CameraEncoding | None = None,
 ) -> ContextSet:
-    """*n* uniformly random contexts measured on *batch*: the Monte-Carlo baseline's data."""
+    """*n* uniformly random contexts measured on *batch*: the Monte-Carlo baseline's data.
+
+    With *encoding* they are measured through the camera's encoding (*clean_f1* must be too).
+    """
     phen = resolve_phenomenon(phenomenon)
     rng = np.random.default_rng(seed)
     units = rng.random((n, len(phen.param_names)))
     results = [
         evaluate_context(
-            detector, batch, phen, u, clean_f1=clean_f1, thresholds=thresholds, seed=seed
+            detector,
+            batch,
+            phen,
+            u,
+            clean_f1=clean_f1,
+            thresholds=thresholds,
+            seed=seed,
+            encoding=encoding,
         )
         for u in units
     ]
     cats = np.asarray([r.category for r in results], np.int64)
     drops = np.asarray([r.drop for r in results], np.float64)
-    return ContextSet(phenomenon, tuple(phen.param_names), units, cats, "random", drops)
+    spec = "" if encoding is None else str(encoding)
+    return ContextSet(phenomenon, tuple(phen.param_names), units, cats, "random", drops, spec)
 
 
 @dataclass
@@ -239,6 +270,7 @@ def perturbed_frames(
     clean_fraction: float = 0.2,
     balanced: bool = True,
     seed: int = 0,
+    encoding: CameraEncoding | None = None,
 ) -> LabelledFrames:
     """*n* frames of *data*, each clean or perturbed by one context of one of *sets*.
 
@@ -250,10 +282,12 @@ def perturbed_frames(
         balanced: Draw a category first, then a context of it (the archive's rare category
             1 is seen as often as the others); else contexts uniformly.
         seed: Frames, contexts and the phenomena's seeds derive from it.
+        encoding: The camera's encoding every frame goes through last, clean ones too.
 
     """
     if len(data) == 0:
         raise EnlilError("perturbed_frames: the split has no images")
+    sent = (lambda image: image) if encoding is None else encoding.apply
     rng = np.random.default_rng(seed)
     width = max(len(s.param_names) for s in sets)
     phens = [resolve_phenomenon(s.phenomenon) for s in sets]
@@ -269,7 +303,7 @@ def perturbed_frames(
     for i in range(n):
         image = data.image(int(rng.integers(len(data))))
         if rng.random() < clean_fraction:
-            out.frames.append(image)
+            out.frames.append(sent(image))
             continue
         which = int(rng.integers(len(sets)))
         unit, cat, rows[i] = _pick_context(rng, sets[which], balanced)
@@ -277,7 +311,7 @@ def perturbed_frames(
         drops[i] = math.nan if measured is None else measured[rows[i]]
         phen = phens[which]
         params = phen.from_vector(to_phenomenon_vector(phen, unit))
-        out.frames.append(phen.apply(image, params, seed=int(rng.integers(2**31))))
+        out.frames.append(sent(phen.apply(image, params, seed=int(rng.integers(2**31)))))
         d = len(unit)
         out.category[i], out.phenomenon[i] = cat, which + 1
         out.params[i, :d], out.params_mask[i, :d] = unit, 1.0
@@ -313,6 +347,8 @@ class OracleTrainConfig:
         choice_fraction: Share of the val frames the calibration (temperatures, the
             lookup's mix, category 1's boost, the drop's line) is chosen on; the card's val
             figures come from the rest, which nothing was chosen on.
+        encoding: The camera encoding every train and val frame goes through after its
+            phenomenon (``jpeg:90``; ``""``: none): the contexts' must be the same.
 
     """
 
@@ -334,6 +370,7 @@ class OracleTrainConfig:
     drop_head: bool = True
     drop_weight: float = 4.0
     choice_fraction: float = 0.5
+    encoding: str = ""
     extra: dict[str, Any] = field(default_factory=dict)
 
 
@@ -520,6 +557,20 @@ def choose_lookup_mix(
     return lookup.spec(weight, boost, {"split": "val", "frames": len(val.category), "macro_f1": f1})
 
 
+def _frames_encoding(sets: Sequence[ContextSet], spec: str) -> CameraEncoding | None:
+    """The frames' camera encoding, which must be the one the contexts were measured through."""
+    encoding = CameraEncoding.parse(spec)
+    spec = "" if encoding is None else str(encoding)
+    if sets[0].encoding != spec:
+        raise EnlilError(
+            f"train_oracle: the contexts of {sets[0].source} were measured through the camera "
+            f"encoding {sets[0].encoding or 'none'!r}, the frames would go through "
+            f"{spec or 'none'!r}; train with encoding={sets[0].encoding!r} "
+            "(oracle train --encoding) or assess again with the frames' encoding"
+        )
+    return encoding
+
+
 def train_oracle(
     train: Dataset,
     val: Dataset,
@@ -545,6 +596,7 @@ def train_oracle(
         raise EnlilError("train_oracle: give at least one set of contexts (an archive)")
     cfg = config or OracleTrainConfig()
     sets = merge_context_sets(sets)
+    encoding = _frames_encoding(sets, cfg.encoding)
     drop_head = cfg.drop_head and all(s.drops is not None for s in sets)
     torch = _torch()
     if cfg.threads:
@@ -566,11 +618,15 @@ def train_oracle(
     step = progress or (lambda stage, done, total: None)
     frac, bal = cfg.clean_fraction, cfg.balanced
     step("frames", 0, 2)
-    tr = perturbed_frames(train, sets, cfg.frames, clean_fraction=frac, balanced=bal, seed=cfg.seed)
+    tr = perturbed_frames(
+        train, sets, cfg.frames, clean_fraction=frac, balanced=bal, seed=cfg.seed,
+        encoding=encoding,
+    )  # fmt: skip
     step("frames", 1, 2)
     va = perturbed_frames(
-        val, sets, cfg.val_frames, clean_fraction=frac, balanced=bal, seed=cfg.seed + 1_000_003
-    )
+        val, sets, cfg.val_frames, clean_fraction=frac, balanced=bal, seed=cfg.seed + 1_000_003,
+        encoding=encoding,
+    )  # fmt: skip
     step("frames", 2, 2)
     lookup = fit_lookup(sets, thresholds=thresholds) if cfg.lookup else None
     soft = soft_targets(lookup, sets, tr) if lookup is not None and cfg.soft_labels else None

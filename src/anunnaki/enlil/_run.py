@@ -25,7 +25,7 @@ from anunnaki.enlil._archive import Archive, ArchiveMeta, ArchiveWriter, read_ar
 from anunnaki.enlil._context import ContextResult, EnlilError, evaluate_context, fixed_batch
 from anunnaki.enlil._search import SEARCHES, Search
 from anunnaki.lec import Detector
-from anunnaki.phenomena import reuse_fog_noise
+from anunnaki.phenomena import CameraEncoding, reuse_fog_noise
 
 __all__ = [
     "Job",
@@ -53,6 +53,9 @@ class Job:
         model_id: With a registry: which of its models (default: its default model).
         shared_classes: Measure on the classes the model and the data share
             (:func:`anunnaki.lec.shared_classes`) instead of refusing other class lists.
+        encoding: The camera's encoding (``jpeg:90``; ``""`` none) every frame goes
+            through after the phenomenon, the clean batch's too
+            (:class:`anunnaki.phenomena.CameraEncoding`).
 
     """
 
@@ -65,6 +68,12 @@ class Job:
     thresholds: tuple[float, float] = (0.05, 0.10)
     model_id: str | None = None
     shared_classes: bool = False
+    encoding: str = ""
+
+    def __post_init__(self) -> None:
+        # a bad spec fails here, in the caller, not in every worker; kept in its one spelling
+        parsed = CameraEncoding.parse(self.encoding)
+        object.__setattr__(self, "encoding", "" if parsed is None else str(parsed))
 
     def key(self) -> str:
         """Cache key of the loaded model and batch in a worker."""
@@ -73,6 +82,7 @@ class Job:
         ]
         parts += [self.data if isinstance(self.data, str) else id(self.data)]
         parts += [self.split, self.batch_images, self.seed, self.model_id, self.shared_classes]
+        parts += [self.encoding]  # the clean F1 is measured through it
         return json.dumps(parts, default=str)
 
 
@@ -93,7 +103,8 @@ def _loaded(job: Job) -> tuple[Detector, Dataset, float, dict[Any, Any]]:
         batch = fixed_batch(job.data, job.split, job.batch_images, job.seed)
         if job.shared_classes:
             det, batch = shared_classes(det, batch)
-        _LOADED[key] = (det, batch, float(lec.evaluate_detector(det, batch).f1), {})
+        clean = lec.evaluate_detector(det, batch, encoding=CameraEncoding.parse(job.encoding))
+        _LOADED[key] = (det, batch, float(clean.f1), {})
     return _LOADED[key]
 
 
@@ -115,6 +126,7 @@ def evaluate_task(task: tuple[Job, list[float]]) -> ContextResult:
             clean_f1=clean,
             thresholds=job.thresholds,
             seed=job.seed,
+            encoding=CameraEncoding.parse(job.encoding),
         )
 
 
@@ -242,6 +254,7 @@ def run_search(
         batch_images=job.batch_images,
         clean_f1=clean_f1(job),
         extra=meta_extra or {},
+        encoding=job.encoding,
     )
     writer = ArchiveWriter(out, meta)
     strategy = SEARCHES.create(

@@ -44,7 +44,7 @@ from anunnaki.lec._recipe import (
     consistency_loss,
     pick,
 )
-from anunnaki.phenomena import PHENOMENA, Mask, Phenomenon
+from anunnaki.phenomena import PHENOMENA, CameraEncoding, Mask, Phenomenon
 
 __all__ = [
     "Augmenter",
@@ -465,6 +465,7 @@ def evaluate_detector(
     score_threshold: float | None = None,
     iou: float = 0.5,
     batch_size: int = 32,
+    encoding: CameraEncoding | None = None,
 ) -> Metrics:
     """Precision/recall/F1 of *det* on *data*, optionally under a phenomenon.
 
@@ -480,6 +481,8 @@ def evaluate_detector(
             none).
         iou: IoU needed for a match.
         batch_size: Images per ``detect`` call.
+        encoding: A camera's encoding every image goes through after the phenomenon (or
+            alone, without one): the frames as a camera that sends JPEG delivers them.
 
     What it reads of the detector: ``classes`` (matched to the dataset's by name),
     ``detect(images)`` and, if present, ``score_threshold``.
@@ -501,7 +504,13 @@ def evaluate_detector(
         )
 
         def transform(i: int, image: Image) -> Image:
-            return phen.apply(image, chosen, seed=seed + i)
+            out = phen.apply(image, chosen, seed=seed + i)
+            return out if encoding is None else encoding.apply(out)
+
+    elif encoding is not None:
+
+        def transform(i: int, image: Image) -> Image:
+            return encoding.apply(image)
 
     remap = class_map(det, data)
     thr = score_threshold

@@ -40,6 +40,11 @@ default: the phenomenon hides nothing). A raindrop reports one; a composition co
 steps'. A labelled box whose mean mask is at least :data:`HIDDEN` (0.5) is *hidden*: training
 and evaluation make it an ignore box (``anunnaki.lec.hide_boxes``).
 
+``CameraEncoding(90)`` (``CameraEncoding.parse("jpeg:90")``) is what a camera that sends JPEG
+does to a frame after the phenomena: ``apply(image)`` encodes and decodes it. Assessments and
+oracles for such a camera measure and learn through it (``anunnaki assess --encoding
+jpeg:90``; docs/enlil.md).
+
 ``with reuse_fog_noise(store):`` keeps a fog's noise layers for the seeds it sees, for work
 that applies many contexts to the same images with the same seeds (Enlil's search).
 
@@ -54,6 +59,7 @@ missing one raises :class:`~anunnaki.errors.MissingExtraError` naming ``anunnaki
 from anunnaki.phenomena._base import HIDDEN, Image, Mask, ParamSpec, Phenomenon, PhenomenonError
 from anunnaki.phenomena._color import HSL, Brightness
 from anunnaki.phenomena._composition import Composition, CompositionStep
+from anunnaki.phenomena._encoding import CameraEncoding
 from anunnaki.phenomena._fog import Fog, reuse_fog_noise
 from anunnaki.phenomena._raindrop import Raindrop
 from anunnaki.phenomena._registry import PHENOMENA, StepLike, compose
@@ -66,6 +72,7 @@ __all__ = [
     "HSL",
     "PHENOMENA",
     "Brightness",
+    "CameraEncoding",
     "Composition",
     "CompositionStep",
     "Fog",

@@ -81,13 +81,14 @@ from anunnaki.sim._scenario import (
     parse_scenario,
 )
 from anunnaki.sim._scene import Scene, dataset_frames
-from anunnaki.sim._uav import UAV_CAMERA_FOV, UavMode, UavSim
+from anunnaki.sim._uav import CAMERA_DOWN, UAV_CAMERA_FOV, UavMode, UavSim
 from anunnaki.sim._world import Camera, Light
 
 PLATFORM_MODES: dict[str, tuple[str, ...]] = {"rover": RoverSim.modes, "uav": UavSim.modes}
 """The modes each simulated platform's ``set_mode`` accepts (``anunnaki check --platform``)."""
 
 __all__ = [
+    "CAMERA_DOWN",
     "CAMERA_FOV",
     "CAMERA_HEIGHT",
     "GROUND",
