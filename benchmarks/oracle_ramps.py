@@ -2,9 +2,9 @@
 
 Issue #13's run-time figures for the shipped ``enlil`` oracle of ``rover-default``
 (examples/models/rover.yaml). Each run is the simulated rover (background clutter as in
-the datasets, a pedestrian and a deer in view) with the detector and the ``enlil`` oracle in
-lockstep, no Utu (no swap: the default model stays active): ``--clean`` seconds of clear
-weather, then one scripted ramp, then ``--hold`` seconds at its end:
+the datasets, a pedestrian and a deer in view) with the detector and the ``enlil`` oracle on
+one thread of delivery (an executor), no Utu (no swap: the default model stays active):
+``--clean`` seconds of clear weather, then one scripted ramp, then ``--hold`` seconds at its end:
 
 * ``fog``: fog from nothing to full strength (10 layers at opacity 0.3) over ``--ramp`` s;
 * ``raindrop``: a drop appearing on the lens, its radius growing to 0.3 of the image width
@@ -70,7 +70,7 @@ import numpy as np
 import torch
 
 from anunnaki import topics
-from anunnaki.bus import open_bus
+from anunnaki.bus import Executor, open_bus
 from anunnaki.enlil import evaluate_context, fixed_batch, normalise
 from anunnaki.launch import load_launch, run_launch
 from anunnaki.lec import evaluate_detector, load_registry
@@ -277,7 +277,7 @@ def run_ramp(
         with lock:
             times[int(body["seq"])] = float(body.get("t", 0.0))
 
-    with open_bus("inproc") as bus:
+    with open_bus("inproc", executor=Executor()) as bus:  # one thread: every frame assessed
         bus.subscribe(topics.ORACLE_OUTPUT, on_assessment, queue=1024)
         bus.subscribe(topics.GROUND_TRUTH, on_truth, queue=1024)
         with SimulatedSystem(

@@ -518,7 +518,7 @@ def test_a_launch_run_stops_the_platform_when_a_node_started_by_hand_dies(
     endpoint = f"tcp/127.0.0.1:{free_port()}"
     text = looping_example(tmp_path).read_text()
     text = text.replace("bus: {kind: inproc}", f"bus: {{kind: zenoh, listen: ['{endpoint}']}}")
-    text = text.replace("  monitor: {rate: 50}\n", "")
+    text = text.replace("  monitor: {rate: 50}\n", "").replace("sync: true", "sync: false")
     p = launch_file(tmp_path, text)
     db = tmp_path / "run.db"
     # --speed 5: the loop decides within seconds, not 25 (a fail-safe: the dim light at trace

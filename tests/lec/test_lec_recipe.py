@@ -95,7 +95,8 @@ def test_worst_of_k_keeps_the_candidate_with_the_highest_loss() -> None:
     assert len(set(np.round(losses, 6))) == 4  # the losses are distinct: the pick is decided
     drawn = (hardest + 1) % 4  # the random draw points elsewhere
     before = {k: v.clone() for k, v in net.state_dict().items()}
-    chosen = loop._choose([(sample, candidates, drawn), (loop.data[1], [loop.data[1][0]], 0)])
+    offered = [(c, None) for c in candidates]  # the loop's candidates: (image, no mask)
+    chosen = loop._choose([(sample, offered, drawn), (loop.data[1], [(loop.data[1][0], None)], 0)])
     assert chosen[0][0] is candidates[hardest]
     assert chosen[1][0] is loop.data[1][0]  # a single candidate is kept as it is
     assert np.array_equal(chosen[0][1], sample[1])  # with the image's own targets
@@ -106,7 +107,7 @@ def test_worst_of_k_keeps_the_candidate_with_the_highest_loss() -> None:
     assert net.training
     # the same draw under "random": the drawn one, and no forward pass
     rand = _loop(TrainConfig(width=8, batch_size=4, perturb=Shades(4, "random")), data)
-    chosen = rand._choose([(sample, candidates, drawn)])
+    chosen = rand._choose([(sample, offered, drawn)])
     assert chosen[0][0] is candidates[drawn]
     assert rand.counts["select_forwards"] == 0 and rand.counts["candidates"] == 4
 

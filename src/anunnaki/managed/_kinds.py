@@ -18,7 +18,7 @@ from pydantic import BaseModel, ConfigDict, Field
 
 from anunnaki.errors import AnunnakiError, ModelFileError
 from anunnaki.managed._camera import check_camera_chain
-from anunnaki.managed._slot import DecisionLike, ManagedContext, UtuSettings
+from anunnaki.managed._slot import DecisionLike, ManagedContext, UtuSettings, wait_for_utu
 from anunnaki.trace import Record, read_trace
 
 __all__ = ["ScriptedConfig", "ScriptedKind", "SimConfig", "SimKind"]
@@ -48,6 +48,12 @@ class ScriptedConfig(_Strict):
         loop: Start over at the end (trace time keeps increasing), until stopped.
         publish_clock: Publish the trace time on ``/clock`` (for ``clock: sim``; always so
             when the run is one program on an executor, where it is Utu's only clock).
+        sync: Without an executor (Utu on threads of its own, or in other processes): after
+            each instant, wait (at most ``sync_timeout`` s) until Utu has taken that
+            instant's messages before moving time on, as a simulator waits for its
+            controller. With ``clock: sim`` every input is then stamped with exactly its
+            instant, at any ``speed``. On an executor the replay is in step anyway.
+        sync_timeout: The longest wait per instant, in wall seconds.
 
     In one process on sim time (``clock: sim``, Utu's five parts composed) the replay is one
     deterministic program: after each instant the replay drains the run's executor (every
@@ -63,6 +69,8 @@ class ScriptedConfig(_Strict):
     speed: Annotated[float, Field(gt=0, le=10_000)] = 1.0
     loop: bool = False
     publish_clock: bool = False
+    sync: bool = False
+    sync_timeout: Annotated[float, Field(gt=0)] = 1.0
 
 
 def drive(
@@ -72,12 +80,16 @@ def drive(
     speed: float,
     loop: bool,
     until: float | None,
-    after_instant: Callable[[], object] | None = None,
+    on_instant: Callable[[float], object] | None = None,
+    after_instant: Callable[[int], object] | None = None,
+    watched: frozenset[str] = frozenset(),
 ) -> None:
     """Publish the scripted system's trace live: record time / ``speed`` after the start.
 
-    ``after_instant()`` is called after the records of each instant went out (the run's
-    executor drains there: every node takes them before time moves on).
+    ``on_instant(t)`` is called before the records of instant ``t`` go out (it moves an
+    in-process simulation clock), and ``after_instant(n)`` after them, with ``n`` the number
+    of records on ``watched`` topics (the run's executor drains there; without one, a
+    ``sync`` replay waits until Utu has taken them).
     """
     base = list(system.records)
     instants = system.instants()
@@ -88,6 +100,7 @@ def drive(
     span = instants[-1] - first + gap
     wall0 = time.monotonic()
     offset = 0.0
+    cursor = 0  # the first record not yet counted for after_instant
     while True:
         for instant in instants:
             t = instant + offset
@@ -96,9 +109,16 @@ def drive(
             delay = wall0 + (t - first) / speed - time.monotonic()
             if (delay > 0 and stop.wait(delay)) or stop.is_set():
                 return
+            if on_instant is not None:
+                on_instant(t)
             system.step(t)
             if after_instant is not None:
-                after_instant()
+                n = 0
+                records = system.records
+                while cursor < len(records) and records[cursor].t <= t:
+                    n += records[cursor].topic in watched
+                    cursor += 1
+                after_instant(n)
         if not loop:
             return
         offset += span
@@ -126,6 +146,36 @@ class _Running:
 
     def close(self) -> None:
         self.system.close()
+
+
+def _after_instant(ctx: ManagedContext, sc: ScriptedConfig) -> Callable[[int], object] | None:
+    """What a replay does after each instant (``n``: the watched records it published).
+
+    On the run's executor: drain it. Without one, with ``sync``: wait until Utu (on other
+    threads or in other processes) has taken them.
+    """
+    executor = ctx.executor
+    if executor is not None:
+        return lambda _n: executor.spin_until_idle()
+    taken = ctx.taken
+    if not sc.sync or taken is None:
+        return None
+    total = late = 0
+
+    def wait(n: int) -> None:
+        nonlocal total, late
+        total += n
+        if not n or wait_for_utu(lambda: taken(total), ctx.stop, sc.sync_timeout):
+            return
+        late += 1
+        if late == 1:
+            log.warning(
+                "sync: Utu did not take the messages of an instant within %.1f s; the "
+                "replay goes on without waiting for it",
+                sc.sync_timeout,
+            )
+
+    return wait
 
 
 class ScriptedKind:
@@ -191,7 +241,9 @@ class ScriptedKind:
             f"t {recs[0].t:g}–{recs[-1].t:g} s) at {ctx.speed:g}× "
             + ("looping" if sc.loop else "once")
             + (", one thread of delivery" if executor is not None else "")
+            + (", in step with Utu (sync)" if executor is None and sc.sync else "")
         )
+        after = _after_instant(ctx, sc)
 
         def run() -> None:
             if executor is not None:
@@ -203,7 +255,9 @@ class ScriptedKind:
                     speed=ctx.speed,
                     loop=sc.loop,
                     until=ctx.until,
-                    after_instant=None if executor is None else executor.spin_until_idle,
+                    on_instant=None if executor is not None else ctx.on_instant,
+                    after_instant=after,
+                    watched=ctx.watched,
                 )
             except AnunnakiError as exc:
                 if not ctx.stop.is_set():
