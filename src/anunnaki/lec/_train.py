@@ -454,6 +454,21 @@ def predict(
     return out
 
 
+def phenomenon_params(
+    phenomenon: str | Phenomenon, params: Any, strength: float | None
+) -> tuple[Phenomenon, Any]:
+    """The phenomenon and its parameters from ``params`` or a ``strength`` (not both)."""
+    phen = PHENOMENA.create(phenomenon) if isinstance(phenomenon, str) else phenomenon
+    if params is not None and strength is not None:
+        raise DetectorError("give the phenomenon's params or a strength, not both")
+    chosen = (
+        phen.validate(params)
+        if params is not None
+        else phen.strength_params(1.0 if strength is None else strength)
+    )
+    return phen, chosen
+
+
 def evaluate_detector(
     det: Detector,
     data: Dataset,
@@ -494,14 +509,7 @@ def evaluate_detector(
     """
     transform: Callable[[int, Image], Image] | None = None
     if phenomenon is not None:
-        phen = PHENOMENA.create(phenomenon) if isinstance(phenomenon, str) else phenomenon
-        if params is not None and strength is not None:
-            raise DetectorError("give the phenomenon's params or a strength, not both")
-        chosen = (
-            phen.validate(params)
-            if params is not None
-            else phen.strength_params(1.0 if strength is None else strength)
-        )
+        phen, chosen = phenomenon_params(phenomenon, params, strength)
 
         def transform(i: int, image: Image) -> Image:
             out = phen.apply(image, chosen, seed=seed + i)

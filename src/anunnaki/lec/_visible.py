@@ -21,11 +21,11 @@ from typing import Any
 import numpy as np
 
 from anunnaki.datasets import Dataset
-from anunnaki.lec._detector import DetectionResult, Detector, DetectorError
+from anunnaki.lec._detector import DetectionResult, Detector
 from anunnaki.lec._hidden import hide_boxes
 from anunnaki.lec._metrics import Metrics, f1_at_iou
-from anunnaki.lec._train import Image, class_map, predict
-from anunnaki.phenomena import HIDDEN, PHENOMENA, Mask, Phenomenon
+from anunnaki.lec._train import Image, class_map, phenomenon_params, predict
+from anunnaki.phenomena import HIDDEN, Mask, Phenomenon
 
 __all__ = ["VisibleMetrics", "evaluate_visible"]
 
@@ -87,14 +87,7 @@ def evaluate_visible(
         DetectorError: As :func:`anunnaki.lec.evaluate_detector`.
 
     """
-    phen = PHENOMENA.create(phenomenon) if isinstance(phenomenon, str) else phenomenon
-    if params is not None and strength is not None:
-        raise DetectorError("give the phenomenon's params or a strength, not both")
-    chosen = (
-        phen.validate(params)
-        if params is not None
-        else phen.strength_params(1.0 if strength is None else strength)
-    )
+    phen, chosen = phenomenon_params(phenomenon, params, strength)
     masks: dict[int, Mask | None] = {}
 
     def transform(i: int, image: Image) -> Image:
