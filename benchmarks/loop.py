@@ -485,8 +485,8 @@ def component(
                 return {"frames": stats.frames, "detections": stats.detections}
 
         elif name == "oracle":
-            node, ack = _oracle_node(bus, sim, camera)
-            closing.extend([ack, node])
+            node = _oracle_node(bus, sim, camera)
+            closing.append(node)
 
             def report() -> dict[str, Any]:
                 stats = node.stats()
@@ -507,39 +507,27 @@ def component(
             obj.close()
 
 
-class _Acks:
-    """The oracle process's acknowledgements: frame ``seq`` handled by the oracle node."""
+def _oracle_node(bus: Any, sim: Any, camera: str) -> Any:
+    """The launch's oracle node alone, with what it takes from the detector's registry.
 
-    def __init__(self, bus: Any, node: Any) -> None:
-        self._stop = threading.Event()
-        self._thread = threading.Thread(target=self._run, args=(bus, node), daemon=True)
-        self._thread.start()
-
-    def _run(self, bus: Any, node: Any) -> None:
-        seq = 0
-        while not self._stop.is_set():
-            if node.wait_for_frame(seq, 0.2):
-                bus.publish(HANDLED, {"seq": seq})
-                seq += 1
-
-    def close(self) -> None:
-        self._stop.set()
-        self._thread.join(timeout=5.0)
-
-
-def _oracle_node(bus: Any, sim: Any, camera: str) -> tuple[Any, _Acks]:
-    """The launch's oracle node alone, with what it takes from the detector's registry."""
+    It acknowledges each frame once its node has handled it (assessed, withheld or skipped),
+    on :data:`HANDLED`, from the frame's own callback: the platform's lockstep.
+    """
     from anunnaki.lec import load_registry
     from anunnaki.managed import TakesModels
     from anunnaki.oracles import ORACLES, OracleNode
+
+    class AckingOracleNode(OracleNode):
+        def _on_frame(self, sample: Any) -> None:
+            super()._on_frame(sample)
+            self.bus.publish(HANDLED, {"seq": sample.message.seq})
 
     options = dict(sim.oracle or {})
     name = str(options.pop("name", "ground_truth"))
     factory = ORACLES.factory(name)
     if sim.models is not None and isinstance(factory, TakesModels):
         options = {**factory.options_from_models(load_registry(sim.models)), **options}
-    node = OracleNode(bus, name, camera=camera, **options)
-    return node, _Acks(bus, node)
+    return AckingOracleNode(bus, name, camera=camera, **options)
 
 
 def _utu(bus: Any, launch: Launch, closing: list[Any]) -> Callable[[], dict[str, Any]]:
