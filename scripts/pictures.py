@@ -235,7 +235,7 @@ def make_dashboard(picture: Picture, out: Path) -> None:
             try:
                 page = ctx.new_page()
                 page.goto(url.group(1))
-                ended = '#connection[data-state=ended][title="Utu\'s nodes are gone"]'
+                ended = '#connection[data-state=ended][title="the run has ended"]'
                 _wait_for(run, lambda: page.query_selector(ended), "the run did not end")
                 _check_page(run, picture, page)
                 shot = Path(profile) / "page.png"

@@ -422,6 +422,10 @@ def test_the_run_is_live_while_fed_and_ended_after_idle_or_when_utu_leaves() -> 
     assert state.run()["state"] == "ended"  # Utu gone: late messages do not revive the run
     state.utu_node("/utu_monitor", True)  # Utu restarted
     assert state.run()["state"] == "live"
+    state.end("the run has ended")  # its launch says so: ended for good, whatever follows
+    state.heard()
+    state.utu_node("/utu_plan", True)
+    assert state.run() == {"live": False, "state": "ended", "reason": "the run has ended"}
 
 
 def test_the_badge_follows_utus_liveliness_token_on_the_bus(rover_run: RoverRun) -> None:
@@ -643,6 +647,9 @@ def test_run_with_dashboard_serves_the_rover_run(tmp_path: Path) -> None:
 
         snap = wait_for(shown, what="both tactics verified on the page")
         assert snap["oracle"][0]["category"] == 1
+        # The launch closed the page's observer before Utu's nodes stopped: the badge says
+        # the run is over (it once waited for tokens whose withdrawal it could not hear).
+        assert snap["run"] == {"live": False, "state": "ended", "reason": "the run has ended"}
         proc.send_signal(signal.SIGINT)
         assert proc.wait(timeout=30) == 0
     finally:

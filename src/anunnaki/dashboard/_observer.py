@@ -49,6 +49,8 @@ from anunnaki.tokens import client_operator_token
 __all__ = ["OPERATIONS", "BusObserver", "ObserverConfig", "OperatorError", "SimTime"]
 
 log = logging.getLogger("anunnaki.dashboard")
+#: The badge's reason once the observer is closed: its launch's run is over.
+RUN_ENDED = "the run has ended"
 
 
 Operation = Literal["pause", "resume", "approve", "reject", "run_stop"]
@@ -471,8 +473,9 @@ class BusObserver(Closing):
         return self._closed.is_set()
 
     def close(self) -> None:
-        """Fetch the last decisions, withdraw the subscriptions and stop the ticker. Idempotent.
+        """Fetch the last decisions, withdraw the subscriptions, stop the ticker. Idempotent.
 
+        The page then says the run has ended (:data:`RUN_ENDED`).
         The last fetch asks Utu once more, while it may still answer (``anunnaki run
         --dashboard`` closes the observer after the run, before Utu's nodes stop and the bus
         closes): the page then shows the run's decisions to the end. A Utu that is not up
@@ -483,6 +486,8 @@ class BusObserver(Closing):
         self._doorbell.set()  # wakes the decision fetcher, which then ends
         if first and self._seeded.is_set() and not self.bus.closed:
             self._fetch(wait_for_service=False)
+        if first:
+            self.state.end(RUN_ENDED)
         for obj in reversed(self._declared):
             try:
                 obj.close()

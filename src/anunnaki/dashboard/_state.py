@@ -135,6 +135,7 @@ class DashboardState:
         self._heard_at: float | None = None  # wall time of the last message
         self._utu_nodes: set[str] = set()  # Utu's nodes whose liveliness token is alive
         self._utu_seen = False
+        self._ended: str | None = None  # why the run is over, when its launch said so
         self._evaluate_own(self.clock())
 
     # -- the run's liveliness and time ---------------------------------------------------------
@@ -160,14 +161,29 @@ class DashboardState:
             self._bump()
         self._changed()
 
+    def end(self, reason: str) -> None:
+        """The run is over (its launch closed the observer): ``run()`` says so, with ``reason``.
+
+        A launch that serves its own dashboard (``anunnaki run --dashboard``) closes the
+        observer before Utu's nodes stop, so their tokens' withdrawal is never heard: this
+        is how the page learns that the run has ended, at once and for good.
+        """
+        with self._lock:
+            self._ended = reason
+            self._bump()
+        self._changed()
+
     def run(self) -> dict[str, Any]:
         """Whether the run is live: ``{live, state, reason}``.
 
-        ``state`` is ``"waiting"`` before any message, ``"ended"`` once every Utu node seen
-        has withdrawn its liveliness token or no message has arrived for :attr:`idle`
-        seconds (wall clock), else ``"live"``. A run that is fed again is live again.
+        ``state`` is ``"waiting"`` before any message, ``"ended"`` once the launch said the
+        run is over (:meth:`end`), every Utu node seen has withdrawn its liveliness token or
+        no message has arrived for :attr:`idle` seconds (wall clock), else ``"live"``. A run
+        that is fed again is live again, unless its launch ended it.
         """
         with self._lock:
+            if self._ended is not None:
+                return {"live": False, "state": "ended", "reason": self._ended}
             if self._utu_seen and not self._utu_nodes:
                 return {"live": False, "state": "ended", "reason": "Utu's nodes are gone"}
             if self._heard_at is None:
