@@ -11,6 +11,11 @@ again) and prints one line per launch::
 
     .venv/bin/python benchmarks/determinism.py                  # rover 30 s and the UAV mission
     .venv/bin/python benchmarks/determinism.py --cases rover --runs 2
+    .venv/bin/python benchmarks/determinism.py --cases uav --until 11 --output /tmp/d.json
+
+``--until`` shortens every case to that many simulated seconds (the suite's check,
+tests/benchmarks/test_determinism_benchmark.py, runs the rover's first 9 s and the UAV's
+first 11 s twice each); ``--output`` writes elsewhere than the committed results.
 """
 
 from __future__ import annotations
@@ -66,9 +71,10 @@ def _run(launch: str, until: float | None, folder: Path, k: int) -> dict[str, An
     }
 
 
-def measure(name: str, runs: int) -> dict[str, Any]:
-    """``runs`` runs of case ``name``; the middle one beside a busy process."""
-    launch, until = CASES[name]
+def measure(name: str, runs: int, until: float | None = None) -> dict[str, Any]:
+    """``runs`` runs of case ``name`` (``until``: its own length); the 2nd beside a busy process."""
+    launch, length = CASES[name]
+    until = length if until is None else until
     out: list[dict[str, Any]] = []
     with tempfile.TemporaryDirectory(prefix="determinism-") as tmp:
         folder = Path(tmp)
@@ -105,12 +111,19 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--cases", default="rover,uav", help="comma-separated: rover, uav")
     ap.add_argument("--runs", type=int, default=3, help="runs per case (the 2nd is loaded)")
+    ap.add_argument("--until", type=float, help="simulated seconds of every case (default: each's)")
+    ap.add_argument("--output", type=Path, default=RESULTS, help="the JSON written")
     args = ap.parse_args(argv)
+    if args.runs < 2:
+        ap.error("--runs must be at least 2: one run cannot repeat itself")
+    if args.until is not None and args.until <= 0:
+        ap.error(f"--until must be positive, got {args.until:g}")
     names = [c for c in args.cases.split(",") if c]
     unknown = [c for c in names if c not in CASES]
     if unknown:
         ap.error(f"unknown case(s) {unknown}: choose from {sorted(CASES)}")
-    doc = json.loads(RESULTS.read_text()) if RESULTS.is_file() else {"cases": {}}
+    out: Path = args.output
+    doc = json.loads(out.read_text()) if out.is_file() else {"cases": {}}
     doc.update(
         benchmark="determinism",
         date=time.strftime("%Y-%m-%d %H:%M:%S"),
@@ -118,9 +131,9 @@ def main(argv: list[str] | None = None) -> int:
     )
     for name in names:
         print(f"{name}: {args.runs} runs", flush=True)
-        doc["cases"][name] = measure(name, args.runs)
-        RESULTS.parent.mkdir(parents=True, exist_ok=True)
-        RESULTS.write_text(json.dumps(doc, indent=1) + "\n")
+        doc["cases"][name] = measure(name, args.runs, args.until)
+        out.parent.mkdir(parents=True, exist_ok=True)
+        out.write_text(json.dumps(doc, indent=1) + "\n")
         c = doc["cases"][name]
         print(
             f"{name}: reports identical {c['identical_reports']}, decision logs identical "

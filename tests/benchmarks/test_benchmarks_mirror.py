@@ -12,7 +12,6 @@ HERE = Path(__file__).parent
 ELSEWHERE = {
     "ros1": ROOT / "tests" / "ros1" / "test_ros1_benchmark.py",
     "robustify": ROOT / "tests" / "enki" / "test_robustify_benchmark.py",
-    "determinism": ROOT / "tests" / "managed" / "test_determinism.py",
 }
 #: Scripts that are part of another benchmark, not benchmarks of their own.
 PARTS = {"ros1_node": "benchmarks/ros1.py's ROS side (an echo node under Debian's python3)"}
