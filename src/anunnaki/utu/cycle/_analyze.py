@@ -1,19 +1,18 @@
-"""The analyze stage: the goal model's evaluation, and the cycle's beginning and end."""
+"""The analyze stage: the goal model's evaluation at the start of every cycle."""
 
 from __future__ import annotations
 
 import logging
 import math
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Mapping, Sequence
 from typing import Any, cast
 
 from anunnaki.errors import AnunnakiError
 from anunnaki.goals import status_name
-from anunnaki.messages import AnalysisState, CycleDone, MonitorBatch
+from anunnaki.messages import AnalysisState, MonitorBatch
 from anunnaki.utu.cycle._entries import (
     OPERATOR,
     RESTORE_WINDOW,
-    TICK,
     build_message,
     reloaded_parts,
     resuming,
@@ -31,7 +30,11 @@ log = logging.getLogger("anunnaki.utu")
 
 # -- analyze -------------------------------------------------------------------------------------
 class AnalyzeStage:
-    """Evaluates the goal model on every batch; records inputs, verdicts and step ends.
+    """Evaluates the goal model on every batch; records inputs and verdicts.
+
+    Entered once per cycle: :meth:`analyze` hands on the analysis, which says whether the
+    step took something (``took``); the host ends the step
+    (:func:`~anunnaki.utu.cycle._entries.end_step`) once execute has acted on it.
 
     Args:
         parts: The loaded configuration.
@@ -44,7 +47,6 @@ class AnalyzeStage:
         self.parts = parts
         self.knowledge = knowledge
         self.origin = origin
-        self.execute_alive: Callable[[], bool] | None = None  # per-node: is execute up?
         self.topic_watch = TopicWatch(parts.model, knowledge)
         self.analyzer = Analyzer(parts.model, parts.tactics, knowledge)
         self.now = 0.0
@@ -57,7 +59,6 @@ class AnalyzeStage:
         self.refused = 0  # batches refused as implausible (see _plausible)
         #: A reaction took inputs and decided nothing: the next cycle ends that step.
         self.reacted = False
-        self._marked: dict[int, tuple[float, bool]] = {}
         if resuming(knowledge):
             self._restore()
 
@@ -136,10 +137,8 @@ class AnalyzeStage:
             return None
         self.eligible = eligible
         self.seq += 1
-        self._marked[self.seq] = (
-            t,
-            bool(not self.cycles or inputs or ticked or changed or batch.ops or self.reacted),
-        )
+        took = bool(not self.cycles or inputs or ticked or changed or batch.ops or self.reacted)
+        self.cycles += 1
         self.reacted = False
         tactics = self.parts.tactics.tactics
         post_goals = {
@@ -163,6 +162,7 @@ class AnalyzeStage:
             warming_up=a.warming_up,
             changed=changed,
             taken=self.taken,
+            took=took,
         )
 
     def plausible(self, batch: MonitorBatch) -> bool:
@@ -254,29 +254,3 @@ class AnalyzeStage:
                 **extra,
             ),
         )
-
-    def finish(self, done: CycleDone | None, seq: int | None = None) -> None:
-        """End a cycle (``done``: execute's report, ``None`` when it never answered).
-
-        Marks the end of the step in Knowledge when it took something or decided
-        something, so a replay steps at the same instants.
-        """
-        key = done.seq if done is not None else seq
-        if key is None or key not in self._marked:
-            return
-        # Unreported while execute is gone: the marker says so (a replay analyses only).
-        gone = done is None and self.execute_alive is not None and not self.execute_alive()
-        for old in [s for s in self._marked if s < key]:  # never reported: end them too
-            self._mark(old, 0, gone)
-        self._mark(key, done.decisions if done is not None else 0, gone)
-
-    def _mark(self, seq: int, decisions: int, gone: bool) -> None:
-        t, marked = self._marked.pop(seq)
-        if marked or decisions > 0:
-            self.knowledge.record_input(t, TICK, {"executed": False} if gone else {})
-        self.cycles += 1
-
-    @property
-    def unfinished(self) -> list[int]:
-        """Cycles analysed but not yet reported done."""
-        return sorted(self._marked)
