@@ -55,7 +55,8 @@ class AnalyzeStage:
         self.cycles = 0
         self.taken = 0
         self.seq = 0
-        self.eligible: list[str] = []
+        self.eligible: list[str] = []  # the applicable tactics now (restored after a restart)
+        self.handed: list[str] = []  # ... as the last analysis handed on had them
         self.refused = 0  # batches refused as implausible (see _plausible)
         #: A reaction took inputs and decided nothing: the next cycle ends that step.
         self.reacted = False
@@ -97,17 +98,17 @@ class AnalyzeStage:
         batch: MonitorBatch,
         *,
         full: bool = True,
-        unless_idle: Sequence[str] | None = None,
+        react: bool = False,
     ) -> AnalysisState | None:
         """Take one batch; return the analysis execute acts on.
 
         ``full`` fills in ``nodes`` (every goal's utility and status, what displays show);
         a cycle in one process leaves it out and builds it only to publish.
 
-        ``unless_idle`` (the applicable tactics of the last cycle) makes this a reaction:
-        when the batch changed no goal, brought no operator call and left the applicable
-        tactics as they were, its inputs are recorded and ``None`` is returned — there is
-        nothing to decide now, and the next cycle marks the end of the step.
+        ``react`` makes this a reaction: when the batch changed no goal, brought no
+        operator call and left the applicable tactics as the last analysis handed on had
+        them, its inputs are recorded and ``None`` is returned — there is nothing to decide
+        now, and the next cycle marks the end of the step.
         """
         a, kb = self.analyzer, self.knowledge
         if not self.plausible(batch):
@@ -132,10 +133,10 @@ class AnalyzeStage:
             kb.record_input(t, OPERATOR, op)
             out_ops.append(self._apply_op(dict(op), t, changed))
         eligible = a.eligible()
-        if unless_idle is not None and not changed and not out_ops and eligible == unless_idle:
+        if react and not changed and not out_ops and eligible == self.handed:
             self.reacted = self.reacted or bool(inputs)
             return None
-        self.eligible = eligible
+        self.eligible = self.handed = eligible
         self.seq += 1
         took = bool(not self.cycles or inputs or ticked or changed or batch.ops or self.reacted)
         self.cycles += 1

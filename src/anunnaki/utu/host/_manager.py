@@ -199,7 +199,6 @@ class AutonomicManager(Closing):
         self._pull = MonitoredTopics(self._subscribe_topic)
         self._clock_sub: Any = None
         self._stepped = False
-        self._last_eligible: list[str] = []
         self._state_cache: AnalysisState | None = None
         record_run(self.knowledge, parts)
         take_up(self.knowledge, "manager", lambda: self._build_stages(actuator, actions))
@@ -482,10 +481,9 @@ class AutonomicManager(Closing):
         self.now = batch.t
         a = self.analyze_stage
         idle = react and not any(rt.state == "running" for rt in self.planner.runtimes.values())
-        state = a.analyze(batch, full=False, unless_idle=self._last_eligible if idle else None)
+        state = a.analyze(batch, full=False, react=idle)
         if state is None:
             return len(inputs)  # nothing to decide now: the next time-driven step goes on from here
-        self._last_eligible = list(state.eligible or [])
         kb = self.knowledge
         if not execute:
             end_step(kb, float(state.t or 0.0), took=bool(state.took), decisions=0)
