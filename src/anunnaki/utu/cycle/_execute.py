@@ -86,8 +86,7 @@ class ExecuteStage:
         self.stopped = False  # a run-stop performed here
         self.heard_run_stop = False  # a run-stop heard on its topic, not yet performed
         self.now = 0.0
-        self.eligible: list[str] = []
-        #: The analysis of the cycle (its postconditions and their goals' status).
+        #: The analysis of the cycle: applicable tactics, postconditions, their goals' status.
         self.analysis: AnalysisState | None = None
         self._approvals: list[list[str]] = []
         self._cascade_t: float | None = None  # the instant of the escalations in _cascade
@@ -111,6 +110,11 @@ class ExecuteStage:
                 )
 
     @property
+    def eligible(self) -> list[str]:
+        """The applicable tactics, as the analysis of the cycle has them (file order)."""
+        return list((self.analysis.eligible if self.analysis is not None else None) or [])
+
+    @property
     def halted(self) -> bool:
         """Whether adaptation is halted (paused, run-stopped, or a run-stop was heard)."""
         return self.paused or self.stopped or self.heard_run_stop
@@ -126,7 +130,6 @@ class ExecuteStage:
         t = float(state.t or 0.0)
         self.now = t
         self._state = self.analysis = state
-        self.eligible = list(state.eligible or [])
         self._approvals = []
         ops = [dict(op) for op in state.ops or []]
         for op in ops:
