@@ -669,3 +669,115 @@ def test_the_watchdog_run_stops_a_stuck_loop(tmp_path: Path) -> None:
             made = [(d.kind, d.data.get("caller")) for d in m.knowledge.decisions()]
             m.close()
     assert ("run_stop", "watchdog:utu") in made
+
+
+# -- the cycle, told once -----------------------------------------------------------------
+def entries(m: AutonomicManager) -> list[str]:
+    """Record every entry into a stage of ``m`` (in the list returned, in call order)."""
+    calls: list[str] = []
+    stages = {
+        "monitor": (m.monitor_stage, "batch"),
+        "analyze": (m.analyze_stage, "analyze"),
+        "execute.begin": (m.execute_stage, "begin"),
+        "plan": (m.plan_stage, "plan"),
+        "execute.complete": (m.execute_stage, "complete"),
+    }
+    for label, (stage, method) in stages.items():
+        original = getattr(stage, method)
+
+        def entered(*args, _label=label, _original=original, **kwargs):  # type: ignore[no-untyped-def]
+            calls.append(_label)
+            return _original(*args, **kwargs)
+
+        setattr(stage, method, entered)
+    return calls
+
+
+CYCLE = ["monitor", "analyze", "execute.begin", "plan", "execute.complete"]
+
+
+def test_a_goal_update_enters_each_stage_once_in_order() -> None:
+    """One goal update: monitor, analyze, plan and execute each entered once per step.
+
+    Execute's two halves frame plan: ``begin`` settles what is in flight (operator calls,
+    outcomes, postconditions, escalation) so that plan selects among what is left, and
+    ``complete`` starts plan's choice. Nothing else of a stage runs: no second analysis,
+    no copy of the tactic runtimes between plan and execute.
+    """
+    m, act = make()
+    calls = entries(m)
+    drive(m, ticks(0, 1.0))
+    steps = 11
+    assert calls == CYCLE * steps
+    calls.clear()
+    feed_nominal(m, 1.1, category=1)  # the goal update: A4.category turns 1
+    m.step(1.1)
+    assert calls == CYCLE  # each once, in order, for the update that starts two tactics
+    assert [tac for _, k, tac in kinds(m) if k == "started"] == ["beep", "hand-over"]
+    assert act.calls[:2] == [
+        ("publish", "/rover/buzzer", {"on": True}),
+        ("request", "/rover/set_mode", {"mode": "manual"}),
+    ]
+    ends = [r.t for r in m.knowledge.inputs() if r.topic == "__tick__"]
+    assert ends.count(1.1) == 1  # the step's end is marked once, after execute
+
+
+def test_a_rover_run_enters_each_stage_once_per_step(bus) -> None:  # type: ignore[no-untyped-def]
+    """Over the rover's whole scenario (fail-safe, escalation-free), every step is one cycle."""
+    system = ScriptedSystem(bus, ROVER / "trace.jsonl")
+    manager = AutonomicManager(
+        rover_model(), load_tactics(ROVER / "tactics.xml"), bus=bus, failsafe="fail-safe",
+        run_stop_service="/rover/stop", warmup=2.0,
+    )  # fmt: skip
+    calls = entries(manager)
+    try:
+        steps = 0
+        for t in system.instants():
+            if t > 45.0:
+                break
+            system.step(t)
+            manager.step(t)
+            steps += 1
+        assert steps > 100
+        assert calls == CYCLE * steps
+        assert "postcondition_ok" in [k for _, k, _ in kinds(manager, "fail-safe")]
+    finally:
+        manager.close()
+        system.close()
+
+
+def test_plan_and_execute_share_one_store_of_tactic_runtimes(tmp_path: Path) -> None:
+    """One owner per piece of state: one Planner holds every tactic's runtime.
+
+    Plan selects among the execute stage's runtimes (it writes only the selection fields);
+    neither copies the other's — the copies a plan and an execute node in different
+    processes keep (``mirror``) are never taken in one process — and a restarted part
+    takes up the same store.
+    """
+    m, _ = make(cooldown=10.0, knowledge=Knowledge(tmp_path / "k.db"))
+    store = m.planner
+    assert m.plan_stage.planner is store
+    assert m.execute_stage.planner is store
+    runtimes = dict(store.runtimes)
+
+    def no_copy(*args: object) -> None:
+        raise AssertionError("a copy of the tactic runtimes was taken in one process")
+
+    m.plan_stage.mirror = no_copy  # type: ignore[method-assign]
+    m.execute_stage.mirror = no_copy  # type: ignore[method-assign]
+    drive(m, ticks(0, 1.0))
+    drive(m, ticks(1.1, 1.5), category_at=lambda t: 1)  # hand-over starts, then awaits
+    handover = store.runtimes["hand-over"]
+    assert handover is runtimes["hand-over"]
+    assert handover.state == "awaiting" and handover.fired
+    for part in ("plan", "execute"):
+        m.restart_part(part)
+        assert m.plan_stage.planner is m.execute_stage.planner is store
+    assert handover.state == "awaiting"  # execute took its fields up again from Knowledge
+    assert not handover.fired  # a restarted plan forgets what only selection knew
+    drive(m, ticks(1.6, 3.5), category_at=lambda t: 1)  # postcondition fails at its deadline
+    made = [k for _, k, _ in kinds(m, "hand-over")]
+    assert made.count("started") == 1 and "postcondition_failed" in made
+    assert handover.cooldown_until == pytest.approx(13.1)  # set by execute, seen by plan:
+    assert handover.state == "queued" and made[-1] == "deferred"  # still applicable, waits
+    m.close()

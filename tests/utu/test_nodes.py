@@ -406,6 +406,45 @@ def test_a_run_stop_on_the_topic_halts_plan_and_execute_at_once(five) -> None:  
         assert bus.request(ready_service(name), {}, timeout=2.0).to_body()["run_stopped"]
 
 
+def test_a_cycle_through_the_nodes_enters_each_stage_once_in_order(five) -> None:  # type: ignore[no-untyped-def]
+    """The nodes enter their stages as the composed manager does, once each per cycle.
+
+    Plan and execute in different processes each keep a copy of the tactic runtimes, so
+    each takes the other's fields once per cycle (``mirror``) before its own stage runs;
+    the analyze node ends the step when execute reports it done, without its stage.
+    """
+    _, nodes, rover = five
+    calls: list[str] = []
+    watched = {
+        "monitor": ("monitor", "batch"),
+        "analyze": ("analyze", "analyze"),
+        "execute.begin": ("execute", "begin"),
+        "plan.mirror": ("plan", "mirror"),
+        "plan": ("plan", "plan"),
+        "execute.mirror": ("execute", "mirror"),
+        "execute.complete": ("execute", "complete"),
+    }
+    for label, (node, method) in watched.items():
+        stage = nodes[node].stage  # type: ignore[attr-defined]
+        original = getattr(stage, method)
+
+        def entered(*args, _label=label, _original=original, **kwargs):  # type: ignore[no-untyped-def]
+            calls.append(_label)
+            return _original(*args, **kwargs)
+
+        setattr(stage, method, entered)
+    steps = 0
+    for t in rover.instants():
+        if t > 27.0:
+            break
+        rover.step(t)
+        step_nodes(nodes, t)
+        steps += 1
+    assert calls == list(watched) * steps
+    kinds = [d.kind for d in nodes["execute"].knowledge.decisions()]
+    assert kinds[:3] == ["selected", "started", "action"]  # the fail-safe started at 25 s
+
+
 def test_knowledge_node_answers_queries_and_publishes_decisions(five) -> None:  # type: ignore[no-untyped-def]
     bus, nodes, rover = five
     published: list[dict[str, Any]] = []

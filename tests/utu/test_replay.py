@@ -615,8 +615,7 @@ def test_a_run_stop_that_execute_never_acted_on_is_not_acted_on_in_replay(
         analyze = nodes["analyze"]
         assert isinstance(analyze, AnalyzeNode)
         try:
-            alive = analyze.stage.execute_alive
-            assert alive is not None
+            alive = analyze.execute_up
             wait_until(alive, 10.0, "the analyze node to see execute up")  # watch's thread
             for t in rover.instants():
                 if t > 27.0:

@@ -13,22 +13,32 @@ returns its own (the typed cycle messages of :mod:`anunnaki.bus`)::
 
     MonitorStage.batch ─MonitorBatch─▶ AnalyzeStage.analyze ─AnalysisState─▶
     ExecuteStage.begin ─ExecuteStatus─▶ PlanStage.plan ─PlanStart─▶
-    ExecuteStage.complete ─CycleDone─▶ AnalyzeStage.finish
+    ExecuteStage.complete ─CycleDone─▶ the step's end (end_step, by the host)
+
+Each stage is entered once per goal update. Execute's two halves frame plan: ``begin``
+settles what is in flight (operator calls, outcomes, postconditions, escalation) so that
+plan selects among what it left, and ``complete`` starts plan's choice. One
+:class:`Planner` holds every tactic's runtime: the execute stage's, handed to the plan
+stage of the same process, which writes only the selection fields (nodes in different
+processes each keep a copy and ``mirror`` the other's fields from the cycle's messages).
 
 Who owns what, one module each:
 
 * ``_monitor``: which topics are watched; the time of the cycle; each input's arrival time
   (clamped into the cycle's interval, so a burst keeps its spacing);
-* ``_analyze``: the goal model's evaluation, inputs/verdicts/step ends in Knowledge, node
-  losses (an agent's topics expire), the warm-up, the analysis of reloaded files;
+* ``_analyze``: the goal model's evaluation, inputs and verdicts in Knowledge, node losses
+  (an agent's topics expire), the warm-up, the analysis of reloaded files, and whether a
+  step took something (its end is marked once execute has acted);
 * ``_plan``: selection — when a tactic became eligible, queued/pending/rejected, the
   ``deferred`` reasons, once-per-episode firing;
-* ``_execute``: everything once a tactic starts — actions, deadlines, cooldowns, attempts,
-  postconditions, escalation (next tactic → fail-safe → run-stop) — and the operator flags
-  (pause, run-stop);
+* ``_execute``: the tactic runtimes (one store), everything once a tactic starts —
+  actions, deadlines, cooldowns, attempts, postconditions checked against the analysis,
+  escalation (next tactic → fail-safe → run-stop) — and the operator flags (pause,
+  run-stop);
 * ``_knowledge_stage``: queries, and the decisions written since the last publication;
-* ``_entries``: what they share — the markers in Knowledge, operator entries, restarts,
-  reloads, and which fields of a tactic's runtime plan or execute owns;
+* ``_entries``: what they share — the markers in Knowledge (the step's end:
+  ``end_step``), operator entries, restarts, reloads, and which fields of a tactic's
+  runtime plan or execute owns;
 * ``_mape``: the parts the stages run — :class:`TopicWatch` (what is known of each monitored
   topic, kept by the analyze stage), :class:`Analyzer`, :class:`Planner`, :class:`Executor`;
 * ``_actions``: the :class:`Actuator` actions go through and how an outcome comes back

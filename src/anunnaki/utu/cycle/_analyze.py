@@ -1,19 +1,18 @@
-"""The analyze stage: the goal model's evaluation, and the cycle's beginning and end."""
+"""The analyze stage: the goal model's evaluation at the start of every cycle."""
 
 from __future__ import annotations
 
 import logging
 import math
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Mapping, Sequence
 from typing import Any, cast
 
 from anunnaki.errors import AnunnakiError
 from anunnaki.goals import status_name
-from anunnaki.messages import AnalysisState, CycleDone, MonitorBatch
+from anunnaki.messages import AnalysisState, MonitorBatch
 from anunnaki.utu.cycle._entries import (
     OPERATOR,
     RESTORE_WINDOW,
-    TICK,
     build_message,
     reloaded_parts,
     resuming,
@@ -31,7 +30,11 @@ log = logging.getLogger("anunnaki.utu")
 
 # -- analyze -------------------------------------------------------------------------------------
 class AnalyzeStage:
-    """Evaluates the goal model on every batch; records inputs, verdicts and step ends.
+    """Evaluates the goal model on every batch; records inputs and verdicts.
+
+    Entered once per cycle: :meth:`analyze` hands on the analysis, which says whether the
+    step took something (``took``); the host ends the step
+    (:func:`~anunnaki.utu.cycle._entries.end_step`) once execute has acted on it.
 
     Args:
         parts: The loaded configuration.
@@ -44,7 +47,6 @@ class AnalyzeStage:
         self.parts = parts
         self.knowledge = knowledge
         self.origin = origin
-        self.execute_alive: Callable[[], bool] | None = None  # per-node: is execute up?
         self.topic_watch = TopicWatch(parts.model, knowledge)
         self.analyzer = Analyzer(parts.model, parts.tactics, knowledge)
         self.now = 0.0
@@ -53,11 +55,11 @@ class AnalyzeStage:
         self.cycles = 0
         self.taken = 0
         self.seq = 0
-        self.eligible: list[str] = []
+        self.eligible: list[str] = []  # the applicable tactics now (restored after a restart)
+        self.handed: list[str] = []  # ... as the last analysis handed on had them
         self.refused = 0  # batches refused as implausible (see _plausible)
         #: A reaction took inputs and decided nothing: the next cycle ends that step.
         self.reacted = False
-        self._marked: dict[int, tuple[float, bool]] = {}
         if resuming(knowledge):
             self._restore()
 
@@ -96,17 +98,17 @@ class AnalyzeStage:
         batch: MonitorBatch,
         *,
         full: bool = True,
-        unless_idle: Sequence[str] | None = None,
+        react: bool = False,
     ) -> AnalysisState | None:
         """Take one batch; return the analysis execute acts on.
 
         ``full`` fills in ``nodes`` (every goal's utility and status, what displays show);
         a cycle in one process leaves it out and builds it only to publish.
 
-        ``unless_idle`` (the applicable tactics of the last cycle) makes this a reaction:
-        when the batch changed no goal, brought no operator call and left the applicable
-        tactics as they were, its inputs are recorded and ``None`` is returned — there is
-        nothing to decide now, and the next cycle marks the end of the step.
+        ``react`` makes this a reaction: when the batch changed no goal, brought no
+        operator call and left the applicable tactics as the last analysis handed on had
+        them, its inputs are recorded and ``None`` is returned — there is nothing to decide
+        now, and the next cycle marks the end of the step.
         """
         a, kb = self.analyzer, self.knowledge
         if not self.plausible(batch):
@@ -131,15 +133,13 @@ class AnalyzeStage:
             kb.record_input(t, OPERATOR, op)
             out_ops.append(self._apply_op(dict(op), t, changed))
         eligible = a.eligible()
-        if unless_idle is not None and not changed and not out_ops and eligible == unless_idle:
+        if react and not changed and not out_ops and eligible == self.handed:
             self.reacted = self.reacted or bool(inputs)
             return None
-        self.eligible = eligible
+        self.eligible = self.handed = eligible
         self.seq += 1
-        self._marked[self.seq] = (
-            t,
-            bool(not self.cycles or inputs or ticked or changed or batch.ops or self.reacted),
-        )
+        took = bool(not self.cycles or inputs or ticked or changed or batch.ops or self.reacted)
+        self.cycles += 1
         self.reacted = False
         tactics = self.parts.tactics.tactics
         post_goals = {
@@ -163,6 +163,7 @@ class AnalyzeStage:
             warming_up=a.warming_up,
             changed=changed,
             taken=self.taken,
+            took=took,
         )
 
     def plausible(self, batch: MonitorBatch) -> bool:
@@ -254,29 +255,3 @@ class AnalyzeStage:
                 **extra,
             ),
         )
-
-    def finish(self, done: CycleDone | None, seq: int | None = None) -> None:
-        """End a cycle (``done``: execute's report, ``None`` when it never answered).
-
-        Marks the end of the step in Knowledge when it took something or decided
-        something, so a replay steps at the same instants.
-        """
-        key = done.seq if done is not None else seq
-        if key is None or key not in self._marked:
-            return
-        # Unreported while execute is gone: the marker says so (a replay analyses only).
-        gone = done is None and self.execute_alive is not None and not self.execute_alive()
-        for old in [s for s in self._marked if s < key]:  # never reported: end them too
-            self._mark(old, 0, gone)
-        self._mark(key, done.decisions if done is not None else 0, gone)
-
-    def _mark(self, seq: int, decisions: int, gone: bool) -> None:
-        t, marked = self._marked.pop(seq)
-        if marked or decisions > 0:
-            self.knowledge.record_input(t, TICK, {"executed": False} if gone else {})
-        self.cycles += 1
-
-    @property
-    def unfinished(self) -> list[int]:
-        """Cycles analysed but not yet reported done."""
-        return sorted(self._marked)

@@ -30,10 +30,10 @@ __all__ = [
     "PLAN_FIELDS",
     "RESTART",
     "RESTORE_WINDOW",
-    "STATUS_OF_NAME",
     "TICK",
     "Sources",
     "build_message",
+    "end_step",
     "last_halt",
     "mark_restart",
     "model_from_sources",
@@ -59,7 +59,6 @@ RESTART = "__restart__"
 RESTORE_WINDOW = 120.0
 
 Sources = dict[str, tuple[str | None, str]]
-STATUS_OF_NAME: dict[str, bool | None] = {"satisfied": True, "unsatisfied": False}
 
 
 def build_message(c: Callable[..., Any], **fields: Any) -> Any:
@@ -95,6 +94,23 @@ def mark_restart(knowledge: Knowledge, node: str) -> float:
     knowledge.record_decision(t, "restarted", None, node=node)
     knowledge.flush()
     return t
+
+
+def end_step(
+    knowledge: Knowledge, t: float, *, took: bool, decisions: int, executed: bool = True
+) -> bool:
+    """Mark the end of the step at ``t`` in Knowledge, if it took or decided something.
+
+    ``took``: the analysis of the step took something (:attr:`AnalysisState.took
+    <anunnaki.messages.AnalysisState.took>`); ``decisions``: how many plan and execute
+    wrote. The marker is where a replay steps; ``executed=False`` says that no execute
+    stage acted on the step (its node was gone), so a replay only analyses it. Returns
+    whether a marker was written.
+    """
+    if not took and decisions <= 0:
+        return False
+    knowledge.record_input(t, TICK, {} if executed else {"executed": False})
+    return True
 
 
 def last_halt(knowledge: Knowledge) -> tuple[bool, bool]:

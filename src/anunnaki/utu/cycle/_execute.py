@@ -10,7 +10,6 @@ from typing import Any, cast
 from anunnaki.messages import AnalysisState, CycleDone, ExecuteStatus, PlanStart
 from anunnaki.utu.cycle._actions import ActionRunner, Actuator
 from anunnaki.utu.cycle._entries import (
-    STATUS_OF_NAME,
     build_message,
     last_halt,
     model_from_sources,
@@ -20,7 +19,7 @@ from anunnaki.utu.cycle._entries import (
     tactics_from_sources,
 )
 from anunnaki.utu.cycle._knowledge import Knowledge
-from anunnaki.utu.cycle._mape import Analyzer, Executor, Planner, TacticRuntime
+from anunnaki.utu.cycle._mape import Executor, Planner, TacticRuntime
 from anunnaki.utu.cycle._parts import UtuParts
 
 __all__ = [
@@ -31,53 +30,32 @@ log = logging.getLogger("anunnaki.utu")
 
 
 # -- execute -------------------------------------------------------------------------------------
-class _NodeStatus:
-    __slots__ = ("status",)
-
-    def __init__(self, status: bool | None) -> None:
-        self.status = status
-
-
-class _StatusView:
-    """The part of an Evaluator that :meth:`Executor.check` reads, from an analysis."""
-
-    def __init__(self) -> None:
-        self.index: dict[str, bool | None] = {}
-
-    def state(self, node: str) -> _NodeStatus:
-        return _NodeStatus(self.index.get(node))
-
-
-class _AnalysisView:
-    """What :meth:`Executor.check` reads from an :class:`Analyzer`, from an analysis."""
-
-    def __init__(self) -> None:
-        self.post: dict[str, bool] = {}
-        self.evaluator = _StatusView()
-
-    def update(self, state: AnalysisState) -> None:
-        self.post = dict(state.postconditions or {})
-        self.evaluator.index = {
-            n: STATUS_OF_NAME.get(s) for n, s in (state.post_goals or {}).items()
-        }
-
-    def postconditions_hold(self, tactic: Any) -> bool:
-        return self.post.get(tactic.name, False)
-
-
 class ExecuteStage:
     """Performs tactics and checks their postconditions (the :class:`~anunnaki.utu.Executor`).
 
     :meth:`begin` applies the cycle's operator calls, runs actions resumed after a restart
-    and checks the postconditions of the tactics in flight against the analysis —
-    escalating to another applicable tactic, the fail-safe, then a run-stop when one fails;
-    :meth:`complete` starts what plan chose.
+    and checks the postconditions of the tactics in flight against the analysis (the
+    verdicts the :class:`~anunnaki.utu.Analyzer` put in it) — escalating to another
+    applicable tactic, the fail-safe, then a run-stop when one fails; :meth:`complete`
+    starts what plan chose. Plan comes between the two because it selects among what
+    :meth:`begin` left: a tactic verified or failed at this instant, and the tactic an
+    escalation started, are what the selection sees (docs/architecture.md, "Where a goal
+    update flows").
+
+    The stage owns the tactic runtimes (:attr:`planner`, one store per process): it
+    restores them after a restart, swaps them on a reload and writes every field of what
+    happens once a tactic starts (:data:`~anunnaki.utu.cycle._entries.EXEC_FIELDS`); the
+    plan stage of the same process is handed the same store and writes only the selection
+    fields (:data:`~anunnaki.utu.cycle._entries.PLAN_FIELDS`).
 
     Args:
         parts: The loaded configuration.
         knowledge: The knowledge base.
         actuator: How actions reach the managed system.
         on_run_stop: Called after a run-stop was performed (e.g. to announce it).
+        runner: Runs blocking requests off the loop (``None``: in the step).
+        planner: The tactic runtimes to take up (a restarted execute stage keeps the
+            selection state of its process's plan stage); default: a new store.
 
     """
 
@@ -89,13 +67,14 @@ class ExecuteStage:
         *,
         on_run_stop: Callable[[str, str], None] | None = None,
         runner: ActionRunner | None = None,
+        planner: Planner | None = None,
     ) -> None:
         self.parts = parts
         self.knowledge = knowledge
         self.actuator = actuator
         self.on_run_stop = on_run_stop
-        # The planner here holds the tactic runtimes (and knows the conflicts); plan selects.
-        self.planner = Planner(parts.tactics, knowledge, dwell=parts.config.dwell)
+        #: The tactic runtimes (and the conflicts between tactics): plan selects among them.
+        self.planner = planner or Planner(parts.tactics, knowledge, dwell=parts.config.dwell)
         self.executor = Executor(
             actuator,
             knowledge,
@@ -107,8 +86,8 @@ class ExecuteStage:
         self.stopped = False  # a run-stop performed here
         self.heard_run_stop = False  # a run-stop heard on its topic, not yet performed
         self.now = 0.0
-        self.eligible: list[str] = []
-        self._view = _AnalysisView()
+        #: The analysis of the cycle: applicable tactics, postconditions, their goals' status.
+        self.analysis: AnalysisState | None = None
         self._approvals: list[list[str]] = []
         self._cascade_t: float | None = None  # the instant of the escalations in _cascade
         self._cascade: set[str] = set()  # tactics that failed at that instant
@@ -131,6 +110,11 @@ class ExecuteStage:
                 )
 
     @property
+    def eligible(self) -> list[str]:
+        """The applicable tactics, as the analysis of the cycle has them (file order)."""
+        return list((self.analysis.eligible if self.analysis is not None else None) or [])
+
+    @property
     def halted(self) -> bool:
         """Whether adaptation is halted (paused, run-stopped, or a run-stop was heard)."""
         return self.paused or self.stopped or self.heard_run_stop
@@ -145,9 +129,7 @@ class ExecuteStage:
         kb = self.knowledge
         t = float(state.t or 0.0)
         self.now = t
-        self._state = state
-        self._view.update(state)
-        self.eligible = list(state.eligible or [])
+        self._state = self.analysis = state
         self._approvals = []
         ops = [dict(op) for op in state.ops or []]
         for op in ops:
@@ -158,10 +140,10 @@ class ExecuteStage:
         for rt in list(runtimes.values()):
             if rt.state == "running":  # resumed mid-action after a restart
                 self.executor.run_actions(rt, t)
-        analysis = cast(Analyzer, self._view)
+        goals = dict(state.post_goals or {})
         for rt in list(runtimes.values()):
             if rt.state == "awaiting":
-                self.executor.check(rt, analysis, t)
+                self.executor.check(rt, t, verified=self._verified(rt), goals=goals)
         return cast(
             ExecuteStatus,
             build_message(
@@ -178,6 +160,18 @@ class ExecuteStage:
             ),
         )
 
+    def mirror(self, start: PlanStart) -> None:
+        """Take what the plan node owns into this execute node's own copy of the runtimes.
+
+        Only where plan and execute run in different processes: the selection state of
+        each tactic not in flight (queued, pending, idle, …).
+        """
+        runtimes = self.planner.runtimes
+        for name, st in start.states.items():
+            rt = runtimes.get(name)
+            if rt is not None and not rt.in_flight:
+                rt.state = cast(Any, st)
+
     def complete(self, start: PlanStart | None) -> CycleDone:
         """Start what plan chose (nothing when plan did not answer); report the cycle done."""
         state, kb = self._state, self.knowledge
@@ -186,10 +180,6 @@ class ExecuteStage:
         started: list[str] = []
         if start is not None:
             runtimes = self.planner.runtimes
-            for name, st in start.states.items():
-                rt = runtimes.get(name)
-                if rt is not None and not rt.in_flight:
-                    rt.state = cast(Any, st)
             planned = start.decisions
             for name in start.start:
                 rt = runtimes.get(name)
@@ -209,6 +199,11 @@ class ExecuteStage:
                 decisions=kb.decisions_written - self._before + planned,
             ),
         )
+
+    def _verified(self, rt: TacticRuntime) -> bool:
+        """Whether the analysis of this cycle found every postcondition of ``rt`` holding."""
+        post = self.analysis.postconditions if self.analysis is not None else None
+        return bool((post or {}).get(rt.name, False))
 
     # -- what happens between and around the parts
     def _apply_op(self, op: dict[str, Any], t: float) -> None:
@@ -293,7 +288,7 @@ class ExecuteStage:
                 return
         fs = planner.runtimes.get(self.parts.config.failsafe or "")
         if fs is not None and fs.name not in self._cascade and not fs.in_flight:
-            if fs.tactic.postconditions and self._view.postconditions_hold(fs.tactic):
+            if fs.tactic.postconditions and self._verified(fs):
                 # Already where the fail-safe brings the system (another tactic handed it
                 # over while the failed one was in flight): running it again would only
                 # repeat its actions, its e-mail included.

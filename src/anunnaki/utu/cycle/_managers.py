@@ -13,9 +13,10 @@ the fail-safe) and the knowledge base stay Utu's, so a comparison isolates the c
   ignores the tactics' goal-model preconditions, which is what makes it a baseline: among
   the tactics whose preconditions hold, the rover's tactic set nearly always offers one,
   and the draw would be the planner's own choice. The planner's choices the draw displaced
-  are consumed as if started (their episode has fired, and they wait out their deadline and
-  cooldown), so the random manager does not start more often than Utu would. Each draw is
-  recorded as a ``random_draw`` decision naming the displaced tactics.
+  are consumed as if started: their episode has fired, so a tactic without a cooldown is
+  not queued again before its preconditions clear (one with a cooldown may be queued again
+  at the next instant, and the draw is repeated then). Each draw is recorded as a
+  ``random_draw`` decision naming the displaced tactics.
 
 Under either, the decision log (and ``anunnaki run``'s output) holds what the baseline did,
 not what Utu would have done: the planner records none of its own choices (``selected``,
@@ -61,10 +62,9 @@ class _Random:
         ]
         pick = self.rng.choice(candidates) if candidates else start[0]
         displaced = [rt for rt in start if rt is not pick]
-        for rt in displaced:
+        for rt in displaced:  # selection state only: nothing started, nothing to wait out
             rt.state = "idle"
             rt.fired = True
-            rt.cooldown_until = now + rt.tactic.deadline + rt.tactic.cooldown
         planner.knowledge.record_decision(
             now,
             "random_draw",

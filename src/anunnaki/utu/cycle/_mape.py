@@ -407,19 +407,37 @@ class Planner:
             start.append(rt)
         return start
 
-    def queue(self) -> list[dict[str, Any]]:
-        """The priority-sorted queue (queued, pending approval and in flight)."""
+    def queue(self, starting: Iterable[str] = ()) -> list[dict[str, Any]]:
+        """The priority-sorted queue (queued, pending approval and in flight).
+
+        ``starting``: tactics handed to execute to start now, shown as running.
+        """
         rts = [rt for rt in self.runtimes.values() if rt.state != "idle"]
         rts.sort(key=lambda rt: -rt.tactic.priority)
+        now_running = set(starting)
         return [
             {
                 "tactic": rt.name,
                 "priority": rt.tactic.priority,
-                "state": rt.state,
+                "state": "running" if rt.name in now_running else rt.state,
                 "deadline": rt.deadline,
             }
             for rt in rts
         ]
+
+    def forget_selection(self) -> None:
+        """Start selecting afresh, as a restarted plan part does.
+
+        What selection alone knew goes (when each tactic became eligible, the last
+        ``deferred`` reason, whether it fired in this episode, queued or rejected); what
+        Knowledge keeps stays: pending approvals, and everything of a tactic in flight.
+        """
+        for rt in self.runtimes.values():
+            rt.eligible_since = None
+            rt.blocked_logged = None
+            rt.fired = False
+            if rt.state in ("queued", "rejected"):
+                rt.state = "idle"
 
     def approve(self, name: str, approve: bool, caller: str, now: float) -> str:
         """An operator approves or rejects a pending tactic; returns what happened."""
@@ -596,18 +614,21 @@ class Executor:
             "Publication or Notice",
         )
 
-    def check(self, rt: TacticRuntime, analyzer: Analyzer, now: float) -> None:
-        """Check an awaiting tactic's postconditions: verified, still waiting, or failed."""
+    def check(
+        self, rt: TacticRuntime, now: float, *, verified: bool, goals: Mapping[str, str]
+    ) -> None:
+        """Check an awaiting tactic's postconditions: verified, still waiting, or failed.
+
+        ``verified`` and ``goals`` are the analysis of this instant, as the
+        :class:`Analyzer` gave it: whether every postcondition of the tactic holds, and the
+        status name of each goal a postcondition names (what a failure records).
+        """
         if rt.state != "awaiting":
             return
-        if analyzer.postconditions_hold(rt.tactic):
+        if verified:
             self._finish(rt, now, ok=True, note="postconditions verified")
         elif rt.deadline is not None and now >= rt.deadline:
-            states = {
-                c.goal: status_name(analyzer.evaluator.state(c.goal).status)
-                for c in rt.tactic.postconditions
-                if c.goal in analyzer.evaluator.index
-            }
+            states = {c.goal: goals[c.goal] for c in rt.tactic.postconditions if c.goal in goals}
             self._finish(rt, now, ok=False, note="deadline passed", goals=states)
 
     def _finish(self, rt: TacticRuntime, now: float, *, ok: bool, note: str, **data: Any) -> None:

@@ -32,7 +32,7 @@ from anunnaki.utu.cycle._actions import ActionRunner
 from anunnaki.utu.cycle._execute import ExecuteStage
 from anunnaki.utu.cycle._knowledge import Knowledge
 from anunnaki.utu.cycle._knowledge_stage import DecisionTail, decision_dict
-from anunnaki.utu.cycle._mape import Actuator
+from anunnaki.utu.cycle._mape import Actuator, Planner
 from anunnaki.utu.cycle._monitor import MonitorStage
 from anunnaki.utu.cycle._parts import UtuParts
 from anunnaki.utu.host._actuators import stop_platform
@@ -229,11 +229,13 @@ def execute_stage(
     *,
     bus: Bus | None,
     runner: ActionRunner | None,
+    planner: Planner | None = None,
 ) -> ExecuteStage:
     """The execute stage as every host runs it: a run-stop it performs is announced.
 
     The announcement goes on ``/utu/run_stop`` of ``bus`` (:func:`announce_run_stop`;
-    nothing without a bus); ``runner`` runs blocking requests off the loop.
+    nothing without a bus); ``runner`` runs blocking requests off the loop; ``planner``:
+    the tactic runtimes to take up (default: a new store).
     """
     utu = parts.config.name
 
@@ -241,7 +243,9 @@ def execute_stage(
         if bus is not None:
             announce_run_stop(bus, utu, caller, reason)
 
-    return ExecuteStage(parts, knowledge, actuator, on_run_stop=announce, runner=runner)
+    return ExecuteStage(
+        parts, knowledge, actuator, on_run_stop=announce, runner=runner, planner=planner
+    )
 
 
 class DecisionFeed:

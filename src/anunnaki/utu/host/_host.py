@@ -31,7 +31,7 @@ from anunnaki.utu.cycle._actions import ActionRunner
 from anunnaki.utu.cycle._entries import mark_restart, resuming
 from anunnaki.utu.cycle._execute import ExecuteStage
 from anunnaki.utu.cycle._knowledge import Knowledge
-from anunnaki.utu.cycle._mape import Actuator
+from anunnaki.utu.cycle._mape import Actuator, Planner
 from anunnaki.utu.cycle._parts import UtuParts
 from anunnaki.utu.host._actuators import BusActuator, RecordingActuator, bus_actuator
 from anunnaki.utu.host._desk import execute_stage, loop_watchdog
@@ -155,14 +155,27 @@ class ExecuteSide:
         self.closed = False
         self.stage: ExecuteStage = take_up(knowledge, node, self._build) if node else self._build()
 
-    def _build(self) -> ExecuteStage:
+    def _build(self, planner: Planner | None = None) -> ExecuteStage:
         return execute_stage(
-            self.parts, self.knowledge, self.actuator, bus=self.bus, runner=self.actions
+            self.parts,
+            self.knowledge,
+            self.actuator,
+            bus=self.bus,
+            runner=self.actions,
+            planner=planner,
         )
 
     def restart(self) -> None:
-        """Build the stage again on the knowledge, as a restarted execute node does."""
-        self.stage = take_up(self.knowledge, "execute", self._build, restarted=True)
+        """Build the stage again on the knowledge, as a restarted execute node does.
+
+        It takes up the same store of tactic runtimes (the plan stage of this process
+        selects among them, and it did not restart): what execute owns is read again from
+        Knowledge.
+        """
+        planner = self.stage.planner
+        self.stage = take_up(
+            self.knowledge, "execute", lambda: self._build(planner), restarted=True
+        )
 
     def run_inline(self) -> None:
         """Perform requests in the step itself: on an executor they are answered in its drain.

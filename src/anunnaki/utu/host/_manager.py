@@ -58,6 +58,7 @@ from anunnaki.topics import UTU_NODES as NODE_NAMES
 from anunnaki.utu._config import RunStopConfig, UtuConfig
 from anunnaki.utu.cycle._actions import ActionRunner
 from anunnaki.utu.cycle._analyze import AnalyzeStage
+from anunnaki.utu.cycle._entries import end_step
 from anunnaki.utu.cycle._execute import ExecuteStage
 from anunnaki.utu.cycle._knowledge import Knowledge
 from anunnaki.utu.cycle._knowledge_stage import KnowledgeStage
@@ -198,7 +199,6 @@ class AutonomicManager(Closing):
         self._pull = MonitoredTopics(self._subscribe_topic)
         self._clock_sub: Any = None
         self._stepped = False
-        self._last_eligible: list[str] = []
         self._state_cache: AnalysisState | None = None
         record_run(self.knowledge, parts)
         take_up(self.knowledge, "manager", lambda: self._build_stages(actuator, actions))
@@ -217,11 +217,12 @@ class AutonomicManager(Closing):
             watch=self._pull.watch if self.bus is not None else None,
         )
         self.analyze_stage = AnalyzeStage(parts, kb)
-        self.plan_stage = PlanStage(parts, kb)
         # requests never hold the loop
         self._execute = ExecuteSide(
             parts, kb, bus=self.bus, actuator=actuator, wake=self.wake, actions=actions
         )
+        # One store of tactic runtimes: plan selects among the execute stage's own.
+        self.plan_stage = PlanStage(parts, kb, planner=self.execute_stage.planner)
         self.knowledge_stage = KnowledgeStage(parts, kb)
         rate = self._nodes.get("knowledge", parts.config.rate)
         self._decisions = DecisionFeed(self.bus, kb, rate) if self.bus is not None else None
@@ -480,20 +481,19 @@ class AutonomicManager(Closing):
         self.now = batch.t
         a = self.analyze_stage
         idle = react and not any(rt.state == "running" for rt in self.planner.runtimes.values())
-        state = a.analyze(batch, full=False, unless_idle=self._last_eligible if idle else None)
+        state = a.analyze(batch, full=False, react=idle)
         if state is None:
             return len(inputs)  # nothing to decide now: the next time-driven step goes on from here
-        self._last_eligible = list(state.eligible or [])
         kb = self.knowledge
         if not execute:
-            a.finish(None, state.seq)
+            end_step(kb, float(state.t or 0.0), took=bool(state.took), decisions=0)
             kb.flush()
             return len(inputs)
         before = kb.decisions_written
         status = self.execute_stage.begin(state)
         start = self.plan_stage.plan(status)
         done = self.execute_stage.complete(start)
-        a.finish(done)
+        end_step(kb, float(state.t or 0.0), took=bool(state.took), decisions=done.decisions)
         self.knowledge_stage.queue = self.planner.queue()
         self.knowledge_stage.flags = {"paused": self.paused, "run_stopped": self.run_stopped}
         self._state_cache = None
@@ -578,7 +578,9 @@ class AutonomicManager(Closing):
                     kb, node, lambda: AnalyzeStage(parts, kb), restarted=True
                 )
             elif node == "plan":
-                self.plan_stage = take_up(kb, node, lambda: PlanStage(parts, kb), restarted=True)
+                self.plan_stage = take_up(
+                    kb, node, lambda: PlanStage(parts, kb, planner=self.planner), restarted=True
+                )
             elif node == "execute":
                 self._execute.restart()
             else:

@@ -67,6 +67,7 @@ from anunnaki.topics import UtuNodeName as NodeName
 from anunnaki.topics import node_token, ready_service
 from anunnaki.utu._config import UtuConfig
 from anunnaki.utu.cycle._analyze import AnalyzeStage
+from anunnaki.utu.cycle._entries import end_step
 from anunnaki.utu.cycle._execute import ExecuteStage
 from anunnaki.utu.cycle._knowledge import Knowledge
 from anunnaki.utu.cycle._knowledge_stage import DecisionTail, KnowledgeStage
@@ -435,7 +436,7 @@ class AnalyzeNode(UtuNode):
         )
         # execute itself waits up to ``timeout`` for plan: give it time to say so
         self._ack_timeout = 2 * self.timeout
-        self._awaiting: tuple[int, float] | None = None  # (seq, since)
+        self._awaiting: tuple[AnalysisState, float] | None = None  # (the cycle, since)
         self._unpaced = False
         self.timeouts = 0
         self._batches = self.pull(
@@ -443,8 +444,25 @@ class AnalyzeNode(UtuNode):
         )
         self._done = self.pull(topics.CYCLE_DONE, queue=64, expect=CycleDone)
         self._presence = _Presence(self.bus, self.wake)
-        self.stage.execute_alive = lambda: self._presence.alive("execute")
         self.own(self._presence.watch)
+
+    def execute_up(self) -> bool:
+        """Whether the execute node is up (its liveliness token is seen)."""
+        return self._presence.alive("execute")
+
+    def _end_step(self, state: AnalysisState, done: CycleDone | None) -> None:
+        """End the step of ``state``: as execute reported it, or unreported.
+
+        Unreported while execute is gone, the marker says so: a replay analyses the step
+        only, as nothing acted on it.
+        """
+        gone = done is None and not self.execute_up()
+        decisions = done.decisions if done is not None else 0
+        end_step(
+            self.knowledge, float(state.t or 0.0), took=bool(state.took),
+            decisions=decisions, executed=not gone,
+        )  # fmt: skip
+        self._flush()
 
     def _paced(self) -> bool:
         expects = self._pace if self._pace is not None else self._presence.alive("execute")
@@ -457,10 +475,9 @@ class AnalyzeNode(UtuNode):
             done = cast(CycleDone, sample.message)
             if done.origin != self.stage.origin:
                 continue
-            if self._awaiting is not None and done.seq == self._awaiting[0]:
-                self._awaiting = None
-                self.stage.finish(done)
-                self._flush()
+            if self._awaiting is not None and done.seq == self._awaiting[0].seq:
+                state, self._awaiting = self._awaiting[0], None
+                self._end_step(state, done)
                 self.cycles += 1
                 finished = True
             if done.seq == self.stage.seq:
@@ -492,10 +509,10 @@ class AnalyzeNode(UtuNode):
                 log.warning(
                     "analyze: execute did not finish cycle %d within %.1f s; going on "
                     "without waiting until it answers again",
-                    self._awaiting[0],
+                    self._awaiting[0].seq,
                     self._ack_timeout,
                 )
-            self.stage.finish(None, self._awaiting[0])
+            self._end_step(self._awaiting[0], None)
             self._awaiting = None
         batches: list[MonitorBatch] = []
         while (sample := self._batches.try_recv()) is not None:
@@ -523,10 +540,9 @@ class AnalyzeNode(UtuNode):
         self._flush()
         self.bus.publish(topics.ANALYSIS, state)
         if self._paced():
-            self._awaiting = (self.stage.seq, time.monotonic())
+            self._awaiting = (state, time.monotonic())
         else:
-            self.stage.finish(None, self.stage.seq)
-            self._flush()
+            self._end_step(state, None)
             self.cycles += 1
         return True
 
@@ -583,6 +599,7 @@ class PlanNode(UtuNode):
             status = cast(ExecuteStatus, sample.message)
             if not self.from_peer("analyze", status.origin):
                 continue  # not a cycle of this Utu's analyzer
+            self.stage.mirror(status)  # this process's copy takes the execute node's fields
             start = self.stage.plan(status)
             self.run_stopped = self.stage.run_stopped
             self._flush()
@@ -700,6 +717,8 @@ class ExecuteNode(UtuNode):
                             self._pending[1],
                             self.timeout,
                         )
+                if start is not None:
+                    self.stage.mirror(start)  # this process's copy takes the plan node's states
                 done = self.stage.complete(start)
                 self._flush()
                 self.bus.publish(topics.CYCLE_DONE, done)
