@@ -13,6 +13,13 @@ again) and prints one line per launch::
     .venv/bin/python benchmarks/determinism.py --cases rover --runs 2
     .venv/bin/python benchmarks/determinism.py --cases uav --until 11 --output /tmp/d.json
 
+``--case-studies`` checks the managers benchmark instead: ``benchmarks/case_studies.py --quick
+--cases rover --seeds N`` twice (the second beside a busy process), and its tables (every run's
+measures, every summary) compared, leaving out what measures the machine rather than the run
+(:data:`MACHINE_FIELDS`: wall seconds, load averages, the date)::
+
+    .venv/bin/python benchmarks/determinism.py --case-studies --seeds 2
+
 ``--until`` shortens every case to that many simulated seconds (the suite's check,
 tests/benchmarks/test_determinism_benchmark.py, runs the rover's first 9 s and the UAV's
 first 11 s twice each); ``--output`` writes elsewhere than the committed results.
@@ -40,6 +47,54 @@ CASES: dict[str, tuple[str, float | None]] = {
     "rover": ("examples/rover/demo.yaml", 30.0),
     "uav": ("examples/uav/sim.yaml", None),
 }
+
+
+#: Fields of benchmarks/case_studies.py's JSON that measure the machine, not the run.
+MACHINE_FIELDS = frozenset({"wall_s", "load_average", "date", "machine"})
+
+
+def run_facts(doc: Any) -> Any:
+    """``doc`` without :data:`MACHINE_FIELDS`, at any depth: what a rerun must repeat."""
+    if isinstance(doc, dict):
+        return {k: run_facts(v) for k, v in doc.items() if k not in MACHINE_FIELDS}
+    if isinstance(doc, list):
+        return [run_facts(v) for v in doc]
+    return doc
+
+
+def case_studies(seeds: int) -> dict[str, Any]:
+    """The managers benchmark's quick rover runs twice (the 2nd loaded); their tables compared."""
+    tables: list[Any] = []
+    walls: list[float] = []
+    with tempfile.TemporaryDirectory(prefix="determinism-cs-") as tmp:
+        for k in range(2):
+            out = Path(tmp) / f"cs{k}.json"
+            argv = [sys.executable, str(ROOT / "benchmarks" / "case_studies.py"), "--quick"]
+            argv += ["--cases", "rover", "--seeds", str(seeds), "--output", str(out)]
+            busy = subprocess.Popen([sys.executable, "-c", "while True: pass"]) if k else None
+            t0 = time.perf_counter()
+            try:
+                proc = subprocess.run(argv, capture_output=True, text=True, check=False)
+            finally:
+                if busy is not None:
+                    busy.kill()
+                    busy.wait()
+            walls.append(round(time.perf_counter() - t0, 1))
+            if proc.returncode != 0:
+                raise SystemExit(
+                    f"case_studies.py exited {proc.returncode}:\n{proc.stderr[-2000:]}"
+                )
+            tables.append(run_facts(json.loads(out.read_text())["cases"]))
+            print(f"  case studies run {k + 1}: {walls[-1]} s", flush=True)
+    digests = [hashlib.sha256(json.dumps(t, sort_keys=True).encode()).hexdigest() for t in tables]
+    return {
+        "command": f"benchmarks/case_studies.py --quick --cases rover --seeds {seeds}",
+        "runs": [
+            {"wall_s": w, "tables_sha256": d, "beside_busy": bool(k)}
+            for k, (w, d) in enumerate(zip(walls, digests, strict=True))
+        ],
+        "identical_tables": digests[0] == digests[1],
+    }
 
 
 def _run(launch: str, until: float | None, folder: Path, k: int) -> dict[str, Any]:
@@ -113,6 +168,10 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--runs", type=int, default=3, help="runs per case (the 2nd is loaded)")
     ap.add_argument("--until", type=float, help="simulated seconds of every case (default: each's)")
     ap.add_argument("--output", type=Path, default=RESULTS, help="the JSON written")
+    ap.add_argument(
+        "--case-studies", action="store_true", help="the managers benchmark's tables instead"
+    )
+    ap.add_argument("--seeds", type=int, default=2, help="--case-studies: seeds per manager")
     args = ap.parse_args(argv)
     if args.runs < 2:
         ap.error("--runs must be at least 2: one run cannot repeat itself")
@@ -124,6 +183,12 @@ def main(argv: list[str] | None = None) -> int:
         ap.error(f"unknown case(s) {unknown}: choose from {sorted(CASES)}")
     out: Path = args.output
     doc = json.loads(out.read_text()) if out.is_file() else {"cases": {}}
+    if args.case_studies:
+        doc["case_studies"] = cs = case_studies(args.seeds)
+        out.parent.mkdir(parents=True, exist_ok=True)
+        out.write_text(json.dumps(doc, indent=1) + "\n")
+        print(f"case studies: tables identical {cs['identical_tables']}", flush=True)
+        return 0 if cs["identical_tables"] else 1
     doc.update(
         benchmark="determinism",
         date=time.strftime("%Y-%m-%d %H:%M:%S"),

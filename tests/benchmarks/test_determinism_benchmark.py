@@ -33,3 +33,28 @@ def test_a_run_repeats_itself_quiet_and_loaded(tmp_path: Path, case: str, until:
     assert loaded["report_sha256"] == quiet["report_sha256"]  # the same report, byte for byte
     assert c["identical_reports"] is True and c["identical_logs"] is True
     assert c["replay_exit_code"] == 0, c["replay"]  # `anunnaki replay` of the run
+
+
+def test_the_case_studies_check_compares_runs_not_the_machine() -> None:
+    """``--case-studies`` compares the managers benchmark's tables without what measures the
+    machine (wall seconds, load averages, the date), and nothing else is left out."""
+    from bench_helpers import script_module
+
+    determinism = script_module("determinism.py", "determinism_bench")
+    one = {
+        "rover": {
+            "runs": [{"seed": 0, "degraded_frames": 25, "wall_s": 25.1}],
+            "settings": {"load_average": [[4.2, 6.7, 7.6]], "managers": ["utu"]},
+        }
+    }
+    loaded = {
+        "rover": {
+            "runs": [{"seed": 0, "degraded_frames": 25, "wall_s": 40.3}],
+            "settings": {"load_average": [[9.0, 8.1, 7.7]], "managers": ["utu"]},
+        }
+    }
+    other = {"rover": {**loaded["rover"], "runs": [{"seed": 0, "degraded_frames": 26}]}}
+    facts = determinism.run_facts
+    assert facts(one) == facts(loaded)
+    assert facts(one) != facts(other)
+    assert facts(one)["rover"]["settings"] == {"managers": ["utu"]}
