@@ -38,6 +38,8 @@ class Ros2Config(RobotConfig):
         domain: The ROS domain id (rmw_zenoh keys).
         namespace: zenoh-bridge-ros2dds's ``namespace`` option, if it sets one.
         connect: zenoh endpoints of the robot's zenoh; empty: the launch's own session.
+        distro: The robot's ROS 2 distribution (default: the bridge file's, else
+            ``$ROS_DISTRO``); its message definitions decode the samples.
         models / camera / oracle / scorer: the camera chain (:class:`RobotConfig`).
 
     """
@@ -46,6 +48,7 @@ class Ros2Config(RobotConfig):
     domain: Annotated[int, Field(ge=0, le=232)] = 0
     namespace: str = ""
     connect: list[str] = Field(default_factory=list)
+    distro: Literal["humble", "jazzy", "kilted"] | None = None
 
 
 class _ZenohLink:
@@ -77,8 +80,8 @@ class Ros2Kind(RobotKind):
         import zenoh
 
         from anunnaki.bus import BusConfig
-        from anunnaki.ros1 import load_bridge
         from anunnaki.ros2 import Ros2ZenohBridge
+        from anunnaki.rosbridge import load_bridge
 
         o = self.options
         connect = self._endpoints(ctx)
@@ -94,6 +97,7 @@ class Ros2Kind(RobotKind):
             flavour=o.flavour,
             domain=o.domain,
             namespace=o.namespace,
+            distro=o.distro,
         )
         link = _ZenohLink(session, bridge)
         try:

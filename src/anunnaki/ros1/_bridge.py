@@ -26,7 +26,8 @@ from typing import Any
 from anunnaki._closing import Closing
 from anunnaki.bus import Bus
 from anunnaki.messages import Image, ServiceReply, body_of
-from anunnaki.ros1._convert import (
+from anunnaki.ros1._rospy import master_pid, message_class, reregister_node, service_class
+from anunnaki.rosbridge._convert import (
     ConversionError,
     bus_image_to_compressed,
     bus_image_to_raw,
@@ -34,9 +35,8 @@ from anunnaki.ros1._convert import (
     message_to_dict,
     to_ros_fields,
 )
-from anunnaki.ros1._rospy import master_pid, message_class, reregister_node, service_class
-from anunnaki.ros1._schema import BridgeSpec, ServiceBridge, TopicBridge
-from anunnaki.ros1._tobus import ToBus
+from anunnaki.rosbridge._schema import BridgeSpec, ServiceBridge, TopicBridge
+from anunnaki.rosbridge._tobus import ToBus
 
 __all__ = ["Bridge"]
 

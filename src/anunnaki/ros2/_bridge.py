@@ -14,7 +14,9 @@ needed on Anunnaki's side:
   this reader does not need). A subscriber uses ``*`` for the hash.
 
 :class:`Ros2ZenohBridge` reads and writes those samples with ``rosbags``' CDR serializers and
-ROS 2 (Humble) type store, through a bridge file written for ROS 1 (types ``std_msgs/String``
+the type store of the robot's ROS 2 distribution (the bridge file's ``distro``, else
+``$ROS_DISTRO``: :func:`~anunnaki.ros2._distro.resolve_distro`; never assumed), through a
+bridge file (``ros2-bridge/1``, or one written for ROS 1: types ``std_msgs/String``
 map to ``std_msgs/msg/String``; a mapped field a ROS 2 type lacks — Header's ``seq`` — is
 left out), and publishes on Anunnaki's bus what the ROS 1 bridge publishes.
 """
@@ -27,9 +29,9 @@ from typing import Any, Literal
 
 from anunnaki._closing import Closing
 from anunnaki.bus import Bus
-from anunnaki.errors import MissingExtraError
 from anunnaki.messages import Image, body_of
-from anunnaki.ros1 import (
+from anunnaki.ros2._distro import resolve_distro, type_store
+from anunnaki.rosbridge import (
     BridgeSpec,
     ConversionError,
     ToBus,
@@ -74,28 +76,31 @@ def ros2_key(
     return f"{domain}/{name}/{dds_type_name(ros1_type)}/{type_hash}"
 
 
-def _store() -> Any:
-    try:
-        from rosbags.typesys import Stores, get_typestore
-    except ImportError:
-        raise MissingExtraError("rosbags", "ros") from None
-    return get_typestore(Stores.ROS2_HUMBLE)
+def _store(store: Any | None, distro: str | None) -> Any:
+    return store if store is not None else type_store(resolve_distro(distro, where="the call"))
 
 
-def decode_cdr(ros1_type: str, raw: bytes, store: Any | None = None) -> dict[str, Any]:
-    """A CDR sample of ``ros1_type``'s ROS 2 message as plain data (times as float seconds)."""
-    store = store or _store()
+def decode_cdr(
+    ros1_type: str, raw: bytes, store: Any | None = None, *, distro: str | None = None
+) -> dict[str, Any]:
+    """A CDR sample of ``ros1_type``'s ROS 2 message as plain data (times as float seconds).
+
+    ``store`` (a rosbags type store), else ``distro``'s, else the installed distribution's.
+    """
+    store = _store(store, distro)
     return bag_message_to_dict(store.deserialize_cdr(raw, ros2_type(ros1_type)))
 
 
-def encode_cdr(ros1_type: str, data: Mapping[str, Any], store: Any | None = None) -> bytes:
+def encode_cdr(
+    ros1_type: str, data: Mapping[str, Any], store: Any | None = None, *, distro: str | None = None
+) -> bytes:
     """Plain data as a CDR sample of ``ros1_type``'s ROS 2 message (missing fields: zero).
 
     Raises:
         ConversionError: A field the ROS 2 type does not have.
 
     """
-    store = store or _store()
+    store = _store(store, distro)
     msgtype = ros2_type(ros1_type)
     return bytes(store.serialize_cdr(_build(store, msgtype, data, ""), msgtype))
 
@@ -150,6 +155,8 @@ class Ros2ZenohBridge(Closing):
         flavour: ``ros2dds`` or ``rmw_zenoh`` key expressions.
         domain: The ROS domain id (rmw_zenoh keys).
         namespace: zenoh-bridge-ros2dds's ``namespace`` option, if it sets one.
+        distro: The robot's ROS 2 distribution (default: the bridge file's ``distro``, else
+            ``$ROS_DISTRO``, else the installed rclpy's; none of them: an error).
 
     """
 
@@ -162,6 +169,7 @@ class Ros2ZenohBridge(Closing):
         flavour: Flavour = "ros2dds",
         domain: int = 0,
         namespace: str = "",
+        distro: str | None = None,
     ) -> None:
         self.spec = spec
         self.bus = bus
@@ -169,7 +177,8 @@ class Ros2ZenohBridge(Closing):
         self.flavour: Flavour = flavour
         self.domain = domain
         self.namespace = namespace
-        self.store = _store()
+        self.distro = resolve_distro(distro or spec.distro)
+        self.store = type_store(self.distro)
         self.stats: dict[str, int] = {"to_bus": 0, "to_ros": 0, "malformed": 0}
         self._to_bus = ToBus(spec, strict=False)
         self._handles: list[Any] = []

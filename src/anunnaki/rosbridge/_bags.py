@@ -26,8 +26,8 @@ from typing import Any
 
 from anunnaki import topics
 from anunnaki.errors import AnunnakiError, MissingExtraError, ModelFileError
-from anunnaki.ros1._schema import BridgeSpec, TopicBridge
-from anunnaki.ros1._tobus import ToBus
+from anunnaki.rosbridge._schema import BridgeSpec, TopicBridge
+from anunnaki.rosbridge._tobus import ToBus
 from anunnaki.trace import Record
 
 __all__ = [

@@ -1,9 +1,10 @@
-"""The bridge file (``anunnaki: ros1-bridge/1``): which ROS topics and services meet the bus.
+"""The bridge file (ros1-bridge/1, ros2-bridge/1): which ROS topics and services meet the bus.
 
 Validated in two passes, both naming file, line and element: the shape (pydantic: unknown
 keys, wrong kinds, bad names), then the meaning — every ROS type is one the bridge converts
-(:mod:`anunnaki.ros1._types`), every field path exists in that type, a bus topic fed by
-several ROS topics gets each field from one of them.
+(:mod:`anunnaki.rosbridge._types`, ROS 1's or ROS 2's table by the file's tag), every field
+path exists in that type, a bus topic fed by several ROS topics gets each field from one of
+them, and the ROS 2 settings (``distro``, ``qos``, ``serve: ros``) appear in ROS 2 files only.
 """
 
 from __future__ import annotations
@@ -17,17 +18,24 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
 from anunnaki._safeyaml import LineMap, load_yaml, read_text_limited, validation_error
 from anunnaki.errors import ModelFileError
-from anunnaki.ros1._types import (
+from anunnaki.rosbridge._types import (
     IMAGE_TYPES,
     MESSAGE_TYPES,
+    ROS2_MESSAGE_TYPES,
+    ROS2_SERVICE_TYPES,
+    SENSOR_TYPES,
     SERVICE_TYPES,
     field_type,
     leaf_fields,
 )
 
 __all__ = [
+    "DISTROS",
     "FORMAT_TAG",
+    "ROS2_FORMAT_TAG",
     "BridgeSpec",
+    "Distro",
+    "QosName",
     "ServiceBridge",
     "TopicBridge",
     "load_bridge",
@@ -35,6 +43,15 @@ __all__ = [
 ]
 
 FORMAT_TAG = "ros1-bridge/1"
+ROS2_FORMAT_TAG = "ros2-bridge/1"
+_TAGS = (FORMAT_TAG, ROS2_FORMAT_TAG)
+
+#: The ROS 2 distributions whose message definitions the bridges know (rosbags' type stores).
+Distro = Literal["humble", "jazzy", "kilted"]
+DISTROS: tuple[Distro, ...] = ("humble", "jazzy", "kilted")
+#: A ROS 2 topic's QoS: ``sensor`` (best effort, keep last: rclpy's sensor-data profile) or
+#: ``reliable`` (reliable, keep last ``queue``: commands, states, diagnostics).
+QosName = Literal["sensor", "reliable"]
 
 _T = TypeVar("_T")
 
@@ -60,7 +77,9 @@ class TopicBridge(_Strict):
         fields: Bus field → ROS field path (``{range: range, seq: header.seq}``); empty:
             every field, nested as in ROS. A to_bus image without ``fields`` travels as the
             bus's ``Image``; with ``fields`` as those fields (never the pixels).
-        queue: Messages waiting on either side before the oldest is dropped.
+        queue: Messages waiting on either side before the oldest is dropped (ROS 2: the
+            QoS history depth too).
+        qos: (ROS 2) ``sensor`` or ``reliable``; default :attr:`effective_qos`.
 
     """
 
@@ -70,6 +89,18 @@ class TopicBridge(_Strict):
     bus: RosName | None = None
     fields: dict[FieldPath, FieldPath] = Field(default_factory=dict)
     queue: Annotated[int, Field(ge=1, le=1000)] = 4
+    qos: QosName | None = None
+
+    @property
+    def effective_qos(self) -> QosName:
+        """The QoS stated, else ``sensor`` for a sensor stream read from ROS, else ``reliable``.
+
+        A best-effort reader matches a sensor driver whichever it offers; a reliable
+        writer (commands, states to ROS) matches every reader.
+        """
+        if self.qos is not None:
+            return self.qos
+        return "sensor" if self.direction == "to_bus" and self.type in SENSOR_TYPES else "reliable"
 
     @property
     def bus_topic(self) -> str:
@@ -93,6 +124,10 @@ class ServiceBridge(_Strict):
         fields: Bus request field → ROS request field (``{mode: data}``); empty: the
             request's fields by the same names.
         timeout: Seconds to wait for the ROS service's reply.
+        serve: Where the bridge offers the service: ``bus`` (default: a tactic's request on
+            the bus calls the robot's ROS service) or, ROS 2 only, ``ros`` (the bridge offers
+            the ROS service, and a ROS call requests the bus service; ``fields`` then maps
+            bus field → ROS request field the same way).
 
     """
 
@@ -101,6 +136,7 @@ class ServiceBridge(_Strict):
     type: str
     fields: dict[FieldPath, FieldPath] = Field(default_factory=dict)
     timeout: Annotated[float, Field(gt=0, le=600)] = 2.0
+    serve: Literal["bus", "ros"] = "bus"
 
     @property
     def ros_service(self) -> str:
@@ -111,13 +147,19 @@ class ServiceBridge(_Strict):
 class BridgeSpec(_Strict):
     """A bridge file."""
 
-    anunnaki: Literal["ros1-bridge/1"]
+    anunnaki: Literal["ros1-bridge/1", "ros2-bridge/1"]
     name: Annotated[str, Field(pattern=r"^[A-Za-z][A-Za-z0-9_]*$", max_length=64)] = (
         "anunnaki_bridge"
     )
     description: str = ""
+    distro: Distro | None = None
     topics: list[TopicBridge] = Field(default_factory=list)
     services: list[ServiceBridge] = Field(default_factory=list)
+
+    @property
+    def ros2(self) -> bool:
+        """Whether this is a ROS 2 bridge file (``anunnaki: ros2-bridge/1``)."""
+        return self.anunnaki == ROS2_FORMAT_TAG
 
 
 def parse_bridge(text: str, *, source: str | Path = "<bridge>") -> BridgeSpec:
@@ -130,13 +172,14 @@ def parse_bridge(text: str, *, source: str | Path = "<bridge>") -> BridgeSpec:
     data, lines = load_yaml(source, text=text)
     if not isinstance(data, dict):
         raise ModelFileError("a bridge file is a YAML mapping", path=source, line=1)
-    if data.get("anunnaki") != FORMAT_TAG:
+    if data.get("anunnaki") not in _TAGS:
         raise ModelFileError(
             f"not a bridge file: 'anunnaki' is {data.get('anunnaki')!r}",
             path=source,
             line=lines.line(("anunnaki",)) or 1,
             element="anunnaki",
-            hint=f"start the file with 'anunnaki: {FORMAT_TAG}'",
+            hint=f"start the file with 'anunnaki: {ROS2_FORMAT_TAG}' (ROS 2) "
+            f"or 'anunnaki: {FORMAT_TAG}' (ROS 1)",
         )
     try:
         spec = BridgeSpec.model_validate(data)
@@ -173,14 +216,35 @@ class _File:
         return ModelFileError(message, path=self.path, line=line, element=element, hint=hint)
 
 
+def _check_ros1_only(spec: BridgeSpec, f: _File) -> None:
+    """A ROS 1 file names no ROS 2 setting (it would be silently ignored)."""
+    hint = f"these are ROS 2 settings: write 'anunnaki: {ROS2_FORMAT_TAG}' for a ROS 2 robot"
+    if spec.distro is not None:
+        raise f.error("a ROS 1 bridge file has no 'distro'", ("distro",), "distro", hint)
+    for i, t in enumerate(spec.topics):
+        if t.qos is not None:
+            where = ("topics", i, "qos")
+            raise f.error("a ROS 1 topic has no 'qos'", where, f"topics[{t.ros}].qos", hint)
+    for i, s in enumerate(spec.services):
+        if s.serve != "bus":
+            where = ("services", i, "serve")
+            raise f.error(
+                "the ROS 1 bridge serves on the bus only", where, f"services[{s.bus}].serve", hint
+            )
+
+
 def _check_meaning(spec: BridgeSpec, lines: LineMap, path: str) -> None:
     f = _File(path, lines)
+    if not spec.ros2:
+        _check_ros1_only(spec, f)
+    messages = ROS2_MESSAGE_TYPES if spec.ros2 else MESSAGE_TYPES
+    services = ROS2_SERVICE_TYPES if spec.ros2 else SERVICE_TYPES
     merged: dict[str, dict[str, int]] = {}  # bus topic → bus field → topic entry
     for i, t in enumerate(spec.topics):
         element = f"topics[{t.ros}]"
         at = ("topics", i)
-        fields = _known(f, MESSAGE_TYPES, t.type, at=at, element=element, kind="message")
-        _check_fields(f, t.type, fields, t.fields, at=at, element=element)
+        fields = _known(f, messages, t.type, at=at, element=element, kind="message")
+        _check_fields(f, t.type, fields, t.fields, messages, at=at, element=element)
         if t.direction == "to_bus" and not t.as_image:
             for bus_field in t.fields or dict(fields):
                 first = merged.setdefault(t.bus_topic, {}).setdefault(bus_field, i)
@@ -195,8 +259,8 @@ def _check_meaning(spec: BridgeSpec, lines: LineMap, path: str) -> None:
     for i, s in enumerate(spec.services):
         element = f"services[{s.bus}]"
         at = ("services", i)
-        request, _ = _known(f, SERVICE_TYPES, s.type, at=at, element=element, kind="service")
-        _check_fields(f, f"{s.type} request", request, s.fields, at=at, element=element)
+        request, _ = _known(f, services, s.type, at=at, element=element, kind="service")
+        _check_fields(f, f"{s.type} request", request, s.fields, messages, at=at, element=element)
 
 
 def _known(
@@ -226,6 +290,7 @@ def _check_fields(
     type_name: str,
     fields: tuple[tuple[str, str], ...],
     mapping: Mapping[str, str],
+    table: dict[str, tuple[tuple[str, str], ...]],
     *,
     at: tuple[str, int],
     element: str,
@@ -233,7 +298,7 @@ def _check_fields(
     """Every ROS field an entry's mapping names is one of its type's (not the image bytes)."""
     for bus_field, ros_field in mapping.items():
         where, name = (*at, "fields", bus_field), f"{element}.fields.{bus_field}"
-        _check_field(f, type_name, fields, ros_field, where, element=name)
+        _check_field(f, type_name, fields, ros_field, where, table=table, element=name)
 
 
 def _check_field(
@@ -244,11 +309,12 @@ def _check_field(
     ros_field: str,
     where: tuple[str | int, ...],
     *,
+    table: dict[str, tuple[tuple[str, str], ...]],
     element: str,
 ) -> None:
-    found = field_type(fields, ros_field)
+    found = field_type(fields, ros_field, table)
     if found is None:
-        known = ", ".join(leaf_fields(fields)) or "none"
+        known = ", ".join(leaf_fields(fields, "", table)) or "none"
         raise f.error(
             f"{type_name} has no field '{ros_field}'", where, element, f"its fields: {known}"
         )

@@ -17,8 +17,8 @@ from collections.abc import Mapping
 from typing import Any
 
 from anunnaki.messages import Image
-from anunnaki.ros1._convert import compressed_to_image, raw_to_image, to_bus_fields
-from anunnaki.ros1._schema import BridgeSpec, TopicBridge
+from anunnaki.rosbridge._convert import compressed_to_image, raw_to_image, to_bus_fields
+from anunnaki.rosbridge._schema import BridgeSpec, TopicBridge
 
 __all__ = ["ToBus"]
 
