@@ -8,17 +8,20 @@ process reaches the bridge's bus through a unix socket. Every mapped type goes b
 
 from __future__ import annotations
 
+import json
 import math
+import subprocess
 import threading
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
 import pytest
-from ros2_support import DEADLINE, Netns, Proc, need_ros2
+from ros2_support import DEADLINE, ROS2_PYTHON, Netns, Proc, need_ros2
 
 from anunnaki.bus import Bus, ServiceError, open_bus
 from anunnaki.messages import Image, ServiceReply
+from anunnaki.rosbridge import ROS2_MESSAGE_TYPES, ROS2_SERVICE_TYPES
 
 HERE = Path(__file__).parent
 BRIDGE = HERE / "bridge-live.yaml"
@@ -247,3 +250,52 @@ def test_sigterm_stops_the_bridge_cleanly(live: Live) -> None:
     assert live.bridge.p.wait(timeout=DEADLINE) == 0
     live.bridge.wait_for("ros2 bridge stopped: {")
     assert not any("Traceback" in line for line in live.bridge.lines), live.bridge.lines
+
+
+def _in_ros2_env(code: str) -> str:
+    need_ros2()
+    done = subprocess.run(
+        [str(ROS2_PYTHON), "-c", code], capture_output=True, text=True, check=False, cwd=HERE
+    )
+    assert done.returncode == 0, done.stderr
+    return done.stdout
+
+
+def test_the_ros2_table_is_jazzys_messages() -> None:
+    # the table that checks ros2-bridge files with no ROS installed, against rclpy's classes
+    out = _in_ros2_env(
+        "import json\n"
+        "from anunnaki.ros2._native import message_class, service_class\n"
+        "from anunnaki.ros2._rclpy_convert import ros1_style_type as t\n"
+        "from anunnaki.rosbridge import ROS2_MESSAGE_TYPES, ROS2_SERVICE_TYPES\n"
+        "m = {n: [[f, t(v)] for f, v in message_class(n).get_fields_and_field_types().items()]\n"
+        "     for n in ROS2_MESSAGE_TYPES}\n"
+        "s = {n: [[[f, t(v)] for f, v in c.get_fields_and_field_types().items()]\n"
+        "         for c in (service_class(n).Request, service_class(n).Response)]\n"
+        "     for n in ROS2_SERVICE_TYPES}\n"
+        "print(json.dumps([m, s]))\n"
+    )
+    messages, services = json.loads(out)
+    time_types = {"builtin_interfaces/Time": "time", "builtin_interfaces/Duration": "duration"}
+    for name, fields in ROS2_MESSAGE_TYPES.items():
+        assert [(f, time_types.get(v, v)) for f, v in messages[name]] == list(fields), name
+    for name, (request, response) in ROS2_SERVICE_TYPES.items():
+        assert [tuple(f) for f in services[name][0]] == list(request), name
+        assert [tuple(f) for f in services[name][1]] == list(response), name
+
+
+def test_the_ros2_env_keeps_lark_1_and_the_core_imports_no_rclpy() -> None:
+    # lark-parser 0.12 (ROS's) and lark 1.3 (ours) share lark/: the env holds lark 1.3 alone,
+    # and both ROS's IDL parser and the goal grammar parse with it
+    out = _in_ros2_env(
+        "import sys, lark\n"
+        "from anunnaki.goals import compile_expression\n"
+        "compile_expression(\"camera.luma > 40 and mode.value == 'auto'\")\n"
+        "import anunnaki.cli.main, anunnaki.launch, anunnaki.utu, anunnaki.ros2\n"
+        "core_clean = 'rclpy' not in sys.modules\n"
+        "from rosidl_parser.parser import parse_idl_string\n"
+        "parse_idl_string('module m { module msg { struct S { int32 x; }; }; };')\n"
+        "print(lark.__version__, core_clean)\n"
+    )
+    version, core_clean = out.split()
+    assert version.startswith("1.") and core_clean == "True"
