@@ -92,7 +92,6 @@ class Netns:
             ROS_HOME=str(home),
             ROS_LOG_DIR=str(home / "log"),
             ROS_DOMAIN_ID="0",
-            ROS_LOCALHOST_ONLY="0",
             ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST",
         )
         self.env.pop("ROS_DISTRO", None)

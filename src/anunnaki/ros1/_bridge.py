@@ -195,7 +195,7 @@ class Bridge(Closing):
                 ros_request = srv._request_class()
                 # a request type without fields (Trigger, Empty) takes no payload: a reason
                 # or note in Utu's request is for the decision log, not for the robot
-                fields = to_ros_fields(body_of(request), s.fields) if ros_request.__slots__ else {}
+                fields = s.ros_request(body_of(request)) if ros_request.__slots__ else {}
                 fill_message(ros_request, fields)
             except (ConversionError, ValueError, TypeError) as exc:
                 self.stats["failed_calls"] += 1

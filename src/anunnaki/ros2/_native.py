@@ -232,7 +232,7 @@ class Ros2Bridge(Closing):
                 # a request type without fields (Trigger, Empty) takes no payload: a reason
                 # or note in Utu's request is for the decision log, not for the robot
                 has_fields = bool(ros_request.get_fields_and_field_types())
-                fields = to_ros_fields(body_of(request), s.fields) if has_fields else {}
+                fields = s.ros_request(body_of(request)) if has_fields else {}
                 fill_ros2_message(ros_request, fields)
             except _BAD as exc:
                 self.stats["failed_calls"] += 1

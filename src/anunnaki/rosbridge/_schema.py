@@ -12,12 +12,13 @@ from __future__ import annotations
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Annotated, Literal, TypeVar
+from typing import Annotated, Any, Literal, TypeVar
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
 from anunnaki._safeyaml import LineMap, load_yaml, read_text_limited, validation_error
 from anunnaki.errors import ModelFileError
+from anunnaki.rosbridge._convert import ConversionError, to_ros_fields
 from anunnaki.rosbridge._types import (
     IMAGE_TYPES,
     MESSAGE_TYPES,
@@ -124,6 +125,9 @@ class ServiceBridge(_Strict):
         fields: Bus request field → ROS request field (``{mode: data}``); empty: the
             request's fields by the same names.
         timeout: Seconds to wait for the ROS service's reply.
+        values: Bus field → {bus value → ROS value}: a mode's name as the value the robot's
+            service takes (``{mode: {manual: true, autonomous: false}}`` for a SetBool,
+            ``{state: {active: 3, inactive: 4}}`` for a lifecycle transition's id).
         serve: Where the bridge offers the service: ``bus`` (default: a tactic's request on
             the bus calls the robot's ROS service) or, ROS 2 only, ``ros`` (the bridge offers
             the ROS service, and a ROS call requests the bus service; ``fields`` then maps
@@ -137,6 +141,27 @@ class ServiceBridge(_Strict):
     fields: dict[FieldPath, FieldPath] = Field(default_factory=dict)
     timeout: Annotated[float, Field(gt=0, le=600)] = 2.0
     serve: Literal["bus", "ros"] = "bus"
+    values: dict[FieldPath, dict[str, bool | int | float | str]] = Field(default_factory=dict)
+
+    def ros_request(self, body: Mapping[str, Any]) -> dict[str, Any]:
+        """The ROS request fields of a bus request: ``values`` translated, ``fields`` mapped.
+
+        Raises:
+            ConversionError: A bus value ``values`` does not list.
+
+        """
+        body = dict(body)
+        for field, table in self.values.items():
+            if field in body:
+                key = body[field]
+                key = str(key).lower() if isinstance(key, bool) else str(key)
+                if key not in table:
+                    known = ", ".join(sorted(table))
+                    raise ConversionError(
+                        f"{field} {body[field]!r} is not one of {known} ({self.ros_service})"
+                    )
+                body[field] = table[key]
+        return to_ros_fields(body, self.fields)
 
     @property
     def ros_service(self) -> str:
@@ -260,6 +285,15 @@ def _check_meaning(spec: BridgeSpec, lines: LineMap, path: str) -> None:
         element = f"services[{s.bus}]"
         at = ("services", i)
         request, _ = _known(f, services, s.type, at=at, element=element, kind="service")
+        for field in s.values:
+            bus_fields = s.fields or dict(request)
+            if field not in bus_fields:
+                raise f.error(
+                    f"'values' translates '{field}', which is no field of the bus request",
+                    (*at, "values", field),
+                    f"{element}.values.{field}",
+                    "the bus request's fields: " + (", ".join(bus_fields) or "none"),
+                )
         _check_fields(f, f"{s.type} request", request, s.fields, messages, at=at, element=element)
 
 
