@@ -159,6 +159,28 @@ def test_every_mapped_type_goes_both_ways(live: Live, name: str) -> None:
     same(MESSAGES[name], got.to_body())
 
 
+def test_a_diagnostics_status_reaches_the_bus_as_flat_fields(live: Live) -> None:
+    health: list[Any] = []
+    sub = live.bus.subscribe("/bus/health/camera", lambda s: health.append(s.message.to_body()))
+    try:
+        live.round_trip("diagnostics", MESSAGES["diagnostics"])
+        # the same ROS message feeds both entries; wait for the second
+        end = DEADLINE
+        while not health:
+            end -= 0.05
+            assert end > 0, "no /bus/health/camera"
+            threading.Event().wait(0.05)
+    finally:
+        sub.close()
+    assert health[0] == {
+        "level": 1,
+        "message": "dim",
+        "hardware_id": "cam0",
+        "luma": 42.5,
+        "mode": "auto",
+    }
+
+
 def test_camera_frames_go_both_ways_as_image_and_compressed_image(live: Live) -> None:
     np = pytest.importorskip("numpy")
     pytest.importorskip("cv2")

@@ -63,3 +63,73 @@ def test_a_ros2_file_is_checked_against_ros2s_messages() -> None:
 def test_mistakes_are_named(text: str, message: str) -> None:
     with pytest.raises(ModelFileError, match=message.replace("(", r"\(").replace(")", r"\)")):
         parse_bridge(text, source="bridge.yaml")
+
+
+def test_a_diagnostics_status_becomes_flat_fields_a_binding_reads() -> None:
+    from anunnaki.rosbridge import ToBus
+
+    spec = parse_bridge(
+        "anunnaki: ros2-bridge/1\ntopics:\n"
+        "  - {ros: /diagnostics, type: diagnostic_msgs/DiagnosticArray, direction: to_bus,\n"
+        "     bus: /health/camera, status: rover/camera}\n"
+        "  - {ros: /diagnostics, type: diagnostic_msgs/DiagnosticArray, direction: to_bus,\n"
+        "     bus: /health/battery, status: rover/battery, fields: {soc: charge, ok: healthy}}\n"
+    )
+    camera, battery = spec.topics
+    array = {
+        "header": {"stamp": 1.0, "frame_id": ""},
+        "status": [
+            {
+                "level": 1,
+                "name": "rover/camera",
+                "message": "dim",
+                "hardware_id": "cam0",
+                "values": [{"key": "luma", "value": "42.5"}, {"key": "frames", "value": "7"}],
+            },
+            {
+                "level": 0,
+                "name": "rover/battery",
+                "message": "",
+                "hardware_id": "",
+                "values": [{"key": "charge", "value": "0.8"}, {"key": "healthy", "value": "True"}],
+            },
+        ],
+    }
+    to_bus = ToBus(spec, strict=True)
+    assert to_bus.message(camera, array) == {
+        "level": 1,
+        "message": "dim",
+        "hardware_id": "cam0",
+        "luma": 42.5,
+        "frames": 7,
+    }
+    assert to_bus.message(battery, array) == {"soc": 0.8, "ok": True}
+    assert to_bus.message(camera, {"header": {}, "status": []}) is None  # nothing published
+    with pytest.raises(ModelFileError, match="'status' picks one status of a diagnostics array"):
+        parse_bridge(
+            "anunnaki: ros2-bridge/1\ntopics:\n"
+            "  - {ros: /d, type: std_msgs/String, direction: to_bus, status: x}\n"
+        )
+
+
+def test_service_values_translate_a_mode_name() -> None:
+    from anunnaki.rosbridge import ConversionError
+
+    spec = parse_bridge(
+        "anunnaki: ros2-bridge/1\nservices:\n"
+        "  - {bus: /set_mode, ros: /manual, type: std_srvs/SetBool, fields: {mode: data},\n"
+        "     values: {mode: {manual: true, autonomous: false}}}\n"
+        "  - {bus: /camera/state, ros: /camera/change_state, type: lifecycle_msgs/ChangeState,\n"
+        "     fields: {state: transition.id}, values: {state: {active: 3, inactive: 4}}}\n"
+    )
+    set_mode, lifecycle = spec.services
+    assert set_mode.ros_request({"mode": "manual"}) == {"data": True}
+    assert set_mode.ros_request({"mode": "autonomous", "reason": "G3"}) == {"data": False}
+    assert lifecycle.ros_request({"state": "inactive"}) == {"transition": {"id": 4}}
+    with pytest.raises(ConversionError, match="mode 'parked' is not one of autonomous, manual"):
+        set_mode.ros_request({"mode": "parked"})
+    with pytest.raises(ModelFileError, match="'values' translates 'speed', which is no field"):
+        parse_bridge(
+            "anunnaki: ros2-bridge/1\nservices:\n"
+            "  - {bus: /m, type: std_srvs/SetBool, values: {speed: {fast: true}}}\n"
+        )

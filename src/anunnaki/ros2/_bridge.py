@@ -218,7 +218,9 @@ class Ros2ZenohBridge(Closing):
         def on_sample(sample: Any) -> None:
             try:
                 data = decode_cdr(t.type, sample.payload.to_bytes(), self.store)
-                self.bus.publish(t.bus_topic, self._to_bus.message(t, data))
+                message = self._to_bus.message(t, data)
+                if message is not None:
+                    self.bus.publish(t.bus_topic, message)
             except Exception as exc:  # a bad sample is counted and dropped, never fatal
                 self.stats["malformed"] += 1
                 log.warning("dropped a ROS 2 sample on %s (%s): %s", t.ros, t.type, exc)

@@ -186,7 +186,9 @@ class Ros2Bridge(Closing):
     def _from_ros(self, t: TopicBridge) -> Callable[[Any], None]:
         def on_message(msg: Any) -> None:
             try:
-                self.bus.publish(t.bus_topic, self._to_bus.message(t, ros2_message_to_dict(msg)))
+                message = self._to_bus.message(t, ros2_message_to_dict(msg))
+                if message is not None:
+                    self.bus.publish(t.bus_topic, message)
             except _BAD as exc:
                 self.stats["malformed"] += 1
                 log.warning("dropped a message from %s (%s): %s", t.ros, t.type, exc)

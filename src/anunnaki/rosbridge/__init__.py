@@ -7,7 +7,8 @@
 * **The converters** (:mod:`anunnaki.rosbridge._convert`): a ROS message as plain data and
   back, field mappings, camera frames to and from the bus's ``Image`` (PNG written with zlib).
 * **What the bus gets** of a ROS message (:class:`ToBus`): a frame, or the mapped fields,
-  several ROS topics feeding one bus topic merged.
+  several ROS topics feeding one bus topic merged; one ``/diagnostics`` status as flat
+  fields (:func:`diagnostic_fields`: SUAVE-style observers read by a binding).
 * **Rosbags** (:func:`read_bag`, :func:`write_bag`; ``rosbags``, pure Python).
 
 The ROS 1 bridge (:mod:`anunnaki.ros1`, rospy) and the ROS 2 bridges (:mod:`anunnaki.ros2`:
@@ -42,7 +43,7 @@ from anunnaki.rosbridge._schema import (
     load_bridge,
     parse_bridge,
 )
-from anunnaki.rosbridge._tobus import ToBus
+from anunnaki.rosbridge._tobus import ToBus, diagnostic_fields
 from anunnaki.rosbridge._types import (
     IMAGE_TYPES,
     MESSAGE_TYPES,
@@ -75,6 +76,7 @@ __all__ = [
     "bus_image_to_compressed",
     "bus_image_to_raw",
     "compressed_to_image",
+    "diagnostic_fields",
     "encode_png",
     "fill_message",
     "image_size",

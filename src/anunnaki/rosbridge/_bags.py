@@ -119,7 +119,9 @@ def read_bag(path: str | Path, spec: BridgeSpec | None = None) -> list[Record]:
             for connection, stamp, raw in reader.messages(connections=wanted):
                 data = bag_message_to_dict(reader.deserialize(raw, connection.msgtype))
                 for t in entries[connection.topic]:
-                    records.append(Record(stamp / 1e9, t.bus_topic, to_bus.fields(t, data)))
+                    fields = to_bus.fields(t, data)
+                    if fields is not None:
+                        records.append(Record(stamp / 1e9, t.bus_topic, fields))
     except (rb.highlevel.AnyReaderError, OSError) as exc:
         raise ModelFileError(f"cannot read the bag: {exc}", path=str(path)) from None
     return records

@@ -81,6 +81,10 @@ class TopicBridge(_Strict):
         queue: Messages waiting on either side before the oldest is dropped (ROS 2: the
             QoS history depth too).
         qos: (ROS 2) ``sensor`` or ``reliable``; default :attr:`effective_qos`.
+        status: (``diagnostic_msgs/DiagnosticArray``, to_bus) The name of one status (a
+            SUAVE-style observer's, ``rover/camera``): the bus gets its ``level``,
+            ``message``, ``hardware_id`` and key/value pairs as fields (numbers and booleans
+            read as such), and ``fields`` picks among those; arrays without it are skipped.
 
     """
 
@@ -91,6 +95,7 @@ class TopicBridge(_Strict):
     fields: dict[FieldPath, FieldPath] = Field(default_factory=dict)
     queue: Annotated[int, Field(ge=1, le=1000)] = 4
     qos: QosName | None = None
+    status: Annotated[str, Field(min_length=1, max_length=256)] | None = None
 
     @property
     def effective_qos(self) -> QosName:
@@ -269,6 +274,9 @@ def _check_meaning(spec: BridgeSpec, lines: LineMap, path: str) -> None:
         element = f"topics[{t.ros}]"
         at = ("topics", i)
         fields = _known(f, messages, t.type, at=at, element=element, kind="message")
+        if t.status is not None:
+            _check_status(f, t, at=at, element=element)
+            continue  # its fields are the status's keys: known when the robot reports them
         _check_fields(f, t.type, fields, t.fields, messages, at=at, element=element)
         if t.direction == "to_bus" and not t.as_image:
             for bus_field in t.fields or dict(fields):
@@ -295,6 +303,19 @@ def _check_meaning(spec: BridgeSpec, lines: LineMap, path: str) -> None:
                     "the bus request's fields: " + (", ".join(bus_fields) or "none"),
                 )
         _check_fields(f, f"{s.type} request", request, s.fields, messages, at=at, element=element)
+
+
+def _check_status(f: _File, t: TopicBridge, *, at: tuple[str, int], element: str) -> None:
+    if t.type != _DIAGNOSTICS or t.direction != "to_bus":
+        raise f.error(
+            "'status' picks one status of a diagnostics array read from ROS",
+            (*at, "status"),
+            f"{element}.status",
+            f"use it on a to_bus entry of type {_DIAGNOSTICS}",
+        )
+
+
+_DIAGNOSTICS = "diagnostic_msgs/DiagnosticArray"
 
 
 def _known(
