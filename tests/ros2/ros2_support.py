@@ -31,7 +31,7 @@ ROOT = Path(__file__).parents[2]
 REQUIRE_ROS2 = "ANUNNAKI_REQUIRE_ROS2"
 ROS2_PYTHON = Path(os.environ.get("ANUNNAKI_ROS2_PYTHON", ROOT / ".venv-ros2" / "bin" / "python"))
 
-__all__ = ["DEADLINE", "REQUIRE_ROS2", "ROS2_PYTHON", "Netns", "Proc", "need_ros2"]
+__all__ = ["DEADLINE", "REQUIRE_ROS2", "ROOT", "ROS2_PYTHON", "Netns", "Proc", "need_ros2"]
 
 
 @functools.cache
