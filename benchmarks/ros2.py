@@ -24,6 +24,7 @@ import argparse
 import json
 import os
 import platform
+import random
 import socket
 import statistics
 import subprocess
@@ -98,6 +99,8 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     home = Path(tempfile.mkdtemp(prefix="anunnaki-ros2-bench-"))
     env = {k: v for k, v in os.environ.items() if k != "PYTHONPATH"}
     env.update(PYTHONUNBUFFERED="1", ROS_HOME=str(home), ROS_LOG_DIR=str(home / "log"))
+    # a domain of its own: Fast DDS's shared-memory ports (/dev/shm) are not in the namespace
+    env["ROS_DOMAIN_ID"] = str(random.randint(1, 100))
     python = ros2_python()
 
     def start(cmd: list[str]) -> subprocess.Popen[str]:

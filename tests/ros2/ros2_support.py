@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import functools
 import os
+import random
 import shutil
 import subprocess
 import sys
@@ -91,7 +92,9 @@ class Netns:
             PYTHONUNBUFFERED="1",
             ROS_HOME=str(home),
             ROS_LOG_DIR=str(home / "log"),
-            ROS_DOMAIN_ID="0",
+            # a domain of its own: Fast DDS's shared-memory ports (/dev/shm, not isolated by
+            # the network namespace) then differ from another test worker's
+            ROS_DOMAIN_ID=str(random.randint(1, 100)),
             ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST",
         )
         self.env.pop("ROS_DISTRO", None)

@@ -17,7 +17,14 @@ native on rclpy, or over zenoh) both build on it.
 
 from __future__ import annotations
 
-from anunnaki.rosbridge._bags import bag_message_to_dict, is_bag, read_bag, write_bag
+from anunnaki.rosbridge._bags import (
+    BagStorage,
+    bag_message_to_dict,
+    bag_storage,
+    is_bag,
+    read_bag,
+    write_bag,
+)
 from anunnaki.rosbridge._convert import (
     ConversionError,
     bus_image_to_compressed,
@@ -65,6 +72,7 @@ __all__ = [
     "SENSOR_TYPES",
     "SERVICE_TYPES",
     "SET_STRING_SRV",
+    "BagStorage",
     "BridgeSpec",
     "ConversionError",
     "Distro",
@@ -73,6 +81,7 @@ __all__ = [
     "ToBus",
     "TopicBridge",
     "bag_message_to_dict",
+    "bag_storage",
     "bus_image_to_compressed",
     "bus_image_to_raw",
     "compressed_to_image",
