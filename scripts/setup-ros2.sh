@@ -35,6 +35,8 @@ LARK="lark==1.3.1"
 OPENCV="opencv-python-headless==5.1.0.95"
 # the MCAP reference reader: the tests check that an exported rosbag2 is valid MCAP
 MCAP="mcap==1.6.0"
+# pyzeros: an independent implementation of rmw_zenoh's keys and attachments (the tests compare)
+PYZEROS="pyzeros==0.1.0"
 
 if ! "$PYTHON" -c 'import sys; sys.exit(sys.version_info[:2] != (3, 11))'; then
   # the ros-jazzy-* wheels on PyPI are built for one CPython; 3.11 is the one tested here
@@ -58,7 +60,7 @@ if "${PIP[@]}" show lark-parser >/dev/null 2>&1; then
   "${PIP[@]}" uninstall --quiet -y lark-parser
 fi
 "${PIP[@]}" install --quiet --no-compile --force-reinstall --no-deps "$LARK"
-"${PIP[@]}" install --quiet --no-compile -e ".[ros]" "$OPENCV" "$MCAP" "$LARK"
+"${PIP[@]}" install --quiet --no-compile -e ".[ros]" "$OPENCV" "$MCAP" "$PYZEROS" "$LARK"
 # The proof that the order cannot break either side: lark is 1.3, anunnaki's grammar and
 # ROS's IDL parser both parse with it, and rclpy loads its middleware and a Jazzy message.
 "$VENV/bin/python" - <<'PY'

@@ -25,6 +25,8 @@ zenoh = pytest.importorskip("zenoh")
 
 ROVER = Path(__file__).parents[2] / "examples" / "rover"
 DEADLINE = 30.0
+# std_msgs/msg/Bool's RIHS01 type hash, as ROS 2 Jazzy's share/std_msgs/msg/Bool.json says
+BOOL_HASH = "RIHS01_feb91e995ff9ebd09c0cb3d2aed18b11077585839fb5db80193b62d74528f6c9"
 
 
 @pytest.fixture(autouse=True)
@@ -153,8 +155,11 @@ def test_ros2_samples_reach_the_bus_and_actions_reach_ros2(
         heard: list[dict[str, Any]] = []
         arrived = threading.Event()
 
+        samples: list[Any] = []
+
         def on_buzzer(s: Any) -> None:
             heard.append(decode_cdr("std_msgs/Bool", s.payload.to_bytes()))
+            samples.append((str(s.key_expr), s.attachment))
             arrived.set()
 
         listen = ros2_key("/rover/controller/buzzer", "std_msgs/Bool", flavour=flavour)  # type: ignore[arg-type]
@@ -165,6 +170,14 @@ def test_ros2_samples_reach_the_bus_and_actions_reach_ros2(
         finally:
             sub.undeclare()
         assert heard[0] == {"data": True}
+        key_expr, attachment = samples[0]
+        if flavour == "rmw_zenoh":  # the real type hash, and the attachment rmw_zenoh needs
+            assert key_expr.endswith("/std_msgs::msg::dds_::Bool_/" + BOOL_HASH)
+            raw = attachment.to_bytes()
+            assert len(raw) == 33 and raw[16] == 16  # seq, time, gid length, gid
+            assert int.from_bytes(raw[:8], "little") >= 1
+        else:
+            assert key_expr == "rover/controller/buzzer" and attachment is None
 
 
 def test_a_bad_sample_is_counted_and_the_next_goes_through(bus: Bus, ros2_side: Any) -> None:

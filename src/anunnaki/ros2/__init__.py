@@ -33,7 +33,9 @@ from anunnaki.ros2._bridge import (
     dds_type_name,
     decode_cdr,
     encode_cdr,
+    rmw_zenoh_attachment,
     ros2_key,
+    type_hash,
 )
 from anunnaki.ros2._distro import installed_distro, resolve_distro, type_store
 from anunnaki.ros2._native import Ros2Bridge, Ros2Unavailable, import_rclpy
@@ -51,7 +53,9 @@ __all__ = [
     "import_rclpy",
     "installed_distro",
     "resolve_distro",
+    "rmw_zenoh_attachment",
     "ros2_key",
     "ros2_message_to_dict",
+    "type_hash",
     "type_store",
 ]

@@ -10,8 +10,11 @@ needed on Anunnaki's side:
 * **rmw_zenoh** (ROS 2 Jazzy on): the key is
   ``<domain>/<topic without the leading />/<pkg>::msg::dds_::<Name>_/<type hash>``, e.g.
   ``0/rover/controller/mode/std_msgs::msg::dds_::String_/RIHS01_df66…``; the payload is
-  CDR the same way (sequence number, time and gid travel in the sample's attachment, which
-  this reader does not need). A subscriber uses ``*`` for the hash.
+  CDR the same way, and every sample carries an attachment (:func:`rmw_zenoh_attachment`:
+  sequence number, source time, the publisher's 16-byte gid), without which rmw_zenoh's
+  subscribers drop it. The type hash is the message type's RIHS01 hash in the robot's
+  distribution (:func:`type_hash`, from ``rosbags``' type store; the same as ROS 2 Jazzy's
+  own type descriptions); a subscriber here uses ``*`` for it.
 
 :class:`Ros2ZenohBridge` reads and writes those samples with ``rosbags``' CDR serializers and
 the type store of the robot's ROS 2 distribution (the bridge file's ``distro``, else
@@ -23,7 +26,11 @@ left out), and publishes on Anunnaki's bus what the ROS 1 bridge publishes.
 
 from __future__ import annotations
 
+import itertools
 import logging
+import os
+import struct
+import time
 from collections.abc import Callable, Mapping
 from typing import Any, Literal
 
@@ -41,7 +48,16 @@ from anunnaki.rosbridge import (
     to_ros_fields,
 )
 
-__all__ = ["Flavour", "Ros2ZenohBridge", "dds_type_name", "decode_cdr", "encode_cdr", "ros2_key"]
+__all__ = [
+    "Flavour",
+    "Ros2ZenohBridge",
+    "dds_type_name",
+    "decode_cdr",
+    "encode_cdr",
+    "rmw_zenoh_attachment",
+    "ros2_key",
+    "type_hash",
+]
 
 log = logging.getLogger("anunnaki.ros2")
 
@@ -74,6 +90,24 @@ def ros2_key(
     if flavour == "ros2dds":
         return f"{namespace.strip('/')}/{name}" if namespace else name
     return f"{domain}/{name}/{dds_type_name(ros1_type)}/{type_hash}"
+
+
+def type_hash(ros1_type: str, store: Any, distro: str) -> str:
+    """The type hash rmw_zenoh puts in a key: ``RIHS01_<sha256>`` (Humble has none)."""
+    if distro == "humble":
+        return "TypeHashNotSupported"  # rmw_zenoh's Humble port
+    return str(store.hash_rihs01(ros2_type(ros1_type)))
+
+
+def rmw_zenoh_attachment(sequence: int, stamp_ns: int, gid: bytes) -> bytes:
+    """rmw_zenoh's sample attachment, without which its subscribers drop a sample.
+
+    CDR (little endian, no encapsulation header) of the int64 sequence number, the int64
+    source timestamp (ns), the uint8 gid length (16) and the 16-byte gid.
+    """
+    if len(gid) != 16:
+        raise ValueError(f"a gid is 16 bytes, got {len(gid)}")
+    return struct.pack("<qqB16s", sequence, stamp_ns, 16, gid)
 
 
 def _store(store: Any | None, distro: str | None) -> Any:
@@ -230,7 +264,9 @@ class Ros2ZenohBridge(Closing):
         return on_sample
 
     def _from_bus(self, t: TopicBridge) -> Callable[[Any], None]:
-        key = self.key(t, type_hash="0")
+        key = self.key(t, type_hash=type_hash(t.type, self.store, self.distro))
+        gid = os.urandom(16)  # this publisher's id, as rmw_zenoh gives each one
+        sequence = itertools.count(1)
 
         def on_sample(sample: Any) -> None:
             try:
@@ -245,7 +281,11 @@ class Ros2ZenohBridge(Closing):
                 self.stats["malformed"] += 1
                 log.warning("dropped a bus message on %s for %s: %s", t.bus_topic, t.ros, exc)
                 return
-            self.session.put(key, raw)
+            if self.flavour == "rmw_zenoh":
+                attachment = rmw_zenoh_attachment(next(sequence), time.time_ns(), gid)
+                self.session.put(key, raw, attachment=attachment)
+            else:
+                self.session.put(key, raw)
             self.stats["to_ros"] += 1
 
         return on_sample
