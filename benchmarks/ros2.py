@@ -11,6 +11,11 @@ paths, each a round trip back to the sender:
 * plain rclpy: measure → /bench/direct/* → echo node → back;
 * bridged: measure → ROS 2 → bridge → bus → echo (this process) → bus → bridge → ROS 2 → back.
 
+Reaction: the robot (``ros2_node.py react``) publishes a violating ``/bench/level``; the
+bridge carries it to the bus; Utu (an in-process manager here: one goal, ``level < 0.5``,
+and one tactic requesting ``/bench/set_safe``, cooldown 0) reacts; the bridge calls the
+robot's ``std_srvs/Trigger``. The robot times violation → call with its own clock.
+
 Small message: one std_msgs/String in flight at a time. Image: a 320×240 rgb8
 sensor_msgs/Image (PNG on the bus, a CompressedImage back), one in flight, then a stream
 at 30 Hz (what arrives — frames dropped — and whether the round trip grows: a backlog).
@@ -51,6 +56,32 @@ topics:
      queue: 64}
   - {ros: /bench/bridge/image_back, type: sensor_msgs/CompressedImage, direction: to_ros,
      bus: /bench/image_back, queue: 64}
+  - {ros: /bench/level, type: std_msgs/Float64, direction: to_bus, fields: {level: data}}
+services:
+  - {bus: /bench/set_safe, type: std_srvs/Trigger}
+"""
+
+GOALS = """\
+anunnaki: goal-model/1
+name: bench
+root: G1
+agents:
+  - {id: A1, topics: [{topic: /bench/level, attributes: [level]}]}
+goals:
+  - {id: G1, utility: A1.level < 0.5}
+"""
+
+TACTICS = """\
+anunnaki: tactics/1
+name: bench
+tactics:
+  - name: make-safe
+    priority: 100
+    preconditions:
+      - {goal: G1, state: unsatisfied}
+    actions:
+      - {type: request, service: /bench/set_safe}
+    cooldown: 0
 """
 
 
@@ -127,12 +158,13 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
             counts += ["--stream", str(args.stream), "--rate", str(args.rate)]
             measure = start([python, str(NODE), "measure", *counts])
             out, _ = measure.communicate(timeout=600)
+            reaction = react(bus, start, python, args.trials)
             bridge.send_signal(2)
             tail, _ = bridge.communicate(timeout=30)
         lines = [ln for ln in out.strip().splitlines() if ln.startswith("{")]
         if not lines:
             raise SystemExit(f"the measuring node printed no figures:\n{out[-2000:]}")
-        raw = json.loads(lines[-1])
+        raw = json.loads(lines[-1]) | reaction
         print("\n".join(tail.strip().splitlines()[-3:]), file=sys.stderr)
     finally:
         for p in reversed(procs):
@@ -145,6 +177,38 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
             if p.stdout is not None:
                 p.stdout.close()
     return summarise(raw, args)
+
+
+def react(bus: Any, start: Any, python: str, trials: int) -> dict[str, Any]:
+    """The reaction trials: Utu here, the robot in ROS 2; the robot's figures."""
+    import threading
+
+    from anunnaki.goals import parse_goal_model
+    from anunnaki.tactics import parse_tactics_yaml
+    from anunnaki.utu import AutonomicManager
+
+    model = parse_goal_model(GOALS)
+    tactics = parse_tactics_yaml(TACTICS)
+    stop = threading.Event()
+    # a lost call is a lost trial, not the end of the run (no escalation to a run stop)
+    with AutonomicManager(
+        model, tactics, bus=bus, rate=50.0, escalate_to_run_stop=False
+    ) as manager:
+        spinner = threading.Thread(target=manager.spin, args=(stop,), daemon=True)
+        spinner.start()
+        try:
+            robot = start([python, str(NODE), "react", "--trials", str(trials)])
+            out, _ = robot.communicate(timeout=600)
+        finally:
+            stop.set()
+            spinner.join(timeout=30)
+        failed = [d.data for d in manager.knowledge.decisions() if d.kind == "action_failed"]
+        if failed:
+            print(f"{len(failed)} actions failed, e.g. {failed[0]}", file=sys.stderr)
+    lines = [ln for ln in out.strip().splitlines() if ln.startswith("{")]
+    if not lines:
+        raise SystemExit(f"the robot printed no figures:\n{out[-2000:]}")
+    return dict(json.loads(lines[-1]))
 
 
 def summarise(raw: dict[str, Any], args: argparse.Namespace) -> dict[str, Any]:
@@ -183,6 +247,10 @@ def summarise(raw: dict[str, Any], args: argparse.Namespace) -> dict[str, Any]:
         "image_320x240_round_trip": image,
         "image_320x240_stream": streams,
         "added_by_bridge": added,
+        "violation_to_robot_service_call": {
+            **stats(raw["violation_to_call"]),
+            "lost": raw["lost"],
+        },
         "aims": {"small_added_median_ms": 1.0, "small_p99_ratio": 2.0, "stream_rate_hz": args.rate},
     }
 
@@ -193,6 +261,7 @@ def main() -> int:
     p.add_argument("--images", type=int, default=100, help="image round trips per path")
     p.add_argument("--stream", type=int, default=300, help="frames in the 30 Hz stream")
     p.add_argument("--rate", type=float, default=30.0, help="stream rate, Hz")
+    p.add_argument("--trials", type=int, default=100, help="violation → service call trials")
     p.add_argument("--output", default=str(ROOT / "benchmarks" / "results" / "ros2.json"))
     args = p.parse_args()
     if os.environ.get(_IN_NETNS) != "1":  # again, inside a loopback-only network namespace

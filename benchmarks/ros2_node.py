@@ -5,12 +5,17 @@
 /bench/direct/image (Image) on /bench/direct/image_back — the plain rclpy round trip.
 ``measure``: send pings and frames through both paths (direct: via the echo node; bridged:
 ROS 2 → bridge → bus → echo on the bus → bridge → ROS 2) and print the round trips as JSON.
+``react``: the robot of the reaction trials: publish a violating ``/bench/level``
+(std_msgs/Float64) and time until Utu's tactic calls its ``/bench/set_safe``
+(std_srvs/Trigger) through the bridge; then publish a nominal level and let the manager see
+it; print the times as JSON. Both stamps are this process's.
 Everything reliable, keep last 100 (the bridge reads the frames best effort, as sensor data).
 """
 
 from __future__ import annotations
 
 import argparse
+import functools
 import json
 import threading
 import time
@@ -21,7 +26,8 @@ from rclpy.executors import MultiThreadedExecutor
 from rclpy.node import Node
 from rclpy.qos import QoSProfile
 from sensor_msgs.msg import CompressedImage, Image
-from std_msgs.msg import String
+from std_msgs.msg import Float64, String
+from std_srvs.srv import Trigger
 
 QOS = QoSProfile(depth=100)
 
@@ -50,6 +56,7 @@ class Trip:
     def __init__(self, node: Node, out: str, back: str, out_type: type, back_type: type) -> None:
         self.sent: dict[str, float] = {}
         self.rtt: list[float] = []
+        self.last = 0.0  # when the latest message came back (perf_counter)
         self.lock = threading.Lock()
         self.got = threading.Condition(self.lock)
         self.pub = node.create_publisher(out_type, out, QOS)
@@ -67,6 +74,7 @@ class Trip:
             t0 = self.sent.pop(self.key(msg), None)
             if t0 is not None:
                 self.rtt.append((now - t0) * 1000.0)
+                self.last = now
             self.got.notify_all()
 
     def send(self, key: str, msg: Any) -> None:
@@ -107,7 +115,11 @@ def ping_pong(trip: Trip, n: int, timeout: float) -> None:
 def images(
     trip: Trip, n: int, rate: float, timeout: float, *, one_at_a_time: bool, first: int = 0
 ) -> float:
-    """Send n frames, at ``rate`` Hz or one in flight at a time; return the seconds it took."""
+    """Send n frames, at ``rate`` Hz or one in flight at a time.
+
+    Returns the seconds from the first frame sent to the last one back (not counting the
+    wait for frames that never come back).
+    """
     start = time.perf_counter()
     for k in range(n):
         i = first + k
@@ -125,7 +137,7 @@ def images(
     end = time.monotonic() + timeout
     with trip.lock:
         trip.got.wait_for(lambda: not trip.sent or time.monotonic() > end, timeout)
-    return time.perf_counter() - start
+        return max(0.0, trip.last - start)
 
 
 def measure(args: argparse.Namespace) -> None:
@@ -160,9 +172,60 @@ def measure(args: argparse.Namespace) -> None:
     print(json.dumps(out), flush=True)
 
 
+def _more(calls: list[int], n: int) -> bool:
+    return len(calls) > n
+
+
+def react(args: argparse.Namespace) -> None:
+    node = rclpy.create_node("bench_robot")
+    level = node.create_publisher(Float64, "/bench/level", QOS)
+    lock = threading.Lock()
+    called = threading.Condition(lock)
+    calls: list[int] = []
+
+    def set_safe(_request: Any, response: Any) -> Any:
+        now = time.perf_counter_ns()
+        with lock:
+            calls.append(now)
+            called.notify_all()
+        response.success, response.message = True, "safe"
+        return response
+
+    node.create_service(Trigger, "/bench/set_safe", set_safe)
+    spin(node)
+    end = time.monotonic() + 30
+    while level.get_subscription_count() == 0 or node.count_clients("/bench/set_safe") == 0:
+        if time.monotonic() > end:
+            raise SystemExit("the bridge never subscribed to /bench/level nor became a client")
+        time.sleep(0.05)
+    pause = threading.Event()
+    for _ in range(10):  # the manager sees a nominal robot before the first trial
+        level.publish(Float64(data=0.0))
+        pause.wait(0.05)
+    pause.wait(1.0)
+    latencies: list[float] = []
+    lost = 0
+    for _ in range(args.trials):
+        with lock:
+            before = len(calls)
+        t0 = time.perf_counter_ns()
+        level.publish(Float64(data=1.0))  # the violation
+        with lock:
+            got = called.wait_for(functools.partial(_more, calls, before), 5.0)
+            t1 = calls[before] if got else None
+        if t1 is None:
+            lost += 1
+        else:
+            latencies.append((t1 - t0) / 1e6)
+        level.publish(Float64(data=0.0))
+        pause.wait(0.3)  # the manager sees the robot nominal again before the next trial
+    print(json.dumps({"violation_to_call": latencies, "lost": lost}), flush=True)
+
+
 def main() -> int:
     p = argparse.ArgumentParser()
-    p.add_argument("mode", choices=["echo", "measure"])
+    p.add_argument("mode", choices=["echo", "measure", "react"])
+    p.add_argument("--trials", type=int, default=100)
     p.add_argument("--small", type=int, default=500)
     p.add_argument("--images", type=int, default=100)
     p.add_argument("--stream", type=int, default=300)
@@ -172,6 +235,8 @@ def main() -> int:
     try:
         if args.mode == "echo":
             echo()
+        elif args.mode == "react":
+            react(args)
         else:
             measure(args)
     finally:

@@ -2,7 +2,8 @@
 # Build the ROS 2 environment (issue #31): a SEPARATE virtual environment, .venv-ros2, with
 # ROS 2 Jazzy's rclpy, Fast DDS and the message packages from PyPI (no root, about 35 s), and
 # anunnaki installed in it too (editable, [ros] plus OpenCV for raw images), so the native
-# bridge (python -m anunnaki.ros2) and the example's rclpy nodes run there.
+# bridge (python -m anunnaki.ros2) and the example's rclpy nodes run there; and, for the
+# tests, the MCAP reference reader (mcap) and pyzeros (rmw_zenoh's wire format).
 #
 #   scripts/setup-ros2.sh            # builds or updates .venv-ros2 (idempotent)
 #   ANUNNAKI_ROS2_VENV=DIR scripts/setup-ros2.sh
