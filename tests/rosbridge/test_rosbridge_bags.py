@@ -87,3 +87,33 @@ def test_a_jazzy_rosbag2_reads_through_the_ros2_rovers_bridge_file(tmp_path: Pat
         Record(5.0, "/rover/controller/state", {"control_mode": "manual"}),
         Record(5.1, "/ultrasonic/range", {"range": 0.5}),
     ]
+
+
+def test_a_rosbag2_replays_as_a_run_that_replay_and_explain_read(tmp_path: Path) -> None:
+    # a bag of the rover's phases (as anunnaki log --export-bag writes one) is the scripted
+    # system's trace: anunnaki run records a run that replay reproduces and explain reads
+    import io
+    from contextlib import redirect_stdout
+
+    from anunnaki.cli.main import main
+    from anunnaki.trace import read_trace
+
+    rover = Path(__file__).parents[2] / "examples" / "rover"
+    bag = tmp_path / "phases"
+    write_bag(bag, read_trace(rover / "trace.jsonl").records)
+    launch = tmp_path / "launch.yaml"
+    text = (rover / "utu.yaml").read_text(encoding="utf-8")
+    for name in ("goals.yaml", "binding.yaml", "tactics.yaml"):
+        text = text.replace(f": {name}", f": {rover / name}")
+    launch.write_text(text.replace("trace: trace.jsonl", f"trace: {bag}"), encoding="utf-8")
+    db = tmp_path / "run.db"
+    out = io.StringIO()
+    with redirect_stdout(out):
+        assert main(["run", str(launch), "--speed", "0", "--knowledge", str(db)]) == 0
+    assert f"from {bag} (" in out.getvalue()
+    with redirect_stdout(io.StringIO()) as said:
+        assert main(["replay", str(db)]) == 0
+    assert "identical" in said.getvalue()
+    with redirect_stdout(io.StringIO()) as said:
+        assert main(["explain", str(db), "--at", "30"]) == 0
+    assert "G1" in said.getvalue()
