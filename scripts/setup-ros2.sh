@@ -76,5 +76,10 @@ from sensor_msgs.msg import Range
 assert "variance" in Range.get_fields_and_field_types(), "not Jazzy's sensor_msgs/Range"
 import anunnaki.ros2._native  # noqa: F401
 PY
+# pyzeros's CDR code (cydr) compiles itself with Cython on first use, into $CYDR_CACHE_DIR:
+# once here, inside the environment, not in a test run or the working folder
+CYDR_CACHE_DIR="$VENV/.cydr_cache" "$VENV/bin/python" -c '
+from pyzeros.builtin_msgs import Attachment
+Attachment(sequence_number=1, source_timestamp=2).serialize()'
 echo "$hash" > "$stamp"
 echo "==> $VENV ready: ROS 2 Jazzy (rclpy, Fast DDS) and anunnaki, lark $("$VENV/bin/python" -c 'import lark; print(lark.__version__)')"

@@ -4,7 +4,9 @@ implementation of rmw_zenoh's wire format, installed in the ROS 2 environment)."
 from __future__ import annotations
 
 import json
+import os
 import subprocess
+from pathlib import Path
 
 import pytest
 from ros2_support import ROS2_PYTHON, need_ros2
@@ -33,14 +35,18 @@ print(json.dumps({"keys": keys, "attachment": attachment.serialize()[4:].hex()})
 """
 
 
-def test_rmw_zenoh_keys_and_attachments_are_what_pyzeros_makes() -> None:
+def test_rmw_zenoh_keys_and_attachments_are_what_pyzeros_makes(tmp_path: Path) -> None:
     need_ros2()
     names = sorted(ROS2_MESSAGE_TYPES)
+    # pyzeros's CDR code compiled by scripts/setup-ros2.sh, in the environment
+    cache = ROS2_PYTHON.parents[1] / ".cydr_cache"
     done = subprocess.run(
         [str(ROS2_PYTHON), "-c", PYZEROS, json.dumps(names)],
         capture_output=True,
         text=True,
         check=False,
+        cwd=tmp_path,
+        env={**os.environ, "CYDR_CACHE_DIR": str(cache)},
     )
     assert done.returncode == 0, done.stderr[-3000:]
     theirs = json.loads(done.stdout.strip().splitlines()[-1])
