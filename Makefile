@@ -1,6 +1,7 @@
 # The two commands of the README:
 #   make demo   set up what the demo needs (no root) and run the main job
-#   make test   set up everything the tests need (as root: Chromium, ROS 1) and run them (CI)
+#   make test   set up everything the tests need (as root: Chromium, ROS 1; ROS 2 in .venv-ros2)
+#               and run them (CI)
 .PHONY: demo test lint setup setup-demo setup-test bench
 
 PY := .venv/bin/python
@@ -8,7 +9,8 @@ ROVER := examples/rover
 
 # scripts/setup.sh's profiles: demo = the extras the demos import (vision, dashboard, plot,
 # mail, oracle); test = every extra (dev, bus, vision, dashboard, plot, enlil, ros, mail) and,
-# as root, Debian's Chromium and ROS 1. `setup` is the test profile (benchmarks, results).
+# as root, Debian's Chromium and ROS 1, and ROS 2 Jazzy in its own .venv-ros2 (no root,
+# scripts/setup-ros2.sh). `setup` is the test profile (benchmarks, results).
 setup-demo:
 	@scripts/setup.sh demo
 

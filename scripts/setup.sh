@@ -4,7 +4,8 @@
 #
 #   scripts/setup.sh demo   # make demo, make demo-uav: what the demos import, nothing as root
 #   scripts/setup.sh test   # make test (the default): every extra the suite tests, and, as
-#                           # root, Debian's Chromium and ROS 1 for the browser and ROS 1 tests
+#                           # root, Debian's Chromium and ROS 1 for the browser and ROS 1 tests;
+#                           # ROS 2 Jazzy in its own .venv-ros2 (no root) for the ROS 2 tests
 #   ANUNNAKI_EXTRAS=all scripts/setup.sh        # these extras instead of the profile's
 #
 # Idempotent: nothing is installed when the extras asked for are already in .venv and
@@ -27,6 +28,9 @@ case $PROFILE in
     scripts/setup-browser.sh
     # Debian's ROS 1 Python packages for the ROS 1 bridge's tests (apt, as root; issue #14).
     scripts/setup-ros.sh
+    # ROS 2 Jazzy from PyPI in a separate .venv-ros2 for the live ROS 2 tests (no root, about
+    # 35 s the first time, nothing after; issue #31).
+    scripts/setup-ros2.sh
     ;;
   *)
     echo "usage: scripts/setup.sh [demo|test] (got '$PROFILE')" >&2

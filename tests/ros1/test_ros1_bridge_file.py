@@ -102,7 +102,7 @@ def test_a_file_of_another_kind_is_named_as_such(tmp_path: Path) -> None:
         load_bridge(path)
     assert str(caught.value) == (
         f"{path}:1: anunnaki: not a bridge file: 'anunnaki' is 'binding/1' (hint: start the "
-        "file with 'anunnaki: ros1-bridge/1')"
+        "file with 'anunnaki: ros2-bridge/1' (ROS 2) or 'anunnaki: ros1-bridge/1' (ROS 1))"
     )
 
 

@@ -16,14 +16,23 @@ from typing import Any
 import pytest
 
 from anunnaki.bus import Bus, BusConfig, open_bus
-from anunnaki.ros1 import load_bridge, parse_bridge
+from anunnaki.errors import AnunnakiError
 from anunnaki.ros2 import Ros2ZenohBridge, decode_cdr, encode_cdr, ros2_key
+from anunnaki.rosbridge import load_bridge, parse_bridge
 
 pytest.importorskip("rosbags")
 zenoh = pytest.importorskip("zenoh")
 
 ROVER = Path(__file__).parents[2] / "examples" / "rover"
 DEADLINE = 30.0
+# std_msgs/msg/Bool's RIHS01 type hash, as ROS 2 Jazzy's share/std_msgs/msg/Bool.json says
+BOOL_HASH = "RIHS01_feb91e995ff9ebd09c0cb3d2aed18b11077585839fb5db80193b62d74528f6c9"
+
+
+@pytest.fixture(autouse=True)
+def jazzy(monkeypatch: pytest.MonkeyPatch) -> None:
+    """The robot runs Jazzy, as a ROS 2 install's setup.bash says ($ROS_DISTRO)."""
+    monkeypatch.setenv("ROS_DISTRO", "jazzy")
 
 
 def test_key_expressions_of_both_ros2_zenoh_flavours() -> None:
@@ -49,6 +58,7 @@ def test_cdr_samples_are_what_ros2_puts_on_the_wire() -> None:
         "min_range": 0.0,
         "max_range": 0.0,
         "range": 0.5,
+        "variance": 0.0,
     }
     twist = decode_cdr(
         "geometry_msgs/Twist", encode_cdr("geometry_msgs/Twist", {"angular": {"z": 1.0}})
@@ -57,6 +67,33 @@ def test_cdr_samples_are_what_ros2_puts_on_the_wire() -> None:
         "linear": {"x": 0.0, "y": 0.0, "z": 0.0},
         "angular": {"x": 0.0, "y": 0.0, "z": 1.0},
     }
+
+
+def test_range_decodes_with_the_robots_distribution_not_a_hard_coded_one() -> None:
+    # Jazzy added Range.variance: its samples are 4 bytes longer than Humble's, and a Humble
+    # definition refused them ("CDR message size mismatch"; issue #31)
+    jazzy = encode_cdr("sensor_msgs/Range", {"range": 0.5, "variance": 0.01})
+    humble = encode_cdr("sensor_msgs/Range", {"range": 0.5}, distro="humble")
+    assert len(jazzy) == len(humble) + 4
+    assert decode_cdr("sensor_msgs/Range", jazzy)["variance"] == pytest.approx(0.01)
+    assert "variance" not in decode_cdr("sensor_msgs/Range", humble, distro="humble")
+    assert decode_cdr("sensor_msgs/Range", humble, distro="humble")["range"] == 0.5
+
+
+def test_a_bridge_file_names_the_distribution_and_none_known_is_an_error(
+    monkeypatch: pytest.MonkeyPatch, tmp_path: Path
+) -> None:
+    from anunnaki.ros2._distro import installed_distro
+
+    spec = parse_bridge("anunnaki: ros2-bridge/1\ndistro: humble\n")
+    with open_bus("inproc") as b:
+        assert Ros2ZenohBridge(spec, b, session=None).distro == "humble"
+        monkeypatch.delenv("ROS_DISTRO")
+        if installed_distro() is None:  # this venv has no ROS 2 wheels
+            with pytest.raises(AnunnakiError, match=r"Name it in the bridge file \(distro: "):
+                Ros2ZenohBridge(parse_bridge("anunnaki: ros2-bridge/1\n"), b, session=None)
+    with pytest.raises(AnunnakiError, match="unknown ROS 2 distribution 'iron'"):
+        decode_cdr("std_msgs/Bool", b"", distro="iron")
 
 
 @pytest.fixture
@@ -118,8 +155,11 @@ def test_ros2_samples_reach_the_bus_and_actions_reach_ros2(
         heard: list[dict[str, Any]] = []
         arrived = threading.Event()
 
+        samples: list[Any] = []
+
         def on_buzzer(s: Any) -> None:
             heard.append(decode_cdr("std_msgs/Bool", s.payload.to_bytes()))
+            samples.append((str(s.key_expr), s.attachment))
             arrived.set()
 
         listen = ros2_key("/rover/controller/buzzer", "std_msgs/Bool", flavour=flavour)  # type: ignore[arg-type]
@@ -130,6 +170,14 @@ def test_ros2_samples_reach_the_bus_and_actions_reach_ros2(
         finally:
             sub.undeclare()
         assert heard[0] == {"data": True}
+        key_expr, attachment = samples[0]
+        if flavour == "rmw_zenoh":  # the real type hash, and the attachment rmw_zenoh needs
+            assert key_expr.endswith("/std_msgs::msg::dds_::Bool_/" + BOOL_HASH)
+            raw = attachment.to_bytes()
+            assert len(raw) == 33 and raw[16] == 16  # seq, time, gid length, gid
+            assert int.from_bytes(raw[:8], "little") >= 1
+        else:
+            assert key_expr == "rover/controller/buzzer" and attachment is None
 
 
 def test_a_bad_sample_is_counted_and_the_next_goes_through(bus: Bus, ros2_side: Any) -> None:

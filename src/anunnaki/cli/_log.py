@@ -95,9 +95,16 @@ def add_parser(sub: Any) -> None:
     )
     p.add_argument(
         "--export-bag",
-        metavar="OUT.bag",
+        metavar="OUT.bag|OUT",
         help="write the recorded inputs and decisions (within --since/--until) to a ROS 1 "
-        "bag (std_msgs/String JSON; decisions on /utu/decisions) and exit (anunnaki[ros])",
+        "bag (OUT.bag) or a rosbag2 folder (OUT; MCAP unless --bag-storage says otherwise), "
+        "std_msgs/String JSON, decisions on /utu/decisions, and exit (anunnaki[ros])",
+    )
+    p.add_argument(
+        "--bag-storage",
+        choices=["ros1", "mcap", "sqlite3"],
+        default=None,
+        help="with --export-bag: ros1 (the default for OUT.bag), mcap (else) or sqlite3",
     )
     p.add_argument(
         "--force",
@@ -347,8 +354,8 @@ def _export_bag(
     args: argparse.Namespace,
     span: tuple[float | None, float | None],
 ) -> int:
-    """Write the run's inputs and decisions to a ROS 1 bag (issue #14), at their own times."""
-    from anunnaki.ros1 import write_bag
+    """Write the run's inputs and decisions to a bag (ROS 1 or rosbag2), at their own times."""
+    from anunnaki.rosbridge import write_bag
     from anunnaki.trace import Record
 
     inputs = [
@@ -359,7 +366,9 @@ def _export_bag(
     decisions = [
         (d.t, {"kind": d.kind, "tactic": d.tactic, **d.data}) for d in knowledge.decisions(*span)
     ]
-    n = write_bag(args.export_bag, inputs, decisions, overwrite=args.force)
+    n = write_bag(
+        args.export_bag, inputs, decisions, overwrite=args.force, storage=args.bag_storage
+    )
     hint = _evaluate_hint(args.db, args.export_bag)
     console.print(
         Text(f"wrote {n} messages ({len(decisions)} decisions) to {args.export_bag}{hint}"),

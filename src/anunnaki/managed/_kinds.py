@@ -40,7 +40,11 @@ class ScriptedConfig(_Strict):
     """A scripted managed system (:class:`~anunnaki.managed.ScriptedSystem`).
 
     Attributes:
-        trace: The trace to replay (JSONL, ``anunnaki: trace/1``).
+        trace: The trace to replay (JSONL, ``anunnaki: trace/1``), or a ROS bag: a ROS 1
+            ``.bag``, or a rosbag2 (its folder, ``.mcap`` or ``.db3``), read as a trace
+            (:func:`~anunnaki.rosbridge.read_bag`).
+        bridge: With a bag of a robot: the bridge file that turns its topics into the bus's
+            (as the live bridge would publish them); a bag ``anunnaki log`` wrote needs none.
         prefix: The platform's name prefix: services ``<prefix>/set_mode``, ``<prefix>/stop``.
         status_topic: The topic whose ``mode``/``buzzer`` fields follow commands.
         modes: The modes ``set_mode`` accepts.
@@ -63,6 +67,7 @@ class ScriptedConfig(_Strict):
     """
 
     trace: str
+    bridge: str | None = None
     prefix: str = "/rover"
     status_topic: str | None = None
     modes: list[str] = Field(default_factory=lambda: ["autonomous", "manual"], min_length=1)
@@ -188,7 +193,10 @@ class ScriptedKind:
 
     def __init__(self, options: BaseModel, *, base: Path) -> None:
         assert isinstance(options, ScriptedConfig)
-        self.options = options.model_copy(update={"trace": _here(base, options.trace)})
+        bridge = None if options.bridge is None else _here(base, options.bridge)
+        self.options = options.model_copy(
+            update={"trace": _here(base, options.trace), "bridge": bridge}
+        )
         self.speed = self.options.speed
         self.records: list[Record] = []
 
@@ -197,7 +205,16 @@ class ScriptedKind:
         self._read()
 
     def _read(self) -> None:
-        self.records = read_trace(self.options.trace).records
+        from anunnaki.rosbridge import is_bag
+
+        if is_bag(self.options.trace):
+            from anunnaki.rosbridge import load_bridge, read_bag
+
+            bridge = self.options.bridge
+            spec = None if bridge is None else load_bridge(bridge)
+            self.records = read_bag(self.options.trace, spec)
+        else:
+            self.records = read_trace(self.options.trace).records
         if not self.records:
             raise ModelFileError(
                 "the trace has no records", path=self.options.trace, hint="record or write some"

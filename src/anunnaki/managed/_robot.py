@@ -133,7 +133,7 @@ class RobotKind(ABC):
 
     def check(self, utu: UtuSettings) -> None:
         """Load the bridge file, the registry and the oracles' names now (B5)."""
-        from anunnaki.ros1 import load_bridge
+        from anunnaki.rosbridge import load_bridge
 
         o = self.options
         load_bridge(o.bridge)

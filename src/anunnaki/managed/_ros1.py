@@ -20,16 +20,15 @@ process exits. The launch's bus must be zenoh (the bridge is another process).
 from __future__ import annotations
 
 import os
-import subprocess
 import sys
-import threading
 from collections.abc import Callable
 from typing import Annotated, ClassVar
 
 from pydantic import BaseModel, Field
 
 from anunnaki.bus import on_loopback
-from anunnaki.errors import AnunnakiError, ModelFileError
+from anunnaki.errors import ModelFileError
+from anunnaki.managed._bridgeproc import BridgeProcess, start_bridge
 from anunnaki.managed._robot import RobotConfig, RobotKind
 from anunnaki.managed._slot import ManagedContext
 
@@ -53,34 +52,6 @@ class Ros1Config(RobotConfig):
     ready_timeout: Annotated[float, Field(gt=0, le=600)] = 60.0
 
 
-class _BridgeProcess:
-    """The started bridge process: the robot is reachable while it runs."""
-
-    gone = "the bridge process exited"
-
-    def __init__(self, proc: subprocess.Popen[str], reader: threading.Thread) -> None:
-        self.proc = proc
-        self.reader = reader  # says its output lines; ends at the end of its output
-
-    def alive(self) -> bool:
-        return self.proc.poll() is None
-
-    def close(self) -> None:
-        if self.proc.poll() is None:
-            self.proc.terminate()
-            try:
-                self.proc.wait(timeout=10)
-            except subprocess.TimeoutExpired:
-                self.proc.kill()
-                self.proc.wait()
-        # Its last lines ("ros1 bridge stopped: ...") are said before the pipe closes: the
-        # reader, late under load, read from a closed file and lost them.
-        self.reader.join(timeout=10)
-        for stream in (self.proc.stdin, self.proc.stdout):
-            if stream is not None:
-                stream.close()
-
-
 class Ros1Kind(RobotKind):
     """``kind: ros1``: a ROS 1 robot, bridged; its camera feeds the camera chain."""
 
@@ -88,7 +59,7 @@ class Ros1Kind(RobotKind):
     Options: ClassVar[type[BaseModel]] = Ros1Config
     options: Ros1Config
 
-    def connect(self, ctx: ManagedContext) -> _BridgeProcess:
+    def connect(self, ctx: ManagedContext) -> BridgeProcess:
         """Start the bridge process on the launch's zenoh bus; wait until it is ready."""
         endpoints = [on_loopback(e) for e in getattr(ctx.bus, "endpoints", ())]
         if getattr(ctx.bus, "kind", None) != "zenoh" or not endpoints:
@@ -97,7 +68,7 @@ class Ros1Kind(RobotKind):
                 element="bus",
                 hint="write bus: {kind: zenoh} in the launch file",
             )
-        return _BridgeProcess(*self._start_bridge(endpoints[0], ctx.say))
+        return self._start_bridge(endpoints[0], ctx.say)
 
     def describe(self, ctx: ManagedContext) -> str:
         """``ROS 1 robot through BRIDGE (master URI)``."""
@@ -113,41 +84,6 @@ class Ros1Kind(RobotKind):
         env["PYTHONUNBUFFERED"] = "1"
         return env
 
-    def _start_bridge(
-        self, endpoint: str, say: Callable[[str], None]
-    ) -> tuple[subprocess.Popen[str], threading.Thread]:
+    def _start_bridge(self, endpoint: str, say: Callable[[str], None]) -> BridgeProcess:
         args = [sys.executable, "-m", "anunnaki.ros1", self.options.bridge, "--connect", endpoint]
-        proc = subprocess.Popen(
-            [*args, "--exit-with-parent"],  # it stops once this process is gone (any way)
-            env=self._env(),
-            stdin=subprocess.PIPE,  # its other end: only here; it closes when we end
-            stdout=subprocess.PIPE,
-            stderr=subprocess.STDOUT,
-            text=True,
-            bufsize=1,
-        )
-        ready = threading.Event()
-        lines: list[str] = []
-
-        def read() -> None:
-            assert proc.stdout is not None
-            for line in proc.stdout:
-                text = line.rstrip("\n")
-                lines.append(text)
-                if "ros1 bridge ready" in text:
-                    ready.set()
-                if text.startswith(("ros1 bridge", "error", "WARNING", "ERROR")):
-                    say(f"ros1: {text}")
-            ready.set()  # the process ended: stop waiting
-
-        reader = threading.Thread(target=read, name="anunnaki-ros1-out", daemon=True)
-        reader.start()
-        ready.wait(self.options.ready_timeout)
-        if proc.poll() is not None or not any("ros1 bridge ready" in x for x in lines):
-            proc.kill()
-            proc.wait()
-            reader.join(timeout=10)
-            raise AnunnakiError(
-                "the ROS 1 bridge did not start: " + (" | ".join(lines[-5:]) or "no output")
-            )
-        return proc, reader
+        return start_bridge(args, self._env(), "ros1", self.options.ready_timeout, say)

@@ -8,7 +8,10 @@ with file, line and element) without ROS installed. The bridge runs as its own p
 (:func:`import_rospy`); a launch file starts it as the managed-system kind ``ros1``
 (:mod:`anunnaki.managed`).
 
-Converters (:mod:`anunnaki.ros1._convert`): std_msgs Bool, String, Int32/64, Float32/64,
+The ROS-neutral parts (the bridge file, the converters, :class:`ToBus`, rosbags) live in
+:mod:`anunnaki.rosbridge`, shared with the ROS 2 bridges, and are re-exported here.
+
+Converters: std_msgs Bool, String, Int32/64, Float32/64,
 Header; sensor_msgs Image and CompressedImage (to and from the bus's ``Image``), Range,
 BatteryState, NavSatFix; geometry_msgs Twist and PoseStamped; services std_srvs SetBool,
 Trigger, Empty and ``anunnaki_msgs/SetString`` (string in, success and message out) for
@@ -28,31 +31,35 @@ files; the launch kinds ``ros1`` and ``ros2`` are in :mod:`anunnaki.managed`.
 
 from __future__ import annotations
 
-from anunnaki.ros1._bags import bag_message_to_dict, is_bag, read_bag, write_bag
-from anunnaki.ros1._convert import (
+from anunnaki.ros1._light import LightOracle
+from anunnaki.ros1._rospy import ROS_DIST_PACKAGES, RosUnavailable, import_rospy
+from anunnaki.rosbridge import (
+    FORMAT_TAG,
+    IMAGE_TYPES,
+    MESSAGE_TYPES,
+    SERVICE_TYPES,
+    SET_STRING_SRV,
+    BridgeSpec,
     ConversionError,
+    ServiceBridge,
+    ToBus,
+    TopicBridge,
+    bag_message_to_dict,
     bus_image_to_compressed,
     compressed_to_image,
     encode_png,
     fill_message,
     image_size,
+    is_bag,
+    load_bridge,
     message_to_dict,
+    parse_bridge,
     raw_to_image,
+    read_bag,
     to_bus_fields,
     to_ros_fields,
+    write_bag,
 )
-from anunnaki.ros1._light import LightOracle
-from anunnaki.ros1._rospy import ROS_DIST_PACKAGES, RosUnavailable, import_rospy
-from anunnaki.ros1._schema import (
-    FORMAT_TAG,
-    BridgeSpec,
-    ServiceBridge,
-    TopicBridge,
-    load_bridge,
-    parse_bridge,
-)
-from anunnaki.ros1._tobus import ToBus
-from anunnaki.ros1._types import IMAGE_TYPES, MESSAGE_TYPES, SERVICE_TYPES, SET_STRING_SRV
 
 __all__ = [
     "FORMAT_TAG",

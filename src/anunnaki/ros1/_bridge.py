@@ -26,7 +26,8 @@ from typing import Any
 from anunnaki._closing import Closing
 from anunnaki.bus import Bus
 from anunnaki.messages import Image, ServiceReply, body_of
-from anunnaki.ros1._convert import (
+from anunnaki.ros1._rospy import master_pid, message_class, reregister_node, service_class
+from anunnaki.rosbridge._convert import (
     ConversionError,
     bus_image_to_compressed,
     bus_image_to_raw,
@@ -34,9 +35,8 @@ from anunnaki.ros1._convert import (
     message_to_dict,
     to_ros_fields,
 )
-from anunnaki.ros1._rospy import master_pid, message_class, reregister_node, service_class
-from anunnaki.ros1._schema import BridgeSpec, ServiceBridge, TopicBridge
-from anunnaki.ros1._tobus import ToBus
+from anunnaki.rosbridge._schema import BridgeSpec, ServiceBridge, TopicBridge
+from anunnaki.rosbridge._tobus import ToBus
 
 __all__ = ["Bridge"]
 
@@ -147,7 +147,9 @@ class Bridge(Closing):
     def _from_ros(self, t: TopicBridge) -> Callable[[Any], None]:
         def on_message(msg: Any) -> None:
             try:
-                self.bus.publish(t.bus_topic, self._to_bus.message(t, message_to_dict(msg)))
+                message = self._to_bus.message(t, message_to_dict(msg))
+                if message is not None:
+                    self.bus.publish(t.bus_topic, message)
             except (ConversionError, KeyError, ValueError, TypeError) as exc:
                 self.stats["malformed"] += 1
                 log.warning("dropped a message from %s (%s): %s", t.ros, t.type, exc)
@@ -195,7 +197,7 @@ class Bridge(Closing):
                 ros_request = srv._request_class()
                 # a request type without fields (Trigger, Empty) takes no payload: a reason
                 # or note in Utu's request is for the decision log, not for the robot
-                fields = to_ros_fields(body_of(request), s.fields) if ros_request.__slots__ else {}
+                fields = s.ros_request(body_of(request)) if ros_request.__slots__ else {}
                 fill_message(ros_request, fields)
             except (ConversionError, ValueError, TypeError) as exc:
                 self.stats["failed_calls"] += 1

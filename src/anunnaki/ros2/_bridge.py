@@ -10,26 +10,35 @@ needed on Anunnaki's side:
 * **rmw_zenoh** (ROS 2 Jazzy on): the key is
   ``<domain>/<topic without the leading />/<pkg>::msg::dds_::<Name>_/<type hash>``, e.g.
   ``0/rover/controller/mode/std_msgs::msg::dds_::String_/RIHS01_df66…``; the payload is
-  CDR the same way (sequence number, time and gid travel in the sample's attachment, which
-  this reader does not need). A subscriber uses ``*`` for the hash.
+  CDR the same way, and every sample carries an attachment (:func:`rmw_zenoh_attachment`:
+  sequence number, source time, the publisher's 16-byte gid), without which rmw_zenoh's
+  subscribers drop it. The type hash is the message type's RIHS01 hash in the robot's
+  distribution (:func:`type_hash`, from ``rosbags``' type store; the same as ROS 2 Jazzy's
+  own type descriptions); a subscriber here uses ``*`` for it.
 
 :class:`Ros2ZenohBridge` reads and writes those samples with ``rosbags``' CDR serializers and
-ROS 2 (Humble) type store, through a bridge file written for ROS 1 (types ``std_msgs/String``
+the type store of the robot's ROS 2 distribution (the bridge file's ``distro``, else
+``$ROS_DISTRO``: :func:`~anunnaki.ros2._distro.resolve_distro`; never assumed), through a
+bridge file (``ros2-bridge/1``, or one written for ROS 1: types ``std_msgs/String``
 map to ``std_msgs/msg/String``; a mapped field a ROS 2 type lacks — Header's ``seq`` — is
 left out), and publishes on Anunnaki's bus what the ROS 1 bridge publishes.
 """
 
 from __future__ import annotations
 
+import itertools
 import logging
+import os
+import struct
+import time
 from collections.abc import Callable, Mapping
 from typing import Any, Literal
 
 from anunnaki._closing import Closing
 from anunnaki.bus import Bus
-from anunnaki.errors import MissingExtraError
 from anunnaki.messages import Image, body_of
-from anunnaki.ros1 import (
+from anunnaki.ros2._distro import resolve_distro, type_store
+from anunnaki.rosbridge import (
     BridgeSpec,
     ConversionError,
     ToBus,
@@ -39,7 +48,16 @@ from anunnaki.ros1 import (
     to_ros_fields,
 )
 
-__all__ = ["Flavour", "Ros2ZenohBridge", "dds_type_name", "decode_cdr", "encode_cdr", "ros2_key"]
+__all__ = [
+    "Flavour",
+    "Ros2ZenohBridge",
+    "dds_type_name",
+    "decode_cdr",
+    "encode_cdr",
+    "rmw_zenoh_attachment",
+    "ros2_key",
+    "type_hash",
+]
 
 log = logging.getLogger("anunnaki.ros2")
 
@@ -74,28 +92,49 @@ def ros2_key(
     return f"{domain}/{name}/{dds_type_name(ros1_type)}/{type_hash}"
 
 
-def _store() -> Any:
-    try:
-        from rosbags.typesys import Stores, get_typestore
-    except ImportError:
-        raise MissingExtraError("rosbags", "ros") from None
-    return get_typestore(Stores.ROS2_HUMBLE)
+def type_hash(ros1_type: str, store: Any, distro: str) -> str:
+    """The type hash rmw_zenoh puts in a key: ``RIHS01_<sha256>`` (Humble has none)."""
+    if distro == "humble":
+        return "TypeHashNotSupported"  # rmw_zenoh's Humble port
+    return str(store.hash_rihs01(ros2_type(ros1_type)))
 
 
-def decode_cdr(ros1_type: str, raw: bytes, store: Any | None = None) -> dict[str, Any]:
-    """A CDR sample of ``ros1_type``'s ROS 2 message as plain data (times as float seconds)."""
-    store = store or _store()
+def rmw_zenoh_attachment(sequence: int, stamp_ns: int, gid: bytes) -> bytes:
+    """rmw_zenoh's sample attachment, without which its subscribers drop a sample.
+
+    CDR (little endian, no encapsulation header) of the int64 sequence number, the int64
+    source timestamp (ns), the uint8 gid length (16) and the 16-byte gid.
+    """
+    if len(gid) != 16:
+        raise ValueError(f"a gid is 16 bytes, got {len(gid)}")
+    return struct.pack("<qqB16s", sequence, stamp_ns, 16, gid)
+
+
+def _store(store: Any | None, distro: str | None) -> Any:
+    return store if store is not None else type_store(resolve_distro(distro, where="the call"))
+
+
+def decode_cdr(
+    ros1_type: str, raw: bytes, store: Any | None = None, *, distro: str | None = None
+) -> dict[str, Any]:
+    """A CDR sample of ``ros1_type``'s ROS 2 message as plain data (times as float seconds).
+
+    ``store`` (a rosbags type store), else ``distro``'s, else the installed distribution's.
+    """
+    store = _store(store, distro)
     return bag_message_to_dict(store.deserialize_cdr(raw, ros2_type(ros1_type)))
 
 
-def encode_cdr(ros1_type: str, data: Mapping[str, Any], store: Any | None = None) -> bytes:
+def encode_cdr(
+    ros1_type: str, data: Mapping[str, Any], store: Any | None = None, *, distro: str | None = None
+) -> bytes:
     """Plain data as a CDR sample of ``ros1_type``'s ROS 2 message (missing fields: zero).
 
     Raises:
         ConversionError: A field the ROS 2 type does not have.
 
     """
-    store = store or _store()
+    store = _store(store, distro)
     msgtype = ros2_type(ros1_type)
     return bytes(store.serialize_cdr(_build(store, msgtype, data, ""), msgtype))
 
@@ -150,6 +189,8 @@ class Ros2ZenohBridge(Closing):
         flavour: ``ros2dds`` or ``rmw_zenoh`` key expressions.
         domain: The ROS domain id (rmw_zenoh keys).
         namespace: zenoh-bridge-ros2dds's ``namespace`` option, if it sets one.
+        distro: The robot's ROS 2 distribution (default: the bridge file's ``distro``, else
+            ``$ROS_DISTRO``, else the installed rclpy's; none of them: an error).
 
     """
 
@@ -162,6 +203,7 @@ class Ros2ZenohBridge(Closing):
         flavour: Flavour = "ros2dds",
         domain: int = 0,
         namespace: str = "",
+        distro: str | None = None,
     ) -> None:
         self.spec = spec
         self.bus = bus
@@ -169,7 +211,8 @@ class Ros2ZenohBridge(Closing):
         self.flavour: Flavour = flavour
         self.domain = domain
         self.namespace = namespace
-        self.store = _store()
+        self.distro = resolve_distro(distro or spec.distro)
+        self.store = type_store(self.distro)
         self.stats: dict[str, int] = {"to_bus": 0, "to_ros": 0, "malformed": 0}
         self._to_bus = ToBus(spec, strict=False)
         self._handles: list[Any] = []
@@ -209,7 +252,9 @@ class Ros2ZenohBridge(Closing):
         def on_sample(sample: Any) -> None:
             try:
                 data = decode_cdr(t.type, sample.payload.to_bytes(), self.store)
-                self.bus.publish(t.bus_topic, self._to_bus.message(t, data))
+                message = self._to_bus.message(t, data)
+                if message is not None:
+                    self.bus.publish(t.bus_topic, message)
             except Exception as exc:  # a bad sample is counted and dropped, never fatal
                 self.stats["malformed"] += 1
                 log.warning("dropped a ROS 2 sample on %s (%s): %s", t.ros, t.type, exc)
@@ -219,7 +264,9 @@ class Ros2ZenohBridge(Closing):
         return on_sample
 
     def _from_bus(self, t: TopicBridge) -> Callable[[Any], None]:
-        key = self.key(t, type_hash="0")
+        key = self.key(t, type_hash=type_hash(t.type, self.store, self.distro))
+        gid = os.urandom(16)  # this publisher's id, as rmw_zenoh gives each one
+        sequence = itertools.count(1)
 
         def on_sample(sample: Any) -> None:
             try:
@@ -234,7 +281,11 @@ class Ros2ZenohBridge(Closing):
                 self.stats["malformed"] += 1
                 log.warning("dropped a bus message on %s for %s: %s", t.bus_topic, t.ros, exc)
                 return
-            self.session.put(key, raw)
+            if self.flavour == "rmw_zenoh":
+                attachment = rmw_zenoh_attachment(next(sequence), time.time_ns(), gid)
+                self.session.put(key, raw, attachment=attachment)
+            else:
+                self.session.put(key, raw)
             self.stats["to_ros"] += 1
 
         return on_sample

@@ -17,10 +17,48 @@ from collections.abc import Mapping
 from typing import Any
 
 from anunnaki.messages import Image
-from anunnaki.ros1._convert import compressed_to_image, raw_to_image, to_bus_fields
-from anunnaki.ros1._schema import BridgeSpec, TopicBridge
+from anunnaki.rosbridge._convert import compressed_to_image, raw_to_image, to_bus_fields
+from anunnaki.rosbridge._schema import BridgeSpec, TopicBridge
 
-__all__ = ["ToBus"]
+__all__ = ["ToBus", "diagnostic_fields", "diagnostic_value"]
+
+
+def diagnostic_value(text: str) -> bool | int | float | str:
+    """A diagnostic key/value pair's value as the goal model wants it.
+
+    A number or a boolean when it reads as one (``"42.5"`` → 42.5, ``"true"`` → True), else
+    the text.
+    """
+    lowered = text.strip().lower()
+    if lowered in ("true", "false"):
+        return lowered == "true"
+    for kind in (int, float):
+        try:
+            return kind(text)
+        except ValueError:
+            continue
+    return text
+
+
+def diagnostic_fields(data: Mapping[str, Any], status: str) -> dict[str, Any] | None:
+    """One status of a ``DiagnosticArray`` (by name) as flat fields.
+
+    ``level`` (0 OK, 1 WARN, 2 ERROR, 3 STALE), ``message``, ``hardware_id`` and each
+    key/value pair (values as :func:`diagnostic_value` reads them); ``None`` if the array has
+    no such status.
+    """
+    for entry in data.get("status") or ():
+        if entry.get("name") == status:
+            level = entry.get("level", 0)
+            flat: dict[str, Any] = {
+                "level": level[0] if isinstance(level, bytes | bytearray) else int(level),
+                "message": entry.get("message", ""),
+                "hardware_id": entry.get("hardware_id", ""),
+            }
+            for pair in entry.get("values") or ():
+                flat[str(pair.get("key", ""))] = diagnostic_value(str(pair.get("value", "")))
+            return flat
+    return None
 
 
 class ToBus:
@@ -47,8 +85,11 @@ class ToBus:
         self._merged: dict[str, dict[str, Any]] = {}
         self._lock = threading.Lock()
 
-    def message(self, t: TopicBridge, data: Mapping[str, Any]) -> Image | dict[str, Any]:
+    def message(self, t: TopicBridge, data: Mapping[str, Any]) -> Image | dict[str, Any] | None:
         """The bus message of ``data``, a message of entry ``t``'s ROS topic as plain data.
+
+        ``None``: the message holds nothing for this entry (a ``/diagnostics`` array without
+        the entry's ``status``); nothing is published.
 
         Raises:
             ConversionError: A camera frame that does not decode.
@@ -61,13 +102,21 @@ class ToBus:
             return raw_to_image(data)
         return self.fields(t, data)
 
-    def fields(self, t: TopicBridge, data: Mapping[str, Any]) -> dict[str, Any]:
+    def fields(self, t: TopicBridge, data: Mapping[str, Any]) -> dict[str, Any] | None:
         """The bus fields of ``data`` for a non-image entry: mapped, and merged if shared.
+
+        A ``status`` entry (``diagnostic_msgs/DiagnosticArray``) first becomes that status's
+        fields (:func:`diagnostic_fields`); ``None`` when the array does not hold it.
 
         Raises:
             KeyError: (``strict``) A mapped field the message lacks.
 
         """
+        if t.status is not None:
+            flat = diagnostic_fields(data, t.status)
+            if flat is None:
+                return None
+            data = flat
         fields = to_bus_fields(data, t.fields, strict=self._strict)
         if t.bus_topic not in self._shared:
             return fields

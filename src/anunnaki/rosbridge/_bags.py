@@ -12,8 +12,9 @@ bridge file (its topics are the bus's, its messages their JSON). A ROS 2 bag goe
 ROS 1 bridge file; a mapped field its type lacks (ROS 2's Header has no ``seq``) is left out.
 
 **Out.** :func:`write_bag` writes a run's inputs (one ``std_msgs/String`` topic per input
-topic, the message as JSON) and its decisions (``/utu/decisions``, JSON) to a ROS 1 bag,
-what ROS users open with ``rosbag``/``rqt_bag``; ``anunnaki log RUN.db --export-bag OUT.bag``.
+topic, the message as JSON) and its decisions (``/utu/decisions``, JSON) to a ROS 1 bag
+(``rosbag``/``rqt_bag``) or a rosbag2 folder in MCAP or SQLite 3 (``ros2 bag``, Foxglove);
+``anunnaki log RUN.db --export-bag OUT.bag`` (or ``OUT`` for a rosbag2 folder).
 """
 
 from __future__ import annotations
@@ -22,16 +23,18 @@ import dataclasses
 import json
 from collections.abc import Iterable, Iterator, Mapping
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
 from anunnaki import topics
 from anunnaki.errors import AnunnakiError, MissingExtraError, ModelFileError
-from anunnaki.ros1._schema import BridgeSpec, TopicBridge
-from anunnaki.ros1._tobus import ToBus
+from anunnaki.rosbridge._schema import BridgeSpec, TopicBridge
+from anunnaki.rosbridge._tobus import ToBus
 from anunnaki.trace import Record
 
 __all__ = [
+    "BagStorage",
     "bag_message_to_dict",
+    "bag_storage",
     "is_bag",
     "read_bag",
     "write_bag",
@@ -45,6 +48,7 @@ def _rosbags() -> Any:
     try:
         import rosbags.highlevel
         import rosbags.rosbag1
+        import rosbags.rosbag2
         import rosbags.typesys
     except ImportError:
         raise MissingExtraError("rosbags", "ros") from None
@@ -119,7 +123,9 @@ def read_bag(path: str | Path, spec: BridgeSpec | None = None) -> list[Record]:
             for connection, stamp, raw in reader.messages(connections=wanted):
                 data = bag_message_to_dict(reader.deserialize(raw, connection.msgtype))
                 for t in entries[connection.topic]:
-                    records.append(Record(stamp / 1e9, t.bus_topic, to_bus.fields(t, data)))
+                    fields = to_bus.fields(t, data)
+                    if fields is not None:
+                        records.append(Record(stamp / 1e9, t.bus_topic, fields))
     except (rb.highlevel.AnyReaderError, OSError) as exc:
         raise ModelFileError(f"cannot read the bag: {exc}", path=str(path)) from None
     return records
@@ -174,36 +180,81 @@ def _check_type(path: str | Path, topic: str, found: str, entries: list[TopicBri
             )
 
 
+#: How :func:`write_bag` stores a run: a ROS 1 bag, or a rosbag2 folder (MCAP or SQLite 3).
+BagStorage = Literal["ros1", "mcap", "sqlite3"]
+
+
+def bag_storage(path: str | Path, storage: str | None = None) -> BagStorage:
+    """The storage :func:`write_bag` uses for ``path``.
+
+    ``storage`` if given, else ``ros1`` for a ``.bag`` path, else a rosbag2 folder in MCAP
+    (what ``ros2 bag record`` writes by default since Iron).
+
+    Raises:
+        AnunnakiError: An unknown storage name.
+
+    """
+    if storage is None:
+        return "ros1" if Path(path).suffix == ".bag" else "mcap"
+    if storage not in ("ros1", "mcap", "sqlite3"):
+        raise AnunnakiError(f"unknown bag storage {storage!r}: ros1, mcap or sqlite3")
+    return storage  # type: ignore[return-value]
+
+
 def write_bag(
     path: str | Path,
     inputs: Iterable[Record],
     decisions: Iterable[tuple[float, Mapping[str, Any]]] = (),
     *,
     overwrite: bool = False,
+    storage: str | None = None,
 ) -> int:
-    """Write a run to a ROS 1 bag: inputs on their topics, decisions on ``topics.BAG_DECISIONS``.
+    """Write a run to a bag: inputs on their topics, decisions on ``topics.BAG_DECISIONS``.
 
-    Every message is a ``std_msgs/String`` holding the JSON of the message (the bus's
-    messages have no fixed ROS type), so :func:`read_bag` reads its inputs back without a
-    bridge file. Returns how many messages were written.
+    A ROS 1 bag (``path`` ends in ``.bag``, or ``storage="ros1"``), or a rosbag2 folder
+    (``storage`` ``mcap``, the default otherwise, or ``sqlite3``; ``metadata.yaml`` version 9,
+    as ROS 2 Jazzy's ``ros2 bag`` writes). Every message is a ``std_msgs/String`` holding
+    the JSON of the message (the bus's messages have no fixed ROS type), so :func:`read_bag`
+    reads its inputs back without a bridge file, and a ROS 2 node that plays the bag gets
+    them as ``std_msgs/msg/String``. Returns how many messages were written.
 
     Raises:
         AnunnakiError: The bag exists already (and not ``overwrite``), or cannot be written.
 
     """
     rb = _rosbags()
-    store = rb.typesys.get_typestore(rb.typesys.Stores.ROS1_NOETIC)
-    string = store.types["std_msgs/msg/String"]
+    kind = bag_storage(path, storage)
     out = Path(path)
     if out.exists():
         if not overwrite:
             raise AnunnakiError(f"{out} exists already; give another name, or --force")
+        _remove_bag(out)
+    rows = list(_in_time_order(inputs, decisions))
+    if kind == "ros1":
+        return _write_ros1(rb, out, rows)
+    return _write_ros2(rb, out, rows, kind)
+
+
+def _remove_bag(out: Path) -> None:
+    """Remove an old bag: a file, or a rosbag2 folder (never any other folder)."""
+    if not out.is_dir():
         out.unlink()
+        return
+    if not (out / "metadata.yaml").exists():
+        raise AnunnakiError(f"{out} is a folder but no rosbag2 (no metadata.yaml): not replaced")
+    import shutil
+
+    shutil.rmtree(out)
+
+
+def _write_ros1(rb: Any, out: Path, rows: list[tuple[float, str, Any]]) -> int:
+    store = rb.typesys.get_typestore(rb.typesys.Stores.ROS1_NOETIC)
+    string = store.types["std_msgs/msg/String"]
     n = 0
     try:
         with rb.rosbag1.Writer(out) as writer:
             connections: dict[str, Any] = {}
-            for t, topic, body in _in_time_order(inputs, decisions):
+            for t, topic, body in rows:
                 if topic not in connections:
                     connections[topic] = writer.add_connection(
                         topic, "std_msgs/msg/String", typestore=store
@@ -212,6 +263,31 @@ def write_bag(
                 writer.write(connections[topic], max(0, round(t * 1e9)), raw)
                 n += 1
     except (rb.rosbag1.WriterError, OSError) as exc:
+        raise AnunnakiError(f"cannot write the bag {out}: {exc}") from None
+    return n
+
+
+def _write_ros2(rb: Any, out: Path, rows: list[tuple[float, str, Any]], kind: str) -> int:
+    # std_msgs/String is the same in every ROS 2 distribution; Jazzy's store describes it
+    store = rb.typesys.get_typestore(rb.typesys.Stores.ROS2_JAZZY)
+    string = store.types["std_msgs/msg/String"]
+    plugin = rb.rosbag2.StoragePlugin.MCAP if kind == "mcap" else None
+    options: dict[str, Any] = {"version": 9}
+    if plugin is not None:
+        options["storage_plugin"] = plugin
+    n = 0
+    try:
+        with rb.rosbag2.Writer(out, **options) as writer:
+            connections: dict[str, Any] = {}
+            for t, topic, body in rows:
+                if topic not in connections:
+                    connections[topic] = writer.add_connection(
+                        topic, "std_msgs/msg/String", typestore=store
+                    )
+                raw = store.serialize_cdr(string(data=json.dumps(body)), "std_msgs/msg/String")
+                writer.write(connections[topic], max(0, round(t * 1e9)), raw)
+                n += 1
+    except (rb.rosbag2.WriterError, OSError) as exc:
         raise AnunnakiError(f"cannot write the bag {out}: {exc}") from None
     return n
 

@@ -23,6 +23,8 @@ from anunnaki.messages import Image
 
 __all__ = [
     "bus_image_to_compressed",
+    "bus_image_to_raw",
+    "coerce_value",
     "compressed_to_image",
     "fill_message",
     "image_size",
@@ -97,18 +99,24 @@ def fill_message(msg: Any, data: Mapping[str, Any], where: str = "") -> Any:
         elif hasattr(current, "__slots__") and hasattr(current, "_slot_types"):
             raise ConversionError(f"'{path}' is a {types[key]}: give its fields as a mapping")
         else:
-            setattr(msg, key, _coerce(types[key], value, path))
+            setattr(msg, key, coerce_value(types[key], value, path))
     return msg
 
 
-def _coerce(type_: str, value: Any, path: str) -> Any:
+def coerce_value(type_: str, value: Any, path: str) -> Any:
+    """``value`` as a field of ROS 1-style type ``type_`` (``float32``, ``uint8[]``) at ``path``.
+
+    Raises:
+        ConversionError: A value of the wrong kind (a string for a number, a float for an int).
+
+    """
     base = type_.split("[", 1)[0]
     if "[" in type_:
         if base == "uint8" and isinstance(value, bytes | bytearray):
             return bytes(value)
         if not isinstance(value, list | tuple):
             raise ConversionError(f"'{path}' is an array ({type_}), got {type(value).__name__}")
-        return [_coerce(base, x, path) for x in value]
+        return [coerce_value(base, x, path) for x in value]
     try:
         if base == "bool":
             if not isinstance(value, bool):

@@ -1,0 +1,302 @@
+"""The native ROS 2 bridge: a bridge file's topics and services between rclpy and the bus.
+
+The counterpart of the ROS 1 bridge (:mod:`anunnaki.ros1._bridge`), on rclpy: one
+:class:`Ros2Bridge` lives in its own process (``python -m anunnaki.ros2``, run from the ROS 2
+environment that scripts/setup-ros2.sh builds, or any environment where ``import rclpy``
+works, e.g. after sourcing a ROS 2 install's ``setup.bash``) and is a ROS 2 node there:
+
+* a ``to_bus`` topic is a subscription, a ``to_ros`` topic a publisher, with the entry's
+  QoS (``sensor``: best effort, as drivers publish sensor data; ``reliable``: commands,
+  states), history depth ``queue``;
+* camera frames (``sensor_msgs/Image``, ``sensor_msgs/CompressedImage``) become the bus's
+  ``Image`` and back (a raw ``Image`` to ROS decodes the frame: OpenCV);
+* a service with ``serve: bus`` (the default) answers a bus request by calling the ROS
+  service; with ``serve: ros`` the bridge offers the ROS service and answers a ROS call by
+  requesting the bus service.
+
+It never dies from one bad message: a message that does not convert is counted
+(``stats["malformed"]``) and logged with the topic and the reason, and the next one goes
+through. Nothing here imports rclpy at import time: the process passes the imported module in.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+import time
+from collections import Counter
+from collections.abc import Callable
+from importlib import import_module
+from types import ModuleType
+from typing import Any
+
+from anunnaki._closing import Closing
+from anunnaki.bus import Bus, BusError
+from anunnaki.errors import AnunnakiError
+from anunnaki.messages import Image, ServiceReply, body_of
+from anunnaki.ros2._rclpy_convert import fill_ros2_message, ros2_message_to_dict
+from anunnaki.rosbridge import (
+    BridgeSpec,
+    ConversionError,
+    ServiceBridge,
+    ToBus,
+    TopicBridge,
+    bus_image_to_compressed,
+    bus_image_to_raw,
+    to_bus_fields,
+    to_ros_fields,
+)
+
+__all__ = ["Ros2Bridge", "Ros2Unavailable", "import_rclpy", "message_class", "service_class"]
+
+log = logging.getLogger("anunnaki.ros2")
+
+#: What a message that does not convert raises (rclpy's own checks raise AssertionError).
+_BAD = (ConversionError, KeyError, ValueError, TypeError, OverflowError, AssertionError)
+
+
+class Ros2Unavailable(AnunnakiError):
+    """rclpy cannot be imported here; the message says how to get it."""
+
+
+def import_rclpy() -> ModuleType:
+    """Import rclpy (and its QoS and executors).
+
+    Raises:
+        Ros2Unavailable: rclpy is not installed in this environment.
+
+    """
+    try:
+        rclpy = import_module("rclpy")
+        import_module("rclpy.qos")
+        import_module("rclpy.executors")
+        import_module("rclpy.callback_groups")
+        import_module("rclpy.signals")
+    except ImportError as exc:
+        raise Ros2Unavailable(
+            f"cannot import rclpy ({exc}); run the ROS 2 bridge with the ROS 2 environment's "
+            "Python (scripts/setup-ros2.sh builds .venv-ros2: .venv-ros2/bin/python -m "
+            "anunnaki.ros2 ...), or source your ROS 2 install's setup.bash first"
+        ) from None
+    return rclpy
+
+
+def message_class(type_name: str) -> Any:
+    """The rclpy class of ROS message type ``pkg/Name`` (``pkg.msg.Name``)."""
+    package, name = type_name.split("/", 1)
+    return getattr(import_module(f"{package}.msg"), name)
+
+
+def service_class(type_name: str) -> Any:
+    """The rclpy class of ROS service type ``pkg/Name`` (``pkg.srv.Name``)."""
+    package, name = type_name.split("/", 1)
+    return getattr(import_module(f"{package}.srv"), name)
+
+
+def qos_profile(rclpy: ModuleType, t: TopicBridge) -> Any:
+    """The rclpy QoS of an entry: best effort (``sensor``) or reliable, keep last ``queue``."""
+    q = rclpy.qos
+    reliability = (
+        q.ReliabilityPolicy.BEST_EFFORT
+        if t.effective_qos == "sensor"
+        else q.ReliabilityPolicy.RELIABLE
+    )
+    return q.QoSProfile(
+        history=q.HistoryPolicy.KEEP_LAST,
+        depth=t.queue,
+        reliability=reliability,
+        durability=q.DurabilityPolicy.VOLATILE,
+    )
+
+
+class Ros2Bridge(Closing):
+    """Carries a bridge file's topics and services between ROS 2 (rclpy) and the bus.
+
+    Args:
+        spec: The bridge file, loaded (:func:`~anunnaki.rosbridge.load_bridge`).
+        bus: The bus to publish and serve on (usually zenoh, shared with Utu's nodes).
+        node: The rclpy node to declare on; an executor spins it (callbacks may run on
+            several threads: everything here is thread-safe).
+        rclpy: The imported rclpy module (:func:`import_rclpy`).
+
+    Attributes:
+        stats: Counters: ``to_bus``, ``to_ros``, ``calls``, ``failed_calls``, ``ros_calls``
+            (ROS calls served), ``malformed`` (messages that did not convert).
+
+    """
+
+    def __init__(self, spec: BridgeSpec, bus: Bus, node: Any, rclpy: ModuleType) -> None:
+        self.spec = spec
+        self.bus = bus
+        self.node = node
+        self.rclpy = rclpy
+        self.stats: Counter[str] = Counter()
+        self._to_bus = ToBus(spec, strict=spec.ros2)
+        self._ros_handles: list[tuple[str, Any]] = []
+        self._bus_handles: list[Any] = []
+        self._group = rclpy.callback_groups.ReentrantCallbackGroup()
+
+    # -- life ----------------------------------------------------------------------------------
+    def start(self) -> None:
+        """Declare every topic and service on ROS 2 and on the bus."""
+        node = self.node
+        for t in self.spec.topics:
+            cls = message_class(t.type)
+            qos = qos_profile(self.rclpy, t)
+            if t.direction == "to_bus":
+                sub = node.create_subscription(
+                    cls, t.ros, self._from_ros(t), qos, callback_group=self._group
+                )
+                self._ros_handles.append(("subscription", sub))
+            else:
+                pub = node.create_publisher(cls, t.ros, qos)
+                self._ros_handles.append(("publisher", pub))
+                self._bus_handles.append(
+                    self.bus.subscribe(t.bus_topic, self._from_bus(t, cls, pub), queue=t.queue)
+                )
+        for s in self.spec.services:
+            srv = service_class(s.type)
+            if s.serve == "bus":
+                client = node.create_client(srv, s.ros_service, callback_group=self._group)
+                self._ros_handles.append(("client", client))
+                self._bus_handles.append(self.bus.service(s.bus, self._bus_handler(s, client)))
+            else:
+                service = node.create_service(
+                    srv, s.ros_service, self._ros_handler(s), callback_group=self._group
+                )
+                self._ros_handles.append(("service", service))
+
+    def close(self) -> None:
+        """Release everything declared on the bus and on ROS 2."""
+        for handle in self._bus_handles:
+            handle.close()
+        self._bus_handles.clear()
+        handles, self._ros_handles = self._ros_handles, []
+        for kind, handle in handles:
+            try:
+                getattr(self.node, f"destroy_{kind}")(handle)
+            except Exception as exc:  # the node or its context already gone
+                log.debug("destroy %s %r: %r", kind, handle, exc)
+
+    def __enter__(self) -> Ros2Bridge:
+        self.start()
+        return self
+
+    # -- ROS 2 → bus ---------------------------------------------------------------------------
+    def _from_ros(self, t: TopicBridge) -> Callable[[Any], None]:
+        def on_message(msg: Any) -> None:
+            try:
+                message = self._to_bus.message(t, ros2_message_to_dict(msg))
+                if message is not None:
+                    self.bus.publish(t.bus_topic, message)
+            except _BAD as exc:
+                self.stats["malformed"] += 1
+                log.warning("dropped a message from %s (%s): %s", t.ros, t.type, exc)
+                return
+            self.stats["to_bus"] += 1
+
+        return on_message
+
+    # -- bus → ROS 2 ---------------------------------------------------------------------------
+    def _from_bus(self, t: TopicBridge, cls: Any, pub: Any) -> Callable[[Any], None]:
+        def on_sample(sample: Any) -> None:
+            try:
+                msg = fill_ros2_message(cls(), self._ros_fields(t, sample.message))
+                pub.publish(msg)
+            except _BAD as exc:
+                self.stats["malformed"] += 1
+                log.warning("dropped a bus message on %s for %s: %s", t.bus_topic, t.ros, exc)
+                return
+            self.stats["to_ros"] += 1
+
+        return on_sample
+
+    def _ros_fields(self, t: TopicBridge, message: Any) -> dict[str, Any]:
+        if isinstance(message, Image):
+            if t.type == "sensor_msgs/CompressedImage":
+                fields = bus_image_to_compressed(message, time.time())
+            elif t.type == "sensor_msgs/Image":
+                fields = bus_image_to_raw(message, time.time())
+            else:
+                raise ConversionError(f"a camera frame cannot become a {t.type}")
+            fields["header"].pop("seq", None)  # ROS 2's Header has no seq
+            return fields
+        return to_ros_fields(body_of(message), t.fields)
+
+    # -- services: bus → ROS 2 -----------------------------------------------------------------
+    def _bus_handler(self, s: ServiceBridge, client: Any) -> Callable[[Any], ServiceReply]:
+        srv = service_class(s.type)
+
+        def handle(request: Any) -> ServiceReply:
+            self.stats["calls"] += 1
+            try:
+                ros_request = srv.Request()
+                # a request type without fields (Trigger, Empty) takes no payload: a reason
+                # or note in Utu's request is for the decision log, not for the robot
+                has_fields = bool(ros_request.get_fields_and_field_types())
+                fields = s.ros_request(body_of(request)) if has_fields else {}
+                fill_ros2_message(ros_request, fields)
+            except _BAD as exc:
+                self.stats["failed_calls"] += 1
+                return ServiceReply(ok=False, error=f"bad request for {s.ros_service}: {exc}")
+            try:
+                reply = self._call(client, ros_request, s)
+            except _CallFailed as exc:
+                self.stats["failed_calls"] += 1
+                return ServiceReply(ok=False, error=f"{s.ros_service}: {exc}")
+            ok = bool(reply.get("success", True))
+            if not ok:
+                self.stats["failed_calls"] += 1
+            error = None if ok else str(reply.get("message") or "refused")
+            return ServiceReply(ok=ok, error=error, body=reply)
+
+        return handle
+
+    def _call(self, client: Any, request: Any, s: ServiceBridge) -> dict[str, Any]:
+        if not client.wait_for_service(timeout_sec=s.timeout):
+            raise _CallFailed(f"no ROS 2 service answers within {s.timeout:g} s")
+        done = threading.Event()
+        future = client.call_async(request)
+        future.add_done_callback(lambda _f: done.set())
+        if not done.wait(s.timeout):
+            future.cancel()
+            raise _CallFailed(f"no reply within {s.timeout:g} s")
+        if future.exception() is not None:
+            exc = future.exception()
+            raise _CallFailed(f"{type(exc).__name__}: {exc}")
+        return ros2_message_to_dict(future.result())
+
+    # -- services: ROS 2 → bus -----------------------------------------------------------------
+    def _ros_handler(self, s: ServiceBridge) -> Callable[[Any, Any], Any]:
+        inverse = {ros: bus for bus, ros in s.fields.items()}
+
+        def handle(request: Any, response: Any) -> Any:
+            self.stats["ros_calls"] += 1
+            body = ros2_message_to_dict(request)
+            payload = to_bus_fields(body, inverse) if inverse else body
+            fields = response.get_fields_and_field_types()
+            try:
+                reply = self.bus.request(s.bus, payload, timeout=s.timeout)
+                ok, text, answer = True, "", body_of(reply)
+                if isinstance(reply, ServiceReply):
+                    ok, text, answer = reply.ok, reply.error or "", dict(reply.body)
+            except BusError as exc:
+                self.stats["failed_calls"] += 1
+                ok, text, answer = False, f"{s.bus}: {exc}", {}
+            values = {k: v for k, v in answer.items() if k in fields}
+            if "success" in fields:
+                values["success"] = ok
+            if "message" in fields and text:
+                values["message"] = text
+            try:
+                fill_ros2_message(response, values)
+            except _BAD as exc:
+                self.stats["failed_calls"] += 1
+                log.warning("the reply of bus service %s does not fit %s: %s", s.bus, s.type, exc)
+            return response
+
+        return handle
+
+
+class _CallFailed(Exception):
+    """A ROS 2 service call that got no answer."""
