@@ -52,6 +52,10 @@ Each trained arm runs with ``--seeds`` (3 by default). Every model is measured o
   augmentation (:class:`anunnaki.lec.Augmenter`'s strength rule) cannot reach it, refusing to
   run if one can.
 
+- ``own_hardest`` (c′, with ``--n-own N``): N hardest contexts of a fresh Enlil search
+  against *each* final model (``--hard-budget``, ``--hard-seed``), chosen as (c)'s; every arm
+  is attacked at its own weak spots (:func:`own_hardest`).
+
 Figures: F1 per condition (mean over its contexts), per arm the mean and standard deviation
 over seeds; mPC (mean F1 over the corrupted conditions) and rPC (mPC / clean F1), as in the
 detection-robustness benchmarks; the margin Enki − random per condition, a **tie** unless
@@ -75,6 +79,18 @@ adds a domain measured at its own scale, e.g. a slower platform at a smaller bud
 report states each domain's; ``--lr-choice FILE`` keeps with them how their learning rate was
 chosen on val). Every arm × seed (and the searches) runs under a lock in the
 work folder, so several processes given the same domain and ``--work`` share its work.
+
+Issue 33's ablation: ``--round screening`` and ``--round confirmation`` (:data:`ROUNDS`:
+domains, arms, settings per platform; work in ``runs/robustify-ROUND``, results in
+``benchmarks/results/robustify-ROUND.json``). Every Enki arm is compared with A+c by a paired
+bootstrap interval over seeds and contexts (``vs_random_c``, :func:`paired_bootstrap`), the
+best one in ``best_enki_arm`` (:func:`best_arm`), which the confirmation measures. Every run
+prints its plan first (``--plan``: only that): arms × seeds × domains × steps, images
+rendered, forward passes and an estimated time from a calibration measured here
+(:func:`calibrate`), then a progress line with the time left as each arm × seed ends.
+``--scheduler local`` (a Dask LocalCluster) or ``--scheduler tcp://HOST:8786`` fans the
+arms × seeds out (:func:`anunnaki.enlil.executor_map`, as Enlil's search); the default runs
+them in this process, one after another.
 
 ``--report`` regenerates docs/enki.md and its plots from benchmarks/results/robustify.json
 alone (nothing typed by hand; a test checks the page regenerates identically). ``--quick``
@@ -335,7 +351,9 @@ class Settings:
     jitter: float = 0.1
     consistency: float = 1.0
     ema: float = 0.0
+    # (c′): contexts of a fresh search against each final model (0: no such condition)
     n_own: int = 0
+    # each training seed's Enki arms on a search of their own (seed search_seed + seed)
     seed_searches: bool = False
 
     def finetune_budget(self) -> Any:
@@ -689,6 +707,9 @@ def prepare(domain: Domain, data: Path, work: Path, s: Settings, bars: Bars) -> 
     # (search seed ``search_seed + seed``): the spread over seeds includes the search's
     seed_archives = {}
     for seed in s.seeds if s.seed_searches else ():
+        if seed == 0:  # its search seed is the common search's: the same search
+            seed_archives[seed] = train_archive
+            continue
         seed_archives[seed] = search(
             domain, model, data, work / f"search-train-s{seed}", budget=s.search_budget,
             seed=s.search_seed + seed, s=s, bars=bars, label=f"search for Enki, seed {seed}",
@@ -1715,11 +1736,12 @@ def plan_domain(
     render = calib["render"][domain.phenomenon]
     fwd = calib["forward"]
     perturbed = steps * s.batch_size * (1 - s.clean)  # frames a source perturbs per run
-    evals = s.search_budget * (1 + (len(s.seeds) if s.seed_searches else 0)) + s.hard_budget
+    own_searches = sum(1 for seed in s.seeds if seed != 0) if s.seed_searches else 0
+    evals = s.search_budget * (1 + own_searches) + s.hard_budget
     fam_contexts = len(s.families) * s.n_family
     contexts = s.n_random + s.n_hardest + s.n_region + fam_contexts
     jobs, counts = {}, {"runs": 0, "steps": 0, "renders": 0, "forwards": 0, "searches": 2}
-    counts["searches"] += len(s.seeds) if s.seed_searches else 0
+    counts["searches"] += own_searches
     search_images = evals * s.search_images
     counts["renders"] += search_images + contexts * s.test_images  # (b)-(d): once per domain
     counts["forwards"] += search_images
@@ -2144,6 +2166,14 @@ def main(argv: Sequence[str] | None = None) -> int:
     workers = 1
     if args.scheduler:
         workers = args.workers or max(1, (os.cpu_count() or 1) // s.threads)
+    if not args.plan:
+        for domain, _ in items:
+            data = data_of[domain.platform]
+            if not (data / "train.json").is_file():
+                p.error(
+                    f"--{domain.platform}-data {data}: no dataset there; make one with "
+                    f"anunnaki make-dataset {domain.platform} --out {data}"
+                )
     with Bars(args.quiet) as bars:
         calibs = {}
         for domain, own in items:
@@ -2165,13 +2195,6 @@ def main(argv: Sequence[str] | None = None) -> int:
             return 0
         bars.console.print(text, highlight=False, soft_wrap=True)
         write_json(args.work / "plan.json", plan)
-        for domain, _ in items:
-            data = data_of[domain.platform]
-            if not (data / "train.json").is_file():
-                p.error(
-                    f"--{domain.platform}-data {data}: no dataset there; make one with "
-                    f"anunnaki make-dataset {domain.platform} --out {data}"
-                )
         doc = read_json(args.output) if args.output.is_file() else None
         if (
             doc is None
@@ -2499,6 +2522,18 @@ def _recipe_arms(domains: dict[str, Any]) -> list[str]:
         "Measured here: "
         + (", ".join(f"`{a}`" for a in measured) if measured else "none yet")
         + ".",
+        "",
+        "The ablation runs in two rounds, each resumable in its own work folder and printing "
+        "its plan (runs, steps, images rendered, forward passes, an estimated time from a "
+        "calibration on the machine) first: `--round screening` (every arm above at 96 "
+        "steps, 3 seeds each on an Enki search of its own, rover hsl, raindrop and fog) and "
+        "`--round confirmation` (the screening's best Enki arm against A+c and A at 504 "
+        "steps on the rover's three domains, 96 on the UAV's two). Both add condition "
+        "(c′), the hardest contexts of a fresh search against each final model, and compare "
+        "every Enki arm with A+c by a paired bootstrap interval over seeds and contexts; "
+        "`--scheduler local` fans the arms × seeds out over a Dask cluster. Commands, the "
+        "plans' figures on this machine: "
+        "[robustify.md](robustify.md#the-ablations-two-rounds).",
         "",
     ]
 

@@ -439,14 +439,15 @@ def test_the_plan_counts_a_round_without_training(
     assert (
         "rover-hsl: 9 arms × 3 seeds × 96 steps (enki, random, corruption_mix, random_c, " in text
     )
-    # searches: Enki's and (c)'s, one Enki search per seed, and (c′) against each of the 30
-    # models measured (default, today's, shipped and the 27 arm × seed runs)
-    assert "27 fine-tunes, 2592 optimiser steps, 35 searches" in text
+    # searches: Enki's and (c)'s, an Enki search of its own for seeds 1 and 2 (seed 0's is
+    # the common one), and (c′) against each of the 30 models measured (default, today's,
+    # shipped and the 27 arm × seed runs)
+    assert "27 fine-tunes, 2592 optimiser steps, 34 searches" in text
     assert "rover-raindrop: 9 arms × 3 seeds × 96 steps" in text and "24 fine-tunes, 2304" in text
     # rover-fog rebuilds today's rover-fog (504 steps of its own command) once
     assert "24 fine-tunes, 2808 optimiser steps" in text
     # one second per step, nothing else: the estimate is the steps
-    assert "total: 75 fine-tunes, 7,704 optimiser steps, 104 searches" in text
+    assert "total: 75 fine-tunes, 7,704 optimiser steps, 101 searches" in text
     assert "about 2.1 h of compute" in text  # 7,704 s
     # renders: worst-of-k renders k candidates for each perturbed frame (96 × 32 × 0.7)
     s = replace_settings(bench, bench.ROUNDS["screening"].settings["rover"])
@@ -455,9 +456,9 @@ def test_the_plan_counts_a_round_without_training(
     plain, worst = 2150, 8601
     own = s.n_own * s.test_images + s.hard_budget * s.search_images  # (c′): search, measure
     measured = (1 + 8 + 6 + 4 + 4) * s.test_images
-    prep = (64 * 4 + 48) * 24 + 22 * 64  # the searches' evaluations, (b)-(d) once
+    prep = (64 * 3 + 48) * 24 + 22 * 64  # the searches' evaluations, (b)-(d) once
     assert hsl["renders"] == prep + 3 * (plain + worst) + 9 * own
-    assert hsl["forwards"] == (64 * 4 + 48) * 24 + 9 * (measured + own) + 3 * (
+    assert hsl["forwards"] == (64 * 3 + 48) * 24 + 9 * (measured + own) + 3 * (
         96 * 32 + 96 * 32 + worst
     )
     assert hsl["jobs"]["random-s0"] == hsl["jobs"]["archive_mix_wok-s2"] == 96.0
@@ -539,11 +540,11 @@ def test_the_paired_bootstrap_tells_a_tie_from_a_win(bench: Any) -> None:
 def test_own_hardest_contexts_and_a_dask_cluster_give_the_in_process_figures(
     bench: Any, rover_data: Path, tmp_path: Path
 ) -> None:
-    """(c′) is measured per model; A, A+c and D alone; --scheduler local gives the same."""
+    """(c′) per model; A, A+c and D alone, D's seeds on searches of their own; a LocalCluster."""
     torch = pytest.importorskip("torch")
     pytest.importorskip("distributed")
     argv = ["--quick", "--rover-data", str(rover_data), "--arms", "=A,A+c,D", "--seeds", "0,1",
-            "--k", "2", "--quiet"]  # fmt: skip
+            "--k", "2", "--seed-searches", "--quiet"]  # fmt: skip
     out, work = tmp_path / "here.json", tmp_path / "here"
     threads = torch.get_num_threads()
     try:
@@ -555,6 +556,19 @@ def test_own_hardest_contexts_and_a_dask_cluster_give_the_in_process_figures(
     assert [a for a in d["arms"] if a in bench.RECIPES] == ["random", "random_c", "archive_mix_wok"]
     assert "enki_vs_random" not in d and doc["settings"]["n_own"] == 2
     assert (work / "plan.json").is_file()
+    # seed 1's Enki arms train on a search of their own (seed 0's is the common search)
+    assert d["searches"]["enki_per_seed"]["1"]["seed"] == 101
+    assert d["searches"]["enki_per_seed"]["0"] == d["searches"]["enki"]
+    prep = json.loads((work / "rover-hsl" / "conditions.json").read_text("utf-8"))
+    assert prep["enki_selections"]["0"] == prep["enki_selection"]
+    assert (work / "rover-hsl" / "search-train-s1").is_dir()
+    assert not (work / "rover-hsl" / "search-train-s0").exists()
+    settings = bench.Settings(
+        **{k: v for k, v in doc["settings"].items() if k not in ("seeds", "families")}
+    )
+    for seed in (0, 1):
+        mix = bench.source_for("archive_mix", bench.DOMAINS["rover-hsl"], prep, settings, seed)
+        assert np.asarray(mix.contexts).tolist() == prep["enki_selections"][str(seed)]["contexts"]
     for entry in d["arms"].values():  # (c′): every model searched and measured on its own
         assert entry["own_hardest"]["n"] == len(entry["per_seed"])
         for run in entry["own_searches"]:
