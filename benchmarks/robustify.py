@@ -479,10 +479,13 @@ def region_reach(domain: Domain, names: Sequence[str]) -> dict[str, bool]:
 
 def _uniform_outside_class() -> Any:
     from anunnaki.enki import UniformContexts
-    from anunnaki.enlil import to_phenomenon_vector
 
     class UniformOutside(UniformContexts):
-        """Random-context augmentation over the domain's space minus the held-out box."""
+        """Random-context augmentation over the domain's space minus the held-out box.
+
+        Its frames are :class:`~anunnaki.enki.UniformContexts`' (with the phenomenon's
+        occlusion mask where it has one); only the draw of the context is restricted.
+        """
 
         kind = "uniform"
 
@@ -490,13 +493,12 @@ def _uniform_outside_class() -> Any:
             super().__init__(phenomenon, clean=clean)
             self.box = box
 
-        def perturb(self, image: Any, rng: np.random.Generator) -> Any:
+        def draw(self, rng: np.random.Generator) -> npt.NDArray[np.float64]:
             d = len(self.phenomenon.param_names)
             unit = rng.random(d)
             while inside(unit, self.box)[0]:
                 unit = rng.random(d)
-            params = self.phenomenon.from_vector(to_phenomenon_vector(self.phenomenon, unit))
-            return self.phenomenon.apply(image, params, seed=int(rng.integers(2**31 - 1)))
+            return unit
 
         def describe(self) -> dict[str, Any]:
             return super().describe() | {"excluded_box": self.box.tolist()}
