@@ -1650,6 +1650,7 @@ def calibrate(
 
     from anunnaki.datasets import load_split
     from anunnaki.enki import Budget, UniformContexts, finetune
+    from anunnaki.enlil import to_phenomenon_vector
     from anunnaki.lec import evaluate_detector, load_detector
     from anunnaki.phenomena import PHENOMENA
 
@@ -1686,10 +1687,10 @@ def calibrate(
         for name in phenomena:
             phen = PHENOMENA.create(name)
             t0, n = time.perf_counter(), 0
-            while n < 8 or time.perf_counter() - t0 < 1.0:
-                image = test.image(n % len(test))
-                params = phen.strength_params(float(rng.random()))
-                phen.apply(image, params, seed=n)
+            while n < 16 or time.perf_counter() - t0 < 2.0:
+                image = test.image(n % len(test))  # a context uniform over the space
+                unit = rng.random(len(phen.param_names))
+                phen.apply(image, phen.from_vector(to_phenomenon_vector(phen, unit)), seed=n)
                 n += 1
             render[name] = (time.perf_counter() - t0) / n
         det = load_detector(model)
@@ -1699,6 +1700,8 @@ def calibrate(
         for _ in range(rounds):
             evaluate_detector(det, frames)
         forward = (time.perf_counter() - t0) / (rounds * len(frames))
+        seconds, images = _time_search(model, data, phenomena[0], s, work / "calibration")
+        search_start = max(0.0, seconds - images * (render[phenomena[0]] + forward))
     finally:
         torch.set_num_threads(threads)
     perturbed = s.batch_size * (1 - s.clean)
@@ -1708,12 +1711,39 @@ def calibrate(
         "setup": round(setup, 2),
         "render": {k: round(v, 5) for k, v in render.items()},
         "forward": round(forward, 5),
+        "search_start": round(search_start, 2),
         "measured": time.strftime("%Y-%m-%d %H:%M", time.gmtime()),
         "loadavg": loadavg(),
         "data": str(data),
     }
     write_json(cache, stored | {key: record})
     return record
+
+
+def _time_search(
+    model: Path, data: Path, phenomenon: str, s: Settings, folder: Path
+) -> tuple[float, int]:
+    """A short Enlil search, timed: its seconds and the images it evaluated.
+
+    Less its renders and forward passes, what is left is a search's own start (the model
+    and batch loaded, the clean F1, the archive written).
+    """
+    import shutil
+
+    from anunnaki.datasets import load_split
+    from anunnaki.enlil import Job, run_search
+
+    images = min(s.search_images, len(load_split(data, "val", cache=True)))
+    out = folder / "search"
+    shutil.rmtree(out, ignore_errors=True)  # a search resumes: time a fresh one
+    job = Job(model=str(model), data=str(data), phenomenon=phenomenon, split="val",
+              batch_images=images, seed=0)  # fmt: skip
+    evaluations = 6
+    t0 = time.perf_counter()
+    run_search(job, out, search="enlil", budget=evaluations, seed=0, batch=3, workers=1)
+    seconds = time.perf_counter() - t0
+    shutil.rmtree(out, ignore_errors=True)
+    return seconds, evaluations * images
 
 
 def plan_domain(
@@ -1742,12 +1772,16 @@ def plan_domain(
     evals = s.search_budget * (1 + own_searches) + s.hard_budget
     fam_contexts = len(s.families) * s.n_family
     contexts = s.n_random + s.n_hardest + s.n_region + fam_contexts
-    jobs, counts = {}, {"runs": 0, "steps": 0, "renders": 0, "forwards": 0, "searches": 2}
+    jobs: dict[str, float] = {}
+    counts = {"runs": 0, "steps": 0, "renders": 0, "forwards": 0, "searches": 2}
     counts["searches"] += own_searches
     search_images = evals * s.search_images
     counts["renders"] += search_images + contexts * s.test_images  # (b)-(d): once per domain
     counts["forwards"] += search_images
-    prep_seconds = search_images * (render + fwd) + contexts * s.test_images * render
+    start = calib.get("search_start", 0.0)  # each search's own start
+    n_searches = 2 + own_searches
+    prep_seconds = n_searches * start + search_images * (render + fwd)
+    prep_seconds += contexts * s.test_images * render
     for arm, seed in domain_jobs(domain, s, arms):
         seconds, renders, forwards = 0.0, 0, 0
         if arm in RECIPES and (trains_shared or arm not in SHARED):
@@ -1770,7 +1804,11 @@ def plan_domain(
         own = s.n_own * s.test_images + s.hard_budget * s.search_images if s.n_own else 0
         renders += own
         forwards += measured + own
-        seconds += measured * fwd + own * (render + fwd)
+        own_seconds = 0.0
+        if s.n_own:  # (c′): the search against this model, its contexts measured
+            own_seconds = start + s.hard_budget * s.search_images * (render + fwd)
+            own_seconds += s.n_own * s.test_images * (render + fwd)
+        seconds += measured * fwd + own_seconds
         counts["searches"] += 1 if s.n_own else 0
         counts["renders"] += renders
         counts["forwards"] += forwards
@@ -1780,8 +1818,7 @@ def plan_domain(
         "seeds": list(s.seeds),
         "arms": list(arms),
         **counts,
-        "searches_seconds": round(prep_seconds, 1),
-        "jobs": jobs,
+        "jobs": {"searches": round(prep_seconds, 1)} | jobs,
         "seconds": round(prep_seconds + sum(jobs.values()), 1),
     }
 
@@ -1813,7 +1850,7 @@ def make_plan(
         "domains": domains,
         "total": total,
         "workers": workers,
-        "wall_hours": round(total["seconds"] / 3600 / max(1, workers), 2),
+        "wall_seconds": round(total["seconds"] / max(1, workers), 1),
         "calibration": calibs,
     }
 
@@ -1872,7 +1909,7 @@ def plan_text(
         f"  total: {int(t['runs'])} fine-tunes, {int(t['steps']):,} optimiser steps, "
         f"{int(t['searches'])} searches, {int(t['renders']):,} images rendered, "
         f"{int(t['forwards']):,} forward passes; about {_hours(t['seconds'])} of "
-        f"compute, {_hours(3600 * plan['wall_hours'])} on {plan['workers']} worker(s)"
+        f"compute, {_hours(plan['wall_seconds'])} on {plan['workers']} worker(s)"
     )
     for plat, c in plan["calibration"].items():
         renders = ", ".join(f"{k} {1000 * v:.1f} ms" for k, v in c["render"].items())
@@ -1880,7 +1917,8 @@ def plan_text(
             f"  calibration ({plat}, {c['measured']}, load {c['loadavg'][0]}): "
             f"{c['step']:.2f} s per optimiser step ({c['step_core']:.2f} s without its "
             f"renders), {c.get('setup', 0):.1f} s to start a fine-tune, "
-            f"{1000 * c['forward']:.1f} ms per forward pass, renders {renders}"
+            f"{1000 * c['forward']:.1f} ms per forward pass, renders {renders}, "
+            f"{c.get('search_start', 0):.1f} s to start a search"
         )
     paced = {k: v for k, v in (pace or {}).items() if k in plan["calibration"]}
     if paced:
@@ -1903,7 +1941,7 @@ def plan_text(
 
 
 class Eta:
-    """A progress line as each arm × seed finishes: runs done, and the time left.
+    """A progress line as each job (a domain's searches, an arm × seed) ends, and the time left.
 
     The time left is the plan's seconds for the jobs not done, scaled by how long the jobs
     done in this process took against their plan (a job done before is only counted).
@@ -1928,7 +1966,7 @@ class Eta:
         rate = self.spent / self.planned if self.planned > 0 else 1.0
         left = sum(self.left.values()) * rate
         self.bars.log(
-            f"progress: {self.total - len(self.left)}/{self.total} arm × seed runs done "
+            f"progress: {self.total - len(self.left)}/{self.total} jobs done "
             f"({domain} {job} {'read back' if reused else f'{seconds:.0f} s'}); "
             f"{(time.perf_counter() - self.t0) / 60:.0f} min so far, about {left / 3600:.1f} h "
             f"left (planned × {rate:.2f})"
@@ -1960,8 +1998,11 @@ def run_domain(
         record | {"platform": domain.platform, "data": str(data.resolve()), "quick": quick},
     )
     bars.log(f"{domain.name}: searches and conditions")
+    t0, reused = time.perf_counter(), (work / "conditions.json").is_file()
     with _TrainLock(work / "searches"):  # one process searches, the others wait for it
         prep = prepare(domain, data, work, s, bars)
+    if eta is not None:
+        eta.finished(domain.name, "searches", None, time.perf_counter() - t0, reused)
     train, val, test = splits(data, s)
     ctx = {
         "settings": s,

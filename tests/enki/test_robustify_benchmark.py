@@ -417,7 +417,7 @@ def test_quick_run_with_recipe_arms_counts_their_forward_passes(
 
 def _calibration(work: Path, key: str, **costs: Any) -> None:
     """A calibration as the plan reads it from the work folder (no training to measure it)."""
-    record = {"step": 1.0, "step_core": 1.0, "setup": 0.0, "forward": 0.0,
+    record = {"step": 1.0, "step_core": 1.0, "setup": 0.0, "forward": 0.0, "search_start": 0.0,
               "render": {"hsl": 0.0, "raindrop": 0.0, "fog": 0.0, "rain+brightness": 0.0},
               "measured": "test", "loadavg": [0.0], "data": "-"}  # fmt: skip
     (work / "calibration.json").parent.mkdir(parents=True, exist_ok=True)
