@@ -583,6 +583,12 @@ def test_own_hardest_contexts_and_a_dask_cluster_give_the_in_process_figures(
     page = bench.render_report(doc)
     assert "## The ablation: every Enki arm against random + consistency (A+c)" in page
     assert "| rover-hsl | D archive mix, worst-of-k |" in page and "(c′) hardest" in page
+    # docs/enki.md takes the rounds' results beside the comparison: one command, both budgets
+    rounds = bench.render_report(doc, {"screening": doc | {"round": "screening"}})
+    assert "## Issue 33's ablation: the rounds" in rounds and "### Screening" in rounds
+    assert "(c′): 2 contexts of a 6-evaluation search against each final model." in rounds
+    assert "Each seed's Enki arms train on a search of their own" in rounds
+    assert rounds.count("| rover-hsl | D archive mix, worst-of-k |") == 2  # and in its round
     # the same arms × seeds fanned out over a LocalCluster (one worker process, one thread)
     there, work2 = tmp_path / "there.json", tmp_path / "there"
     run = _run(*argv, "--work", str(work2), "--output", str(there), "--scheduler", "local",
