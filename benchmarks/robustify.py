@@ -2474,7 +2474,9 @@ def render_report(doc: dict[str, Any], rounds: dict[str, dict[str, Any]] | None 
     for own, names in groups or [(s, [])]:
         lines += [
             "nice -n 10 .venv/bin/python benchmarks/robustify.py --rover-data data/rover "
-            "--uav-data data/uav \\",
+            "--uav-data data/uav"
+            + (f" --round {doc['round']}" if doc.get("round") else "")
+            + " \\",
             f"    --domains {','.join(names) or 'rover-hsl'}"
             f"{_options(own, bool(doc.get('quick')))}",
         ]
@@ -2668,6 +2670,9 @@ def _options(s: dict[str, Any], quick: bool) -> str:
     out = " --quick" if quick else ""
     for key, value in s.items():
         if key in base and json.loads(json.dumps(base[key])) != value:
+            if isinstance(value, bool):  # a flag (--seed-searches)
+                out += f" --{key.replace('_', '-')}" if value else ""
+                continue
             shown = ",".join(map(str, value)) if isinstance(value, list) else value
             out += f" --{key.replace('_', '-')} {shown}"
     return out
