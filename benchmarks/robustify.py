@@ -52,6 +52,10 @@ Each trained arm runs with ``--seeds`` (3 by default). Every model is measured o
   augmentation (:class:`anunnaki.lec.Augmenter`'s strength rule) cannot reach it, refusing to
   run if one can.
 
+- ``own_hardest`` (c′, with ``--n-own N``): N hardest contexts of a fresh Enlil search
+  against *each* final model (``--hard-budget``, ``--hard-seed``), chosen as (c)'s; every arm
+  is attacked at its own weak spots (:func:`own_hardest`).
+
 Figures: F1 per condition (mean over its contexts), per arm the mean and standard deviation
 over seeds; mPC (mean F1 over the corrupted conditions) and rPC (mPC / clean F1), as in the
 detection-robustness benchmarks; the margin Enki − random per condition, a **tie** unless
@@ -76,6 +80,18 @@ report states each domain's; ``--lr-choice FILE`` keeps with them how their lear
 chosen on val). Every arm × seed (and the searches) runs under a lock in the
 work folder, so several processes given the same domain and ``--work`` share its work.
 
+Issue 33's ablation: ``--round screening`` and ``--round confirmation`` (:data:`ROUNDS`:
+domains, arms, settings per platform; work in ``runs/robustify-ROUND``, results in
+``benchmarks/results/robustify-ROUND.json``). Every Enki arm is compared with A+c by a paired
+bootstrap interval over seeds and contexts (``vs_random_c``, :func:`paired_bootstrap`), the
+best one in ``best_enki_arm`` (:func:`best_arm`), which the confirmation measures. Every run
+prints its plan first (``--plan``: only that): arms × seeds × domains × steps, images
+rendered, forward passes and an estimated time from a calibration measured here
+(:func:`calibrate`), then a progress line with the time left as each arm × seed ends.
+``--scheduler local`` (a Dask LocalCluster) or ``--scheduler tcp://HOST:8786`` fans the
+arms × seeds out (:func:`anunnaki.enlil.executor_map`, as Enlil's search); the default runs
+them in this process, one after another.
+
 ``--report`` regenerates docs/enki.md and its plots from benchmarks/results/robustify.json
 alone (nothing typed by hand; a test checks the page regenerates identically). ``--quick``
 is the suite's tiny end-to-end run.
@@ -90,7 +106,8 @@ import platform
 import statistics
 import sys
 import time
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
+from contextlib import contextmanager
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Any
@@ -334,6 +351,10 @@ class Settings:
     jitter: float = 0.1
     consistency: float = 1.0
     ema: float = 0.0
+    # (c′): contexts of a fresh search against each final model (0: no such condition)
+    n_own: int = 0
+    # each training seed's Enki arms on a search of their own (seed search_seed + seed)
+    seed_searches: bool = False
 
     def finetune_budget(self) -> Any:
         """The one :class:`anunnaki.enki.Budget` of every trained arm."""
@@ -347,7 +368,7 @@ class Settings:
 
 #: The recipe settings (issue 33), recorded only where they differ from their defaults: work
 #: folders and results made before them continue and merge as they were.
-RECIPE_SETTINGS = ("k", "share", "jitter", "consistency", "ema")
+RECIPE_SETTINGS = ("k", "share", "jitter", "consistency", "ema", "n_own", "seed_searches")
 
 
 def settings_record(s: Settings) -> dict[str, Any]:
@@ -376,6 +397,7 @@ QUICK = Settings(
     n_family=1,
     n_region=1,
     seeds=(0, 1),
+    n_own=2,
 )
 
 
@@ -457,10 +479,13 @@ def region_reach(domain: Domain, names: Sequence[str]) -> dict[str, bool]:
 
 def _uniform_outside_class() -> Any:
     from anunnaki.enki import UniformContexts
-    from anunnaki.enlil import to_phenomenon_vector
 
     class UniformOutside(UniformContexts):
-        """Random-context augmentation over the domain's space minus the held-out box."""
+        """Random-context augmentation over the domain's space minus the held-out box.
+
+        Its frames are :class:`~anunnaki.enki.UniformContexts`' (with the phenomenon's
+        occlusion mask where it has one); only the draw of the context is restricted.
+        """
 
         kind = "uniform"
 
@@ -468,13 +493,12 @@ def _uniform_outside_class() -> Any:
             super().__init__(phenomenon, clean=clean)
             self.box = box
 
-        def perturb(self, image: Any, rng: np.random.Generator) -> Any:
+        def draw(self, rng: np.random.Generator) -> npt.NDArray[np.float64]:
             d = len(self.phenomenon.param_names)
             unit = rng.random(d)
             while inside(unit, self.box)[0]:
                 unit = rng.random(d)
-            params = self.phenomenon.from_vector(to_phenomenon_vector(self.phenomenon, unit))
-            return self.phenomenon.apply(image, params, seed=int(rng.integers(2**31 - 1)))
+            return unit
 
         def describe(self) -> dict[str, Any]:
             return super().describe() | {"excluded_box": self.box.tolist()}
@@ -681,20 +705,24 @@ def prepare(domain: Domain, data: Path, work: Path, s: Settings, bars: Bars) -> 
         bars=bars,
         label="search for (c)",
     )
+    # with seed_searches, each training seed's Enki arms train on a search of its own
+    # (search seed ``search_seed + seed``): the spread over seeds includes the search's
+    seed_archives = {}
+    for seed in s.seeds if s.seed_searches else ():
+        if seed == 0:  # its search seed is the common search's: the same search
+            seed_archives[seed] = train_archive
+            continue
+        seed_archives[seed] = search(
+            domain, model, data, work / f"search-train-s{seed}", budget=s.search_budget,
+            seed=s.search_seed + seed, s=s, bars=bars, label=f"search for Enki, seed {seed}",
+        )  # fmt: skip
     searches_s = time.perf_counter() - t0
     outside = ~inside(train_archive.params, box)
     selection = select_contexts(
         keep_rows(train_archive, outside), SelectionRule(contexts=s.contexts)
     )
     # (c): the largest drops of the other search, outside the box, spread by farthest points
-    hard_out = keep_rows(hard_archive, ~inside(hard_archive.params, box))
-    order = np.argsort(-hard_out.drop, kind="stable")
-    pool = order[: 2 * s.n_hardest]  # the 2n largest drops; n of them, spread out
-    pool_mask = np.zeros(len(hard_out), bool)
-    pool_mask[pool] = True
-    hardest = select_contexts(
-        keep_rows(hard_out, pool_mask), SelectionRule(contexts=s.n_hardest, weights=(1, 1, 1))
-    )
+    hardest = hardest_contexts(hard_archive, box, s.n_hardest)
     rng = np.random.default_rng(s.eval_seed)
     conditions: dict[str, Any] = {
         "random": {
@@ -724,24 +752,55 @@ def prepare(domain: Domain, data: Path, work: Path, s: Settings, bars: Bars) -> 
         float(np.min(np.linalg.norm(trained - np.asarray(c), axis=1)))
         for c in conditions["hardest"]["contexts"]
     ]
-    record = {
+    record: dict[str, Any] = {
         "searches": {
             "enki": _archive_info(train_archive, s.search_seed),
             "hardest": _archive_info(hard_archive, s.hard_seed),
             "seconds": round(searches_s, 1),
         },
-        "enki_selection": {
-            "contexts": [[float(x) for x in row] for row in selection.params],
-            "counts": selection.counts(),
-            "archive_rows_in_region_dropped": int((~outside).sum()),
-        },
+        "enki_selection": _selection_record(selection, outside),
         "hardest_min_distance_to_enki_contexts": round(min(gaps), 4) if gaps else None,
         "box": box.tolist(),
         "param_names": list(phen.param_names),
         "conditions": conditions,
     }
+    if seed_archives:
+        record["searches"]["enki_per_seed"] = {
+            str(seed): _archive_info(archive, s.search_seed + seed)
+            for seed, archive in seed_archives.items()
+        }
+        record["enki_selections"] = {}
+        for seed, archive in seed_archives.items():
+            out_rows = ~inside(archive.params, box)
+            chosen = select_contexts(
+                keep_rows(archive, out_rows), SelectionRule(contexts=s.contexts)
+            )
+            record["enki_selections"][str(seed)] = _selection_record(chosen, out_rows)
     write_json(work / "conditions.json", record)
     return record
+
+
+def _selection_record(selection: Any, outside: npt.NDArray[np.bool_]) -> dict[str, Any]:
+    return {
+        "contexts": [[float(x) for x in row] for row in selection.params],
+        "counts": selection.counts(),
+        "archive_rows_in_region_dropped": int((~outside).sum()),
+    }
+
+
+def hardest_contexts(archive: Any, box: npt.NDArray[np.float64], n: int) -> Any:
+    """n of the archive's 2n largest drops outside the box, spread by farthest points.
+
+    The hardest contexts of a search: condition (c) against the default model, (c′) against
+    each final model.
+    """
+    from anunnaki.enki import SelectionRule, select_contexts
+
+    out = keep_rows(archive, ~inside(archive.params, box))
+    order = np.argsort(-out.drop, kind="stable")
+    pool_mask = np.zeros(len(out), bool)
+    pool_mask[order[: 2 * n]] = True  # the 2n largest drops; n of them, spread out
+    return select_contexts(keep_rows(out, pool_mask), SelectionRule(contexts=n, weights=(1, 1, 1)))
 
 
 def _archive_info(archive: Any, seed: int) -> dict[str, Any]:
@@ -814,18 +873,22 @@ def measure(
 # -- one arm ----------------------------------------------------------------------------------
 
 
-def source_for(arm: str, domain: Domain, prep: dict[str, Any], s: Settings) -> Any:
+def source_for(
+    arm: str, domain: Domain, prep: dict[str, Any], s: Settings, seed: int | None = None
+) -> Any:
     """The arm's context source (:data:`RECIPES`), every draw outside the held-out box.
 
     The uniform draws come from the benchmark's ``UniformOutside``, the archive mix's from
     :class:`anunnaki.enki.ArchiveMix` with the box excluded, the elites are Enki's
-    selection (its archive rows in the box dropped); worst-of-k wraps the arm's source.
+    selection (its archive rows in the box dropped): the training seed's own search's with
+    ``seed_searches``; worst-of-k wraps the arm's source.
     """
     from anunnaki.enki import ArchiveContexts, ArchiveMix, CorruptionMix, WorstOfK
 
     recipe = RECIPES[arm]
     box = np.asarray(prep["box"])
-    elites = prep["enki_selection"]["contexts"]
+    own = prep.get("enki_selections", {}).get(str(seed))
+    elites = (own or prep["enki_selection"])["contexts"]
     base: Any
     if recipe.source == "archive":
         base = ArchiveContexts(domain.phenomenon, elites, clean=s.clean)
@@ -851,11 +914,15 @@ def consistency_for(arm: str, s: Settings) -> float:
 def parse_arms(text: str | None) -> tuple[str, ...]:
     """``--arms``: letters or names, comma-separated, added to :data:`TRAINED` (in order).
 
+    A leading ``=`` gives exactly the arms named (``=A,A+c,D``: no other trained arm).
+
     Raises:
         SystemExit: An unknown arm, naming the valid letters and names.
 
     """
     out = list(TRAINED)
+    if text and text.startswith("="):  # exactly these (a round's confirmation: A, A+c, best)
+        out, text = [], text[1:]
     for item in [] if not text else [t.strip() for t in text.split(",") if t.strip()]:
         name = LETTERS.get(item, item)
         if name not in RECIPES:
@@ -912,7 +979,7 @@ def _tune(arm: str, seed: int, domain: Domain, ctx: dict[str, Any], folder: Path
     if file.is_file() and (folder / "training.json").is_file():
         return
     shared = arm in SHARED
-    source = source_for(arm, domain, ctx["prep"], s)
+    source = source_for(arm, domain, ctx["prep"], s, seed)
     who = f"{domain.platform} (shared)" if shared else domain.name
     label = f"{who} {arm} seed {seed}: fine-tune"
     load0, t0 = loadavg(), time.perf_counter()
@@ -955,42 +1022,117 @@ def _shared_note(domain: Domain, ctx: dict[str, Any]) -> dict[str, Any]:
     }
 
 
-def run_jobs(domain: Domain, ctx: dict[str, Any]) -> dict[str, list[dict[str, Any]]]:
-    """Every arm × seed of the domain, each under a lock: processes can share the work.
+def domain_jobs(domain: Domain, s: Settings, arms: Sequence[str]) -> list[tuple[str, int | None]]:
+    """The domain's arm × seed runs, in the order they run.
 
-    A job another process holds (the same domain measured by two processes, or the
-    platform's shared corruption mix being trained for another domain) is left for later
-    and waited for only when nothing else is left; a finished job is read back. The single
-    models (default, today's, shipped: measured only) go first, then the trained arms seed
-    by seed: a run stopped early leaves whole seeds done, each a paired comparison.
+    The single models (default, today's, shipped: measured only) go first, then the trained
+    arms seed by seed: a run stopped early leaves whole seeds done, each a paired comparison.
     """
-    s: Settings = ctx["settings"]
     jobs: list[tuple[str, int | None]] = [("default", None)]
     if domain.today is not None:
         jobs.append(("today", None))
     if domain.shipped is not None and (MODELS / f"{domain.shipped}.safetensors").is_file():
         jobs.append(("shipped", None))
-    # seed by seed: a run stopped early has whole seeds (every trained arm) done
-    jobs += [(arm, seed) for seed in s.seeds for arm in ctx.get("arms", TRAINED)]
+    return jobs + [(arm, seed) for seed in s.seeds for arm in arms]
+
+
+def one_job(
+    arm: str, seed: int | None, domain: Domain, ctx: dict[str, Any], *, blocking: bool
+) -> dict[str, Any]:
+    """One arm × seed under its lock (and the platform's shared fine-tune's, if it has one).
+
+    Raises:
+        BlockingIOError: Not *blocking*, and another process holds the job.
+
+    """
+    folder = ctx["work"] / "arms" / (arm if seed is None else f"{arm}-s{seed}")
+    with _TrainLock(folder, blocking=blocking):
+        if arm in SHARED:
+            with _TrainLock(ctx["shared"] / f"s{seed}", blocking=blocking):
+                _tune(arm, int(seed or 0), domain, ctx, ctx["shared"] / f"s{seed}")
+        return run_arm(arm, seed, domain, ctx)
+
+
+def run_jobs(domain: Domain, ctx: dict[str, Any]) -> dict[str, list[dict[str, Any]]]:
+    """Every arm × seed of the domain, each under a lock: processes can share the work.
+
+    A job another process holds (the same domain measured by two processes, or the
+    platform's shared corruption mix being trained for another domain) is left for later
+    and waited for only when nothing else is left; a finished job is read back. With a Dask
+    scheduler (``ctx["dask"]``) the jobs fan out over its workers instead
+    (:func:`anunnaki.enlil.executor_map`, the code path of Enlil's search), each under the
+    same locks. Each job's end is a progress line with the time left (``ctx["eta"]``).
+    """
+    s: Settings = ctx["settings"]
+    jobs = domain_jobs(domain, s, ctx.get("arms", TRAINED))
+    eta: Eta | None = ctx.get("eta")
     done: dict[tuple[str, int | None], dict[str, Any]] = {}
+    if ctx.get("dask") is not None:
+        from anunnaki.enlil import executor_map
+
+        spec = {k: ctx[k] for k in ("settings", "work", "shared", "data", "arms", "quiet")}
+        tasks = [{**spec, "domain": domain.name, "arm": a, "seed": sd} for a, sd in jobs]
+
+        def finished(i: int, out: dict[str, Any]) -> None:
+            if eta is not None:
+                eta.finished(domain.name, *jobs[i], out["seconds"], out["reused"])
+
+        with executor_map(dask=ctx["dask"], fn=remote_job, on_result=finished) as fan_out:
+            for (arm, seed), out in zip(jobs, fan_out(tasks), strict=True):
+                done[arm, seed] = out["result"]
     for blocking in (False, True):
         for arm, seed in jobs:
             if (arm, seed) in done:
                 continue
+            t0 = time.perf_counter()
             folder = ctx["work"] / "arms" / (arm if seed is None else f"{arm}-s{seed}")
+            reused = (folder / "result.json").is_file()
             try:
-                with _TrainLock(folder, blocking=blocking):
-                    if arm in SHARED:
-                        shared = ctx["shared"] / f"s{seed}"
-                        with _TrainLock(shared, blocking=blocking):
-                            _tune(arm, int(seed or 0), domain, ctx, shared)
-                    done[arm, seed] = run_arm(arm, seed, domain, ctx)
+                done[arm, seed] = one_job(arm, seed, domain, ctx, blocking=blocking)
             except BlockingIOError:
                 continue
+            if eta is not None:
+                eta.finished(domain.name, arm, seed, time.perf_counter() - t0, reused)
     results: dict[str, list[dict[str, Any]]] = {}
     for arm, seed in sorted(jobs, key=lambda job: ARMS.index(job[0])):  # stable: seeds in order
         results.setdefault(arm, []).append(done[arm, seed])
     return results
+
+
+#: A worker's loaded splits and conditions, per (domain, work folder): loaded once.
+_WORKER_CTX: dict[tuple[str, str], dict[str, Any]] = {}
+
+
+def remote_job(task: dict[str, Any]) -> dict[str, Any]:
+    """One arm × seed on a Dask worker (:func:`run_jobs`): the job, its seconds, if reused.
+
+    The worker loads the domain's splits and the conditions the main process prepared
+    (the work folder's conditions.json) once, and runs :func:`one_job` under the same
+    locks as an in-process run, so a cluster and side-by-side processes share the work.
+    """
+    import torch
+
+    domain, s = DOMAINS[task["domain"]], task["settings"]
+    key = (domain.name, str(task["work"]))
+    if key not in _WORKER_CTX:
+        train, val, test = splits(task["data"], s)
+        prep = read_json(task["work"] / "conditions.json")
+        if prep is None:
+            raise SystemExit(f"{task['work']}: no conditions.json; the searches run first")
+        memory = test.in_memory()
+        _WORKER_CTX[key] = {
+            "settings": s, "bars": Bars(quiet=True), "work": task["work"], "prep": prep,
+            "train": train, "val": val, "test": memory, "shared": task["shared"],
+            "data": task["data"], "arms": task["arms"], "perturbed": Perturbed(memory, s.eval_seed),
+        }  # fmt: skip
+    ctx = _WORKER_CTX[key]
+    torch.set_num_threads(s.threads)
+    arm, seed = task["arm"], task["seed"]
+    folder = ctx["work"] / "arms" / (arm if seed is None else f"{arm}-s{seed}")
+    reused = (folder / "result.json").is_file()
+    t0 = time.perf_counter()
+    result = one_job(arm, seed, domain, ctx, blocking=True)
+    return {"result": result, "seconds": time.perf_counter() - t0, "reused": reused}
 
 
 def run_arm(arm: str, seed: int | None, domain: Domain, ctx: dict[str, Any]) -> dict[str, Any]:
@@ -1014,7 +1156,8 @@ def run_arm(arm: str, seed: int | None, domain: Domain, ctx: dict[str, Any]) -> 
         result["training"] = read_json(tuned_in / "training.json")
         if arm in SHARED:
             result["training"] = result["training"] | {"shared": _shared_note(domain, ctx)}
-        det = load_detector(tuned_in / "model.safetensors")
+        file = tuned_in / "model.safetensors"
+        det = load_detector(file)
     else:
         model = {"default": domain.model, "today": domain.today, "shipped": domain.shipped}[arm]
         assert model is not None
@@ -1049,6 +1192,10 @@ def run_arm(arm: str, seed: int | None, domain: Domain, ctx: dict[str, Any]) -> 
         det, ctx["test"], ctx["prep"]["conditions"], ctx["perturbed"], bars, label
     )
     result["measure_seconds"] = round(time.perf_counter() - t0, 1)
+    s: Settings = ctx["settings"]
+    if s.n_own:
+        result["own_hardest"] = own_hardest(det, file, domain, ctx, folder)
+        result["f1"]["own_hardest"] = result["own_hardest"].pop("f1")
     write_json(folder / "result.json", result)
     tr = result.get("training", {})
     bars.log(
@@ -1060,6 +1207,41 @@ def run_arm(arm: str, seed: int | None, domain: Domain, ctx: dict[str, Any]) -> 
         )
     )
     return result
+
+
+def own_hardest(
+    det: Any, file: Path, domain: Domain, ctx: dict[str, Any], folder: Path
+) -> dict[str, Any]:
+    """Condition (c′): a fresh Enlil search against this final model, its hardest contexts.
+
+    Every model is attacked at its own weak spots: a search of ``hard_budget`` evaluations
+    (seed ``hard_seed``, the val batch of (c)) against *file*, then ``n_own`` of its 2n
+    largest drops outside the held-out box, spread by farthest points (as (c)), measured on
+    the test images. The search is kept in *folder* (``search-own``) and resumes.
+    """
+    from anunnaki.lec import evaluate_detector
+
+    s: Settings = ctx["settings"]
+    bars: Bars = ctx["bars"]
+    box = np.asarray(ctx["prep"]["box"])
+    t0 = time.perf_counter()
+    archive = search(
+        domain, file, ctx["data"], folder / "search-own", budget=s.hard_budget,
+        seed=s.hard_seed, s=s, bars=bars, label=f"{domain.name} {folder.name}: search for (c′)",
+    )  # fmt: skip
+    chosen = hardest_contexts(archive, box, s.n_own)
+    once = Perturbed(ctx["test"], s.eval_seed, max_bytes=0)  # this model's own: not kept
+    f1s = [
+        round(float(evaluate_detector(det, once.get(domain.phenomenon, unit, ("own", i))).f1), 5)
+        for i, unit in enumerate(chosen.params.tolist())
+    ]
+    return {
+        "contexts": [[float(x) for x in row] for row in chosen.params],
+        "drop_on_search_batch": [round(float(x), 5) for x in chosen.drops],
+        "search": _archive_info(archive, s.hard_seed),
+        "seconds": round(time.perf_counter() - t0, 1),
+        "f1": f1s,
+    }
 
 
 # -- figures ----------------------------------------------------------------------------------
@@ -1080,9 +1262,112 @@ def verdict(a: dict[str, Any], b: dict[str, Any]) -> dict[str, Any]:
     return {"margin": round(margin, 4), "spread": round(spread, 4), "verdict": word}
 
 
+#: The paired bootstrap: resamples, the confidence level of its interval, its random seed.
+RESAMPLES, LEVEL, BOOT_SEED = 2000, 0.95, 0
+
+
+def paired_bootstrap(
+    a: Sequence[dict[str, Sequence[float]]],
+    b: Sequence[dict[str, Sequence[float]]],
+    conditions: Sequence[str],
+    *,
+    paired_contexts: bool = True,
+    resamples: int = RESAMPLES,
+    level: float = LEVEL,
+    seed: int = BOOT_SEED,
+) -> dict[str, Any]:
+    """Arm *a* − arm *b*: the margin and its paired bootstrap interval over seeds and contexts.
+
+    *a* and *b* hold one run per training seed (the same seeds, in the same order: run *i*
+    of each is paired), each mapping a condition to its per-context F1s. The statistic is
+    the mean over *conditions* of the mean over seeds and contexts of the F1 (one condition:
+    its mean; the corrupted ones: mPC). Each resample draws the seeds with replacement
+    (the same draw for both arms) and, within each drawn seed and condition, the contexts
+    with replacement: the same contexts for both arms when they are the same contexts
+    (*paired_contexts*), apart when each model has its own ((c′)). A margin whose interval
+    holds 0 is a **tie**; else a win or a loss.
+    """
+    if len(a) != len(b) or not a:
+        raise ValueError(f"paired runs needed: {len(a)} against {len(b)}")
+    rng = np.random.default_rng(seed)
+    n_seeds = len(a)
+    pick = rng.integers(n_seeds, size=(resamples, n_seeds))
+    margin, boot = 0.0, np.zeros(resamples)
+    for cond in conditions:
+        va = np.asarray([r[cond] for r in a], np.float64)  # [seeds, contexts]
+        vb = np.asarray([r[cond] for r in b], np.float64)
+        margin += float(va.mean() - vb.mean())
+        ia = rng.integers(va.shape[1], size=(resamples, n_seeds, va.shape[1]))
+        ib = (
+            ia
+            if paired_contexts
+            else rng.integers(vb.shape[1], size=(resamples, n_seeds, vb.shape[1]))
+        )
+        rows = pick[:, :, None]
+        boot += va[rows, ia].mean(axis=(1, 2)) - vb[rows, ib].mean(axis=(1, 2))
+    margin /= len(conditions)
+    boot /= len(conditions)
+    tail = 100 * (1 - level) / 2
+    low, high = (float(x) for x in np.percentile(boot, [tail, 100 - tail]))
+    word = "win" if low > 0 else "loss" if high < 0 else "tie"
+    return {"margin": round(margin, 4), "low": round(low, 4), "high": round(high, 4),
+            "verdict": word}  # fmt: skip
+
+
+#: The Enki arms of the ablation (B–G): those compared with A+c, the best one confirmed.
+ENKI_ARMS = ("enki", "archive_mix", "archive_mix_wok", "random_wok", "archive_mix_wok_c",
+             "archive_mix_rok")  # fmt: skip
+
+
+def versus(
+    results: dict[str, list[dict[str, Any]]], base: str, names: Sequence[str]
+) -> dict[str, dict[str, Any]]:
+    """Every Enki arm − *base* per condition and mPC: margin, bootstrap interval, verdict."""
+    corrupted = [n for n in names if n not in ("clean", OWN)]
+    out: dict[str, dict[str, Any]] = {}
+    for arm in ENKI_ARMS:
+        if arm not in results or base not in results:
+            continue
+        a, b = [r["f1"] for r in results[arm]], [r["f1"] for r in results[base]]
+        out[arm] = {n: paired_bootstrap(a, b, [n], paired_contexts=n != OWN) for n in names} | {
+            "mPC": paired_bootstrap(a, b, corrupted)
+        }
+    return out
+
+
+def best_arm(domains: dict[str, Any], base: str = "random_c") -> dict[str, Any] | None:
+    """The best Enki arm against *base* over the domains: on (c′), else (c), mean margin.
+
+    An arm that loses more than ``AIMS["clean_loss"]`` of clean F1 against the default in
+    any domain is passed over when another is not (issue 33: the winner keeps clean F1).
+    """
+    rows: dict[str, list[float]] = {}
+    clean_ok: dict[str, bool] = {}
+    for d in domains.values():
+        vs = d.get("vs_" + base, {})
+        for arm, conds in vs.items():
+            cond = OWN if OWN in conds else "hardest"
+            rows.setdefault(arm, []).append(conds[cond]["margin"])
+            loss = d["arms"]["default"]["clean"]["mean"] - d["arms"][arm]["clean"]["mean"]
+            clean_ok[arm] = clean_ok.get(arm, True) and loss <= AIMS["clean_loss"]
+    full = {a: v for a, v in rows.items() if len(v) == len(domains)}
+    if not full:
+        return None
+    pool = [a for a in full if clean_ok[a]] or list(full)
+    arm = max(pool, key=lambda a: (statistics.fmean(full[a]), -ENKI_ARMS.index(a)))
+    return {
+        "arm": arm,
+        "against": base,
+        "mean_margin": round(statistics.fmean(full[arm]), 4),
+        "margins": {a: round(statistics.fmean(v), 4) for a, v in full.items()},
+        "clean_within_aim": clean_ok[arm],
+        "domains": list(domains),
+    }
+
+
 def arm_figures(runs: list[dict[str, Any]], names: list[str]) -> dict[str, Any]:
     """Per seed: each condition's mean F1, mPC and rPC; then mean and std over seeds."""
-    corrupted = [n for n in names if n != "clean"]
+    corrupted = [n for n in names if n not in ("clean", OWN)]  # mPC as before (c′)
     per_seed = []
     for r in runs:
         f1 = {n: statistics.fmean(r["f1"][n]) for n in names}
@@ -1106,33 +1391,18 @@ def arm_figures(runs: list[dict[str, Any]], names: list[str]) -> dict[str, Any]:
                 for vals in zip(*(r["f1"][n] for r in runs), strict=True)
             ]
             for n in names
+            if n != OWN  # each model's own contexts: no context is shared by two models
         },
     }
 
 
-def domain_figures(
-    domain: Domain, prep: dict[str, Any], results: dict[str, list[dict[str, Any]]], s: Settings
+def enki_versus_random(
+    arms: dict[str, Any], results: dict[str, list[dict[str, Any]]], names: list[str]
 ) -> dict[str, Any]:
-    """The domain's entry of the output."""
-    names = ["clean", *prep["conditions"]]
-    arms = {arm: arm_figures(runs, names) for arm, runs in results.items()}
-    for arm, runs in results.items():
-        if "training" in runs[0]:
-            arms[arm]["training"] = [r["training"] for r in runs]
-        arms[arm]["measure_seconds"] = [r["measure_seconds"] for r in runs]
-        if "model" in runs[0]:
-            arms[arm]["model"] = runs[0]["model"]
-    trained = [arm for arm in results if arm in RECIPES]
-    steps = {arm: [r["training"]["steps"] for r in results[arm]] for arm in trained}
-    forwards = {
-        arm: [r["training"]["forwards"] for r in results[arm]]
-        for arm in trained
-        if "forwards" in results[arm][0]["training"]
-    }
-    flat = {x for v in steps.values() for x in v}
-    if len(flat) != 1:
-        raise SystemExit(f"{domain.name}: the arms made different numbers of steps: {steps}")
+    """Enki − random per condition (the seeds' spread rule and the bootstrap interval), aims."""
     margins = {n: verdict(arms["enki"][n], arms["random"][n]) for n in [*names, "mPC", "rPC"]}
+    for n, ci in versus(results, "random", names)["enki"].items():
+        margins[n]["ci"] = {k: ci[k] for k in ("low", "high", "verdict")}
     enki, default = arms["enki"], arms["default"]
     hard = margins["hardest"]
     aims = {
@@ -1158,6 +1428,41 @@ def domain_figures(
     aims["hardest_margin"]["met"] = (
         hard["margin"] >= AIMS["hardest_margin"] and hard["verdict"] == "win"
     )
+    return {"enki_vs_random": margins, "aims": aims}
+
+
+def domain_figures(
+    domain: Domain, prep: dict[str, Any], results: dict[str, list[dict[str, Any]]], s: Settings
+) -> dict[str, Any]:
+    """The domain's entry of the output."""
+    names = ["clean", *prep["conditions"], *([OWN] if s.n_own else [])]
+    arms = {arm: arm_figures(runs, names) for arm, runs in results.items()}
+    if s.n_own:
+        for arm, runs in results.items():
+            arms[arm]["own_searches"] = [
+                {k: v for k, v in r["own_hardest"].items() if k != "seconds"} for r in runs
+            ]
+    for arm, runs in results.items():
+        if "training" in runs[0]:
+            arms[arm]["training"] = [r["training"] for r in runs]
+        arms[arm]["measure_seconds"] = [r["measure_seconds"] for r in runs]
+        if "model" in runs[0]:
+            arms[arm]["model"] = runs[0]["model"]
+    trained = [arm for arm in results if arm in RECIPES]
+    steps = {arm: [r["training"]["steps"] for r in results[arm]] for arm in trained}
+    forwards = {
+        arm: [r["training"]["forwards"] for r in results[arm]]
+        for arm in trained
+        if "forwards" in results[arm][0]["training"]
+    }
+    flat = {x for v in steps.values() for x in v}
+    if len(flat) != 1:
+        raise SystemExit(f"{domain.name}: the arms made different numbers of steps: {steps}")
+    comparisons: dict[str, Any] = {}
+    if "enki" in arms and "random" in arms:  # a run with only some arms (--arms =...) has none
+        comparisons = enki_versus_random(arms, results, names)
+    if "random_c" in results:  # issue 33: every Enki arm against A+c, with its interval
+        comparisons["vs_random_c"] = versus(results, "random_c", names)
     conds = {
         n: {"phenomenon": c["phenomenon"], "contexts": c["contexts"]}
         | (
@@ -1167,6 +1472,12 @@ def domain_figures(
         )
         for n, c in prep["conditions"].items()
     }
+    if s.n_own:
+        conds[OWN] = {
+            "phenomenon": domain.phenomenon,
+            "contexts": "each model's own (arms.ARM.own_searches)",
+            "search": {"budget": s.hard_budget, "seed": s.hard_seed, "contexts": s.n_own},
+        }
     reach = region_reach(domain, _mix_names(s) + _today_augment(domain))
     if any(reach.values()):
         raise SystemExit(f"{domain.name}: the held-out region is reachable by {reach}")
@@ -1198,11 +1509,13 @@ def domain_figures(
             "train_images": s.train_images,
         }
         | ({"forwards": forwards} if forwards else {}),
-        "enki_vs_random": margins,
-        "aims": aims,
+        **comparisons,
         "paper": domain.paper,
     }
 
+
+#: Condition (c′)'s name: each final model's own hardest contexts (:func:`own_hardest`).
+OWN = "own_hardest"
 
 #: What a fine-tune spends beside its optimiser steps (``TrainResult.counts``).
 FORWARDS = ("train_forwards", "select_forwards", "consistency_forwards", "candidates")
@@ -1235,6 +1548,432 @@ def _today_augment(domain: Domain) -> list[str]:
     return [str(a) for a in aug]
 
 
+# -- the rounds, the plan and the time left --------------------------------------------------
+
+
+@dataclass(frozen=True)
+class Round:
+    """A round of issue 33's ablation: its domains, arms and settings per platform.
+
+    Attributes:
+        domains: The domains measured.
+        arms: ``--arms`` (letters; a leading ``=``: exactly these); ``BEST`` stands for the
+            best Enki arm of the screening (:func:`best_arm` of ``--screening``'s results).
+        settings: Per platform, the :class:`Settings` that differ from the defaults.
+        what: One line on what the round decides.
+
+    """
+
+    domains: tuple[str, ...]
+    arms: str
+    settings: dict[str, dict[str, Any]]
+    what: str
+
+
+#: The screening's settings: the committed comparison's scale (96 optimiser steps), each
+#: training seed with its own Enki search, and condition (c′).
+_SCREEN = {
+    "train_images": 1024, "val_images": 64, "test_images": 64, "epochs": 3, "threads": 1,
+    "search_budget": 64, "hard_budget": 48, "search_images": 24, "contexts": 32,
+    "n_random": 8, "n_hardest": 6, "n_family": 4, "n_region": 4, "n_own": 6,
+    "seed_searches": True,
+}  # fmt: skip
+BEST = "BEST"
+ROUNDS = {
+    "screening": Round(
+        domains=("rover-hsl", "rover-raindrop", "rover-fog"),
+        arms="A,A+c,B,C,D,E,F,G,mix",
+        settings={"rover": _SCREEN},
+        what="every arm at 96 steps on the rover's hsl, raindrop and fog",
+    ),
+    "confirmation": Round(
+        domains=tuple(DOMAINS),
+        arms=f"=A,A+c,{BEST}",
+        # the rover at the shipped models' 504 steps (2000 images × 8 epochs, batch 32); the
+        # UAV (a step takes about 20 s) at 96 (1536 images × 2 epochs), its largest equal
+        # budget here: its plan alone is hours
+        settings={
+            "rover": _SCREEN | {"train_images": 2000, "epochs": 8},
+            "uav": _SCREEN | {"train_images": 1536, "epochs": 2},
+        },
+        what="the screening's best Enki arm against A+c and A at 504 steps (UAV: 96)",
+    ),
+}
+
+
+def round_arms(rnd: Round, screening: Path, *, planning: bool) -> tuple[str, dict[str, Any]]:
+    """The round's ``--arms``, ``BEST`` read from the screening's results (and the choice).
+
+    Raises:
+        SystemExit: The screening's results are missing or have no Enki arm against A+c
+            in every domain (a plan assumes the costliest candidate, F, and says so).
+
+    """
+    if BEST not in rnd.arms:
+        return rnd.arms, {}
+    doc = read_json(screening)
+    best = None if doc is None else best_arm(doc["domains"])
+    if best is None:
+        if not planning:
+            raise SystemExit(
+                f"--round confirmation needs the screening's best Enki arm: {screening} has "
+                "none (run --round screening first, or give --screening FILE)"
+            )
+        best = {"arm": "archive_mix_wok_c", "planned": "the screening has not run: the "
+                "costliest candidate (F) is planned"}  # fmt: skip
+    letter = next(k for k, v in LETTERS.items() if v == best["arm"])
+    return rnd.arms.replace(BEST, letter), best
+
+
+#: Image size per platform (``make-dataset``'s: scripts/train-domains.sh).
+SIZES = {"rover": (128, 128), "uav": (320, 240)}
+
+
+def calibrate(
+    platform_name: str, data: Path, s: Settings, phenomena: Sequence[str], work: Path, bars: Bars
+) -> dict[str, Any]:
+    """Seconds per optimiser step, per render and per forward pass, measured here (cached).
+
+    A few optimiser steps of the platform's default model (batch ``s.batch_size``, a uniform
+    source of the first phenomenon, ``s.threads`` threads), renders of each phenomenon and
+    no-grad forward passes on test images, timed on this machine under its current load; the
+    step's own cost is the step less its renders. The data are *data*'s if it holds a
+    dataset, else a few frames rendered into the work folder. Kept in
+    ``WORK/calibration.json`` per platform and threads and reused (``--recalibrate``).
+    """
+    cache = work / "calibration.json"
+    key = f"{platform_name}/threads={s.threads}/batch={s.batch_size}"
+    stored = read_json(cache) or {}
+    if key in stored and all(ph in stored[key]["render"] for ph in phenomena):
+        return dict(stored[key])
+    import torch
+
+    from anunnaki.datasets import load_split
+    from anunnaki.enki import Budget, UniformContexts, finetune
+    from anunnaki.enlil import to_phenomenon_vector
+    from anunnaki.lec import evaluate_detector, load_detector
+    from anunnaki.phenomena import PHENOMENA
+
+    if not (data / "train.json").is_file():
+        from anunnaki.sim import make_dataset
+
+        data = work / "calibration" / f"{platform_name}-data"
+        if not (data / "test.json").is_file():
+            bars.log(f"calibration: rendering a few {platform_name} frames into {data}")
+            width, height = SIZES[platform_name]
+            make_dataset(platform_name, data, train_layouts=[0], val_layouts=[1],
+                         test_layouts=[2], per_layout=4, width=width, height=height, seed=0,
+                         workers=1, overwrite=True)  # fmt: skip
+    threads = torch.get_num_threads()
+    torch.set_num_threads(s.threads)
+    try:
+        train = load_split(data, "train", cache=True)
+        test = load_split(data, "test", cache=True).in_memory()
+        val = test.subset(range(min(4, len(test))))
+        steps = 3
+        batch = train.subset([i % len(train) for i in range(steps * s.batch_size)])
+        model = MODELS / f"{platform_name}-default.safetensors"
+        stamps: list[float] = [time.perf_counter()]
+        bars.log(f"calibration: {steps} optimiser steps of {model.name}, renders, forwards")
+        finetune(
+            model, batch, val, UniformContexts(phenomena[0], clean=s.clean),
+            budget=Budget(epochs=1, batch_size=s.batch_size, lr=s.lr, threads=s.threads),
+            on_step=lambda step, total, info: stamps.append(time.perf_counter()),
+        )  # fmt: skip
+        step = (stamps[-1] - stamps[1]) / (len(stamps) - 2)  # the first step warms up
+        setup = max(0.0, stamps[1] - stamps[0] - step)  # the model loaded, the data fitted
+        render: dict[str, float] = {}
+        rng = np.random.default_rng(0)
+        for name in phenomena:
+            phen = PHENOMENA.create(name)
+            t0, n = time.perf_counter(), 0
+            while n < 16 or time.perf_counter() - t0 < 2.0:
+                image = test.image(n % len(test))  # a context uniform over the space
+                unit = rng.random(len(phen.param_names))
+                phen.apply(image, phen.from_vector(to_phenomenon_vector(phen, unit)), seed=n)
+                n += 1
+            render[name] = (time.perf_counter() - t0) / n
+        det = load_detector(model)
+        frames = test.subset([i % len(test) for i in range(32)])  # a measurement's batch
+        evaluate_detector(det, frames)  # warm-up
+        t0, rounds = time.perf_counter(), 2
+        for _ in range(rounds):
+            evaluate_detector(det, frames)
+        forward = (time.perf_counter() - t0) / (rounds * len(frames))
+        seconds, images = _time_search(model, data, phenomena[0], s, work / "calibration")
+        search_start = max(0.0, seconds - images * (render[phenomena[0]] + forward))
+    finally:
+        torch.set_num_threads(threads)
+    perturbed = s.batch_size * (1 - s.clean)
+    record = {
+        "step": round(step, 4),
+        "step_core": round(max(step - perturbed * render[phenomena[0]], 0.1 * step), 4),
+        "setup": round(setup, 2),
+        "render": {k: round(v, 5) for k, v in render.items()},
+        "forward": round(forward, 5),
+        "search_start": round(search_start, 2),
+        "measured": time.strftime("%Y-%m-%d %H:%M", time.gmtime()),
+        "loadavg": loadavg(),
+        "data": str(data),
+    }
+    write_json(cache, stored | {key: record})
+    return record
+
+
+def _time_search(
+    model: Path, data: Path, phenomenon: str, s: Settings, folder: Path
+) -> tuple[float, int]:
+    """A short Enlil search, timed: its seconds and the images it evaluated.
+
+    Less its renders and forward passes, what is left is a search's own start (the model
+    and batch loaded, the clean F1, the archive written).
+    """
+    import shutil
+
+    from anunnaki.datasets import load_split
+    from anunnaki.enlil import Job, run_search
+
+    images = min(s.search_images, len(load_split(data, "val", cache=True)))
+    out = folder / "search"
+    job = Job(model=str(model), data=str(data), phenomenon=phenomenon, split="val",
+              batch_images=images, seed=0)  # fmt: skip
+    evaluations = 6
+    for _ in range(2):  # the second: a search in a process that has searched (imports done)
+        shutil.rmtree(out, ignore_errors=True)  # a search resumes: time a fresh one
+        t0 = time.perf_counter()
+        run_search(job, out, search="enlil", budget=evaluations, seed=0, batch=3, workers=1)
+        seconds = time.perf_counter() - t0
+    shutil.rmtree(out, ignore_errors=True)
+    return seconds, evaluations * images
+
+
+def plan_domain(
+    domain: Domain,
+    s: Settings,
+    arms: Sequence[str],
+    calib: dict[str, Any],
+    *,
+    trains_shared: bool = True,
+) -> dict[str, Any]:
+    """The domain's counts (runs, steps, images rendered, forward passes) and seconds.
+
+    Per job (arm × seed, and the single models) and for the domain's searches. Seconds are
+    *calib*'s unit costs times the counts: a step's own cost, a render per image, a no-grad
+    forward pass per image (worst-of-k's scoring, the consistency loss's clean views, the
+    searches' and the measurements' evaluations). The platform's shared corruption mix is
+    trained in one domain (*trains_shared*) and only measured in the others.
+    """
+    from anunnaki.enki import Budget
+
+    steps = Budget(epochs=s.epochs, batch_size=s.batch_size).steps(s.train_images)
+    render = calib["render"][domain.phenomenon]
+    fwd = calib["forward"]
+    perturbed = steps * s.batch_size * (1 - s.clean)  # frames a source perturbs per run
+    own_searches = sum(1 for seed in s.seeds if seed != 0) if s.seed_searches else 0
+    evals = s.search_budget * (1 + own_searches) + s.hard_budget
+    fam_contexts = len(s.families) * s.n_family
+    contexts = s.n_random + s.n_hardest + s.n_region + fam_contexts
+    jobs: dict[str, float] = {}
+    counts = {"runs": 0, "steps": 0, "renders": 0, "forwards": 0, "searches": 2}
+    counts["searches"] += own_searches
+    search_images = evals * s.search_images
+    counts["renders"] += search_images + contexts * s.test_images  # (b)-(d): once per domain
+    counts["forwards"] += search_images
+    start = calib.get("search_start", 0.0)  # each search's own start
+    n_searches = 2 + own_searches
+    prep_seconds = n_searches * start + search_images * (render + fwd)
+    prep_seconds += contexts * s.test_images * render
+    for arm, seed in domain_jobs(domain, s, arms):
+        seconds, renders, forwards = 0.0, 0, 0
+        if arm in RECIPES and (trains_shared or arm not in SHARED):
+            recipe = RECIPES[arm]
+            k = s.k if recipe.worst else 1
+            renders += int(perturbed * k)
+            scoring = int(perturbed * k) if recipe.worst and recipe.select == "hardest" else 0
+            clean_views = int(perturbed) if recipe.consistency else 0
+            forwards += steps * s.batch_size + scoring + clean_views
+            seconds += calib.get("setup", 0.0) + steps * calib["step_core"] + perturbed * k * render
+            seconds += (scoring + clean_views) * fwd
+            counts["runs"] += 1
+            counts["steps"] += steps
+        elif arm == "today" and domain.today in RETIRED and not _shipped(domain.today):
+            args = RETIRED[domain.today]
+            rebuilt = int(args[args.index("--epochs") + 1]) * -(-2000 // 32)  # its own budget
+            seconds += rebuilt * calib["step"]
+            counts["steps"] += rebuilt
+        measured = (1 + contexts) * s.test_images
+        own = s.n_own * s.test_images + s.hard_budget * s.search_images if s.n_own else 0
+        renders += own
+        forwards += measured + own
+        own_seconds = 0.0
+        if s.n_own:  # (c′): the search against this model, its contexts measured
+            own_seconds = start + s.hard_budget * s.search_images * (render + fwd)
+            own_seconds += s.n_own * s.test_images * (render + fwd)
+        seconds += measured * fwd + own_seconds
+        counts["searches"] += 1 if s.n_own else 0
+        counts["renders"] += renders
+        counts["forwards"] += forwards
+        jobs[f"{arm}" if seed is None else f"{arm}-s{seed}"] = round(seconds, 1)
+    return {
+        "steps_per_run": steps,
+        "seeds": list(s.seeds),
+        "arms": list(arms),
+        **counts,
+        "jobs": {"searches": round(prep_seconds, 1)} | jobs,
+        "seconds": round(prep_seconds + sum(jobs.values()), 1),
+    }
+
+
+def _shipped(model_id: str) -> bool:
+    return (MODELS / f"{model_id}.safetensors").is_file()
+
+
+def make_plan(
+    items: Sequence[tuple[Domain, Settings]],
+    arms: Sequence[str],
+    calibs: dict[str, dict[str, Any]],
+    *,
+    workers: int = 1,
+) -> dict[str, Any]:
+    """The run's plan: per domain its counts and estimated seconds, and the totals."""
+    first: dict[str, str] = {}
+    for domain, _ in items:
+        first.setdefault(domain.platform, domain.name)
+    domains = {
+        d.name: plan_domain(
+            d, s, arms, calibs[d.platform], trains_shared=first[d.platform] == d.name
+        )
+        for d, s in items
+    }
+    keys = ("runs", "steps", "renders", "forwards", "searches", "seconds")
+    total = {k: round(sum(p[k] for p in domains.values()), 1) for k in keys}
+    return {
+        "domains": domains,
+        "total": total,
+        "workers": workers,
+        "wall_seconds": round(total["seconds"] / max(1, workers), 1),
+        "calibration": calibs,
+    }
+
+
+def _hours(seconds: float) -> str:
+    """A duration for the plan: minutes below an hour, else hours."""
+    return f"{seconds / 60:.0f} min" if seconds < 3600 else f"{seconds / 3600:.1f} h"
+
+
+def recorded_pace(doc: dict[str, Any] | None) -> dict[str, dict[str, Any]]:
+    """Per platform, the seconds per optimiser step the fine-tunes of *doc* took, and load.
+
+    The median over its trained arms' runs (their renders included), with the median load
+    average they started at: the pace of a run on this machine as it was shared then.
+    """
+    out: dict[str, dict[str, Any]] = {}
+    for name, d in (doc or {}).get("domains", {}).items():
+        plat = DOMAINS[name].platform if name in DOMAINS else None
+        if plat is None:
+            continue
+        for arm, a in d["arms"].items():
+            for run in a.get("training", []) if arm in RECIPES else []:
+                if "seconds" in run and run.get("steps"):
+                    rec = out.setdefault(plat, {"paces": [], "loads": [], "date": doc_date(d)})
+                    rec["paces"].append(run["seconds"] / run["steps"])
+                    rec["loads"].append(run["loadavg_start"][0])
+    return {
+        k: {"step": round(statistics.median(v["paces"]), 3),
+            "load": round(statistics.median(v["loads"]), 1), "date": v["date"]}
+        for k, v in out.items()
+    }  # fmt: skip
+
+
+def doc_date(d: dict[str, Any]) -> str:
+    return str(d.get("run", {}).get("date", "?"))
+
+
+def plan_text(
+    plan: dict[str, Any], title: str, pace: dict[str, dict[str, Any]] | None = None
+) -> str:
+    """The plan as printed first on every run and by ``--plan``.
+
+    With *pace* (:func:`recorded_pace` of the committed results) the plan is also scaled to
+    the pace those runs had on this machine, shared as it was then.
+    """
+    lines = [f"plan: {title}"]
+    for name, p in plan["domains"].items():
+        lines.append(
+            f"  {name}: {len(p['arms'])} arms × {len(p['seeds'])} seeds × {p['steps_per_run']} "
+            f"steps ({', '.join(p['arms'])}); {p['runs']} fine-tunes, {p['steps']} optimiser "
+            f"steps, {p['searches']} searches, {p['renders']:,} images rendered, "
+            f"{p['forwards']:,} forward passes; about {_hours(p['seconds'])}"
+        )
+    t = plan["total"]
+    lines.append(
+        f"  total: {int(t['runs'])} fine-tunes, {int(t['steps']):,} optimiser steps, "
+        f"{int(t['searches'])} searches, {int(t['renders']):,} images rendered, "
+        f"{int(t['forwards']):,} forward passes; about {_hours(t['seconds'])} of "
+        f"compute, {_hours(plan['wall_seconds'])} on {plan['workers']} worker(s)"
+    )
+    for plat, c in plan["calibration"].items():
+        renders = ", ".join(f"{k} {1000 * v:.1f} ms" for k, v in c["render"].items())
+        lines.append(
+            f"  calibration ({plat}, {c['measured']}, load {c['loadavg'][0]}): "
+            f"{c['step']:.2f} s per optimiser step ({c['step_core']:.2f} s without its "
+            f"renders), {c.get('setup', 0):.1f} s to start a fine-tune, "
+            f"{1000 * c['forward']:.1f} ms per forward pass, renders {renders}, "
+            f"{c.get('search_start', 0):.1f} s to start a search"
+        )
+    paced = {k: v for k, v in (pace or {}).items() if k in plan["calibration"]}
+    if paced:
+        scaled = sum(
+            p["seconds"]
+            * paced.get(DOMAINS[n].platform, {}).get("step", 0)
+            / plan["calibration"][DOMAINS[n].platform]["step"]
+            for n, p in plan["domains"].items()
+        )
+        said = ", ".join(
+            f"{k} {v['step']:.2f} s per step at load {v['load']} ({v['date']})"
+            for k, v in paced.items()
+        )
+        lines.append(
+            f"  at the pace of the committed comparison's fine-tunes ({said}): about "
+            f"{_hours(scaled)} of compute, {_hours(scaled / max(1, plan['workers']))} on "
+            f"{plan['workers']} worker(s)"
+        )
+    return "\n".join(lines)
+
+
+class Eta:
+    """A progress line as each job (a domain's searches, an arm × seed) ends, and the time left.
+
+    The time left is the plan's seconds for the jobs not done, scaled by how long the jobs
+    done in this process took against their plan (a job done before is only counted).
+    """
+
+    def __init__(self, plan: dict[str, Any], bars: Bars) -> None:
+        self.left = {
+            (d, j): sec for d, p in plan["domains"].items() for j, sec in p["jobs"].items()
+        }
+        self.total, self.bars = len(self.left), bars
+        self.spent = self.planned = 0.0
+        self.t0 = time.perf_counter()
+
+    def finished(
+        self, domain: str, arm: str, seed: int | None, seconds: float, reused: bool
+    ) -> None:
+        job = arm if seed is None else f"{arm}-s{seed}"
+        planned = self.left.pop((domain, job), 0.0)
+        if not reused:
+            self.spent += seconds
+            self.planned += planned
+        rate = self.spent / self.planned if self.planned > 0 else 1.0
+        left = sum(self.left.values()) * rate
+        self.bars.log(
+            f"progress: {self.total - len(self.left)}/{self.total} jobs done "
+            f"({domain} {job} {'read back' if reused else f'{seconds:.0f} s'}); "
+            f"{(time.perf_counter() - self.t0) / 60:.0f} min so far, about {left / 3600:.1f} h "
+            f"left (planned × {rate:.2f})"
+        )
+
+
 # -- the run ----------------------------------------------------------------------------------
 
 
@@ -1247,7 +1986,10 @@ def run_domain(
     *,
     quick: bool,
     arms: tuple[str, ...] = TRAINED,
+    dask: Any = None,
+    eta: Eta | None = None,
 ) -> dict[str, Any]:
+    """The domain's searches and conditions, every arm × seed (in this process or on *dask*)."""
     work = work_root / domain.name
     record = settings_record(s)
     claim(work, record | {"domain": domain.name, "data": str(data.resolve()), "quick": quick})
@@ -1257,8 +1999,11 @@ def run_domain(
         record | {"platform": domain.platform, "data": str(data.resolve()), "quick": quick},
     )
     bars.log(f"{domain.name}: searches and conditions")
+    t0, reused = time.perf_counter(), (work / "conditions.json").is_file()
     with _TrainLock(work / "searches"):  # one process searches, the others wait for it
         prep = prepare(domain, data, work, s, bars)
+    if eta is not None:
+        eta.finished(domain.name, "searches", None, time.perf_counter() - t0, reused)
     train, val, test = splits(data, s)
     ctx = {
         "settings": s,
@@ -1272,6 +2017,9 @@ def run_domain(
         "shared": shared,
         "data": data,
         "arms": arms,
+        "dask": dask,
+        "eta": eta,
+        "quiet": bars.quiet,
     }
     ctx["perturbed"] = Perturbed(ctx["test"], s.eval_seed)
     return domain_figures(domain, prep, run_jobs(domain, ctx), s)
@@ -1285,12 +2033,52 @@ def main(argv: Sequence[str] | None = None) -> int:
         help="regenerate docs/enki.md and its plots from --output, measure nothing",
     )
     p.add_argument(
-        "--domains", default="rover-hsl", help=f"comma list of {', '.join(DOMAINS)} (or 'all')"
+        "--domains",
+        help=f"comma list of {', '.join(DOMAINS)} (or 'all'; default rover-hsl, or the round's)",
     )
     p.add_argument("--rover-data", type=Path, default=ROOT / "data" / "rover")
     p.add_argument("--uav-data", type=Path, default=ROOT / "data" / "uav")
-    p.add_argument("--work", type=Path, default=ROOT / "runs" / "robustify-benchmark")
-    p.add_argument("--output", type=Path, default=OUT)
+    p.add_argument(
+        "--work",
+        type=Path,
+        help="work folder (default runs/robustify-benchmark, or runs/robustify-ROUND)",
+    )
+    p.add_argument(
+        "--output",
+        type=Path,
+        help="results (default benchmarks/results/robustify.json, or robustify-ROUND.json)",
+    )
+    p.add_argument(
+        "--round",
+        choices=list(ROUNDS),
+        help="issue 33's ablation round: " + "; ".join(f"{k}: {r.what}" for k, r in ROUNDS.items()),
+    )
+    p.add_argument(
+        "--screening",
+        type=Path,
+        default=OUT.with_name("robustify-screening.json"),
+        help="--round confirmation: the screening's results (its best Enki arm)",
+    )
+    p.add_argument(
+        "--plan",
+        action="store_true",
+        help="print the plan (arms × seeds × domains × steps, images rendered, forward passes, "
+        "estimated time from a calibration on this machine) and stop",
+    )
+    p.add_argument(
+        "--recalibrate", action="store_true", help="measure the calibration again (not reuse)"
+    )
+    p.add_argument(
+        "--scheduler",
+        help="fan the arms × seeds out over Dask: 'local' (a LocalCluster here) or a "
+        "scheduler's address (tcp://HOST:8786); default: in this process, one after another",
+    )
+    p.add_argument(
+        "--workers",
+        type=int,
+        default=None,
+        help="--scheduler local: worker processes (default: cores / threads)",
+    )
     p.add_argument("--doc", type=Path, default=DOC, help="--report: the page written")
     p.add_argument("--images", type=Path, default=IMAGES, help="--report: the plots' folder")
     p.add_argument("--quick", action="store_true", help="tiny sizes (the test suite's run)")
@@ -1326,6 +2114,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         "n_hardest",
         "n_family",
         "n_region",
+        "n_own",
         "search_seed",
         "hard_seed",
         "eval_seed",
@@ -1359,8 +2148,20 @@ def main(argv: Sequence[str] | None = None) -> int:
         "val (kept with each domain and stated in the report)",
     )
     p.add_argument("--clean", type=float, default=None)
+    p.add_argument(
+        "--seed-searches",
+        action="store_const",
+        const=True,
+        default=None,
+        help="each training seed's Enki arms train on a search of their own (seed "
+        "search-seed + seed)",
+    )
     args = p.parse_args(argv)
-    arms = parse_arms(args.arms)
+    rnd = ROUNDS[args.round] if args.round else None
+    if args.output is None:
+        args.output = OUT.with_name(f"robustify-{args.round}.json") if rnd else OUT
+    if args.work is None:
+        args.work = ROOT / "runs" / (f"robustify-{args.round}" if rnd else "robustify-benchmark")
     if args.report:
         write_report(json.loads(args.output.read_text(encoding="utf-8")), args.doc, args.images)
         return 0
@@ -1372,7 +2173,15 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 0
     if args.nice:
         os.nice(args.nice)
-    s = QUICK if args.quick else defaults
+    best: dict[str, Any] = {}
+    arms_text = args.arms
+    if rnd is not None:
+        if args.quick:
+            p.error("--round and --quick: a round has its own scale; choose one")
+        if args.arms:
+            p.error(f"--round {args.round} has its arms ({rnd.arms}); --arms goes without it")
+        arms_text, best = round_arms(rnd, args.screening, planning=args.plan)
+    arms = parse_arms(arms_text)
     changes: dict[str, Any] = {
         k: v for k, v in vars(args).items() if k in Settings.__dataclass_fields__ and v is not None
     }
@@ -1380,51 +2189,133 @@ def main(argv: Sequence[str] | None = None) -> int:
         changes["seeds"] = tuple(int(x) for x in args.seeds.split(","))
     if args.families:
         changes["families"] = tuple(args.families.split(","))
-    s = replace(s, **changes)
-    names = list(DOMAINS) if args.domains == "all" else args.domains.split(",")
+    domains = args.domains or (",".join(rnd.domains) if rnd else "rover-hsl")
+    names = list(DOMAINS) if domains == "all" else domains.split(",")
     unknown = [n for n in names if n not in DOMAINS]
     if unknown:
         p.error(f"--domains: unknown {unknown}; choose from {', '.join(DOMAINS)}")
+
+    def settings_of(domain: Domain) -> Settings:
+        base = QUICK if args.quick else defaults
+        if rnd is not None:
+            base = replace(base, **rnd.settings.get(domain.platform, {}))
+        return replace(base, **changes)
+
+    items = [(DOMAINS[n], settings_of(DOMAINS[n])) for n in names]
+    data_of = {"rover": args.rover_data, "uav": args.uav_data}
     import torch
 
+    s = items[0][1]
     torch.set_num_threads(s.threads)
-    doc = read_json(args.output) if args.output.is_file() else None
-    if doc is None or doc.get("settings") != _settings_json(s) or doc.get("quick") != args.quick:
-        doc = {
-            "benchmark": "robustify",
-            "quick": args.quick,
-            "settings": _settings_json(s),
-            "domains": {},
-        }
-    doc["machine"] = {
-        "cpus": os.cpu_count(),
-        "python": platform.python_version(),
-        "torch": torch.__version__,
-        "torch_threads": s.threads,
-    }
-    with Bars(args.quiet) as bars:
-        for name in names:
-            domain = DOMAINS[name]
-            data = args.rover_data if domain.platform == "rover" else args.uav_data
+    workers = 1
+    if args.scheduler:
+        workers = args.workers or max(1, (os.cpu_count() or 1) // s.threads)
+    if not args.plan:
+        for domain, _ in items:
+            data = data_of[domain.platform]
             if not (data / "train.json").is_file():
                 p.error(
                     f"--{domain.platform}-data {data}: no dataset there; make one with "
                     f"anunnaki make-dataset {domain.platform} --out {data}"
                 )
-            t0, load0 = time.perf_counter(), loadavg()
-            entry = run_domain(domain, data, args.work, s, bars, quick=args.quick, arms=arms)
-            entry["settings"] = _settings_json(s)
-            entry["run"] = {
-                "date": time.strftime("%Y-%m-%d", time.gmtime()),
-                "wall_seconds": round(time.perf_counter() - t0, 1),
-                "loadavg_start": load0,
-                "loadavg_end": loadavg(),
-                "data": str(data),
+    with Bars(args.quiet) as bars:
+        calibs = {}
+        for domain, own in items:
+            if domain.platform not in calibs:
+                if args.recalibrate:
+                    _forget_calibration(args.work, domain.platform, own)
+                phens = [d.phenomenon for d, _ in items if d.platform == domain.platform]
+                calibs[domain.platform] = calibrate(
+                    domain.platform, data_of[domain.platform], own, phens, args.work, bars
+                )
+        plan = make_plan(items, arms, calibs, workers=workers)
+        title = (
+            f"round {args.round} ({rnd.what})" if rnd else "robustify benchmark"
+        ) + (f"; best Enki arm: {best['arm']} ({best.get('planned', 'from the screening')})"
+             if best else "")  # fmt: skip
+        text = plan_text(plan, title, recorded_pace(read_json(OUT)))
+        if args.plan:
+            print(text)
+            return 0
+        bars.console.print(text, highlight=False, soft_wrap=True)
+        write_json(args.work / "plan.json", plan)
+        doc = read_json(args.output) if args.output.is_file() else None
+        if (
+            doc is None
+            or doc.get("settings") != _settings_json(s)
+            or doc.get("quick") != args.quick
+        ):
+            doc = {
+                "benchmark": "robustify",
+                "quick": args.quick,
+                "settings": _settings_json(s),
+                "domains": {},
             }
-            doc["domains"][name] = entry
-            write_json(args.output, doc)
-            bars.log(f"{name}: written to {args.output}")
+        if rnd is not None:
+            doc["round"] = args.round
+            if best:
+                doc["confirmed_arm"] = best
+        doc["machine"] = {
+            "cpus": os.cpu_count(),
+            "python": platform.python_version(),
+            "torch": torch.__version__,
+            "torch_threads": s.threads,
+        }
+        eta = Eta(plan, bars)
+        with _scheduler(args.scheduler, workers) as dask:
+            for domain, own in items:
+                data = data_of[domain.platform]
+                t0, load0 = time.perf_counter(), loadavg()
+                entry = run_domain(
+                    domain, data, args.work, own, bars, quick=args.quick, arms=arms,
+                    dask=dask, eta=eta,
+                )  # fmt: skip
+                entry["settings"] = _settings_json(own)
+                entry["run"] = {
+                    "date": time.strftime("%Y-%m-%d", time.gmtime()),
+                    "wall_seconds": round(time.perf_counter() - t0, 1),
+                    "loadavg_start": load0,
+                    "loadavg_end": loadavg(),
+                    "data": str(data),
+                    **({"scheduler": args.scheduler, "workers": workers} if dask else {}),
+                }
+                doc["domains"][domain.name] = entry
+                if any("vs_random_c" in d for d in doc["domains"].values()):
+                    found = best_arm(
+                        {k: v for k, v in doc["domains"].items() if "vs_random_c" in v}
+                    )
+                    if found is not None:
+                        doc["best_enki_arm"] = found
+                write_json(args.output, doc)
+                bars.log(f"{domain.name}: written to {args.output}")
     return 0
+
+
+def _forget_calibration(work: Path, platform_name: str, s: Settings) -> None:
+    stored = read_json(work / "calibration.json") or {}
+    stored.pop(f"{platform_name}/threads={s.threads}/batch={s.batch_size}", None)
+    write_json(work / "calibration.json", stored)
+
+
+@contextmanager
+def _scheduler(address: str | None, workers: int) -> Iterator[Any]:
+    """``--scheduler``: None (in this process), a LocalCluster, or a scheduler's address."""
+    if not address:
+        yield None
+        return
+    try:
+        from distributed import Client, LocalCluster
+    except ImportError as exc:
+        raise SystemExit("--scheduler needs Dask's distributed: pip install -e '.[enlil]'") from exc
+    if address != "local":
+        with Client(address) as client:  # type: ignore[no-untyped-call]
+            yield client
+        return
+    cluster = LocalCluster(  # type: ignore[no-untyped-call]
+        n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None
+    )
+    with cluster, Client(cluster) as client:  # type: ignore[no-untyped-call]
+        yield client
 
 
 def merge(
@@ -1489,6 +2380,7 @@ def cond_title(name: str) -> str:
         "clean": "(a) clean",
         "random": "(b) random contexts",
         "hardest": "(c) hardest contexts",
+        OWN: "(c′) hardest for this model",
         "region": "(d) held-out region",
     }
     if name.startswith("family:"):
@@ -1496,8 +2388,18 @@ def cond_title(name: str) -> str:
     return titles.get(name, name)
 
 
-def render_report(doc: dict[str, Any]) -> str:
-    """docs/enki.md from the benchmark's JSON (deterministic: a test regenerates it)."""
+def round_results(folder: Path = OUT.parent) -> dict[str, dict[str, Any]]:
+    """The ablation rounds' results that exist (``robustify-ROUND.json``), by round."""
+    found = {r: read_json(folder / f"robustify-{r}.json") for r in ROUNDS}
+    return {r: doc for r, doc in found.items() if doc is not None and not doc.get("quick")}
+
+
+def render_report(doc: dict[str, Any], rounds: dict[str, dict[str, Any]] | None = None) -> str:
+    """docs/enki.md from the benchmark's JSON (deterministic: a test regenerates it).
+
+    With the ablation rounds' results (*rounds*; default: :func:`round_results`, those
+    committed beside it) the page has their section too: one command, both budgets.
+    """
     s = doc["settings"]
     lines = [
         "# Enki against random augmentation: the comparison",
@@ -1560,17 +2462,21 @@ def render_report(doc: dict[str, Any]) -> str:
     if not domains:
         lines += ["No domain measured yet.", ""]
     lines += _summary_table(domains)
+    lines += _ablation(doc)
     lines += _decision(domains)
     lines += _kept(domains)
     lines += _paper_table(domains)
     for name, d in domains.items():
         lines += _domain_section(name, d)
     lines += _recipe_arms(domains)
+    lines += _rounds_lines(round_results() if rounds is None else rounds)
     lines += ["## How to regenerate", "", "```"]
     for own, names in groups or [(s, [])]:
         lines += [
             "nice -n 10 .venv/bin/python benchmarks/robustify.py --rover-data data/rover "
-            "--uav-data data/uav \\",
+            "--uav-data data/uav"
+            + (f" --round {doc['round']}" if doc.get("round") else "")
+            + " \\",
             f"    --domains {','.join(names) or 'rover-hsl'}"
             f"{_options(own, bool(doc.get('quick')))}",
         ]
@@ -1594,6 +2500,92 @@ def render_report(doc: dict[str, Any]) -> str:
         "",
     ]
     return "\n".join(lines)
+
+
+def _rounds_lines(rounds: dict[str, dict[str, Any]]) -> list[str]:
+    """Issue 33's ablation rounds: scale, every arm's F1 per domain, arm − A+c, the best."""
+    if not rounds:
+        return []
+    lines = [
+        "## Issue 33's ablation: the rounds",
+        "",
+        "`--round screening` and `--round confirmation` "
+        "([robustify.md](robustify.md#the-ablations-two-rounds)); each domain's arms as "
+        "F1 (%), mean ± std over seeds, on (a) clean, (b) random contexts, (c) the hardest "
+        "contexts of the default model, (c′) each model's own hardest contexts, and mPC.",
+        "",
+    ]
+    conds = ["clean", "random", "hardest", OWN, "mPC"]
+    for name, doc in rounds.items():
+        lines += [f"### {name.capitalize()}", ""]
+        groups: dict[str, list[str]] = {}
+        for dname, d in doc["domains"].items():
+            groups.setdefault(json.dumps(d.get("settings", doc["settings"])), []).append(dname)
+        for settings, names in groups.items():
+            lines += [_scale(f"{', '.join(names)}: m", json.loads(settings), ""), ""]
+        for dname, d in doc["domains"].items():
+            lines += [
+                f"**{dname}**",
+                "",
+                "| arm | " + " | ".join(cond_title(c) if c != "mPC" else c for c in conds) + " |",
+                "|---" * (1 + len(conds)) + "|",
+            ]
+            for arm in ARMS:
+                if arm in d["arms"]:
+                    a = d["arms"][arm]
+                    cells = [ms(a[c]) if c in a else "—" for c in conds]
+                    lines.append(f"| {LABELS[arm]} | " + " | ".join(cells) + " |")
+            lines.append("")
+        lines += _ablation(doc)[2:]  # its table and the best arm, under this round's title
+    return lines
+
+
+def _ablation(doc: dict[str, Any]) -> list[str]:
+    """Every Enki arm − A+c per domain, with the paired bootstrap interval; the best arm."""
+    rows = []
+    conds = ["clean", "random", "hardest", OWN, "mPC"]
+    for name, d in doc["domains"].items():
+        for arm, vs in d.get("vs_random_c", {}).items():
+            cells = [
+                "—"
+                if c not in vs
+                else f"{100 * vs[c]['margin']:+.1f} {_interval(vs[c])} {vs[c]['verdict']}"
+                for c in conds
+            ]
+            letter = next(k for k, v in LETTERS.items() if v == arm)
+            rows.append(f"| {name} | {letter} {LABELS[arm]} | " + " | ".join(cells) + " |")
+    if not rows:
+        return []
+    lines = [
+        "## The ablation: every Enki arm against random + consistency (A+c)",
+        "",
+        "Arm − A+c, F1 points, with its paired bootstrap 95 % interval over seeds and "
+        f"contexts ({RESAMPLES} resamples: the seeds drawn with replacement, the same for "
+        "both arms, and within each the contexts, the same contexts for both arms except on "
+        "(c′), where each model has its own). A margin whose interval holds 0 is a **tie**.",
+        "",
+        "| domain | arm | "
+        + " | ".join(cond_title(c) if c != "mPC" else "mPC" for c in conds)
+        + " |",
+        "|---" * (2 + len(conds)) + "|",
+        *rows,
+        "",
+    ]
+    best = doc.get("best_enki_arm")
+    if best:
+        lines += [
+            f"**Best Enki arm** over {', '.join(best['domains'])}: `{best['arm']}` (mean margin "
+            f"over A+c on (c′) {100 * best['mean_margin']:+.1f} points; clean F1 "
+            f"{'within' if best['clean_within_aim'] else '**not** within'} the "
+            f"{100 * AIMS['clean_loss']:.0f}-point aim). Margins per arm: "
+            + ", ".join(f"`{a}` {100 * m:+.1f}" for a, m in best["margins"].items())
+            + ".",
+            "",
+        ]
+    confirmed = doc.get("confirmed_arm")
+    if confirmed:
+        lines += [f"The confirmation measures `{confirmed['arm']}`, the screening's best.", ""]
+    return lines
 
 
 def _recipe_arms(domains: dict[str, Any]) -> list[str]:
@@ -1626,6 +2618,18 @@ def _recipe_arms(domains: dict[str, Any]) -> list[str]:
         + (", ".join(f"`{a}`" for a in measured) if measured else "none yet")
         + ".",
         "",
+        "The ablation runs in two rounds, each resumable in its own work folder and printing "
+        "its plan (runs, steps, images rendered, forward passes, an estimated time from a "
+        "calibration on the machine) first: `--round screening` (every arm above at 96 "
+        "steps, 3 seeds each on an Enki search of its own, rover hsl, raindrop and fog) and "
+        "`--round confirmation` (the screening's best Enki arm against A+c and A at 504 "
+        "steps on the rover's three domains, 96 on the UAV's two). Both add condition "
+        "(c′), the hardest contexts of a fresh search against each final model, and compare "
+        "every Enki arm with A+c by a paired bootstrap interval over seeds and contexts; "
+        "`--scheduler local` fans the arms × seeds out over a Dask cluster. Commands, the "
+        "plans' figures on this machine: "
+        "[robustify.md](robustify.md#the-ablations-two-rounds).",
+        "",
     ]
 
 
@@ -1645,6 +2649,18 @@ def _scale(who: str, s: dict[str, Any], quick: str) -> str:
         f"images each; Enki trains on {s['contexts']} selected contexts. Contexts per "
         f"condition: (b) {s['n_random']}, (c) {s['n_hardest']}, (d) {s['n_family']} per "
         f"held-out family and {s['n_region']} in the held-out region."
+        + (
+            f" (c′): {s['n_own']} contexts of a {s['hard_budget']}-evaluation search against "
+            "each final model."
+            if s.get("n_own")
+            else ""
+        )
+        + (
+            f" Each seed's Enki arms train on a search of their own (seed {s['search_seed']} "
+            "+ the training seed)."
+            if s.get("seed_searches")
+            else ""
+        )
     )
 
 
@@ -1654,6 +2670,9 @@ def _options(s: dict[str, Any], quick: bool) -> str:
     out = " --quick" if quick else ""
     for key, value in s.items():
         if key in base and json.loads(json.dumps(base[key])) != value:
+            if isinstance(value, bool):  # a flag (--seed-searches)
+                out += f" --{key.replace('_', '-')}" if value else ""
+                continue
             shown = ",".join(map(str, value)) if isinstance(value, list) else value
             out += f" --{key.replace('_', '-')} {shown}"
     return out
@@ -1661,6 +2680,7 @@ def _options(s: dict[str, Any], quick: bool) -> str:
 
 def _summary_table(domains: dict[str, Any]) -> list[str]:
     """Per domain: Enki − random contexts on every condition, with its verdict."""
+    domains = {k: d for k, d in domains.items() if "enki_vs_random" in d}
     if not domains:
         return []
     conds = ["clean", *next(iter(domains.values()))["conditions"], "mPC"]
@@ -1675,6 +2695,8 @@ def _summary_table(domains: dict[str, Any]) -> list[str]:
         "|---" * (len(conds) + 2) + "|",
     ]
     for name, d in domains.items():
+        if "enki_vs_random" not in d:  # measured without Enki or random contexts
+            continue
         cells = []
         for c in conds:
             m = d["enki_vs_random"].get(c)
@@ -1695,7 +2717,7 @@ def decide(d: dict[str, Any]) -> dict[str, Any] | None:
     (two models, each as variable as an Enki fine-tune); else it is a tie.
     """
     arms = d["arms"]
-    if "today" not in arms:
+    if "today" not in arms or "enki" not in arms:
         return None
     cand = "shipped" if "shipped" in arms else "enki"
     margins = _single_margins(d, cand, "today")
@@ -1753,7 +2775,7 @@ def keep_shipped(d: dict[str, Any]) -> dict[str, Any] | None:
     not this one, runs on clean frames.
     """
     arms = d["arms"]
-    if "today" in arms or "shipped" not in arms:
+    if "today" in arms or "shipped" not in arms or "enki" not in arms:
         return None
     margins = _single_margins(d, "shipped", "default")
     own = [margins[k]["verdict"] for k in ("random", "hardest")]
@@ -1885,6 +2907,8 @@ def _paper_table(domains: dict[str, Any]) -> list[str]:
     for name, d in domains.items():
         paper = d.get("paper") or {}
         arms = d["arms"]
+        if "enki" not in arms or "random" not in arms:
+            continue
         ours = (
             f"{ms(arms['default']['clean'])} | {ms(arms['default']['random'])} | "
             f"{ms(arms['enki']['random'])} | {ms(arms['random']['random'])}"
@@ -2006,6 +3030,15 @@ def _domain_section(name: str, d: dict[str, Any]) -> list[str]:
         f"![F1 over the parameter space, {name}](images/enki-{name}-space.png)",
         "",
     ]
+    if "enki_vs_random" in d:
+        lines += _enki_random_lines(d, conds)
+    lines += _budget_lines(d)
+    return lines
+
+
+def _enki_random_lines(d: dict[str, Any], conds: list[str]) -> list[str]:
+    """Enki − random contexts per condition, and the aims (a domain measured with both)."""
+    lines: list[str] = []
     lines += [
         "**Enki − random contexts** (F1 points; a tie unless |margin| > the sum of the "
         "two standard deviations):",
@@ -2013,12 +3046,19 @@ def _domain_section(name: str, d: dict[str, Any]) -> list[str]:
         "| condition | margin | spread | verdict |",
         "|---|---|---|---|",
     ]
+    ci = "ci" in d["enki_vs_random"]["clean"]  # results made before the interval have none
+    if ci:
+        lines[-2:] = [
+            "| condition | margin | spread | verdict | 95 % bootstrap interval | verdict |",
+            "|---|---|---|---|---|---|",
+        ]
     for c in [*conds, "mPC"]:
         m = d["enki_vs_random"][c]
         title = cond_title(c) if c != "mPC" else "mPC"
-        lines.append(
-            f"| {title} | {100 * m['margin']:+.1f} | {100 * m['spread']:.1f} | {m['verdict']} |"
-        )
+        row = f"| {title} | {100 * m['margin']:+.1f} | {100 * m['spread']:.1f} | {m['verdict']} |"
+        if ci:
+            row += f" {_interval(m['ci'])} | {m['ci']['verdict']} |"
+        lines.append(row)
     aims = d["aims"]
     r, cl, h = aims["random_of_default_clean"], aims["clean_loss"], aims["hardest_margin"]
     word = {True: "**met**", False: "**missed**"}
@@ -2036,8 +3076,11 @@ def _domain_section(name: str, d: dict[str, Any]) -> list[str]:
         f"{word[h['met']]}.",
         "",
     ]
-    lines += _budget_lines(d)
     return lines
+
+
+def _interval(ci: dict[str, Any]) -> str:
+    return f"[{100 * ci['low']:+.1f}, {100 * ci['high']:+.1f}]"
 
 
 def _budget_lines(d: dict[str, Any]) -> list[str]:
@@ -2051,12 +3094,12 @@ def _budget_lines(d: dict[str, Any]) -> list[str]:
     walls = [
         t["seconds"]
         for a in ("enki", "random", "corruption_mix")
-        for t in arms[a].get("training", [])
+        for t in arms.get(a, {}).get("training", [])
     ]
     loads = [
         t["loadavg_start"][0]
         for a in ("enki", "random", "corruption_mix")
-        for t in arms[a].get("training", [])
+        for t in arms.get(a, {}).get("training", [])
     ]
     run = d.get("run", {})
     sel = d["enki_selection"]["counts"]
@@ -2103,7 +3146,7 @@ def _budget_lines(d: dict[str, Any]) -> list[str]:
             "own search) — its own budget; its training contexts were not kept out of the "
             "held-out region, so (d) region is not held out for it;"
         )
-    shared = arms["corruption_mix"].get("training", [{}])[0].get("shared")
+    shared = arms.get("corruption_mix", {}).get("training", [{}])[0].get("shared")
     if shared:
         lines.append(
             f"- the corruption mix is trained once per seed for every {shared['platform']} "
@@ -2247,8 +3290,11 @@ def _space_plot(plt: Any, d: dict[str, Any], name: str, images: Path, meta: Any)
 
 
 def write_report(doc: dict[str, Any], page: Path, images: Path) -> None:
-    """docs/enki.md and docs/images/enki-* from the JSON."""
-    page.write_text(render_report(doc), encoding="utf-8")
+    """docs/enki.md and docs/images/enki-* from the JSON (with the rounds' results).
+
+    A round's own results (``doc["round"]``) make a page of that round alone.
+    """
+    page.write_text(render_report(doc, {} if "round" in doc else None), encoding="utf-8")
     write_plots(doc, images)
 
 

@@ -326,3 +326,45 @@ def test_a_folder_from_before_the_oracle_options_were_the_stage_s_own(
     rerun = _run([*argv(chain["model"], chain["data"], work), "--oracle-architecture", "patch_cnn"])
     assert rerun["rerun_stages"] == ["oracle"]
     assert rerun["oracle"]["architecture"] == "patch_cnn"
+
+
+def test_a_second_opinion_gives_the_learnability_cap_its_second_model(
+    chain: dict[str, Any],
+) -> None:
+    """Only the contexts the input model fails are measured again; both below: left out."""
+    from dataclasses import replace
+
+    import numpy as np
+
+    from anunnaki.cli._robustify import _config
+    from anunnaki.enki import SelectionRule
+
+    archive = read_archive(chain["summary"]["archive"]["path"])
+    f1 = np.sort(np.unique(archive.f1))
+    assert len(f1) > 1  # a floor between two F1s: some contexts below it, some above
+    floor = float((f1[0] + f1[1]) / 2)
+    below = np.flatnonzero(archive.f1 < floor)
+    work = chain["tmp"] / "second"
+    more = ["--archive", chain["summary"]["archive"]["path"], "--second-opinion",
+            str(MODELS / "rover-default.safetensors")]  # fmt: skip
+    config = _config(build_parser().parse_args(argv(chain["model"], chain["data"], work, *more)))
+    assert config.options()["second_opinion"] == str(MODELS / "rover-default.safetensors")
+    config = replace(config, rule=SelectionRule(contexts=4, weights=(1, 3, 3), learnable=floor))
+    seen: list[str] = []
+
+    def stop(stage: str, done: int, total: int) -> None:
+        seen.append(stage)
+        if stage.startswith("fine-tune"):
+            raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt):
+        robustify(chain["model"], chain["data"], work, config, progress=stop)
+    picked = json.loads((work / "stages" / "select.json").read_text("utf-8"))
+    # the second model is the input model's own file: it fails exactly where the input does
+    assert picked["second_opinion"]["model_id"] == "rover-default"
+    assert picked["second_opinion"]["measured"] == len(below)
+    assert picked["unlearnable"] == below.tolist() and picked["cap"] == "applied"
+    assert "learnability: rover-default" in seen
+    # without it: one model, nothing left out, and no option recorded
+    plain = _config(build_parser().parse_args(argv(chain["model"], chain["data"], work)))
+    assert plain.second_opinion is None and "second_opinion" not in plain.options()

@@ -15,6 +15,7 @@ from anunnaki.enki import (
     ContextSource,
     CorruptionMix,
     EnkiError,
+    MixedContexts,
     SourceSpec,
     UniformContexts,
     WorstOfK,
@@ -154,3 +155,44 @@ def test_a_fine_tune_with_worst_of_k_consistency_and_ema_reports_its_forward_pas
     with pytest.raises(EnkiError, match="consistency"):  # the folder is of this fine-tune
         finetune(model, train, val, source, budget=budget, seed=1, consistency=0.0,
                  checkpoints=tmp_path / "c")  # fmt: skip
+
+
+def test_every_source_returns_the_occlusion_mask_of_its_very_draw() -> None:
+    """A raindrop hides what is behind it: the frame comes with its mask (ignore boxes)."""
+    from anunnaki.enlil import to_phenomenon_vector
+    from anunnaki.lec import Augmenter
+    from anunnaki.phenomena import PHENOMENA
+
+    image = np.full((32, 32, 3), 128, np.uint8)
+    drop = PHENOMENA.create("raindrop")
+    # the mask is the phenomenon's own for the context and seed the source drew
+    rng, again = np.random.default_rng(7), np.random.default_rng(7)
+    for _ in range(5):
+        out, mask = UniformContexts("raindrop", clean=0.0).perturb(image, rng)
+        params = drop.from_vector(to_phenomenon_vector(drop, again.random(4)))
+        seed = int(again.integers(2**31 - 1))
+        assert np.array_equal(out, drop.apply(image, params, seed=seed))
+        assert np.array_equal(mask, drop.occlusion(image.shape, params, seed))
+    assert mask.shape == (32, 32) and mask.dtype == np.float32
+    elites = [[0.5, 0.5, 0.9, 0.5]]
+    for source in (ArchiveContexts("raindrop", elites), ArchiveMix("raindrop", elites),
+                   MixedContexts([UniformContexts("raindrop")]),
+                   WorstOfK(UniformContexts("raindrop"), k=2)):  # fmt: skip
+        out, mask = source.perturb(image, np.random.default_rng(1))
+        assert out.shape == image.shape and mask.shape == (32, 32) and mask.max() > 0
+    # worst-of-k: every candidate with its own mask, the clean frame alone
+    offered = [WorstOfK(UniformContexts("raindrop"), k=3, clean=0.5).candidates(image, rng)
+               for _ in range(20)]  # fmt: skip
+    assert {len(c) for c in offered} == {1, 3}
+    for found in offered:
+        if len(found) == 1:
+            assert found[0] is image
+        else:
+            assert all(isinstance(c, tuple) and c[1].shape == (32, 32) for c in found)
+    # the corruption mix: the Augmenter's occluded path, the same draws
+    mixed = CorruptionMix(["raindrop"], clean=0.0).perturb(image, np.random.default_rng(3))
+    aug = Augmenter(["raindrop"], probability=1.0).occluded(image, np.random.default_rng(3))
+    assert np.array_equal(mixed[0], aug[0]) and np.array_equal(mixed[1], aug[1])
+    # a phenomenon without a mask: the frame alone, as before
+    assert isinstance(UniformContexts("hsl").perturb(image, rng), np.ndarray)
+    assert isinstance(CorruptionMix(["fog"]).perturb(image, rng), np.ndarray)

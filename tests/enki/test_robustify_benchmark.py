@@ -123,7 +123,8 @@ def test_quick_run_end_to_end_resumes_and_reports(
     d = doc["domains"]["rover-hsl"]
     assert list(d["arms"]) == ["default", "enki", "random", "corruption_mix", "today", "shipped"]
     seeds = list(doc["settings"]["seeds"])
-    conditions = ["clean", "random", "hardest", "family:motion_blur", "region"]
+    # (c′) too: the quick run searches each final model for its own hardest contexts
+    conditions = ["clean", "random", "hardest", "family:motion_blur", "region", "own_hardest"]
     for arm, entry in d["arms"].items():
         trained = arm in ("enki", "random", "corruption_mix")
         assert [p["seed"] for p in entry["per_seed"]] == (seeds if trained else [None])
@@ -412,3 +413,190 @@ def test_quick_run_with_recipe_arms_counts_their_forward_passes(
         source["inner"]["excluded_box"]
         == json.loads((work / "rover-hsl" / "conditions.json").read_text("utf-8"))["box"]
     )
+
+
+def _calibration(work: Path, key: str, **costs: Any) -> None:
+    """A calibration as the plan reads it from the work folder (no training to measure it)."""
+    record = {"step": 1.0, "step_core": 1.0, "setup": 0.0, "forward": 0.0, "search_start": 0.0,
+              "render": {"hsl": 0.0, "raindrop": 0.0, "fog": 0.0, "rain+brightness": 0.0},
+              "measured": "test", "loadavg": [0.0], "data": "-"}  # fmt: skip
+    (work / "calibration.json").parent.mkdir(parents=True, exist_ok=True)
+    (work / "calibration.json").write_text(json.dumps({key: record | costs}))
+
+
+def test_the_plan_counts_a_round_without_training(
+    bench: Any, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    work = tmp_path / "work"
+    _calibration(work, "rover/threads=1/batch=32")
+    argv = ["--plan", "--round", "screening", "--work", str(work)]
+    assert bench.main(argv) == 0
+    text = capsys.readouterr().out
+    assert not (work / "rover-hsl").exists()  # nothing ran: no searches, no arms
+    # 9 arms (A, A+c, B-G, mix) × 3 seeds × 96 steps; the corruption mix trained once for
+    # the rover (in rover-hsl, the first domain), only measured in the other two
+    assert "rover-hsl: 9 arms × 3 seeds × 96 steps" in text
+    assert (
+        "rover-hsl: 9 arms × 3 seeds × 96 steps (enki, random, corruption_mix, random_c, " in text
+    )
+    # searches: Enki's and (c)'s, an Enki search of its own for seeds 1 and 2 (seed 0's is
+    # the common one), and (c′) against each of the 30 models measured (default, today's,
+    # shipped and the 27 arm × seed runs)
+    assert "27 fine-tunes, 2592 optimiser steps, 34 searches" in text
+    assert "rover-raindrop: 9 arms × 3 seeds × 96 steps" in text and "24 fine-tunes, 2304" in text
+    # rover-fog rebuilds today's rover-fog (504 steps of its own command) once
+    assert "24 fine-tunes, 2808 optimiser steps" in text
+    # one second per step, nothing else: the estimate is the steps
+    assert "total: 75 fine-tunes, 7,704 optimiser steps, 101 searches" in text
+    assert "about 2.1 h of compute" in text  # 7,704 s
+    # renders: worst-of-k renders k candidates for each perturbed frame (96 × 32 × 0.7)
+    s = replace_settings(bench, bench.ROUNDS["screening"].settings["rover"])
+    calib = json.loads((work / "calibration.json").read_text())["rover/threads=1/batch=32"]
+    hsl = bench.plan_domain(bench.DOMAINS["rover-hsl"], s, ("random", "archive_mix_wok"), calib)
+    plain, worst = 2150, 8601
+    own = s.n_own * s.test_images + s.hard_budget * s.search_images  # (c′): search, measure
+    measured = (1 + 8 + 6 + 4 + 4) * s.test_images
+    prep = (64 * 3 + 48) * 24 + 22 * 64  # the searches' evaluations, (b)-(d) once
+    assert hsl["renders"] == prep + 3 * (plain + worst) + 9 * own
+    assert hsl["forwards"] == (64 * 3 + 48) * 24 + 9 * (measured + own) + 3 * (
+        96 * 32 + 96 * 32 + worst
+    )
+    assert hsl["jobs"]["random-s0"] == hsl["jobs"]["archive_mix_wok-s2"] == 96.0
+
+
+def replace_settings(bench: Any, changes: dict[str, Any]) -> Any:
+    from dataclasses import replace
+
+    return replace(bench.Settings(), **changes)
+
+
+def test_the_confirmation_plans_the_screenings_best_enki_arm(
+    bench: Any, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    work, screening = tmp_path / "work", tmp_path / "screening.json"
+    _calibration(work, "rover/threads=1/batch=32")
+    uav = json.loads((work / "calibration.json").read_text())["rover/threads=1/batch=32"]
+    both = json.loads((work / "calibration.json").read_text()) | {"uav/threads=1/batch=32": uav}
+    (work / "calibration.json").write_text(json.dumps(both))
+    argv = ["--plan", "--round", "confirmation", "--work", str(work), "--screening", str(screening)]
+    assert bench.main(argv) == 0
+    text = capsys.readouterr().out
+    assert "best Enki arm: archive_mix_wok_c (the screening has not run" in text
+    assert "rover-hsl: 3 arms × 3 seeds × 504 steps (random, random_c, archive_mix_wok_c)" in text
+    assert "uav-fog: 3 arms × 3 seeds × 96 steps" in text
+    with pytest.raises(SystemExit, match="run --round screening first"):
+        bench.round_arms(bench.ROUNDS["confirmation"], screening, planning=False)
+
+    def domain(margins: dict[str, float], clean: dict[str, float]) -> dict[str, Any]:
+        vs = {a: {"own_hardest": {"margin": m}} for a, m in margins.items()}
+        arms = {a: {"clean": {"mean": c}} for a, c in clean.items()}
+        return {"vs_random_c": vs, "arms": arms}
+
+    clean = {"default": 0.9, "archive_mix": 0.89, "archive_mix_wok": 0.8}
+    doc = {"domains": {
+        "rover-hsl": domain({"archive_mix": 0.02, "archive_mix_wok": 0.10}, clean),
+        "rover-fog": domain({"archive_mix": 0.04, "archive_mix_wok": 0.10}, clean),
+    }}  # fmt: skip
+    screening.write_text(json.dumps(doc))
+    best = bench.best_arm(doc["domains"])  # D wins on (c′) but loses 10 points clean
+    assert best["arm"] == "archive_mix" and best["mean_margin"] == 0.03
+    assert best["margins"] == {"archive_mix": 0.03, "archive_mix_wok": 0.1}
+    arms, chosen = bench.round_arms(bench.ROUNDS["confirmation"], screening, planning=False)
+    assert arms == "=A,A+c,C" and chosen["arm"] == "archive_mix"
+    assert bench.parse_arms(arms) == ("random", "random_c", "archive_mix")
+
+
+def test_the_paired_bootstrap_tells_a_tie_from_a_win(bench: Any) -> None:
+    rng = np.random.default_rng(1)
+    base = [{"c": list(rng.uniform(0.2, 0.8, 8))} for _ in range(3)]
+    # a known win: +5 points on every context of every seed
+    win = [{"c": [v + 0.05 for v in r["c"]]} for r in base]
+    out = bench.paired_bootstrap(win, base, ["c"])
+    assert out["verdict"] == "win" and out["margin"] == 0.05
+    assert 0 < out["low"] <= 0.05 <= out["high"]
+    loss = bench.paired_bootstrap(base, win, ["c"])
+    assert loss["verdict"] == "loss" and loss["high"] < 0
+    # a known tie: ±5 points, context by context, summing to nothing
+    tie = [{"c": [v + (0.05 if i % 2 else -0.05) for i, v in enumerate(r["c"])]} for r in base]
+    out = bench.paired_bootstrap(tie, base, ["c"])
+    assert out["verdict"] == "tie" and out["margin"] == 0.0 and out["low"] < 0 < out["high"]
+    # several conditions: the mean of their margins (mPC); unpaired contexts ((c′)) too
+    two = bench.paired_bootstrap(
+        [r | {"d": r["c"]} for r in win], [r | {"d": r["c"]} for r in base], ["c", "d"]
+    )
+    assert two["margin"] == 0.05 and two["verdict"] == "win"
+    # each model's own contexts are drawn apart: the interval widens (paired, a constant
+    # shift has none)
+    paired = bench.paired_bootstrap(win, base, ["c"])
+    apart = bench.paired_bootstrap(win, base, ["c"], paired_contexts=False)
+    assert paired["high"] - paired["low"] < 1e-9
+    assert apart["margin"] == 0.05 and apart["high"] - apart["low"] > 0.05
+    with pytest.raises(ValueError, match="paired runs"):
+        bench.paired_bootstrap(win[:2], base, ["c"])
+
+
+@pytest.mark.slow
+@pytest.mark.timeout(600)
+def test_own_hardest_contexts_and_a_dask_cluster_give_the_in_process_figures(
+    bench: Any, rover_data: Path, tmp_path: Path
+) -> None:
+    """(c′) per model; A, A+c and D alone, D's seeds on searches of their own; a LocalCluster."""
+    torch = pytest.importorskip("torch")
+    pytest.importorskip("distributed")
+    argv = ["--quick", "--rover-data", str(rover_data), "--arms", "=A,A+c,D", "--seeds", "0,1",
+            "--k", "2", "--seed-searches", "--quiet"]  # fmt: skip
+    out, work = tmp_path / "here.json", tmp_path / "here"
+    threads = torch.get_num_threads()
+    try:
+        assert bench.main([*argv, "--work", str(work), "--output", str(out)]) == 0
+    finally:
+        torch.set_num_threads(threads)
+    doc = json.loads(out.read_text("utf-8"))
+    d = doc["domains"]["rover-hsl"]
+    assert [a for a in d["arms"] if a in bench.RECIPES] == ["random", "random_c", "archive_mix_wok"]
+    assert "enki_vs_random" not in d and doc["settings"]["n_own"] == 2
+    assert (work / "plan.json").is_file()
+    # seed 1's Enki arms train on a search of their own (seed 0's is the common search)
+    assert d["searches"]["enki_per_seed"]["1"]["seed"] == 101
+    assert d["searches"]["enki_per_seed"]["0"] == d["searches"]["enki"]
+    prep = json.loads((work / "rover-hsl" / "conditions.json").read_text("utf-8"))
+    assert prep["enki_selections"]["0"] == prep["enki_selection"]
+    assert (work / "rover-hsl" / "search-train-s1").is_dir()
+    assert not (work / "rover-hsl" / "search-train-s0").exists()
+    settings = bench.Settings(
+        **{k: v for k, v in doc["settings"].items() if k not in ("seeds", "families")}
+    )
+    for seed in (0, 1):
+        mix = bench.source_for("archive_mix", bench.DOMAINS["rover-hsl"], prep, settings, seed)
+        assert np.asarray(mix.contexts).tolist() == prep["enki_selections"][str(seed)]["contexts"]
+    for entry in d["arms"].values():  # (c′): every model searched and measured on its own
+        assert entry["own_hardest"]["n"] == len(entry["per_seed"])
+        for run in entry["own_searches"]:
+            assert len(run["contexts"]) == 2 and run["search"]["evaluations"] == 6
+    assert d["conditions"]["own_hardest"]["search"] == {"budget": 6, "seed": 200, "contexts": 2}
+    vs = d["vs_random_c"]["archive_mix_wok"]
+    assert set(vs) == {"clean", "random", "hardest", "family:motion_blur", "region",
+                       "own_hardest", "mPC"}  # fmt: skip
+    for v in vs.values():
+        assert v["low"] <= v["margin"] <= v["high"] and v["verdict"] in ("win", "tie", "loss")
+    assert doc["best_enki_arm"]["arm"] == "archive_mix_wok"
+    page = bench.render_report(doc)
+    assert "## The ablation: every Enki arm against random + consistency (A+c)" in page
+    assert "| rover-hsl | D archive mix, worst-of-k |" in page and "(c′) hardest" in page
+    # docs/enki.md takes the rounds' results beside the comparison: one command, both budgets
+    rounds = bench.render_report(doc, {"screening": doc | {"round": "screening"}})
+    assert "## Issue 33's ablation: the rounds" in rounds and "### Screening" in rounds
+    assert "(c′): 2 contexts of a 6-evaluation search against each final model." in rounds
+    assert "Each seed's Enki arms train on a search of their own" in rounds
+    assert rounds.count("| rover-hsl | D archive mix, worst-of-k |") == 2  # and in its round
+    # the same arms × seeds fanned out over a LocalCluster (one worker process, one thread)
+    there, work2 = tmp_path / "there.json", tmp_path / "there"
+    run = _run(*argv, "--work", str(work2), "--output", str(there), "--scheduler", "local",
+               "--workers", "1")  # fmt: skip
+    assert run.returncode == 0, run.stdout[-2000:] + run.stderr[-4000:]
+    other = json.loads(there.read_text("utf-8"))["domains"]["rover-hsl"]
+    assert other["run"]["scheduler"] == "local" and other["run"]["workers"] == 1
+    for arm, entry in d["arms"].items():
+        assert other["arms"][arm]["per_seed"] == entry["per_seed"], arm
+        assert other["arms"][arm]["own_searches"] == entry["own_searches"], arm
+    assert other["vs_random_c"] == d["vs_random_c"]

@@ -54,6 +54,10 @@ def add_parser(sub: Any) -> None:
         metavar=("W0", "W1", "W2"),
         help="weights of categories 0 1 2 (1 3 3)",
     )
+    s.add_argument("--second-opinion", metavar="MODEL",
+                   help="a second model (file or registry id) for the learnability cap: a "
+                   "context is left out only if it too scores F1 below the floor there "
+                   "(without one, nothing is left out)")  # fmt: skip
     f = p.add_argument_group("fine-tune")
     f.add_argument("--clean", type=float, default=0.3, help="share of clean frames (0.3)")
     f.add_argument("--epochs", type=int, default=8, help="(8)")
@@ -139,6 +143,7 @@ def _config(args: argparse.Namespace) -> Any:
         share=args.share,
         jitter=args.jitter,
         consistency=args.consistency,
+        second_opinion=args.second_opinion,
     )
 
 

@@ -74,6 +74,11 @@ class RobustifyConfig:
         share: ``archive_mix``: share of perturbed frames from the selected contexts.
         jitter: ``archive_mix``: standard deviation of their jitter (normalised units).
         consistency: λ of the consistency loss (0: off).
+        second_opinion: A second model (file or registry id) for the learnability cap: its
+            F1 is measured on the archive's contexts where the input model scores below
+            the floor (``rule.learnable``), on the search's val batch, and a context is left
+            out only if both score below it (:func:`select_contexts`' ``others``). ``None``:
+            one model, nothing left out.
 
     The recipe's options (``source`` … ``consistency``, and ``finetune.ema``) are recorded
     in the work folder only where they differ from the defaults, so that a folder made
@@ -108,6 +113,7 @@ class RobustifyConfig:
     share: float = 0.5
     jitter: float = 0.1
     consistency: float = 0.0
+    second_opinion: str | None = None
 
     def __post_init__(self) -> None:
         """Refuse a domain or an id that is no name (they become file names: docs/robustify.md).
@@ -153,6 +159,8 @@ class RobustifyConfig:
             data["recipe"] = self.recipe()
         if data["rule"]["learnable"] == LEARNABLE_F1:  # as recorded before the cap existed
             del data["rule"]["learnable"]
+        if data["second_opinion"] is None:  # folders made before it continue as they were
+            del data["second_opinion"]
         return data
 
     @staticmethod
@@ -388,8 +396,40 @@ class _Chain:
         return archive
 
     def select(self, archive_path: str) -> dict[str, Any]:
-        selection = select_contexts(read_archive(archive_path), self.cfg.rule)
-        return selection.as_dict() | {"counts": selection.counts()}
+        archive = read_archive(archive_path)
+        others, second = self._second_opinion(archive)
+        selection = select_contexts(archive, self.cfg.rule, others=others)
+        return selection.as_dict() | {"counts": selection.counts()} | second
+
+    def _second_opinion(self, archive: Archive) -> tuple[list[Any], dict[str, Any]]:
+        """The second model's F1 where the input model is below the floor (``nan`` elsewhere).
+
+        Only those rows can be left out by the cap, so only they are measured: on the
+        search's val batch, with its seed, as the archive's own F1 was.
+        """
+        cfg = self.cfg
+        if cfg.second_opinion is None or cfg.rule.learnable == 0.0:
+            return [], {}
+        from anunnaki.enlil import executor_map
+        from anunnaki.lec import resolve_model
+
+        other = resolve_model(cfg.second_opinion)
+        low = np.flatnonzero(np.asarray(archive.f1, np.float64) < cfg.rule.learnable)
+        f1 = np.full(len(archive), np.nan)
+        job = self._job(str(other.file), None)  # the file resolved
+        label, done = f"learnability: {other.model_id}", [0]
+        self.progress(label, 0, len(low))
+
+        def tick(i: int, result: Any) -> None:
+            done[0] += 1
+            self.progress(label, done[0], len(low))
+
+        with executor_map(cfg.workers, on_result=tick) as run:
+            results = run([(job, archive.params[row].tolist()) for row in low])
+        for row, result in zip(low, results, strict=True):
+            f1[row] = result.f1
+        record = {"model_id": other.model_id, "sha256": other.sha256, "measured": len(low)}
+        return [f1], {"second_opinion": record}
 
     def finetune(self, search: dict[str, Any], selection: Selection) -> dict[str, Any]:
         from anunnaki.lec import save_detector

@@ -20,6 +20,12 @@ geometric augmentation. With probability ``clean`` the image stays clean; otherw
   under the current network (:class:`anunnaki.lec.CandidatePerturb`), or one at random
   (the control with the same rendering cost).
 
+Where the phenomenon reports an occlusion mask (a raindrop: ``Phenomenon.occlusion``), a
+source returns ``(image, mask)`` instead of the image (:data:`Perturbed`, as
+:data:`anunnaki.lec.Perturb` allows): the training loop then turns the boxes the phenomenon
+hides into ignore boxes (``TrainConfig.ignore``), for every source and worst-of-k's every
+candidate alike. A phenomenon without a mask gives the image alone, as before.
+
 By name (``anunnaki robustify --source``, benchmarks/robustify.py): :data:`CONTEXT_SOURCES`
 builds ``archive``, ``archive_mix``, ``uniform`` and ``corruption_mix`` from a
 :class:`SourceSpec`, and :func:`make_source` wraps one in :class:`WorstOfK` when asked.
@@ -37,7 +43,7 @@ import numpy.typing as npt
 
 from anunnaki.enki._errors import EnkiError
 from anunnaki.enlil import resolve_phenomenon, to_phenomenon_vector
-from anunnaki.phenomena import PHENOMENA, Phenomenon
+from anunnaki.phenomena import PHENOMENA, Mask, Phenomenon
 from anunnaki.plugins import Registry
 
 __all__ = [
@@ -54,6 +60,13 @@ __all__ = [
 ]
 
 Image = npt.NDArray[np.uint8]
+#: A perturbed frame: the image, or ``(image, mask)`` with the phenomenon's occlusion mask
+#: where it reports one (the boxes it hides become ignore boxes in training).
+Perturbed = Image | tuple[Image, Mask]
+
+
+def _with_mask(out: Image, mask: Mask | None) -> Perturbed:
+    return out if mask is None else (out, mask)
 
 
 class ContextSource(abc.ABC):
@@ -72,10 +85,13 @@ class ContextSource(abc.ABC):
         self.clean = clean
 
     @abc.abstractmethod
-    def perturb(self, image: Image, rng: np.random.Generator) -> Image:
-        """Return *image* under one context of this source (never clean)."""
+    def perturb(self, image: Image, rng: np.random.Generator) -> Perturbed:
+        """Return *image* under one context of this source (never clean).
 
-    def __call__(self, image: Image, rng: np.random.Generator) -> Image:
+        With the phenomenon's occlusion mask where it has one: ``(image, mask)``.
+        """
+
+    def __call__(self, image: Image, rng: np.random.Generator) -> Perturbed:
         """The training loop's hook: clean with probability ``clean``, else :meth:`perturb`."""
         if rng.random() < self.clean:
             return image
@@ -86,9 +102,11 @@ class ContextSource(abc.ABC):
         return {"kind": self.kind, "clean": self.clean}
 
 
-def _apply(phen: Phenomenon, unit: npt.NDArray[np.float64], image: Image, seed: int) -> Image:
+def _apply(phen: Phenomenon, unit: npt.NDArray[np.float64], image: Image, seed: int) -> Perturbed:
+    """*image* under the context *unit*, with the occlusion mask of that very draw, if any."""
     params = phen.from_vector(to_phenomenon_vector(phen, unit))
-    return phen.apply(image, params, seed=seed)
+    out = phen.apply(image, params, seed=seed)
+    return _with_mask(out, phen.occlusion(image.shape, params, seed))
 
 
 class ArchiveContexts(ContextSource):
@@ -116,7 +134,7 @@ class ArchiveContexts(ContextSource):
                 f"{list(self.phenomenon.param_names)}, got shape {self.contexts.shape}"
             )
 
-    def perturb(self, image: Image, rng: np.random.Generator) -> Image:
+    def perturb(self, image: Image, rng: np.random.Generator) -> Perturbed:
         """One of the contexts, drawn uniformly."""
         unit = self.contexts[int(rng.integers(len(self.contexts)))]
         return _apply(self.phenomenon, unit, image, int(rng.integers(2**31 - 1)))
@@ -138,9 +156,13 @@ class UniformContexts(ContextSource):
         super().__init__(clean=clean)
         self.phenomenon = resolve_phenomenon(phenomenon)
 
-    def perturb(self, image: Image, rng: np.random.Generator) -> Image:
-        """A uniformly random context."""
-        unit = rng.random(len(self.phenomenon.param_names))
+    def draw(self, rng: np.random.Generator) -> npt.NDArray[np.float64]:
+        """One normalised context, uniform over ``[0, 1]^d`` (a subclass may restrict it)."""
+        return rng.random(len(self.phenomenon.param_names))
+
+    def perturb(self, image: Image, rng: np.random.Generator) -> Perturbed:
+        """A context of :meth:`draw`."""
+        unit = self.draw(rng)
         return _apply(self.phenomenon, unit, image, int(rng.integers(2**31 - 1)))
 
     def describe(self) -> dict[str, Any]:
@@ -178,9 +200,9 @@ class CorruptionMix(ContextSource):
             raise EnkiError(f"the corruption mix has no phenomenon left after excluding {exclude}")
         self.augmenter = Augmenter(kept, probability=1.0)
 
-    def perturb(self, image: Image, rng: np.random.Generator) -> Image:
-        """A random phenomenon of the library at a random strength."""
-        return self.augmenter(image, rng)
+    def perturb(self, image: Image, rng: np.random.Generator) -> Perturbed:
+        """A random phenomenon of the library at a random strength (the Augmenter's draws)."""
+        return _with_mask(*self.augmenter.occluded(image, rng))
 
     def describe(self) -> dict[str, Any]:
         """Kind, clean share and the library."""
@@ -228,7 +250,7 @@ class MixedContexts(ContextSource):
             )
         self.weights = w / w.sum()
 
-    def perturb(self, image: Image, rng: np.random.Generator) -> Image:
+    def perturb(self, image: Image, rng: np.random.Generator) -> Perturbed:
         """A frame of one inner source, drawn by weight."""
         k = int(rng.choice(len(self.sources), p=self.weights))
         return self.sources[k].perturb(image, rng)
@@ -317,7 +339,7 @@ class ArchiveMix(ContextSource):
             f"{self.exclude.tolist() if self.exclude is not None else None}; give a smaller box"
         )
 
-    def perturb(self, image: Image, rng: np.random.Generator) -> Image:
+    def perturb(self, image: Image, rng: np.random.Generator) -> Perturbed:
         """A jittered elite or a uniform context (:meth:`draw`)."""
         unit, _ = self.draw(rng)
         return _apply(self.phenomenon, unit, image, int(rng.integers(2**31 - 1)))
@@ -373,13 +395,17 @@ class WorstOfK(ContextSource):
         self.inner, self.k = inner, int(k)
         self.select: Literal["hardest", "random"] = select
 
-    def candidates(self, image: Image, rng: np.random.Generator) -> list[Image]:
-        """The image alone (with probability ``clean``), else *k* frames of the inner source."""
+    def candidates(self, image: Image, rng: np.random.Generator) -> list[Perturbed]:
+        """The image alone (with probability ``clean``), else *k* frames of the inner source.
+
+        Each frame with its occlusion mask where the phenomenon has one: the loop scores
+        and trains each candidate with the boxes it hides as ignore boxes.
+        """
         if rng.random() < self.clean:
             return [image]
         return [self.inner.perturb(image, rng) for _ in range(self.k)]
 
-    def perturb(self, image: Image, rng: np.random.Generator) -> Image:
+    def perturb(self, image: Image, rng: np.random.Generator) -> Perturbed:
         """Without a network to judge: *k* candidates rendered, one kept at random."""
         found = [self.inner.perturb(image, rng) for _ in range(self.k)]
         return found[int(rng.integers(self.k))]

@@ -69,7 +69,14 @@ from anunnaki.enlil._oracle_train import (
     train_oracle_seeds,
 )
 from anunnaki.enlil._plot import plot_archive
-from anunnaki.enlil._run import Job, SearchOutcome, occupied_cells, run_search, summarise
+from anunnaki.enlil._run import (
+    Job,
+    SearchOutcome,
+    executor_map,
+    occupied_cells,
+    run_search,
+    summarise,
+)
 from anunnaki.enlil._search import SEARCHES, EnlilSearch, RandomSearch, Search, SobolSearch
 from anunnaki.enlil._sweep import ContextDraw, ContextSpec, draw_contexts, parse_contexts
 
@@ -113,6 +120,7 @@ __all__ = [
     "draw_contexts",
     "evaluate_context",
     "evaluate_oracles",
+    "executor_map",
     "fit_baseline",
     "fit_baselines",
     "fixed_batch",

@@ -139,34 +139,62 @@ def _one_thread() -> None:
     torch.set_num_threads(1)
 
 
-MapFn = Callable[[list[tuple[Job, list[float]]]], list[ContextResult]]
+MapFn = Callable[[list[Any]], list[Any]]
 
 
 @contextmanager
-def executor_map(workers: int = 1, dask: Any = None) -> Iterator[MapFn]:
+def executor_map(
+    workers: int = 1,
+    dask: Any = None,
+    *,
+    fn: Callable[[Any], Any] = evaluate_task,
+    on_result: Callable[[int, Any], None] | None = None,
+) -> Iterator[MapFn]:
     """Yield ``map(tasks) -> results`` (in task order) for a local pool or a Dask cluster.
 
     Args:
         workers: Local processes (1: in this process).
         dask: A scheduler address (``tcp://HOST:8786``) or a ``distributed.Client``.
+        fn: What each task runs (default: one context's evaluation, the search's task);
+            module-level, for the processes and the cluster to run it.
+        on_result: ``on_result(index, result)`` as each task's result comes back (on a
+            cluster in the order they finish), e.g. for a progress line.
 
     """
     if dask is not None:
         try:
-            from distributed import Client
+            from distributed import Client, as_completed
         except ImportError as exc:  # pragma: no cover - depends on the environment
             from anunnaki.errors import MissingExtraError
 
             raise MissingExtraError("distributed", "enlil") from exc
         client: Any = dask if isinstance(dask, Client) else Client(dask)  # type: ignore[no-untyped-call]
+
+        def remote(tasks: list[Any]) -> list[Any]:
+            futures = client.map(fn, tasks, pure=False)
+            if on_result is not None:
+                index = {f.key: i for i, f in enumerate(futures)}
+                for future in as_completed(futures):  # type: ignore[no-untyped-call]
+                    on_result(index[future.key], future.result())
+            return list(client.gather(futures))
+
         try:
-            yield lambda tasks: list(client.gather(client.map(evaluate_task, tasks, pure=False)))
+            yield remote
         finally:
             if client is not dask:
                 client.close()
         return
+
+    def report(results: Iterator[Any]) -> list[Any]:
+        out = []
+        for i, result in enumerate(results):
+            if on_result is not None:
+                on_result(i, result)
+            out.append(result)
+        return out
+
     if workers <= 1:
-        yield lambda tasks: [evaluate_task(t) for t in tasks]
+        yield lambda tasks: report(fn(t) for t in tasks)
         return
     # spawn, not fork: the parent has usually run torch already (the clean F1), and a child
     # forked from a process whose OpenMP pool is up hangs on its first parallel region.
@@ -176,7 +204,7 @@ def executor_map(workers: int = 1, dask: Any = None) -> Iterator[MapFn]:
         initializer=_one_thread,
     )
     try:
-        yield lambda tasks: list(pool.map(evaluate_task, tasks))
+        yield lambda tasks: report(pool.map(fn, tasks))
     finally:
         pool.shutdown(cancel_futures=True)
 

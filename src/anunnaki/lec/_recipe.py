@@ -60,8 +60,12 @@ class CandidatePerturb(Protocol):
 
     select: Literal["hardest", "random"]
 
-    def candidates(self, image: Image, rng: np.random.Generator) -> list[Image]:
-        """The candidate images for *image* (at least one), drawing only from *rng*."""
+    def candidates(self, image: Image, rng: np.random.Generator) -> list[Any]:
+        """The candidate images for *image* (at least one), drawing only from *rng*.
+
+        Each an image, or ``(image, mask)`` with the perturbation's occlusion mask (as
+        :data:`anunnaki.lec.Perturb` may return): the boxes it hides become ignore boxes.
+        """
         ...
 
 
