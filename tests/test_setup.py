@@ -1,8 +1,9 @@
 """scripts/setup.sh: the demo and test profiles, the stamp that makes a re-run install nothing.
 
 Run on a copy of the script beside a stand-in ``.venv/bin/python`` that records each ``pip
-install`` instead of installing, and stand-ins for the root-only apt scripts (issue #34,
-item 9: ``make demo`` installed the browser, ROS 1 and every test extra).
+install`` instead of installing, and stand-ins for the root-only apt scripts and the ROS 2
+environment's (issue #34, item 9: ``make demo`` installed the browser, ROS 1 and every test
+extra).
 """
 
 from __future__ import annotations
@@ -39,7 +40,7 @@ def checkout(tmp_path: Path) -> Path:
     shutil.copy(SETUP, tmp_path / "scripts" / "setup.sh")
     for name in ("pyproject.toml", "constraints.txt"):
         shutil.copy(ROOT / name, tmp_path / name)
-    for name in ("setup-browser.sh", "setup-ros.sh"):
+    for name in ("setup-browser.sh", "setup-ros.sh", "setup-ros2.sh"):
         _executable(tmp_path / "scripts" / name, f"#!/bin/sh\necho {name} >> calls.log\n")
     (tmp_path / ".venv" / "bin").mkdir(parents=True)
     _executable(tmp_path / ".venv" / "bin" / "python", '#!/bin/sh\necho "pip $*" >> calls.log\n')
@@ -78,10 +79,11 @@ def test_the_demo_profile_installs_its_extras_and_nothing_as_root(checkout: Path
 def test_the_test_profile_adds_the_rest_after_the_demo(checkout: Path) -> None:
     setup(checkout, "demo")
     calls = setup(checkout, "test")
-    assert calls[:2] == ["setup-browser.sh", "setup-ros.sh"]
-    assert len(calls) == 3 and installed(calls[2]) == set(profile("test")) | set(profile("demo"))
+    helpers = ["setup-browser.sh", "setup-ros.sh", "setup-ros2.sh"]  # ROS 2 in .venv-ros2
+    assert calls[:3] == helpers
+    assert len(calls) == 4 and installed(calls[3]) == set(profile("test")) | set(profile("demo"))
     assert setup(checkout, "demo") == []  # everything the demo needs is there
-    assert setup(checkout) == ["setup-browser.sh", "setup-ros.sh"]  # test is the default
+    assert setup(checkout) == helpers  # test is the default
 
 
 def test_a_changed_pyproject_installs_again(checkout: Path) -> None:

@@ -76,7 +76,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     from anunnaki.errors import AnunnakiError
     from anunnaki.ros1._bridge import Bridge
     from anunnaki.ros1._rospy import import_rospy
-    from anunnaki.rosbridge._schema import load_bridge
+    from anunnaki.rosbridge import load_bridge
 
     try:
         spec = load_bridge(args.bridge)

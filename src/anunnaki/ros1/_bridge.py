@@ -27,16 +27,18 @@ from anunnaki._closing import Closing
 from anunnaki.bus import Bus
 from anunnaki.messages import Image, ServiceReply, body_of
 from anunnaki.ros1._rospy import master_pid, message_class, reregister_node, service_class
-from anunnaki.rosbridge._convert import (
+from anunnaki.rosbridge import (
+    BridgeSpec,
     ConversionError,
+    ServiceBridge,
+    ToBus,
+    TopicBridge,
     bus_image_to_compressed,
     bus_image_to_raw,
     fill_message,
     message_to_dict,
     to_ros_fields,
 )
-from anunnaki.rosbridge._schema import BridgeSpec, ServiceBridge, TopicBridge
-from anunnaki.rosbridge._tobus import ToBus
 
 __all__ = ["Bridge"]
 

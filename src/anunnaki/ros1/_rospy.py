@@ -16,7 +16,7 @@ from types import ModuleType
 from typing import Any
 
 from anunnaki.errors import AnunnakiError
-from anunnaki.rosbridge._types import SET_STRING_SRV
+from anunnaki.rosbridge import SET_STRING_SRV
 
 __all__ = [
     "ROS_DIST_PACKAGES",

@@ -21,8 +21,7 @@ import re
 from collections.abc import Mapping
 from typing import Any
 
-from anunnaki.rosbridge import ConversionError
-from anunnaki.rosbridge._convert import coerce_value
+from anunnaki.rosbridge import ConversionError, coerce_value
 
 __all__ = ["fill_ros2_message", "ros1_style_type", "ros2_message_to_dict"]
 
