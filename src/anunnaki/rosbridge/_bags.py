@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
-from collections.abc import Iterable, Iterator, Mapping
+from collections.abc import Callable, Iterable, Iterator, Mapping
 from pathlib import Path
 from typing import Any, Literal
 
@@ -42,6 +42,9 @@ __all__ = [
 
 
 _TIME_TYPES = {"builtin_interfaces/msg/Time", "builtin_interfaces/msg/Duration"}
+
+#: What a run's records are written as in a bag: the record's JSON in a string.
+_STRING = "std_msgs/msg/String"
 
 
 def _rosbags() -> Any:
@@ -139,7 +142,7 @@ def _read_run_bag(rb: Any, path: Path) -> list[Record]:
             foreign = sorted(
                 f"{c.topic} ({_ros1_type(c.msgtype)})"
                 for c in reader.connections
-                if c.msgtype != "std_msgs/msg/String"
+                if c.msgtype != _STRING
             )
             if foreign:
                 raise ModelFileError(
@@ -247,49 +250,44 @@ def _remove_bag(out: Path) -> None:
     shutil.rmtree(out)
 
 
+def _write_strings(
+    writer: Any,
+    store: Any,
+    serialize: Callable[[Any, str], Any],
+    rows: list[tuple[float, str, Any]],
+) -> int:
+    """Each row as a ``std_msgs/String`` holding its JSON, one connection per topic."""
+    string = store.types[_STRING]
+    connections: dict[str, Any] = {}
+    for t, topic, body in rows:
+        if topic not in connections:
+            connections[topic] = writer.add_connection(topic, _STRING, typestore=store)
+        raw = serialize(string(data=json.dumps(body)), _STRING)
+        writer.write(connections[topic], max(0, round(t * 1e9)), raw)
+    return len(rows)
+
+
 def _write_ros1(rb: Any, out: Path, rows: list[tuple[float, str, Any]]) -> int:
     store = rb.typesys.get_typestore(rb.typesys.Stores.ROS1_NOETIC)
-    string = store.types["std_msgs/msg/String"]
-    n = 0
     try:
         with rb.rosbag1.Writer(out) as writer:
-            connections: dict[str, Any] = {}
-            for t, topic, body in rows:
-                if topic not in connections:
-                    connections[topic] = writer.add_connection(
-                        topic, "std_msgs/msg/String", typestore=store
-                    )
-                raw = store.serialize_ros1(string(data=json.dumps(body)), "std_msgs/msg/String")
-                writer.write(connections[topic], max(0, round(t * 1e9)), raw)
-                n += 1
+            return _write_strings(writer, store, store.serialize_ros1, rows)
     except (rb.rosbag1.WriterError, OSError) as exc:
         raise AnunnakiError(f"cannot write the bag {out}: {exc}") from None
-    return n
 
 
 def _write_ros2(rb: Any, out: Path, rows: list[tuple[float, str, Any]], kind: str) -> int:
     # std_msgs/String is the same in every ROS 2 distribution; Jazzy's store describes it
     store = rb.typesys.get_typestore(rb.typesys.Stores.ROS2_JAZZY)
-    string = store.types["std_msgs/msg/String"]
     plugin = rb.rosbag2.StoragePlugin.MCAP if kind == "mcap" else None
     options: dict[str, Any] = {"version": 9}
     if plugin is not None:
         options["storage_plugin"] = plugin
-    n = 0
     try:
         with rb.rosbag2.Writer(out, **options) as writer:
-            connections: dict[str, Any] = {}
-            for t, topic, body in rows:
-                if topic not in connections:
-                    connections[topic] = writer.add_connection(
-                        topic, "std_msgs/msg/String", typestore=store
-                    )
-                raw = store.serialize_cdr(string(data=json.dumps(body)), "std_msgs/msg/String")
-                writer.write(connections[topic], max(0, round(t * 1e9)), raw)
-                n += 1
+            return _write_strings(writer, store, store.serialize_cdr, rows)
     except (rb.rosbag2.WriterError, OSError) as exc:
         raise AnunnakiError(f"cannot write the bag {out}: {exc}") from None
-    return n
 
 
 def _in_time_order(
