@@ -13,7 +13,6 @@ from __future__ import annotations
 import argparse
 import logging
 import os
-import signal
 import sys
 import threading
 import time
@@ -23,24 +22,13 @@ __all__ = ["main"]
 
 
 def _parser() -> argparse.ArgumentParser:
+    from anunnaki.rosbridge import add_bus_arguments
+
     p = argparse.ArgumentParser(
         prog="python -m anunnaki.ros1", description="Bridge ROS 1 topics and services to the bus."
     )
     p.add_argument("bridge", help="the bridge file (anunnaki: ros1-bridge/1)")
-    p.add_argument(
-        "--connect",
-        action="append",
-        default=[],
-        metavar="ENDPOINT",
-        help="zenoh endpoint to connect to (Utu's or the launch's bus)",
-    )
-    p.add_argument(
-        "--listen",
-        action="append",
-        default=None,
-        metavar="ENDPOINT",
-        help="zenoh endpoint to listen on (default: none when connecting)",
-    )
+    add_bus_arguments(p)
     p.add_argument("--master-uri", help="the ROS master (default $ROS_MASTER_URI)")
     p.add_argument("--ros-ip", help="this host's address for ROS (default $ROS_IP)")
     p.add_argument(
@@ -55,11 +43,6 @@ def _parser() -> argparse.ArgumentParser:
         default=30.0,
         metavar="SECONDS",
         help="how long to wait for the master to answer at start (default 30)",
-    )
-    p.add_argument(
-        "--exit-with-parent",
-        action="store_true",
-        help="stop when standard input closes (the launch that started it is gone)",
     )
     return p
 
@@ -76,7 +59,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     from anunnaki.errors import AnunnakiError
     from anunnaki.ros1._bridge import Bridge
     from anunnaki.ros1._rospy import import_rospy
-    from anunnaki.rosbridge import load_bridge
+    from anunnaki.rosbridge import bus_options, load_bridge, stop_event
 
     try:
         spec = load_bridge(args.bridge)
@@ -84,19 +67,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     except AnunnakiError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
-    stop = threading.Event()
-    for sig in (signal.SIGINT, signal.SIGTERM):
-        signal.signal(sig, lambda *_: stop.set())
-    if args.exit_with_parent:
-        from anunnaki._parent import stop_with_parent
-
-        stop_with_parent(stop.set)
-    options: dict[str, object] = {"mode": "peer", "name": spec.name}
-    if args.connect:
-        options["connect"] = args.connect
-        options["listen"] = args.listen or []
-    elif args.listen:
-        options["listen"] = args.listen
+    stop = stop_event(args)
+    options = bus_options(args, spec.name)
     uri = os.environ.get("ROS_MASTER_URI", "http://localhost:11311")
     if not _wait_for_master(spec.name, uri, args.wait_master, stop):
         print(

@@ -16,7 +16,6 @@ from __future__ import annotations
 
 import argparse
 import logging
-import signal
 import sys
 import threading
 from collections.abc import Sequence
@@ -26,30 +25,14 @@ __all__ = ["main"]
 
 
 def _parser() -> argparse.ArgumentParser:
+    from anunnaki.rosbridge import add_bus_arguments
+
     p = argparse.ArgumentParser(
         prog="python -m anunnaki.ros2",
         description="Bridge ROS 2 topics and services to the bus (rclpy).",
     )
     p.add_argument("bridge", help="the bridge file (anunnaki: ros2-bridge/1)")
-    p.add_argument(
-        "--connect",
-        action="append",
-        default=[],
-        metavar="ENDPOINT",
-        help="zenoh endpoint to connect to (Utu's or the launch's bus)",
-    )
-    p.add_argument(
-        "--listen",
-        action="append",
-        default=None,
-        metavar="ENDPOINT",
-        help="zenoh endpoint to listen on (default: none when connecting)",
-    )
-    p.add_argument(
-        "--exit-with-parent",
-        action="store_true",
-        help="stop when standard input closes (the launch that started it is gone)",
-    )
+    add_bus_arguments(p)
     return p
 
 
@@ -60,7 +43,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     from anunnaki.errors import AnunnakiError
     from anunnaki.ros2._distro import installed_distro, resolve_distro
     from anunnaki.ros2._native import import_rclpy
-    from anunnaki.rosbridge import load_bridge
+    from anunnaki.rosbridge import bus_options, load_bridge, stop_event
 
     try:
         spec = load_bridge(args.bridge)
@@ -78,19 +61,8 @@ def main(argv: Sequence[str] | None = None) -> int:
             file=sys.stderr,
         )
         return 2
-    stop = threading.Event()
-    for sig in (signal.SIGINT, signal.SIGTERM):
-        signal.signal(sig, lambda *_: stop.set())
-    if args.exit_with_parent:
-        from anunnaki._parent import stop_with_parent
-
-        stop_with_parent(stop.set)
-    options: dict[str, object] = {"mode": "peer", "name": spec.name}
-    if args.connect:
-        options["connect"] = args.connect
-        options["listen"] = args.listen or []
-    elif args.listen:
-        options["listen"] = args.listen
+    stop = stop_event(args)
+    options = bus_options(args, spec.name)
     rclpy.init(signal_handler_options=rclpy.signals.SignalHandlerOptions.NO)
     try:
         return _run(rclpy, spec, options, stop, distro)

@@ -39,6 +39,7 @@ from anunnaki.rosbridge._convert import (
     to_bus_fields,
     to_ros_fields,
 )
+from anunnaki.rosbridge._process import add_bus_arguments, bus_options, stop_event
 from anunnaki.rosbridge._schema import (
     DISTROS,
     FORMAT_TAG,
@@ -81,10 +82,12 @@ __all__ = [
     "ServiceBridge",
     "ToBus",
     "TopicBridge",
+    "add_bus_arguments",
     "bag_message_to_dict",
     "bag_storage",
     "bus_image_to_compressed",
     "bus_image_to_raw",
+    "bus_options",
     "coerce_value",
     "compressed_to_image",
     "diagnostic_fields",
@@ -97,6 +100,7 @@ __all__ = [
     "parse_bridge",
     "raw_to_image",
     "read_bag",
+    "stop_event",
     "to_bus_fields",
     "to_ros_fields",
     "write_bag",
