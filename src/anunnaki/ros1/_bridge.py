@@ -37,6 +37,7 @@ from anunnaki.rosbridge import (
     bus_image_to_raw,
     fill_message,
     message_to_dict,
+    ros_reply,
     to_ros_fields,
 )
 
@@ -211,10 +212,9 @@ class Bridge(Closing):
             except Exception as exc:  # ROS exceptions: unavailable, timed out, refused
                 self.stats["failed_calls"] += 1
                 return ServiceReply(ok=False, error=f"{s.ros_service}: {type(exc).__name__}: {exc}")
-            ok = bool(reply.get("success", True))
-            if not ok:
+            answer = ros_reply(reply)
+            if not answer.ok:
                 self.stats["failed_calls"] += 1
-            error = None if ok else str(reply.get("message") or "refused")
-            return ServiceReply(ok=ok, error=error, body=reply)
+            return answer
 
         return handle

@@ -43,6 +43,7 @@ from anunnaki.rosbridge import (
     TopicBridge,
     bus_image_to_compressed,
     bus_image_to_raw,
+    ros_reply,
     to_bus_fields,
     to_ros_fields,
 )
@@ -244,11 +245,10 @@ class Ros2Bridge(Closing):
             except _CallFailed as exc:
                 self.stats["failed_calls"] += 1
                 return ServiceReply(ok=False, error=f"{s.ros_service}: {exc}")
-            ok = bool(reply.get("success", True))
-            if not ok:
+            answer = ros_reply(reply)
+            if not answer.ok:
                 self.stats["failed_calls"] += 1
-            error = None if ok else str(reply.get("message") or "refused")
-            return ServiceReply(ok=ok, error=error, body=reply)
+            return answer
 
         return handle
 

@@ -36,6 +36,7 @@ from anunnaki.rosbridge._convert import (
     image_size,
     message_to_dict,
     raw_to_image,
+    ros_reply,
     to_bus_fields,
     to_ros_fields,
 )
@@ -100,6 +101,7 @@ __all__ = [
     "parse_bridge",
     "raw_to_image",
     "read_bag",
+    "ros_reply",
     "stop_event",
     "to_bus_fields",
     "to_ros_fields",

@@ -19,7 +19,7 @@ import zlib
 from collections.abc import Mapping
 from typing import Any
 
-from anunnaki.messages import Image
+from anunnaki.messages import Image, ServiceReply
 
 __all__ = [
     "bus_image_to_compressed",
@@ -335,3 +335,14 @@ def bus_image_to_raw(image: Image, stamp: float) -> dict[str, Any]:
         "step": width * 3,
         "data": rgb.tobytes(),
     }
+
+
+def ros_reply(reply: Mapping[str, Any]) -> ServiceReply:
+    """A ROS service's response (as plain data) as the bus's reply.
+
+    ``ok`` is its ``success`` field (true when it has none: Empty, Trigger-less types), the
+    error its ``message`` (or "refused") when it refused; the body is the response whole.
+    """
+    ok = bool(reply.get("success", True))
+    error = None if ok else str(reply.get("message") or "refused")
+    return ServiceReply(ok=ok, error=error, body=dict(reply))
