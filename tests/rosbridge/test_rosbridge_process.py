@@ -34,4 +34,3 @@ def test_sigterm_sets_the_stop_event() -> None:
     finally:
         for sig, handler in before.items():
             signal.signal(sig, handler)
-
