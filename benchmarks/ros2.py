@@ -30,14 +30,14 @@ import json
 import os
 import platform
 import random
-import socket
 import statistics
 import subprocess
 import sys
 import tempfile
-import time
 from pathlib import Path
 from typing import Any
+
+from ros1 import free_port, stats, wait_line  # the ROS 1 benchmark's, the same measures
 
 ROOT = Path(__file__).resolve().parents[1]
 NODE = ROOT / "benchmarks" / "ros2_node.py"
@@ -91,36 +91,6 @@ def ros2_python() -> str:
     if not python.exists():
         raise SystemExit(f"no ROS 2 environment at {python}: run scripts/setup-ros2.sh")
     return str(python)
-
-
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
-
-
-def wait_line(proc: subprocess.Popen[str], text: str, timeout: float = 60) -> None:
-    assert proc.stdout is not None
-    end = time.monotonic() + timeout
-    for line in proc.stdout:
-        if text in line:
-            return
-        if time.monotonic() > end:
-            break
-    raise SystemExit(f"never saw {text!r}")
-
-
-def stats(ms: list[float]) -> dict[str, float]:
-    ordered = sorted(ms)
-    if not ordered:
-        return {"n": 0}
-    q = statistics.quantiles(ordered, n=100) if len(ordered) > 1 else [ordered[0]] * 99
-    return {
-        "n": len(ordered),
-        "median_ms": round(statistics.median(ordered), 3),
-        "p90_ms": round(q[89], 3),
-        "p99_ms": round(q[98], 3),
-    }
 
 
 def run(args: argparse.Namespace) -> dict[str, Any]:
