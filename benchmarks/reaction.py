@@ -803,7 +803,7 @@ class _StampedClock(WallClock):
 
 class _StampedActuator(BusActuator):
     """The bus actuator, stamping (step start, request) when the fail-safe's request leaves
-    the step, while armed."""
+    the step (sent without waiting, or on a worker thread), while armed."""
 
     def __init__(self, bus: Bus, clock: _StampedClock) -> None:
         super().__init__(bus)
@@ -812,9 +812,16 @@ class _StampedActuator(BusActuator):
         self.stamps: list[tuple[int, int]] = []
 
     def request(self, service: str, payload: Mapping[str, Any], timeout: float) -> Any:
+        self._stamp(service)
+        return super().request(service, payload, timeout)
+
+    def request_start(self, service: str, payload: Mapping[str, Any], timeout: float) -> Any:
+        self._stamp(service)
+        return super().request_start(service, payload, timeout)
+
+    def _stamp(self, service: str) -> None:
         if self.armed and service == "/rover/set_mode":
             self.stamps.append((self.clock.read_ns, time.perf_counter_ns()))
-        return super().request(service, payload, timeout)
 
 
 def run_breakdown(trials: int, tmp: Path, tactics: Path, seed: int) -> dict[str, Any]:

@@ -492,9 +492,38 @@ def test_a_request_that_does_not_wait_for_its_service_fails_at_once(
     assert reply == Generic(data={"up": True})
 
 
-def _answers(bus: Bus, service: str) -> bool:
+def test_request_start_returns_at_once_and_the_reply_completes_its_future(
+    bus_pair: tuple[Bus, Bus],
+) -> None:
+    """``request_start``: no thread waits; the service's reply (or error) ends the future."""
+    a, b = bus_pair
+    release = threading.Event()
+    a.service("/gated", lambda r: {"echo": r["x"]} if release.wait(10) else None)
+    a.service("/refuses", lambda r: ServiceReply(ok=False, error="refused: moving"))
+    assert wait_for(lambda: _answers(b, "/refuses", ServiceError))
+    pending = b.request_start("/gated", {"x": 7}, timeout=10.0)
+    assert not pending.done()  # the caller goes on while the service works
+    release.set()
+    assert pending.result(10.0) == Generic(data={"echo": 7})
+    refused = b.request_start("/refuses", {}, timeout=10.0)
+    with pytest.raises(ServiceError, match="refused: moving"):
+        refused.result(10.0)
+    nobody = b.request_start("/nobody", {}, timeout=30.0)
+    with pytest.raises(BusTimeout, match="it is not up"):  # tried once, as wait_for_service=False
+        nobody.result(10.0)
+    with pytest.raises(BusConfigError):
+        b.request_start("/gated", {}, timeout=0)
+    b.close()
+    with pytest.raises(BusClosedError):
+        b.request_start("/gated", {}, timeout=1.0)
+
+
+def _answers(bus: Bus, service: str, *answers: type[Exception]) -> bool:
+    """Whether ``service`` is up (a reply, or one of the exceptions ``answers`` name)."""
     try:
         bus.request(service, {}, timeout=0.5, wait_for_service=False)
+    except answers:
+        return True
     except BusTimeout:
         return False
     return True

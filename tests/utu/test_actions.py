@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import threading
+from concurrent.futures import Future
 from pathlib import Path
 from typing import Any
 
@@ -12,7 +13,7 @@ from anunnaki.bus import open_bus
 from anunnaki.managed import ScriptedSystem
 from anunnaki.utu import ActionOutcome, AutonomicManager, Knowledge, parse_config, replay
 from anunnaki.utu.cycle import RecordedOutcome, ReplayRunner
-from anunnaki.utu.host import ThreadRunner
+from anunnaki.utu.host import BusActuator, ThreadRunner
 
 ROVER = Path(__file__).resolve().parents[2] / "examples" / "rover"
 
@@ -50,6 +51,70 @@ def test_a_thread_runner_hands_back_outcomes_in_order_and_fails_a_hung_action() 
     finally:
         gate.set()
         runner.close()
+
+
+def test_a_thread_runner_sends_a_request_that_does_not_wait_from_the_step_itself() -> None:
+    """``start`` (the bus actuator's ``request_start``): no worker thread between the step
+    and the request; the reply completes it, and one with no reply fails at its timeout."""
+    woken = threading.Event()
+    runner = ThreadRunner(on_done=woken.set, settle=0.0, grace=30.0)
+    threads: list[str] = []
+    replies: list[Future[ActionOutcome]] = []
+
+    def start() -> Future[ActionOutcome]:
+        threads.append(threading.current_thread().name)
+        replies.append(Future())
+        return replies[-1]
+
+    def unused() -> ActionOutcome:
+        raise AssertionError("a request with a start never runs on a worker thread")
+
+    try:
+        assert runner.submit("t1", 0, unused, 5.0, 0, start=start) is None
+        assert runner.submit("t2", 0, unused, 0.05, 0, start=start) is None
+        assert threads == [threading.current_thread().name] * 2 and runner.in_flight == 2
+        replies[0].set_result(ActionOutcome(True, "replied"))
+        assert woken.wait(5.0)
+        assert [(d.tactic, d.outcome) for d in runner.finished(0.0)] == [
+            ("t1", ActionOutcome(True, "replied"))
+        ]
+        # No thread to overrun its timeout: failed at the timeout itself, not after the grace.
+        wait_until(lambda: runner.has_outcomes, 5.0, "the unanswered request's timeout")
+        done = runner.finished(0.0)
+        assert [(d.tactic, d.outcome) for d in done] == [
+            ("t2", ActionOutcome(False, "no reply within 0.05 s"))
+        ]
+        # A reply already in (the in-process bus answering within the send) is taken at once,
+        # settle 0 or not; a start that raises is a failed outcome, never an exception.
+        answered: Future[ActionOutcome] = Future()
+        answered.set_result(ActionOutcome(True, "at once"))
+        assert runner.submit("t3", 0, unused, 1.0, 0, start=lambda: answered) == ActionOutcome(
+            True, "at once"
+        )
+        out = runner.submit("t4", 0, unused, 1.0, 0, start=lambda: 1 / 0)  # type: ignore[arg-type,return-value]
+        assert out is not None and not out.ok and "ZeroDivisionError" in out.detail
+        assert runner.in_flight == 0
+    finally:
+        runner.close()
+
+
+def test_the_bus_actuator_sends_without_waiting_and_maps_the_reply() -> None:
+    with open_bus("inproc") as bus:
+        release = threading.Event()
+        bus.service("/rover/set_mode", lambda r: {"mode": r["mode"]} if release.wait(10) else None)
+        bus.service("/rover/stop", lambda r: {"ok": False, "error": "already stopped"})
+        actuator = BusActuator(bus)
+        pending = actuator.request_start("/rover/set_mode", {"mode": "manual"}, 5.0)
+        assert not pending.done()
+        release.set()
+        assert pending.result(5.0) == ActionOutcome(
+            True, "/rover/set_mode replied", {"mode": "manual"}
+        )
+        refused = actuator.request_start("/rover/stop", {}, 5.0).result(5.0)
+        assert refused == actuator.request("/rover/stop", {}, 5.0)
+        assert not refused.ok and refused.detail == "already stopped"
+        nobody = actuator.request_start("/nobody", {}, 5.0).result(5.0)
+        assert not nobody.ok and "it is not up" in nobody.detail
 
 
 def test_a_replay_runner_gives_recorded_outcomes_at_their_instants() -> None:

@@ -28,6 +28,7 @@ import weakref
 from abc import ABC, abstractmethod
 from collections import defaultdict
 from collections.abc import Callable, Iterator, Mapping
+from concurrent.futures import Future
 from dataclasses import dataclass, field
 from typing import Any, ClassVar, Literal, Protocol
 
@@ -656,6 +657,13 @@ class Service(_Declared):
         self._bus._forget(self)
 
 
+def _no_reply(service: str, timeout: float, deadline: float) -> BusTimeout:
+    """A request given up: the service is not up, or (past ``deadline``) it did not answer."""
+    if time.monotonic() >= deadline:  # it is up, and did not answer in time
+        return BusTimeout(f"no reply from service {service!r} within {timeout} s")
+    return BusTimeout(f"no reply from service {service!r}: it is not up")
+
+
 def _safe_reply(reply: ReplyFn, data: bytes, name: str) -> None:
     try:
         reply(data)
@@ -961,6 +969,60 @@ class Bus(ABC, Closing):
             BusClosedError: The bus closed meanwhile.
 
         """
+        service, key, data, qos = self._request_envelope(name, payload, timeout)
+        deadline = time.monotonic() + timeout
+        while True:
+            remaining = deadline - time.monotonic()
+            if remaining <= 0:
+                raise BusTimeout(f"no reply from service {service!r} within {timeout} s")
+            raw = self._query(key, data, qos, remaining)
+            if raw is not None:
+                break
+            if not wait_for_service:
+                raise _no_reply(service, timeout, deadline)
+            if self._closed.wait(min(0.02, max(remaining, 0.0))):
+                raise BusClosedError(f"bus {self._name!r} closed during a request")
+        return self._reply_of(service, raw)
+
+    def request_start(
+        self, name: str, payload: MessageLike, timeout: float = 2.0
+    ) -> Future[Message]:
+        """Send a request and return at once; the returned future gets the reply.
+
+        :meth:`request` with ``wait_for_service=False``, without holding the caller (as
+        rclpy's ``call_async``): no thread waits for the reply, the transport's own delivery
+        completes the future. It ends with the reply message, or with the error
+        :meth:`request` would raise: :class:`ServiceError` (an error or malformed reply),
+        :class:`BusTimeout` (no service up; over zenoh also no reply within ``timeout``).
+        A service on the in-process bus that never answers leaves the future pending:
+        bound the wait with ``future.result(timeout)`` (Utu's action runner gives such a
+        request up at its timeout).
+
+        Raises:
+            BusClosedError: The bus is closed (at once, not through the future).
+
+        """
+        service, key, data, qos = self._request_envelope(name, payload, timeout)
+        future: Future[Message] = Future()
+        deadline = time.monotonic() + timeout
+
+        def on_reply(raw: bytes | None) -> None:
+            if future.done():
+                return
+            try:
+                if raw is None:
+                    raise _no_reply(service, timeout, deadline)
+                future.set_result(self._reply_of(service, raw))
+            except BusError as exc:
+                future.set_exception(exc)
+
+        self._query_start(key, data, qos, timeout, on_reply)
+        return future
+
+    def _request_envelope(
+        self, name: str, payload: MessageLike, timeout: float
+    ) -> tuple[str, str, bytes, QoS]:
+        """A request's service name, key, encoded envelope and QoS (checked)."""
         self._check_open()
         if not timeout > 0:
             raise BusConfigError(f"timeout must be > 0 seconds, got {timeout!r}")
@@ -971,21 +1033,10 @@ class Bus(ABC, Closing):
         with self._lock:
             seq = self._request_seq
             self._request_seq += 1
-        data = encode_envelope(Envelope(message, self._now(), seq, self._name))
-        deadline = time.monotonic() + timeout
-        while True:
-            remaining = deadline - time.monotonic()
-            if remaining <= 0:
-                raise BusTimeout(f"no reply from service {service!r} within {timeout} s")
-            raw = self._query(key, data, qos, remaining)
-            if raw is not None:
-                break
-            if not wait_for_service:
-                if time.monotonic() >= deadline:  # it is up, and did not answer in time
-                    raise BusTimeout(f"no reply from service {service!r} within {timeout} s")
-                raise BusTimeout(f"no reply from service {service!r}: it is not up")
-            if self._closed.wait(min(0.02, max(remaining, 0.0))):
-                raise BusClosedError(f"bus {self._name!r} closed during a request")
+        return service, key, encode_envelope(Envelope(message, self._now(), seq, self._name)), qos
+
+    def _reply_of(self, service: str, raw: bytes) -> Message:
+        """The reply message in ``raw``; an error or malformed reply raises ServiceError."""
         try:
             reply = decode_envelope(raw).message
         except MalformedMessage as exc:
@@ -1057,6 +1108,20 @@ class Bus(ABC, Closing):
     @abstractmethod
     def _query(self, key: str, payload: bytes, qos: QoS, timeout: float) -> bytes | None:
         """Query ``key`` once: the first reply's payload, or ``None`` if none came."""
+
+    @abstractmethod
+    def _query_start(
+        self,
+        key: str,
+        payload: bytes,
+        qos: QoS,
+        timeout: float,
+        on_reply: Callable[[bytes | None], None],
+    ) -> None:
+        """Query ``key`` once without waiting; ``on_reply`` gets the first reply's payload.
+
+        Or ``None`` if none can come: nothing answers ``key`` (over zenoh also the timeout).
+        """
 
     @abstractmethod
     def _declare_token(self, key: str) -> _Link:

@@ -132,6 +132,17 @@ class InprocHub:
         handler(payload, slot.set)
         return slot.wait(timeout)
 
+    def _query_start(
+        self, key: str, payload: bytes, on_reply: Callable[[bytes | None], None]
+    ) -> None:
+        with self._lock:
+            handlers = self._queryables.get(key)
+            handler = handlers[0] if handlers else None
+        if handler is None:
+            on_reply(None)
+        else:
+            handler(payload, on_reply)
+
     def _add_token(self, key: str) -> _Link:
         with self._lock:
             self._tokens[key] += 1
@@ -246,6 +257,16 @@ class InprocBus(Bus):
 
     def _query(self, key: str, payload: bytes, qos: QoS, timeout: float) -> bytes | None:
         return self._hub._query(key, payload, timeout)
+
+    def _query_start(
+        self,
+        key: str,
+        payload: bytes,
+        qos: QoS,
+        timeout: float,
+        on_reply: Callable[[bytes | None], None],
+    ) -> None:
+        self._hub._query_start(key, payload, on_reply)
 
     def _declare_token(self, key: str) -> _Link:
         return self._hub._add_token(key)

@@ -174,13 +174,7 @@ class ZenohBus(Bus):
         return self._config
 
     def _callback(self, fn: Callable[[Any], None]) -> Any:
-        def guarded(arg: Any) -> None:
-            try:
-                fn(arg)
-            except Exception:  # never let an exception reach zenoh's thread
-                logger.exception("zenoh callback failed")
-
-        return self._z.handlers.Callback(guarded, indirect=False)
+        return self._z.handlers.Callback(_guarded(fn), indirect=False)
 
     def _declare_sender(self, key: str, qos: QoS) -> _ZSender:
         z = self._z
@@ -269,6 +263,45 @@ class ZenohBus(Bus):
             logger.debug("query on %s ended: %s", key, exc)
         return None
 
+    def _query_start(
+        self,
+        key: str,
+        payload: bytes,
+        qos: QoS,
+        timeout: float,
+        on_reply: Callable[[bytes | None], None],
+    ) -> None:
+        z = self._z
+        answered = False
+
+        def on_answer(reply: Any) -> None:
+            nonlocal answered
+            ok = reply.ok
+            if ok is not None and not answered:
+                answered = True
+                on_reply(ok.payload.to_bytes())
+
+        def on_end() -> None:  # zenoh's last call for this query: replies are all in
+            if not answered:
+                on_reply(None)
+
+        try:
+            self._session.get(
+                key,
+                payload=payload,
+                timeout=timeout,
+                consolidation=z.ConsolidationMode.NONE,
+                congestion_control=z.CongestionControl.BLOCK,
+                priority=z.Priority.REAL_TIME if qos.rank == 0 else z.Priority.INTERACTIVE_HIGH,
+                express=True,
+                handler=z.handlers.Callback(_guarded(on_answer), _guarded(on_end), indirect=False),
+            )
+        except z.ZError as exc:
+            if self._session.is_closed():
+                raise BusClosedError("the zenoh session closed during a request") from exc
+            logger.debug("query on %s ended: %s", key, exc)
+            on_reply(None)
+
     def _declare_token(self, key: str) -> _Link:
         try:
             token = self._session.liveliness().declare_token(key)
@@ -311,3 +344,15 @@ def open_zenoh(
     if hub is not None:
         raise BusConfigError("hub only applies to the inproc bus")
     return ZenohBus(config, clock=clock)
+
+
+def _guarded(fn: Callable[..., None]) -> Callable[..., None]:
+    """``fn``, never letting an exception reach zenoh's thread."""
+
+    def guarded(*args: Any) -> None:
+        try:
+            fn(*args)
+        except Exception:
+            logger.exception("zenoh callback failed")
+
+    return guarded

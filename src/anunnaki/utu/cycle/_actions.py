@@ -9,7 +9,10 @@ tactic stays ``running`` while its action is in flight, and the next cycle that 
 outcome records it (``action`` decision) and continues with the tactic's next action — or
 fails the tactic and escalates when the action was refused, timed out or met a dead service.
 
-* ``ThreadRunner`` (live, in :mod:`anunnaki.utu.host`): a few worker threads;
+* ``ThreadRunner`` (live, in :mod:`anunnaki.utu.host`): an actuator that can send a request
+  without waiting (``request_start``, as the bus actuator does) sends it from the step itself
+  and the reply completes it, with no thread between; any other request runs on one of a few
+  worker threads;
 * :class:`ReplayRunner` (:func:`~anunnaki.utu.replay`): gives each action the outcome the run
   recorded, at the instant the run took it, so a replay takes the same decisions at the
   same times.
@@ -22,6 +25,7 @@ from __future__ import annotations
 
 from collections import deque
 from collections.abc import Callable, Iterable, Mapping
+from concurrent.futures import Future
 from dataclasses import dataclass
 from typing import Any, Protocol
 
@@ -34,7 +38,11 @@ __all__ = [
     "Finished",
     "RecordedOutcome",
     "ReplayRunner",
+    "Start",
 ]
+
+#: A request sent without waiting: called once, it returns the future its outcome completes.
+Start = Callable[[], "Future[ActionOutcome]"]
 
 
 @dataclass(frozen=True)
@@ -83,8 +91,13 @@ class ActionRunner(Protocol):
         now: float,
         *,
         attempt: int = 0,
+        start: Start | None = None,
     ) -> ActionOutcome | None:
-        """Start one action; its outcome now, or ``None`` while it is in flight."""
+        """Start one action; its outcome now, or ``None`` while it is in flight.
+
+        ``call`` performs it and waits; ``start``, where the actuator has one, sends the
+        same request without waiting (a runner that can takes it instead of a thread).
+        """
         ...
 
     def finished(self, now: float) -> list[Finished]:
@@ -136,6 +149,7 @@ class ReplayRunner:
         now: float,
         *,
         attempt: int = 0,
+        start: Start | None = None,
     ) -> ActionOutcome | None:
         """The recorded outcome now, or ``None`` until the instant the run took it."""
         queue = self._recorded.get((tactic, attempt, index)) or self._recorded.get(

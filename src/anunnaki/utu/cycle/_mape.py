@@ -10,8 +10,9 @@ from __future__ import annotations
 import logging
 from collections import deque
 from collections.abc import Callable, Iterable, Mapping
+from concurrent.futures import Future
 from dataclasses import dataclass
-from typing import Any, Literal
+from typing import Any, Literal, cast
 
 from anunnaki.goals import (
     Evaluator,
@@ -32,7 +33,7 @@ from anunnaki.tactics import (
     TacticAction,
     TacticSet,
 )
-from anunnaki.utu.cycle._actions import ActionOutcome, ActionRunner, Actuator
+from anunnaki.utu.cycle._actions import ActionOutcome, ActionRunner, Actuator, Start
 from anunnaki.utu.cycle._knowledge import Knowledge, TacticRow
 
 __all__ = [
@@ -588,8 +589,17 @@ class Executor:
         def call() -> ActionOutcome:
             return actuator.request(service, payload, timeout)
 
+        start: Start | None = None
+        request_start = getattr(actuator, "request_start", None)
+        if callable(request_start):
+
+            def start() -> Future[ActionOutcome]:
+                return cast("Future[ActionOutcome]", request_start(service, payload, timeout))
+
         try:
-            return self.runner.submit(tactic, index, call, timeout, now, attempt=attempt)
+            return self.runner.submit(
+                tactic, index, call, timeout, now, attempt=attempt, start=start
+            )
         except Exception as exc:  # a runner that cannot start it: failed, never fatal
             log.warning("action of %s could not start: %r", tactic, exc)
             return ActionOutcome(False, f"{type(exc).__name__}: {exc}")

@@ -5,6 +5,7 @@ from __future__ import annotations
 import logging
 from collections import deque
 from collections.abc import Callable, Mapping, Sequence
+from concurrent.futures import Future
 from typing import Any
 
 from anunnaki import topics
@@ -95,13 +96,31 @@ class BusActuator:
             )
         except AnunnakiError as exc:
             return ActionOutcome(False, f"{type(exc).__name__}: {exc}")
-        body = body_of(reply)  # a Generic's object, or a ServiceReply's {ok, error, body}
-        if body.get("ok") is False:
-            return ActionOutcome(False, str(body.get("error") or "refused"), body)
-        inner = body.get("body")
-        if isinstance(inner, dict) and "ok" in body:
-            body = inner
-        return ActionOutcome(True, f"{service} replied", body)
+        return _outcome_of(service, reply)
+
+    def request_start(
+        self, service: str, payload: Mapping[str, Any], timeout: float
+    ) -> Future[ActionOutcome]:
+        """:meth:`request` without waiting: the reply completes the returned future.
+
+        The bus's :meth:`~anunnaki.bus.Bus.request_start`: no thread waits for the reply.
+        """
+        outcome: Future[ActionOutcome] = Future()
+        try:
+            pending = self.bus.request_start(service, dict(payload), timeout=timeout)
+        except AnunnakiError as exc:
+            outcome.set_result(ActionOutcome(False, f"{type(exc).__name__}: {exc}"))
+            return outcome
+
+        def replied(done: Future[Any]) -> None:
+            try:
+                result = _outcome_of(service, done.result())
+            except Exception as exc:  # a timeout, an error reply: a failed action
+                result = ActionOutcome(False, f"{type(exc).__name__}: {exc}")
+            outcome.set_result(result)
+
+        pending.add_done_callback(replied)
+        return outcome
 
     def notify(self, action: Notice, tactic: str, now: float) -> ActionOutcome:
         """Send through the notifier in the background (the loop never waits on SMTP)."""
@@ -175,3 +194,14 @@ def bus_actuator(
 
         notifier = Notifier(NotifyConfig.model_validate(config.notify))
     return BusActuator(bus, notifier, on_notified=on_notified)
+
+
+def _outcome_of(service: str, reply: Any) -> ActionOutcome:
+    """A request's reply as an action's outcome: refused (``ok: false``) or replied."""
+    body = body_of(reply)  # a Generic's object, or a ServiceReply's {ok, error, body}
+    if body.get("ok") is False:
+        return ActionOutcome(False, str(body.get("error") or "refused"), body)
+    inner = body.get("body")
+    if isinstance(inner, dict) and "ok" in body:
+        body = inner
+    return ActionOutcome(True, f"{service} replied", body)

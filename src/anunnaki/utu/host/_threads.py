@@ -1,10 +1,14 @@
-"""Actions off the loop's path: service requests run on worker threads with their own deadline.
+"""Actions off the loop's path: service requests in flight, each with its own deadline.
 
 :class:`ThreadRunner` is the live :class:`~anunnaki.utu.cycle.ActionRunner` (see
-:mod:`anunnaki.utu.cycle._actions` for why actions leave the loop): a few worker threads; an
-action whose thread has not come back by its timeout plus a grace period is reported failed
-("no reply within …") and its thread abandoned, so even an actuator that ignores its own
-timeout cannot hold the loop.
+:mod:`anunnaki.utu.cycle._actions` for why actions leave the loop). A request the actuator can
+send without waiting (``request_start``: the bus actuator's, a transport's asynchronous query)
+leaves from the step itself and its reply completes it: no thread in between, which takes a
+thread hand-over off the reaction (``benchmarks/reaction.py``); given no reply by its timeout
+it is reported failed. Any other request runs on one of a few worker threads; one whose
+thread has not come back by its timeout plus a grace period is reported failed ("no reply
+within …") and its thread abandoned, so even an actuator that ignores its own timeout cannot
+hold the loop.
 """
 
 from __future__ import annotations
@@ -16,7 +20,7 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass
 
-from anunnaki.utu.cycle._actions import ActionOutcome, Finished
+from anunnaki.utu.cycle._actions import ActionOutcome, Finished, Start
 
 __all__ = ["ThreadRunner", "action_runner"]
 
@@ -37,6 +41,7 @@ class _Flight:
     future: cf.Future[ActionOutcome]
     deadline: float  # time.monotonic()
     timeout: float
+    threaded: bool = True  # on a worker thread (else a request sent without waiting)
 
 
 class ThreadRunner:
@@ -81,17 +86,29 @@ class ThreadRunner:
         now: float,
         *,
         attempt: int = 0,
+        start: Start | None = None,
     ) -> ActionOutcome | None:
-        """Start ``call`` on a worker thread; its outcome if back within ``settle`` seconds."""
+        """Send ``start``'s request here, else run ``call`` on a worker thread.
+
+        Returns the outcome if it is back within ``settle`` seconds, else ``None``.
+        """
         if self._closed:
             return ActionOutcome(False, "the loop is closing; action not performed")
-        future = self._pool.submit(call)
+        if start is not None:
+            try:
+                future = start()
+            except Exception as exc:  # an actuator must never kill the loop
+                return ActionOutcome(False, f"{type(exc).__name__}: {exc}")
+            deadline = time.monotonic() + timeout
+        else:
+            future = self._pool.submit(call)
+            deadline = time.monotonic() + timeout + self.grace
         wait = timeout if self.settle is None else min(self.settle, timeout)
-        if wait > 0:
+        if future.done() or wait > 0:
             cf.wait([future], timeout=wait)
             if future.done():
                 return _result(future)
-        flight = _Flight(tactic, index, future, time.monotonic() + timeout + self.grace, timeout)
+        flight = _Flight(tactic, index, future, deadline, timeout, threaded=start is None)
         with self._lock:
             self._flights.append(flight)
         if self.on_done is not None:
@@ -115,7 +132,11 @@ class ThreadRunner:
                         f.tactic,
                         f.timeout,
                     )
-                    detail = f"no reply within {f.timeout:g} s (abandoned)"
+                    detail = (  # a thread is abandoned; a request sent is given up
+                        f"no reply within {f.timeout:g} s (abandoned)"
+                        if f.threaded
+                        else f"no reply within {f.timeout} s"
+                    )
                     out.append(Finished(f.tactic, f.index, ActionOutcome(False, detail)))
                 else:
                     keep.append(f)
