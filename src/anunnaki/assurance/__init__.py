@@ -51,7 +51,7 @@ from anunnaki.assurance._export import (
     write_case,
 )
 from anunnaki.assurance._relax_text import Acceptance, acceptance
-from anunnaki.assurance._validate import validate, validate_gsn
+from anunnaki.assurance._validate import validate, validate_gsn, validate_gsn_file
 
 __all__ = [
     "CASE_FORMAT",
@@ -82,5 +82,6 @@ __all__ = [
     "render_svg",
     "validate",
     "validate_gsn",
+    "validate_gsn_file",
     "write_case",
 ]

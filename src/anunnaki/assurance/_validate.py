@@ -18,9 +18,10 @@ element id → ``text``, ``supportedBy``, ``inContextOf``, ``undeveloped``):
 from __future__ import annotations
 
 from collections.abc import Mapping
+from pathlib import Path
 from typing import Any, Final
 
-__all__ = ["PREFIXES", "element_type", "validate", "validate_gsn"]
+__all__ = ["PREFIXES", "element_type", "validate", "validate_gsn", "validate_gsn_file"]
 
 #: Prefix → element type; ``Sn`` is tried before ``S``.
 PREFIXES: Final = (
@@ -170,3 +171,17 @@ def validate(case: Any) -> list[str]:
         if element_type(n.id) != n.type
     ]
     return problems + validate_gsn(gsn_document(case))
+
+
+def validate_gsn_file(path: str | Path) -> list[str]:
+    """:func:`validate_gsn` of a GSN YAML file; a repeated id (a duplicate key) is a problem."""
+    from anunnaki._safeyaml import load_yaml
+    from anunnaki.errors import ModelFileError
+
+    try:
+        doc, _ = load_yaml(path)
+    except ModelFileError as exc:
+        return [str(exc)]
+    if not isinstance(doc, Mapping):
+        return [f"{path}: not a mapping of GSN elements"]
+    return validate_gsn(doc)
