@@ -189,3 +189,33 @@ def test_coverage_counts_leaf_goals_with_supported_evidence(rover: Case, uav: Ca
 def test_both_cases_keep_the_gsn_rules(rover: Case, uav: Case) -> None:
     for case in (rover, uav):
         assert validate_gsn(gsn_document(case)) == []
+
+
+def test_goal_ids_without_the_g_prefix_get_one_and_the_case_keeps_the_rules() -> None:
+    from anunnaki.assurance import case_from_model, propagate
+    from anunnaki.goals import parse_goal_model
+
+    model = parse_goal_model(
+        """
+anunnaki: goal-model/1
+name: toy
+root: Safe
+agents:
+  - {id: A1, topics: [{topic: /toy, attributes: [seen, stopped]}]}
+goals:
+  - {id: Safe, refinement: and, children: [Sees, Sn1]}
+  - {id: Sees, utility: A1.seen, agents: [A1]}
+  - {id: Sn1, utility: A1.stopped, agents: [A1]}
+obstacles:
+  - {id: Blind, obstructs: [Sees], condition: A1.seen == false, resolutions: [Sn1]}
+"""
+    )
+    case = case_from_model(model)
+    propagate(case)
+    assert case.root == "G-Safe"
+    assert case.nodes["S-Safe"].supported_by == ["G-Sees", "G-Sn1"]
+    assert case.nodes["G-Sn1"].type == "goal" and case.nodes["G-Sn1"].source == "Sn1"
+    assert case.nodes["S-Blind-resolutions"].supported_by == ["G-Sn1"]
+    assert "S-Blind" in case.nodes["G-Sees"].supported_by
+    assert validate_gsn(gsn_document(case)) == []
+    assert case.coverage()["by_status"] == {"undeveloped": ["G-Sees", "G-Sn1"]}

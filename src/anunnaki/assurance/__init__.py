@@ -17,12 +17,13 @@ Typical use::
     write_case(case, "case/")
     print(case.coverage())
     print(check_case(case))     # [] while no artefact changed
+    live = evaluate(case, evaluator_states, active_model="uav-fog", perceived="fog")
 
 Nothing is measured and no model is loaded: figures are read from JSON, files hashed.
 Formats and the GSN mapping: docs/assurance.md.
 """
 
-from anunnaki.assurance._build import CRITERIA_FILE, build_case, case_from_model
+from anunnaki.assurance._build import CRITERIA_FILE, build_case, case_from_model, goal_id
 from anunnaki.assurance._case import (
     CASE_FORMAT,
     STATUSES,
@@ -50,6 +51,7 @@ from anunnaki.assurance._export import (
     render_svg,
     write_case,
 )
+from anunnaki.assurance._live import LIVE_STATUSES, LiveStatus, evaluate
 from anunnaki.assurance._relax_text import Acceptance, acceptance
 from anunnaki.assurance._validate import validate, validate_gsn, validate_gsn_file
 
@@ -57,6 +59,7 @@ __all__ = [
     "CASE_FORMAT",
     "CRITERIA_FILE",
     "CRITERIA_FORMAT",
+    "LIVE_STATUSES",
     "STAGES",
     "STATUSES",
     "Acceptance",
@@ -66,12 +69,15 @@ __all__ = [
     "Criteria",
     "Evidence",
     "EvidenceSpec",
+    "LiveStatus",
     "Node",
     "acceptance",
     "build_case",
     "case_from_model",
     "check_case",
     "combine",
+    "evaluate",
+    "goal_id",
     "gsn_document",
     "gsn_yaml",
     "load_criteria",

@@ -26,7 +26,7 @@ from anunnaki.assurance._case import Case, Evidence, Node, propagate
 from anunnaki.assurance._criteria import Criteria, load_criteria
 from anunnaki.assurance._evidence import Sources, collect, run_tests
 from anunnaki.assurance._relax_text import acceptance
-from anunnaki.assurance._validate import validate
+from anunnaki.assurance._validate import element_type, validate
 from anunnaki.errors import ModelFileError
 from anunnaki.goals import GoalModel, did_you_mean
 
@@ -136,11 +136,22 @@ def _reachable(model: GoalModel) -> list[str]:
 
 
 def case_from_model(
-    model: GoalModel, crit: Criteria | None, src: Sources, *, name: str = ""
+    model: GoalModel,
+    crit: Criteria | None = None,
+    src: Sources | None = None,
+    *,
+    name: str = "",
 ) -> Case:
-    """The argument of ``model`` with the evidence ``crit`` names (statuses not yet set)."""
+    """The argument of ``model`` with the evidence ``crit`` names (statuses not yet set).
+
+    Without ``src`` (where the evidence is read from) the case has no evidence: every leaf
+    is undeveloped. :func:`propagate` sets the statuses.
+    """
+    if src is None:
+        src = Sources(root=Path.cwd(), files={})
+        crit = None
     nodes: dict[str, Node] = {}
-    root = model.root
+    root = goal_id(model.root)
     _goal_nodes(model, _reachable(model), nodes)
     _hazard_nodes(model, nodes)
     _root_context(model, src, nodes)
@@ -157,17 +168,23 @@ def _add(nodes: dict[str, Node], node: Node) -> Node:
     return nodes.setdefault(node.id, node)
 
 
+def goal_id(gid: str) -> str:
+    """A goal's GSN id: its own when it starts with ``G`` (and no other prefix), else ``G-ID``."""
+    return gid if element_type(gid) == "goal" else f"G-{gid}"
+
+
 def _goal_nodes(model: GoalModel, goals: list[str], nodes: dict[str, Node]) -> None:
     """Goals, their refinement strategies, acceptance criteria and agents."""
     kinds = {a.id: a.kind for a in model.spec.agents}
     for gid in goals:
         g = model.goals[gid]
-        _add(nodes, Node(gid, "goal", g.description or gid, source=gid, leaf=not g.children))
+        node = Node(goal_id(gid), "goal", g.description or gid, source=gid, leaf=not g.children)
+        _add(nodes, node)
     for gid in goals:
         g = model.goals[gid]
-        node = nodes[gid]
+        node = nodes[goal_id(gid)]
         if g.children:
-            kids = [c for c in g.children if c in nodes]
+            kids = [goal_id(c) for c in g.children if goal_id(c) in nodes]
             listed = ", ".join(kids)
             text = (
                 f"Argument over the alternatives of {gid}: any one of {listed} suffices"
@@ -175,7 +192,8 @@ def _goal_nodes(model: GoalModel, goals: list[str], nodes: dict[str, Node]) -> N
                 else f"Argument over the sub-goals of {gid}: all of {listed} hold"
             )
             how: Literal["and", "or"] = "or" if g.refinement == "or" else "and"
-            s = _add(nodes, Node(f"S-{gid}", "strategy", text, kids, refinement=how, source=gid))
+            s = Node(f"S-{gid}", "strategy", text, kids, refinement=how, source=gid)
+            _add(nodes, s)
             node.supported_by.append(s.id)
         acc = acceptance(g)
         if acc is not None:
@@ -197,7 +215,7 @@ def _goal_nodes(model: GoalModel, goals: list[str], nodes: dict[str, Node]) -> N
 def _hazard_nodes(model: GoalModel, nodes: dict[str, Node]) -> None:
     """Each obstacle as a hazard: detected, then resolved by any one of its resolutions."""
     for oid, o in model.obstacles.items():
-        targets = [g for g in o.obstructs if g in nodes]
+        targets = [goal_id(g) for g in o.obstructs if goal_id(g) in nodes]
         if not targets:
             continue
         cond = f" (condition {o.condition})" if o.condition else ""
@@ -206,7 +224,7 @@ def _hazard_nodes(model: GoalModel, nodes: dict[str, Node]) -> None:
         text = f"Hazard {oid} is detected when it occurs{cond}"
         detected = _add(nodes, Node(f"G-{oid}-detected", "goal", text, source=oid))
         kids = [detected.id]
-        res = [r for r in o.resolutions if r in nodes]
+        res = [goal_id(r) for r in o.resolutions if goal_id(r) in nodes]
         if res:
             text = f"Argument over the resolutions of {oid}: any one of {', '.join(res)} suffices"
             sr = _add(
@@ -227,7 +245,7 @@ def _hazard_nodes(model: GoalModel, nodes: dict[str, Node]) -> None:
 
 def _root_context(model: GoalModel, src: Sources, nodes: dict[str, Node]) -> None:
     """The launch as context, the evidence rule as justification, domain properties."""
-    root = nodes[model.root]
+    root = nodes[goal_id(model.root)]
     for did, d in model.domain_properties.items():
         cond = f" ({d.condition})" if d.condition else ""
         a = _add(nodes, Node(f"A-{did}", "assumption", f"{d.description or did}{cond}", source=did))
@@ -250,8 +268,8 @@ _RULE = (
 
 def _attach(model: GoalModel, crit: Criteria, src: Sources, nodes: dict[str, Node]) -> None:
     for key, items in crit.evidence.items():
-        if key in nodes and nodes[key].type == "goal" and key in model.goals:
-            target = nodes[key]
+        if key in model.goals and goal_id(key) in nodes:
+            target = nodes[goal_id(key)]
             relax = acceptance(model.goals[key])
         elif key in model.obstacles and f"G-{key}-detected" in nodes:
             target = nodes[f"G-{key}-detected"]

@@ -273,6 +273,10 @@ def _data(spec: EvidenceSpec, acc: Acceptance, src: Sources, element: str) -> li
         if test_split.is_file():
             arts.append(src.artefact("dataset:test", test_split))
         command = f"anunnaki make-dataset {platform} --out data/{platform}"
+        # held-out test images are clean frames; an Enki model's training covers its phenomenon
+        conditions = ["clear"]
+        if (t.get("source") or {}).get("phenomenon"):
+            conditions.append(str(t["source"]["phenomenon"]))
         out.append(
             _make(
                 spec,
@@ -282,7 +286,7 @@ def _data(spec: EvidenceSpec, acc: Acceptance, src: Sources, element: str) -> li
                 command=command,
                 artefacts=arts,
                 model=m.id,
-                conditions=None,
+                conditions=conditions,
             )
         )
     return out
@@ -571,7 +575,7 @@ def run_tests(node_ids: list[str], root: Path) -> dict[str, str]:
     """Run pytest once on ``node_ids`` (from ``root``); node id → ``pass`` or ``fail``."""
     if not node_ids:
         return {}
-    report = root / ".assurance-tests.json"
+    report = root / ".assurance-tests.xml"
     cmd = [
         sys.executable,
         "-m",
