@@ -286,6 +286,10 @@ code{font-size:.85em;word-break:break-all}
 """
 
 
+def _counts(by: dict[str, int]) -> str:
+    return ", ".join(f"{by[s]} {s}" for s in STATUSES if s in by) or "none"
+
+
 def _badge(status: str) -> str:
     fill, stroke = _COLOURS.get(status, _COLOURS[""])
     return (
@@ -346,7 +350,7 @@ def render_html(case: Case, svg: str | None = None) -> str:
 {_badge(case.nodes[case.root].status)}</p>
 <p><b>Evidence coverage</b>: {cov["supported"]} of {cov["leaf_goals"]} leaf goals supported
 ({"—" if share is None else f"{100 * share:.0f} %"}): {e(summary)}.
-{cov["solutions"]} evidence items: {e(json.dumps(cov["solutions_by_status"]))}.</p>
+{cov["solutions"]} evidence items: {e(_counts(cov["solutions_by_status"]))}.</p>
 <p>Statuses: {legend}. A claim is <b>supported</b> only by evidence that meets its criterion
 and whose artefacts are unchanged since it was measured; an <b>undeveloped</b> claim has no
 evidence, a <b>stale</b> one rests on an artefact that changed, an <b>unverified</b> one on
