@@ -126,3 +126,20 @@ def test_cli_check_of_a_folder_without_a_case_says_so(
 ) -> None:
     assert main(["assurance", "check", str(tmp_path)]) == 2
     assert "no assurance case here" in capsys.readouterr().err
+
+
+def test_a_changed_goal_model_is_reported_as_the_argument_to_rebuild(
+    project: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    monkeypatch.chdir(project)
+    out = project / "case"
+    main(["assurance", "build", "examples/uav/sim.yaml", "--out", str(out)])
+    goals = project / "examples/uav/goals.yaml"
+    goals.write_text(goals.read_text(encoding="utf-8") + "# edited\n", encoding="utf-8")
+    changes = check_case(read_case(out))
+    assert [(c.node, c.role) for c in changes] == [("(argument)", "goal_model")]
+    capsys.readouterr()
+    assert main(["assurance", "check", str(out)]) == 1
+    text = capsys.readouterr().out
+    assert "the argument: goal_model examples/uav/goals.yaml was " in text
+    assert "build it again (examples/uav/sim.yaml)" in text

@@ -21,7 +21,8 @@ class Change:
     """One artefact that is not as the case recorded it.
 
     Attributes:
-        node: The solution whose figure rests on it.
+        node: The solution whose figure rests on it, or ``(argument)`` for a file the
+            argument was built from.
         role: The artefact's role (``model:uav-fog``, ``results`` …).
         path: Its path as recorded.
         recorded: Its sha256 in the case.
@@ -38,6 +39,10 @@ class Change:
 
 def check_case(case: Case, root: str | Path | None = None) -> list[Change]:
     """Re-hash the case's artefacts; mark stale what changed (in place) and return the changes.
+
+    A change to a file the argument was built from (the launch, goal model, binding,
+    tactics, registry or criteria file) is reported with ``node`` ``(argument)``: the
+    argument itself may differ now, so the case needs building again.
 
     Args:
         case: The case (``read_case``).
@@ -65,5 +70,10 @@ def check_case(case: Case, root: str | Path | None = None) -> list[Change]:
         if why:
             ev.stale = "; ".join(why) if ev.stale is None else f"{ev.stale}; {'; '.join(why)}"
             node.text = f"{node.text} (STALE: {'; '.join(why)})"
+    for a in case.artefacts:  # the files the argument itself was built from
+        path = Path(a.path) if Path(a.path).is_absolute() else base / a.path
+        now = sha256_file(path) if path.is_file() else None
+        if now != a.sha256:
+            changes.append(Change("(argument)", a.role, a.path, a.sha256, now))
     propagate(case)
     return changes

@@ -14,6 +14,7 @@ import json
 import shlex
 import subprocess
 import sys
+import tempfile
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -575,19 +576,12 @@ def run_tests(node_ids: list[str], root: Path) -> dict[str, str]:
     """Run pytest once on ``node_ids`` (from ``root``); node id → ``pass`` or ``fail``."""
     if not node_ids:
         return {}
-    report = root / ".assurance-tests.xml"
-    cmd = [
-        sys.executable,
-        "-m",
-        "pytest",
-        "-q",
-        "-p",
-        "no:cacheprovider",
-        f"--junitxml={report}",
-        *node_ids,
-    ]
-    subprocess.run(cmd, cwd=root, capture_output=True, text=True, check=False)
-    return _junit(report, node_ids)
+    with tempfile.TemporaryDirectory(prefix="anunnaki-assurance-") as tmp:
+        report = Path(tmp) / "tests.xml"
+        cmd = [sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider"]
+        cmd += [f"--junitxml={report}", *node_ids]
+        subprocess.run(cmd, cwd=root, capture_output=True, text=True, check=False)
+        return _junit(report, node_ids)
 
 
 def _junit(report: Path, node_ids: list[str]) -> dict[str, str]:
@@ -598,8 +592,6 @@ def _junit(report: Path, node_ids: list[str]) -> dict[str, str]:
         tree = ET.parse(report)
     except (OSError, ET.ParseError):
         return {t: "fail" for t in node_ids}
-    finally:
-        report.unlink(missing_ok=True)
     ran: dict[str, list[bool]] = {t: [] for t in node_ids}
     for case in tree.iter("testcase"):
         name = case.get("name", "")

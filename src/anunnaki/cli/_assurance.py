@@ -122,7 +122,10 @@ def _check(args: argparse.Namespace) -> int:
         return 0
     for ch in changes:
         now = "gone" if ch.now is None else f"now {ch.now[:12]}…"
-        print(f"stale {ch.node}: {ch.role} {ch.path} was {ch.recorded[:12]}…, {now}")
+        what = "the argument" if ch.node == "(argument)" else f"stale {ch.node}"
+        print(f"{what}: {ch.role} {ch.path} was {ch.recorded[:12]}…, {now}")
+    if any(ch.node == "(argument)" for ch in changes):
+        print(f"the argument was built from files that changed: build it again ({case.launch})")
     lost = [n.id for n in case if before.get(n.id) == "supported" and n.status != "supported"]
     if lost:
         print(f"claims no longer supported: {', '.join(lost)}")
