@@ -143,3 +143,15 @@ def test_a_changed_goal_model_is_reported_as_the_argument_to_rebuild(
     text = capsys.readouterr().out
     assert "the argument: goal_model examples/uav/goals.yaml was " in text
     assert "build it again (examples/uav/sim.yaml)" in text
+
+
+def test_a_case_built_elsewhere_is_checked_against_the_working_folder(
+    project: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    case = _build(project)
+    case.project_root = "/nowhere/the/clone/it/was/built/in"  # type: ignore[attr-defined]
+    write_case(case, project / "case")  # type: ignore[arg-type]
+    monkeypatch.chdir(project)
+    assert check_case(read_case(project / "case")) == []
+    monkeypatch.chdir(project / "examples")  # the artefacts are not found from here
+    assert {c.now for c in check_case(read_case(project / "case"))} == {None}

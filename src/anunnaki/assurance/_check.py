@@ -46,10 +46,12 @@ def check_case(case: Case, root: str | Path | None = None) -> list[Change]:
 
     Args:
         case: The case (``read_case``).
-        root: Where relative artefact paths lie (default: the root it was built from).
+        root: Where relative artefact paths lie (default: the root it was built from, or
+            the working folder where that folder does not exist here).
 
     """
-    base = Path(root or case.project_root or Path.cwd())
+    recorded = Path(case.project_root) if case.project_root else None
+    base = Path(root) if root else recorded if recorded and recorded.is_dir() else Path.cwd()
     hashes: dict[Path, str | None] = {}
     changes: list[Change] = []
     for node in case.solutions():
