@@ -85,14 +85,24 @@ def test_relax_tolerances_are_stated_as_acceptance_criteria(rover: Case, uav: Ca
     )
 
 
-def test_a_leaf_without_evidence_is_undeveloped_and_never_supported(rover: Case) -> None:
-    for gid in ("G13", "G14", "G7", "G8", "G6"):
-        node = rover.nodes[gid]
-        assert node.supported_by == [] and node.undeveloped
-        assert node.status == "undeveloped"
-        assert gsn_document(rover)[gid]["undeveloped"] is True
-    # G12 (OR of two undeveloped leaves) is not supported either
-    assert rover.nodes["G12"].status == "undeveloped"
+def test_a_leaf_without_evidence_is_undeveloped_and_never_supported(uav: Case) -> None:
+    node = uav.nodes["G12"]  # the ground-station link: no measurement, no test named
+    assert node.supported_by == [] and node.undeveloped
+    assert node.status == "undeveloped"
+    assert gsn_document(uav)["G12"]["undeveloped"] is True
+    assert "supportedBy" not in gsn_document(uav)["G12"]
+    # G1 is an AND over it (and fails on its own evidence besides)
+    assert uav.nodes["S-G1"].status != "supported"
+
+
+def test_tests_not_run_support_nothing(rover: Case) -> None:
+    (sn,) = [rover.nodes[s] for s in rover.nodes["G7"].supported_by]
+    assert sn.evidence is not None and sn.evidence.kind == "tests"
+    assert (sn.evidence.result, sn.status, rover.nodes["G7"].status) == (
+        "not run",
+        "unverified",
+        "unverified",
+    )
 
 
 def test_evidence_records_figure_criterion_result_command_and_hashes(rover: Case) -> None:
@@ -152,7 +162,7 @@ def test_the_oracle_against_its_ceiling_and_its_false_alarms(rover: Case) -> Non
     (alarms,) = [
         n
         for n in rover.solutions()
-        if n.evidence is not None and "oracle_ramps.json" in n.evidence.figure
+        if n.evidence is not None and "false_alarms.with_close" in n.evidence.figure
     ]
     assert alarms.evidence is not None
     oracle = {a.role: a for a in alarms.evidence.artefacts}["oracle:rover-default"]
@@ -182,8 +192,9 @@ def test_coverage_counts_leaf_goals_with_supported_evidence(rover: Case, uav: Ca
         leaves = case.leaf_goals()
         assert cov["leaf_goals"] == len(leaves)
         assert cov["supported"] == sum(n.status == "supported" for n in leaves)
-        assert cov["by_status"]["undeveloped"]
+        assert sum(len(ids) for ids in cov["by_status"].values()) == len(leaves)
     assert rover.coverage()["leaf_goals"] == 13 and uav.coverage()["leaf_goals"] == 9
+    assert uav.coverage()["by_status"]["undeveloped"] == ["G12"]
 
 
 def test_both_cases_keep_the_gsn_rules(rover: Case, uav: Case) -> None:

@@ -29,7 +29,7 @@ def test_the_svg_draws_every_node_once_with_its_status(uav: Case) -> None:
         assert cls[:2] == ["gsn", n.type]
         if n.status:
             assert cls[2] == n.status
-    assert "undeveloped" in groups["gsn-G3"]
+    assert "undeveloped" in groups["gsn-G12"]
     # a goal is a rectangle, a strategy a parallelogram, a solution a circle
     g1 = next(g for g in tree.iter(f"{ns}g") if g.get("id") == "gsn-G1")
     assert g1.find(f"{ns}rect") is not None
