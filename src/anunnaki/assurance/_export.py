@@ -309,13 +309,17 @@ def render_html(case: Case, svg: str | None = None) -> str:
         if n.type == "solution":
             continue
         ctx = ", ".join(n.in_context_of)
-        below = ", ".join(n.supported_by) or "<em>undeveloped</em>"
+        below = ", ".join(f'<a href="#{e(c)}">{e(c)}</a>' for c in n.supported_by)
         rows.append(
             f'<tr id="{e(n.id)}"><td><b>{e(n.id)}</b><br>{e(n.type)}'
             f"{' (leaf)' if n.leaf else ''}</td><td>{_badge(n.status)}</td><td>{e(n.text)}</td>"
-            f"<td>{below if below.startswith('<em>') else e(below)}</td><td>{e(ctx)}</td></tr>"
+            f"<td>{below or '<em>undeveloped</em>'}</td><td>{e(ctx)}</td></tr>"
         )
     ev_rows = []
+    parents: dict[str, list[str]] = {}
+    for n in case:
+        for c in n.supported_by:
+            parents.setdefault(c, []).append(n.id)
     for n in case.solutions():
         ev = n.evidence
         assert ev is not None
@@ -330,8 +334,9 @@ def render_html(case: Case, svg: str | None = None) -> str:
         )
         stale = f'<div class="stale-why">stale: {e(ev.stale)}</div>' if ev.stale else ""
         conds = f"<br>conditions: {e(', '.join(ev.conditions))}" if ev.conditions else ""
+        for_ = ", ".join(f'<a href="#{e(p)}">{e(p)}</a>' for p in parents.get(n.id, []))
         ev_rows.append(
-            f'<tr id="{e(n.id)}"><td><b>{e(n.id)}</b><br>for {e(n.source or "")}</td>'
+            f'<tr id="{e(n.id)}"><td><b>{e(n.id)}</b><br>for {for_}</td>'
             f"<td>{_badge(n.status)}</td><td>{e(ev.stage)}</td><td>{e(ev.figure)}{conds}{stale}"
             f"</td><td>{e(ev.criterion)}</td><td>{e(ev.result)}</td>"
             f"<td><code>{e(ev.command)}</code></td><td>{arts}</td></tr>"
