@@ -155,3 +155,12 @@ def test_a_case_built_elsewhere_is_checked_against_the_working_folder(
     assert check_case(read_case(project / "case")) == []
     monkeypatch.chdir(project / "examples")  # the artefacts are not found from here
     assert {c.now for c in check_case(read_case(project / "case"))} == {None}
+
+
+def test_a_prior_case_of_another_launch_is_not_compared(project: Path) -> None:
+    prior = _build(project)
+    prior.launch = "examples/rover/demo.yaml"  # type: ignore[attr-defined]
+    tactics = project / "examples/uav/tactics.yaml"
+    tactics.write_text(tactics.read_text(encoding="utf-8") + "# edited\n", encoding="utf-8")
+    case = _build(project, prior=prior)
+    assert case.nodes["Sn-G10-1"].status == "supported"  # type: ignore[attr-defined]

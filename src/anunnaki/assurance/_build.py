@@ -108,7 +108,7 @@ def build_case(
     case.launch = src.rel(launch_path)
     case.project_root = str(base)
     case.artefacts = [src.artefact(role, path) for role, path in files.items()]
-    if prior is not None:
+    if prior is not None and prior.launch == case.launch:  # another launch's case: no prior
         mark_changed_since(case, prior)
     problems = validate(case)
     if problems:  # a bug here, not the user's: the generator broke a GSN rule
