@@ -18,7 +18,7 @@ import tempfile
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 from anunnaki.assurance._case import Artefact, Evidence
 from anunnaki.assurance._criteria import DEFAULT_STAGE, EvidenceSpec
@@ -169,17 +169,19 @@ def _acceptance(
     return Acceptance(f"= {spec.equals:g}{u}", spec.equals, spec.equals)
 
 
-def _make(
-    spec: EvidenceSpec,
-    acc: Acceptance,
-    *,
-    figure: str,
-    value: float | None,
-    command: str,
-    artefacts: list[Artefact],
-    model: str | None = None,
-    conditions: list[str] | None = None,
-) -> Evidence:
+class _Figure(NamedTuple):
+    """What one evidence record says, before its criterion is checked."""
+
+    figure: str
+    value: float | None
+    command: str
+    artefacts: list[Artefact]
+    model: str | None = None
+    conditions: list[str] | None = None
+
+
+def _make(spec: EvidenceSpec, acc: Acceptance, fig: _Figure) -> Evidence:
+    figure, value, command, artefacts, model, conditions = fig
     result = "not run" if value is None else "pass" if check_value(value, acc) else "fail"
     ev = Evidence(
         kind=spec.kind,
@@ -231,18 +233,7 @@ def _detector(spec: EvidenceSpec, acc: Acceptance, src: Sources, element: str) -
             f"anunnaki evaluate-detector {src.rel(registry)} --model {m.id} "
             f"--data {data} --split test"
         )
-        out.append(
-            _make(
-                spec,
-                acc,
-                figure=figure,
-                value=f1,
-                command=command,
-                artefacts=arts,
-                model=m.id,
-                conditions=["clear"],
-            )
-        )
+        out.append(_make(spec, acc, _Figure(figure, f1, command, arts, m.id, ["clear"])))
     return out
 
 
@@ -274,21 +265,13 @@ def _data(spec: EvidenceSpec, acc: Acceptance, src: Sources, element: str) -> li
         if test_split.is_file():
             arts.append(src.artefact("dataset:test", test_split))
         command = f"anunnaki make-dataset {platform} --out data/{platform}"
+        count = None if n is None else float(n)
         # held-out test images are clean frames; an Enki model's training covers its phenomenon
         conditions = ["clear"]
         if (t.get("source") or {}).get("phenomenon"):
             conditions.append(str(t["source"]["phenomenon"]))
         out.append(
-            _make(
-                spec,
-                acc,
-                figure="; ".join(parts),
-                value=None if n is None else float(n),
-                command=command,
-                artefacts=arts,
-                model=m.id,
-                conditions=conditions,
-            )
+            _make(spec, acc, _Figure("; ".join(parts), count, command, arts, m.id, conditions))
         )
     return out
 
@@ -341,14 +324,7 @@ def _robustness(spec: EvidenceSpec, acc: Acceptance, src: Sources, element: str)
         command = f"nice -n 10 .venv/bin/python benchmarks/robustify.py --domains {key}"
         out.append(
             _make(
-                spec,
-                acc,
-                figure=figure,
-                value=value,
-                command=command,
-                artefacts=arts,
-                model=mid,
-                conditions=[str(dom.get("phenomenon"))],
+                spec, acc, _Figure(figure, value, command, arts, mid, [str(dom.get("phenomenon"))])
             )
         )
     return out
@@ -379,18 +355,8 @@ def _oracle(spec: EvidenceSpec, acc: Acceptance, src: Sources, element: str) -> 
             f"anunnaki oracle evaluate --models {src.rel(src.files['registry'])} --model {m.id} "
             f"--data data/{m.id.split('-')[0]} --phenomenon {phen[0] if phen else 'fog'}"
         )
-        out.append(
-            _make(
-                spec,
-                acc,
-                figure=figure,
-                value=acc_v,
-                command=command,
-                artefacts=arts,
-                model=m.id,
-                conditions=["clear", *map(str, phen)],
-            )
-        )
+        conditions = ["clear", *map(str, phen)]
+        out.append(_make(spec, acc, _Figure(figure, acc_v, command, arts, m.id, conditions)))
     return out
 
 
@@ -423,18 +389,7 @@ def _oracle_ceiling(
         command = (
             f"nice -n 10 .venv/bin/python benchmarks/oracle.py --{platform}-data data/{platform}"
         )
-        out.append(
-            _make(
-                spec,
-                acc,
-                figure=figure,
-                value=value,
-                command=command,
-                artefacts=arts,
-                model=mid,
-                conditions=[phen],
-            )
-        )
+        out.append(_make(spec, acc, _Figure(figure, value, command, arts, mid, [phen])))
     return out
 
 
@@ -500,11 +455,13 @@ def _result(spec: EvidenceSpec, acc: Acceptance, src: Sources, element: str) -> 
         _make(
             spec,
             acc,
-            figure=f"{spec.text}: {value:g}{unit} ({spec.file}: {spec.path})",
-            value=value,
-            command=command,
-            artefacts=arts,
-            model=model,
+            _Figure(
+                f"{spec.text}: {value:g}{unit} ({spec.file}: {spec.path})",
+                value,
+                command,
+                arts,
+                model,
+            ),
         )
     ]
 
@@ -538,16 +495,8 @@ def _tests(spec: EvidenceSpec, acc: Acceptance, src: Sources, element: str) -> l
             t.split("::")[-1] for t in spec.tests
         )
     command = ".venv/bin/python -m pytest -q " + " ".join(shlex.quote(t) for t in spec.tests)
-    return [
-        _make(
-            spec,
-            Acceptance("every test passes", 1.0, None),
-            figure=figure,
-            value=value,
-            command=command,
-            artefacts=arts,
-        )
-    ]
+    every = Acceptance("every test passes", 1.0, None)
+    return [_make(spec, every, _Figure(figure, value, command, arts))]
 
 
 _KINDS: dict[str, Callable[[EvidenceSpec, Acceptance, Sources, str], list[Evidence]]] = {

@@ -114,9 +114,14 @@ def acceptance(goal: GoalSpec) -> Acceptance | None:
 
 
 def _cross(u: Any, outer: float, inner: float, threshold: float) -> float | None:
-    """The value between ``outer`` (utility below) and ``inner`` where utility meets threshold."""
+    """Where, between ``inner`` (utility meets threshold) and ``outer``, it stops meeting it.
+
+    ``None`` when it does not meet it at ``inner``; ``outer`` when it still does there.
+    """
     if u(inner) < threshold:
         return None
+    if u(outer) >= threshold:
+        return outer
     a, b = outer, inner
     for _ in range(_STEPS):
         mid = (a + b) / 2
@@ -135,13 +140,5 @@ def _eventually_gap(op: TemporalOperator, horizon: float, threshold: float) -> f
         value = op.utility_at(history, None, 1.0 + gap)
         return 0.0 if value is None else value
 
-    a, b = 0.0, horizon
-    if utility(b) >= threshold:
-        return b
-    for _ in range(_STEPS):
-        mid = (a + b) / 2
-        if utility(mid) >= threshold:
-            a = mid
-        else:
-            b = mid
-    return round(a, 6)
+    gap = _cross(utility, horizon, 0.0, threshold)
+    return 0.0 if gap is None else gap
