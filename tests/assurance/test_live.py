@@ -74,3 +74,21 @@ def test_a_relaxed_goal_within_its_tolerance_is_degraded(rover: Case, uav: Case)
     assert full["G20"].status == "supported"
     crisp = evaluate(uav, {"G10": _state("G10", True, 0.6)})
     assert crisp["G10"].status == "supported"  # crisp: no RELAX tolerance to be within
+
+
+def test_the_evaluators_states_feed_it_directly(rover: Case) -> None:
+    """What a live pane does: the running goal model's states in, the case's statuses out."""
+    from anunnaki.goals import Evaluator, load_goal_model
+
+    model = load_goal_model(
+        ROOT / "examples/rover/goals-lm.yaml", ROOT / "examples/rover/binding-enlil.yaml"
+    )
+    ev = Evaluator(model)
+    status = {"mode": "autonomous", "buzzer": False, "bumper": False, "lights": False}
+    ev.observe("/rover/status", status, now=1.0)
+    assert evaluate(rover, ev.states())["G5"].status == rover.nodes["G5"].status == "supported"
+    ev.observe("/rover/status", {**status, "bumper": True}, now=2.0)  # a contact: G5 fails
+    live = evaluate(rover, ev.states(), active_model="rover-default", perceived="clear")
+    assert live["G5"] == evaluate(rover, {"G5": ev.state("G5")})["G5"]
+    assert live["G5"].status == "violated"
+    assert live["G5"].reason == "the goal model finds it unsatisfied"
