@@ -121,3 +121,20 @@ def test_a_build_imports_no_ml_framework() -> None:
     )
     done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert done.stdout.strip() == "[]"
+
+
+def test_criteria_for_another_goal_model_are_refused_or_left_out() -> None:
+    launch = ROOT / "examples/rover/utu.yaml"  # the rover's goals.yaml, not goals-lm.yaml
+    criteria = ROOT / "examples/rover/assurance.yaml"
+    with pytest.raises(ModelFileError) as err:
+        build_case(launch, criteria=criteria, root=ROOT)
+    assert "the criteria develop goals-lm.yaml, but the launch's goal model is goals.yaml" in str(
+        err.value
+    )
+    assert f"{criteria}: goal_model:" in str(err.value)
+    # found beside the launch only: left out, and the case says so
+    case = build_case(launch, root=ROOT)
+    assert case.solutions() == []
+    (note,) = case.notes
+    assert note.startswith("examples/rover/assurance.yaml develops examples/rover/goals-lm.yaml")
+    assert case.coverage()["supported"] == 0

@@ -24,7 +24,7 @@ from typing import Any, Literal
 
 from anunnaki.assurance._case import Case, Evidence, Node, propagate
 from anunnaki.assurance._criteria import Criteria, load_criteria
-from anunnaki.assurance._evidence import Sources, collect, run_tests
+from anunnaki.assurance._evidence import Sources, collect, relative, run_tests
 from anunnaki.assurance._relax_text import acceptance
 from anunnaki.assurance._validate import element_type, validate
 from anunnaki.errors import ModelFileError
@@ -89,12 +89,9 @@ def build_case(
     scenario = getattr(getattr(loaded.managed, "options", None), "scenario", None)
     if isinstance(scenario, str) and Path(scenario).is_file():
         files["scenario"] = Path(scenario).resolve()
-    if criteria is None:
-        beside = launch_path.resolve().parent / CRITERIA_FILE
-        criteria = beside if beside.is_file() else None
-    crit = load_criteria(criteria) if criteria is not None else None
-    if crit is not None:
-        files["criteria"] = Path(criteria).resolve()  # type: ignore[arg-type]
+    crit, notes = _criteria_for(launch_path, criteria, files["goal_model"], base)
+    if crit is not None and crit.source is not None:
+        files["criteria"] = Path(crit.source).resolve()
     src = Sources(
         root=base,
         files=files,
@@ -107,6 +104,7 @@ def build_case(
     case = case_from_model(loaded.parts.model, crit, src, name=loaded.name)
     case.launch = src.rel(launch_path)
     case.project_root = str(base)
+    case.notes = notes
     case.artefacts = [src.artefact(role, path) for role, path in files.items()]
     if prior is not None and prior.launch == case.launch:  # another launch's case: no prior
         mark_changed_since(case, prior)
@@ -117,6 +115,41 @@ def build_case(
     case.built = _dt.datetime.now(_dt.UTC).strftime("%Y-%m-%dT%H:%M:%SZ")
     case.build_seconds = round(time.perf_counter() - started, 3)
     return case
+
+
+def _criteria_for(
+    launch: Path, criteria: str | Path | None, goal_model: Path, base: Path
+) -> tuple[Criteria | None, list[str]]:
+    """The criteria to apply, and notes: the file given, or the one beside the launch.
+
+    A criteria file that names another goal model than the launch's is refused when given,
+    and left out with a note when it was only found beside the launch.
+    """
+    given = criteria is not None
+    if criteria is None:
+        beside = launch.resolve().parent / CRITERIA_FILE
+        if not beside.is_file():
+            return None, []
+        criteria = beside
+    crit = load_criteria(criteria)
+    if crit.goal_model is None:
+        return crit, []
+    meant = (Path(criteria).resolve().parent / crit.goal_model).resolve()
+    if meant == goal_model.resolve():
+        return crit, []
+    if given:
+        raise ModelFileError(
+            f"the criteria develop {meant.name}, but the launch's goal model is {goal_model.name}",
+            path=crit.source,
+            element="goal_model",
+            hint="give the criteria file written for this goal model (--criteria)",
+        )
+    note = (
+        f"{relative(base, Path(criteria))} develops {relative(base, meant)}, not this "
+        f"launch's goal model {relative(base, goal_model)}: no evidence attached "
+        "(give --criteria FILE)"
+    )
+    return None, [note]
 
 
 def _reachable(model: GoalModel) -> list[str]:

@@ -161,6 +161,7 @@ class Case:
     project_root: str = ""
     build_seconds: float | None = None
     artefacts: list[Artefact] = field(default_factory=list)
+    notes: list[str] = field(default_factory=list)
 
     def __iter__(self) -> Iterator[Node]:
         return iter(self.nodes.values())
@@ -202,6 +203,7 @@ class Case:
             "build_seconds": self.build_seconds,
             "coverage": self.coverage(),
             "artefacts": [asdict(a) for a in self.artefacts],
+            "notes": list(self.notes),
             "nodes": [_node_json(n) for n in self],
         }
 
@@ -235,6 +237,7 @@ class Case:
                 project_root=data.get("project_root", ""),
                 build_seconds=data.get("build_seconds"),
                 artefacts=[Artefact(**a) for a in data.get("artefacts", [])],
+                notes=list(data.get("notes", [])),
             )
         except (KeyError, TypeError) as exc:
             raise ModelFileError(

@@ -6,6 +6,7 @@ acceptance criterion (docs/assurance.md, "The criteria file")::
 
     anunnaki: assurance/1
     case: rover
+    goal_model: goals-lm.yaml           # the goal model it develops (relative to this file)
     evidence:
       G16:                              # a goal of the goal model, or an obstacle (O1)
         - kind: detector                # held-out F1 of each model of the launch's registry
@@ -154,6 +155,7 @@ class Criteria(BaseModel):
     anunnaki: Literal["assurance/1"]
     case: str = ""
     description: str = ""
+    goal_model: str | None = None
     evidence: dict[str, Annotated[list[EvidenceSpec], Field(min_length=1)]] = Field(
         default_factory=dict
     )

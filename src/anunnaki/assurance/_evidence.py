@@ -26,7 +26,13 @@ from anunnaki.assurance._relax_text import Acceptance, check_value
 from anunnaki.errors import ModelFileError
 from anunnaki.lec import ModelRegistry, sha256_file
 
-__all__ = ["Sources", "collect", "run_tests"]
+__all__ = ["Sources", "collect", "relative", "run_tests"]
+
+
+def relative(root: Path, path: Path) -> str:
+    """``path`` relative to ``root`` where it lies inside it, else absolute (POSIX form)."""
+    p = path.resolve()
+    return p.relative_to(root).as_posix() if p.is_relative_to(root) else p.as_posix()
 
 
 @dataclass
@@ -53,11 +59,7 @@ class Sources:
 
     def rel(self, path: Path) -> str:
         """``path`` relative to the root when inside it."""
-        p = path.resolve()
-        try:
-            return p.relative_to(self.root).as_posix()
-        except ValueError:
-            return p.as_posix()
+        return relative(self.root, path)
 
     def sha(self, path: Path) -> str:
         """The file's sha256, hashed once per build."""

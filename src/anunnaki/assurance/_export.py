@@ -356,6 +356,7 @@ def render_html(case: Case, svg: str | None = None) -> str:
 <p><b>Evidence coverage</b>: {cov["supported"]} of {cov["leaf_goals"]} leaf goals supported
 ({"—" if share is None else f"{100 * share:.0f} %"}): {e(summary)}.
 {cov["solutions"]} evidence items: {e(_counts(cov["solutions_by_status"]))}.</p>
+{"".join(f"<p><b>Note</b>: {e(note)}</p>" for note in case.notes)}
 <p>Statuses: {legend}. A claim is <b>supported</b> only by evidence that meets its criterion
 and whose artefacts are unchanged since it was measured; an <b>undeveloped</b> claim has no
 evidence, a <b>stale</b> one rests on an artefact that changed, an <b>unverified</b> one on

@@ -99,6 +99,8 @@ def _build(args: argparse.Namespace) -> int:
         f"{cov['solutions']} evidence items {cov['solutions_by_status']}; "
         f"built in {case.build_seconds:.2f} s"
     )
+    for note in case.notes:
+        print(f"  note: {note}")
     for status, ids in cov["by_status"].items():
         if status != "supported":
             print(f"  {status}: {', '.join(ids)}")
