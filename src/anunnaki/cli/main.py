@@ -21,6 +21,7 @@ def build_parser() -> argparse.ArgumentParser:
     """Build the argument parser with every sub-command."""
     from anunnaki.cli import (
         _assess,
+        _assurance,
         _check,
         _dashboard,
         _detector,
@@ -41,6 +42,7 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     sub.required = True
     _assess.add_parser(sub)
+    _assurance.add_parser(sub)
     _check.add_parser(sub)
     _dashboard.add_parser(sub)
     _detector.add_parser(sub)
