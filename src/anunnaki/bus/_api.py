@@ -3,7 +3,7 @@
 :class:`Bus` holds everything that does not depend on the transport: naming, encoding, QoS,
 bounded queues and dispatcher threads, services, stats, logging and closing. A transport
 (in-process hub or zenoh session) implements seven small hooks (``_declare_sender``,
-``_declare_receiver``, ``_declare_queryable``, ``_query``, ``_declare_token``,
+``_declare_receiver``, ``_declare_queryable``, ``_query_start``, ``_declare_token``,
 ``_query_tokens``, ``_declare_token_watch``) plus ``_close_transport``. So the two buses
 cannot drift apart in behaviour: one contract suite tests both.
 
@@ -1106,10 +1106,6 @@ class Bus(ABC, Closing):
         """Call ``on_query(payload, reply)`` for each query on ``key``; cheaply."""
 
     @abstractmethod
-    def _query(self, key: str, payload: bytes, qos: QoS, timeout: float) -> bytes | None:
-        """Query ``key`` once: the first reply's payload, or ``None`` if none came."""
-
-    @abstractmethod
     def _query_start(
         self,
         key: str,
@@ -1122,6 +1118,18 @@ class Bus(ABC, Closing):
 
         Or ``None`` if none can come: nothing answers ``key`` (over zenoh also the timeout).
         """
+
+    def _query(self, key: str, payload: bytes, qos: QoS, timeout: float) -> bytes | None:
+        """Query ``key`` once and wait: the first reply's payload, or ``None`` if none came."""
+        replied = threading.Event()
+        box: list[bytes | None] = []
+
+        def on_reply(raw: bytes | None) -> None:
+            box.append(raw)
+            replied.set()
+
+        self._query_start(key, payload, qos, timeout, on_reply)
+        return box[0] if replied.wait(timeout) else None
 
     @abstractmethod
     def _declare_token(self, key: str) -> _Link:

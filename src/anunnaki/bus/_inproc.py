@@ -44,20 +44,6 @@ class _Link:
             undo()
 
 
-class _Slot:
-    def __init__(self) -> None:
-        self._event = threading.Event()
-        self._value: bytes | None = None
-
-    def set(self, value: bytes) -> None:
-        if not self._event.is_set():
-            self._value = value
-            self._event.set()
-
-    def wait(self, timeout: float) -> bytes | None:
-        return self._value if self._event.wait(timeout) else None
-
-
 class InprocHub:
     """The in-process 'network': buses attached to the same hub exchange messages.
 
@@ -121,16 +107,6 @@ class InprocHub:
                     self._queryables.pop(key, None)
 
         return _Link(undo)
-
-    def _query(self, key: str, payload: bytes, timeout: float) -> bytes | None:
-        with self._lock:
-            handlers = self._queryables.get(key)
-            handler = handlers[0] if handlers else None
-        if handler is None:
-            return None
-        slot = _Slot()
-        handler(payload, slot.set)
-        return slot.wait(timeout)
 
     def _query_start(
         self, key: str, payload: bytes, on_reply: Callable[[bytes | None], None]
@@ -254,9 +230,6 @@ class InprocBus(Bus):
 
     def _declare_queryable(self, key: str, on_query: QueryCallback) -> _Link:
         return self._hub._add_queryable(key, on_query)
-
-    def _query(self, key: str, payload: bytes, qos: QoS, timeout: float) -> bytes | None:
-        return self._hub._query(key, payload, timeout)
 
     def _query_start(
         self,

@@ -240,29 +240,6 @@ class ZenohBus(Bus):
             raise self._error("declare a service", exc) from exc
         return _Link(queryable.undeclare)
 
-    def _query(self, key: str, payload: bytes, qos: QoS, timeout: float) -> bytes | None:
-        z = self._z
-        try:
-            replies = self._session.get(
-                key,
-                payload=payload,
-                timeout=timeout,
-                consolidation=z.ConsolidationMode.NONE,
-                congestion_control=z.CongestionControl.BLOCK,
-                priority=z.Priority.REAL_TIME if qos.rank == 0 else z.Priority.INTERACTIVE_HIGH,
-                express=True,
-            )
-            for reply in replies:
-                ok = reply.ok
-                if ok is not None:
-                    data: bytes = ok.payload.to_bytes()
-                    return data
-        except z.ZError as exc:
-            if self._session.is_closed():
-                raise BusClosedError("the zenoh session closed during a request") from exc
-            logger.debug("query on %s ended: %s", key, exc)
-        return None
-
     def _query_start(
         self,
         key: str,
