@@ -2312,7 +2312,12 @@ def _scheduler(address: str | None, workers: int) -> Iterator[Any]:
             yield client
         return
     cluster = LocalCluster(  # type: ignore[no-untyped-call]
-        n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None
+        # ":0": its web server on a free port (None still takes 8787, and another cluster
+        # started meanwhile — a test's — then fails)
+        n_workers=workers,
+        threads_per_worker=1,
+        processes=True,
+        dashboard_address=":0",
     )
     with cluster, Client(cluster) as client:  # type: ignore[no-untyped-call]
         yield client

@@ -70,7 +70,9 @@ def test_dask_local_cluster_gives_the_local_pools_archive(job: Job, tmp_path: Pa
     local = run_search(
         job, tmp_path / "pool", search="enlil", budget=20, seed=5, batch=10, workers=2
     )
-    cluster = distributed.LocalCluster(n_workers=1, processes=False, dashboard_address=None)
+    # ":0": the scheduler's web server on a free port. None does not turn it off (distributed
+    # 2026.8 serves it on 8787 anyway, and warns — an error here — when 8787 is taken).
+    cluster = distributed.LocalCluster(n_workers=1, processes=False, dashboard_address=":0")
     with cluster, distributed.Client(cluster) as client:
         remote = run_search(
             job, tmp_path / "dask", search="enlil", budget=20, seed=5, batch=10, dask=client
