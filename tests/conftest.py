@@ -43,6 +43,24 @@ def _bytecode_outside_the_tree() -> None:
 _bytecode_outside_the_tree()
 
 
+def _one_compute_thread_per_process() -> None:
+    """Torch and BLAS compute on one thread in the suite and the processes it starts.
+
+    The suite runs two workers on two cores; each process's torch and OpenBLAS started a
+    thread per core as well, and their workers spin while they wait for one another: with
+    the other worker (or a busy process beside) holding a core, a parallel region waits for
+    a thread that is not running. The training test took 25 s quiet and 456–668 s at load
+    5–19; a training test ran 10.6–14.8 s on one thread against 16.5–20.3 s on two at load
+    10. ``OMP_NUM_THREADS`` (read by torch and OpenBLAS when they load, inherited by every
+    process a test starts) is set unless the caller set it; code that chooses its threads
+    (``--threads``, ``blas_threads``) still does.
+    """
+    os.environ.setdefault("OMP_NUM_THREADS", "1")
+
+
+_one_compute_thread_per_process()
+
+
 #: Session fixtures whose setup pytest-timeout counts against the first test that uses them,
 #: with a timeout that holds it, per folder under tests/: the LEC tests' 60 rendered frames
 #: for the shipped model and Enki's tiny rendered dataset take seconds quiet; Enki's passed

@@ -141,11 +141,16 @@ def _blas_threads() -> set[int]:
     return {int(lib["num_threads"]) for lib in threadpool_info() if lib["user_api"] == "blas"}
 
 
-def test_enlil_plugin_assesses_on_one_blas_thread(oracle_file, monkeypatch) -> None:  # type: ignore[no-untyped-def]
+def test_enlil_plugin_assesses_on_one_blas_thread(oracle_file, monkeypatch, request) -> None:  # type: ignore[no-untyped-def]
     # A frame's lookup is a few small BLAS calls; idle OpenBLAS workers spun between frames
     # (23–34 ms of CPU a frame against 8–9 on one thread, docs/whole-loop.md). The process's own
     # setting is restored after each frame, and the figures are those of the default threads.
+    from threadpoolctl import threadpool_limits
+
     path, _, _ = oracle_file
+    # The process's threads are 2 here (the suite's processes compute on one, tests/conftest.py).
+    limits = threadpool_limits(2, user_api="blas")
+    request.addfinalizer(limits.restore_original_limits)
     threaded = EnlilOracle(oracles={"colour": path}, blas_threads=None)
     single = EnlilOracle(oracles={"colour": path})
     assert single.blas_threads == 1
@@ -169,6 +174,7 @@ def test_enlil_plugin_assesses_on_one_blas_thread(oracle_file, monkeypatch) -> N
         probs = [np.asarray(x.context["probs"], dtype=float) for x in (a, b)]
         np.testing.assert_allclose(probs[0], probs[1], atol=1e-4)
         assert _blas_threads() == before  # restored
+    assert before == {2}
     assert seen[0::2] == [before] * 3  # blas_threads=None: the process's threads
     assert seen[1::2] == [{1}] * 3  # the default: one
 
