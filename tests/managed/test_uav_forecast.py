@@ -23,6 +23,7 @@ from anunnaki.cli.main import main
 from anunnaki.launch import load_launch, run_launch
 from anunnaki.managed import DrawsScenarios, SimKind
 from anunnaki.messages import body_of
+from anunnaki.utu import replay
 
 UAV = Path(__file__).parents[2] / "examples" / "uav"
 
@@ -90,7 +91,7 @@ def power_launch(tmp: Path, scenario: dict[str, Any]) -> Path:
     return tmp / "launch.yaml"
 
 
-def fly(tmp: Path, delivery: list[float]) -> dict[str, Any]:
+def fly(tmp: Path, delivery: list[float], knowledge: str | None = None) -> dict[str, Any]:
     """One flight to ``delivery``: the report's flight, battery statuses and decisions."""
     scenario = {**MISSION, "mission": {**MISSION["mission"], "delivery": delivery}}
     launch = load_launch(power_launch(tmp, scenario))
@@ -106,7 +107,15 @@ def fly(tmp: Path, delivery: list[float]) -> dict[str, Any]:
 
         bus.subscribe("/uav/status", keep, queue=1024)
 
-    result = run_launch(launch, speed=0, handle_signals=False, on_bus=attach, out=_Quiet())
+    result = run_launch(
+        launch,
+        speed=0,
+        handle_signals=False,
+        on_bus=attach,
+        out=_Quiet(),
+        knowledge=knowledge,
+        fresh=knowledge is not None,
+    )
     report = json.loads((tmp / "report.json").read_text())
     started = [d for d in result.decisions if d.kind == "started"]
     return {"flight": report["flight"], "started": started, "levels": levels, "result": result}
@@ -134,7 +143,9 @@ def test_the_forecast_lets_the_uav_deliver_to_the_near_point(tmp_path: Path) -> 
 
 @pytest.mark.timeout(300)
 def test_the_forecast_turns_the_uav_home_before_the_far_point(tmp_path: Path) -> None:
-    run = fly(tmp_path, [80, 0])
+    """...and the run's decision log replays it: the forecasts are computed again from the
+    recorded inputs (the binding's text is in the log) and give the same decisions."""
+    run = fly(tmp_path, [80, 0], knowledge=str(tmp_path / "run.db"))
     flight, started = run["flight"], run["started"]
     assert [d.tactic for d in started] == ["return-home"], started
     turned = started[0].t
@@ -143,6 +154,9 @@ def test_the_forecast_turns_the_uav_home_before_the_far_point(tmp_path: Path) ->
     assert flight["delivered"] is False
     assert flight["landing"] == "home" and flight["battery_at_landing"] >= 5.0
     assert flight["landed_xy"] == [0.0, 0.0]
+    again = replay(tmp_path / "run.db")
+    assert again.identical, again.summary()
+    assert again.decisions == again.replayed_decisions >= 4  # selected, started, action, …
 
 
 @pytest.mark.timeout(300)
