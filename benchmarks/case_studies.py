@@ -177,6 +177,11 @@ CASES: dict[str, Case] = {
         },
     ),
 }
+#: The UAV under the paper's power goal G11 (examples/uav/goals-g11.yaml), before the
+#: anticipatory G15 (docs/uav.md, "Power"): the same case with that launch.
+CASES["uav-g11"] = dataclasses.replace(
+    CASES["uav"], launch=ROOT / "examples" / "uav" / "sim-g11.yaml"
+)
 #: The UAV's power obstacle O2 (examples/uav/goals.yaml): the battery below 20 %.
 UAV_LOW_BATTERY = 20.0
 
@@ -324,22 +329,16 @@ class _Recorder(_Heard):
 
 @dataclass
 class _UavRecorder(_Heard):
-    """What a UAV run publishes, heard on its bus: its frames' categories and its flight.
+    """What a UAV run publishes, heard on its bus: its frames' categories and its battery.
 
     A frame counts as handled by the detector while the UAV flies on it (airborne in
     ``auto`` or ``return_home`` at the frame's time; hovering or landing it waits). The
-    flight is read from ``/uav/status``: take-off, the last touch-down (time, battery,
-    where, and whether the battery had forced it), seconds airborne below O2's 20 %, the
-    package's ``delivered``. ``landed`` is set at the touch-down after a flight (the run
-    can stop there: nothing of the mission changes after it).
+    seconds airborne below O2's 20 % are read from ``/uav/status``; the mission's outcome
+    (delivered, where and with what battery it landed) from the run's report
+    (:func:`mission_outcome`).
     """
 
-    home: tuple[float, float]
-    landed: threading.Event = field(default_factory=threading.Event)
     detected: set[int] = field(default_factory=set)  # frames the detector handled
-    airborne_at: float | None = None
-    touchdown: dict[str, Any] | None = None  # t, battery, x, y, forced
-    forced: bool = False
     low_battery_s: float = 0.0
 
     def attach(self, bus: Any) -> None:
@@ -354,20 +353,12 @@ class _UavRecorder(_Heard):
 
     def _on_status(self, sample: Any) -> None:
         body = body_of(sample.message)
-        t, altitude, battery = float(body["t"]), float(body["altitude"]), float(body["battery"])
+        t = float(body["t"])
         with self.lock:
             last = self.statuses[-1] if self.statuses else {}
             if last and float(last["altitude"]) > 0.05 and float(last["battery"]) < UAV_LOW_BATTERY:
                 self.low_battery_s += max(0.0, t - float(last["t"]))
             self._keep_status(body)
-            if altitude > 0.05:
-                if self.airborne_at is None:
-                    self.airborne_at = t
-                self.touchdown = None
-                self.forced = self.forced or body.get("phase") == "forced landing"
-            elif self.airborne_at is not None and self.touchdown is None:
-                self.touchdown = {"t": t, "battery": battery, "x": body["x"], "y": body["y"]}
-                self.landed.set()
 
     def _flying(self, seq: int) -> bool:
         s = self.status_at(seq)
@@ -380,27 +371,23 @@ class _UavRecorder(_Heard):
                 for s, c in self.scorer.items()
                 if c >= 1 and s in self.detected and self._flying(s)
             )
-            last = dict(self.statuses[-1]) if self.statuses else {}
-            down = self.touchdown
-            low, forced, airborne_at = self.low_battery_s, self.forced, self.airborne_at
-        if airborne_at is None:
-            landing = "ground"
-        elif down is None:
-            landing = "airborne"
-        elif forced:
-            landing = "forced"
-        else:
-            away = math.hypot(float(down["x"]) - self.home[0], float(down["y"]) - self.home[1])
-            landing = "home" if away < 1.0 else "elsewhere"
-        return {
-            "degraded_frames": degraded,
-            "delivered": int(bool(last.get("delivered"))),
-            "landing": landing,
-            "landed_home": int(landing == "home"),
-            "battery_at_landing": round(float(down["battery"] if down else last["battery"]), 2),
-            "mission_time_s": None if down is None else round(float(down["t"]), 2),
-            "low_battery_s": round(low, 2),
-        }
+            low = self.low_battery_s
+        return {"degraded_frames": degraded, "low_battery_s": round(low, 2)}
+
+
+def mission_outcome(flight: dict[str, Any]) -> dict[str, Any]:
+    """A UAV run's outcome from its report's ``flight`` (``anunnaki run --report``)."""
+    landing = str(flight["landing"])
+    battery = flight["battery_at_landing"]
+    return {
+        "delivered": int(bool(flight["delivered"])),
+        "landing": landing,
+        "landed_home": int(landing == "home"),
+        "forced_landing": int(landing == "forced"),
+        "landed_xy": flight["landed_xy"],
+        "battery_at_landing": round(float(flight["battery"] if battery is None else battery), 2),
+        "mission_time_s": None if flight["landed"] is None else round(float(flight["landed"]), 2),
+    }
 
 
 class _LockstepMisses(logging.Handler):
@@ -469,20 +456,20 @@ def run_once(
     launch's, with its decisions).
     """
     launch, managed = _sim_launch(case)  # managed: the same object in the launch replaced below
-    update: dict[str, Any] = {"scenario_seed": seed, "report": False, "scorer": SCORER}
+    update: dict[str, Any] = {"report": False, "scorer": SCORER}
     if scenario_file is not None:
         update["scenario"] = str(scenario_file)
-    options = managed.options.model_copy(update=update)
-    managed.options = options
+    managed.options = managed.options.model_copy(update=update)
+    # the seed's draw and the end at the touch-down, as `anunnaki run --seed N --until-landed`
+    managed.with_scenario(seed=seed, until_landed=case.platform == "uav")
+    options = managed.options
     utu = launch.utu.model_copy(update={"notify": {}, "watchdog": WATCHDOG})
     launch = dataclasses.replace(launch, utu=utu)
     scenario = draw_scenario(load_scenario(options.scenario), seed)
     end = scenario.duration if until is None else min(until, scenario.duration)
     recorder: _Recorder | _UavRecorder
-    stop: threading.Event | None = None
     if case.platform == "uav":
-        recorder = _UavRecorder(scenario.mission.home)
-        stop = recorder.landed
+        recorder = _UavRecorder()
     else:
         recorder = _Recorder(scenario.camera.width, scenario.camera.height)
     report_path = Path(os.environ.get("TMPDIR", "/tmp")) / f"case-{os.getpid()}-{seed}.json"
@@ -495,7 +482,6 @@ def run_once(
             launch,
             speed=FAST,
             until=end,
-            stop=stop,
             out=io.StringIO(),
             handle_signals=False,
             on_bus=recorder.attach,
@@ -586,6 +572,7 @@ def run_once(
         "frames": len(report["frames"]),
         "wall_s": round(wall, 2),
         **recorder.counts(),
+        **(mission_outcome(report["flight"]) if case.platform == "uav" else {}),
         **({"collisions": len(report["collisions"])} if case.platform == "rover" else {}),
         **({"lockstep_misses": misses.count} if case.platform == "uav" else {}),
         "onset_delays": delays,
@@ -631,6 +618,7 @@ MEASURES = (
 UAV_MEASURES = (
     "delivered",
     "landed_home",
+    "forced_landing",
     "battery_at_landing",
     "mission_time_s",
     "low_battery_s",
@@ -648,7 +636,7 @@ def measures_of(case: Case) -> tuple[str, ...]:
 def summarise(runs: list[dict[str, Any]], measures: tuple[str, ...] = MEASURES) -> dict[str, Any]:
     """Mean and spread per measure, onset delays pooled over phases and seeds."""
     out: dict[str, Any] = {
-        m: _spread([float(r[m]) for r in runs if r[m] is not None]) for m in measures
+        m: _spread([float(r[m]) for r in runs if r.get(m) is not None]) for m in measures
     }
     delays = [p["delay_s"] for r in runs for p in r["onset_delays"]]
     known = [float(d) for d in delays if d is not None]

@@ -14,7 +14,9 @@ Phases (times in seconds):
          goal G9 is satisfied and G6 holds again.
 * 40-50  dense fog: category 2; G9 no longer resolves O1, G6 and G5 fail, G1 is violated.
 * 50-60  Failsafe F-1: the UAV hovers; G5 is satisfied through G7.
-* 60-70  the battery sags below 20 %: O2 holds, G11 and G8 fail.
+* 60-70  the battery sags below 20 %: O2 holds, and the battery forecast at home (A3.after_mission,
+         from the drain of the last 5 s over the 100 m still to fly at 6 m/s) falls far below
+         the 5 % reserve: G15 and G8 fail.
 * 70-80  the UAV returns home: G8 is satisfied through G10 (and G7 still holds).
 """
 
@@ -47,6 +49,11 @@ def altitude(t: float) -> float:
     return 30.0
 
 
+def route_m(t: float) -> float:
+    """Metres at cruise speed still to fly: 400 at take-off, 6 m/s off while flying on."""
+    return 400.0 - 6.0 * min(t, 50.0)
+
+
 def oracle(t: float) -> tuple[int, str]:
     """The oracle's category and context at ``t``: fog from 30 s, dense from 40 s."""
     if 30 <= t < 40:
@@ -76,6 +83,7 @@ def build() -> list[Record | Phase]:
     for k in range(int(END * 2)):  # A1 status at 2 Hz
         t = k / 2
         status = {"mode": mode(t), "altitude": altitude(t), "delivered": False}
+        status |= {"route_m": route_m(t), "home_m": 150.0, "cruise_speed": 6.0}
         at(t, "/uav/status", {**status, "phase": phase(mode(t))})
     for k in range(int(END * 10)):  # A2 camera metadata and A5 GPS at 10 Hz
         t = k / 10

@@ -509,7 +509,7 @@ def _expression_findings(model: GoalModel, ts: TacticSet, path: str | None) -> l
                 )
         for attr in sorted(expr.refs):
             agent_obj = model.agents.get(attr.agent)
-            if agent_obj is not None and attr.attribute not in agent_obj.attributes:
+            if agent_obj is not None and not agent_obj.knows(attr.attribute):
                 out.append(
                     Finding(
                         "error",
@@ -518,7 +518,7 @@ def _expression_findings(model: GoalModel, ts: TacticSet, path: str | None) -> l
                         eref.line,
                         eref.element,
                         f"{attr.agent} publishes: "
-                        + (", ".join(sorted(agent_obj.attributes)) or "none"),
+                        + (", ".join(agent_obj.attribute_names()) or "none"),
                     )
                 )
     return out

@@ -5,10 +5,11 @@ platform, and a UAV run costs a minute of the suite.)
 
 The quick UAV mission (``CASES["uav"].quick``: 26 s at most, out 48 m east, fog from 3 s, a
 36 % battery draining 1.5 %/s more from 2 s): under Utu the fog swap happens and its
-postcondition holds, G11 fails at about 5 s and ``return-home`` brings the UAV home with
-about a fifth of its battery; under ``none`` the battery obstacle is not handled: the UAV
-delivers, flies on below O2's 20 % and the empty battery forces it down before home (the
-documented measures: docs/uav.md, "Managers compared").
+postcondition holds, the battery forecast at home (G15) fails at about 5 s and
+``return-home`` brings the UAV home with about a fifth of its battery; under ``none`` the
+battery obstacle is not handled: the UAV delivers, flies on below O2's 20 % and the empty
+battery forces it down before home (the documented measures: docs/uav.md, "Managers
+compared").
 """
 
 from __future__ import annotations

@@ -9,8 +9,10 @@ only while it cruises), Utu swaps in the Enki rain+brightness model, then, named
 model's own oracle, the fog model (G6 holds again after each). In the dense fog at cruise
 uav-fog itself loses over 10 % F1 through the camera's JPEG: its oracle (trained through
 the same encoding, issue 34 item 8) calls it compromised, as the live scorer does, and
-Failsafe F-1 hovers the UAV. The draining battery then makes it return home: G11 (RELAX-ed,
-utility 0.5 at 30 %) fails on the way to obstacle O2 (20 %), G8 then holds only through G10.
+Failsafe F-1 hovers the UAV. The draining battery then makes it return home: the battery
+forecast at home after the rest of the mission (A3.after_mission, from the drain of the last
+5 s) falls below the 5 % reserve, G15 fails long before obstacle O2 (20 %), and G8 then holds
+only through G10.
 """
 
 from __future__ import annotations
@@ -216,10 +218,19 @@ def test_uav_fog_s_oracle_agrees_with_the_scorer_in_the_dense_fog(
     said compromised: its contexts had been measured, and it had been trained, on frames
     that never went through the camera's JPEG, which takes more from a fogged frame than
     the fog alone. Trained through the camera's encoding, it agrees with the scorer on the
-    frames both assessed while uav-fog flew in the dense fog."""
+    frames both assessed while uav-fog flew in the dense fog at cruise altitude (in the
+    landing's descent at home, where the battery forecast's return brings the UAV before the
+    run ends, the scene below changes with the altitude: the scorer says degraded there
+    where the oracle still says compromised)."""
+    statuses = short_run["statuses"]
+
+    def landing(seq: int) -> bool:  # the frame's time: seq / the camera's rate
+        before = [st for st in statuses if st["t"] <= seq / SHORT["camera"]["rate"] + 1e-9]
+        return bool(before) and before[-1]["phase"] == "landing"
+
     scorer = {a.frame_seq: a.category for a in short_run["scorer"] if a.model_id == "uav-fog"}
     oracle = {a.frame_seq: a.category for a in short_run["oracle"] if a.model_id == "uav-fog"}
-    both = sorted(set(scorer) & set(oracle))
+    both = sorted(s for s in set(scorer) & set(oracle) if not landing(s))
     assert len(both) >= 30, (scorer, oracle)
     agree = sum(scorer[s] == oracle[s] for s in both)
     assert agree >= 0.9 * len(both), [(s, scorer[s], oracle[s]) for s in both]
@@ -235,7 +246,8 @@ def test_low_battery_sends_the_uav_home(short_run: dict[str, Any]) -> None:
     assert "return-home" in [d.tactic for d in result.decisions if d.kind == "postcondition_ok"]
     after = [s for s in statuses if s["t"] > home[0] + 0.5]
     assert after and all(s["mode"] == "return_home" for s in after)  # it flies home
-    assert min(s["battery"] for s in statuses if s["t"] <= home[0]) < 30.0  # G11 had failed
+    # the forecast turned it, not the level: the battery still read above O2's 20 %
+    assert min(s["battery"] for s in statuses if s["t"] <= home[0]) > 20.0
     # the mission's outcome, printed under the per-phase table
     assert (
         "mission: took off at t = 0.0 s; package not delivered; still airborne" in short_run["log"]

@@ -21,7 +21,7 @@ from anunnaki._parent import stop_with_parent
 from anunnaki.bus import BusConfig, open_bus
 from anunnaki.cli import _dashboard
 from anunnaki.launch import MailSink, load_launch, run_launch, signals_to
-from anunnaki.managed import WritesReports
+from anunnaki.managed import DrawsScenarios, WritesReports
 from anunnaki.tokens import OPERATOR_TOKEN_ENV, user_operator_token
 from anunnaki.utu import MANAGERS, NODE_NAMES, NodeConfigError, PeerWatch, build_node
 
@@ -79,6 +79,18 @@ def _add_run_parser(sub: Any) -> None:
         metavar="FILE.png",
         help="with a simulated managed system: draw the run (windowed F1 per model, oracle "
         "category, tactics; overrides managed.sim.plot_file)",
+    )
+    p.add_argument(
+        "--seed",
+        type=int,
+        metavar="N",
+        help="with a simulated managed system: draw the scenario again from seed N as its "
+        "vary: section says (overrides managed.sim.scenario_seed)",
+    )
+    p.add_argument(
+        "--until-landed",
+        action="store_true",
+        help="with a simulated UAV: end the run at its touch-down after the flight",
     )
     _dashboard.add_run_options(p)
     p.add_argument(
@@ -165,6 +177,8 @@ def run(args: argparse.Namespace) -> int:
             report=str(Path(args.report).resolve()) if args.report else None,
             plot=str(Path(args.plot).resolve()) if args.plot else None,
         )
+    if not _scenario_options(launch, args):
+        return 2
     if os.environ.get(OPERATOR_TOKEN_ENV) is None and launch.utu.operator_token_file is None:
         # Never open by accident: the user's own token, made now if missing (every node
         # process started below reads the same file).
@@ -208,6 +222,25 @@ def run(args: argparse.Namespace) -> int:
         if sink is not None:
             sink.close()
     return result.exit_code
+
+
+def _scenario_options(launch: Any, args: argparse.Namespace) -> bool:
+    """Apply ``--seed`` and ``--until-landed`` to the managed system; False: an error said."""
+    seed, landed = getattr(args, "seed", None), getattr(args, "until_landed", False)
+    if seed is None and not landed:
+        return True
+    if not isinstance(launch.managed, DrawsScenarios):
+        print(
+            "error: --seed and --until-landed need a simulated managed system, a kind that "
+            f"draws its scenario ('managed: {{kind: sim, …}}' in {args.config})",
+            file=sys.stderr,
+        )
+        return False
+    if seed is not None and seed < 0:
+        print(f"error: --seed {seed}: a seed is 0 or more", file=sys.stderr)
+        return False
+    launch.managed.with_scenario(seed=seed, until_landed=landed)
+    return True
 
 
 def _print_mail(sink: MailSink, decisions: list[Any]) -> None:

@@ -38,6 +38,7 @@ from typing import Any, Final, Literal
 
 from anunnaki.errors import ModelFileError
 from anunnaki.goals._expr import ABSENT, AttrRef, Expression, truth
+from anunnaki.goals._forecast import Forecaster
 from anunnaki.goals._freshness import RateEstimator, is_stale
 from anunnaki.goals._history import History
 from anunnaki.goals._model import GoalModel
@@ -169,6 +170,7 @@ class Evaluator:
         self._rate_slot: dict[str, int] = {}
         self._slot_readers: list[list[int]] = []
         self._build_slots_and_nodes()
+        self._build_forecasts()
         self._conditions: dict[str, Callable[[list[Any]], Any]] = {}
         for name, expr in (conditions or {}).items():
             self._conditions[name] = expr.bind(self._slot, self._rslot)
@@ -265,6 +267,55 @@ class Evaluator:
                 for r in res:
                     self._deps[r].append(gi)
             self._obstr[gi] = tuple(entries)
+
+    def _build_forecasts(self) -> None:
+        """A slot per forecast (the binding's ``forecasts:``) and the slots it reads."""
+        self._forecasts: list[tuple[int, int, int | float, int | float, Forecaster]] = []
+        self._fc_field: dict[int, list[int]] = {}  # field slot -> forecasts sampling it
+        self._fc_input: dict[int, list[int]] = {}  # any input slot -> forecasts reading it
+
+        def source(ref: str | float) -> int | float:
+            if isinstance(ref, str):
+                agent, _, attr = ref.partition(".")
+                return self._slot(AttrRef(agent, attr))
+            return float(ref)
+
+        for agent in self.model.agents.values():
+            for name, spec in agent.forecasts.items():
+                k = len(self._forecasts)
+                out = self._slot(AttrRef(agent.id, name))
+                fld = self._slot(AttrRef(agent.id, spec.of))
+                dist, speed = source(spec.distance), source(spec.speed)
+                self._forecasts.append((out, fld, dist, speed, Forecaster(spec.window)))
+                self._fc_field.setdefault(fld, []).append(k)
+                for slot in {fld, dist, speed}:
+                    if isinstance(slot, int):
+                        self._fc_input.setdefault(slot, []).append(k)
+
+    def _refresh_forecasts(self, slots: Iterable[int], now: float | None) -> list[int]:
+        """Recompute the forecasts reading ``slots``; with ``now``, sample their fields first.
+
+        Returns the nodes to re-evaluate (the readers of the forecasts that changed).
+        """
+        hit: set[int] = set()
+        for slot in slots:
+            if now is not None:
+                for k in self._fc_field.get(slot, ()):
+                    self._forecasts[k][4].sample(now, self.slots[slot])
+            hit.update(self._fc_input.get(slot, ()))
+        dirty: list[int] = []
+        values = self.slots
+        for k in sorted(hit):
+            out, fld, dist, speed, fc = self._forecasts[k]
+            value = fc.value(
+                values[fld],
+                values[dist] if isinstance(dist, int) else dist,
+                values[speed] if isinstance(speed, int) else speed,
+            )
+            if values[out] != value:
+                values[out] = value
+                dirty.extend(self._reader_tuples[out])
+        return dirty
 
     def _setup_relax(self, i: int, gid: str, op: RelaxOperator) -> None:
         m = self.model
@@ -532,6 +583,8 @@ class Evaluator:
             if slots[slot] != value or type(slots[slot]) is not type(value):
                 slots[slot] = value
                 dirty.extend(readers[slot])
+        if self._forecasts:
+            dirty.extend(self._refresh_forecasts([slot for slot, _ in tp.fields], now))
         for r in tp.rated:
             est = self._rates[r]
             est.arrive(now)
@@ -557,7 +610,9 @@ class Evaluator:
         if slot is None:
             return
         self.slots[slot] = value
-        dirty = self._reader_tuples[slot]
+        dirty = list(self._reader_tuples[slot])
+        if self._forecasts:
+            dirty.extend(self._refresh_forecasts([slot], now))
         if self._temporal:
             self._sample_temporal(dirty)
         self._propagate(dirty)
@@ -584,21 +639,7 @@ class Evaluator:
         self.now = max(self.now, now)
         slots = self.slots
         readers = self._reader_tuples
-        dirty: list[int] = []
-        next_stale = float("inf")
-        for tp in self._topics.values():
-            if tp.last is None or tp.stale:
-                continue
-            deadline = tp.last + tp.staleness
-            if is_stale(tp.last, now, tp.staleness):
-                tp.stale = True
-                for slot, _ in tp.fields:
-                    if slots[slot] is not None:
-                        slots[slot] = None
-                        dirty.extend(readers[slot])
-            elif deadline < next_stale:
-                next_stale = deadline
-        self._next_stale = next_stale
+        dirty = self._expire_stale(now)
         for r, est in enumerate(self._rates):
             if est.in_gap(now):
                 slot = self._rate_slot[self._rate_agents[r]]
@@ -614,6 +655,31 @@ class Evaluator:
             self._propagate(dirty)
         return changed
 
+    def _expire_stale(self, now: float) -> list[int]:
+        """Make the values of topics silent past their staleness unknown; the nodes to redo."""
+        slots = self.slots
+        readers = self._reader_tuples
+        dirty: list[int] = []
+        gone: list[int] = []  # slots gone unknown
+        next_stale = float("inf")
+        for tp in self._topics.values():
+            if tp.last is None or tp.stale:
+                continue
+            deadline = tp.last + tp.staleness
+            if is_stale(tp.last, now, tp.staleness):
+                tp.stale = True
+                for slot, _ in tp.fields:
+                    if slots[slot] is not None:
+                        slots[slot] = None
+                        dirty.extend(readers[slot])
+                        gone.append(slot)
+            elif deadline < next_stale:
+                next_stale = deadline
+        self._next_stale = next_stale
+        if gone and self._forecasts:
+            dirty.extend(self._refresh_forecasts(gone, None))
+        return dirty
+
     def expire(self, topic: str, now: float) -> None:
         """Make a topic's values unknown now (its publisher is known to be gone)."""
         self.now = max(self.now, now)
@@ -626,6 +692,8 @@ class Evaluator:
             if self.slots[slot] is not None:
                 self.slots[slot] = None
                 dirty.extend(self._reader_tuples[slot])
+        if self._forecasts:
+            dirty.extend(self._refresh_forecasts([slot for slot, _ in tp.fields], None))
         if self._temporal:
             self._sample_temporal(dirty)
         if dirty:

@@ -31,6 +31,7 @@ from anunnaki.goals._schema import (
     BindingSpec,
     DomainPropertySpec,
     EndpointSpec,
+    ForecastSpec,
     GoalModelSpec,
     GoalSpec,
     ObstacleSpec,
@@ -91,6 +92,16 @@ class Agent:
     node: str | None = None
     # attribute name -> (topic, dotted field path)
     attributes: dict[str, tuple[str, str]] = field(default_factory=dict)
+    # forecast name -> its spec (the binding's ``forecasts:``): attributes computed, not heard
+    forecasts: dict[str, ForecastSpec] = field(default_factory=dict)
+
+    def knows(self, attribute: str) -> bool:
+        """Whether ``attribute`` can be read: a field it publishes or one of its forecasts."""
+        return attribute in self.attributes or attribute in self.forecasts
+
+    def attribute_names(self) -> list[str]:
+        """Every attribute an expression may read of this agent, sorted."""
+        return sorted({*self.attributes, *self.forecasts})
 
     @property
     def primary_topic(self) -> str | None:
@@ -234,6 +245,7 @@ class GoalModel:
     def _resolve(self) -> None:
         self._collect()
         self._bind_agents()
+        self._check_forecasts()
         self._map_logical()
         self._check_agent_ids()
         self._link()
@@ -356,11 +368,14 @@ class GoalModel:
             topics = list(a.topics)
             staleness = a.staleness
             node = a.node
+            forecasts = {}
             if aid in bound:
                 topics = list(bound[aid].topics)
                 staleness = bound[aid].staleness or staleness
                 node = bound[aid].node or node
+                forecasts = dict(bound[aid].forecasts)
             agent = Agent(aid, a.description, topics, staleness or self.spec.staleness, node)
+            agent.forecasts = forecasts
             for tb in topics:
                 for attr, fpath in tb.attributes.items():
                     agent.attributes.setdefault(attr, (tb.topic, fpath))
@@ -398,6 +413,68 @@ class GoalModel:
                         element=f"endpoints[{ep.name}]",
                     )
                 self.endpoints[ep.name] = ep
+
+    def _check_forecasts(self) -> None:
+        """Each forecast reads a field its agent publishes, and attributes that exist."""
+        if self.binding is None:
+            return
+        path, lines = self.binding.path, self.binding.lines
+
+        def bad(aid: str, name: str, key: str, message: str, hint: str) -> None:
+            where = ("agents", aid, "forecasts", name)
+            self._add(
+                "error",
+                message,
+                path=path,
+                line=lines.line((*where, key)) or lines.line(where),
+                element=f"agents.{aid}.forecasts.{name}.{key}",
+                hint=hint,
+            )
+
+        for aid, agent in self.agents.items():
+            for name, fc in agent.forecasts.items():
+                if name in agent.attributes:
+                    bad(
+                        aid,
+                        name,
+                        "of",
+                        f"forecast '{name}' of {aid} has the name of an attribute {aid} publishes",
+                        f"rename the forecast, e.g. {name}_forecast",
+                    )
+                if fc.of not in agent.attributes:
+                    known = ", ".join(sorted(agent.attributes)) or "none"
+                    bad(
+                        aid,
+                        name,
+                        "of",
+                        f"forecast '{name}' extrapolates '{fc.of}', which {aid} does not publish",
+                        f"'of' names one of {aid}'s attributes: {known}",
+                    )
+                for key in ("distance", "speed"):
+                    ref = getattr(fc, key)
+                    if not isinstance(ref, str):
+                        continue
+                    other, _, attr = ref.partition(".")
+                    target = self.agents.get(other)
+                    if target is None:
+                        bad(
+                            aid,
+                            name,
+                            key,
+                            f"forecast '{name}' reads {key} from unknown agent '{other}'",
+                            _did_you_mean(other, self.agents),
+                        )
+                    elif attr not in target.attributes:
+                        known = ", ".join(sorted(target.attributes)) or "none"
+                        bad(
+                            aid,
+                            name,
+                            key,
+                            f"forecast '{name}' reads {key} from '{ref}', which {other} "
+                            "does not publish",
+                            f"{other} publishes: {known} (a forecast reads published "
+                            "attributes, or takes a number)",
+                        )
 
     def _link(self) -> None:
         for g in self.goals.values():
@@ -565,8 +642,8 @@ class GoalModel:
             agent = self.agents.get(ref.agent)
             if agent is None or not agent.topics:
                 continue
-            if ref.attribute not in agent.attributes:
-                known = ", ".join(sorted(agent.attributes)) or "none"
+            if not agent.knows(ref.attribute):
+                known = ", ".join(agent.attribute_names()) or "none"
                 self._add(
                     "error",
                     f"unknown attribute '{ref}' in '{expr.text}'",

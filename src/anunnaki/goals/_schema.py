@@ -22,6 +22,7 @@ __all__ = [
     "BindingSpec",
     "DomainPropertySpec",
     "EndpointSpec",
+    "ForecastSpec",
     "GoalModelSpec",
     "GoalSpec",
     "ObstacleSpec",
@@ -249,12 +250,62 @@ class GoalModelSpec(_Strict):
     endpoints: list[EndpointSpec] = Field(default_factory=list)
 
 
+ATTR_REF = re.compile(r"^[A-Za-z][A-Za-z0-9_]*\.[A-Za-z_][A-Za-z0-9_]*$")
+
+
+def _input(value: Any, what: str, *, positive: bool) -> Any:
+    """A forecast's input: ``Agent.attribute`` (text) or a number (no expression, no eval)."""
+    if isinstance(value, bool):
+        raise ValueError(f"'{what}' is a number or an attribute such as A1.{what}, not {value}")
+    if isinstance(value, int | float):
+        if not math.isfinite(value) or value < 0 or (positive and value == 0):
+            bound = "> 0" if positive else ">= 0"
+            raise ValueError(f"'{what}' as a number must be finite and {bound}, not {value}")
+        return float(value)
+    if isinstance(value, str) and ATTR_REF.match(value.strip()):
+        return value.strip()
+    raise ValueError(
+        f"'{what}' must be a number or an agent's attribute written Agent.attribute "
+        f"(e.g. A1.{what}), not {value!r}"
+    )
+
+
+class ForecastSpec(_Strict):
+    """An anticipatory attribute: where a monitored field will be at the end of a route.
+
+    The field ``of`` (an attribute of the same agent) is extrapolated along its rate of
+    change over the last ``window`` seconds of its samples, for the time the rest of the
+    route takes: ``distance / speed``. So ``value + rate × distance / speed``; e.g. the
+    battery expected at home from its drain, the metres still to fly and the cruise speed.
+    ``distance`` and ``speed`` are attributes (``A1.route_m``) or numbers.
+    """
+
+    of: Annotated[str, Field(pattern=r"^[A-Za-z_][A-Za-z0-9_]*$")]
+    window: Annotated[float, Field(gt=0, le=3600)]
+    distance: str | float
+    speed: str | float
+    description: str = ""
+
+    @field_validator("distance", mode="before")
+    @classmethod
+    def _distance(cls, v: Any) -> Any:
+        return _input(v, "distance", positive=False)
+
+    @field_validator("speed", mode="before")
+    @classmethod
+    def _speed(cls, v: Any) -> Any:
+        return _input(v, "speed", positive=True)
+
+
 class AgentBinding(_Strict):
-    """How one agent is observed on one platform."""
+    """How one agent is observed on one platform, and the forecasts made from it."""
 
     topics: list[TopicBinding] = Field(min_length=1)
     staleness: Annotated[float, Field(gt=0)] | None = None
     node: str | None = None
+    forecasts: dict[
+        Annotated[str, Field(pattern=r"^[A-Za-z_][A-Za-z0-9_]*$", max_length=64)], ForecastSpec
+    ] = Field(default_factory=dict)
 
 
 class BindingSpec(_Strict):

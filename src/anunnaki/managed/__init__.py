@@ -43,6 +43,7 @@ from anunnaki.managed._scripted import ScriptedSystem
 from anunnaki.managed._slot import (
     MANAGED,
     DecisionLike,
+    DrawsScenarios,
     ManagedContext,
     ManagedKind,
     ManagedRun,
@@ -66,6 +67,7 @@ __all__ = [
     "MANAGED",
     "CameraChain",
     "DecisionLike",
+    "DrawsScenarios",
     "Link",
     "ManagedContext",
     "ManagedKind",

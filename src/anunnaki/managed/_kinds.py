@@ -319,7 +319,11 @@ class SimConfig(_Strict):
             launch file.
         scenario_seed: Draw the scenario again from this seed as its ``vary:`` section says
             (:func:`~anunnaki.sim.draw_scenario`: phase timing, object placement, condition
-            strength, fault timing, battery drain); ``None`` runs it as written.
+            strength, fault timing, battery drain); ``None`` runs it as written
+            (``anunnaki run --seed N``).
+        until_landed: End the run at the UAV's touch-down after its flight (nothing of the
+            mission changes after it) instead of at the scenario's end
+            (``anunnaki run --until-landed``); a rover ignores it.
 
     """
 
@@ -333,6 +337,7 @@ class SimConfig(_Strict):
     report_file: str | None = None
     plot_file: str | None = None
     scenario_seed: Annotated[int, Field(ge=0)] | None = None
+    until_landed: bool = False
 
 
 class SimKind:
@@ -369,6 +374,19 @@ class SimKind:
             from anunnaki.sim import require_plot_extra
 
             require_plot_extra()  # before the run, not after it
+
+    def with_scenario(self, *, seed: int | None = None, until_landed: bool = False) -> None:
+        """Draw the scenario from ``seed`` (its ``vary:``) and end at the touch-down.
+
+        ``seed=None`` keeps the launch's ``scenario_seed``; ``until_landed=False`` its
+        ``until_landed``.
+        """
+        update: dict[str, Any] = {}
+        if seed is not None:
+            update["scenario_seed"] = seed
+        if until_landed:
+            update["until_landed"] = True
+        self.options = SimConfig.model_validate({**self.options.model_dump(), **update})
 
     def check(self, utu: UtuSettings) -> None:
         """Load the scenario and the registry now, so that errors come before bring-up (B5)."""
@@ -420,7 +438,9 @@ class SimKind:
 
         def run() -> None:
             try:
-                system.run(ctx.stop, speed=ctx.speed, until=end)
+                system.run(ctx.stop, speed=ctx.speed, until=end, until_landed=cfg.until_landed)
+                if system.landed_stop:
+                    running.ended = "the UAV landed"
             except Exception:  # a bug: say so; the run then ends as after the scenario
                 log.exception("the simulation failed")
 
@@ -428,8 +448,9 @@ class SimKind:
             self._finish(system, decisions, ran, ctx.say)
 
         thread = threading.Thread(target=run, name="anunnaki-sim", daemon=True)
+        running = _Running(system, thread, "scenario ended", finish)
         thread.start()
-        return _Running(system, thread, "scenario ended", finish)
+        return running
 
     def _finish(
         self, system: Any, decisions: Sequence[DecisionLike], ran: float, say: Callable[[str], None]

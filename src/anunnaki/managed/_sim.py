@@ -326,6 +326,7 @@ class SimulatedSystem(Closing):
         self._collisions: list[float] = []
         self._closing: list[Any] = []
         self._stopping = threading.Event()
+        self.landed_stop = False  # the run ended at the UAV's touch-down (until_landed)
         if isinstance(scenario, Scenario):
             sc = scenario
         else:
@@ -485,6 +486,7 @@ class SimulatedSystem(Closing):
         until: float | None = None,
         every: float = 1.0,
         callback: Callable[[SimPlatform], None] | None = None,
+        until_landed: bool = False,
     ) -> None:
         """Run the simulation until ``stop``, ``until`` or the scenario's end.
 
@@ -494,15 +496,24 @@ class SimulatedSystem(Closing):
             until: End at this simulated time (default: the scenario's duration).
             every: Call ``callback`` every this many simulated seconds.
             callback: ``callback(platform)``, e.g. to print progress.
+            until_landed: End at a flying platform's touch-down after its flight
+                (:meth:`~anunnaki.sim.SimPlatform.touched_down`); then
+                :attr:`landed_stop` is true.
 
         """
         self._stopping = stop
         end = self.scenario.duration if until is None else until
         collisions = 0
         next_call = self.platform.t + every
+        done = threading.Event()  # ``stop``, or the touch-down with ``until_landed``
 
         def tick(sim: SimPlatform) -> None:
             nonlocal collisions, next_call
+            if stop.is_set():
+                done.set()
+            elif until_landed and sim.touched_down():
+                self.landed_stop = True
+                done.set()
             if executor is not None:  # the present's messages all delivered and acted on
                 executor.spin_until_idle()
             if self.on_time is not None:
@@ -522,7 +533,7 @@ class SimulatedSystem(Closing):
         try:
             if self.on_time is not None:
                 self.on_time(self.platform.t)
-            self.platform.run(stop, speed=speed, until=end, every=1.0 / 40.0, callback=tick)
+            self.platform.run(done, speed=speed, until=end, every=1.0 / 40.0, callback=tick)
         finally:
             if executor is not None:
                 executor.spin_until_idle()

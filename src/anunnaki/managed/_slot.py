@@ -44,6 +44,7 @@ from anunnaki.plugins import Registry
 __all__ = [
     "MANAGED",
     "DecisionLike",
+    "DrawsScenarios",
     "ManagedContext",
     "ManagedKind",
     "ManagedRun",
@@ -179,6 +180,18 @@ class WritesReports(Protocol):
 
     def with_reports(self, *, report: str | None, plot: str | None) -> None:
         """Write the run's report and plot to these files at the end."""
+        ...
+
+
+@runtime_checkable
+class DrawsScenarios(Protocol):
+    """Optional: a kind whose scenario a seed draws again, and that can end at a landing.
+
+    ``anunnaki run --seed N --until-landed`` (and benchmarks/case_studies.py) use it.
+    """
+
+    def with_scenario(self, *, seed: int | None = None, until_landed: bool = False) -> None:
+        """Draw the scenario from ``seed`` (its ``vary:``); end the run at the touch-down."""
         ...
 
 

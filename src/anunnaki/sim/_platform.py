@@ -333,6 +333,10 @@ class SimPlatform(Closing):
         """
         return None
 
+    def touched_down(self) -> bool:
+        """Whether a flying platform is on the ground after a flight (never, for a rover)."""
+        return False
+
     # -- commands -------------------------------------------------------------------------
     def _notify(self) -> None:
         """Wake :meth:`wait_for` callers (a command or a detection arrived)."""

@@ -114,8 +114,10 @@ class RunReport:
             often they agreed and the delay between their category changes
             (:func:`compare_assessors`); ``None`` otherwise (and absent from the file).
         flight: A UAV's flight (:meth:`UavSim.flight <anunnaki.sim.UavSim.flight>`):
-            ``took_off``, ``delivered``, ``delivered_at``, ``landed`` (the touch-down, s),
-            ``landed_xy``, ``landed_home``, ``battery_at_landing`` and ``track``, rows of
+            the mission's outcome — ``delivered`` (the package dropped), ``landing`` (``home``,
+            ``forced``, ``elsewhere``, ``airborne``, ``ground``), ``landed_xy``,
+            ``battery_at_landing`` — and ``took_off``, ``delivered_at``, ``landed`` (the
+            touch-down, s), ``landed_home``, ``battery`` and ``track``, rows of
             ``{t, x, y, altitude, battery, mode}`` at 2 Hz; ``None`` for a rover (and absent
             from the file).
 

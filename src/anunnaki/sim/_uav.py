@@ -16,6 +16,13 @@ plus any ``battery_drain`` fault of the scenario (obstacle O2); nothing on the g
 landed UAV draws no power, whatever the fault).
 ``/uav/link`` says whether the ground station answers: ``connected`` is false during a
 scenario's ``link`` dropout.
+
+What is left to fly is on ``/uav/status`` for anticipatory goals (docs/goal-models.md,
+"Forecasts"): ``route_m``, the rest of the mission (the legs left, the drop and the way home
+down to the ground), and ``home_m``, the way straight home as ``return_home`` flies it, with
+``cruise_speed``. Both are in *metres at cruise speed*: a horizontal metre counts once, a
+vertical one ``speed / climb_rate`` times (the time it takes), the drop's hold ``speed ×
+deliver_time``, so ``route_m / cruise_speed`` is the flight time left.
 """
 
 from __future__ import annotations
@@ -58,7 +65,8 @@ def _ms(t: float | None) -> float | None:
 class UavSim(SimPlatform):
     """The simulated UAV on the bus.
 
-    Publishes ``/uav/status`` {mode, altitude, delivered, phase, speed, battery, x, y, t},
+    Publishes ``/uav/status`` {mode, altitude, delivered, phase, speed, battery, x, y,
+    route_m, home_m, cruise_speed, t},
     ``/uav/gps`` {lat, lon, alt}, ``/uav/battery`` {level}, ``/uav/link`` {connected},
     ``/uav/camera/image``, ``/uav/camera/info``, ``/sim/ground_truth``, ``/sim/phenomena``
     and ``/clock``. Offers ``/uav/set_mode`` {mode: auto|hover|return_home|land} and
@@ -126,6 +134,7 @@ class UavSim(SimPlatform):
             self.airborne_at: float | None = None  # first take-off (simulated s)
             self.landed_at: float | None = None  # last touch-down after a flight
             self.landed_battery: float | None = None  # battery (%) at that touch-down
+            self.forced = False  # the empty battery forced the UAV down
             self.mode: UavMode = mode
             self.phase = "takeoff"
             self.leg = 0
@@ -226,6 +235,7 @@ class UavSim(SimPlatform):
         if self.battery <= 0.0 and self.z > 0.0 and mode not in ("land", "stopped"):
             mode = "land"
             self.phase = "forced landing"
+            self.forced = True
         if mode == "auto":
             self._follow_mission(h)
         elif mode == "hover":
@@ -277,6 +287,35 @@ class UavSim(SimPlatform):
         else:
             self.phase = "landing" if self.z > 0 else "landed"
             self._fly_to(hx, hy, 0.0, h)
+
+    # -- what is left to fly ----------------------------------------------------------------
+    def _path_m(self, legs: list[tuple[str, float, float, float]]) -> float:
+        """Metres at cruise speed from here through ``legs`` (see the module docstring)."""
+        m = self.scenario.mission
+        vertical = m.speed / m.climb_rate
+        x, y, z, total = self.x, self.y, self.z, 0.0
+        for phase, tx, ty, tz in legs:
+            if phase == "deliver":
+                total += max(0.0, m.deliver_time - self._hold) * m.speed
+                continue
+            total += math.hypot(tx - x, ty - y) + abs(tz - z) * vertical
+            x, y, z = tx, ty, tz
+        return total
+
+    def route_m(self) -> float:
+        """The rest of the mission, down to the ground at home (metres at cruise speed)."""
+        return self._path_m(self.legs[self.leg :])
+
+    def home_m(self) -> float:
+        """Straight home and down, as ``return_home`` flies it (metres at cruise speed)."""
+        m = self.scenario.mission
+        hx, hy = m.home
+        if math.hypot(hx - self.x, hy - self.y) <= 0.3:
+            return self._path_m([("landing", hx, hy, 0.0)])
+        top = max(self.z, m.cruise_altitude)
+        return self._path_m(
+            [("climb", self.x, self.y, top), ("return", hx, hy, top), ("landing", hx, hy, 0.0)]
+        )
 
     # -- sensors --------------------------------------------------------------------------
     def gps(self) -> tuple[float, float]:
@@ -330,28 +369,41 @@ class UavSim(SimPlatform):
             ``delivered_at`` (s or ``None``), ``landed`` (the last touch-down after a
             flight, s; ``None`` while airborne or before take-off), ``landed_xy`` ([x, y]
             in metres, or ``None``), ``landed_home`` (within 1 m of home, or ``None``),
-            ``battery_at_landing`` (%, or ``None``), ``battery`` (% now) and ``track``:
-            ``{t, x, y, altitude, battery, mode}`` every 0.5 s of simulated time.
+            ``landing`` (where the flight ended: ``home``; ``forced``, the empty battery
+            forced it down wherever that was; ``elsewhere``; ``airborne`` still; or
+            ``ground``, it never took off), ``battery_at_landing`` (%, or ``None``),
+            ``battery`` (% now) and ``track``: ``{t, x, y, altitude, battery, mode}`` every
+            0.5 s of simulated time.
 
         """
         with self._lock:
             hx, hy = self.scenario.mission.home
             landed = self.landed_at
+            home = landed is not None and math.hypot(self.x - hx, self.y - hy) < 1.0
+            if self.airborne_at is None:
+                landing = "ground"
+            elif landed is None:
+                landing = "airborne"
+            else:
+                landing = "forced" if self.forced else "home" if home else "elsewhere"
             return {
+                "landing": landing,
                 "took_off": _ms(self.airborne_at),
                 "delivered": self.delivered,
                 "delivered_at": _ms(self.delivered_at),
                 "landed": _ms(landed),
                 "landed_xy": None if landed is None else [round(self.x, 2), round(self.y, 2)],
-                "landed_home": None
-                if landed is None
-                else math.hypot(self.x - hx, self.y - hy) < 1.0,
+                "landed_home": None if landed is None else home,
                 "battery_at_landing": None
                 if self.landed_battery is None
                 else round(self.landed_battery, 2),
                 "battery": round(self.battery, 2),
                 "track": [dict(row) for row in self._track],
             }
+
+    def touched_down(self) -> bool:
+        """Whether the UAV is on the ground after a flight (the mission can change no more)."""
+        return self.landed_at is not None
 
     def summary(self) -> str:
         """The flight in one line: take-off, delivery, where and when it landed, battery."""
@@ -371,8 +423,9 @@ class UavSim(SimPlatform):
             place = (
                 "at home" if f["landed_home"] else f"{math.hypot(x - hx, y - hy):.0f} m from home"
             )
+            how = "forced down (battery empty)" if f["landing"] == "forced" else "landed"
             parts.append(
-                f"landed {place} ({x:.1f}, {y:.1f}) at t = {landed:.1f} s with battery "
+                f"{how} {place} ({x:.1f}, {y:.1f}) at t = {landed:.1f} s with battery "
                 f"{f['battery_at_landing']:.1f} %"
             )
         elif took_off is not None:
@@ -398,5 +451,8 @@ class UavSim(SimPlatform):
                 "battery": round(self.battery, 3),
                 "x": round(self.x, 3),
                 "y": round(self.y, 3),
+                "route_m": round(self.route_m(), 2),
+                "home_m": round(self.home_m(), 2),
+                "cruise_speed": float(self.scenario.mission.speed),
                 "t": round(self.t, 6),
             }
