@@ -93,6 +93,12 @@ def add_parser(sub: Any) -> None:
     )
     p.add_argument("--detections", default="/lec/*/detections", help="detections topic pattern")
     p.add_argument("--oracle", default="/utu/oracle/**", help="assessment topic pattern")
+    p.add_argument(
+        "--case",
+        metavar="DIR",
+        help="the assurance case to draw (default: built from the launch when an "
+        "assurance.yaml lies beside it); its statuses come from the running launch",
+    )
     p.set_defaults(run=run)
 
 
@@ -313,6 +319,13 @@ def run(args: argparse.Namespace) -> int:
     dashboard = dashboard_for_launch(
         launch, host=args.host, port=args.port, token=token, topics=topics
     )
+    from anunnaki.assurance import load_live_case, render_svg
+
+    case = load_live_case(
+        launch.path, args.case, warn=lambda line: print(line, file=sys.stderr, flush=True)
+    )
+    if case is not None:
+        dashboard.state.set_case_drawing(render_svg(case))
     try:
         with open_bus(bus_config, name=f"{launch.name}-dashboard") as bus:
             dashboard.attach(bus)
