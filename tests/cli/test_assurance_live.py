@@ -34,18 +34,25 @@ def case_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
     ]
     (tmp / "crit.yaml").write_text("\n".join(lines) + "\n")
     out = tmp / "case"
-    code = main(
-        ["assurance", "build", str(LAUNCH), "--criteria", str(tmp / "crit.yaml")]
-        + ["--root", str(tmp), "--out", str(out)]
-    )
+    build = ["assurance", "build", str(LAUNCH), "--criteria", str(tmp / "crit.yaml")]
+    code = main([*build, "--root", str(tmp), "--out", str(out)])
     assert code == 1  # G1 is not supported: G12's leaves are undeveloped
     return out
 
 
 def _run(case_dir: Path, db: Path) -> list[tuple[float, dict[str, object]]]:
     code = main(
-        ["run", str(LAUNCH), "--case", str(case_dir), "--knowledge", str(db), "--fresh"]
-        + ["--speed", "50"]
+        [
+            "run",
+            str(LAUNCH),
+            "--case",
+            str(case_dir),
+            "--knowledge",
+            str(db),
+            "--fresh",
+            "--speed",
+            "50",
+        ]
     )
     assert code == 0
     kb = Knowledge(db)
@@ -75,19 +82,21 @@ def test_a_run_records_when_a_top_claim_loses_and_regains_support(
     capsys.readouterr()
 
     # status from the knowledge file, at an instant and at the end
-    code = main(
-        ["assurance", "status", "--case", str(case_dir), "--knowledge", str(tmp_path / "run.db")]
-        + ["--at", "25.2"]
-    )
+    status = [
+        "assurance",
+        "status",
+        "--case",
+        str(case_dir),
+        "--knowledge",
+        str(tmp_path / "run.db"),
+    ]
+    code = main([*status, "--at", "25.2"])
     out = capsys.readouterr().out
     assert code == 1  # G1 does not hold
     assert "top-level claim G1 violated" in out
     assert " *G2                 violated     the goal model finds it unsatisfied" in out
     assert "25.000  G2 support lost (violated)" in out and "25.500" not in out
-    code = main(
-        ["assurance", "status", "--case", str(case_dir), "--knowledge", str(tmp_path / "run.db")]
-        + ["--json", "--all"]
-    )
+    code = main([*status, "--json", "--all"])
     body = json.loads(capsys.readouterr().out)
     assert body["nodes"]["G2"][0] == "supported" and body["nodes"]["S-G2"][0] == "supported"
     assert [c["support"] for c in body["changes"]] == ["lost", "regained"]
