@@ -18,6 +18,7 @@ from anunnaki.assurance import (
     top_claims,
 )
 from anunnaki.bus import Executor, open_bus
+from anunnaki.errors import ModelFileError
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -118,3 +119,17 @@ def test_the_monitor_publishes_on_change_and_answers_queries(rover: Case) -> Non
         assert [r["support"] for r in rows] == ["initial"] * 4
         monitor.close()
     assert [r["claim"] for r in rows[4:]] == []  # G20 is not a top claim; G15 did not change
+
+
+def test_a_launch_gets_a_live_case_only_where_its_criteria_develop_it(tmp_path: Path) -> None:
+    from anunnaki.assurance import load_live_case
+
+    said: list[str] = []
+    case = load_live_case(ROOT / "examples/rover/demo.yaml", warn=said.append)
+    assert case is not None and case.solutions() and said == []
+    # utu.yaml runs goals.yaml; the assurance.yaml beside it develops goals-lm.yaml: no case
+    assert load_live_case(ROOT / "examples/rover/utu.yaml", warn=said.append) is None
+    assert said == []
+    assert load_live_case(tmp_path / "launch.yaml") is None  # no criteria beside it
+    with pytest.raises(ModelFileError, match="no assurance case here"):
+        load_live_case(None, tmp_path)

@@ -96,7 +96,8 @@ def load_live_case(
 ) -> Case | None:
     """The case a running launch evaluates: ``case_dir``'s, or built from the launch now.
 
-    Built only when a criteria file (``assurance.yaml``) lies beside the launch file: a few
+    Built only when a criteria file (``assurance.yaml``) lies beside the launch file and
+    develops its goal model (a case without any evidence argues nothing: ``None``); a few
     tenths of a second. A case that cannot be built is said through ``warn`` and ``None``
     returned (the run goes on without one); a ``case_dir`` that cannot be read raises.
     """
@@ -109,11 +110,12 @@ def load_live_case(
     if launch is None or not (Path(launch).parent / CRITERIA_FILE).is_file():
         return None
     try:
-        return build_case(launch)
+        case = build_case(launch)
     except AnunnakiError as exc:
         if warn is not None:
             warn(f"assurance: no live case ({exc})")
         return None
+    return case if case.solutions() else None
 
 
 class LiveCase:
