@@ -9,6 +9,11 @@ loses its support at 25 s and regains it at 25.5 s: the decision log says so, on
 from __future__ import annotations
 
 import json
+import os
+import signal
+import socket
+import subprocess
+import sys
 from pathlib import Path
 
 import pytest
@@ -18,6 +23,7 @@ from anunnaki.utu import Knowledge
 
 ROOT = Path(__file__).resolve().parents[2]
 LAUNCH = ROOT / "examples" / "rover" / "utu.yaml"
+CLI = [sys.executable, "-m", "anunnaki.cli.main"]
 
 
 @pytest.fixture(scope="module")
@@ -117,3 +123,65 @@ def test_no_case_and_a_missing_case(tmp_path: Path, capsys: pytest.CaptureFixtur
     code = main(["run", str(LAUNCH), "--case", str(tmp_path / "nowhere"), "--speed", "50"])
     assert code == 2
     assert "no assurance case here" in capsys.readouterr().err
+
+
+def test_processes_record_too(case_dir: Path, tmp_path: Path) -> None:
+    """One process per node: the launch's own connection records (and commits) the claims."""
+    db = tmp_path / "run.db"
+    args = ["run", str(LAUNCH), "--processes", "--case", str(case_dir), "--knowledge", str(db)]
+    assert main([*args, "--speed", "10"]) == 0
+    kb = Knowledge(db)
+    rows = [
+        (d.t, d.data["claim"], d.data["support"]) for d in kb.decisions() if d.kind == "assurance"
+    ]
+    kb.close()
+    assert [r for r in rows if r[0] > 0] == [(25.0, "G2", "lost"), (25.5, "G2", "regained")]
+
+
+def test_status_asks_a_running_launch_over_its_bus(case_dir: Path, tmp_path: Path) -> None:
+    rover = ROOT / "examples" / "rover"
+    port = free_port()
+    text = (rover / "utu-processes.yaml").read_text()
+    for name in ("goals.yaml", "binding.yaml", "tactics.yaml", "trace.jsonl"):
+        text = text.replace(f": {name}", f": {rover / name}")
+    launch = tmp_path / "launch.yaml"
+    launch.write_text(text.replace("7447", str(port)))
+    proc = subprocess.Popen(
+        [*CLI, "run", str(launch), "--case", str(case_dir)],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+        env={**os.environ, "PYTHONUNBUFFERED": "1"},
+    )
+    try:
+        assert proc.stdout is not None
+        for line in proc.stdout:
+            if line.startswith("ready:"):
+                break
+        out = subprocess.run(
+            [*CLI, "assurance", "status", str(launch), "--json", "--timeout", "30"],
+            capture_output=True,
+            text=True,
+            timeout=120,
+            check=False,
+        )
+        body = json.loads(out.stdout)
+        assert out.returncode == 1, out.stderr  # G1 does not hold (G12 undeveloped)
+        assert body["case"] == "rover" and body["root"] == "G1"
+        assert body["nodes"]["G12"][0] == "undeveloped" and body["kinds"]["S-G2"] == "strategy"
+        assert "svg" not in body
+    finally:
+        proc.send_signal(signal.SIGINT)
+        try:
+            proc.wait(timeout=30)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait()
+        if proc.stdout is not None:
+            proc.stdout.close()
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
