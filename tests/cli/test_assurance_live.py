@@ -185,3 +185,21 @@ def free_port() -> int:
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
         return int(s.getsockname()[1])
+
+
+def test_the_launch_file_names_its_case_or_none(
+    case_dir: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    rover = ROOT / "examples" / "rover"
+    text = (rover / "utu.yaml").read_text()
+    for name in ("goals.yaml", "binding.yaml", "tactics.yaml", "trace.jsonl"):
+        text = text.replace(f": {name}", f": {rover / name}")
+    (tmp_path / "cases").mkdir()
+    (tmp_path / "cases" / "rover").symlink_to(case_dir)
+    launch = tmp_path / "launch.yaml"
+    launch.write_text(text + "assurance: cases/rover\n")  # relative to the launch file
+    assert main(["run", str(launch), "--speed", "50", "--knowledge", str(tmp_path / "a.db")]) == 0
+    assert "assurance: case rover (33 nodes" in capsys.readouterr().out
+    launch.write_text(text + "assurance: false\n")
+    assert main(["run", str(launch), "--speed", "50"]) == 0
+    assert "assurance:" not in capsys.readouterr().out

@@ -230,15 +230,16 @@ def run(args: argparse.Namespace) -> int:
 def _live_case(launch: Any, args: argparse.Namespace) -> tuple[Any, Any]:
     """The hook that puts the launch's assurance case on the bus, and the case (or ``None``s).
 
-    ``--case DIR`` reads a built case; otherwise one is built now when the launch has a
-    criteria file beside it (a few tenths of a second). A case that cannot be built is
-    said on stderr and the run goes on without it.
+    ``--case DIR`` (or the launch file's ``assurance: DIR``) reads a built case; otherwise
+    one is built now when the launch has a criteria file beside it (a few tenths of a
+    second). A case that cannot be built is said on stderr and the run goes on without it.
     """
-    if getattr(args, "no_case", False):
+    folder = _dashboard.case_folder(launch, getattr(args, "case", None))
+    if getattr(args, "no_case", False) or folder is False:
         return None, None
     from anunnaki.assurance import load_live_case
 
-    case = load_live_case(launch.path, getattr(args, "case", None), warn=_warn)
+    case = load_live_case(launch.path, folder if isinstance(folder, str) else None, warn=_warn)
     if case is None:
         return None, None
     print(
