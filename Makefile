@@ -51,10 +51,13 @@ bench: setup
 # The paper's §4 figures beside ours (the shipped models and oracles on our rendered data,
 # rendered into data/ if absent) and the managers' table of benchmarks/case_studies.py:
 # regenerates docs/results-paper.md and docs/images/results-paper-*.png (18 min at load 22;
-# measurements cached in runs/paper/, so a rerun measures only what changed).
+# measurements cached in runs/paper/, so a rerun measures only what changed); then the
+# rover's and the UAV's assurance cases from the results as they now stand, into
+# docs/assurance/rover and docs/assurance/uav (a second, reproducible: same inputs, same bytes).
 .PHONY: results
 results: setup
 	nice -n 10 $(PY) benchmarks/paper.py
+	$(PY) benchmarks/assurance.py --ship docs/assurance
 
 # The simulated UAV's delivery mission (paper Fig. 18) with its detector, the learned enlil
 # oracle as A4 and Utu (about 75 s): take-off, waypoints, fog near the target (swap to

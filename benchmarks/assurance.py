@@ -15,6 +15,13 @@ Writes ``benchmarks/results/assurance.json``::
 
     .venv/bin/python benchmarks/assurance.py            # 5 runs per case (about 30 s)
     .venv/bin/python benchmarks/assurance.py --quick    # 1 run, no tests
+
+``--ship DIR`` measures nothing: it writes both cases (case.json, case.gsn.yaml, case.svg,
+case.html) into ``DIR/rover`` and ``DIR/uav`` without a build time or date, so the same
+inputs give the same bytes — what ``make results`` commits as ``docs/assurance/`` (the tests
+named in the criteria are not run: they show as unverified)::
+
+    .venv/bin/python benchmarks/assurance.py --ship docs/assurance
 """
 
 from __future__ import annotations
@@ -35,7 +42,7 @@ from typing import Any
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "src"))
 
-from anunnaki.assurance import build_case  # noqa: E402
+from anunnaki.assurance import build_case, write_case  # noqa: E402
 
 RESULTS = ROOT / "benchmarks" / "results" / "assurance.json"
 CASES = {"rover": "examples/rover/demo.yaml", "uav": "examples/uav/sim.yaml"}
@@ -92,13 +99,32 @@ def measure(name: str, launch: str, repeats: int, tests: bool) -> dict[str, Any]
     return row
 
 
+def ship(folder: Path) -> dict[str, Path]:
+    """Write both cases, reproducibly, into ``folder/<name>``; returns the folders."""
+    out = {}
+    for name, launch in CASES.items():
+        case = build_case(ROOT / launch, root=ROOT).reproducible()
+        write_case(case, folder / name)
+        cov = case.coverage()
+        print(
+            f"{name}: top-level claim {case.root} {case.nodes[case.root].status}; "
+            f"{cov['supported']} of {cov['leaf_goals']} leaf goals supported -> {folder / name}"
+        )
+        out[name] = folder / name
+    return out
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--repeats", type=int, default=5, help="builds per case (5)")
     ap.add_argument("--no-tests", dest="tests", action="store_false", help="skip --run-tests")
     ap.add_argument("--quick", action="store_true", help="one build per case, no tests")
     ap.add_argument("--output", type=Path, default=RESULTS)
+    ap.add_argument("--ship", type=Path, metavar="DIR", help="write both cases into DIR, only")
     args = ap.parse_args(argv)
+    if args.ship is not None:
+        ship(args.ship)
+        return 0
     repeats = 1 if args.quick else max(1, args.repeats)
     tests = args.tests and not args.quick
     load = list(os.getloadavg())

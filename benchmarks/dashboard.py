@@ -19,11 +19,18 @@ Measured, for ``--seconds`` (default 60):
       analysis, published at once) to G1 turning red on the page: the page stamps the class
       change with ``performance.timeOrigin + performance.now()`` (a MutationObserver), this
       process stamps the publication with ``time.time()``: one machine, one wall clock.
-      A violation every 5 s, held for 2 s.
+      A violation every 5 s, held for 2 s;
+    * with the assurance case pane (on unless ``--no-case``): the case of the same 300-goal
+      model (``anunnaki.assurance.case_from_model``: every leaf undeveloped, no evidence to
+      read) evaluated live by a ``CaseMonitor`` on its own bus session, as ``anunnaki run``
+      does, and drawn in the page's case pane; the latency from the same violation on the bus
+      to the claim G1 drawn red there (the monitor evaluates the analysis, publishes
+      ``/utu/assurance/state``, the dashboard patches the page, the page recolours
+      ``g#gsn-G1``: stamped as above).
 
 Results go to benchmarks/results/dashboard.json.
 
-    python benchmarks/dashboard.py [--seconds 60] [--out benchmarks/results/dashboard.json]
+    python benchmarks/dashboard.py [--seconds 60] [--no-case] [--out FILE.json]
 """
 
 from __future__ import annotations
@@ -45,6 +52,7 @@ from typing import Any
 
 from playwright.sync_api import sync_playwright
 
+from anunnaki.assurance import CaseMonitor, LiveCase, case_from_model, propagate, render_svg
 from anunnaki.bus import InprocHub, open_bus
 from anunnaki.dashboard import Dashboard
 from anunnaki.goals import parse_goal_model
@@ -131,6 +139,16 @@ RECORDER = """
     if (now && !red) window.__red.push(performance.timeOrigin + performance.now());
     red = now;
   }).observe(g1, {attributes: true, attributeFilter: ['class']});
+  window.__caseRed = [];
+  const claim = document.querySelector('#case-drawing g#gsn-G1');
+  if (claim) {
+    let was = false;
+    new MutationObserver(() => {
+      const now = claim.dataset.status === 'violated';
+      if (now && !was) window.__caseRed.push(performance.timeOrigin + performance.now());
+      was = now;
+    }).observe(claim, {attributes: true, attributeFilter: ['data-status']});
+  }
   const cam = document.getElementById('camera');
   new MutationObserver(() => { window.__frames.add(cam.dataset.seq); })
     .observe(cam, {attributes: true, attributeFilter: ['data-seq']});
@@ -142,6 +160,7 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seconds", type=float, default=60.0)
     ap.add_argument("--out", default=str(ROOT / "benchmarks" / "results" / "dashboard.json"))
+    ap.add_argument("--no-case", action="store_true", help="without the assurance case pane")
     args = ap.parse_args()
     model = parse_goal_model(model_text(), source="<bench-300>")
     goals = list(model.goals)
@@ -152,6 +171,14 @@ def main() -> None:
     dash_bus = open_bus("inproc", hub=hub, name="dashboard")
     pub_bus = open_bus("inproc", hub=hub, name="bench")
     dash = Dashboard(model, TacticSet(tactics=[]), bus=dash_bus, port=0, seed=False)
+    monitor = None
+    case_bus = None
+    if not args.no_case:
+        case = case_from_model(model, name="bench-300")
+        propagate(case)
+        case_bus = open_bus("inproc", hub=hub, name="case")
+        monitor = CaseMonitor(LiveCase(case), case_bus)
+        dash.state.set_case_drawing(render_svg(case))
     dash.start()
     stop = threading.Event()
     violate = threading.Event()
@@ -230,6 +257,8 @@ def main() -> None:
         worker = threading.Thread(target=publish, daemon=True)
         worker.start()
         page.wait_for_selector("#goal-svg [data-node=G1].satisfied", timeout=30_000)
+        if monitor is not None:
+            page.wait_for_selector("#case-drawing g#gsn-G1[data-status]", timeout=30_000)
         page.evaluate(RECORDER)
         start = time.monotonic()
         while time.monotonic() - start < args.seconds:
@@ -244,19 +273,20 @@ def main() -> None:
         time.sleep(1.0)
         raf = page.evaluate("window.__raf")
         red = page.evaluate("window.__red")
+        case_red = page.evaluate("window.__caseRed")
         drawn = page.evaluate("window.__frames.size")
         ctx.close()
     stop.set()
     worker.join(5)
     dash.close()
+    if monitor is not None and case_bus is not None:
+        monitor.close()
+        case_bus.close()
     pub_bus.close()
     dash_bus.close()
     intervals = [b - a for a, b in itertools.pairwise(raf[1:])]
-    latencies = []
-    for p in published_red:
-        after = [r for r in red if r >= p - 5]
-        if after:
-            latencies.append(min(after) - p)
+    latencies = _latencies(published_red, red)
+    case_latencies = _latencies(published_red, case_red)
     result = {
         "benchmark": "dashboard",
         "setup": {
@@ -278,10 +308,28 @@ def main() -> None:
         "camera_frames_drawn_per_s": round(drawn / args.seconds, 2),
         "published": {k: round(v / args.seconds, 2) for k, v in sent.items()},
         "violation_to_red_ms": summary(latencies) if latencies else None,
+        "case": None
+        if monitor is None
+        else {
+            "nodes": len(case.nodes),
+            "svg_bytes": len(render_svg(case)),
+            "violation_to_claim_red_ms": summary(case_latencies) if case_latencies else None,
+            "aim_p95_ms": 100,
+        },
     }
     Path(args.out).parent.mkdir(parents=True, exist_ok=True)
     Path(args.out).write_text(json.dumps(result, indent=2) + "\n", encoding="utf-8")
     print(json.dumps(result, indent=2))
+
+
+def _latencies(published: list[float], seen: list[float]) -> list[float]:
+    """For each violation published, the first time the page showed it (ms)."""
+    out = []
+    for p in published:
+        after = [r for r in seen if r >= p - 5]
+        if after:
+            out.append(min(after) - p)
+    return out
 
 
 if __name__ == "__main__":

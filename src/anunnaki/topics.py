@@ -38,6 +38,8 @@ __all__ = [
     "ACTIVE_MODEL",
     "ANALYSIS",
     "APPROVE",
+    "ASSURANCE_QUERY",
+    "ASSURANCE_STATE",
     "BAG_DECISIONS",
     "CLEAN_FRAMES",
     "CLOCK",
@@ -109,6 +111,11 @@ UTU_NODES: Final[tuple[UtuNodeName, ...]] = ("monitor", "analyze", "plan", "exec
 #: Utu's nodes hold liveliness tokens ``/utu_<node>`` (:func:`node_token`): while one is
 #: alive, Utu runs.
 UTU_NODE_PREFIX: Final = "/utu_"
+
+#: The assurance case's live statuses (``anunnaki run`` with a case; docs/assurance.md).
+ASSURANCE_STATE: Final = "/utu/assurance/state"
+#: Asks the running case for its statuses now (``{"svg": true}``: with its drawing).
+ASSURANCE_QUERY: Final = "/utu/assurance/query"
 
 # -- behavior oracles --------------------------------------------------------------------------
 ORACLE_OUTPUT: Final = "/utu/oracle/output"

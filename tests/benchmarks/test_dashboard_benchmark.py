@@ -22,3 +22,7 @@ def test_dashboard_benchmark(tmp_path: Path) -> None:
     assert raf["n"] > 10 and 0 < raf["p50"] <= raf["p95"] <= raf["max"]
     assert doc["violation_to_red_ms"]["n"] >= 1
     assert doc["camera_frames_drawn_per_s"] > 0
+    # the assurance case pane: the same violation turns the claim G1 red there too
+    case = doc["case"]
+    assert case["nodes"] > 300 and case["aim_p95_ms"] == 100
+    assert case["violation_to_claim_red_ms"]["n"] >= 1

@@ -174,6 +174,17 @@ class Case:
         """The goal model's leaf goals, as GSN goals."""
         return [n for n in self if n.type == "goal" and n.leaf]
 
+    def reproducible(self) -> Case:
+        """Drop what changes at every build (time, duration, folder), in place; returns self.
+
+        What ``make results`` ships (docs/assurance/): the same files from the same inputs,
+        byte for byte. The project root becomes ``.`` (the paths are relative to it).
+        """
+        self.built = ""
+        self.build_seconds = None
+        self.project_root = "."
+        return self
+
     def coverage(self) -> dict[str, Any]:
         """The share of the goal model's leaf goals whose evidence supports them."""
         leaves = self.leaf_goals()

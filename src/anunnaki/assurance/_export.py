@@ -55,8 +55,9 @@ def gsn_document(case: Case) -> dict[str, dict[str, Any]]:
 
 def gsn_yaml(case: Case) -> str:
     """``case.gsn.yaml``'s text."""
+    built = f" {case.built}" if case.built else ""
     head = (
-        f"# The assurance case of {case.name} ({case.launch}), built {case.built} by "
+        f"# The assurance case of {case.name} ({case.launch}), built{built} by "
         "'anunnaki assurance build'.\n# Layout: gsn2x (https://github.com/jonasthewolf/gsn2x); "
         "classes: each element's status. Mapping: docs/assurance.md\n"
     )
@@ -350,7 +351,7 @@ def render_html(case: Case, svg: str | None = None) -> str:
 <title>Assurance case: {e(case.name)}</title><style>{_CSS}</style></head>
 <body>
 <h1>Assurance case: {e(case.name)}</h1>
-<p>Launch <code>{e(case.launch)}</code>; built {e(case.built)} in {case.build_seconds} s by
+<p>Launch <code>{e(case.launch)}</code>; built{_when(case)} by
 <code>anunnaki assurance build</code>. Top-level claim <b>{e(case.root)}</b>:
 {_badge(case.nodes[case.root].status)}</p>
 <p><b>Evidence coverage</b>: {cov["supported"]} of {cov["leaf_goals"]} leaf goals supported
@@ -379,6 +380,12 @@ tests not run, a <b>failed</b> one on evidence that misses its criterion.</p>
 </table>
 </body></html>
 """
+
+
+def _when(case: Case) -> str:
+    """`` 2026-12-02T19:00:00Z in 0.3 s`` ('' for a case made reproducible: no time in it)."""
+    out = f" {html.escape(case.built)}" if case.built else ""
+    return out + (f" in {case.build_seconds} s" if case.build_seconds is not None else "")
 
 
 def _artefact_row(role: str, path: str, sha: str) -> str:

@@ -1,11 +1,12 @@
-"""``anunnaki assurance build | check``: a launch's assurance case (docs/assurance.md).
+"""``anunnaki assurance build | check | status``: a launch's assurance case (docs/assurance.md).
 
 ``build LAUNCH.yaml --out case/`` argues the launch's goal model in GSN and develops each
 claim with the project's own measurements (the criteria file ``assurance.yaml`` beside the
 launch says which), then writes case.json, case.gsn.yaml (gsn2x), case.svg and case.html.
 When ``--out`` already holds a case, a figure whose measurement is unchanged while an
 artefact it rests on changed is stale. ``check case/`` hashes every artefact again and
-names what changed.
+names what changed. ``status`` prints the case's live statuses: from a running launch
+(over its bus) or from a run's knowledge file (``--knowledge``, at ``--at T``).
 """
 
 from __future__ import annotations
@@ -23,7 +24,7 @@ def add_parser(sub: Any) -> None:
     """Register ``assurance`` and its sub-commands."""
     p: argparse.ArgumentParser = sub.add_parser(
         "assurance",
-        help="an assurance case from the goal model and measured evidence: build, check",
+        help="an assurance case from the goal model and measured evidence: build, check, status",
         description=plain(__doc__),
     )
     asub = p.add_subparsers(dest="assurance_command", metavar="SUBCOMMAND")
@@ -77,6 +78,36 @@ def add_parser(sub: Any) -> None:
         "--update", action="store_true", help="rewrite the case's files with the stale marks"
     )
     c.set_defaults(run=_check)
+    st: argparse.ArgumentParser = asub.add_parser(
+        "status",
+        help="the case's statuses now: from a running launch, or from a run's knowledge file",
+        description=(
+            "Print each claim's live status (supported, degraded, undeveloped, unverified, "
+            "stale, failed, violated) and why. Without --knowledge it asks the running launch "
+            "of CONFIG over its bus (/utu/assurance/query; the bus must reach other processes: "
+            "zenoh). With --knowledge FILE it evaluates the case at --at T (default: the end) "
+            "from the run's recorded goal states, active model and oracle context, and lists "
+            "the top-level claims' recorded support changes. Exit 0 when the top-level claim "
+            "holds (supported or degraded), 1 when not, 2 on a bad file or no answer."
+        ),
+    )
+    st.add_argument("config", nargs="?", help="launch file (the running one, or to build the case)")
+    st.add_argument("--case", metavar="DIR", help="a built case (default: built from CONFIG)")
+    st.add_argument("--knowledge", metavar="FILE", help="a run's knowledge file (decision log)")
+    st.add_argument(
+        "--at", type=float, metavar="T", help="with --knowledge: seconds from the run's start"
+    )
+    st.add_argument(
+        "--all", action="store_true", help="strategies and solutions too, not only goals"
+    )
+    st.add_argument("--json", action="store_true", help="print the statuses as JSON")
+    st.add_argument(
+        "--connect", action="append", metavar="ENDPOINT", help="zenoh endpoint to connect to"
+    )
+    st.add_argument("--listen", action="append", metavar="ENDPOINT", help=argparse.SUPPRESS)
+    st.add_argument("--mode", choices=("peer", "client", "router"), help="zenoh mode")
+    st.add_argument("--timeout", type=float, default=5.0, help="seconds to wait for the answer")
+    st.set_defaults(run=_status)
 
 
 def _build(args: argparse.Namespace) -> int:
@@ -138,3 +169,104 @@ def _check(args: argparse.Namespace) -> int:
         write_case(case, folder if folder.is_dir() else folder.parent)
     sys.stdout.flush()
     return 1
+
+
+def _status(args: argparse.Namespace) -> int:
+    import json
+
+    from anunnaki.assurance import HOLDING
+
+    body = _status_from_log(args) if args.knowledge else _status_from_bus(args)
+    if body is None:
+        return 2
+    nodes: dict[str, list[str]] = body["nodes"]
+    root = body["root"]
+    holds = nodes.get(root, [""])[0] in HOLDING
+    if args.json:
+        print(json.dumps(body, indent=1, sort_keys=True))
+        return 0 if holds else 1
+    t = body.get("t")
+    when = "" if t is None else f" at t = {t:.3f} s"
+    print(
+        f"{body['case']}{when}: top-level claim {root} {nodes[root][0]}; active model "
+        f"{body.get('active_model') or '?'}, perceived {body.get('perceived') or '?'}"
+    )
+    kinds = body.get("kinds", {})
+    for nid, (status, reason) in nodes.items():
+        if not args.all and kinds.get(nid, "goal") != "goal":
+            continue
+        mark = "*" if nid in body.get("claims", []) else " "
+        print(f" {mark}{nid:<18} {status:<12} {reason}".rstrip())
+    for row in body.get("changes", []):
+        why = f": {row['reason']}" if row.get("reason") else ""
+        print(f"  {row['t']:9.3f}  {row['claim']} support {row['support']} ({row['status']}){why}")
+    return 0 if holds else 1
+
+
+def _case_for(args: argparse.Namespace) -> Any:
+    from anunnaki.assurance import build_case, read_case
+
+    if args.case:
+        return read_case(args.case)
+    if not args.config:
+        raise SystemExit("error: give the launch file (CONFIG) or --case DIR")
+    return build_case(args.config)
+
+
+def _status_from_log(args: argparse.Namespace) -> dict[str, Any] | None:
+    """Evaluate the case at ``--at`` from what the run recorded (verdicts and inputs)."""
+    from anunnaki import topics
+    from anunnaki.assurance import LiveCase, perceived_of
+    from anunnaki.utu.runlog import open_run
+
+    case = _case_for(args)
+    kb = open_run(args.knowledge)
+    try:
+        origin = kb.time_origin()
+        t = kb.last_t() if args.at is None else origin + args.at
+        live = LiveCase(case)
+        state = kb.state_at(t)
+        live.take_analysis({"t": t, "nodes": {k: list(v) for k, v in state.items()}})
+        for row in kb.inputs(until=t):
+            if row.topic == topics.ACTIVE_MODEL:
+                live.take_active_model(row.msg)
+            elif row.topic == topics.ORACLE_OUTPUT and perceived_of(row.msg) is not None:
+                live.take_assessment(row.msg)
+        live.update()
+        changes = [
+            {"t": d.t - origin, **d.data}
+            for d in kb.decisions(until=t)
+            if d.kind == "assurance" and d.data.get("support") != "initial"
+        ]
+    finally:
+        kb.close()
+    body = live.snapshot()
+    body["t"] = t - origin
+    body["changes"] = changes
+    body["kinds"] = {n.id: n.type for n in case}
+    return body
+
+
+def _status_from_bus(args: argparse.Namespace) -> dict[str, Any] | None:
+    """Ask the running launch's case over its bus."""
+    from anunnaki import topics
+    from anunnaki.bus import BusError, open_bus
+    from anunnaki.cli._dashboard import joining_bus
+    from anunnaki.launch import load_launch
+    from anunnaki.messages import body_of
+
+    if not args.config:
+        raise SystemExit("error: give the running launch's file (CONFIG), or --knowledge FILE")
+    launch = load_launch(args.config, read_records=False)
+    config = joining_bus(launch, args, role="anunnaki assurance status")
+    with open_bus(config, name=f"{launch.name}-assurance-status") as bus:
+        try:
+            reply = body_of(bus.request(topics.ASSURANCE_QUERY, {}, timeout=args.timeout))
+        except BusError as exc:
+            print(
+                f"error: no live assurance case answered on {topics.ASSURANCE_QUERY} ({exc}); "
+                f"is '{launch.name}' running with a case (anunnaki run … without --no-case)?",
+                file=sys.stderr,
+            )
+            return None
+    return dict(reply)

@@ -16,6 +16,7 @@ import sys
 import threading
 import time
 from collections.abc import Callable
+from pathlib import Path
 from typing import Any
 
 from pydantic import ValidationError
@@ -29,6 +30,7 @@ __all__ = [
     "add_parser",
     "add_run_options",
     "announce",
+    "case_folder",
     "dashboard_for_launch",
     "joining_bus",
     "linger",
@@ -93,6 +95,12 @@ def add_parser(sub: Any) -> None:
     )
     p.add_argument("--detections", default="/lec/*/detections", help="detections topic pattern")
     p.add_argument("--oracle", default="/utu/oracle/**", help="assessment topic pattern")
+    p.add_argument(
+        "--case",
+        metavar="DIR",
+        help="the assurance case to draw (default: built from the launch when an "
+        "assurance.yaml lies beside it); its statuses come from the running launch",
+    )
     p.set_defaults(run=run)
 
 
@@ -297,6 +305,20 @@ def joining_bus(
         raise BusConfigError(f"bus option {where}: {validation_message(first)}") from None
 
 
+def case_folder(launch: Launch, given: str | None) -> str | bool | None:
+    """The live case's folder: ``--case``, else the launch file's ``assurance:``.
+
+    A folder in the launch file is relative to it; ``False`` when the launch file says
+    ``assurance: false``; ``None``: built if it can be (docs/assurance.md).
+    """
+    if given is not None:
+        return given
+    key = launch.config.assurance
+    if isinstance(key, str) and launch.path is not None:
+        return str(Path(launch.path).parent / key)
+    return False if key is False else None
+
+
 def run(args: argparse.Namespace) -> int:
     """Serve the dashboard of a launch's bus until a signal; returns the exit code."""
     from anunnaki.dashboard import ObserverConfig
@@ -313,6 +335,20 @@ def run(args: argparse.Namespace) -> int:
     dashboard = dashboard_for_launch(
         launch, host=args.host, port=args.port, token=token, topics=topics
     )
+    from anunnaki.assurance import load_live_case, render_svg
+
+    folder = case_folder(launch, args.case)
+    case = (
+        None
+        if folder is False
+        else load_live_case(
+            launch.path,
+            folder if isinstance(folder, str) else None,
+            warn=lambda line: print(line, file=sys.stderr, flush=True),
+        )
+    )
+    if case is not None:
+        dashboard.state.set_case_drawing(render_svg(case))
     try:
         with open_bus(bus_config, name=f"{launch.name}-dashboard") as bus:
             dashboard.attach(bus)

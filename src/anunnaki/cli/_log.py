@@ -435,6 +435,7 @@ def run_explain(args: argparse.Namespace) -> int:
         state = rebuild_goal_state(knowledge, path, at + origin)
         lo, hi = at - args.window, at + args.window
         around = [d.shifted(origin) for d in knowledge.decisions(lo + origin, hi + origin)]
+        claims = _claims_at(knowledge, at + origin, origin)
         span = run_span(path)
     as_of = None if state.as_of is None else state.as_of - origin
     ev = state.evaluator
@@ -462,6 +463,7 @@ def run_explain(args: argparse.Namespace) -> int:
             "agrees_with_record": not differ,
             "disagreements": differ,
             "decisions": [_decision_json(d) for d in around],
+            "assurance": claims,
         }
         sys.stdout.write(json.dumps(out, sort_keys=True) + "\n")
         return 0
@@ -495,12 +497,32 @@ def run_explain(args: argparse.Namespace) -> int:
         )
     elif state.recorded:
         console.print(Text("the rebuilt state agrees with the recorded verdicts", style="dim"))
+    if claims:
+        parts = [
+            f"{c} {d['status']} ({d['support']} at {d['t']:.3f} s"
+            + (f": {d['reason']})" if d.get("reason") else ")")
+            for c, d in claims.items()
+        ]
+        console.print(
+            Text("assurance case, top-level claims as recorded: " + "; ".join(parts)),
+            soft_wrap=True,
+        )
     if around:
         console.print(Text(f"decisions from t = {lo:.3f} to {hi:.3f} s:", style="bold"))
         _show(console, _table(console, around, as_of))
     else:
         console.print(Text(f"no decisions from t = {lo:.3f} to {hi:.3f} s"))
     return 0
+
+
+def _claims_at(knowledge: Knowledge, t: float, origin: float) -> dict[str, dict[str, Any]]:
+    """Each top-level claim of the run's live assurance case as last recorded by ``t``."""
+    out: dict[str, dict[str, Any]] = {}
+    for d in knowledge.decisions(None, t):
+        claim = d.data.get("claim")
+        if d.kind == "assurance" and isinstance(claim, str):
+            out[claim] = {"t": d.t - origin, **d.data}
+    return out
 
 
 def _word(kind: str, status: bool | None) -> str:

@@ -104,6 +104,17 @@ def _add_run_parser(sub: Any) -> None:
         "--manager-seed", type=int, metavar="N", help="the random manager's seed (default 0)"
     )
     p.add_argument(
+        "--case",
+        metavar="DIR",
+        help="the assurance case to evaluate live (a folder 'anunnaki assurance build' wrote; "
+        "default: built at the start when an assurance.yaml lies beside the launch file)",
+    )
+    p.add_argument(
+        "--no-case",
+        action="store_true",
+        help="no live assurance case (neither built nor read)",
+    )
+    p.add_argument(
         "--mail-sink",
         type=int,
         metavar="PORT",
@@ -188,6 +199,7 @@ def run(args: argparse.Namespace) -> int:
             f"alone); anunnaki reload and the dashboard read it there, other clients send it",
             flush=True,
         )
+    live_case, case = _live_case(launch, args)
     dashboard = None
     if getattr(args, "dashboard", False):
         # Bound and serving before anything starts: a port in use fails here, at once.
@@ -195,6 +207,10 @@ def run(args: argparse.Namespace) -> int:
         dashboard = _dashboard.dashboard_for_launch(
             launch, host=args.dashboard_host, port=args.dashboard_port, token=token
         )
+        if case is not None:
+            from anunnaki.assurance import render_svg
+
+            dashboard.state.set_case_drawing(render_svg(case))
         dashboard.start()
         _dashboard.announce(dashboard, token)
     sink = MailSink(args.mail_sink) if getattr(args, "mail_sink", None) is not None else None
@@ -211,6 +227,7 @@ def run(args: argparse.Namespace) -> int:
             on_bus=None if dashboard is None else dashboard.attach,
             manager=getattr(args, "manager", None),
             manager_seed=getattr(args, "manager_seed", None),
+            on_knowledge=live_case,
         )
         if sink is not None:
             _print_mail(sink, result.decisions)
@@ -241,6 +258,45 @@ def _scenario_options(launch: Any, args: argparse.Namespace) -> bool:
         return False
     launch.managed.with_scenario(seed=seed, until_landed=landed)
     return True
+
+
+def _live_case(launch: Any, args: argparse.Namespace) -> tuple[Any, Any]:
+    """The hook that puts the launch's assurance case on the bus, and the case (or ``None``s).
+
+    ``--case DIR`` (or the launch file's ``assurance: DIR``) reads a built case; otherwise
+    one is built now when the launch has a criteria file beside it (a few tenths of a
+    second). A case that cannot be built is said on stderr and the run goes on without it.
+    """
+    folder = _dashboard.case_folder(launch, getattr(args, "case", None))
+    if getattr(args, "no_case", False) or folder is False:
+        return None, None
+    from anunnaki.assurance import load_live_case
+
+    case = load_live_case(launch.path, folder if isinstance(folder, str) else None, warn=_warn)
+    if case is None:
+        return None, None
+    print(
+        f"assurance: case {case.name} ({len(case.nodes)} nodes, top-level claim {case.root} "
+        f"{case.nodes[case.root].status}) evaluated live",
+        flush=True,
+    )
+    processes = bool(getattr(args, "processes", False))
+
+    def attach(bus: Any, kb: Any) -> Any:
+        from anunnaki.assurance import CaseMonitor, LiveCase, render_svg
+
+        def record(*a: Any, **k: Any) -> None:
+            kb.record_decision(*a, **k)
+            if processes:  # this process's own connection: no loop commits it
+                kb.flush()
+
+        return CaseMonitor(LiveCase(case, record=record), bus, svg=render_svg(case))
+
+    return attach, case
+
+
+def _warn(line: str) -> None:
+    print(line, file=sys.stderr, flush=True)
 
 
 def _print_mail(sink: MailSink, decisions: list[Any]) -> None:

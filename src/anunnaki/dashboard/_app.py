@@ -194,6 +194,13 @@ def _add_views(
             raise HTTPException(404, f"no goal or obstacle {node!r} in the goal model")
         return _json(out)
 
+    @app.get("/api/assurance.svg")
+    def assurance_svg() -> Response:
+        drawing = state.case_drawing
+        if drawing is None:
+            raise HTTPException(404, "no assurance case: the run has none (docs/assurance.md)")
+        return Response(drawing, media_type="image/svg+xml", headers={"Cache-Control": "no-store"})
+
     @app.get("/api/frame/{seq}")
     def frame(seq: str) -> Response:
         return _frame_response(state, seq)

@@ -14,6 +14,8 @@ the agents' topics (binding)    the monitor pane and the dashboard's own evaluat
 ``/*/camera/image``             camera frames (``Image``)
 ``/lec/*/detections``           detection boxes (``Detections``)
 ``/lm_manager/active``          the active model and its domain
+``/utu/assurance/state``        the live assurance case's statuses (asked once at start
+                                from ``/utu/assurance/query``)
 ``/clock``                      simulation time, when Utu runs on ``clock: sim``
 =============================== ========================================================
 
@@ -83,6 +85,8 @@ class ObserverConfig:
         detections: Pattern of the detection topics (``Detections``).
         active_model: The model manager's announcement topic.
         clock: The simulation clock topic (read when the observer is given a sim clock).
+        assurance: The live assurance case's state topic.
+        assurance_query: Its query service (asked once at start).
         query_timeout: Seconds to wait for Utu's answer at start.
 
     """
@@ -97,6 +101,8 @@ class ObserverConfig:
     detections: str = "/lec/*/detections"
     active_model: str = topics.ACTIVE_MODEL
     clock: str = topics.CLOCK
+    assurance: str = topics.ASSURANCE_STATE
+    assurance_query: str = topics.ASSURANCE_QUERY
     query_timeout: float = 3.0
 
 
@@ -241,6 +247,7 @@ class BusObserver(Closing):
             self._sub(c.camera, self._on_frame, 4, Image)
             self._sub(c.detections, self._on_detections, 16, Detections)
             self._sub(c.active_model, self._on_active, 8)
+            self._sub(c.assurance, self._on_assurance, 8)
             self._declared.append(bus.watch_liveliness(self._on_liveliness))
         except BaseException:
             self.close()
@@ -381,6 +388,9 @@ class BusObserver(Closing):
     def _on_active(self, sample: Sample) -> None:
         self.state.take_active_model(body_of(sample.message))
 
+    def _on_assurance(self, sample: Sample) -> None:
+        self.state.take_assurance(body_of(sample.message))
+
     def _tick(self) -> None:
         while not self._closed.wait(0.1):
             try:
@@ -409,7 +419,21 @@ class BusObserver(Closing):
             if not self._closed.is_set():
                 log.info("dashboard: no answer from %s (%s); showing live data only", c.query, exc)
         finally:
+            self._seed_case()
             self._seeded.set()
+
+    def _seed_case(self) -> None:
+        """The live case's statuses so far, when the dashboard draws a case."""
+        if self.state.case_drawing is None:
+            return
+        c = self.config
+        try:
+            reply = self.bus.request(
+                c.assurance_query, {}, timeout=c.query_timeout, wait_for_service=False
+            )
+            self.state.take_assurance(body_of(reply))
+        except (BusError, AnunnakiError) as exc:  # not up yet: its topic will say
+            log.info("dashboard: no answer from %s (%s)", c.assurance_query, exc)
 
     def wait_seeded(self, timeout: float | None = None) -> bool:
         """Wait until the start-up query is answered (or given up); returns whether it ended."""

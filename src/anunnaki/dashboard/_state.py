@@ -136,6 +136,11 @@ class DashboardState:
         self._utu_nodes: set[str] = set()  # Utu's nodes whose liveliness token is alive
         self._utu_seen = False
         self._ended: str | None = None  # why the run is over, when its launch said so
+        # The assurance case: its drawing (rendered in this process, never from the bus) and
+        # its live statuses (from /utu/assurance/state: plain strings, drawn as text).
+        self._case_svg: str | None = None
+        self._case: dict[str, Any] | None = None
+        self._case_v = 0
         self._evaluate_own(self.clock())
 
     # -- the run's liveliness and time ---------------------------------------------------------
@@ -445,6 +450,58 @@ class DashboardState:
             self._camera_v = self._bump()
         self._changed()
 
+    def set_case_drawing(self, svg: str | None) -> None:
+        """The assurance case's drawing (``anunnaki.assurance.render_svg``), made here."""
+        with self._lock:
+            self._case_svg = svg
+            self._case_v = self._bump()
+        self._changed()
+
+    @property
+    def case_drawing(self) -> str | None:
+        """The assurance case's SVG, when one was given."""
+        return self._case_svg
+
+    def take_assurance(self, body: Mapping[str, Any]) -> None:
+        """The live case's statuses (``/utu/assurance/state`` or its query's answer).
+
+        Each node's ``[status, reason]``; anything malformed is dropped (any bus client may
+        publish here: it is shown, never trusted as markup).
+        """
+        if not isinstance(body, Mapping) or not isinstance(body.get("nodes"), Mapping):
+            return
+        seq = body.get("seq")
+        nodes: dict[str, list[str]] = {}
+        for nid, pair in body["nodes"].items():
+            if isinstance(nid, str) and isinstance(pair, list | tuple) and len(pair) == 2:
+                nodes[nid[:64]] = [str(pair[0])[:16], str(pair[1])[:500]]
+        claims = body.get("claims")
+        with self._lock:
+            old = self._case
+            if (
+                old is not None
+                and isinstance(seq, int)
+                and isinstance(old.get("seq"), int)
+                and seq < old["seq"]
+                and body.get("case") == old.get("case")
+            ):
+                return  # an older state (the query's answer after a newer publication)
+            self._heard_at = self._wall()
+            self._case = {
+                "case": _name(body.get("case")),
+                "root": _name(body.get("root")),
+                "t": _num(body.get("t")),
+                "seq": seq if isinstance(seq, int) else None,
+                "active_model": _name(body.get("active_model")),
+                "perceived": _name(body.get("perceived")),
+                "claims": [c for c in claims if isinstance(c, str)][:64]
+                if isinstance(claims, list)
+                else [],
+                "nodes": nodes,
+            }
+            self._case_v = self._bump()
+        self._changed()
+
     # -- readers (web server) ---------------------------------------------------------------
     def frame(self, seq: int | None = None) -> Frame | None:
         """The latest camera frame, or the one with sequence number ``seq`` if still kept."""
@@ -511,6 +568,8 @@ class DashboardState:
                 "utu_t": self._utu_t,
                 "latest_t": self._latest_t,
                 "run": self.run(),
+                "assurance": self._case,
+                "assurance_drawing": self._case_svg is not None,
             }
 
     def frame_rate(self, window: float = 2.0) -> float | None:
@@ -563,6 +622,9 @@ class DashboardState:
                 out["camera"] = self._camera.view(self._camera.latest())
             if self._executions_v > since:
                 out["executions"] = list(self._log.executions)
+            if self._case_v > since:
+                out["assurance"] = self._case
+                out["assurance_drawing"] = self._case_svg is not None
             new = [d for d in self._log.decisions if d["n"] > decisions_after]
             if new:
                 out["decisions"] = new

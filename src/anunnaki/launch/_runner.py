@@ -235,6 +235,7 @@ def run_launch(
     on_bus: Callable[[Bus], object] | None = None,
     manager: str | None = None,
     manager_seed: int | None = None,
+    on_knowledge: Callable[[Bus, Knowledge], object] | None = None,
 ) -> RunResult:
     """Run a launch: nodes (in this process or one process each), then the managed system.
 
@@ -259,6 +260,11 @@ def run_launch(
         manager: Who chooses the tactics: ``utu``, or a baseline, ``none`` or ``random``
             (overrides the Utu configuration's ``manager``; docs/whole-loop.md).
         manager_seed: The random manager's seed (overrides ``manager_seed``).
+        on_knowledge: Called with the bus and the run's knowledge base once it is open,
+            before any node starts (e.g. a live assurance case that records in the decision
+            log: :class:`anunnaki.assurance.CaseMonitor`). With ``processes`` the knowledge
+            base is this process's connection to the nodes' file (what is recorded on it is
+            committed by its ``flush``). What it returns is closed as ``on_bus``'s is.
 
     Raises:
         LaunchError: A node failed at bring-up or did not become ready in time.
@@ -281,6 +287,7 @@ def run_launch(
         on_bus=on_bus,
         manager=manager,
         manager_seed=manager_seed,
+        on_knowledge=on_knowledge,
     )
     if not handle_signals:
         return runner.run()
@@ -308,10 +315,12 @@ class _Runner:
         on_bus: Callable[[Bus], object] | None = None,
         manager: str | None = None,
         manager_seed: int | None = None,
+        on_knowledge: Callable[[Bus, Knowledge], object] | None = None,
     ) -> None:
         self.launch = launch
         self.on_bus = on_bus
-        self.attached: object = None  # what on_bus returned: closed by _detach
+        self.on_knowledge = on_knowledge
+        self.attached: list[object] = []  # what on_bus and on_knowledge returned: see _detach
         self.processes = processes
         self.managed = launch.managed
         default_speed = self.managed.speed if self.managed is not None else 1.0
@@ -528,7 +537,7 @@ class _Runner:
         executor = Executor() if self._deterministic() else None
         bus = open_bus(launch.bus, name=f"{launch.name}-launch", executor=executor)
         if self.on_bus is not None:
-            self.attached = self.on_bus(bus)
+            self.attached.append(self.on_bus(bus))
         nodes: list[UtuNode | AutonomicManager] = []
         threads: list[threading.Thread] = []
         halt = threading.Event()
@@ -544,8 +553,7 @@ class _Runner:
                 else f"{len(launch.nodes)} nodes in one process"
             )
             self._header(mode, bus)
-            kb = open_knowledge(self.kb_path)
-            self._resuming(kb)
+            kb = self._open_knowledge(bus)
             tail = DecisionTail(kb)
             # On sim time the scripted system moves the clock itself, in order with its
             # records (a clock fed from the bus arrives on another thread: racy).
@@ -596,11 +604,20 @@ class _Runner:
                     kb.close()
             bus.close()
 
+    def _open_knowledge(self, bus: Bus) -> Knowledge:
+        """The run's knowledge base, opened (resumed, said so) and given to ``on_knowledge``."""
+        kb = open_knowledge(self.kb_path)
+        self._resuming(kb)
+        if self.on_knowledge is not None:
+            self.attached.append(self.on_knowledge(bus, kb))
+        return kb
+
     def _detach(self) -> None:
-        """Close what ``on_bus`` returned (once), while Utu still answers on the bus."""
-        attached, self.attached = self.attached, None
-        if isinstance(attached, Closing):
-            attached.close()
+        """Close what ``on_bus`` and ``on_knowledge`` returned (once), while Utu still answers."""
+        attached, self.attached = self.attached, []
+        for item in reversed(attached):
+            if isinstance(item, Closing):
+                item.close()
 
     def _watch_peers(self, bus: Bus) -> PeerWatch | None:
         """Watch the Utu nodes this launch does not run (started by hand elsewhere).
@@ -666,7 +683,7 @@ class _Runner:
             parent_config = BusConfig(kind="zenoh", namespace=parent_config.namespace)
         bus = open_bus(parent_config, name=f"{launch.name}-launch")
         if self.on_bus is not None:
-            self.attached = self.on_bus(bus)
+            self.attached.append(self.on_bus(bus))
         children = Children(self.out, self.err)
         managed = None
         peers: PeerWatch | None = None
@@ -676,8 +693,7 @@ class _Runner:
             if launch.bus.kind == "inproc":
                 self.say("note: bus kind inproc cannot cross processes; using zenoh on loopback")
             # Create the knowledge base before the nodes open it together.
-            kb = open_knowledge(self.kb_path)
-            self._resuming(kb)
+            kb = self._open_knowledge(bus)
             tail = DecisionTail(kb)
             taken = _counter(bus, launch.nodes)  # before the nodes: it sees every report
             for name in launch.nodes:

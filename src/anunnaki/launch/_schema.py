@@ -101,6 +101,7 @@ class LaunchConfig(_Strict):
     ready_timeout: Annotated[float, Field(gt=0)] = 30.0
     stop_timeout: Annotated[float, Field(gt=0)] = 10.0
     linger: Annotated[float, Field(ge=0)] = 0.5
+    assurance: str | bool | None = None
 
     @field_validator("nodes", mode="before")
     @classmethod

@@ -103,14 +103,16 @@ KINDS: tuple[str, ...] = (
     "notify_result",
     "node_died",
     "random_draw",
+    "assurance",
 )
 """Every kind of decision the manager records (docs/decision-log.md describes each)."""
 
-ASYNC_KINDS: frozenset[str] = frozenset({"notify_result", "node_died"})
+ASYNC_KINDS: frozenset[str] = frozenset({"notify_result", "node_died", "assurance"})
 """Decisions written outside the loop's steps — when a background job finishes (a
-notification delivered or not), or by the launch or a surviving node when a Utu node died
-(and it run-stopped the platform) — at whatever instant the run is at then: not a choice of
-the loop, so a replay neither makes nor compares them."""
+notification delivered or not), by the launch or a surviving node when a Utu node died
+(and it run-stopped the platform), or by the launch's live assurance case when a top-level
+claim loses or regains its support — at whatever instant the run is at then: not a choice
+of the loop, so a replay neither makes nor compares them."""
 
 MARKERS: tuple[str, str, str] = (TICK, OPERATOR, RESTART)
 """The pseudo-topics of the ``inputs`` table that are not messages: end of a step, operator

@@ -10,7 +10,11 @@
     camera: {}, executions: [], decisions: [], timeline: [], now: 0, utu_t: null,
     latest_t: null, run: null, streaming: false,
     clock: "wall", t0: 0, operator: false, goal_source: "dashboard",
+    assurance: null,        // the live case's statuses: {case, root, t, seq, claims, nodes}
   };
+  let caseEls = null;       // GSN id -> {g, type, text}, once the drawing is in
+  let caseLoading = false;
+  let caseSelected = null;
   const dirty = new Set();   // panes to redraw
   const changedGoals = new Set();
   let nodeEls = {};          // goal id -> {g, u}
@@ -69,6 +73,7 @@
     ["header", "knowledge", "monitor", "oracle", "analyze", "plan", "execute", "camera",
      "timeline", "operator"].forEach((p) => dirty.add(p));
     for (const id of Object.keys(S.goals)) changedGoals.add(id);
+    takeAssurance(s);
   }
 
   function applyPatch(p) {
@@ -94,6 +99,65 @@
     }
     if (p.timeline) { S.timeline = S.timeline.concat(p.timeline).slice(-5000); dirty.add("timeline"); }
     if (p.goals) dirty.add("timeline");
+    takeAssurance(p);
+  }
+
+  // -- assurance case -----------------------------------------------------------------------
+  // The drawing is the case's own SVG (made by the dashboard's process, fetched once and
+  // parsed as XML: nothing in it runs); each claim's <g id="gsn-ID"> gets its live status as
+  // a class, the stylesheet colours it, and its reason goes in its tooltip and, on a click,
+  // in the pane's detail line. Statuses and reasons from the bus are text, never markup.
+  function takeAssurance(p) {
+    if (p.assurance !== undefined && p.assurance !== null) { S.assurance = p.assurance; dirty.add("case"); }
+    if (p.assurance_drawing && !caseEls && !caseLoading) loadCaseDrawing();
+  }
+  async function loadCaseDrawing() {
+    caseLoading = true;
+    try {
+      const r = await fetch("/api/assurance.svg");
+      if (!r.ok) return;
+      const doc = new DOMParser().parseFromString(await r.text(), "image/svg+xml");
+      const root = doc.documentElement;
+      if (root.nodeName !== "svg") return;
+      root.querySelectorAll("script, foreignObject").forEach((n) => n.remove());
+      const drawing = document.importNode(root, true);
+      caseEls = {};
+      drawing.querySelectorAll("g.gsn[id^='gsn-']").forEach((g) => {
+        const id = g.id.slice(4);
+        const title = g.querySelector("title");
+        caseEls[id] = { g, type: g.classList[1] || "", text: title ? title.textContent : id, title };
+        g.addEventListener("click", () => { caseSelected = id; drawCase(); });
+      });
+      $("case-drawing").replaceChildren(drawing);
+      $("pane-case").hidden = false;
+      dirty.add("case");
+    } finally { caseLoading = false; }
+  }
+  function drawCase() {
+    const a = S.assurance;
+    if (!caseEls) return;
+    if (a) {
+      for (const [id, [st, reason]] of Object.entries(a.nodes)) {
+        const e = caseEls[id];
+        if (!e) continue;
+        const cls = st.replace(/[^a-z]+/g, "-");
+        e.g.setAttribute("class", `gsn ${e.type} ${cls}${id === caseSelected ? " selected" : ""}`);
+        e.g.dataset.status = st;
+        if (e.title) e.title.textContent = `${id} [${st}]${reason ? ": " + reason : ""} (${e.text})`;
+      }
+      const root = a.nodes[a.root];
+      $("case-summary").textContent = `${a.case}: ${a.root} ${root ? root[0] : "?"}` +
+        ` · active model ${a.active_model || "?"} · perceived ${a.perceived || "?"}` +
+        (a.t === null || a.t === undefined ? "" : ` · t ${fmtT(a.t)}`);
+      $("case-drawing").dataset.seq = a.seq === null || a.seq === undefined ? "" : String(a.seq);
+    }
+    if (caseSelected) {
+      const e = caseEls[caseSelected];
+      const [st, reason] = (a && a.nodes[caseSelected]) || ["", ""];
+      $("case-detail").replaceChildren(el("p", { "data-node": caseSelected },
+        el("strong", {}, caseSelected + " "), el("span", { class: "status" }, st || "–"),
+        reason ? " — " + reason : "", el("br"), el("small", {}, e ? e.text : "")));
+    }
   }
 
   // -- goal model -------------------------------------------------------------------------
@@ -607,7 +671,7 @@
   const DRAW = {
     header: drawHeader, operator: drawOperator, knowledge: drawKnowledge, monitor: drawMonitor,
     oracle: drawOracle, analyze: drawAnalyze, plan: drawPlan, execute: drawExecute,
-    camera: drawCamera, timeline: drawTimeline,
+    camera: drawCamera, timeline: drawTimeline, case: drawCase,
   };
   function frame() {
     if (changedGoals.size) drawGoals();
