@@ -85,6 +85,21 @@ tactics:
 """
 
 
+def rerun_in_netns(script: str) -> int:
+    """Run ``script`` (with this process's arguments) again in a loopback-only network namespace."""
+    inner = [sys.executable, str(Path(script).resolve()), *sys.argv[1:]]
+    shell = 'ip link set lo up && exec "$@"'
+    env = os.environ | {_IN_NETNS: "1"}
+    return subprocess.run(
+        ["unshare", "-rn", "sh", "-c", shell, "sh", *inner], check=False, env=env
+    ).returncode
+
+
+def in_netns() -> bool:
+    """Whether this process is the one :func:`rerun_in_netns` started."""
+    return os.environ.get(_IN_NETNS) == "1"
+
+
 def ros2_python() -> str:
     named = os.environ.get("ANUNNAKI_ROS2_PYTHON")
     python = Path(named) if named else ROOT / ".venv-ros2" / "bin" / "python"
@@ -234,13 +249,8 @@ def main() -> int:
     p.add_argument("--trials", type=int, default=100, help="violation → service call trials")
     p.add_argument("--output", default=str(ROOT / "benchmarks" / "results" / "ros2.json"))
     args = p.parse_args()
-    if os.environ.get(_IN_NETNS) != "1":  # again, inside a loopback-only network namespace
-        inner = [sys.executable, str(Path(__file__).resolve()), *sys.argv[1:]]
-        script = 'ip link set lo up && exec "$@"'
-        env = os.environ | {_IN_NETNS: "1"}
-        return subprocess.run(
-            ["unshare", "-rn", "sh", "-c", script, "sh", *inner], check=False, env=env
-        ).returncode
+    if not in_netns():
+        return rerun_in_netns(__file__)
     result = run(args)
     Path(args.output).write_text(json.dumps(result, indent=2) + "\n", encoding="utf-8")
     print(json.dumps({k: result[k] for k in ("added_by_bridge", "image_320x240_stream")}, indent=2))

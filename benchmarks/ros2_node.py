@@ -22,7 +22,7 @@ import time
 from typing import Any
 
 import rclpy
-from rclpy.executors import MultiThreadedExecutor
+from rclpy.executors import MultiThreadedExecutor, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.qos import QoSProfile
 from sensor_msgs.msg import CompressedImage, Image
@@ -32,22 +32,40 @@ from std_srvs.srv import Trigger
 QOS = QoSProfile(depth=100)
 
 
-def spin(node: Node) -> MultiThreadedExecutor:
-    executor = MultiThreadedExecutor(num_threads=2)
+#: The executors ``--executor`` picks from: ``multi`` (MultiThreadedExecutor, 2 threads),
+#: ``single`` (SingleThreadedExecutor), ``events`` (rclpy.experimental.EventsExecutor).
+EXECUTORS = ("multi", "single", "events")
+EXECUTOR = "multi"
+
+
+def make_executor(kind: str) -> Any:
+    if kind == "events":
+        from rclpy.experimental import EventsExecutor
+
+        return EventsExecutor()
+    if kind == "single":
+        return SingleThreadedExecutor()
+    return MultiThreadedExecutor(num_threads=2)
+
+
+def spin(node: Node, kind: str) -> Any:
+    executor = make_executor(kind)
     executor.add_node(node)
     threading.Thread(target=executor.spin, daemon=True).start()
     return executor
 
 
-def echo() -> None:
+def echo(args: argparse.Namespace) -> None:
     node = rclpy.create_node("bench_echo")
     pong = node.create_publisher(String, "/bench/direct/pong", QOS)
     back = node.create_publisher(Image, "/bench/direct/image_back", QOS)
     node.create_subscription(String, "/bench/direct/ping", pong.publish, QOS)
     node.create_subscription(Image, "/bench/direct/image", back.publish, QOS)
-    spin(node)
+    spin(node, args.executor)
+    stop = threading.Event()
+    node.context.on_shutdown(stop.set)  # SIGINT/SIGTERM: rclpy's handlers shut the context
     print("echo ready", flush=True)
-    threading.Event().wait()
+    stop.wait()
 
 
 class Trip:
@@ -144,25 +162,32 @@ def measure(args: argparse.Namespace) -> None:
     node = rclpy.create_node("bench_measure")
     paths = {
         "direct_small": Trip(node, "/bench/direct/ping", "/bench/direct/pong", String, String),
-        "bridged_small": Trip(node, "/bench/bridge/ping", "/bench/bridge/pong", String, String),
         "direct_image": Trip(node, "/bench/direct/image", "/bench/direct/image_back", Image, Image),
-        "bridged_image": Trip(
-            node, "/bench/bridge/image", "/bench/bridge/image_back", Image, CompressedImage
-        ),
     }
-    spin(node)
+    if not args.direct_only:
+        paths["bridged_small"] = Trip(
+            node, "/bench/bridge/ping", "/bench/bridge/pong", String, String
+        )
+        paths["bridged_image"] = Trip(
+            node, "/bench/bridge/image", "/bench/bridge/image_back", Image, CompressedImage
+        )
+    kinds = ("direct",) if args.direct_only else ("direct", "bridged")
+    spin(node, args.executor)
     for name, trip in paths.items():
         if not trip.wait_connected(30):
             raise SystemExit(f"{name}: never connected")
     time.sleep(0.5)  # let the bus side's subscriptions settle before the first message
     out: dict[str, object] = {}
-    for name in ("direct_small", "bridged_small"):
+    for kind in kinds:
+        name = f"{kind}_small"
         ping_pong(paths[name], args.small, 5.0)
         out[name] = paths[name].rtt
-    for name in ("direct_image", "bridged_image"):
+    for kind in kinds:
+        name = f"{kind}_image"
         images(paths[name], args.images, args.rate, 10.0, one_at_a_time=True)
         out[name] = paths[name].rtt
-    for name in ("direct_image", "bridged_image"):
+    for kind in kinds:
+        name = f"{kind}_image"
         trip = paths[name]
         with trip.lock:
             trip.rtt, trip.sent = [], {}
@@ -192,7 +217,7 @@ def react(args: argparse.Namespace) -> None:
         return response
 
     node.create_service(Trigger, "/bench/set_safe", set_safe)
-    spin(node)
+    spin(node, args.executor)
     end = time.monotonic() + 30
     while level.get_subscription_count() == 0 or node.count_clients("/bench/set_safe") == 0:
         if time.monotonic() > end:
@@ -230,11 +255,13 @@ def main() -> int:
     p.add_argument("--images", type=int, default=100)
     p.add_argument("--stream", type=int, default=300)
     p.add_argument("--rate", type=float, default=30.0)
+    p.add_argument("--executor", choices=EXECUTORS, default=EXECUTOR)
+    p.add_argument("--direct-only", action="store_true", help="measure: no bridged paths")
     args = p.parse_args()
     rclpy.init()
     try:
         if args.mode == "echo":
-            echo()
+            echo(args)
         elif args.mode == "react":
             react(args)
         else:
