@@ -12,6 +12,7 @@ HERE = Path(__file__).parent
 ELSEWHERE = {
     "ros1": ROOT / "tests" / "ros1" / "test_ros1_benchmark.py",
     "ros2": ROOT / "tests" / "ros2" / "test_ros2_benchmark.py",
+    "ros2_probe": ROOT / "tests" / "ros2" / "test_ros2_benchmark.py",
     "robustify": ROOT / "tests" / "enki" / "test_robustify_benchmark.py",
 }
 #: Scripts that are part of another benchmark, not benchmarks of their own.

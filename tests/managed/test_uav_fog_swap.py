@@ -21,6 +21,11 @@ ROOT = Path(__file__).parents[2]
 UAV = ROOT / "examples" / "uav"
 
 
+#: What the UAV publishes of its route (G15's battery forecast at home needs it, and two
+#: battery samples: Utu warms up 2 s, as examples/uav/sim.yaml's does).
+ROUTE = {"route_m": 400.0, "home_m": 150.0, "cruise_speed": 8.0}
+
+
 def uav_oracle(t: float, domain: str) -> tuple[int, str]:
     """The oracle's (category, context) at t: fog from 5 s, the fog model copes with it."""
     if t < 5.0:
@@ -43,13 +48,15 @@ def test_a_uav_fog_swap_succeeds(tmp_path: Path) -> None:
         open_bus("inproc") as bus,
         LecNode(bus, registry, camera="/uav/camera/image", active_period=None) as node,
         AutonomicManager(
-            goals, tactics, bus=bus, knowledge=Knowledge(str(tmp_path / "k.db")), warmup=1.0
+            goals, tactics, bus=bus, knowledge=Knowledge(str(tmp_path / "k.db")), warmup=2.0
         ) as utu,
     ):
         for k in range(150):  # 15 s of simulated time in steps of 0.1 s
             t = round(k * 0.1, 1)
             bus.publish("/uav/camera/info", {"seq": k, "width": 320, "height": 240})
-            bus.publish("/uav/status", {"mode": "auto", "altitude": 30.0, "delivered": False})
+            bus.publish(
+                "/uav/status", {"mode": "auto", "altitude": 30.0, "delivered": False, **ROUTE}
+            )
             bus.publish("/uav/gps", {"lat": 42.7251, "lon": -84.4791})
             if k % 10 == 0:
                 bus.publish("/uav/battery", {"level": 90.0})

@@ -49,6 +49,11 @@ CONTEXT = {
 RAIN_AT = 1.0
 
 
+#: What the UAV publishes of its route (G15's battery forecast at home needs it, and two
+#: battery samples: Utu warms up 2 s, as examples/uav/sim.yaml's does).
+ROUTE = {"route_m": 400.0, "home_m": 150.0, "cruise_speed": 8.0}
+
+
 def frames(n: int) -> list[np.ndarray]:
     """*n* frames of test layout 44 (never in any model's or oracle's training)."""
     return [np.asarray(f.image) for f in scene_frames("uav", layout=44, seed=0, n=n,
@@ -89,7 +94,7 @@ def run(tmp_path_factory: pytest.TempPathFactory, clean: list[np.ndarray]) -> di
         LecNode(bus, registry, camera=CAMERA, active_period=None) as node,
         OracleNode(bus, "enlil", camera=CAMERA, models=registry, window=3) as oracle,
         AutonomicManager(
-            goals, tactics, bus=bus, knowledge=Knowledge(str(tmp / "k.db")), warmup=0.5
+            goals, tactics, bus=bus, knowledge=Knowledge(str(tmp / "k.db")), warmup=2.0
         ) as utu,
     ):
         bus.subscribe(topics.ORACLE_OUTPUT, lambda s: seen.append(s.message), expect=Assessment)
@@ -104,7 +109,9 @@ def run(tmp_path_factory: pytest.TempPathFactory, clean: list[np.ndarray]) -> di
                 image = rain.apply(image, CONTEXT, seed=k)
             bus.publish(CAMERA, Image.from_array(image, encoding="png", seq=k))
             bus.publish("/uav/camera/info", {"seq": k, "width": 320, "height": 240})
-            bus.publish("/uav/status", {"mode": "auto", "altitude": 30.0, "delivered": False})
+            bus.publish(
+                "/uav/status", {"mode": "auto", "altitude": 30.0, "delivered": False, **ROUTE}
+            )
             bus.publish("/uav/gps", {"lat": 42.7251, "lon": -84.4791})
             assert handled(oracle, k + 1), f"frame {k} was not assessed"
             utu.step(t)

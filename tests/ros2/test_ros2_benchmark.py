@@ -40,3 +40,25 @@ def _env() -> dict[str, str]:
     import os
 
     return {k: v for k, v in os.environ.items() if k != "PYTHONPATH"}
+
+
+def test_the_ros2_probe_compares_executors_and_transports(tmp_path: Path) -> None:
+    """benchmarks/ros2_probe.py, tiny: plain rclpy round trips per executor and transport."""
+    need_ros2()
+    out = tmp_path / "probe.json"
+    args = ["--small", "5", "--images", "1", "--rounds", "1", "--executors", "multi,single"]
+    args += ["--transports", "DEFAULT,UDPv4", "--output", str(out)]
+    done = subprocess.run(
+        [sys.executable, str(ROOT / "benchmarks" / "ros2_probe.py"), *args],
+        capture_output=True,
+        text=True,
+        timeout=300,
+        check=False,
+        cwd=ROOT,
+        env={"ANUNNAKI_ROS2_PYTHON": str(ROS2_PYTHON), **_env()},
+    )
+    assert done.returncode == 0, done.stdout[-2000:] + done.stderr[-4000:]
+    text = out.read_text(encoding="utf-8")
+    assert json.loads(text)  # what it wrote is JSON
+    for name in ("multi", "single", "DEFAULT", "UDPv4"):
+        assert name in text, name
