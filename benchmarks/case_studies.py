@@ -4,8 +4,8 @@ As the self-adaptive exemplars do (SUAVE, ReBeT ship a *none* and a *random* man
 theirs), each case's demo launch is run with ``--manager utu|none|random`` over ``--seeds``
 seeds; the seed draws the scenario again (its ``vary:`` section: phase timing, pedestrian
 placement, condition strength; :func:`anunnaki.sim.draw_scenario`) and seeds the random
-manager. Every run is flat out in simulated time (the simulator in lockstep with the
-detector and both oracles), so the figures are in simulated seconds and frames. Per run,
+manager. Every run is flat out in simulated time (one deterministic program on the run's
+executor: :mod:`anunnaki.bus`), so the figures are in simulated seconds and frames. Per run,
 measured from the run's public topics (``on_bus``), its decisions and its report:
 
 * ``degraded_frames``: frames the rover drove autonomously with a model the ground-truth
@@ -51,16 +51,13 @@ its flight (nothing of the mission changes after it), or at the scenario's end:
 * ``low_battery_s``: simulated seconds airborne below 20 % (obstacle O2 holding);
 * ``degraded_frames``: frames the UAV flew on its detector (airborne in ``auto`` or
   ``return_home``) with a model in category >= 1 by the ground-truth scorer;
-* ``lockstep_misses``: frames the simulator stepped past after 2 s of wall time without
-  their detections (a loaded machine; the figures of such a run lag behind);
 * onset delays, false alarms, decisions and adaptations as for the rover, with the UAV's
   tactics (:data:`CASES`): adaptations are the swaps, ``failsafe-f1``, ``return-home``,
   ``hold-route`` and ``link-lost``; a mode change adapts to a camera phase only from
   ``failsafe-f1``; an adverse condition is a phenomenon or a fault in force (a sensor off
   its nominal rate, the link down, the battery's extra drain).
 
-Utu's wall-time watchdog gets :data:`WATCHDOG` (a loaded machine, not the scenario, would
-trip its 3 s). The runs send no e-mail (the launch's ``notify`` section is dropped, so a
+The runs send no e-mail (the launch's ``notify`` section is dropped, so a
 fail-safe's e-mail fails at once as not configured, recorded as a decision, its log lines
 kept off the output): a benchmark must not mail whatever listens on the demo's port.
 
@@ -111,15 +108,10 @@ from anunnaki.sim import Scenario, StopRule, Timeline, draw_scenario, load_scena
 ROOT = Path(__file__).parents[1]
 RESULTS = Path(__file__).parent / "results" / "case-studies.json"
 MANAGERS = ("utu", "none", "random")
-FAST = 0.0  # --speed 0: as fast as the lockstep allows
+FAST = 0.0  # --speed 0: as fast as the work allows
 #: The live scorer of every run: the ground truth over the last second (10 frames), so that
 #: a frame's category is that of the model that handled it, not of the last 3 s.
 SCORER = {"name": "ground_truth", "window": 10, "min_frames": 5, "min_objects": 5}
-#: Utu's watchdog (wall seconds a round may take before it run-stops the platform; 3 s by
-#: default): a run in lockstep on a loaded machine can starve Utu's thread for longer while
-#: simulated time waits, and a run-stop then would end the run for the host's load, not for
-#: anything the scenario did.
-WATCHDOG = 120.0
 
 
 @dataclass(frozen=True)
@@ -390,18 +382,6 @@ def mission_outcome(flight: dict[str, Any]) -> dict[str, Any]:
     }
 
 
-class _LockstepMisses(logging.Handler):
-    """Counts the frames the simulator stepped past without their detections (under load)."""
-
-    def __init__(self) -> None:
-        super().__init__(logging.WARNING)
-        self.count = 0
-
-    def emit(self, record: logging.LogRecord) -> None:
-        if "got no detections" in record.getMessage():
-            self.count += 1
-
-
 def _adverse(scenario: Any, timeline: Timeline, t: float) -> bool:
     """A condition in force at ``t``: a phenomenon or a fault (a rate off the nominal one)."""
     if timeline.phenomena(t):
@@ -463,7 +443,7 @@ def run_once(
     # the seed's draw and the end at the touch-down, as `anunnaki run --seed N --until-landed`
     managed.with_scenario(seed=seed, until_landed=case.platform == "uav")
     options = managed.options
-    utu = launch.utu.model_copy(update={"notify": {}, "watchdog": WATCHDOG})
+    utu = launch.utu.model_copy(update={"notify": {}})
     launch = dataclasses.replace(launch, utu=utu)
     scenario = draw_scenario(load_scenario(options.scenario), seed)
     end = scenario.duration if until is None else min(until, scenario.duration)
@@ -474,8 +454,6 @@ def run_once(
         recorder = _Recorder(scenario.camera.width, scenario.camera.height)
     report_path = Path(os.environ.get("TMPDIR", "/tmp")) / f"case-{os.getpid()}-{seed}.json"
     managed.with_reports(report=str(report_path), plot=None)
-    misses = _LockstepMisses()
-    logging.getLogger("anunnaki.managed").addHandler(misses)
     t0 = time.perf_counter()
     try:
         result = run_launch(
@@ -490,7 +468,6 @@ def run_once(
         )
     finally:
         recorder.close()
-        logging.getLogger("anunnaki.managed").removeHandler(misses)
     wall = time.perf_counter() - t0
     report = json.loads(report_path.read_text(encoding="utf-8"))
     report_path.unlink(missing_ok=True)
@@ -574,7 +551,6 @@ def run_once(
         **recorder.counts(),
         **(mission_outcome(report["flight"]) if case.platform == "uav" else {}),
         **({"collisions": len(report["collisions"])} if case.platform == "rover" else {}),
-        **({"lockstep_misses": misses.count} if case.platform == "uav" else {}),
         "onset_delays": delays,
         "false_alarms": len(alarms),
         "false_alarm_tactics": [f"{d.tactic}@{d.t:.1f}" for d in alarms],

@@ -481,7 +481,16 @@ def component(
             closing.append(node)
 
             def report() -> dict[str, Any]:
+                # A frame's detections leave the node before its callback counts them: the
+                # platform may have seen the last frame's (and said "ran") while the count
+                # is one short. Take the figures once every frame received has ended.
+                deadline = time.monotonic() + LOCKSTEP_TIMEOUT
                 stats = node.stats()
+                while stats.frames > stats.detections + stats.failed:
+                    if time.monotonic() > deadline:
+                        break
+                    time.sleep(0.01)
+                    stats = node.stats()
                 return {"frames": stats.frames, "detections": stats.detections}
 
         elif name == "oracle":

@@ -188,7 +188,7 @@ def secure(pki: Path) -> Iterator[Secure]:
 def plain_decisions(tmp_path_factory: pytest.TempPathFactory) -> list[tuple[float, str, str]]:
     """The decisions of the rover example without router, TLS or rules (in-process bus)."""
     path = launch_file(tmp_path_factory.mktemp("plain"), None)
-    # Sim time in lockstep: the decisions and their times do not depend on the speed.
+    # Sim time on the run's executor: the decisions and their times do not depend on the speed.
     result = run_launch(load_launch(path), speed=50.0, out=io.StringIO(), handle_signals=False)
     assert result.exit_code == 0, result.reason
     return [(d.t, d.kind, d.tactic or "") for d in result.decisions]
