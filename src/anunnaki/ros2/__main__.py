@@ -6,7 +6,8 @@ install's ``setup.bash``. The process joins the zenoh bus (``--connect`` the lau
 Utu's endpoint), becomes the ROS 2 node named in the bridge file (domain
 ``$ROS_DOMAIN_ID``), checks that the bridge file's ``distro`` (if it names one) is the
 installed ROS 2's, prints ``ros2 bridge ready`` once everything is declared, holds the bus
-liveliness token ``/ros2_bridge_<name>``, and runs until SIGINT/SIGTERM (or, with
+liveliness token ``/ros2_bridge_<name>``, publishes its ROS 2 heartbeat ``/<name>/heartbeat``
+(a liveliness lease robots watch), and runs until SIGINT/SIGTERM (or, with
 ``--exit-with-parent``, until its standard input closes). rclpy's own signal handlers are
 off: a signal stops the bridge cleanly (executor, node, bus, in that order), and an
 ``ExternalShutdownException`` (the ROS context shut down under it) ends it cleanly too.

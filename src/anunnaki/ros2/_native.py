@@ -12,7 +12,12 @@ works, e.g. after sourcing a ROS 2 install's ``setup.bash``) and is a ROS 2 node
   ``Image`` and back (a raw ``Image`` to ROS decodes the frame: OpenCV);
 * a service with ``serve: bus`` (the default) answers a bus request by calling the ROS
   service; with ``serve: ros`` the bridge offers the ROS service and answers a ROS call by
-  requesting the bus service.
+  requesting the bus service;
+* a heartbeat: ``std_msgs/Empty`` on ``/<name>/heartbeat``, liveliness ``MANUAL_BY_TOPIC``
+  with the bridge file's lease (``heartbeat``, default 1 s), published every quarter lease
+  from the executor. A robot subscribed with that lease sees the bridge's ``alive_count``
+  fall to 0 a lease after the bridge stops, hangs or is killed (``kill -9`` too), and goes to
+  its safe state on its own (examples/rover/ros2/rover_robot.py does).
 
 It never dies from one bad message: a message that does not convert is counted
 (``stats["malformed"]``) and logged with the topic and the reason, and the next one goes
@@ -94,6 +99,19 @@ def service_class(type_name: str) -> Any:
     return getattr(import_module(f"{package}.srv"), name)
 
 
+def heartbeat_qos(rclpy: ModuleType, lease: float) -> Any:
+    """The heartbeat's QoS: reliable, keep last 1, liveliness by topic with ``lease`` seconds."""
+    q = rclpy.qos
+    return q.QoSProfile(
+        history=q.HistoryPolicy.KEEP_LAST,
+        depth=1,
+        reliability=q.ReliabilityPolicy.RELIABLE,
+        durability=q.DurabilityPolicy.VOLATILE,
+        liveliness=q.LivelinessPolicy.MANUAL_BY_TOPIC,
+        liveliness_lease_duration=import_module("rclpy.duration").Duration(seconds=lease),
+    )
+
+
 def qos_profile(rclpy: ModuleType, t: TopicBridge) -> Any:
     """The rclpy QoS of an entry: best effort (``sensor``) or reliable, keep last ``queue``."""
     q = rclpy.qos
@@ -166,6 +184,19 @@ class Ros2Bridge(Closing):
                     srv, s.ros_service, self._ros_handler(s), callback_group=self._group
                 )
                 self._ros_handles.append(("service", service))
+        self._start_heartbeat()
+
+    def _start_heartbeat(self) -> None:
+        """Publish ``/<name>/heartbeat`` every quarter lease (liveliness by topic)."""
+        empty = message_class("std_msgs/Empty")
+        lease = self.spec.heartbeat_lease
+        pub = self.node.create_publisher(
+            empty, self.spec.heartbeat_topic, heartbeat_qos(self.rclpy, lease)
+        )
+        self._ros_handles.append(("publisher", pub))
+        timer = self.node.create_timer(lease / 4, lambda: pub.publish(empty()))
+        self._ros_handles.append(("timer", timer))
+        pub.publish(empty())  # alive from the first moment, not a quarter lease later
 
     def close(self) -> None:
         """Release everything declared on the bus and on ROS 2."""
