@@ -34,8 +34,9 @@ QOS = QoSProfile(depth=100)
 
 #: The executors ``--executor`` picks from: ``multi`` (MultiThreadedExecutor, 2 threads),
 #: ``single`` (SingleThreadedExecutor), ``events`` (rclpy.experimental.EventsExecutor).
+#: ``single``, as the bridge: benchmarks/ros2_probe.py measured it fastest (docs/results.md).
 EXECUTORS = ("multi", "single", "events")
-EXECUTOR = "multi"
+EXECUTOR = "single"
 
 
 def make_executor(kind: str) -> Any:

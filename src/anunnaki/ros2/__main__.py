@@ -74,13 +74,16 @@ def main(argv: Sequence[str] | None = None) -> int:
 def _run(
     rclpy: Any, spec: Any, options: dict[str, object], stop: threading.Event, distro: str
 ) -> int:
-    from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
+    from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 
     from anunnaki.bus import open_bus
     from anunnaki.ros2._native import Ros2Bridge
 
     node = rclpy.create_node(spec.name)
-    executor = MultiThreadedExecutor(num_threads=4)
+    # one thread: no callback of the bridge waits. benchmarks/ros2_probe.py, plain rclpy
+    # round trips at load 7 on 2 cores: SingleThreadedExecutor median 0.47 ms, p99 9.7 ms;
+    # MultiThreadedExecutor 4.2 ms, 92 ms (docs/results.md)
+    executor = SingleThreadedExecutor()
     executor.add_node(node)
 
     def spin() -> None:
