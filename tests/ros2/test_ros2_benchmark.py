@@ -35,6 +35,7 @@ def test_the_ros2_benchmark_writes_its_figures(tmp_path: Path) -> None:
     assert set(doc["added_by_bridge"]) == {"small_median_ms", "small_p99_ratio", "image_median_ms"}
     reaction = doc["violation_to_robot_service_call"]
     assert reaction["n"] + reaction["lost"] == 3 and reaction["n"] > 0
+    assert "first_call_ms" in reaction  # the warm-up trial, apart
     killed = doc["bridge_kill_to_rover_safe_state"]
     assert (killed["n"], killed["lost"], killed["heartbeat_lease_s"]) == (1, 0, 1.0)
 
