@@ -14,7 +14,15 @@ paths, each a round trip back to the sender:
 Reaction: the robot (``ros2_node.py react``) publishes a violating ``/bench/level``; the
 bridge carries it to the bus; Utu (an in-process manager here: one goal, ``level < 0.5``,
 and one tactic requesting ``/bench/set_safe``, cooldown 0) reacts; the bridge calls the
-robot's ``std_srvs/Trigger``. The robot times violation → call with its own clock.
+robot's ``std_srvs/Trigger``. The robot times violation → call with its own clock; the
+first trial warms up (the bridge's first call waits on the service's discovery) and is
+reported apart (``first_call_ms``).
+
+Bridge killed: the example rover (examples/rover/ros2/rover_robot.py) and its bridge
+(examples/rover/ros2/bridge.yaml, the heartbeat's default 1-s lease); once the rover says it
+sees the bridge alive, the bridge gets SIGKILL, and the time to the rover's ``safe state``
+line is taken (this process's clock: the kill, then the line read; ``--kills`` times, a new
+bridge each time).
 
 Small message: one std_msgs/String in flight at a time. Image: a 320×240 rgb8
 sensor_msgs/Image (PNG on the bus, a CompressedImage back), one in flight, then a stream
@@ -34,9 +42,11 @@ import statistics
 import subprocess
 import sys
 import tempfile
+import time
 from pathlib import Path
 from typing import Any
 
+from anunnaki.rosbridge import HEARTBEAT_LEASE
 from ros1 import free_port, stats, wait_line  # the ROS 1 benchmark's, the same measures
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -146,10 +156,11 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
             reaction = react(bus, start, python, args.trials)
             bridge.send_signal(2)
             tail, _ = bridge.communicate(timeout=30)
+            killed = kill_to_safe_state(start, python, endpoint, args.kills)
         lines = [ln for ln in out.strip().splitlines() if ln.startswith("{")]
         if not lines:
             raise SystemExit(f"the measuring node printed no figures:\n{out[-2000:]}")
-        raw = json.loads(lines[-1]) | reaction
+        raw = json.loads(lines[-1]) | reaction | killed
         print("\n".join(tail.strip().splitlines()[-3:]), file=sys.stderr)
     finally:
         for p in reversed(procs):
@@ -196,6 +207,33 @@ def react(bus: Any, start: Any, python: str, trials: int) -> dict[str, Any]:
     return dict(json.loads(lines[-1]))
 
 
+def kill_to_safe_state(start: Any, python: str, endpoint: str, kills: int) -> dict[str, Any]:
+    """SIGKILL the example rover's bridge ``kills`` times; the seconds to its safe state each."""
+    rover_py = ROOT / "examples" / "rover" / "ros2" / "rover_robot.py"
+    bridge_file = ROOT / "examples" / "rover" / "ros2" / "bridge.yaml"
+    if kills <= 0:
+        return {"kill_to_safe_state": [], "kill_lost": 0}
+    rover = start([python, str(rover_py)])
+    wait_line(rover, "rover ready")
+    took: list[float] = []
+    lost = 0
+    for _ in range(kills):
+        bridge = start([python, "-m", "anunnaki.ros2", str(bridge_file), "--connect", endpoint])
+        wait_line(bridge, "ros2 bridge ready")
+        wait_line(rover, "manager anunnaki_bridge alive")
+        t0 = time.monotonic()
+        bridge.kill()
+        try:
+            wait_line(rover, "manager anunnaki_bridge gone", timeout=60)
+            took.append((time.monotonic() - t0) * 1000.0)
+        except SystemExit:
+            lost += 1
+        bridge.wait(timeout=30)
+    rover.terminate()
+    rover.wait(timeout=30)
+    return {"kill_to_safe_state": took, "kill_lost": lost}
+
+
 def summarise(raw: dict[str, Any], args: argparse.Namespace) -> dict[str, Any]:
     small = {k: stats(raw[f"{k}_small"]) for k in ("direct", "bridged")}
     image = {k: stats(raw[f"{k}_image"]) for k in ("direct", "bridged")}
@@ -235,9 +273,22 @@ def summarise(raw: dict[str, Any], args: argparse.Namespace) -> dict[str, Any]:
         "violation_to_robot_service_call": {
             **stats(raw["violation_to_call"]),
             "lost": raw["lost"],
+            # the warm-up trial, not in the figures above: the bridge's first call of the
+            # robot's service (discovery of its endpoints included); None: never arrived
+            "first_call_ms": _round(raw.get("first_call")),
+        },
+        "bridge_kill_to_rover_safe_state": {
+            **stats(raw["kill_to_safe_state"]),
+            "ms": [round(x, 1) for x in raw["kill_to_safe_state"]],
+            "lost": raw["kill_lost"],
+            "heartbeat_lease_s": HEARTBEAT_LEASE,
         },
         "aims": {"small_added_median_ms": 1.0, "small_p99_ratio": 2.0, "stream_rate_hz": args.rate},
     }
+
+
+def _round(ms: float | None) -> float | None:
+    return None if ms is None else round(ms, 1)
 
 
 def main() -> int:
@@ -247,6 +298,7 @@ def main() -> int:
     p.add_argument("--stream", type=int, default=300, help="frames in the 30 Hz stream")
     p.add_argument("--rate", type=float, default=30.0, help="stream rate, Hz")
     p.add_argument("--trials", type=int, default=100, help="violation → service call trials")
+    p.add_argument("--kills", type=int, default=5, help="bridge SIGKILL → rover safe state trials")
     p.add_argument("--output", default=str(ROOT / "benchmarks" / "results" / "ros2.json"))
     args = p.parse_args()
     if not in_netns():

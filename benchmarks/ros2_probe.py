@@ -7,8 +7,8 @@ rounds (each round every configuration once, so a change in the machine's load h
 all alike), inside a loopback-only network namespace (as benchmarks/ros2.py):
 
 * the executor both nodes spin: ``multi`` (MultiThreadedExecutor, 2 threads, in a thread:
-  what ros2_node.py used), ``single`` (SingleThreadedExecutor), ``events``
-  (rclpy.experimental.EventsExecutor);
+  what ros2_node.py used before this probe), ``single`` (SingleThreadedExecutor: what
+  ros2_node.py and the bridge use since), ``events`` (rclpy.experimental.EventsExecutor);
 * Fast DDS's transports (``FASTDDS_BUILTIN_TRANSPORTS``): ``DEFAULT`` (shared memory and
   UDPv4), ``UDPv4`` (no shared memory), ``SHM`` (shared memory only).
 

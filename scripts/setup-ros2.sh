@@ -45,7 +45,10 @@ if ! "$PYTHON" -c 'import sys; sys.exit(sys.version_info[:2] != (3, 11))'; then
 fi
 
 stamp="$VENV/.anunnaki-ros2-setup"
-hash=$(cat "$0" pyproject.toml | sha256sum | cut -c1-16)
+# the checkout's path is in the stamp too: the environment holds it (anunnaki is installed
+# editable), so an environment copied from another checkout is installed again here rather
+# than left importing the other checkout's code
+hash=$( (cat "$0" pyproject.toml; pwd -P) | sha256sum | cut -c1-16)
 if [[ -f $stamp && $(cat "$stamp") == "$hash" && -x $VENV/bin/python ]]; then
   exit 0
 fi

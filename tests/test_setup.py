@@ -47,13 +47,13 @@ def checkout(tmp_path: Path) -> Path:
     return tmp_path
 
 
-def setup(checkout: Path, *args: str) -> list[str]:
+def setup(checkout: Path, *args: str, script: str = "setup.sh") -> list[str]:
     """Run the script; the calls it made (apt scripts, pip installs) in order."""
     log = checkout / "calls.log"
     log.unlink(missing_ok=True)
     env = {k: v for k, v in os.environ.items() if k != "ANUNNAKI_EXTRAS"}
     out = subprocess.run(
-        ["bash", str(checkout / "scripts" / "setup.sh"), *args],
+        ["bash", str(checkout / "scripts" / script), *args],
         capture_output=True,
         text=True,
         env=env,
@@ -110,3 +110,26 @@ def test_the_readme_says_what_each_command_installs() -> None:
         extras = ",".join(profile(name))
         assert f"`make {name}` installs" in readme
         assert f"`{extras}`" in readme, f"the README does not list the {name} extras {extras}"
+
+
+def test_a_ros2_environment_copied_from_another_checkout_is_installed_again(
+    tmp_path: Path,
+) -> None:
+    # .venv-ros2 holds the checkout's path (anunnaki installed editable): its stamp says
+    # which checkout, so a copy made elsewhere is not taken as ready (it would import the
+    # other checkout's code)
+    first = tmp_path / "first"
+    (first / "scripts").mkdir(parents=True)
+    shutil.copy(ROOT / "scripts" / "setup-ros2.sh", first / "scripts" / "setup-ros2.sh")
+    shutil.copy(ROOT / "pyproject.toml", first / "pyproject.toml")
+    (first / ".venv-ros2" / "bin").mkdir(parents=True)
+    _executable(first / ".venv-ros2" / "bin" / "python", '#!/bin/sh\necho "$*" >> calls.log\n')
+
+    def calls(where: Path) -> list[str]:
+        return setup(where, script="setup-ros2.sh")
+
+    assert any("install" in c and "-e .[ros]" in c for c in calls(first))
+    assert calls(first) == []  # ready: a re-run installs nothing
+    second = tmp_path / "second"
+    shutil.copytree(first, second, symlinks=True)
+    assert any("install" in c and "-e .[ros]" in c for c in calls(second))

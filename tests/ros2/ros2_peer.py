@@ -6,7 +6,9 @@ each mapped type), offers ``/peer/set_flag`` (``std_srvs/SetBool``) and
 ``/peer/change_state`` (``lifecycle_msgs/ChangeState``), and obeys ``/peer/command``:
 ``bad-image`` publishes an ``Image`` in an encoding the bridge does not convert on
 ``/in/image``; ``call-trigger`` calls the bridge's ``/bridge/trigger`` (a ROS service the
-bridge answers from the bus) and publishes the reply on ``/peer/result``. Publishers of
+bridge answers from the bus) and publishes the reply on ``/peer/result``; ``call-chain``
+calls the bridge's ``/bridge/set_flag`` (true), which the bridge answers from the bus
+service that calls this peer's ``/peer/set_flag``, and publishes the reply likewise. Publishers of
 sensor types use the sensor-data QoS (best effort), as drivers do. It prints
 ``peer ready`` once everything is declared, and stops on SIGTERM.
 """
@@ -48,6 +50,18 @@ TYPES: dict[str, tuple[Any, bool]] = {
 }
 
 
+def call(client: Any, request: Any) -> str:
+    """Call a service of the bridge; its reply as ``"<success> <message>"``."""
+    if not client.wait_for_service(timeout_sec=30.0):
+        return f"no {client.srv_name}"
+    done = threading.Event()
+    future = client.call_async(request)
+    future.add_done_callback(lambda _f: done.set())
+    done.wait(30.0)
+    reply = future.result()
+    return "no reply" if reply is None else f"{reply.success} {reply.message}"
+
+
 def main() -> int:
     rclpy.init(signal_handler_options=rclpy.signals.SignalHandlerOptions.NO)
     node = rclpy.create_node("anunnaki_test_peer")
@@ -62,6 +76,7 @@ def main() -> int:
         node.create_subscription(cls, f"/out/{name}", pub.publish, reliable, callback_group=group)
     result = node.create_publisher(String, "/peer/result", reliable)
     trigger = node.create_client(Trigger, "/bridge/trigger", callback_group=group)
+    chain = node.create_client(SetBool, "/bridge/set_flag", callback_group=group)
 
     def set_flag(request: Any, response: Any) -> Any:
         response.success = bool(request.data)
@@ -77,16 +92,9 @@ def main() -> int:
             bad = Image(height=2, width=2, encoding="yuv422_16", step=8, data=b"\0" * 16)
             pubs["image"].publish(bad)
         elif msg.data == "call-trigger":
-            if not trigger.wait_for_service(timeout_sec=30.0):
-                result.publish(String(data="no /bridge/trigger"))
-                return
-            done = threading.Event()
-            future = trigger.call_async(Trigger.Request())
-            future.add_done_callback(lambda _f: done.set())
-            done.wait(30.0)
-            reply = future.result()
-            text = "no reply" if reply is None else f"{reply.success} {reply.message}"
-            result.publish(String(data=text))
+            result.publish(String(data=call(trigger, Trigger.Request())))
+        elif msg.data == "call-chain":
+            result.publish(String(data=call(chain, SetBool.Request(data=True))))
 
     node.create_service(SetBool, "/peer/set_flag", set_flag, callback_group=group)
     node.create_service(ChangeState, "/peer/change_state", change_state, callback_group=group)

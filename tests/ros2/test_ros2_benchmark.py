@@ -13,7 +13,8 @@ from ros2_support import ROOT, ROS2_PYTHON, need_ros2
 def test_the_ros2_benchmark_writes_its_figures(tmp_path: Path) -> None:
     need_ros2()
     out = tmp_path / "ros2.json"
-    args = ["--small", "5", "--images", "2", "--stream", "6", "--trials", "3", "--output", str(out)]
+    args = ["--small", "5", "--images", "2", "--stream", "6", "--trials", "3", "--kills", "1"]
+    args += ["--output", str(out)]
     done = subprocess.run(
         [sys.executable, str(ROOT / "benchmarks" / "ros2.py"), *args],
         capture_output=True,
@@ -34,6 +35,9 @@ def test_the_ros2_benchmark_writes_its_figures(tmp_path: Path) -> None:
     assert set(doc["added_by_bridge"]) == {"small_median_ms", "small_p99_ratio", "image_median_ms"}
     reaction = doc["violation_to_robot_service_call"]
     assert reaction["n"] + reaction["lost"] == 3 and reaction["n"] > 0
+    assert "first_call_ms" in reaction  # the warm-up trial, apart
+    killed = doc["bridge_kill_to_rover_safe_state"]
+    assert (killed["n"], killed["lost"], killed["heartbeat_lease_s"]) == (1, 0, 1.0)
 
 
 def _env() -> dict[str, str]:

@@ -228,6 +228,13 @@ def test_services_go_both_ways(live: Live) -> None:
     assert len(calls) == 1
 
 
+def test_a_ros_call_that_comes_back_through_the_bridge_does_not_deadlock(live: Live) -> None:
+    # ROS /bridge/set_flag → bus /robot/set_flag → ROS /peer/set_flag, all through the
+    # bridge: its one executor thread awaits the bus reply instead of holding it, so the
+    # peer's reply (which that thread takes) comes in, and the answer is the peer's
+    assert _command(live, "call-chain", "/peer/result") == "True flag set to True"
+
+
 def _command(live: Live, command: str, answer_topic: str) -> str:
     """Send the peer a command (until it answers on ``answer_topic``); its answer."""
     got: list[str] = []

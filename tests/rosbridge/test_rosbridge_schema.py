@@ -54,6 +54,15 @@ def test_a_ros2_file_is_checked_against_ros2s_messages() -> None:
             "the ROS 1 bridge serves on the bus only",
         ),
         ("anunnaki: ros2-bridge/1\ndistro: iron\n", "distro"),
+        ("anunnaki: ros1-bridge/1\nheartbeat: 1.0\n", "a ROS 1 bridge file has no 'heartbeat'"),
+        (  # a lease the scheduling alone would let lapse: file, line and key named
+            "anunnaki: ros2-bridge/1\nheartbeat: 0.01\n",
+            "bridge.yaml:2: heartbeat: the lease of the bridge's ROS 2 heartbeat is 0.01 s, "
+            "outside 0.1..60 s",
+        ),
+        ("anunnaki: ros2-bridge/1\nheartbeat: .inf\n", "heartbeat: .* is inf s"),
+        ("anunnaki: ros2-bridge/1\nheartbeat: true\n", "heartbeat: Input should be a valid"),
+        ("anunnaki: ros2-bridge/1\nheartbeat: fast\n", "heartbeat: Input should be a valid"),
         (
             "anunnaki: ros2-bridge/1\nservices:\n  - {bus: /m, type: anunnaki_msgs/SetString}\n",
             "unknown ROS service type 'anunnaki_msgs/SetString'",
@@ -63,6 +72,12 @@ def test_a_ros2_file_is_checked_against_ros2s_messages() -> None:
 def test_mistakes_are_named(text: str, message: str) -> None:
     with pytest.raises(ModelFileError, match=message.replace("(", r"\(").replace(")", r"\)")):
         parse_bridge(text, source="bridge.yaml")
+
+
+def test_the_heartbeat_lease_defaults_to_one_second_on_the_bridges_own_topic() -> None:
+    spec = parse_bridge("anunnaki: ros2-bridge/1\nname: rover_bridge\n")
+    assert (spec.heartbeat_lease, spec.heartbeat_topic) == (1.0, "/rover_bridge/heartbeat")
+    assert parse_bridge("anunnaki: ros2-bridge/1\nheartbeat: 2\n").heartbeat_lease == 2.0
 
 
 def test_a_diagnostics_status_becomes_flat_fields_a_binding_reads() -> None:

@@ -11,9 +11,12 @@ ROS 2 install's setup.bash, works too). One process, three nodes, as a real rove
   ``/rover/controller/lights`` (std_msgs/Bool), which the bridge merges into the bus topic
   ``/rover/controller/state``; the services ``/rover/controller/manual`` (std_srvs/SetBool:
   true → manual, false → autonomous) and ``/rover/controller/stop`` (std_srvs/Trigger); the
-  buzzer command ``/rover/controller/buzzer`` (std_msgs/Bool); and its own fail-safe: once
-  the manager's bridge node (``--manager``) has been seen in the ROS graph, its disappearance
-  puts the rover in manual mode (the robot's safe state) by itself;
+  buzzer command ``/rover/controller/buzzer`` (std_msgs/Bool); and its own fail-safe: it
+  subscribes to the manager's bridge's heartbeat ``/<--manager>/heartbeat`` with a
+  liveliness lease (``--lease``, 1 s, the bridge's default) and, once it has seen the bridge
+  alive, puts itself in manual mode (the robot's safe state) when the heartbeat's
+  ``alive_count`` falls to 0: the bridge stopped, hung or was killed (``kill -9`` too), a
+  lease after its last heartbeat;
 * ``rover_camera``: ``/camera/image_raw`` (sensor_msgs/Image, 320×240 ``rgb8``, sensor-data
   QoS): a synthetic scene with a box that moves, dimmed after ``--dim-at`` seconds;
 * ``rover_ultrasonic``: ``/ultrasonic/range`` (sensor_msgs/Range, ULTRASOUND, sensor-data
@@ -35,11 +38,13 @@ from typing import Any
 
 import rclpy
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
-from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
+from rclpy.duration import Duration
+from rclpy.event_handler import SubscriptionEventCallbacks
+from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
-from rclpy.qos import QoSProfile, qos_profile_sensor_data
+from rclpy.qos import QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
 from sensor_msgs.msg import Image, Range
-from std_msgs.msg import Bool, String
+from std_msgs.msg import Bool, Empty, String
 from std_srvs.srv import SetBool, Trigger
 
 RELIABLE = QoSProfile(depth=4)
@@ -82,7 +87,21 @@ class Controller(Node):
         self.create_timer(1.0 / args.rate, self.tick)
         self.create_timer(1.0, self.report)
         if args.manager:
-            self.create_timer(0.25, self.watch_manager)
+            # the bridge offers liveliness MANUAL_BY_TOPIC with its lease; asking for a lease
+            # no shorter than it matches, and Fast DDS then counts the bridge dead this lease
+            # after its last heartbeat
+            heartbeat = QoSProfile(
+                depth=1,
+                reliability=ReliabilityPolicy.BEST_EFFORT,
+                liveliness_lease_duration=Duration(seconds=args.lease),
+            )
+            events = SubscriptionEventCallbacks(
+                liveliness=self.on_manager_liveliness, incompatible_qos=self.on_incompatible
+            )
+            topic = f"/{args.manager}/heartbeat"
+            self.create_subscription(
+                Empty, topic, lambda _msg: None, heartbeat, event_callbacks=events
+            )
 
     def on_manual(self, request: Any, response: Any) -> Any:
         mode = "manual" if request.data else "autonomous"
@@ -102,15 +121,23 @@ class Controller(Node):
             self.buzzer = bool(msg.data)
         print(f"buzzer {msg.data}", flush=True)
 
-    def watch_manager(self) -> None:
-        present = self.args.manager in self.get_node_names()
-        if present:
+    def on_manager_liveliness(self, event: Any) -> None:
+        if event.alive_count > 0:
+            if not self.manager_seen:
+                print(f"manager {self.args.manager} alive", flush=True)
             self.manager_seen = True
         elif self.manager_seen:
             self.manager_seen = False
             with self.lock:
                 self.mode = "manual"
             print(f"manager {self.args.manager} gone: safe state manual", flush=True)
+
+    def on_incompatible(self, _event: Any) -> None:
+        print(
+            f"manager {self.args.manager}'s heartbeat does not match: its lease is longer than "
+            f"--lease {self.args.lease:g} s (the bridge file's 'heartbeat')",
+            flush=True,
+        )
 
     def tick(self) -> None:
         with self.lock:
@@ -200,13 +227,23 @@ def main() -> int:
     p.add_argument(
         "--manager",
         default="anunnaki_bridge",
-        help="the manager's bridge node; its disappearance puts the rover in manual ('': none)",
+        help="the manager's bridge (its file's name); its heartbeat lost puts the rover in "
+        "manual ('': none)",
+    )
+    p.add_argument(
+        "--lease",
+        type=float,
+        default=1.0,
+        help="seconds without the bridge's heartbeat before the safe state (at least the "
+        "bridge file's 'heartbeat', default 1)",
     )
     args = p.parse_args()
+    if not 0 < args.lease < float("inf"):
+        p.error(f"--lease must be a positive number of seconds, got {args.lease:g}")
     rclpy.init(signal_handler_options=rclpy.signals.SignalHandlerOptions.NO)
     start = time.monotonic()
     nodes = [Controller(args), Camera(args, start), Ultrasonic(args, start)]
-    executor = MultiThreadedExecutor(num_threads=3)
+    executor = SingleThreadedExecutor()
     for node in nodes:
         executor.add_node(node)
     stop = threading.Event()

@@ -6,7 +6,8 @@ install's ``setup.bash``. The process joins the zenoh bus (``--connect`` the lau
 Utu's endpoint), becomes the ROS 2 node named in the bridge file (domain
 ``$ROS_DOMAIN_ID``), checks that the bridge file's ``distro`` (if it names one) is the
 installed ROS 2's, prints ``ros2 bridge ready`` once everything is declared, holds the bus
-liveliness token ``/ros2_bridge_<name>``, and runs until SIGINT/SIGTERM (or, with
+liveliness token ``/ros2_bridge_<name>``, publishes its ROS 2 heartbeat ``/<name>/heartbeat``
+(a liveliness lease robots watch), and runs until SIGINT/SIGTERM (or, with
 ``--exit-with-parent``, until its standard input closes). rclpy's own signal handlers are
 off: a signal stops the bridge cleanly (executor, node, bus, in that order), and an
 ``ExternalShutdownException`` (the ROS context shut down under it) ends it cleanly too.
@@ -73,13 +74,16 @@ def main(argv: Sequence[str] | None = None) -> int:
 def _run(
     rclpy: Any, spec: Any, options: dict[str, object], stop: threading.Event, distro: str
 ) -> int:
-    from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
+    from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 
     from anunnaki.bus import open_bus
     from anunnaki.ros2._native import Ros2Bridge
 
     node = rclpy.create_node(spec.name)
-    executor = MultiThreadedExecutor(num_threads=4)
+    # one thread: no callback of the bridge waits. benchmarks/ros2_probe.py, plain rclpy
+    # round trips at load 7 on 2 cores: SingleThreadedExecutor median 0.47 ms, p99 9.7 ms;
+    # MultiThreadedExecutor 4.2 ms, 92 ms (docs/results.md)
+    executor = SingleThreadedExecutor()
     executor.add_node(node)
 
     def spin() -> None:

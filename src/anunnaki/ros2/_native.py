@@ -12,7 +12,18 @@ works, e.g. after sourcing a ROS 2 install's ``setup.bash``) and is a ROS 2 node
   ``Image`` and back (a raw ``Image`` to ROS decodes the frame: OpenCV);
 * a service with ``serve: bus`` (the default) answers a bus request by calling the ROS
   service; with ``serve: ros`` the bridge offers the ROS service and answers a ROS call by
-  requesting the bus service.
+  requesting the bus service;
+* a heartbeat: ``std_msgs/Empty`` on ``/<name>/heartbeat``, liveliness ``MANUAL_BY_TOPIC``
+  with the bridge file's lease (``heartbeat``, default 1 s), published every quarter lease
+  from the executor. A robot subscribed with that lease sees the bridge's ``alive_count``
+  fall to 0 a lease after the bridge stops, hangs or is killed (``kill -9`` too), and goes to
+  its safe state on its own (examples/rover/ros2/rover_robot.py does).
+
+Nothing here waits inside an executor callback, so one thread spins the node
+(``SingleThreadedExecutor``, the faster one here: docs/results.md): a bus request a ROS call
+needs is sent with ``request_start`` from a coroutine callback, which awaits its reply
+without holding the executor; a ROS service a bus request needs is called with
+``call_async`` from the bus service's own thread, which the executor's thread answers.
 
 It never dies from one bad message: a message that does not convert is counted
 (``stats["malformed"]``) and logged with the topic and the reason, and the next one goes
@@ -31,7 +42,7 @@ from types import ModuleType
 from typing import Any
 
 from anunnaki._closing import Closing
-from anunnaki.bus import Bus, BusError
+from anunnaki.bus import Bus, BusError, BusTimeout
 from anunnaki.errors import AnunnakiError
 from anunnaki.messages import Image, ServiceReply, body_of
 from anunnaki.ros2._rclpy_convert import fill_ros2_message, ros2_message_to_dict
@@ -94,6 +105,19 @@ def service_class(type_name: str) -> Any:
     return getattr(import_module(f"{package}.srv"), name)
 
 
+def heartbeat_qos(rclpy: ModuleType, lease: float) -> Any:
+    """The heartbeat's QoS: reliable, keep last 1, liveliness by topic with ``lease`` seconds."""
+    q = rclpy.qos
+    return q.QoSProfile(
+        history=q.HistoryPolicy.KEEP_LAST,
+        depth=1,
+        reliability=q.ReliabilityPolicy.RELIABLE,
+        durability=q.DurabilityPolicy.VOLATILE,
+        liveliness=q.LivelinessPolicy.MANUAL_BY_TOPIC,
+        liveliness_lease_duration=import_module("rclpy.duration").Duration(seconds=lease),
+    )
+
+
 def qos_profile(rclpy: ModuleType, t: TopicBridge) -> Any:
     """The rclpy QoS of an entry: best effort (``sensor``) or reliable, keep last ``queue``."""
     q = rclpy.qos
@@ -116,8 +140,8 @@ class Ros2Bridge(Closing):
     Args:
         spec: The bridge file, loaded (:func:`~anunnaki.rosbridge.load_bridge`).
         bus: The bus to publish and serve on (usually zenoh, shared with Utu's nodes).
-        node: The rclpy node to declare on; an executor spins it (callbacks may run on
-            several threads: everything here is thread-safe).
+        node: The rclpy node to declare on; an executor spins it (one thread is enough: no
+            callback here waits; several are safe too).
         rclpy: The imported rclpy module (:func:`import_rclpy`).
 
     Attributes:
@@ -166,6 +190,19 @@ class Ros2Bridge(Closing):
                     srv, s.ros_service, self._ros_handler(s), callback_group=self._group
                 )
                 self._ros_handles.append(("service", service))
+        self._start_heartbeat()
+
+    def _start_heartbeat(self) -> None:
+        """Publish ``/<name>/heartbeat`` every quarter lease (liveliness by topic)."""
+        empty = message_class("std_msgs/Empty")
+        lease = self.spec.heartbeat_lease
+        pub = self.node.create_publisher(
+            empty, self.spec.heartbeat_topic, heartbeat_qos(self.rclpy, lease)
+        )
+        self._ros_handles.append(("publisher", pub))
+        timer = self.node.create_timer(lease / 4, lambda: pub.publish(empty()))
+        self._ros_handles.append(("timer", timer))
+        pub.publish(empty())  # alive from the first moment, not a quarter lease later
 
     def close(self) -> None:
         """Release everything declared on the bus and on ROS 2."""
@@ -270,13 +307,16 @@ class Ros2Bridge(Closing):
     def _ros_handler(self, s: ServiceBridge) -> Callable[[Any, Any], Any]:
         inverse = {ros: bus for bus, ros in s.fields.items()}
 
-        def handle(request: Any, response: Any) -> Any:
+        async def handle(request: Any, response: Any) -> Any:
+            # a coroutine: the executor runs other callbacks while the bus answers (a wait
+            # here would hold a single-threaded executor, and deadlock a bus service that
+            # calls back into ROS through this bridge)
             self.stats["ros_calls"] += 1
             body = ros2_message_to_dict(request)
             payload = to_bus_fields(body, inverse) if inverse else body
             fields = response.get_fields_and_field_types()
             try:
-                reply = self.bus.request(s.bus, payload, timeout=s.timeout)
+                reply = await self._bus_reply(s, payload)
                 ok, text, answer = True, "", body_of(reply)
                 if isinstance(reply, ServiceReply):
                     ok, text, answer = reply.ok, reply.error or "", dict(reply.body)
@@ -296,6 +336,43 @@ class Ros2Bridge(Closing):
             return response
 
         return handle
+
+    async def _bus_reply(self, s: ServiceBridge, payload: dict[str, Any]) -> Any:
+        """The bus service's reply, awaited on the executor (never blocking it).
+
+        Raises:
+            BusError: As :meth:`~anunnaki.bus.Bus.request` (no reply in time, an error).
+
+        """
+        task = import_module("rclpy.task")
+        waiting = task.Future(executor=self.node.executor)
+        # a done callback makes set_result wake the executor (it schedules the callback as a
+        # task), which then resumes this coroutine; without one it would wait for the next
+        # message or timer
+        waiting.add_done_callback(lambda _f: None)
+        deadline = threading.Timer(s.timeout + 1.0, _expire, (waiting, s))
+        deadline.daemon = True  # zenoh ends the query at its timeout; this is the backstop
+        deadline.start()
+
+        def settle(sent: Any) -> None:
+            if waiting.done():
+                return
+            if sent.exception() is not None:
+                waiting.set_exception(sent.exception())
+            else:
+                waiting.set_result(sent.result())
+
+        try:
+            self.bus.request_start(s.bus, payload, timeout=s.timeout).add_done_callback(settle)
+            return await waiting
+        finally:
+            deadline.cancel()
+
+
+def _expire(waiting: Any, s: ServiceBridge) -> None:
+    """End a bus request that its transport never ended (the in-process bus can't)."""
+    if not waiting.done():
+        waiting.set_exception(BusTimeout(f"no reply from service {s.bus!r} within {s.timeout} s"))
 
 
 class _CallFailed(Exception):

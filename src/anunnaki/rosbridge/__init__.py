@@ -44,6 +44,8 @@ from anunnaki.rosbridge._process import add_bus_arguments, bus_options, stop_eve
 from anunnaki.rosbridge._schema import (
     DISTROS,
     FORMAT_TAG,
+    HEARTBEAT_LEASE,
+    HEARTBEAT_RANGE,
     ROS2_FORMAT_TAG,
     BridgeSpec,
     Distro,
@@ -67,6 +69,8 @@ from anunnaki.rosbridge._types import (
 __all__ = [
     "DISTROS",
     "FORMAT_TAG",
+    "HEARTBEAT_LEASE",
+    "HEARTBEAT_RANGE",
     "IMAGE_TYPES",
     "MESSAGE_TYPES",
     "ROS2_FORMAT_TAG",

@@ -33,6 +33,8 @@ from anunnaki.rosbridge._types import (
 __all__ = [
     "DISTROS",
     "FORMAT_TAG",
+    "HEARTBEAT_LEASE",
+    "HEARTBEAT_RANGE",
     "ROS2_FORMAT_TAG",
     "BridgeSpec",
     "Distro",
@@ -50,6 +52,11 @@ _TAGS = (FORMAT_TAG, ROS2_FORMAT_TAG)
 #: The ROS 2 distributions whose message definitions the bridges know (rosbags' type stores).
 Distro = Literal["humble", "jazzy", "kilted"]
 DISTROS: tuple[Distro, ...] = ("humble", "jazzy", "kilted")
+#: The default lease (seconds) of the ROS 2 bridge's heartbeat (``heartbeat``), and the range
+#: a bridge file may set: shorter than 0.1 s a loaded machine's scheduling alone would let it
+#: lapse; longer than 60 s a dead bridge would go unnoticed for a minute.
+HEARTBEAT_LEASE = 1.0
+HEARTBEAT_RANGE = (0.1, 60.0)
 #: A ROS 2 topic's QoS: ``sensor`` (best effort, keep last: rclpy's sensor-data profile) or
 #: ``reliable`` (reliable, keep last ``queue``: commands, states, diagnostics).
 QosName = Literal["sensor", "reliable"]
@@ -175,7 +182,17 @@ class ServiceBridge(_Strict):
 
 
 class BridgeSpec(_Strict):
-    """A bridge file."""
+    """A bridge file.
+
+    Attributes:
+        heartbeat: (ROS 2) The liveliness lease, in seconds, of the bridge's heartbeat topic
+            ``/<name>/heartbeat`` (``std_msgs/Empty``, liveliness ``MANUAL_BY_TOPIC``,
+            published every quarter lease): a robot that subscribes with this lease (or a
+            longer one) sees the bridge's ``alive_count`` fall to 0 that long after the bridge
+            stops or is killed, and goes to its safe state. Default
+            :data:`HEARTBEAT_LEASE`; between :data:`HEARTBEAT_RANGE`.
+
+    """
 
     anunnaki: Literal["ros1-bridge/1", "ros2-bridge/1"]
     name: Annotated[str, Field(pattern=r"^[A-Za-z][A-Za-z0-9_]*$", max_length=64)] = (
@@ -183,6 +200,7 @@ class BridgeSpec(_Strict):
     )
     description: str = ""
     distro: Distro | None = None
+    heartbeat: Annotated[float, Field(strict=True)] | None = None  # not `true`
     topics: list[TopicBridge] = Field(default_factory=list)
     services: list[ServiceBridge] = Field(default_factory=list)
 
@@ -190,6 +208,16 @@ class BridgeSpec(_Strict):
     def ros2(self) -> bool:
         """Whether this is a ROS 2 bridge file (``anunnaki: ros2-bridge/1``)."""
         return self.anunnaki == ROS2_FORMAT_TAG
+
+    @property
+    def heartbeat_lease(self) -> float:
+        """The heartbeat's lease in seconds: the file's ``heartbeat``, else the default."""
+        return HEARTBEAT_LEASE if self.heartbeat is None else self.heartbeat
+
+    @property
+    def heartbeat_topic(self) -> str:
+        """The ROS 2 topic of the bridge's heartbeat: ``/<name>/heartbeat``."""
+        return f"/{self.name}/heartbeat"
 
 
 def parse_bridge(text: str, *, source: str | Path = "<bridge>") -> BridgeSpec:
@@ -251,6 +279,8 @@ def _check_ros1_only(spec: BridgeSpec, f: _File) -> None:
     hint = f"these are ROS 2 settings: write 'anunnaki: {ROS2_FORMAT_TAG}' for a ROS 2 robot"
     if spec.distro is not None:
         raise f.error("a ROS 1 bridge file has no 'distro'", ("distro",), "distro", hint)
+    if spec.heartbeat is not None:
+        raise f.error("a ROS 1 bridge file has no 'heartbeat'", ("heartbeat",), "heartbeat", hint)
     for i, t in enumerate(spec.topics):
         if t.qos is not None:
             where = ("topics", i, "qos")
@@ -267,6 +297,7 @@ def _check_meaning(spec: BridgeSpec, lines: LineMap, path: str) -> None:
     f = _File(path, lines)
     if not spec.ros2:
         _check_ros1_only(spec, f)
+    _check_heartbeat(spec, f)
     messages = ROS2_MESSAGE_TYPES if spec.ros2 else MESSAGE_TYPES
     services = ROS2_SERVICE_TYPES if spec.ros2 else SERVICE_TYPES
     merged: dict[str, dict[str, int]] = {}  # bus topic → bus field → topic entry
@@ -303,6 +334,21 @@ def _check_meaning(spec: BridgeSpec, lines: LineMap, path: str) -> None:
                     "the bus request's fields: " + (", ".join(bus_fields) or "none"),
                 )
         _check_fields(f, f"{s.type} request", request, s.fields, messages, at=at, element=element)
+
+
+def _check_heartbeat(spec: BridgeSpec, f: _File) -> None:
+    """``heartbeat`` is a lease in seconds, within :data:`HEARTBEAT_RANGE`."""
+    lease = spec.heartbeat
+    low, high = HEARTBEAT_RANGE
+    if lease is None or low <= lease <= high:
+        return
+    raise f.error(
+        f"the lease of the bridge's ROS 2 heartbeat is {lease:g} s, outside {low:g}..{high:g} s",
+        ("heartbeat",),
+        "heartbeat",
+        f"write a lease between {low:g} and {high:g} s (default {HEARTBEAT_LEASE:g}); the "
+        "robot's subscriber must ask for this lease or a longer one (docs/ros.md)",
+    )
 
 
 def _check_status(f: _File, t: TopicBridge, *, at: tuple[str, int], element: str) -> None:
