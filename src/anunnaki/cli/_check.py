@@ -126,6 +126,21 @@ def run(args: argparse.Namespace) -> int:
 def _check(args: argparse.Namespace) -> CheckResult:
     """Check the files given, or everything a launch file names (with its platform's modes)."""
     modes = _simulated(args.platform) if args.platform else None
+    if _tag_of(args.model) == "assurance/1":
+        if args.files or args.binding or args.tactics:
+            return CheckResult(
+                findings=[
+                    Finding(
+                        "error",
+                        "an assurance criteria file is checked alone",
+                        args.model,
+                        hint="drop the other files: the criteria name their goal model "
+                        "(goal_model:)",
+                    )
+                ],
+                unreadable=True,
+            )
+        return _check_criteria(Path(args.model))
     if not _is_launch(args.model):
         return check_files(
             args.model, *args.files, binding=args.binding, tactics=args.tactics, modes=modes
@@ -147,17 +162,83 @@ def _check(args: argparse.Namespace) -> CheckResult:
     return check_launch(args.model, binding=args.binding, tactics=args.tactics, modes=modes)
 
 
-_LAUNCH_TAG = re.compile(r"""^anunnaki:[ \t]*['"]?(?:launch|utu)/1\b""", re.MULTILINE)
+_TAG = re.compile(r"""^anunnaki:[ \t]*['"]?([a-z-]+/\d+)\b""", re.MULTILINE)
 
 
-def _is_launch(path: str) -> bool:
-    """Whether *path* is what ``run`` takes: a launch file or a Utu configuration (its tag)."""
+def _tag_of(path: str) -> str | None:
+    """The format tag (``anunnaki: KIND/N``) in the first 4 KiB of *path*, if any."""
     try:
         with Path(path).open("rb") as fh:
             head = fh.read(4096).decode("utf-8", errors="replace")
     except OSError:
-        return False  # check_files says why
-    return _LAUNCH_TAG.search(head) is not None
+        return None  # check_files says why
+    found = _TAG.search(head)
+    return found.group(1) if found else None
+
+
+def _is_launch(path: str) -> bool:
+    """Whether *path* is what ``run`` takes: a launch file or a Utu configuration (its tag)."""
+    return _tag_of(path) in ("launch/1", "utu/1")
+
+
+def _check_criteria(path: Path) -> CheckResult:
+    """Check an assurance criteria file (``assurance/1``).
+
+    Its format, and that every claim it develops is a goal or obstacle of the goal model it
+    names (``goal_model:``, relative to the file).
+    """
+    from anunnaki.assurance import load_criteria
+    from anunnaki.errors import ModelFileError
+    from anunnaki.goals import did_you_mean, load_goal_model
+
+    result = CheckResult()
+    try:
+        crit = load_criteria(path)
+    except ModelFileError as exc:
+        result.findings.append(Finding.from_error(exc))
+        return result
+    items = sum(len(v) for v in crit.evidence.values())
+    result.checked.append(f"{items} evidence items for {len(crit.evidence)} claims")
+    if crit.goal_model is None:
+        result.findings.append(
+            Finding(
+                "warning",
+                "no goal_model: the claims it develops are not checked",
+                str(path),
+                element="goal_model",
+                hint="name the goal model this file develops, relative to it",
+            )
+        )
+        return result
+    model_path = path.parent / crit.goal_model
+    try:
+        model = load_goal_model(model_path, None, strict=False)
+    except ModelFileError as exc:
+        result.findings.append(Finding.from_error(exc))
+        return result
+    result.model = model
+    known = {**dict.fromkeys(model.goals), **dict.fromkeys(model.obstacles)}
+    text = path.read_text(encoding="utf-8").splitlines()
+    for key in crit.evidence:
+        if key not in known:
+            result.findings.append(
+                Finding(
+                    "error",
+                    f"evidence for {key!r}: no goal or obstacle of {crit.goal_model} has that id",
+                    str(path),
+                    line=next(
+                        (
+                            i
+                            for i, ln in enumerate(text, 1)
+                            if re.match(rf"\s+{re.escape(key)}:", ln)
+                        ),
+                        None,
+                    ),
+                    element=f"evidence.{key}",
+                    hint=did_you_mean(key, known),
+                )
+            )
+    return result
 
 
 def _simulated(platform: str) -> PlatformModes:
