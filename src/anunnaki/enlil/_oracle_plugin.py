@@ -20,7 +20,10 @@ contexts). OpenBLAS's idle workers spin for a while after each threaded call, so
 rate they kept a core busy between frames: measured in the whole loop, the UAV's oracle
 process took 23–34 ms of CPU per frame with numpy's and SciPy's default two BLAS threads
 and 8–9 with one (docs/whole-loop.md). ``assess`` therefore runs on one BLAS thread
-(``blas_threads``), through threadpoolctl, and restores the process's setting after.
+(``blas_threads``), through threadpoolctl, and restores the process's setting after. So does
+loading an oracle, whose context lookup factors a kernel matrix of at most a few hundred
+contexts per phenomenon: with two BLAS threads and the other core busy the rover's nine fits
+took 5.8 s in all, on one thread 0.5 s (``anunnaki run examples/rover/demo.yaml``, load 2).
 """
 
 from __future__ import annotations
@@ -135,7 +138,8 @@ class EnlilOracle:
         elif isinstance(source, OracleModel):
             oracle = source
         else:
-            oracle = load_oracle(source[0], sha256=source[1])
+            with self._blas_limit():  # its context lookup's fit: small matrices, one thread
+                oracle = load_oracle(source[0], sha256=source[1])
             log.info("enlil: loaded the oracle of model %r from %s", model_id, source[0])
         if oracle is not None and oracle.model_id != model_id:
             log.warning(
@@ -161,7 +165,8 @@ class EnlilOracle:
         """At most ``blas_threads`` BLAS threads in the block (a no-op with ``None``)."""
         if self.blas_threads is None:
             return contextlib.nullcontext()
-        if self._blas is None:  # after the oracles' loading: their BLAS is loaded by now
+        if self._blas is None:
+            import scipy.linalg  # noqa: F401  # its own BLAS, loaded before it is looked for
             from threadpoolctl import ThreadpoolController  # type: ignore[import-untyped]
 
             self._blas = ThreadpoolController().select(user_api="blas")
