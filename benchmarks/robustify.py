@@ -2719,6 +2719,16 @@ def _rounds_lines(rounds: dict[str, dict[str, Any]]) -> list[str]:
     conds = ["clean", "random", "hardest", OWN, "mPC"]
     for name, doc in rounds.items():
         lines += [f"### {name.capitalize()}", ""]
+        planned = ROUNDS[name].domains if name in ROUNDS else ()
+        missing = [d for d in planned if d not in doc["domains"]]
+        if missing:
+            lines += [
+                f"**In progress**: {len(planned) - len(missing)} of {len(planned)} domains "
+                f"measured; {', '.join(missing)} to come (the round continues over sessions "
+                "from its tracked progress: [robustify.md](robustify.md#spreading-a-round-over-"
+                "sessions)). The best arm below is over the domains measured so far.",
+                "",
+            ]
         groups: dict[str, list[str]] = {}
         for dname, d in doc["domains"].items():
             groups.setdefault(json.dumps(d.get("settings", doc["settings"])), []).append(dname)

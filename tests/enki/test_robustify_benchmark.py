@@ -673,3 +673,12 @@ def test_a_work_folder_binds_its_data_folder_as_the_repository_names_it(
     assert bench.portable("/elsewhere/rover") == "/elsewhere/rover"  # outside: as given
     with pytest.raises(SystemExit, match="data = "):
         bench.claim(tmp_path, settings | {"data": "data/uav"})
+
+
+def test_a_round_not_yet_measured_in_every_domain_is_reported_in_progress(bench: Any) -> None:
+    path = ROOT / "benchmarks" / "results" / "robustify-screening.json"
+    doc = json.loads(path.read_text("utf-8"))
+    assert not any("In progress" in line for line in bench._rounds_lines({"screening": doc}))
+    doc["domains"].pop("rover-fog")
+    text = "\n".join(bench._rounds_lines({"screening": doc}))
+    assert "**In progress**: 2 of 3 domains measured; rover-fog to come" in text
