@@ -2471,10 +2471,13 @@ def main(argv: Sequence[str] | None = None) -> int:
                     "wall_seconds": round(time.perf_counter() - t0, 1),
                     "loadavg_start": load0,
                     "loadavg_end": loadavg(),
-                    "data": str(data),
+                    "data": portable(str(data)),
                     **spread,
                     **({"scheduler": args.scheduler, "workers": workers} if dask else {}),
                 }
+                old = doc["domains"].get(domain.name)
+                if old is not None and "run" in old and _unrun(old) == _unrun(entry):
+                    entry["run"] = old["run"]  # read back whole: the run that measured it
                 doc["domains"][domain.name] = entry
                 if any("vs_random_c" in d for d in doc["domains"].values()):
                     found = best_arm(
@@ -2485,6 +2488,11 @@ def main(argv: Sequence[str] | None = None) -> int:
                 write_json(args.output, doc)
                 bars.log(f"{domain.name}: written to {args.output}")
     return 0
+
+
+def _unrun(entry: dict[str, Any]) -> dict[str, Any]:
+    """A domain's results without their run record (when and how long, not what)."""
+    return {k: v for k, v in entry.items() if k != "run"}
 
 
 def _forget_calibration(work: Path, platform_name: str, s: Settings) -> None:

@@ -650,6 +650,14 @@ def test_a_fresh_clone_continues_a_round_from_its_tracked_progress(
     }  # read back as measured
     assert after["random"]["per_seed"] == before["arms"]["random"]["per_seed"]  # the same figures
     assert (progress / "rover-hsl" / "arms" / "random-s0" / "result.json").is_file()  # saved
+    # a domain read back whole keeps the run record of the session that measured it
+    run = json.loads(out.read_text("utf-8"))["domains"]["rover-hsl"]["run"]
+    assert run["progress"] == str(progress) and run["data"] == str(rover_data)  # outside: as is
+    try:
+        assert bench.main([*argv, "--work", str(tmp_path / "a-third-clone")]) == 0
+    finally:
+        torch.set_num_threads(threads)
+    assert json.loads(out.read_text("utf-8"))["domains"]["rover-hsl"]["run"] == run
 
     # progress made with other settings, or on another dataset, is refused, naming it
     settings = json.loads((progress / "rover-hsl" / "settings.json").read_text("utf-8"))
