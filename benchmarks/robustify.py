@@ -82,7 +82,12 @@ work folder, so several processes given the same domain and ``--work`` share its
 
 Issue 33's ablation: ``--round screening`` and ``--round confirmation`` (:data:`ROUNDS`:
 domains, arms, settings per platform; work in ``runs/robustify-ROUND``, results in
-``benchmarks/results/robustify-ROUND.json``). Every Enki arm is compared with A+c by a paired
+``benchmarks/results/robustify-ROUND.json``). A round runs over several sessions, each on a
+fresh machine: its finished work (each domain's settings and searches' conditions, each
+arm × seed's result) is kept in ``benchmarks/results/robustify-ROUND.progress`` (tracked by
+git; ``--progress DIR``, ``--no-progress``), restored into the work folder at the start and
+saved after every job, so a fresh clone redoes only the job in flight (:class:`Progress`).
+Every Enki arm is compared with A+c by a paired
 bootstrap interval over seeds and contexts (``vs_random_c``, :func:`paired_bootstrap`), the
 best one in ``best_enki_arm`` (:func:`best_arm`), which the confirmation measures. Every run
 prints its plan first (``--plan``: only that): arms × seeds × domains × steps, images
@@ -567,20 +572,166 @@ def read_json(path: Path) -> Any:
     return json.loads(path.read_text(encoding="utf-8")) if path.is_file() else None
 
 
+def portable(path: str) -> str:
+    """*path* relative to the repository when it lies inside it (the same on every clone)."""
+    p = Path(path)
+    try:
+        return p.resolve().relative_to(ROOT).as_posix() if p.is_absolute() else p.as_posix()
+    except ValueError:
+        return path
+
+
+def _portable_record(record: dict[str, Any]) -> dict[str, Any]:
+    """A work folder's settings with its ``data`` as :func:`portable` writes it."""
+    record = json.loads(json.dumps(record))  # tuples as lists, as read back
+    if isinstance(record.get("data"), str):
+        record["data"] = portable(record["data"])
+    return record
+
+
+def _differs(old: dict[str, Any], new: dict[str, Any]) -> str | None:
+    """The first setting (sorted) where two settings records differ (``data`` portably)."""
+    old, new = _portable_record(old), _portable_record(new)
+    return next((k for k in sorted(set(old) | set(new)) if old.get(k) != new.get(k)), None)
+
+
 def claim(folder: Path, record: dict[str, Any]) -> None:
-    """Bind *folder* to these settings; refuse one made with others, naming the setting."""
+    """Bind *folder* to these settings; refuse one made with others, naming the setting.
+
+    The data folder is compared as :func:`portable` writes it: a work folder restored from
+    a round's tracked progress (:class:`Progress`) on another clone is the same work.
+    """
     marker = folder / "settings.json"
     record = json.loads(json.dumps(record))  # tuples as lists, as read back
     old = read_json(marker)
     if old is None:
         write_json(marker, record)
         return
-    for key in sorted(set(old) | set(record)):
-        if old.get(key) != record.get(key):
+    key = _differs(old, record)
+    if key is not None:
+        raise SystemExit(
+            f"{folder}: this work was made with {key} = {old.get(key)!r}, this run has "
+            f"{record.get(key)!r}; give another --work folder or the same settings"
+        )
+
+
+def data_fingerprint(data: Path) -> dict[str, str]:
+    """sha256 of a dataset's split files (``train.json``, ``val.json``, ``test.json``)."""
+    import hashlib
+
+    return {
+        f"{split}.json": hashlib.sha256((data / f"{split}.json").read_bytes()).hexdigest()
+        for split in ("train", "val", "test")
+        if (data / f"{split}.json").is_file()
+    }
+
+
+class Progress:
+    """A round's finished work, tracked by git, so that a fresh clone continues the round.
+
+    The work folder (``runs/robustify-ROUND``) is not tracked, and a session's machine does
+    not outlive it. This folder (``--progress``; a round's default
+    ``benchmarks/results/robustify-ROUND.progress``) keeps, per domain, the small files a
+    rerun reads instead of redoing the work: ``settings.json`` (the data folder written
+    relative to the repository), ``conditions.json`` (the searches' outcome: Enki's
+    selections and every condition's contexts, so no search runs again) and each finished
+    arm × seed's ``arms/JOB/result.json`` (its figures and training record: the job is read
+    back, not trained again). ``data.json`` holds the sha256 of each platform's split files
+    and ``progress.json`` the jobs done and left (:meth:`save`). Not kept: fine-tuned models,
+    checkpoints and search archives (a job in flight when a session ends starts again), the
+    platform's shared corruption-mix fine-tunes and the calibration (measured again under
+    the new session's load).
+
+    A run restores into its work folder what the work lacks (:meth:`restore`; it never
+    overwrites the work) and saves after the searches and after each job. Progress made with
+    other settings or on another dataset is refused, naming the setting or the file.
+    """
+
+    KEPT = ("settings.json", "conditions.json")
+
+    def __init__(self, folder: Path, work: Path, plan: dict[str, Any] | None = None) -> None:
+        self.folder, self.work, self.plan = folder, work, plan
+
+    def check_data(self, platform_name: str, data: Path) -> None:
+        """Refuse a dataset other than the one the tracked progress was measured on."""
+        stored = (read_json(self.folder / "data.json") or {}).get(platform_name)
+        if stored is None:
+            return
+        now = data_fingerprint(data)
+        for name, digest in stored.items():
+            if now.get(name) != digest:
+                raise SystemExit(
+                    f"{self.folder / 'data.json'}: the tracked progress was measured on a "
+                    f"{platform_name} dataset whose {name} has sha256 {digest[:12]}…; "
+                    f"{data / name} has {str(now.get(name, 'no such file'))[:12]}…: render "
+                    f"the dataset as docs/robustify.md says (anunnaki make-dataset "
+                    f"{platform_name} …), or give another --progress"
+                )
+
+    def restore(self, domain: str, record: dict[str, Any]) -> int:
+        """Copy the domain's tracked files the work folder lacks; the number copied.
+
+        Raises:
+            SystemExit: The tracked progress of *domain* was made with other settings.
+
+        """
+        src = self.folder / domain
+        old = read_json(src / "settings.json")
+        if old is None:
+            return 0
+        key = _differs(old, record)
+        if key is not None:
             raise SystemExit(
-                f"{folder}: this work was made with {key} = {old.get(key)!r}, this run has "
-                f"{record.get(key)!r}; give another --work folder or the same settings"
+                f"{src / 'settings.json'}: the tracked progress was made with {key} = "
+                f"{old.get(key)!r}, this run has {record.get(key)!r}; give another "
+                "--progress folder or the same settings"
             )
+        copied = 0
+        for file in sorted(src.rglob("*.json")):
+            target = self.work / domain / file.relative_to(src)
+            if not target.is_file():
+                target.parent.mkdir(parents=True, exist_ok=True)
+                target.write_bytes(file.read_bytes())
+                copied += 1
+        return copied
+
+    def save(self, domain: str, platform_name: str, data: Path) -> None:
+        """Copy the domain's finished work into the tracked folder (only what changed)."""
+        src = self.work / domain
+        files = [src / name for name in self.KEPT if (src / name).is_file()]
+        files += sorted(src.glob("arms/*/result.json"))
+        for file in files:
+            body = read_json(file)
+            if file.name == "settings.json":
+                body = _portable_record(body)
+            target = self.folder / domain / file.relative_to(src)
+            if read_json(target) != body:
+                write_json(target, body)
+        prints = read_json(self.folder / "data.json") or {}
+        if platform_name not in prints:
+            write_json(self.folder / "data.json", prints | {platform_name: data_fingerprint(data)})
+        if self.plan is not None:
+            self.summary(self.plan)
+
+    def summary(self, plan: dict[str, Any]) -> dict[str, Any]:
+        """The jobs of *plan* done and left (by the tracked results), written to progress.json."""
+        domains: dict[str, Any] = {}
+        for name, p in plan["domains"].items():
+            jobs = [j for j in p["jobs"] if j != "searches"]
+            done = [j for j in jobs if (self.folder / name / "arms" / j / "result.json").is_file()]
+            domains[name] = {
+                "searches": (self.folder / name / "conditions.json").is_file(),
+                "done": len(done),
+                "left": [j for j in jobs if j not in done],
+            }
+        record = {
+            "jobs_done": sum(d["done"] for d in domains.values()),
+            "jobs_total": sum(len(d["left"]) + d["done"] for d in domains.values()),
+            "updated": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()),
+            "domains": domains,
+        }
+        write_json(self.folder / "progress.json", record)
+        return record
 
 
 # -- data, searches, conditions ---------------------------------------------------------------
@@ -1074,6 +1225,8 @@ def run_jobs(domain: Domain, ctx: dict[str, Any]) -> dict[str, list[dict[str, An
         tasks = [{**spec, "domain": domain.name, "arm": a, "seed": sd} for a, sd in jobs]
 
         def finished(i: int, out: dict[str, Any]) -> None:
+            if "saved" in ctx:
+                ctx["saved"]()
             if eta is not None:
                 eta.finished(domain.name, *jobs[i], out["seconds"], out["reused"])
 
@@ -1091,6 +1244,8 @@ def run_jobs(domain: Domain, ctx: dict[str, Any]) -> dict[str, list[dict[str, An
                 done[arm, seed] = one_job(arm, seed, domain, ctx, blocking=blocking)
             except BlockingIOError:
                 continue
+            if "saved" in ctx:
+                ctx["saved"]()
             if eta is not None:
                 eta.finished(domain.name, arm, seed, time.perf_counter() - t0, reused)
     results: dict[str, list[dict[str, Any]]] = {}
@@ -1988,11 +2143,22 @@ def run_domain(
     arms: tuple[str, ...] = TRAINED,
     dask: Any = None,
     eta: Eta | None = None,
+    progress: Progress | None = None,
 ) -> dict[str, Any]:
-    """The domain's searches and conditions, every arm × seed (in this process or on *dask*)."""
+    """The domain's searches and conditions, every arm × seed (in this process or on *dask*).
+
+    With *progress*, the work restores what it lacks from the tracked progress first and
+    saves into it after the searches and after each job (:class:`Progress`).
+    """
     work = work_root / domain.name
     record = settings_record(s)
-    claim(work, record | {"domain": domain.name, "data": str(data.resolve()), "quick": quick})
+    mine = record | {"domain": domain.name, "data": str(data.resolve()), "quick": quick}
+    if progress is not None:
+        progress.check_data(domain.platform, data)
+        restored = progress.restore(domain.name, mine)
+        if restored:
+            bars.log(f"{domain.name}: {restored} files restored from {progress.folder}")
+    claim(work, mine)
     shared = work_root / f"{domain.platform}-shared" / "corruption_mix"
     claim(
         shared,
@@ -2002,6 +2168,12 @@ def run_domain(
     t0, reused = time.perf_counter(), (work / "conditions.json").is_file()
     with _TrainLock(work / "searches"):  # one process searches, the others wait for it
         prep = prepare(domain, data, work, s, bars)
+
+    def save() -> None:
+        if progress is not None:
+            progress.save(domain.name, domain.platform, data)
+
+    save()
     if eta is not None:
         eta.finished(domain.name, "searches", None, time.perf_counter() - t0, reused)
     train, val, test = splits(data, s)
@@ -2020,6 +2192,7 @@ def run_domain(
         "dask": dask,
         "eta": eta,
         "quiet": bars.quiet,
+        "saved": save,
     }
     ctx["perturbed"] = Perturbed(ctx["test"], s.eval_seed)
     return domain_figures(domain, prep, run_jobs(domain, ctx), s)
@@ -2052,6 +2225,18 @@ def main(argv: Sequence[str] | None = None) -> int:
         "--round",
         choices=list(ROUNDS),
         help="issue 33's ablation round: " + "; ".join(f"{k}: {r.what}" for k, r in ROUNDS.items()),
+    )
+    p.add_argument(
+        "--progress",
+        type=Path,
+        help="the tracked progress a fresh clone continues from (default for a round: "
+        "benchmarks/results/robustify-ROUND.progress; none otherwise): restored into --work, "
+        "saved after the searches and each job",
+    )
+    p.add_argument(
+        "--no-progress",
+        action="store_true",
+        help="a round without its tracked progress (the work folder alone)",
     )
     p.add_argument(
         "--screening",
@@ -2162,6 +2347,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         args.output = OUT.with_name(f"robustify-{args.round}.json") if rnd else OUT
     if args.work is None:
         args.work = ROOT / "runs" / (f"robustify-{args.round}" if rnd else "robustify-benchmark")
+    if args.no_progress:
+        args.progress = None
+    elif args.progress is None and rnd is not None:
+        args.progress = OUT.with_name(f"robustify-{args.round}.progress")
     if args.report:
         write_report(json.loads(args.output.read_text(encoding="utf-8")), args.doc, args.images)
         return 0
@@ -2262,13 +2451,19 @@ def main(argv: Sequence[str] | None = None) -> int:
             "torch_threads": s.threads,
         }
         eta = Eta(plan, bars)
+        progress = None if args.progress is None else Progress(args.progress, args.work, plan)
+        spread = {} if progress is None else {
+            "progress": portable(str(progress.folder)),
+            "note": "a round spread over sessions: wall_seconds is the last session's; each "
+            "job's own seconds are in its training record",
+        }  # fmt: skip
         with _scheduler(args.scheduler, workers) as dask:
             for domain, own in items:
                 data = data_of[domain.platform]
                 t0, load0 = time.perf_counter(), loadavg()
                 entry = run_domain(
                     domain, data, args.work, own, bars, quick=args.quick, arms=arms,
-                    dask=dask, eta=eta,
+                    dask=dask, eta=eta, progress=progress,
                 )  # fmt: skip
                 entry["settings"] = _settings_json(own)
                 entry["run"] = {
@@ -2276,9 +2471,13 @@ def main(argv: Sequence[str] | None = None) -> int:
                     "wall_seconds": round(time.perf_counter() - t0, 1),
                     "loadavg_start": load0,
                     "loadavg_end": loadavg(),
-                    "data": str(data),
+                    "data": portable(str(data)),
+                    **spread,
                     **({"scheduler": args.scheduler, "workers": workers} if dask else {}),
                 }
+                old = doc["domains"].get(domain.name)
+                if old is not None and "run" in old and _unrun(old) == _unrun(entry):
+                    entry["run"] = old["run"]  # read back whole: the run that measured it
                 doc["domains"][domain.name] = entry
                 if any("vs_random_c" in d for d in doc["domains"].values()):
                     found = best_arm(
@@ -2289,6 +2488,11 @@ def main(argv: Sequence[str] | None = None) -> int:
                 write_json(args.output, doc)
                 bars.log(f"{domain.name}: written to {args.output}")
     return 0
+
+
+def _unrun(entry: dict[str, Any]) -> dict[str, Any]:
+    """A domain's results without their run record (when and how long, not what)."""
+    return {k: v for k, v in entry.items() if k != "run"}
 
 
 def _forget_calibration(work: Path, platform_name: str, s: Settings) -> None:
@@ -2523,6 +2727,16 @@ def _rounds_lines(rounds: dict[str, dict[str, Any]]) -> list[str]:
     conds = ["clean", "random", "hardest", OWN, "mPC"]
     for name, doc in rounds.items():
         lines += [f"### {name.capitalize()}", ""]
+        planned = ROUNDS[name].domains if name in ROUNDS else ()
+        missing = [d for d in planned if d not in doc["domains"]]
+        if missing:
+            lines += [
+                f"**In progress**: {len(planned) - len(missing)} of {len(planned)} domains "
+                f"measured; {', '.join(missing)} to come (the round continues over sessions "
+                "from its tracked progress: [robustify.md](robustify.md#spreading-a-round-over-"
+                "sessions)). The best arm below is over the domains measured so far.",
+                "",
+            ]
         groups: dict[str, list[str]] = {}
         for dname, d in doc["domains"].items():
             groups.setdefault(json.dumps(d.get("settings", doc["settings"])), []).append(dname)

@@ -600,3 +600,93 @@ def test_own_hardest_contexts_and_a_dask_cluster_give_the_in_process_figures(
         assert other["arms"][arm]["per_seed"] == entry["per_seed"], arm
         assert other["arms"][arm]["own_searches"] == entry["own_searches"], arm
     assert other["vs_random_c"] == d["vs_random_c"]
+
+
+@pytest.mark.slow
+@pytest.mark.timeout(600)
+def test_a_fresh_clone_continues_a_round_from_its_tracked_progress(
+    bench: Any, rover_data: Path, tmp_path: Path, capfd: pytest.CaptureFixture[str]
+) -> None:
+    out, progress, work = tmp_path / "r.json", tmp_path / "tracked", tmp_path / "work"
+    argv = ["--quick", "--rover-data", str(rover_data), "--arms", "=A", "--seeds", "0",
+            "--output", str(out), "--progress", str(progress)]  # fmt: skip
+    first = _run(*argv, "--work", str(work))
+    assert first.returncode == 0, first.stdout[-2000:] + first.stderr[-4000:]
+    jobs = ["default", "today", "shipped", "random-s0"]
+    kept = sorted(p.relative_to(progress).as_posix() for p in progress.rglob("*") if p.is_file())
+    assert kept == sorted(
+        ["data.json", "progress.json", "rover-hsl/settings.json", "rover-hsl/conditions.json"]
+        + [f"rover-hsl/arms/{job}/result.json" for job in jobs]
+    )  # the small files only: no model, checkpoint or search archive
+    state = json.loads((progress / "progress.json").read_text("utf-8"))
+    assert (state["jobs_done"], state["jobs_total"]) == (4, 4)
+    assert state["domains"]["rover-hsl"] == {"searches": True, "done": 4, "left": []}
+    assert json.loads((progress / "data.json").read_text())["rover"] == bench.data_fingerprint(
+        rover_data
+    )
+    before = json.loads(out.read_text("utf-8"))["domains"]["rover-hsl"]
+
+    # a fresh clone: no work folder; the session ended while random-s0 was in flight
+    (progress / "rover-hsl" / "arms" / "random-s0" / "result.json").unlink()
+    fresh = tmp_path / "fresh-clone-work"
+    capfd.readouterr()
+    torch = pytest.importorskip("torch")
+    threads = torch.get_num_threads()
+    try:
+        assert bench.main([*argv, "--work", str(fresh)]) == 0
+    finally:
+        torch.set_num_threads(threads)
+    err = capfd.readouterr().err
+    assert "5 files restored from" in err  # settings, conditions, the three results
+    assert err.count("done before") == 3  # the finished jobs are read back, not redone
+    domain = fresh / "rover-hsl"
+    assert not (domain / "search-train").exists()  # the searches are not run again
+    for job in ("default", "today", "shipped"):
+        assert not (domain / "arms" / job / "search-own").exists()  # nor their (c′) searches
+    assert (domain / "arms" / "random-s0" / "model.safetensors").is_file()  # the one redone
+    after = json.loads(out.read_text("utf-8"))["domains"]["rover-hsl"]["arms"]
+    assert {k: v for k, v in after.items() if k != "random"} == {
+        k: v for k, v in before["arms"].items() if k != "random"
+    }  # read back as measured
+    assert after["random"]["per_seed"] == before["arms"]["random"]["per_seed"]  # the same figures
+    assert (progress / "rover-hsl" / "arms" / "random-s0" / "result.json").is_file()  # saved
+    # a domain read back whole keeps the run record of the session that measured it
+    run = json.loads(out.read_text("utf-8"))["domains"]["rover-hsl"]["run"]
+    assert run["progress"] == str(progress) and run["data"] == str(rover_data)  # outside: as is
+    try:
+        assert bench.main([*argv, "--work", str(tmp_path / "a-third-clone")]) == 0
+    finally:
+        torch.set_num_threads(threads)
+    assert json.loads(out.read_text("utf-8"))["domains"]["rover-hsl"]["run"] == run
+
+    # progress made with other settings, or on another dataset, is refused, naming it
+    settings = json.loads((progress / "rover-hsl" / "settings.json").read_text("utf-8"))
+    tracked = bench.Progress(progress, tmp_path / "another")
+    with pytest.raises(SystemExit, match="tracked progress was made with epochs = 1"):
+        tracked.restore("rover-hsl", settings | {"epochs": 2})
+    prints = json.loads((progress / "data.json").read_text("utf-8"))
+    prints["rover"]["train.json"] = "0" * 64
+    (progress / "data.json").write_text(json.dumps(prints))
+    with pytest.raises(SystemExit, match="make-dataset rover"):
+        tracked.check_data("rover", rover_data)
+
+
+def test_a_work_folder_binds_its_data_folder_as_the_repository_names_it(
+    bench: Any, tmp_path: Path
+) -> None:
+    settings = {"epochs": 8, "data": str(ROOT / "data" / "rover")}
+    bench.claim(tmp_path, settings)
+    bench.claim(tmp_path, settings | {"data": "data/rover"})  # the same folder, portably
+    assert bench.portable(str(ROOT / "data" / "uav")) == "data/uav"
+    assert bench.portable("/elsewhere/rover") == "/elsewhere/rover"  # outside: as given
+    with pytest.raises(SystemExit, match="data = "):
+        bench.claim(tmp_path, settings | {"data": "data/uav"})
+
+
+def test_a_round_not_yet_measured_in_every_domain_is_reported_in_progress(bench: Any) -> None:
+    path = ROOT / "benchmarks" / "results" / "robustify-screening.json"
+    doc = json.loads(path.read_text("utf-8"))
+    assert not any("In progress" in line for line in bench._rounds_lines({"screening": doc}))
+    doc["domains"].pop("rover-fog")
+    text = "\n".join(bench._rounds_lines({"screening": doc}))
+    assert "**In progress**: 2 of 3 domains measured; rover-fog to come" in text
