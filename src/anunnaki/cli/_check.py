@@ -187,13 +187,15 @@ def _check_criteria(path: Path) -> CheckResult:
     Its format, and that every claim it develops is a goal or obstacle of the goal model it
     names (``goal_model:``, relative to the file).
     """
-    from anunnaki.assurance import load_criteria
+    from anunnaki._safeyaml import load_yaml
+    from anunnaki.assurance import parse_criteria
     from anunnaki.errors import ModelFileError
     from anunnaki.goals import did_you_mean, load_goal_model
 
     result = CheckResult()
     try:
-        crit = load_criteria(path)
+        data, lines = load_yaml(path)
+        crit = parse_criteria(data, source=str(path), lines=lines)
     except ModelFileError as exc:
         result.findings.append(Finding.from_error(exc))
         return result
@@ -218,7 +220,6 @@ def _check_criteria(path: Path) -> CheckResult:
         return result
     result.model = model
     known = {**dict.fromkeys(model.goals), **dict.fromkeys(model.obstacles)}
-    text = path.read_text(encoding="utf-8").splitlines()
     for key in crit.evidence:
         if key not in known:
             result.findings.append(
@@ -226,14 +227,7 @@ def _check_criteria(path: Path) -> CheckResult:
                     "error",
                     f"evidence for {key!r}: no goal or obstacle of {crit.goal_model} has that id",
                     str(path),
-                    line=next(
-                        (
-                            i
-                            for i, ln in enumerate(text, 1)
-                            if re.match(rf"\s+{re.escape(key)}:", ln)
-                        ),
-                        None,
-                    ),
+                    line=lines.line(("evidence", key)),
                     element=f"evidence.{key}",
                     hint=did_you_mean(key, known),
                 )
