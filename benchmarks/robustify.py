@@ -1520,6 +1520,70 @@ def best_arm(domains: dict[str, Any], base: str = "random_c") -> dict[str, Any] 
     }
 
 
+def recipe_flags(arm: str, s: Settings | None = None) -> str:
+    """The ``anunnaki robustify`` options that train *arm*'s recipe (:data:`RECIPES`)."""
+    s = s or Settings()
+    recipe = RECIPES[arm]
+    flags = [f"--source {recipe.source}"]
+    if recipe.source == "archive_mix":
+        flags.append(f"--share {s.share} --jitter {s.jitter}")
+    if recipe.worst:
+        flags.append(f"--k {s.k}" + (" --select random" if recipe.select == "random" else ""))
+    if recipe.consistency:
+        flags.append(f"--consistency {s.consistency}")
+    return " ".join(flags)
+
+
+def round_winner(domains: dict[str, Any]) -> dict[str, Any] | None:
+    """The round's best trained arm, Enki or not (issue 33 item 4: robustify's default).
+
+    The best mean F1 on (c′), each model's own hardest contexts, over *domains*, among the
+    arms that keep clean F1 within ``AIMS["clean_loss"]`` of the default in every domain;
+    when none does, the best whatever its clean F1 (said in ``clean_within_aim``). Only
+    arms measured in every domain compete; the corruption mix is not a candidate (it does
+    not depend on the domain).
+    """
+    if not domains:
+        return None
+    own: dict[str, list[float]] = {}
+    losses: dict[str, dict[str, float]] = {}
+    for name, d in domains.items():
+        default = d["arms"]["default"]["clean"]["mean"]
+        for arm, figures in d["arms"].items():
+            if arm not in RECIPES or arm in SHARED or OWN not in figures:
+                continue
+            own.setdefault(arm, []).append(figures[OWN]["mean"])
+            losses.setdefault(arm, {})[name] = round(default - figures["clean"]["mean"], 4)
+    full = {a: v for a, v in own.items() if len(v) == len(domains)}
+    if not full:
+        return None
+    ok = [a for a in full if max(losses[a].values()) <= AIMS["clean_loss"]]
+    arm = max(ok or list(full), key=lambda a: (statistics.fmean(full[a]), -ARMS.index(a)))
+    return {
+        "arm": arm,
+        "flags": recipe_flags(arm),
+        "clean_within_aim": arm in ok,
+        "own_hardest": {a: round(statistics.fmean(v), 4) for a, v in full.items()},
+        "clean_loss": {a: losses[a] for a in full},
+        "domains": list(domains),
+    }
+
+
+def robustify_default_arm() -> str | None:
+    """The arm ``anunnaki robustify`` trains when no recipe option is given (``None``: none
+    of :data:`RECIPES`)."""
+    import argparse
+
+    from anunnaki.cli._robustify import add_parser
+
+    parser = argparse.ArgumentParser()
+    add_parser(parser.add_subparsers())
+    a = parser.parse_args(["robustify", "M", "--data", "D", "-p", "P", "--domain", "N"])
+    worst = a.k > 1
+    wanted = Recipe(a.source, worst, a.select if worst else "hardest", a.consistency > 0)
+    return next((arm for arm, recipe in RECIPES.items() if recipe == wanted), None)
+
+
 def arm_figures(runs: list[dict[str, Any]], names: list[str]) -> dict[str, Any]:
     """Per seed: each condition's mean F1, mPC and rPC; then mean and std over seeds."""
     corrupted = [n for n in names if n not in ("clean", OWN)]  # mPC as before (c′)
@@ -2756,7 +2820,46 @@ def _rounds_lines(rounds: dict[str, dict[str, Any]]) -> list[str]:
                     lines.append(f"| {LABELS[arm]} | " + " | ".join(cells) + " |")
             lines.append("")
         lines += _ablation(doc)[2:]  # its table and the best arm, under this round's title
+        if name == "confirmation":
+            lines += _winner_lines(round_winner(doc["domains"]), complete=not missing)
     return lines
+
+
+def _winner_lines(win: dict[str, Any] | None, *, complete: bool) -> list[str]:
+    """The round's winner among every trained arm, and whether robustify's default is it."""
+    if win is None:
+        return []
+    aim = 100 * AIMS["clean_loss"]
+
+    def arm_text(a: str) -> str:
+        letter = next(k for k, v in LETTERS.items() if v == a)
+        worst = max(win["clean_loss"][a].items(), key=lambda kv: kv[1])
+        return (
+            f"{letter} `{a}` {100 * win['own_hardest'][a]:.1f}"
+            + ("" if worst[1] <= AIMS["clean_loss"] else
+               f" (passed over: {100 * worst[1]:.1f} points of clean F1 lost on {worst[0]})")
+        )  # fmt: skip
+
+    ranked = sorted(win["own_hardest"], key=lambda a: -win["own_hardest"][a])
+    default = robustify_default_arm()
+    lines = [
+        f"**The round's winner** (issue 33, item 4: `anunnaki robustify`'s default is the arm "
+        f"with the best mean F1 on (c′) over the domains among those whose clean F1 stays "
+        f"within {aim:.0f} points of the default model's in every domain): "
+        f"`{win['arm']}` (`{win['flags']}`)"
+        + ("" if win["clean_within_aim"] else f", though no arm kept clean F1 within {aim:.0f}")
+        + ". Mean (c′) F1 per arm: "
+        + "; ".join(arm_text(a) for a in ranked)
+        + ".",
+        "",
+    ]
+    if default == win["arm"]:
+        said = f"`anunnaki robustify`'s default recipe trains `{default}`: the winner."
+    else:
+        said = f"`anunnaki robustify`'s default recipe trains `{default}`, not the winner" + (
+            ": the round is not complete." if not complete else "."
+        )
+    return [*lines, said, ""]
 
 
 def _ablation(doc: dict[str, Any]) -> list[str]:

@@ -690,3 +690,37 @@ def test_a_round_not_yet_measured_in_every_domain_is_reported_in_progress(bench:
     doc["domains"].pop("rover-fog")
     text = "\n".join(bench._rounds_lines({"screening": doc}))
     assert "**In progress**: 2 of 3 domains measured; rover-fog to come" in text
+
+
+def test_the_rounds_winner_keeps_clean_f1_and_names_robustifys_options(bench: Any) -> None:
+    def domain(own: dict[str, float], clean: dict[str, float]) -> dict[str, Any]:
+        arms = {a: {"clean": {"mean": c}} for a, c in clean.items()}
+        for a, v in own.items():
+            arms[a]["own_hardest"] = {"mean": v}
+        return {"arms": arms}
+
+    clean = {"default": 0.94, "random": 0.90, "random_c": 0.93, "archive_mix_wok": 0.935}
+    own = {"random": 0.85, "random_c": 0.70, "archive_mix_wok": 0.75}
+    domains = {"rover-hsl": domain(own, clean), "rover-fog": domain(own, clean)}
+    win = bench.round_winner(domains)
+    # A is best on (c′) but loses 4 points clean: D, the best of the rest, wins
+    assert win["arm"] == "archive_mix_wok" and win["clean_within_aim"]
+    assert win["flags"] == "--source archive_mix --share 0.5 --jitter 0.1 --k 4"
+    assert win["clean_loss"]["random"] == {"rover-hsl": 0.04, "rover-fog": 0.04}
+    # when no arm keeps clean F1, the best whatever it is, and said so
+    worse = {a: c - 0.05 for a, c in clean.items() if a != "default"} | {"default": 0.94}
+    win = bench.round_winner({"rover-hsl": domain(own, worse)})
+    assert win["arm"] == "random" and not win["clean_within_aim"]
+    assert bench.recipe_flags("random_c") == "--source uniform --consistency 1.0"
+    assert bench.recipe_flags("archive_mix_rok").endswith("--k 4 --select random")
+
+
+def test_robustifys_default_is_the_confirmations_winner(bench: Any) -> None:
+    path = ROOT / "benchmarks" / "results" / "robustify-confirmation.json"
+    doc = json.loads(path.read_text("utf-8"))
+    win = bench.round_winner(doc["domains"])
+    assert win is not None and win["clean_within_aim"]
+    # the CLI's default recipe, read from its parser, is the arm the round measured best
+    assert bench.robustify_default_arm() == win["arm"]
+    lines = bench._winner_lines(win, complete=True)
+    assert f"trains `{win['arm']}`: the winner" in lines[-2]
