@@ -53,16 +53,31 @@ top level of the results (as before); the UAV's are under ``"uav"``. Writes
 
 ``--profile`` runs the whole loop in one process under cProfile, every thread on its own CPU
 clock, and writes the CPU time per frame of each part (:data:`PARTS`) instead.
+
+``--cli`` times the command a user runs instead, scorer and bring-up included: ``anunnaki run
+LAUNCH --speed 0 --until SECONDS --report FILE`` in a process of its own, ``--repeats`` times
+per loop: simulated seconds per wall second, the process's CPU seconds (user + system, its
+children's clock), the run's own wall time (the ``simulated … in … s wall`` line) and the
+report's sha256. With ``--cli-against DIR`` (another checkout, e.g. ``git archive main``
+unpacked) its runs alternate with this checkout's, the same launch files from each, so the
+before/after pairs share the minutes of a shared machine, and the reports are compared byte
+for byte (``reports_identical``)::
+
+    .venv/bin/python benchmarks/loop.py --cli --seconds 20 --repeats 2 \
+        --cli-against /tmp/main --output benchmarks/results/sim-speed.json
 """
 
 from __future__ import annotations
 
 import argparse
+import hashlib
 import io
 import json
 import os
 import platform
 import queue
+import re
+import resource
 import statistics
 import subprocess
 import sys
@@ -667,6 +682,68 @@ def profile(
 
 
 # -- the measurement ----------------------------------------------------------------------------
+def cli_run(launch: Path, seconds: float, *, src: Path | None = None) -> dict[str, Any]:
+    """One ``anunnaki run LAUNCH --speed 0 --until SECONDS --report`` (``src``: whose code)."""
+    env = dict(os.environ)
+    if src is not None:  # another checkout's package ahead of this one's
+        env["PYTHONPATH"] = os.pathsep.join(p for p in (str(src), env.get("PYTHONPATH")) if p)
+    with tempfile.TemporaryDirectory() as tmp:
+        report = Path(tmp) / "report.json"
+        argv = [sys.executable, "-m", "anunnaki", "run", str(launch), "--speed", "0"]
+        argv += ["--until", f"{seconds:g}", "--report", str(report)]
+        load = os.getloadavg()[0]
+        before = resource.getrusage(resource.RUSAGE_CHILDREN)
+        start = time.perf_counter()
+        done = subprocess.run(argv, capture_output=True, text=True, env=env, check=False)
+        wall = time.perf_counter() - start
+        after = resource.getrusage(resource.RUSAGE_CHILDREN)
+        if done.returncode != 0 or not report.exists():
+            raise RuntimeError(f"{' '.join(argv)} failed ({done.returncode}):\n{done.stderr}")
+        digest = hashlib.sha256(report.read_bytes()).hexdigest()
+    found = re.search(r"simulated ([0-9.]+) s in ([0-9.]+) s wall", done.stdout)
+    user, system = after.ru_utime - before.ru_utime, after.ru_stime - before.ru_stime
+    return {
+        "wall_s": round(wall, 2),
+        "cpu_s": round(user + system, 2),
+        "user_s": round(user, 2),
+        "sys_s": round(system, 2),
+        "sim_s_per_wall_s": round(seconds / wall, 3),
+        "run_wall_s": None if found is None else float(found.group(2)),
+        "load1_before": round(load, 2),
+        "load1_after": round(os.getloadavg()[0], 2),
+        "report_sha256": digest,
+    }
+
+
+def cli_measure(
+    launches: Mapping[str, Path], seconds: float, repeats: int, *, against: Path | None
+) -> dict[str, Any]:
+    """``--cli``: each loop's command ``repeats`` times, alternating with ``against``'s."""
+    out: dict[str, Any] = {}
+    for name, launch in launches.items():
+        codes: dict[str, tuple[Path, Path | None]] = {}
+        if against is not None:
+            codes["against"] = (against / launch.resolve().relative_to(ROOT), against / "src")
+        codes["this"] = (launch, None)
+        runs: dict[str, list[dict[str, Any]]] = {code: [] for code in codes}
+        for _ in range(repeats):
+            for code, (path, src) in codes.items():
+                run = cli_run(path, seconds, src=src)
+                runs[code].append(run)
+                print(f"{name} {code}: {json.dumps(run)}", flush=True)
+        doc: dict[str, Any] = {"launch": str(launch)}
+        for code, done in runs.items():
+            doc[code] = {
+                "sim_s_per_wall_s_median": round(_median(done, "sim_s_per_wall_s"), 3),
+                "cpu_s_median": round(_median(done, "cpu_s"), 2),
+                "runs": done,
+            }
+        digests = {run["report_sha256"] for done in runs.values() for run in done}
+        doc["reports_identical"] = len(digests) == 1
+        out[name] = doc
+    return out
+
+
 def _median(runs: list[dict[str, Any]], key: str) -> float:
     return round(statistics.median(float(r[key]) for r in runs), 2)
 
@@ -841,6 +918,18 @@ def main() -> None:
         help="the enlil oracle's BLAS threads (its blas_threads: 1, the default, or none: the "
         "process's), comma-separated variants to compare in the same run",
     )
+    ap.add_argument(
+        "--cli",
+        action="store_true",
+        help="instead: time `anunnaki run LAUNCH --speed 0 --until SECONDS --report` per loop "
+        "(scorer and bring-up included): simulated seconds per wall second, CPU seconds",
+    )
+    ap.add_argument(
+        "--cli-against",
+        type=Path,
+        metavar="DIR",
+        help="with --cli: another checkout whose runs alternate with this one's",
+    )
     ap.add_argument("--component", choices=COMPONENTS, help=argparse.SUPPRESS)
     ap.add_argument("--oracle-json", default="{}", help=argparse.SUPPRESS)
     ap.add_argument("--bus-json", help=argparse.SUPPRESS)
@@ -855,8 +944,36 @@ def main() -> None:
             torch_threads=int(args.torch_threads),
         )
         return
-    torch = _torch()
     loops = _csv(args.loops, ("rover", "uav"), "--loops", ap)
+    if args.cli:
+        cli: dict[str, Any] = {
+            "benchmark": "loop --cli",
+            "date": time.strftime("%Y-%m-%d %H:%M:%S"),
+            "command": f"anunnaki run LAUNCH --speed 0 --until {args.seconds:g} --report FILE",
+            "machine": {
+                "python": platform.python_version(),
+                "cpus": os.cpu_count(),
+                "nice": os.nice(0),
+                "PYTHONDONTWRITEBYTECODE": os.environ.get("PYTHONDONTWRITEBYTECODE"),
+                "load_average_before": list(os.getloadavg()),
+            },
+            "simulated_seconds": args.seconds,
+            "repeats": args.repeats,
+            "against": None if args.cli_against is None else str(args.cli_against),
+        }
+        launches = {"rover": args.launch, "uav": args.uav_launch}
+        cli |= cli_measure(
+            {k: v for k, v in launches.items() if k in loops},
+            args.seconds,
+            args.repeats,
+            against=args.cli_against,
+        )
+        cli["machine"]["load_average_after"] = list(os.getloadavg())
+        args.output.parent.mkdir(parents=True, exist_ok=True)
+        args.output.write_text(json.dumps(cli, indent=1) + "\n")
+        print(f"wrote {args.output}")
+        return
+    torch = _torch()
     layouts = tuple(_csv(args.layouts, LAYOUTS, "--layouts", ap))
     try:
         variants = tuple(int(x) for x in args.torch_threads.split(","))

@@ -93,6 +93,35 @@ def test_contract_every_kind_checks_starts_ends_and_closes(kind: str, on_executo
             run.close()
 
 
+def test_a_simulated_system_runs_torch_on_the_threads_it_is_given() -> None:
+    """``torch_threads``: torch's threads while the system runs, the process's put back at its
+    close (a test process, or a program that runs a launch among other work, keeps its own)."""
+    torch = pytest.importorskip("torch")
+    before = torch.get_num_threads()
+    torch.set_num_threads(2)
+    try:
+        options = SimKind.Options.model_validate({**BUILTIN_OPTIONS["sim"], "torch_threads": 1})
+        managed = SimKind(options, base=ROVER)
+        executor = Executor()
+        with open_bus("inproc", executor=executor) as bus:
+            stop = threading.Event()
+            ctx = ManagedContext(
+                bus=bus, stop=stop, speed=1000.0, until=0.5, say=[].append, executor=executor
+            )
+            run = managed.start(ctx)
+            try:
+                assert torch.get_num_threads() == 1
+                run.thread.join(timeout=120)
+                assert not run.thread.is_alive()
+            finally:
+                run.close()
+            assert torch.get_num_threads() == 2
+        with pytest.raises(ValueError, match="torch_threads"):
+            SimKind.Options.model_validate({**BUILTIN_OPTIONS["sim"], "torch_threads": 0})
+    finally:
+        torch.set_num_threads(before)
+
+
 def test_kind_key_and_the_older_form_load_the_same() -> None:
     new = parse_launch(HEAD + f"managed: {{kind: scripted, trace: {ROVER}/trace.jsonl}}\n")
     old = parse_launch(HEAD + f"managed: {{scripted: {{trace: {ROVER}/trace.jsonl}}}}\n")

@@ -237,6 +237,23 @@ def test_paired_frames_wait_for_their_clean_render_in_any_order() -> None:
     assert result is not None and result.category == 0
 
 
+def test_a_frame_without_phenomena_is_not_run_again() -> None:
+    """As a simulated run delivers a frame (its clean render, the camera frame, the truth,
+    the detections): when the camera frame is its clean render pixel for pixel, the
+    detections the model published for it are its clean run, and the model is not run a
+    second time; a frame the phenomena changed is run on its clean render as before."""
+    scorer, loaded = paired(window=10, min_frames=1)
+    for seq, perturbed in enumerate([False, True, False]):
+        clean = clean_frame(found=True)
+        camera = clean_frame(found=not perturbed)  # the phenomena hid the object
+        scorer.observe_clean_frame(seq, clean)
+        scorer.assess(camera, seq=seq, model_id="m")
+        feed(scorer, seq, found=not perturbed)
+    window = scorer.metrics()
+    assert window == WindowMetrics("m", 3, 2, 0, 1, 0.8, 1.0)
+    assert loaded["m"].frames == 1  # the perturbed frame's clean render only
+
+
 def test_a_paired_scorer_asks_for_clean_frames() -> None:
     scorer, _ = paired()
     assert isinstance(scorer, ObservesCleanFrames) and scorer.clean_frames is True

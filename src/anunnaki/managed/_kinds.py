@@ -16,7 +16,7 @@ from typing import Annotated, Any, ClassVar
 
 from pydantic import BaseModel, ConfigDict, Field
 
-from anunnaki.errors import AnunnakiError, ModelFileError
+from anunnaki.errors import AnunnakiError, MissingExtraError, ModelFileError
 from anunnaki.managed._camera import check_camera_chain
 from anunnaki.managed._slot import DecisionLike, ManagedContext, UtuSettings, wait_for_utu
 from anunnaki.trace import Record, read_trace
@@ -139,18 +139,26 @@ class _Running:
         thread: threading.Thread,
         ended: str,
         finish: Callable[[Sequence[DecisionLike], float], None] | None = None,
+        *,
+        after_close: Callable[[], None] | None = None,
     ) -> None:
         self.system = system
         self.thread = thread
         self.ended = ended
         self._finish = finish
+        self._after_close = after_close
 
     def finish(self, decisions: Sequence[DecisionLike], ran: float) -> None:
         if self._finish is not None:
             self._finish(decisions, ran)
 
     def close(self) -> None:
-        self.system.close()
+        try:
+            self.system.close()
+        finally:
+            after, self._after_close = self._after_close, None
+            if after is not None:
+                after()
 
 
 def _after_instant(ctx: ManagedContext, sc: ScriptedConfig) -> Callable[[int], object] | None:
@@ -324,6 +332,13 @@ class SimConfig(_Strict):
         until_landed: End the run at the UAV's touch-down after its flight (nothing of the
             mission changes after it) instead of at the scenario's end
             (``anunnaki run --until-landed``); a rover ignores it.
+        torch_threads: torch's intra-op threads while the system runs (the detector's, the
+            oracles' and the scorer's networks; process-wide, set at the start and put back
+            at the close); ``None`` leaves torch's default, one per core. In one process the
+            run has one thread of delivery, so the networks never run at once; on two cores
+            shared with other work a second thread spent much of each forward waiting at
+            OpenMP's barriers (docs/results.md, issue #30 item 4). The same detections
+            either way.
 
     """
 
@@ -338,6 +353,20 @@ class SimConfig(_Strict):
     plot_file: str | None = None
     scenario_seed: Annotated[int, Field(ge=0)] | None = None
     until_landed: bool = False
+    torch_threads: Annotated[int, Field(ge=1)] | None = None
+
+
+def _torch_threads(threads: int) -> Callable[[], None]:
+    """Run torch's operators on ``threads`` threads in this process; returns the undo."""
+    import anunnaki.lec  # noqa: F401  # sets OMP_WAIT_POLICY before torch is first imported
+
+    try:
+        import torch
+    except ImportError as exc:
+        raise MissingExtraError("torch", "vision") from exc
+    before = torch.get_num_threads()
+    torch.set_num_threads(threads)
+    return lambda: torch.set_num_threads(before)
 
 
 class SimKind:
@@ -419,14 +448,20 @@ class SimKind:
             from anunnaki.sim import draw_scenario, load_scenario
 
             scenario = draw_scenario(load_scenario(cfg.scenario), cfg.scenario_seed)
-        system = SimulatedSystem(
-            ctx.bus,
-            scenario,
-            models=cfg.models,
-            oracle=cfg.oracle,
-            scorer=cfg.scorer,
-            shadow=cfg.shadow,
-        )
+        undo = None if cfg.torch_threads is None else _torch_threads(cfg.torch_threads)
+        try:
+            system = SimulatedSystem(
+                ctx.bus,
+                scenario,
+                models=cfg.models,
+                oracle=cfg.oracle,
+                scorer=cfg.scorer,
+                shadow=cfg.shadow,
+            )
+        except BaseException:
+            if undo is not None:
+                undo()
+            raise
         sc = system.scenario
         end = sc.duration if ctx.until is None else ctx.until
         ctx.say(
@@ -448,7 +483,7 @@ class SimKind:
             self._finish(system, decisions, ran, ctx.say)
 
         thread = threading.Thread(target=run, name="anunnaki-sim", daemon=True)
-        running = _Running(system, thread, "scenario ended", finish)
+        running = _Running(system, thread, "scenario ended", finish, after_close=undo)
         thread.start()
         return running
 

@@ -20,7 +20,10 @@ Where ``clean_f1`` comes from is the ``reference``:
 * ``paired``: the same model's F1 over the same window of frames *as rendered without the
   phenomena* (the simulator's clean frames, ``topics.CLEAN_FRAMES``; the assessor runs the
   model on them itself, loaded from ``models``): the drop is the phenomena's alone, as
-  Enlil labels a context (the same batch, clean and perturbed). Simulation only.
+  Enlil labels a context (the same batch, clean and perturbed). Simulation only. A frame
+  whose clean render is the camera frame pixel for pixel (no phenomenon, no fault) is not
+  run again: the model's published detections of it are what the run would give (the
+  same network on the same pixels), so they are counted for both.
 
 With ``min_objects``, a window holding fewer labelled objects shows no drop: by default
 (``sparse: nominal``) it is assessed as category 0 with its confidence scaled down, which
@@ -219,7 +222,9 @@ class GroundTruthAssessor:
         # frames waiting for their other parts: "truth" (boxes, names, ignore), "dets" and,
         # paired, "clean" (the frame as rendered without the phenomena)
         self._pending: OrderedDict[int, dict[str, Any]] = OrderedDict()
-        # per frame: tp, fp, fn on the frame, then (paired) on its clean render
+        # per frame: tp, fp, fn on the frame, then (paired) on its clean render; a frame
+        # whose "clean" part is the camera frame itself (``assess`` compared the pixels)
+        # has "same" set, and its detections stand for the clean run of the model
         self._counts: deque[tuple[int, ...]] = deque(maxlen=window)
         self._model: str | None = None
         self._context: dict[str, JsonValue] | None = None
@@ -287,10 +292,24 @@ class GroundTruthAssessor:
             entry[part] = value
             if all(k in entry for k in needed):
                 del self._pending[seq]
-                self._score(entry["dets"], *entry["truth"], clean=entry.get("clean"))
+                self._score(
+                    entry["dets"],
+                    *entry["truth"],
+                    clean=entry.get("clean"),
+                    same=entry.get("same", False),
+                )
                 return
             while len(self._pending) > self.buffer:
                 self._pending.popitem(last=False)
+
+    def _note_same(self, seq: int, frame: Frame) -> None:
+        """Mark frame ``seq`` when its clean render, already in, has the same pixels."""
+        with self._lock:
+            entry = self._pending.get(seq)
+            if entry is None or "clean" not in entry:
+                return
+            if np.array_equal(np.asarray(entry["clean"]), np.asarray(frame)):
+                entry["same"] = True
 
     def _detector(self, model_id: str) -> Detector:
         """The assessed model, loaded once (``reference: paired``)."""
@@ -312,6 +331,7 @@ class GroundTruthAssessor:
         ignore: npt.NDArray[np.float64],
         *,
         clean: Frame | None = None,
+        same: bool = False,
     ) -> None:
         if dets.model_id != self._model:
             self._model = dets.model_id
@@ -322,7 +342,9 @@ class GroundTruthAssessor:
             np.asarray(dets.scores, np.float32),
         )
         counts: tuple[int, ...] = self._match(pred, list(dets.labels), boxes, names, ignore)
-        if clean is not None:
+        if same:  # the clean render is the frame the model ran on: the same detections
+            counts += counts
+        elif clean is not None:
             detector = self._detector(dets.model_id)
             found = detector.detect([clean])[0]
             classes = list(detector.classes)
@@ -387,12 +409,18 @@ class GroundTruthAssessor:
         return value
 
     def assess(self, frame: Frame, *, seq: int, model_id: str) -> Assessment | None:
-        """Assess ``model_id`` from the window (the frame's pixels are not looked at).
+        """Assess ``model_id`` from the window (the frame's pixels are not assessed).
 
         Returns ``None`` until the window holds ``min_frames`` frames of ``model_id``, for a
         model whose clean F1 is unknown, and (``sparse: withhold``) for a window with fewer
         than ``min_objects`` objects.
+
+        With ``reference: paired``, the frame is compared with its clean render when that
+        came first (a simulator publishes it before the camera frame): equal pixels spare
+        the model's second run on it (the frame's detections count for both).
         """
+        if self.reference == "paired":
+            self._note_same(seq, frame)
         window = self.metrics()
         if window is None or window.model_id != model_id or window.frames < self.min_frames:
             return None

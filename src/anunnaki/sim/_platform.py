@@ -263,27 +263,27 @@ class SimPlatform(Closing):
             },
         )
         if not self.timeline.silent("camera", t):
+            message = Image.from_array(
+                image,
+                encoding=cam.encoding,
+                quality=cam.quality,
+                frame_id=f"{self.platform}_camera",
+                seq=seq,
+            )
             if self.publish_clean:
-                self._publish(
-                    topics.CLEAN_FRAMES,
-                    Image.from_array(
+                # no phenomenon: the clean render is the frame, and its message the same
+                # (frozen) one, encoded once
+                clean = message
+                if image is not frame.image:
+                    clean = Image.from_array(
                         frame.image,
                         encoding=cam.encoding,
                         quality=cam.quality,
                         frame_id=f"{self.platform}_camera",
                         seq=seq,
-                    ),
-                )
-            self._publish(
-                f"{self.prefix}/camera/image",
-                Image.from_array(
-                    image,
-                    encoding=cam.encoding,
-                    quality=cam.quality,
-                    frame_id=f"{self.platform}_camera",
-                    seq=seq,
-                ),
-            )
+                    )
+                self._publish(topics.CLEAN_FRAMES, clean)
+            self._publish(f"{self.prefix}/camera/image", message)
             self._publish(
                 f"{self.prefix}/camera/info",
                 {"seq": seq, "width": cam.width, "height": cam.height, "t": t},
