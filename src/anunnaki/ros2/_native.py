@@ -21,11 +21,11 @@ works, e.g. after sourcing a ROS 2 install's ``setup.bash``) and is a ROS 2 node
 
 Each message costs the executor two rebuilds of its wait set, in Python, and each waitable
 in it adds to both; rclpy gives every publisher and subscription two QoS event handlers
-(incompatible QoS, incompatible type) unless told not to, and these were most of the wait set
-(2 of 3 entries on a bridge of 28 topics) and half of a wake's CPU time (115 → 56 µs on the
-benchmark's bridge, docs/results.md). So the bridge declares its topics without them and
-checks its peers itself, every :data:`PEER_CHECK_PERIOD` seconds from a timer: an endpoint
-on a bridged topic whose QoS cannot match the bridge's, or whose type differs, is logged once
+(incompatible QoS, incompatible type) unless told not to: 64 waitables on a bridge of 31
+topics, and 49 of the 115 µs of CPU a wake took on the benchmark's bridge (docs/results.md).
+So the bridge declares its topics without them and checks its peers itself, every
+:data:`PEER_CHECK_PERIOD` seconds from a timer: an endpoint on a bridged topic (or the
+heartbeat) whose QoS cannot match the bridge's, or whose type differs, is logged once
 (``stats["incompatible_peers"]``), as rclpy's handlers did.
 
 Nothing here waits inside an executor callback, so one thread spins the node
@@ -223,9 +223,8 @@ class Ros2Bridge(Closing):
                 )
                 self._ros_handles.append(("service", service))
         self._start_heartbeat()
-        if self.spec.topics:
-            timer = node.create_timer(PEER_CHECK_PERIOD, self.check_peers)
-            self._ros_handles.append(("timer", timer))
+        timer = node.create_timer(PEER_CHECK_PERIOD, self.check_peers)
+        self._ros_handles.append(("timer", timer))
 
     def _start_heartbeat(self) -> None:
         """Publish ``/<name>/heartbeat`` every quarter lease (liveliness by topic)."""
@@ -245,7 +244,7 @@ class Ros2Bridge(Closing):
         pub.publish(empty())  # alive from the first moment, not a quarter lease later
 
     def check_peers(self) -> int:
-        """Log, once each, the peers on bridged topics that cannot match the bridge.
+        """Log, once each, the peers on bridged topics (and the heartbeat) that cannot match.
 
         A peer cannot match when its QoS is incompatible with the bridge's (a best-effort
         publisher for the bridge's reliable subscription, say) or when it uses another type
@@ -259,15 +258,17 @@ class Ros2Bridge(Closing):
         q = self.rclpy.qos
         me = self.node.get_name()
         found = 0
-        for t in self.spec.topics:
-            ros_type = t.type.replace("/", "/msg/", 1)
-            if t.direction == "to_bus":
-                ends = self.node.get_subscriptions_info_by_topic(t.ros)
-                peers = self.node.get_publishers_info_by_topic(t.ros)
+        entries = [(t.ros, t.type, t.direction) for t in self.spec.topics]
+        entries.append((self.spec.heartbeat_topic, "std_msgs/Empty", "to_ros"))
+        for topic, type_name, direction in entries:
+            ros_type = type_name.replace("/", "/msg/", 1)
+            if direction == "to_bus":
+                ends = self.node.get_subscriptions_info_by_topic(topic)
+                peers = self.node.get_publishers_info_by_topic(topic)
                 role = "publisher"
             else:
-                ends = self.node.get_publishers_info_by_topic(t.ros)
-                peers = self.node.get_subscriptions_info_by_topic(t.ros)
+                ends = self.node.get_publishers_info_by_topic(topic)
+                peers = self.node.get_subscriptions_info_by_topic(topic)
                 role = "subscription"
             # the bridge's own endpoint as the graph reports it: its QoS with the defaults
             # resolved, comparable with the peers' (the profile it was declared with is not)
@@ -277,7 +278,7 @@ class Ros2Bridge(Closing):
             for peer in peers:
                 if peer.node_name == me:
                     continue
-                key = (t.ros, bytes(peer.endpoint_gid))
+                key = (topic, bytes(peer.endpoint_gid))
                 if key in self._warned:
                     continue
                 if peer.topic_type != ros_type:
@@ -302,7 +303,7 @@ class Ros2Bridge(Closing):
                     "between them",
                     role,
                     where,
-                    t.ros,
+                    topic,
                     why,
                 )
         return found
