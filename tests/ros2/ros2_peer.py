@@ -8,9 +8,11 @@ each mapped type), offers ``/peer/set_flag`` (``std_srvs/SetBool``) and
 ``/in/image``; ``call-trigger`` calls the bridge's ``/bridge/trigger`` (a ROS service the
 bridge answers from the bus) and publishes the reply on ``/peer/result``; ``call-chain``
 calls the bridge's ``/bridge/set_flag`` (true), which the bridge answers from the bus
-service that calls this peer's ``/peer/set_flag``, and publishes the reply likewise. Publishers of
-sensor types use the sensor-data QoS (best effort), as drivers do. It prints
-``peer ready`` once everything is declared, and stops on SIGTERM.
+service that calls this peer's ``/peer/set_flag``, and publishes the reply likewise;
+``incompatible`` declares a best-effort publisher on ``/in/string`` (whose bridge
+subscription is reliable: the two cannot match) and says ``incompatible declared`` on
+``/peer/result``. Publishers of sensor types use the sensor-data QoS (best effort), as
+drivers do. It prints ``peer ready`` once everything is declared, and stops on SIGTERM.
 """
 
 from __future__ import annotations
@@ -87,6 +89,8 @@ def main() -> int:
         response.success = request.transition.id == 3  # activate
         return response
 
+    kept: list[Any] = []  # what a command declared, alive until the peer stops
+
     def command(msg: Any) -> None:
         if msg.data == "bad-image":
             bad = Image(height=2, width=2, encoding="yuv422_16", step=8, data=b"\0" * 16)
@@ -95,6 +99,9 @@ def main() -> int:
             result.publish(String(data=call(trigger, Trigger.Request())))
         elif msg.data == "call-chain":
             result.publish(String(data=call(chain, SetBool.Request(data=True))))
+        elif msg.data == "incompatible":
+            kept.append(node.create_publisher(String, "/in/string", qos_profile_sensor_data))
+            result.publish(String(data="incompatible declared"))
 
     node.create_service(SetBool, "/peer/set_flag", set_flag, callback_group=group)
     node.create_service(ChangeState, "/peer/change_state", change_state, callback_group=group)

@@ -274,6 +274,46 @@ def test_a_malformed_message_is_refused_with_a_clear_error_and_the_loop_runs_on(
     assert live.bridge.p.poll() is None
 
 
+def test_a_peer_that_cannot_match_is_named_once(live: Live) -> None:
+    # the bridge's topics carry no QoS event handlers (they cost every executor wake); its
+    # own check names a best-effort publisher that its reliable subscription cannot match
+    assert _command(live, "incompatible", "/peer/result") == "incompatible declared"
+    line = live.bridge.wait_for("cannot match the bridge")
+    assert "the publisher of /anunnaki_test_peer on /in/string" in line
+    assert "(incompatible QoS: Best effort publisher and reliable subscription)" in line
+    # the peer's reliable publisher of the same topic still goes through
+    assert live.round_trip("string", {"data": "after"}).to_body() == {"data": "after"}
+    assert sum("cannot match the bridge" in ln for ln in live.bridge.lines) == 1
+
+
+def test_the_bridges_topics_carry_no_qos_event_handlers(live: Live) -> None:
+    probe = live.ns.python(
+        "-c",
+        "import rclpy\n"
+        "from rclpy.event_handler import EventHandler\n"
+        "from anunnaki.bus import open_bus\n"
+        "from anunnaki.ros2._native import Ros2Bridge, import_rclpy\n"
+        "from anunnaki.rosbridge import load_bridge\n"
+        "rclpy.init()\n"
+        "node = rclpy.create_node('anunnaki_event_probe')\n"
+        "def handlers():\n"
+        "    return sum(isinstance(w, EventHandler) for w in node.waitables)\n"
+        "bare = handlers()  # the node's own (/rosout, /parameter_events)\n"
+        f"spec = load_bridge({str(BRIDGE)!r})\n"
+        "with open_bus('inproc') as bus, Ros2Bridge(spec, bus, node, import_rclpy()):\n"
+        "    added = handlers() - bare\n"
+        "    print(f'{len(spec.topics)} topics, {added} event handlers added', flush=True)\n"
+        "node.destroy_node()\n"
+        "rclpy.shutdown()\n",
+        name="event-probe",
+    )
+    try:
+        line = probe.wait_for("event handlers added")
+        assert line.endswith("31 topics, 0 event handlers added"), line
+    finally:
+        probe.stop()
+
+
 def test_sigterm_stops_the_bridge_cleanly(live: Live) -> None:
     live.bridge.p.terminate()
     assert live.bridge.p.wait(timeout=DEADLINE) == 0

@@ -19,6 +19,15 @@ works, e.g. after sourcing a ROS 2 install's ``setup.bash``) and is a ROS 2 node
   fall to 0 a lease after the bridge stops, hangs or is killed (``kill -9`` too), and goes to
   its safe state on its own (examples/rover/ros2/rover_robot.py does).
 
+Each message costs the executor two rebuilds of its wait set, in Python, and each waitable
+in it adds to both; rclpy gives every publisher and subscription two QoS event handlers
+(incompatible QoS, incompatible type) unless told not to: 64 waitables on a bridge of 31
+topics, and 49 of the 115 µs of CPU a wake took on the benchmark's bridge (docs/results.md).
+So the bridge declares its topics without them and checks its peers itself, every
+:data:`PEER_CHECK_PERIOD` seconds from a timer: an endpoint on a bridged topic (or the
+heartbeat) whose QoS cannot match the bridge's, or whose type differs, is logged once
+(``stats["incompatible_peers"]``), as rclpy's handlers did.
+
 Nothing here waits inside an executor callback, so one thread spins the node
 (``SingleThreadedExecutor``, the faster one here: docs/results.md): a bus request a ROS call
 needs is sent with ``request_start`` from a coroutine callback, which awaits its reply
@@ -59,9 +68,19 @@ from anunnaki.rosbridge import (
     to_ros_fields,
 )
 
-__all__ = ["Ros2Bridge", "Ros2Unavailable", "import_rclpy", "message_class", "service_class"]
+__all__ = [
+    "PEER_CHECK_PERIOD",
+    "Ros2Bridge",
+    "Ros2Unavailable",
+    "import_rclpy",
+    "message_class",
+    "service_class",
+]
 
 log = logging.getLogger("anunnaki.ros2")
+
+#: Seconds between two checks of the peers' QoS and types on the bridged topics.
+PEER_CHECK_PERIOD = 2.0
 
 #: What a message that does not convert raises (rclpy's own checks raise AssertionError).
 _BAD = (ConversionError, KeyError, ValueError, TypeError, OverflowError, AssertionError)
@@ -83,6 +102,7 @@ def import_rclpy() -> ModuleType:
         import_module("rclpy.qos")
         import_module("rclpy.executors")
         import_module("rclpy.callback_groups")
+        import_module("rclpy.event_handler")
         import_module("rclpy.signals")
     except ImportError as exc:
         raise Ros2Unavailable(
@@ -160,21 +180,33 @@ class Ros2Bridge(Closing):
         self._ros_handles: list[tuple[str, Any]] = []
         self._bus_handles: list[Any] = []
         self._group = rclpy.callback_groups.ReentrantCallbackGroup()
+        self._warned: set[tuple[str, bytes]] = set()
 
     # -- life ----------------------------------------------------------------------------------
     def start(self) -> None:
         """Declare every topic and service on ROS 2 and on the bus."""
         node = self.node
+        events = self.rclpy.event_handler
         for t in self.spec.topics:
             cls = message_class(t.type)
             qos = qos_profile(self.rclpy, t)
             if t.direction == "to_bus":
                 sub = node.create_subscription(
-                    cls, t.ros, self._from_ros(t), qos, callback_group=self._group
+                    cls,
+                    t.ros,
+                    self._from_ros(t),
+                    qos,
+                    callback_group=self._group,
+                    event_callbacks=events.SubscriptionEventCallbacks(use_default_callbacks=False),
                 )
                 self._ros_handles.append(("subscription", sub))
             else:
-                pub = node.create_publisher(cls, t.ros, qos)
+                pub = node.create_publisher(
+                    cls,
+                    t.ros,
+                    qos,
+                    event_callbacks=events.PublisherEventCallbacks(use_default_callbacks=False),
+                )
                 self._ros_handles.append(("publisher", pub))
                 self._bus_handles.append(
                     self.bus.subscribe(t.bus_topic, self._from_bus(t, cls, pub), queue=t.queue)
@@ -191,18 +223,90 @@ class Ros2Bridge(Closing):
                 )
                 self._ros_handles.append(("service", service))
         self._start_heartbeat()
+        timer = node.create_timer(PEER_CHECK_PERIOD, self.check_peers)
+        self._ros_handles.append(("timer", timer))
 
     def _start_heartbeat(self) -> None:
         """Publish ``/<name>/heartbeat`` every quarter lease (liveliness by topic)."""
         empty = message_class("std_msgs/Empty")
         lease = self.spec.heartbeat_lease
         pub = self.node.create_publisher(
-            empty, self.spec.heartbeat_topic, heartbeat_qos(self.rclpy, lease)
+            empty,
+            self.spec.heartbeat_topic,
+            heartbeat_qos(self.rclpy, lease),
+            event_callbacks=self.rclpy.event_handler.PublisherEventCallbacks(
+                use_default_callbacks=False
+            ),
         )
         self._ros_handles.append(("publisher", pub))
         timer = self.node.create_timer(lease / 4, lambda: pub.publish(empty()))
         self._ros_handles.append(("timer", timer))
         pub.publish(empty())  # alive from the first moment, not a quarter lease later
+
+    def check_peers(self) -> int:
+        """Log, once each, the peers on bridged topics (and the heartbeat) that cannot match.
+
+        A peer cannot match when its QoS is incompatible with the bridge's (a best-effort
+        publisher for the bridge's reliable subscription, say) or when it uses another type
+        on the topic. rclpy's default QoS event handlers said so; the bridge declares its
+        topics without them (the module docstring says why) and calls this from a timer.
+
+        Returns:
+            How many peers were newly found not to match.
+
+        """
+        q = self.rclpy.qos
+        me = self.node.get_name()
+        found = 0
+        entries = [(t.ros, t.type, t.direction) for t in self.spec.topics]
+        entries.append((self.spec.heartbeat_topic, "std_msgs/Empty", "to_ros"))
+        for topic, type_name, direction in entries:
+            ros_type = type_name.replace("/", "/msg/", 1)
+            if direction == "to_bus":
+                ends = self.node.get_subscriptions_info_by_topic(topic)
+                peers = self.node.get_publishers_info_by_topic(topic)
+                role = "publisher"
+            else:
+                ends = self.node.get_publishers_info_by_topic(topic)
+                peers = self.node.get_subscriptions_info_by_topic(topic)
+                role = "subscription"
+            # the bridge's own endpoint as the graph reports it: its QoS with the defaults
+            # resolved, comparable with the peers' (the profile it was declared with is not)
+            ours = next((e.qos_profile for e in ends if e.node_name == me), None)
+            if ours is None:
+                continue  # not in the graph yet: the next check sees it
+            for peer in peers:
+                if peer.node_name == me:
+                    continue
+                key = (topic, bytes(peer.endpoint_gid))
+                if key in self._warned:
+                    continue
+                if peer.topic_type != ros_type:
+                    why = f"its type is {peer.topic_type}, the bridge's {ros_type}"
+                else:
+                    pair = (
+                        (peer.qos_profile, ours)
+                        if role == "publisher"
+                        else (ours, peer.qos_profile)
+                    )
+                    compatible, reason = q.qos_check_compatible(*pair)
+                    if compatible != q.QoSCompatibility.ERROR:
+                        continue
+                    parts = (p.strip().removeprefix("ERROR: ") for p in reason.split(";"))
+                    why = "incompatible QoS: " + "; ".join(p for p in parts if p)
+                self._warned.add(key)
+                self.stats["incompatible_peers"] += 1
+                found += 1
+                where = f"{peer.node_namespace.rstrip('/')}/{peer.node_name}"
+                log.warning(
+                    "the %s of %s on %s cannot match the bridge (%s); no message will pass "
+                    "between them",
+                    role,
+                    where,
+                    topic,
+                    why,
+                )
+        return found
 
     def close(self) -> None:
         """Release everything declared on the bus and on ROS 2."""
