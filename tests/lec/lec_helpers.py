@@ -53,7 +53,7 @@ SETTINGS: dict[str, Any] = {
     "epochs": 10,
     "batch_size": 16,
     "net_width": 16,
-    "threads": 2,
+    "threads": 1,  # two spin-wait beside a busy core: 195 s of CPU against ~30 (issue #30)
 }
 
 
