@@ -37,6 +37,7 @@ from typing import Any
 
 import numpy as np
 
+from anunnaki._blas import blas_limit
 from anunnaki.enlil._oracle_net import CLEAR, OracleModel, load_oracle
 from anunnaki.lec import ModelRegistry
 from anunnaki.messages import Assessment
@@ -91,7 +92,6 @@ class EnlilOracle:
             raise OracleError(f"enlil: blas_threads must be >= 1 or None, got {blas_threads!r}")
         self.window = window
         self.blas_threads = blas_threads
-        self._blas: Any = None  # threadpoolctl's view of the BLAS libraries, on first use
         self._sources: dict[str, tuple[Path, str | None] | OracleModel] = {}
         if models is not None:
             from anunnaki.lec import load_registry
@@ -163,15 +163,7 @@ class EnlilOracle:
 
     def _blas_limit(self) -> contextlib.AbstractContextManager[Any]:
         """At most ``blas_threads`` BLAS threads in the block (a no-op with ``None``)."""
-        if self.blas_threads is None:
-            return contextlib.nullcontext()
-        if self._blas is None:
-            import scipy.linalg  # noqa: F401  # its own BLAS, loaded before it is looked for
-            from threadpoolctl import ThreadpoolController  # type: ignore[import-untyped]
-
-            self._blas = ThreadpoolController().select(user_api="blas")
-        limiter: contextlib.AbstractContextManager[Any] = self._blas.limit(limits=self.blas_threads)
-        return limiter
+        return blas_limit(self.blas_threads, extra="oracle", with_scipy=True)
 
     def _assess(self, oracle: OracleModel, frame: Frame, *, seq: int, model_id: str) -> Assessment:
         out = oracle.outputs([frame])

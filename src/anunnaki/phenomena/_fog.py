@@ -30,12 +30,11 @@ from contextlib import contextmanager
 from contextvars import ContextVar
 from functools import lru_cache
 from types import MappingProxyType
-from typing import Any
 
 import numpy as np
 import numpy.typing as npt
 
-from anunnaki.errors import MissingExtraError
+from anunnaki._blas import blas_limit
 from anunnaki.phenomena._base import Image, ParamSpec, Phenomenon, require_cv2
 
 __all__ = ["Fog", "reuse_fog_noise"]
@@ -59,16 +58,6 @@ def _cubic_upsampler(size: int, cells: int) -> npt.NDArray[np.float32]:
     )
     matrix.flags.writeable = False
     return matrix
-
-
-@lru_cache(maxsize=1)
-def _blas() -> Any:
-    """The BLAS libraries numpy loaded, to limit their threads (found once: a millisecond)."""
-    try:
-        from threadpoolctl import ThreadpoolController  # type: ignore[import-untyped]
-    except ImportError as exc:
-        raise MissingExtraError("threadpoolctl", "phenomena") from exc
-    return ThreadpoolController().select(user_api="blas")
 
 
 def _smooth_noise(
@@ -156,7 +145,7 @@ class Fog(Phenomenon):
         # Blending toward one colour layer by layer, out += alpha_i * (colour - out), leaves
         # out = colour + (image - colour) * prod(1 - alpha_i): one pass over the colour image.
         clear = np.ones((height, width), dtype=np.float32)
-        with _blas().limit(limits=1):  # small products: one BLAS thread (module docstring)
+        with blas_limit(1, extra="phenomena"):  # small products: one BLAS thread (module docstring)
             for index in range(min(layers, MAX_LAYERS)):
                 noise = _layer_noise(int(seed), index, height, width)
                 clear *= np.float32(1.0 - 0.6 * intensity) - np.float32(0.4 * intensity) * noise
