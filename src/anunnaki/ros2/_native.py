@@ -54,6 +54,7 @@ from anunnaki._closing import Closing
 from anunnaki.bus import Bus, BusError, BusTimeout
 from anunnaki.errors import AnunnakiError
 from anunnaki.messages import Image, ServiceReply, body_of
+from anunnaki.ros2._bridge import ros2_type
 from anunnaki.ros2._rclpy_convert import fill_ros2_message, ros2_message_to_dict
 from anunnaki.rosbridge import (
     BridgeSpec,
@@ -261,7 +262,7 @@ class Ros2Bridge(Closing):
         entries = [(t.ros, t.type, t.direction) for t in self.spec.topics]
         entries.append((self.spec.heartbeat_topic, "std_msgs/Empty", "to_ros"))
         for topic, type_name, direction in entries:
-            ros_type = type_name.replace("/", "/msg/", 1)
+            ros_type = ros2_type(type_name)
             if direction == "to_bus":
                 ends = self.node.get_subscriptions_info_by_topic(topic)
                 peers = self.node.get_publishers_info_by_topic(topic)
