@@ -1490,6 +1490,12 @@ def versus(
     return out
 
 
+def clean_loss(domain: dict[str, Any], arm: str) -> float:
+    """The clean F1 *arm* lost against the default model in *domain* (its means)."""
+    arms = domain["arms"]
+    return float(arms["default"]["clean"]["mean"] - arms[arm]["clean"]["mean"])
+
+
 def best_arm(domains: dict[str, Any], base: str = "random_c") -> dict[str, Any] | None:
     """The best Enki arm against *base* over the domains: on (c′), else (c), mean margin.
 
@@ -1503,8 +1509,7 @@ def best_arm(domains: dict[str, Any], base: str = "random_c") -> dict[str, Any] 
         for arm, conds in vs.items():
             cond = OWN if OWN in conds else "hardest"
             rows.setdefault(arm, []).append(conds[cond]["margin"])
-            loss = d["arms"]["default"]["clean"]["mean"] - d["arms"][arm]["clean"]["mean"]
-            clean_ok[arm] = clean_ok.get(arm, True) and loss <= AIMS["clean_loss"]
+            clean_ok[arm] = clean_ok.get(arm, True) and clean_loss(d, arm) <= AIMS["clean_loss"]
     full = {a: v for a, v in rows.items() if len(v) == len(domains)}
     if not full:
         return None
@@ -1548,12 +1553,11 @@ def round_winner(domains: dict[str, Any]) -> dict[str, Any] | None:
     own: dict[str, list[float]] = {}
     losses: dict[str, dict[str, float]] = {}
     for name, d in domains.items():
-        default = d["arms"]["default"]["clean"]["mean"]
         for arm, figures in d["arms"].items():
             if arm not in RECIPES or arm in SHARED or OWN not in figures:
                 continue
             own.setdefault(arm, []).append(figures[OWN]["mean"])
-            losses.setdefault(arm, {})[name] = round(default - figures["clean"]["mean"], 4)
+            losses.setdefault(arm, {})[name] = round(clean_loss(d, arm), 4)
     full = {a: v for a, v in own.items() if len(v) == len(domains)}
     if not full:
         return None
