@@ -1119,6 +1119,17 @@ class _TrainLock:
             self.handle.close()  # releases the lock
 
 
+def train_domain(arm: str, domain: Domain) -> str:
+    """The domain the arm's fine-tuned model records: a name (``check_name``), not a label.
+
+    A composition's domain name holds a ``+`` (``uav-rain+brightness``), which a model's
+    domain may not; it becomes ``_`` as in the shipped model's id (scripts/train-domains.sh).
+    A shared arm (the corruption mix) is the platform's, not one domain's.
+    """
+    name = f"{domain.platform}-{arm}" if arm in SHARED else domain.name
+    return name.replace("+", "_")
+
+
 def _tune(arm: str, seed: int, domain: Domain, ctx: dict[str, Any], folder: Path) -> None:
     """Fine-tune the arm × seed into *folder* (model.safetensors, training.json) unless done."""
     from anunnaki.enki import finetune
@@ -1143,7 +1154,7 @@ def _tune(arm: str, seed: int, domain: Domain, ctx: dict[str, Any], folder: Path
         budget=s.finetune_budget(),
         seed=seed,
         model_id=f"{domain.model}-{arm}-s{seed}",
-        domain=f"{domain.platform}-{arm}" if shared else domain.name,
+        domain=train_domain(arm, domain),
         checkpoints=folder / "finetune",
         on_step=lambda step, total, info: bars.update(label, step, total),
         consistency=lam,

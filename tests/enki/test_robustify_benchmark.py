@@ -724,3 +724,21 @@ def test_robustifys_default_is_the_confirmations_winner(bench: Any) -> None:
     assert bench.robustify_default_arm() == win["arm"]
     lines = bench._winner_lines(win, complete=True)
     assert f"trains `{win['arm']}`: the winner" in lines[-2]
+
+
+def test_every_arms_model_domain_is_a_name_a_model_accepts(bench: Any) -> None:
+    """The confirmation round once stopped at ``uav-rain+brightness``: its fine-tune gave
+    ``TrainConfig`` the domain with a ``+``, which a model's domain may not hold."""
+    from anunnaki._names import check_name
+
+    arms = [*bench.ARMS, *bench.SHARED]
+    for domain in bench.DOMAINS.values():
+        for arm in arms:
+            name = bench.train_domain(arm, domain)
+            assert check_name(name, what="domain") == name
+    assert bench.train_domain("enki", bench.DOMAINS["uav-rain+brightness"]) == (
+        "uav-rain_brightness"
+    )
+    assert bench.train_domain("corruption_mix", bench.DOMAINS["rover-fog"]) == (
+        "rover-corruption_mix"
+    )
