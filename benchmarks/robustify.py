@@ -1554,10 +1554,14 @@ def round_winner(domains: dict[str, Any]) -> dict[str, Any] | None:
     """The round's best trained arm, Enki or not (issue 33 item 4: robustify's default).
 
     The best mean F1 on (c′), each model's own hardest contexts, over *domains*, among the
-    arms that keep clean F1 within ``AIMS["clean_loss"]`` of the default in every domain;
-    when none does, the best whatever its clean F1 (said in ``clean_within_aim``). Only
-    arms measured in every domain compete; the corruption mix is not a candidate (it does
-    not depend on the domain).
+    arms whose clean F1 stays within ``AIMS["clean_loss"]`` of the domain's reference in
+    every domain; when none does, the best whatever its clean F1 (said in
+    ``clean_within_aim``). The reference is the default model's clean F1; in a domain where
+    no arm stays within the aim of the default (the fine-tuning budget itself costs clean
+    F1 there, whatever the recipe), it is the best arm's clean F1, and the domain is listed
+    in ``relaxed``: the rule then still passes over an arm that loses more clean F1 than the
+    others. Only arms measured in every domain compete; the corruption mix is not a
+    candidate (it does not depend on the domain).
     """
     if not domains:
         return None
@@ -1572,7 +1576,14 @@ def round_winner(domains: dict[str, Any]) -> dict[str, Any] | None:
     full = {a: v for a, v in own.items() if len(v) == len(domains)}
     if not full:
         return None
-    ok = [a for a in full if max(losses[a].values()) <= AIMS["clean_loss"]]
+    relaxed = [n for n in domains if min(losses[a][n] for a in full) > AIMS["clean_loss"]]
+    # the shortfall against the reference: the default's clean F1, or the best arm's
+    short = {
+        a: {n: round(x - (min(losses[b][n] for b in full) if n in relaxed else 0.0), 4)
+            for n, x in losses[a].items()}
+        for a in full
+    }  # fmt: skip
+    ok = [a for a in full if max(short[a].values()) <= AIMS["clean_loss"]]
     arm = max(ok or list(full), key=lambda a: (statistics.fmean(full[a]), -ARMS.index(a)))
     return {
         "arm": arm,
@@ -1580,6 +1591,8 @@ def round_winner(domains: dict[str, Any]) -> dict[str, Any] | None:
         "clean_within_aim": arm in ok,
         "own_hardest": {a: round(statistics.fmean(v), 4) for a, v in full.items()},
         "clean_loss": {a: losses[a] for a in full},
+        "clean_short": short,
+        "relaxed": relaxed,
         "domains": list(domains),
     }
 
@@ -2845,27 +2858,45 @@ def _winner_lines(win: dict[str, Any] | None, *, complete: bool) -> list[str]:
     if win is None:
         return []
     aim = 100 * AIMS["clean_loss"]
+    ranked = sorted(win["own_hardest"], key=lambda a: -win["own_hardest"][a])
+    relaxed = win["relaxed"]
 
     def arm_text(a: str) -> str:
         letter = next(k for k, v in LETTERS.items() if v == a)
-        worst = max(win["clean_loss"][a].items(), key=lambda kv: kv[1])
+        worst = max(win["clean_short"][a].items(), key=lambda kv: kv[1])
+        below = "below the best arm's" if worst[0] in relaxed else "lost"
         return (
             f"{letter} `{a}` {100 * win['own_hardest'][a]:.1f}"
             + ("" if worst[1] <= AIMS["clean_loss"] else
-               f" (passed over: {100 * worst[1]:.1f} points of clean F1 lost on {worst[0]})")
+               f" (passed over: {100 * worst[1]:.1f} points of clean F1 {below} on {worst[0]})")
         )  # fmt: skip
 
-    ranked = sorted(win["own_hardest"], key=lambda a: -win["own_hardest"][a])
+    if relaxed:
+        cost = win["clean_loss"]
+        lost = "; ".join(
+            n + ": " + ", ".join(f"`{a}` {100 * cost[a][n]:.1f}" for a in ranked) for n in relaxed
+        )
+        relaxed_text = (
+            f" In {', '.join(relaxed)} no arm kept clean F1 within {aim:.0f} points of the "
+            f"default model's (clean F1 points lost on {lost}): there the fine-tuning budget "
+            f"costs clean F1 whatever the recipe, so the reference is the best arm's clean F1 "
+            f"instead."
+        )
+    else:
+        relaxed_text = ""
+
     default = robustify_default_arm()
     lines = [
         f"**The round's winner** (issue 33, item 4: `anunnaki robustify`'s default is the arm "
         f"with the best mean F1 on (c′) over the domains among those whose clean F1 stays "
-        f"within {aim:.0f} points of the default model's in every domain): "
+        f"within {aim:.0f} points of the default model's in every domain, or of the best "
+        f"arm's in a domain where no arm does): "
         f"`{win['arm']}` (`{win['flags']}`)"
         + ("" if win["clean_within_aim"] else f", though no arm kept clean F1 within {aim:.0f}")
         + ". Mean (c′) F1 per arm: "
         + "; ".join(arm_text(a) for a in ranked)
-        + ".",
+        + "."
+        + relaxed_text,
         "",
     ]
     if default == win["arm"]:
