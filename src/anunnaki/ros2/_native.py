@@ -182,12 +182,16 @@ class Ros2Bridge(Closing):
         self._bus_handles: list[Any] = []
         self._group = rclpy.callback_groups.ReentrantCallbackGroup()
         self._warned: set[tuple[str, bytes]] = set()
+        # every topic of the bridge (the heartbeat too) is declared without rclpy's QoS event
+        # handlers (the module docstring says why); check_peers does their work from a timer
+        events = rclpy.event_handler
+        self._quiet_pub = events.PublisherEventCallbacks(use_default_callbacks=False)
+        self._quiet_sub = events.SubscriptionEventCallbacks(use_default_callbacks=False)
 
     # -- life ----------------------------------------------------------------------------------
     def start(self) -> None:
         """Declare every topic and service on ROS 2 and on the bus."""
         node = self.node
-        events = self.rclpy.event_handler
         for t in self.spec.topics:
             cls = message_class(t.type)
             qos = qos_profile(self.rclpy, t)
@@ -198,16 +202,11 @@ class Ros2Bridge(Closing):
                     self._from_ros(t),
                     qos,
                     callback_group=self._group,
-                    event_callbacks=events.SubscriptionEventCallbacks(use_default_callbacks=False),
+                    event_callbacks=self._quiet_sub,
                 )
                 self._ros_handles.append(("subscription", sub))
             else:
-                pub = node.create_publisher(
-                    cls,
-                    t.ros,
-                    qos,
-                    event_callbacks=events.PublisherEventCallbacks(use_default_callbacks=False),
-                )
+                pub = node.create_publisher(cls, t.ros, qos, event_callbacks=self._quiet_pub)
                 self._ros_handles.append(("publisher", pub))
                 self._bus_handles.append(
                     self.bus.subscribe(t.bus_topic, self._from_bus(t, cls, pub), queue=t.queue)
@@ -235,9 +234,7 @@ class Ros2Bridge(Closing):
             empty,
             self.spec.heartbeat_topic,
             heartbeat_qos(self.rclpy, lease),
-            event_callbacks=self.rclpy.event_handler.PublisherEventCallbacks(
-                use_default_callbacks=False
-            ),
+            event_callbacks=self._quiet_pub,
         )
         self._ros_handles.append(("publisher", pub))
         timer = self.node.create_timer(lease / 4, lambda: pub.publish(empty()))
