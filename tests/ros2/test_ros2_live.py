@@ -283,7 +283,72 @@ def test_a_peer_that_cannot_match_is_named_once(live: Live) -> None:
     assert "(incompatible QoS: Best effort publisher and reliable subscription)" in line
     # the peer's reliable publisher of the same topic still goes through
     assert live.round_trip("string", {"data": "after"}).to_body() == {"data": "after"}
-    assert sum("cannot match the bridge" in ln for ln in live.bridge.lines) == 1
+    assert sum("/anunnaki_test_peer on /in/string" in ln for ln in live.bridge.lines) == 1
+
+
+def _rclpy_node(name: str, *endpoints: tuple[str, str, str]) -> str:
+    """Code of an rclpy node ``name`` with reliable ``(kind, type, topic)`` endpoints.
+
+    It prints ``declared`` once they exist and runs until its SIGTERM.
+    """
+    code = [
+        "import signal, rclpy",
+        "from importlib import import_module",
+        "from rclpy.qos import QoSProfile",
+        "rclpy.init(signal_handler_options=rclpy.signals.SignalHandlerOptions.NO)",
+        f"node = rclpy.create_node({name!r})",
+        "q = QoSProfile(depth=10)",
+        "kept = []",
+    ]
+    for kind, type_name, topic in endpoints:
+        package, cls = type_name.split("/")
+        make = f"import_module({package + '.msg'!r}).{cls}"
+        args = f"{make}, {topic!r}, q" if kind == "publisher" else f"{make}, {topic!r}, print, q"
+        code.append(f"kept.append(node.create_{kind}({args}))")
+    code += ["print('declared', flush=True)", "signal.pause()"]
+    return "\n".join(code) + "\n"
+
+
+def test_a_peer_of_another_type_is_named_once_with_the_fix(live: Live) -> None:
+    # a second rclpy node, in a process of its own (one DDS participant takes one type per
+    # topic name, and the peer's is String on /in/string), publishes std_msgs/Int32 on the
+    # bridge's std_msgs/String topic /in/string, and std_msgs/Bool on /in/bool: same QoS
+    # both, so only the first one's type keeps it from matching
+    wrong = _rclpy_node(
+        "anunnaki_type_probe",
+        ("publisher", "std_msgs/Int32", "/in/string"),
+        ("publisher", "std_msgs/Bool", "/in/bool"),
+    )
+    probe = live.ns.python("-c", wrong, name="type-probe", ready="declared")
+    try:
+        line = live.bridge.wait_for("/anunnaki_type_probe on")
+        assert line.endswith(
+            "the publisher of /anunnaki_type_probe on /in/string cannot match the bridge "
+            "(its type is std_msgs/msg/Int32, the bridge's std_msgs/msg/String); no message "
+            "will pass between them: give the publisher the type std_msgs/String, or the "
+            "bridge file's entry for /in/string 'type: std_msgs/Int32'"
+        ), line
+        # a subscription of the wrong type on /out/int32, declared only now: the check that
+        # names it is a later one than the check that named the probe's publisher, and it
+        # looks at /in/string and /in/bool first (the bridge file's order); neither is named
+        late = _rclpy_node(
+            "anunnaki_type_probe_sub", ("subscription", "std_msgs/String", "/out/int32")
+        )
+        second = live.ns.python("-c", late, name="type-probe-sub", ready="declared")
+        try:
+            line = live.bridge.wait_for("/anunnaki_type_probe_sub on")
+        finally:
+            second.stop()
+    finally:
+        probe.stop()
+    assert line.endswith(
+        "the subscription of /anunnaki_type_probe_sub on /out/int32 cannot match the bridge "
+        "(its type is std_msgs/msg/String, the bridge's std_msgs/msg/Int32); no message will "
+        "pass between them: give the subscription the type std_msgs/Int32, or the bridge "
+        "file's entry for /out/int32 'type: std_msgs/String'"
+    ), line
+    assert sum("/anunnaki_type_probe on" in ln for ln in live.bridge.lines) == 1
+    assert not any("on /in/bool" in ln for ln in live.bridge.lines)
 
 
 def test_the_bridges_topics_carry_no_qos_event_handlers(live: Live) -> None:

@@ -246,8 +246,10 @@ class Ros2Bridge(Closing):
 
         A peer cannot match when its QoS is incompatible with the bridge's (a best-effort
         publisher for the bridge's reliable subscription, say) or when it uses another type
-        on the topic. rclpy's default QoS event handlers said so; the bridge declares its
-        topics without them (the module docstring says why) and calls this from a timer.
+        on the topic; for a type, the message names the fix (the bridge's type for the peer,
+        or the peer's in the bridge file's entry). rclpy's default QoS event handlers said so;
+        the bridge declares its topics without them (the module docstring says why) and calls
+        this from a timer.
 
         Returns:
             How many peers were newly found not to match.
@@ -256,9 +258,9 @@ class Ros2Bridge(Closing):
         q = self.rclpy.qos
         me = self.node.get_name()
         found = 0
-        entries = [(t.ros, t.type, t.direction) for t in self.spec.topics]
-        entries.append((self.spec.heartbeat_topic, "std_msgs/Empty", "to_ros"))
-        for topic, type_name, direction in entries:
+        entries = [(t.ros, t.type, t.direction, True) for t in self.spec.topics]
+        entries.append((self.spec.heartbeat_topic, "std_msgs/Empty", "to_ros", False))
+        for topic, type_name, direction, in_file in entries:
             ros_type = ros2_type(type_name)
             if direction == "to_bus":
                 ends = self.node.get_subscriptions_info_by_topic(topic)
@@ -279,8 +281,13 @@ class Ros2Bridge(Closing):
                 key = (topic, bytes(peer.endpoint_gid))
                 if key in self._warned:
                     continue
+                fix = ""
                 if peer.topic_type != ros_type:
                     why = f"its type is {peer.topic_type}, the bridge's {ros_type}"
+                    fix = f": give the {role} the type {type_name}"
+                    if in_file:
+                        theirs = peer.topic_type.replace("/msg/", "/", 1)
+                        fix += f", or the bridge file's entry for {topic} 'type: {theirs}'"
                 else:
                     pair = (
                         (peer.qos_profile, ours)
@@ -298,11 +305,12 @@ class Ros2Bridge(Closing):
                 where = f"{peer.node_namespace.rstrip('/')}/{peer.node_name}"
                 log.warning(
                     "the %s of %s on %s cannot match the bridge (%s); no message will pass "
-                    "between them",
+                    "between them%s",
                     role,
                     where,
                     topic,
                     why,
+                    fix,
                 )
         return found
 
