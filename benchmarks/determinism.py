@@ -20,9 +20,10 @@ measures, every summary) compared, leaving out what measures the machine rather 
 
     .venv/bin/python benchmarks/determinism.py --case-studies --seeds 2
 
-``--until`` shortens every case to that many simulated seconds (the suite's check,
-tests/benchmarks/test_determinism_benchmark.py, runs the rover's first 9 s and the UAV's
-first 11 s twice each); ``--output`` writes elsewhere than the committed results.
+``--until`` shortens every case to that many simulated seconds (the suite's checks,
+tests/benchmarks/test_determinism_benchmark.py and test_determinism_uav.py, run the rover's
+first 9 s and the UAV's first 11 s twice each); ``--output`` writes elsewhere than the
+committed results.
 """
 
 from __future__ import annotations

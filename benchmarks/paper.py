@@ -2,7 +2,8 @@
 
 Every figure the paper reports for its two case studies is set beside the same measure of
 the shipped files on our data, and the managers' comparison of ``benchmarks/case_studies.py``
-follows. Ours are measured with the project's own commands, each in a fresh process:
+follows. Ours are measured with the project's own commands (``anunnaki.cli.main.main``, run in
+this process so that torch and the models load once; their JSON read from what they print):
 
 - *clean F1*: ``anunnaki evaluate-detector REG --model ID --data DATA --split test --json``
   (the test split, the model's own score threshold; the F1 rule of docs/detector.md);
@@ -34,7 +35,9 @@ figures (:data:`PAPER`, each with its section) and the prose.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import hashlib
+import io
 import json
 import os
 import subprocess
@@ -156,6 +159,19 @@ def sidecar(entry: dict[str, Any]) -> dict[str, Any]:
     return json.loads(side.read_text(encoding="utf-8")) if side.exists() else {}
 
 
+def anunnaki(args: list[str]) -> tuple[int, str, str]:
+    """``anunnaki ARGS`` in this process: its exit code, what it printed and its errors."""
+    from anunnaki.cli.main import main as cli
+
+    out, err = io.StringIO(), io.StringIO()
+    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+        try:
+            code = cli(args)
+        except SystemExit as exc:  # argparse refused the arguments
+            code = exc.code if isinstance(exc.code, int) else 1
+    return code, out.getvalue(), err.getvalue()
+
+
 class Work:
     """Measurements cached by key (command and the hashes of what it reads)."""
 
@@ -177,15 +193,12 @@ class Work:
             return dict(cached["result"])
         start = time.monotonic()
         print(f"  measure {title} …", flush=True)
-        proc = subprocess.run(
-            [sys.executable, "-m", "anunnaki", *args],
-            capture_output=True, text=True, cwd=ROOT, check=False,
-        )  # fmt: skip
-        if proc.returncode != 0:
+        code, stdout, stderr = anunnaki(args)
+        if code != 0:
             raise SystemExit(
-                f"paper.py: {title} failed (anunnaki {' '.join(args)}):\n{proc.stderr[-3000:]}"
+                f"paper.py: {title} failed (anunnaki {' '.join(args)}):\n{stderr[-3000:]}"
             )
-        result = json.loads(proc.stdout.strip().splitlines()[-1])
+        result = json.loads(stdout.strip().splitlines()[-1])
         wall = time.monotonic() - start
         doc = {"title": title, "args": args, "hashes": hashes, "wall_s": wall, "result": result}
         tmp = out.with_suffix(".tmp")

@@ -61,6 +61,24 @@ def _one_compute_thread_per_process() -> None:
 _one_compute_thread_per_process()
 
 
+@pytest.fixture(autouse=True)
+def _torch_threads_as_the_suite_sets_them() -> Iterator[None]:
+    """After each test, torch computes on the threads ``OMP_NUM_THREADS`` gives it again.
+
+    A command run in the test's process keeps the threads it chose: ``anunnaki
+    evaluate-detector`` sets its ``--threads`` (2 unless told) and leaves them set, so every
+    later test of that worker ran torch on two threads, spinning beside the other worker
+    (issue #30: ``tests/managed`` after ``tests/lec/test_lec_cli.py``, one worker, beside a
+    busy core: 74 s of CPU on two threads, 64 s on one).
+    """
+    yield
+    torch = sys.modules.get("torch")
+    wanted = os.environ.get("OMP_NUM_THREADS", "")
+    threads = int(wanted) if wanted.isdigit() else 0
+    if torch is not None and threads > 0 and torch.get_num_threads() != threads:
+        torch.set_num_threads(threads)
+
+
 #: Session fixtures whose setup pytest-timeout counts against the first test that uses them,
 #: with a timeout that holds it, per folder under tests/: the LEC tests' 60 rendered frames
 #: for the shipped model and Enki's tiny rendered dataset take seconds quiet; Enki's passed

@@ -54,3 +54,22 @@ def check_after_degraded(phase: dict[str, Any]) -> None:
     assert 0.0 <= phase["after_degraded_s"] <= phase["delay_s"], phase
     expected = 0.0 if hurt is None or hurt > acted else acted - hurt
     assert abs(phase["after_degraded_s"] - expected) <= 0.002, phase
+
+
+def check_repeats(tmp_path: Path, case: str, until: float) -> None:
+    """benchmarks/determinism.py's two runs of ``case`` to ``until`` (the second beside a busy
+    process) and ``anunnaki replay`` of the first: the same report and decision log."""
+    out = tmp_path / "determinism.json"
+    args = ["--cases", case, "--runs", "2", "--until", str(until), "--output", str(out)]
+    run("determinism.py", *args, timeout=560)
+    doc = load(out)
+    assert set(doc["cases"]) == {case}
+    c = doc["cases"][case]
+    assert c["until"] == until and [r["beside_busy"] for r in c["runs"]] == [False, True]
+    quiet, loaded = c["runs"]
+    assert abs(quiet["simulated_s"] - until) <= 0.2, quiet
+    assert quiet["decisions"] > 0, "the stretch should decide something"
+    assert loaded["log_sha256"] == quiet["log_sha256"]  # the same decisions at the same times
+    assert loaded["report_sha256"] == quiet["report_sha256"]  # the same report, byte for byte
+    assert c["identical_reports"] is True and c["identical_logs"] is True
+    assert c["replay_exit_code"] == 0, c["replay"]  # `anunnaki replay` of the run

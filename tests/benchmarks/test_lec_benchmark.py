@@ -11,7 +11,9 @@ from bench_helpers import load, run
 @pytest.mark.slow
 def test_lec_benchmark(tmp_path: Path) -> None:
     out = tmp_path / "lec.json"
-    run("lec.py", "--runs", "2", "--warmup", "1", "--train-images", "8", "--output", str(out))
+    # one torch thread, as the suite's processes (two spin beside the other worker)
+    args = ["--runs", "2", "--warmup", "1", "--train-images", "8", "--threads", "1"]
+    run("lec.py", *args, "--output", str(out))
     doc = load(out)["detector"]
     for size in ("128x128", "320x240"):
         for batch in ("batch1", "batch8"):

@@ -13,7 +13,9 @@ from bench_helpers import load, run
 def test_oracle_ramps_benchmark(tmp_path: Path, tiny_rover: Path) -> None:
     """Its quick mode, every case (the scripted ramps, the dusk, the close pedestrians)."""
     out = tmp_path / "oracle_ramps.json"
-    args = ["--quick", "--seeds", "1", "--loop-seconds", "2", "--threads", "1"]
+    # 2 s of clear weather and 2-s ramps (quick: 5 and 5): every case still runs and is scored
+    args = ["--quick", "--seeds", "1", "--clean", "2", "--ramp", "2", "--loop-seconds", "2"]
+    args += ["--threads", "1"]
     run("oracle_ramps.py", *args, "--data", str(tiny_rover), "--output", str(out), timeout=800)
     doc = load(out)
     assert doc["benchmark"] == "oracle_ramps" and doc["settings"]["quick"] is True

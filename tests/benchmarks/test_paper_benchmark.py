@@ -54,6 +54,7 @@ def test_quick_page_regenerates_from_measurements(tiny_rover: Path, tmp_path: Pa
         "--quick", "--platforms", "rover", "--rover-data", str(tiny_rover),
         "--work", str(work), "--page", str(page),
         "--case-studies", str(tmp_path / "case-studies.json"),
+        "--threads", "1",  # as the suite's processes (two spin beside the other worker)
     ]  # fmt: skip
     run("paper.py", *args, timeout=900)
     text = page.read_text(encoding="utf-8")
