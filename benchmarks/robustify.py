@@ -178,6 +178,8 @@ LETTERS = {
     "G": "archive_mix_rok",
     "mix": "corruption_mix",
 }
+#: Arm name → its letter (the inverse of :data:`LETTERS`).
+LETTER_OF = {arm: letter for letter, arm in LETTERS.items()}
 #: Trained arms that do not depend on the domain: one model per platform and seed.
 SHARED = ("corruption_mix",)
 LABELS = {
@@ -1576,13 +1578,13 @@ def round_winner(domains: dict[str, Any]) -> dict[str, Any] | None:
     full = {a: v for a, v in own.items() if len(v) == len(domains)}
     if not full:
         return None
-    relaxed = [n for n in domains if min(losses[a][n] for a in full) > AIMS["clean_loss"]]
+    least = {n: min(losses[a][n] for a in full) for n in domains}  # the best arm's loss
+    relaxed = [n for n in domains if least[n] > AIMS["clean_loss"]]
     # the shortfall against the reference: the default's clean F1, or the best arm's
     short = {
-        a: {n: round(x - (min(losses[b][n] for b in full) if n in relaxed else 0.0), 4)
-            for n, x in losses[a].items()}
+        a: {n: round(x - (least[n] if n in relaxed else 0.0), 4) for n, x in losses[a].items()}
         for a in full
-    }  # fmt: skip
+    }
     ok = [a for a in full if max(short[a].values()) <= AIMS["clean_loss"]]
     arm = max(ok or list(full), key=lambda a: (statistics.fmean(full[a]), -ARMS.index(a)))
     return {
@@ -1868,7 +1870,7 @@ def round_arms(rnd: Round, screening: Path, *, planning: bool) -> tuple[str, dic
             )
         best = {"arm": "archive_mix_wok_c", "planned": "the screening has not run: the "
                 "costliest candidate (F) is planned"}  # fmt: skip
-    letter = next(k for k, v in LETTERS.items() if v == best["arm"])
+    letter = LETTER_OF[best["arm"]]
     return rnd.arms.replace(BEST, letter), best
 
 
@@ -2862,7 +2864,7 @@ def _winner_lines(win: dict[str, Any] | None, *, complete: bool) -> list[str]:
     relaxed = win["relaxed"]
 
     def arm_text(a: str) -> str:
-        letter = next(k for k, v in LETTERS.items() if v == a)
+        letter = LETTER_OF[a]
         worst = max(win["clean_short"][a].items(), key=lambda kv: kv[1])
         below = "below the best arm's" if worst[0] in relaxed else "lost"
         return (
@@ -2920,7 +2922,7 @@ def _ablation(doc: dict[str, Any]) -> list[str]:
                 else f"{100 * vs[c]['margin']:+.1f} {_interval(vs[c])} {vs[c]['verdict']}"
                 for c in conds
             ]
-            letter = next(k for k, v in LETTERS.items() if v == arm)
+            letter = LETTER_OF[arm]
             rows.append(f"| {name} | {letter} {LABELS[arm]} | " + " | ".join(cells) + " |")
     if not rows:
         return []
