@@ -13,6 +13,7 @@ from __future__ import annotations
 import contextlib
 import email
 import email.policy
+import socket
 import threading
 from dataclasses import dataclass
 from email.message import EmailMessage
@@ -86,6 +87,7 @@ class MailSink(Closing):
         self._inbox = _Inbox()
         self._controller = Controller(self._inbox, hostname=host, port=port)
         try:
+            _bindable(host, port)  # at once: aiosmtpd waits its 5-s ready timeout first
             self._controller.start()
         except (OSError, RuntimeError) as exc:
             loop = self._controller.loop
@@ -114,3 +116,15 @@ class MailSink(Closing):
         if self._open:
             self._open = False
             self._controller.stop()
+
+
+def _bindable(host: str, port: int) -> None:
+    """Raise the ``OSError`` that binding ``host:port`` gives now (a port another server holds).
+
+    With ``SO_REUSEADDR`` as the server sets it: a port left in ``TIME_WAIT`` by a closed
+    sink binds; one that something listens on does not.
+    """
+    family = socket.AF_INET6 if ":" in host else socket.AF_INET
+    with socket.socket(family, socket.SOCK_STREAM) as probe:
+        probe.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        probe.bind((host, port))
