@@ -10,7 +10,7 @@ The rover example then runs through the router, in one process and with ``--proc
 while a client with the rover's certificate forges Utu's cycle messages and the oracle's
 output, and callers without the right certificate ask for operator services. Each run must
 make the decisions of the same run without TLS and rules (a live run's, within its
-tolerance in simulated time: tests/launch/live_rover.py), and every forgery and
+tolerance in simulated time: tests/live_rover.py), and every forgery and
 unauthorised call must be denied.
 """
 
@@ -28,13 +28,13 @@ from typing import Any
 
 import pytest
 import yaml
-from live_rover import LIVE_LAG, LIVE_SPEED, live_decisions
 
 from anunnaki.bus import Bus, BusConfig, BusConnectError, BusTimeout, open_bus
 from anunnaki.bus._zenoh import free_port as bus_free_port
 from anunnaki.launch import load_launch, run_launch
 from anunnaki.messages import AnalysisState, MonitorBatch
 from anunnaki.topics import ready_service
+from live_rover import LIVE_LAG, LIVE_SPEED, live_decisions
 
 pytest.importorskip("zenoh")
 pytestmark = pytest.mark.slow
@@ -296,7 +296,7 @@ def test_documented_secure_run_decides_as_a_plain_one_and_denies_forgeries(
     assert result.exit_code == 0, f"{result.reason}\n{log}"
     assert not attacked.error, attacked.error
     decisions = [(d.t, d.kind, d.tactic or "") for d in live_decisions(result.decisions)]
-    # A live run (tests/launch/live_rover.py): the same decisions in the same order, none
+    # A live run (tests/live_rover.py): the same decisions in the same order, none
     # more than LIVE_LAG simulated seconds after the plain run's (the fail-safe may come
     # sooner: G6's slack at 4.8 Hz).
     assert [d[1:] for d in decisions] == [d[1:] for d in plain_decisions], log
