@@ -20,6 +20,7 @@ import pytest
 
 from anunnaki.cli.main import main
 from anunnaki.utu import Knowledge
+from live_rover import LIVE_LAG, LIVE_SPEED
 
 ROOT = Path(__file__).resolve().parents[2]
 LAUNCH = ROOT / "examples" / "rover" / "utu.yaml"
@@ -126,16 +127,27 @@ def test_no_case_and_a_missing_case(tmp_path: Path, capsys: pytest.CaptureFixtur
 
 
 def test_processes_record_too(case_dir: Path, tmp_path: Path) -> None:
-    """One process per node: the launch's own connection records (and commits) the claims."""
+    """One process per node: the launch's own connection records (and commits) the claims.
+
+    A live run (tests/live_rover.py): G2 loses its support at the latest ``LIVE_LAG``
+    simulated seconds after the light dims (sooner if G6 reads as violated first) and
+    regains it once the fail-safe has switched to manual; a goal gone unknown for a moment
+    under load may lose and regain it again, always in turn.
+    """
     db = tmp_path / "run.db"
     args = ["run", str(LAUNCH), "--processes", "--case", str(case_dir), "--knowledge", str(db)]
-    assert main([*args, "--speed", "10"]) == 0
+    assert main([*args, "--speed", str(LIVE_SPEED)]) == 0
     kb = Knowledge(db)
     rows = [
         (d.t, d.data["claim"], d.data["support"]) for d in kb.decisions() if d.kind == "assurance"
     ]
     kb.close()
-    assert [r for r in rows if r[0] > 0] == [(25.0, "G2", "lost"), (25.5, "G2", "regained")]
+    changes = [r for r in rows if r[0] > 0]
+    assert changes and {claim for _, claim, _ in changes} == {"G2"}, rows
+    supports = [support for _, _, support in changes]
+    assert supports == ["lost", "regained"] * (len(supports) // 2) and supports, rows
+    (lost, _, _), (regained, _, _) = changes[:2]
+    assert lost < 25.0 + LIVE_LAG and lost < regained <= lost + 5.0, rows  # fail-safe deadline
 
 
 def test_status_asks_a_running_launch_over_its_bus(case_dir: Path, tmp_path: Path) -> None:

@@ -98,6 +98,12 @@ def missing_registry(d: Path) -> tuple[Path, int | None]:
     return d.parent / "models" / "rover-nope.yaml", None
 
 
+def removed_sync(d: Path) -> tuple[Path, int]:
+    # a launch file written before the replay stopped waiting for Utu
+    f = d / "utu.yaml"
+    return f, edit(f, "    publish_clock: true\n", "    publish_clock: true\n    sync: true\n") + 1
+
+
 def domain_the_registry_lacks(d: Path) -> tuple[Path, int]:
     # the binding's enum lists low_light; the UAV's model registry has no model for it
     f = d / "tactics.yaml"
@@ -111,6 +117,7 @@ CASES: dict[str, tuple[str, str, Callable[[Path], tuple[Path, int | None]]]] = {
     "invalid notify section": ("rover", "demo.yaml", bad_notify),
     "unknown oracle": ("rover", "demo.yaml", unknown_oracle),
     "missing model registry": ("rover", "demo.yaml", missing_registry),
+    "removed option of the scripted replay": ("rover", "utu.yaml", removed_sync),
 }
 
 

@@ -1,8 +1,10 @@
 """``anunnaki run`` / ``anunnaki node``: launch files, the rover end to end, signals, B5.
 
-The rover example runs once in one process (the composed manager), once with the node
-classes in one process, and once with one process per node over zenoh on loopback; all
-three must take the same decisions. Everything waits on conditions with deadlines.
+The rover example runs once in one process (the composed manager: one deterministic
+program on an executor), once with the node classes in one process, and once with one
+process per node over zenoh on loopback (both live: the replay waits for no one); all three
+must take the same decisions, the live ones within a tolerance in simulated time.
+Everything waits on conditions with deadlines.
 """
 
 from __future__ import annotations
@@ -20,6 +22,7 @@ from collections.abc import Callable, Iterator
 from pathlib import Path
 
 import pytest
+from live_rover import LIVE_LAG, LIVE_SPEED, live_decisions
 
 from anunnaki.bus import open_bus
 from anunnaki.cli.main import main
@@ -120,7 +123,7 @@ def test_the_rover_launch_file_loads() -> None:
     assert launch.nodes["monitor"] == 50 and launch.nodes["knowledge"] == 10
     assert launch.bus.kind == "inproc" and launch.utu.clock == "sim"
     scripted = launch.managed
-    assert isinstance(scripted, ScriptedKind) and scripted.options.sync
+    assert isinstance(scripted, ScriptedKind) and scripted.options.publish_clock
     assert Path(scripted.options.trace) == ROVER / "trace.jsonl" and scripted.records
     assert Path(launch.utu.goal_model) == ROVER / "goals.yaml"
     processes = load_launch(ROVER / "utu-processes.yaml", read_records=False)
@@ -185,6 +188,32 @@ def test_bad_launch_files_name_file_and_line(
         assert text.startswith(f"{p}:{line}:"), text
 
 
+@pytest.mark.parametrize(
+    "managed",
+    [
+        "managed:\n  scripted:\n    trace: ROVER/trace.jsonl\n    {key}: {value}\n",
+        "managed:\n  kind: scripted\n  trace: ROVER/trace.jsonl\n  {key}: {value}\n",
+    ],
+)
+@pytest.mark.parametrize(("key", "value"), [("sync", "true"), ("sync_timeout", "2.0")])
+def test_a_removed_replay_option_says_so_with_its_line_and_the_fix(
+    tmp_path: Path, managed: str, key: str, value: str
+) -> None:
+    """``sync``/``sync_timeout`` (the replay waiting for Utu) were removed: a launch file
+    that still has one is told where, and what to do, before anything starts."""
+    body = HEAD + managed.format(key=key, value=value)
+    p = launch_file(tmp_path, body)
+    with pytest.raises(ModelFileError) as err:
+        load_launch(p)
+    exc = err.value
+    assert exc.line == body.count("\n")  # the key's own line, the last
+    assert exc.message == f"'{key}' was removed"
+    assert exc.element is not None and exc.element.endswith(f".{key}")
+    assert exc.hint is not None and exc.hint.startswith("delete the key")
+    assert "executor" in exc.hint and "rosbag play" in exc.hint
+    assert str(exc).startswith(f"{p}:{exc.line}:")
+
+
 def test_parse_launch_from_text() -> None:
     launch = parse_launch(
         "anunnaki: launch/1\nutu: {goal_model: goals.yaml, binding: binding.yaml}\n"
@@ -210,6 +239,22 @@ def assert_the_rover_story(result: RunResult, out: str) -> None:
     assert "postcondition_ok" in out and "fail-safe" in out
 
 
+def assert_the_live_rover_story(result: RunResult, out: str) -> None:
+    """What a live run of the rover guarantees (:mod:`live_rover`): the same decisions in the
+    same order, the switch to manual, and the fail-safe at the latest ``LIVE_LAG`` simulated
+    seconds after the light dims at t=25 (it may come sooner). The exact times are the
+    deterministic run's (:func:`test_rover_in_one_process_end_to_end`).
+    """
+    assert result.exit_code == 0 and result.reason == "trace ended"
+    decisions = live_decisions(result.decisions)
+    assert [(d.kind, d.tactic) for d in decisions] == ROVER_STORY, out
+    first, switched, verified = decisions[0], decisions[2], decisions[4]
+    assert first.t < 25.0 + LIVE_LAG, out
+    assert switched.data["mode"] == "manual" and switched.data["ok"] is True
+    assert verified.t <= first.t + 5.0  # the fail-safe's deadline
+    assert "postcondition_ok" in out and "fail-safe" in out
+
+
 def test_rover_in_one_process_end_to_end() -> None:
     result, out = run(EXAMPLE, speed=50)
     assert_the_rover_story(result, out)
@@ -217,6 +262,7 @@ def test_rover_in_one_process_end_to_end() -> None:
     assert "ready: monitor, analyze, plan, execute, knowledge" in out
 
 
+@pytest.mark.slow
 def test_rover_with_the_node_classes_in_one_process(tmp_path: Path) -> None:
     text = EXAMPLE.read_text().replace("  knowledge: {rate: 10}\n", "")
     p = launch_file(
@@ -226,9 +272,9 @@ def test_rover_with_the_node_classes_in_one_process(tmp_path: Path) -> None:
         .replace("tactics.yaml", "ROVER/tactics.yaml")
         .replace("trace.jsonl", "ROVER/trace.jsonl"),
     )
-    result, out = run(p, speed=50, knowledge=str(tmp_path / "kb.db"))
-    assert "4 nodes in one process" in out
-    assert_the_rover_story(result, out)
+    result, out = run(p, speed=LIVE_SPEED, knowledge=str(tmp_path / "kb.db"))
+    assert "4 nodes in one process" in out  # on threads of their own: a live run
+    assert_the_live_rover_story(result, out)
 
 
 def test_run_until_stops_at_the_given_trace_time() -> None:
@@ -243,11 +289,12 @@ def test_rover_one_process_per_node_over_zenoh(
 ) -> None:
     db = tmp_path / "run.db"
     with caplog.at_level("WARNING", logger="anunnaki"):
-        result, out = run(EXAMPLE, processes=True, speed=50, knowledge=str(db))
+        result, out = run(EXAMPLE, processes=True, speed=LIVE_SPEED, knowledge=str(db))
     # A normal end is quiet: the platform's guard is down before the nodes exit (issue 21).
     assert not [r for r in caplog.records if "liveliness guard" in r.getMessage()], caplog.text
-    assert_the_rover_story(result, out)
-    assert story(result) == story(run(EXAMPLE, speed=50)[0])  # the same decisions
+    assert_the_live_rover_story(result, out)
+    deterministic = story(run(EXAMPLE, speed=50)[0])  # in one process, on the executor
+    assert [(d.kind, d.tactic) for d in live_decisions(result.decisions)] == deterministic
     pids = set(result.pids.values())
     assert len(pids) == 5 and os.getpid() not in pids
     assert wait_for(lambda: all(gone(p) for p in pids))
@@ -518,7 +565,7 @@ def test_a_launch_run_stops_the_platform_when_a_node_started_by_hand_dies(
     endpoint = f"tcp/127.0.0.1:{free_port()}"
     text = looping_example(tmp_path).read_text()
     text = text.replace("bus: {kind: inproc}", f"bus: {{kind: zenoh, listen: ['{endpoint}']}}")
-    text = text.replace("  monitor: {rate: 50}\n", "").replace("sync: true", "sync: false")
+    text = text.replace("  monitor: {rate: 50}\n", "")
     p = launch_file(tmp_path, text)
     db = tmp_path / "run.db"
     # --speed 5: the loop decides within seconds, not 25 (a fail-safe: the dim light at trace

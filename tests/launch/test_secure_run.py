@@ -9,7 +9,8 @@ the block of docs/running.md#across-machines. Only file locations and the port c
 The rover example then runs through the router, in one process and with ``--processes``,
 while a client with the rover's certificate forges Utu's cycle messages and the oracle's
 output, and callers without the right certificate ask for operator services. Each run must
-make the decisions of the same run without TLS and rules, and every forgery and
+make the decisions of the same run without TLS and rules (a live run's, within its
+tolerance in simulated time: tests/live_rover.py), and every forgery and
 unauthorised call must be denied.
 """
 
@@ -33,6 +34,7 @@ from anunnaki.bus._zenoh import free_port as bus_free_port
 from anunnaki.launch import load_launch, run_launch
 from anunnaki.messages import AnalysisState, MonitorBatch
 from anunnaki.topics import ready_service
+from live_rover import LIVE_LAG, LIVE_SPEED, live_decisions
 
 pytest.importorskip("zenoh")
 pytestmark = pytest.mark.slow
@@ -41,7 +43,7 @@ ROOT = Path(__file__).resolve().parents[2]
 BUS_DOC = ROOT / "docs" / "bus.md"
 RUNNING_DOC = ROOT / "docs" / "running.md"
 ROVER = ROOT / "examples" / "rover"
-SPEED = 10.0  # the trace's 50 s in 5 s: time for the forgeries while Utu runs
+SPEED = LIVE_SPEED  # the trace's 50 s in 5 s: time for the forgeries while Utu runs
 FORGER = "rover-forger"
 
 
@@ -293,13 +295,13 @@ def test_documented_secure_run_decides_as_a_plain_one_and_denies_forgeries(
     log = out.getvalue()
     assert result.exit_code == 0, f"{result.reason}\n{log}"
     assert not attacked.error, attacked.error
-    decisions = [(d.t, d.kind, d.tactic or "") for d in result.decisions]
-    # The same decisions in the same order; a postcondition may be verified one status
-    # instant (0.5 s) apart: the buzzer command reaches the scripted rover as the execute
-    # part publishes it, after or (through the router) just before its next instant.
+    decisions = [(d.t, d.kind, d.tactic or "") for d in live_decisions(result.decisions)]
+    # A live run (tests/live_rover.py): the same decisions in the same order, none
+    # more than LIVE_LAG simulated seconds after the plain run's (the fail-safe may come
+    # sooner: G6's slack at 4.8 Hz).
     assert [d[1:] for d in decisions] == [d[1:] for d in plain_decisions], log
-    for (t, kind, _), (t_plain, _, _) in zip(decisions, plain_decisions, strict=True):
-        assert abs(t - t_plain) <= (0.5 if kind == "postcondition_ok" else 1e-9), log
+    for (t, _, _), (t_plain, _, _) in zip(decisions, plain_decisions, strict=True):
+        assert t <= t_plain + LIVE_LAG, log
     assert attacked.marker.is_set(), "the forger's last (allowed) message never arrived"
     assert attacked.forged_seen == []
     assert attacked.answered == {

@@ -535,7 +535,8 @@ def test_a_forged_batch_time_is_refused_alone_by_the_analyze_node(tmp_path) -> N
             real = MonitorInput(topic="/rover/status", t=2.0, msg={"mode": "autonomous"})
             bus.publish(topics.MONITOR_INPUT, MonitorBatch(origin="m", seq=1, t=2.0, inputs=[real]))
             bus.publish(topics.MONITOR_INPUT, MonitorBatch(origin="m", seq=2, t=1e12, inputs=[]))
-            assert wait_for(lambda: analyze.step() and analyze.stage.taken == 1)
+            status = analyze.stage.topic_watch.topics["/rover/status"]
+            assert wait_for(lambda: analyze.step() and status.count == 1)
             assert analyze.stage.now == 2.0 and analyze.stage.refused == 1
         finally:
             analyze.close()

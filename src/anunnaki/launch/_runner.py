@@ -19,15 +19,13 @@ import sys
 import tempfile
 import threading
 import time
-from collections.abc import Callable, Iterable, Sequence
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, TextIO
 
-from anunnaki import topics
 from anunnaki._closing import Closing
 from anunnaki.bus import Bus, BusConfig, Executor, open_bus
-from anunnaki.clock import SimClock
 from anunnaki.launch._schema import Launch, LaunchError, _StoppedDuringBringUp
 from anunnaki.launch._supervisor import (
     Children,
@@ -112,90 +110,6 @@ class _Printer:
         self.decisions += rows
         for d in rows:
             self.say(format_decision(d, t0=self.t0 or 0.0))
-
-
-# -- sync (no executor) ----------------------------------------------------------------------------
-class _InputCounter:
-    """Across processes: count the inputs the monitor node has republished."""
-
-    def __init__(self, bus: Bus) -> None:
-        self.seen = 0
-        self._lock = threading.Lock()
-        self.sub = bus.subscribe(topics.MONITOR_INPUT, self._on_batch, queue=1024)
-
-    def _on_batch(self, sample: Any) -> None:
-        inputs = sample.message.to_body().get("inputs", [])
-        with self._lock:
-            self.seen += len(inputs) if isinstance(inputs, list) else 0
-
-    def __call__(self, n: int) -> bool:
-        with self._lock:
-            return self.seen >= n
-
-
-class _CycleCounter:
-    """Across processes: whether Utu has taken ``n`` inputs and acted on them.
-
-    The analyze node reports the inputs taken so far (``taken`` in its state); with an
-    execute node, the cycle that took them must be done too (its actions are out).
-    """
-
-    def __init__(self, bus: Bus, *, wait_done: bool) -> None:
-        self._lock = threading.Lock()
-        self._cycles: list[tuple[int, int]] = []  # (seq, taken) of recent cycles
-        self._done = -1
-        self._wait_done = wait_done
-        self._declared = [bus.subscribe(topics.ANALYSIS, self._on_state, queue=1024)]
-        if wait_done:
-            self._declared.append(bus.subscribe(topics.CYCLE_DONE, self._on_done, queue=1024))
-
-    def _on_state(self, sample: Any) -> None:
-        body = sample.message.to_body()
-        seq, taken = body.get("seq"), body.get("taken")
-        if isinstance(seq, int) and isinstance(taken, int):
-            with self._lock:
-                self._cycles.append((seq, taken))
-                del self._cycles[:-256]
-
-    def _on_done(self, sample: Any) -> None:
-        seq = sample.message.to_body().get("seq")
-        if isinstance(seq, int):
-            with self._lock:
-                self._done = max(self._done, seq)
-
-    def __call__(self, n: int) -> bool:
-        with self._lock:
-            seq = next((s for s, taken in self._cycles if taken >= n), None)
-            return seq is not None and (not self._wait_done or self._done >= seq)
-
-
-def _counter(bus: Bus, nodes: Iterable[str]) -> Callable[[int], bool] | None:
-    """Whether Utu has taken ``n`` inputs so far, from what its nodes report on the bus."""
-    names = set(nodes)
-    if "analyze" in names:
-        return _CycleCounter(bus, wait_done="execute" in names)
-    if "monitor" in names:
-        return _InputCounter(bus)
-    return None
-
-
-def _taken_here(
-    nodes: Sequence[UtuNode | AutonomicManager], bus: Bus
-) -> Callable[[int], bool] | None:
-    """In one process, without an executor: whether Utu has taken ``n`` inputs so far (sync).
-
-    Counted, never read off empty input queues: a step drains the queues first and reads
-    the clock after, and in between the next instant would move the clock on and the
-    inputs be stamped one instant late (whenever the step runs on a thread of its own:
-    the nodes, or the composed manager on a bus other than the in-process one). The
-    composed manager counts in its analysis; separate nodes report on the bus, as across
-    processes.
-    """
-    for node in nodes:
-        if isinstance(node, AutonomicManager):
-            manager = node
-            return lambda n: manager.analyze_stage.taken >= n
-    return _counter(bus, (node.name for node in nodes if isinstance(node, UtuNode)))
 
 
 @dataclass
@@ -419,16 +333,10 @@ class _Runner:
         self,
         bus: Bus,
         executor: Executor | None = None,
-        *,
-        on_instant: Callable[[float], object] | None = None,
-        taken: Callable[[int], bool] | None = None,
     ) -> ManagedRun | None:
         """Start the managed system (a plugin) in its own thread.
 
         ``executor``: the run's one thread of delivery, if it has one (the system drains it).
-        Without one, ``on_instant(t)`` moves Utu's clock in this process before an instant's
-        messages go out and ``taken(n)`` tells whether Utu has taken ``n`` inputs so far
-        (a ``sync`` replay waits for it).
         """
         if self.managed is None:
             return None
@@ -439,11 +347,6 @@ class _Runner:
             until=self.until,
             say=self.say,
             executor=executor,
-            on_instant=on_instant,
-            taken=taken,
-            watched=frozenset(
-                tb.topic for agent in self.parts.model.agents.values() for tb in agent.topics
-            ),
         )
         self.running = self.managed.start(ctx)
         return self.running
@@ -555,10 +458,8 @@ class _Runner:
             self._header(mode, bus)
             kb = self._open_knowledge(bus)
             tail = DecisionTail(kb)
-            # On sim time the scripted system moves the clock itself, in order with its
-            # records (a clock fed from the bus arrives on another thread: racy).
-            sim = SimClock(max_jump=self.utu.max_time_jump) if self.utu.clock == "sim" else None
-            nodes.extend(self._build_nodes(bus, kb, sim, composed=all_five))
+            # On sim time each node takes its time from /clock, as across processes.
+            nodes.extend(self._build_nodes(bus, kb, composed=all_five))
             detach = _drive(nodes, executor, halt, crashed, threads)
             wait_ready(bus, list(launch.nodes), timeout=launch.config.ready_timeout, stop=self.stop)
             peers = self._watch_peers(bus)
@@ -566,12 +467,7 @@ class _Runner:
             self.say(f"ready: {', '.join(launch.nodes)} after {ready_after:.2f} s")
             printer = _Printer(self.out, tail)
             t_run = time.monotonic()
-            managed = self._start_managed(
-                bus,
-                executor,
-                on_instant=sim.update if sim is not None and executor is None else None,
-                taken=None if executor is not None else _taken_here(nodes, bus),
-            )
+            managed = self._start_managed(bus, executor)
             code, reason = self._watch(
                 printer, managed.thread if managed else None, lambda: crashed[0] if crashed else ""
             )
@@ -633,18 +529,16 @@ class _Runner:
         return PeerWatch(ours[0], bus, self.utu, say=self.say, hosts=ours)
 
     def _build_nodes(
-        self, bus: Bus, kb: Knowledge, sim: SimClock | None, *, composed: bool
+        self, bus: Bus, kb: Knowledge, *, composed: bool
     ) -> list[UtuNode | AutonomicManager]:
         """The launch's Utu nodes on ``bus``: the composed manager when all five are here."""
         launch = self.launch
         if composed:
             return [
-                AutonomicManager.from_config(
-                    self.parts, bus=bus, knowledge=kb, clock=sim, nodes=launch.nodes
-                )
+                AutonomicManager.from_config(self.parts, bus=bus, knowledge=kb, nodes=launch.nodes)
             ]
         return [
-            build_node(name, self.parts, bus=bus, knowledge=kb, clock=sim, rate=rate)
+            build_node(name, self.parts, bus=bus, knowledge=kb, rate=rate)
             for name, rate in launch.nodes.items()
         ]
 
@@ -695,7 +589,6 @@ class _Runner:
             # Create the knowledge base before the nodes open it together.
             kb = self._open_knowledge(bus)
             tail = DecisionTail(kb)
-            taken = _counter(bus, launch.nodes)  # before the nodes: it sees every report
             for name in launch.nodes:
                 config = child_bus_config(parent_config, bus.endpoints, f"{launch.name}-{name}")
                 proc = children.start(name, self._node_argv(name, config))
@@ -712,7 +605,7 @@ class _Runner:
             self.say(f"ready: {', '.join(launch.nodes)} after {ready_after:.2f} s")
             printer = _Printer(self.out, tail)
             t_run = time.monotonic()
-            managed = self._start_managed(bus, taken=taken)
+            managed = self._start_managed(bus)
 
             def failed() -> str:
                 dead = children.died()

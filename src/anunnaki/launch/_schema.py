@@ -477,6 +477,16 @@ def _managed(
             element=".".join(prefix) if prefix != ("managed",) else "managed.kind",
         )
     cls = MANAGED.factory(name)
+    removed: dict[str, str] = getattr(cls.Options, "removed", {})  # type: ignore[attr-defined]
+    for key in options:
+        if key in removed:
+            raise ModelFileError(
+                f"'{key}' was removed",
+                path=where,
+                line=lines.line((*prefix, key)),
+                element=".".join((*prefix, key)),
+                hint=removed[key],
+            )
     try:
         validated = cls.Options.model_validate(options)  # type: ignore[attr-defined]
     except ValidationError as exc:

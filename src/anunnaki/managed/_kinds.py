@@ -18,7 +18,7 @@ from pydantic import BaseModel, ConfigDict, Field
 
 from anunnaki.errors import AnunnakiError, MissingExtraError, ModelFileError
 from anunnaki.managed._camera import check_camera_chain
-from anunnaki.managed._slot import DecisionLike, ManagedContext, UtuSettings, wait_for_utu
+from anunnaki.managed._slot import DecisionLike, ManagedContext, UtuSettings
 from anunnaki.trace import Record, read_trace
 
 __all__ = ["ScriptedConfig", "ScriptedKind", "SimConfig", "SimKind"]
@@ -36,6 +36,13 @@ def _here(base: Path, p: str) -> str:
 
 
 # -- scripted ----------------------------------------------------------------------------------
+_NO_SYNC = (
+    "delete the key: in one process on clock: sim the replay is in step with Utu on the "
+    "run's executor; on threads or across processes it plays on its clock like a bag "
+    "(rosbag play waits for no subscriber); docs/running.md"
+)
+
+
 class ScriptedConfig(_Strict):
     """A scripted managed system (:class:`~anunnaki.managed.ScriptedSystem`).
 
@@ -52,19 +59,22 @@ class ScriptedConfig(_Strict):
         loop: Start over at the end (trace time keeps increasing), until stopped.
         publish_clock: Publish the trace time on ``/clock`` (for ``clock: sim``; always so
             when the run is one program on an executor, where it is Utu's only clock).
-        sync: Without an executor (Utu on threads of its own, or in other processes): after
-            each instant, wait (at most ``sync_timeout`` s) until Utu has taken that
-            instant's messages before moving time on, as a simulator waits for its
-            controller. With ``clock: sim`` every input is then stamped with exactly its
-            instant, at any ``speed``. On an executor the replay is in step anyway.
-        sync_timeout: The longest wait per instant, in wall seconds.
 
     In one process on sim time (``clock: sim``, Utu's five parts composed) the replay is one
     deterministic program: after each instant the replay drains the run's executor (every
     node takes that instant's messages, Utu acts on them) before it moves time on, at any
-    ``speed`` (``anunnaki.bus.Executor``, docs/running.md).
+    ``speed`` (``anunnaki.bus.Executor``, docs/running.md). Anywhere else (Utu on threads
+    of its own, or in other processes) the replay plays on its clock as ``rosbag play``
+    does, waiting for no subscriber: with ``publish_clock`` an instant's time goes out
+    before its messages, and Utu takes whatever has arrived at each cycle.
 
     """
+
+    #: Options that were removed: what a launch file that still has one is told to do.
+    removed: ClassVar[dict[str, str]] = {
+        "sync": _NO_SYNC,
+        "sync_timeout": _NO_SYNC,
+    }
 
     trace: str
     bridge: str | None = None
@@ -74,8 +84,6 @@ class ScriptedConfig(_Strict):
     speed: Annotated[float, Field(gt=0, le=10_000)] = 1.0
     loop: bool = False
     publish_clock: bool = False
-    sync: bool = False
-    sync_timeout: Annotated[float, Field(gt=0)] = 1.0
 
 
 def drive(
@@ -85,16 +93,12 @@ def drive(
     speed: float,
     loop: bool,
     until: float | None,
-    on_instant: Callable[[float], object] | None = None,
-    after_instant: Callable[[int], object] | None = None,
-    watched: frozenset[str] = frozenset(),
+    after_instant: Callable[[], object] | None = None,
 ) -> None:
     """Publish the scripted system's trace live: record time / ``speed`` after the start.
 
-    ``on_instant(t)`` is called before the records of instant ``t`` go out (it moves an
-    in-process simulation clock), and ``after_instant(n)`` after them, with ``n`` the number
-    of records on ``watched`` topics (the run's executor drains there; without one, a
-    ``sync`` replay waits until Utu has taken them).
+    ``after_instant()`` is called after the records of each instant went out (the run's
+    executor drains there).
     """
     base = list(system.records)
     instants = system.instants()
@@ -105,7 +109,6 @@ def drive(
     span = instants[-1] - first + gap
     wall0 = time.monotonic()
     offset = 0.0
-    cursor = 0  # the first record not yet counted for after_instant
     while True:
         for instant in instants:
             t = instant + offset
@@ -114,16 +117,9 @@ def drive(
             delay = wall0 + (t - first) / speed - time.monotonic()
             if (delay > 0 and stop.wait(delay)) or stop.is_set():
                 return
-            if on_instant is not None:
-                on_instant(t)
             system.step(t)
             if after_instant is not None:
-                n = 0
-                records = system.records
-                while cursor < len(records) and records[cursor].t <= t:
-                    n += records[cursor].topic in watched
-                    cursor += 1
-                after_instant(n)
+                after_instant()
         if not loop:
             return
         offset += span
@@ -159,36 +155,6 @@ class _Running:
             after, self._after_close = self._after_close, None
             if after is not None:
                 after()
-
-
-def _after_instant(ctx: ManagedContext, sc: ScriptedConfig) -> Callable[[int], object] | None:
-    """What a replay does after each instant (``n``: the watched records it published).
-
-    On the run's executor: drain it. Without one, with ``sync``: wait until Utu (on other
-    threads or in other processes) has taken them.
-    """
-    executor = ctx.executor
-    if executor is not None:
-        return lambda _n: executor.spin_until_idle()
-    taken = ctx.taken
-    if not sc.sync or taken is None:
-        return None
-    total = late = 0
-
-    def wait(n: int) -> None:
-        nonlocal total, late
-        total += n
-        if not n or wait_for_utu(lambda: taken(total), ctx.stop, sc.sync_timeout):
-            return
-        late += 1
-        if late == 1:
-            log.warning(
-                "sync: Utu did not take the messages of an instant within %.1f s; the "
-                "replay goes on without waiting for it",
-                sc.sync_timeout,
-            )
-
-    return wait
 
 
 class ScriptedKind:
@@ -266,9 +232,7 @@ class ScriptedKind:
             f"t {recs[0].t:g}–{recs[-1].t:g} s) at {ctx.speed:g}× "
             + ("looping" if sc.loop else "once")
             + (", one thread of delivery" if executor is not None else "")
-            + (", in step with Utu (sync)" if executor is None and sc.sync else "")
         )
-        after = _after_instant(ctx, sc)
 
         def run() -> None:
             if executor is not None:
@@ -280,9 +244,7 @@ class ScriptedKind:
                     speed=ctx.speed,
                     loop=sc.loop,
                     until=ctx.until,
-                    on_instant=None if executor is not None else ctx.on_instant,
-                    after_instant=after,
-                    watched=ctx.watched,
+                    after_instant=None if executor is None else executor.spin_until_idle,
                 )
             except AnunnakiError as exc:
                 if not ctx.stop.is_set():

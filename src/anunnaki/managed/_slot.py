@@ -12,7 +12,8 @@ third parties register more under the ``anunnaki.managed`` entry-point group. A 
 a class with
 
 * ``name`` and ``Options`` (a pydantic model: the section's other keys, validated with file
-  and line like the rest of the launch file);
+  and line like the rest of the launch file; an optional ``Options.removed``, option →
+  what to do instead, turns a removed option into that advice at its line);
 * ``__init__(options, *, base)`` — paths are relative to ``base`` (the launch file's folder);
 * what :class:`ManagedKind` lists: ``speed``, ``check`` (bring-up checks, guideline B5),
   ``notes`` and ``start``, which returns a :class:`ManagedRun`; ``deterministic`` (optional,
@@ -30,7 +31,6 @@ This layer sits below Utu: a kind sees Utu's settings through :class:`UtuSetting
 from __future__ import annotations
 
 import threading
-import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any, ClassVar, Protocol, runtime_checkable
@@ -51,7 +51,6 @@ __all__ = [
     "ServesModels",
     "UtuSettings",
     "WritesReports",
-    "wait_for_utu",
 ]
 
 
@@ -97,14 +96,8 @@ class ManagedContext:
             (a simulated run in one process, :mod:`anunnaki.bus._executor`): a kind whose
             ``deterministic`` is true binds it to its thread, drains it after each instant
             (every node takes that instant's messages, Utu acts on them) and moves its
-            clock on only then; ``None``: the bus's own threads deliver.
-        on_instant: Without an executor: call before the messages of each instant go out,
-            with its time (it moves Utu's simulation clock in this process first).
-        taken: Without an executor: ``taken(n)`` — whether Utu, on threads of its own or
-            in other processes, has taken (and acted on) ``n`` inputs on the watched
-            topics so far; a replay with ``sync: true`` waits for it after each instant
-            (a live deployment's replay in step with a remote Utu); ``None``: nothing waits.
-        watched: The topics Utu monitors (the goal model's binding).
+            clock on only then; ``None``: the bus's own threads deliver, and nothing
+            waits for Utu (a live run: Utu takes whatever has arrived at each cycle).
 
     """
 
@@ -114,26 +107,6 @@ class ManagedContext:
     until: float | None
     say: Callable[[str], None]
     executor: Executor | None = None
-    on_instant: Callable[[float], object] | None = None
-    taken: Callable[[int], bool] | None = None
-    watched: frozenset[str] = frozenset()
-
-
-def wait_for_utu(
-    done: Callable[[], bool], stop: threading.Event, timeout: float, *, pause: float = 0.0005
-) -> bool:
-    """A replay's wait for a Utu on other threads: poll ``done()`` until it holds or ``stop``.
-
-    ``False`` only when ``timeout`` seconds of wall time passed first (the replay then goes
-    on without Utu, and says so); a stop ends the wait quietly. Only threaded deployments
-    wait: on an executor nothing does.
-    """
-    deadline = time.monotonic() + timeout
-    while not done() and not stop.is_set():
-        if time.monotonic() > deadline:
-            return False
-        stop.wait(pause)
-    return True
 
 
 class ManagedRun(Protocol):

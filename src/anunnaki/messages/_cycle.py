@@ -140,9 +140,9 @@ class AnalysisState(_CycleMessage):
     Cycle fields (set when the message carries a cycle to execute): ``origin``, ``seq``,
     ``eligible`` (applicable tactics in file order), ``postconditions`` (tactic → whether
     its postconditions hold), ``post_goals`` (status of each goal a postcondition names),
-    ``ops``, ``warming_up``, ``changed``, ``taken`` (inputs taken so far) and ``took``
-    (the step took something — inputs, time, changes, operator calls — so its end is
-    marked in Knowledge even if nothing is decided).
+    ``ops``, ``warming_up``, ``changed`` and ``took`` (the step took something — inputs,
+    time, changes, operator calls — so its end is marked in Knowledge even if nothing is
+    decided).
     """
 
     TYPE_NAME: ClassVar[str | None] = "AnalysisState"
@@ -163,7 +163,6 @@ class AnalysisState(_CycleMessage):
     ops: list[_Op] | None = None
     warming_up: bool | None = None
     changed: list[str] | None = None
-    taken: int | None = Field(default=None, ge=0)
     took: bool | None = None
 
     @field_validator("t")

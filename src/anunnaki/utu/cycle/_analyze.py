@@ -53,7 +53,6 @@ class AnalyzeStage:
         self.started_at: float | None = None
         self.warm_from: float | None = None  # the warm-up's start: the first step, or a restart's
         self.cycles = 0
-        self.taken = 0
         self.seq = 0
         self.eligible: list[str] = []  # the applicable tactics now (restored after a restart)
         self.handed: list[str] = []  # ... as the last analysis handed on had them
@@ -124,7 +123,6 @@ class AnalyzeStage:
             at = min(max(item.t, self.now), t)
             if self.topic_watch.take(item.topic, item.msg, at):
                 a.observe(item.topic, item.msg, at)
-        self.taken += len(inputs)
         self.now = t
         ticked = a.tick(t)
         changed = a.record_changes(t)
@@ -162,7 +160,6 @@ class AnalyzeStage:
             ops=out_ops,
             warming_up=a.warming_up,
             changed=changed,
-            taken=self.taken,
             took=took,
         )
 
