@@ -22,7 +22,6 @@ from collections.abc import Callable, Iterator
 from pathlib import Path
 
 import pytest
-from live_rover import LIVE_LAG, LIVE_SPEED, live_decisions
 
 from anunnaki.bus import open_bus
 from anunnaki.cli.main import main
@@ -37,6 +36,7 @@ from anunnaki.launch import (
 from anunnaki.managed import ScriptedKind
 from anunnaki.topics import node_token, ready_service
 from anunnaki.utu import NODE_NAMES, Knowledge
+from live_rover import LIVE_LAG, LIVE_SPEED, live_decisions
 
 ROVER = Path(__file__).parents[2] / "examples" / "rover"
 EXAMPLE = ROVER / "utu.yaml"

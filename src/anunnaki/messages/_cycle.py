@@ -145,6 +145,9 @@ class AnalysisState(_CycleMessage):
     decided).
     """
 
+    #: 2: ``taken`` (the inputs taken so far, read only by the scripted replay's removed
+    #: ``sync``) went; a version-1 sender may still send it.
+    VERSION: ClassVar[int] = 2
     TYPE_NAME: ClassVar[str | None] = "AnalysisState"
 
     t: float | None = None
