@@ -281,6 +281,10 @@ def test_a_peer_that_cannot_match_is_named_once(live: Live) -> None:
     line = live.bridge.wait_for("cannot match the bridge")
     assert "the publisher of /anunnaki_test_peer on /in/string" in line
     assert "(incompatible QoS: Best effort publisher and reliable subscription)" in line
+    assert line.endswith(
+        ": make the publisher reliable, or give the bridge file's entry for /in/string "
+        "'qos: sensor' (best effort)"
+    )  # with the fix
     # the peer's reliable publisher of the same topic still goes through
     assert live.round_trip("string", {"data": "after"}).to_body() == {"data": "after"}
     assert sum("/anunnaki_test_peer on /in/string" in ln for ln in live.bridge.lines) == 1

@@ -299,6 +299,7 @@ class Ros2Bridge(Closing):
                         continue
                     parts = (p.strip().removeprefix("ERROR: ") for p in reason.split(";"))
                     why = "incompatible QoS: " + "; ".join(p for p in parts if p)
+                    fix = _qos_fix(role, topic, why, in_file)
                 self._warned.add(key)
                 self.stats["incompatible_peers"] += 1
                 found += 1
@@ -487,3 +488,26 @@ def _expire(waiting: Any, s: ServiceBridge) -> None:
 
 class _CallFailed(Exception):
     """A ROS 2 service call that got no answer."""
+
+
+def _qos_fix(role: str, topic: str, why: str, in_file: bool) -> str:
+    """What to change when a peer's QoS cannot match the bridge's (``why``: rclpy's reason).
+
+    A best-effort publisher cannot feed a reliable subscription: make it reliable, or let
+    the bridge read the topic best effort (``qos: sensor`` in its entry). Anything else
+    (durability, deadline, liveliness): the peer takes the bridge's profile for the topic.
+    """
+    if "Best effort publisher and reliable subscription" in why and role == "publisher":
+        fix = ": make the publisher reliable"
+        if in_file:
+            fix += f", or give the bridge file's entry for {topic} 'qos: sensor' (best effort)"
+        return fix
+    if not in_file:  # the heartbeat
+        return (
+            f": give the {role} a QoS the heartbeat offers (reliable, volatile, liveliness "
+            "manual by topic; docs/ros.md)"
+        )
+    return (
+        f": give the {role} the QoS the bridge uses on {topic} ('sensor': best effort, keep "
+        "last; 'reliable': reliable, keep last; both volatile; docs/ros.md)"
+    )
