@@ -1512,20 +1512,25 @@ def clean_loss(domain: dict[str, Any], arm: str) -> float:
 def best_arm(domains: dict[str, Any], base: str = "random_c") -> dict[str, Any] | None:
     """The best Enki arm against *base* over the domains: on (c′), else (c), mean margin.
 
-    An arm that loses more than ``AIMS["clean_loss"]`` of clean F1 against the default in
-    any domain is passed over when another is not (issue 33: the winner keeps clean F1).
+    An arm that loses more than ``AIMS["clean_loss"]`` of clean F1 against the reference in
+    any domain is passed over when another is not (issue 33: the winner keeps clean F1); the
+    reference is :func:`round_winner`'s (:func:`clean_shortfall` over the trained arms), so
+    the two say the same of an arm's clean F1.
     """
     rows: dict[str, list[float]] = {}
-    clean_ok: dict[str, bool] = {}
     for d in domains.values():
         vs = d.get("vs_" + base, {})
         for arm, conds in vs.items():
             cond = OWN if OWN in conds else "hardest"
             rows.setdefault(arm, []).append(conds[cond]["margin"])
-            clean_ok[arm] = clean_ok.get(arm, True) and clean_loss(d, arm) <= AIMS["clean_loss"]
     full = {a: v for a, v in rows.items() if len(v) == len(domains)}
     if not full:
         return None
+    trained = [
+        a for a in RECIPES if a not in SHARED and all(a in d["arms"] for d in domains.values())
+    ]
+    _, short, relaxed = clean_shortfall(domains, [*trained, *(a for a in full if a not in trained)])
+    clean_ok = {a: max(short[a].values()) <= AIMS["clean_loss"] for a in full}
     pool = [a for a in full if clean_ok[a]] or list(full)
     arm = max(pool, key=lambda a: (statistics.fmean(full[a]), -ENKI_ARMS.index(a)))
     return {
@@ -1534,6 +1539,7 @@ def best_arm(domains: dict[str, Any], base: str = "random_c") -> dict[str, Any] 
         "mean_margin": round(statistics.fmean(full[arm]), 4),
         "margins": {a: round(statistics.fmean(v), 4) for a, v in full.items()},
         "clean_within_aim": clean_ok[arm],
+        "relaxed": relaxed,
         "domains": list(domains),
     }
 
@@ -1552,6 +1558,26 @@ def recipe_flags(arm: str, s: Settings | None = None) -> str:
     return " ".join(flags)
 
 
+def clean_shortfall(
+    domains: dict[str, Any], arms: list[str]
+) -> tuple[dict[str, dict[str, float]], dict[str, dict[str, float]], list[str]]:
+    """Each arm's clean-F1 loss per domain, its shortfall against the reference, and where
+    the reference is relaxed.
+
+    The reference is the default model's clean F1; in a domain where none of *arms* stays
+    within ``AIMS["clean_loss"]`` of it (the fine-tuning budget itself costs clean F1 there,
+    whatever the recipe), it is the best of *arms*' clean F1, and the domain is listed.
+    """
+    losses = {a: {n: round(clean_loss(d, a), 4) for n, d in domains.items()} for a in arms}
+    least = {n: min(losses[a][n] for a in arms) for n in domains}  # the best arm's loss
+    relaxed = [n for n in domains if least[n] > AIMS["clean_loss"]]
+    short = {
+        a: {n: round(x - (least[n] if n in relaxed else 0.0), 4) for n, x in losses[a].items()}
+        for a in arms
+    }
+    return losses, short, relaxed
+
+
 def round_winner(domains: dict[str, Any]) -> dict[str, Any] | None:
     """The round's best trained arm, Enki or not (issue 33 item 4: robustify's default).
 
@@ -1568,23 +1594,15 @@ def round_winner(domains: dict[str, Any]) -> dict[str, Any] | None:
     if not domains:
         return None
     own: dict[str, list[float]] = {}
-    losses: dict[str, dict[str, float]] = {}
-    for name, d in domains.items():
+    for d in domains.values():
         for arm, figures in d["arms"].items():
             if arm not in RECIPES or arm in SHARED or OWN not in figures:
                 continue
             own.setdefault(arm, []).append(figures[OWN]["mean"])
-            losses.setdefault(arm, {})[name] = round(clean_loss(d, arm), 4)
     full = {a: v for a, v in own.items() if len(v) == len(domains)}
     if not full:
         return None
-    least = {n: min(losses[a][n] for a in full) for n in domains}  # the best arm's loss
-    relaxed = [n for n in domains if least[n] > AIMS["clean_loss"]]
-    # the shortfall against the reference: the default's clean F1, or the best arm's
-    short = {
-        a: {n: round(x - (least[n] if n in relaxed else 0.0), 4) for n, x in losses[a].items()}
-        for a in full
-    }
+    losses, short, relaxed = clean_shortfall(domains, list(full))
     ok = [a for a in full if max(short[a].values()) <= AIMS["clean_loss"]]
     arm = max(ok or list(full), key=lambda a: (statistics.fmean(full[a]), -ARMS.index(a)))
     return {
@@ -2947,7 +2965,13 @@ def _ablation(doc: dict[str, Any]) -> list[str]:
             f"**Best Enki arm** over {', '.join(best['domains'])}: `{best['arm']}` (mean margin "
             f"over A+c on (c′) {100 * best['mean_margin']:+.1f} points; clean F1 "
             f"{'within' if best['clean_within_aim'] else '**not** within'} the "
-            f"{100 * AIMS['clean_loss']:.0f}-point aim). Margins per arm: "
+            f"{100 * AIMS['clean_loss']:.0f}-point aim"
+            + (
+                f", against the best arm's clean F1 in {', '.join(best['relaxed'])}"
+                if best.get("relaxed")
+                else ""
+            )
+            + "). Margins per arm: "
             + ", ".join(f"`{a}` {100 * m:+.1f}" for a, m in best["margins"].items())
             + ".",
             "",

@@ -716,6 +716,15 @@ def test_the_rounds_winner_keeps_clean_f1_and_names_robustifys_options(bench: An
     assert win["arm"] == "archive_mix_wok" and win["clean_within_aim"]
     assert win["clean_short"]["random"] == {"rover-hsl": 0.035}
     assert win["clean_short"]["random_c"] == {"rover-hsl": 0.005}
+    # the best Enki arm's line judges clean F1 against the same reference: D is within it
+    vs = {"archive_mix_wok": {"own_hardest": {"margin": 0.05}}}
+    best = bench.best_arm({"rover-hsl": domain(own, worse) | {"vs_random_c": vs}})
+    assert best["arm"] == "archive_mix_wok" and best["clean_within_aim"]
+    best = bench.best_arm({"rover-hsl": domain(own, clean) | {"vs_random_c": vs}})
+    assert best["clean_within_aim"]  # 0.5 points below the default, not relaxed
+    lost_d = worse | {"archive_mix_wok": 0.84}  # now D is 4.5 below the best arm (A+c)
+    best = bench.best_arm({"rover-hsl": domain(own, lost_d) | {"vs_random_c": vs}})
+    assert not best["clean_within_aim"]
     # when no arm keeps clean F1 in every domain, the best whatever it is, and said so:
     # D keeps it only where the default is the reference, A+c only where the best arm is
     kept = {"default": 0.94, "random": 0.80, "random_c": 0.90, "archive_mix_wok": 0.93}
