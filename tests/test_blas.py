@@ -7,7 +7,7 @@ import sys
 import numpy as np
 import pytest
 
-from anunnaki._blas import blas_limit
+from anunnaki._blas import blas_limit, torch_threads
 from anunnaki.errors import MissingExtraError
 
 threadpoolctl = pytest.importorskip("threadpoolctl")
@@ -39,3 +39,17 @@ def test_a_missing_threadpoolctl_names_the_extra(monkeypatch: pytest.MonkeyPatch
             blas_limit(1, extra="oracle")
     finally:
         _blas._controller.cache_clear()
+
+
+def test_torch_computes_on_the_threads_asked_and_as_before_after() -> None:
+    torch = pytest.importorskip("torch")
+    before = torch.get_num_threads()
+    with torch_threads(before + 1):
+        assert torch.get_num_threads() == before + 1
+    assert torch.get_num_threads() == before
+    with pytest.raises(RuntimeError, match="boom"), torch_threads(before + 2):
+        raise RuntimeError("boom")
+    assert torch.get_num_threads() == before  # after a failure too
+    for none in (None, 0):
+        with torch_threads(none):
+            assert torch.get_num_threads() == before

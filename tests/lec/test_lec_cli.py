@@ -107,9 +107,14 @@ def test_train_detector_errors(
 
 
 def test_evaluate_detector(trained: Trained, capsys: pytest.CaptureFixture[str]) -> None:
+    import torch
+
     capsys.readouterr()
     base = ["evaluate-detector", str(trained.model), "--data", str(trained.data)]
-    assert main([*base, "--phenomenon", "fog", "--strength", "0.7", "--json"]) == 0
+    threads = torch.get_num_threads()
+    assert main([*base, "--phenomenon", "fog", "--strength", "0.7", "--json", "--threads",
+                 str(threads + 1)]) == 0  # fmt: skip
+    assert torch.get_num_threads() == threads  # its --threads only while it ran
     report = json.loads(capsys.readouterr().out)
     assert report["clean"]["f1"] == pytest.approx(trained.metrics["test"]["f1"])
     assert report["phenomenon"]["name"] == "fog" and report["category"] in (0, 1, 2)

@@ -14,7 +14,6 @@ See docs/detector.md.
 from __future__ import annotations
 
 import argparse
-import importlib.util
 import json
 import math
 import time
@@ -24,6 +23,7 @@ from typing import Any
 from rich.console import Console
 from rich.table import Table
 
+from anunnaki._blas import torch_threads
 from anunnaki._names import check_domain, check_name
 from anunnaki.errors import AnunnakiError
 
@@ -565,17 +565,20 @@ def _check_evaluate_options(args: argparse.Namespace) -> None:
 
 
 def _run_evaluate(args: argparse.Namespace) -> int:
-    from anunnaki.datasets import load_split
-    from anunnaki.lec import DetectorError, evaluate_detector  # before torch: OMP policy
-    from anunnaki.phenomena import PHENOMENA
+    import anunnaki.lec  # noqa: F401  # before torch: its OMP policy
 
     _check_evaluate_options(args)
+    with torch_threads(args.threads):  # as it found them after (an in-process call)
+        return _evaluate(args)
+
+
+def _evaluate(args: argparse.Namespace) -> int:
+    from anunnaki.datasets import load_split
+    from anunnaki.lec import DetectorError, evaluate_detector
+    from anunnaki.phenomena import PHENOMENA
+
     phen = PHENOMENA.create(args.phenomenon) if args.phenomenon else None
     params = phen.validate(args.params) if phen is not None and args.params else None
-    if importlib.util.find_spec("torch") is not None:  # a plugin's model may not need it
-        import torch
-
-        torch.set_num_threads(args.threads)
     det, model = _load_evaluated(args)
     model_id, domain = model.model_id, model.domain
     if args.contexts is not None:

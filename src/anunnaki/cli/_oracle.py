@@ -7,6 +7,7 @@ import json
 import math
 from typing import Any
 
+from anunnaki._blas import torch_threads
 from anunnaki.cli._detector import add_model_options, classes_counted, classes_line, shared_view
 from anunnaki.cli._text import plain
 
@@ -509,6 +510,11 @@ def _evaluate_encoding(given: str | None, oracles: dict[str, Any]) -> Any:
 
 def run_evaluate(args: argparse.Namespace) -> int:
     """Score the oracle(s) and baselines; print the figures (JSON with --json)."""
+    with torch_threads(args.threads):  # as it found them after (an in-process call)
+        return _evaluate(args)
+
+
+def _evaluate(args: argparse.Namespace) -> int:
     from anunnaki.datasets import load_split
     from anunnaki.enlil import EnlilError, evaluate_oracles, parse_contexts
     from anunnaki.lec import resolve_model
@@ -517,10 +523,6 @@ def run_evaluate(args: argparse.Namespace) -> int:
     low, high = args.thresholds
     if not 0.0 <= low < high <= 1.0:
         raise EnlilError(f"--thresholds {low} {high}: need 0 <= DEG < COMP <= 1")
-    if args.threads:
-        import torch
-
-        torch.set_num_threads(args.threads)
     model = resolve_model(args.models, args.model)
     oracles = _oracles(args, model)
     encoding = _evaluate_encoding(args.encoding, oracles)

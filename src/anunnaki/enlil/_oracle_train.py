@@ -28,6 +28,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
+from anunnaki._blas import torch_threads
 from anunnaki.datasets import Dataset
 from anunnaki.enlil._context import (
     EnlilError,
@@ -595,12 +596,34 @@ def train_oracle(
     if not sets:
         raise EnlilError("train_oracle: give at least one set of contexts (an archive)")
     cfg = config or OracleTrainConfig()
+    with torch_threads(cfg.threads):  # as it found them after
+        return _train_oracle(
+            train,
+            val,
+            sets,
+            model_id=model_id,
+            model_sha256=model_sha256,
+            thresholds=thresholds,
+            cfg=cfg,
+            progress=progress,
+        )
+
+
+def _train_oracle(
+    train: Dataset,
+    val: Dataset,
+    sets: Sequence[ContextSet],
+    *,
+    model_id: str,
+    model_sha256: str,
+    thresholds: tuple[float, float],
+    cfg: OracleTrainConfig,
+    progress: Callable[[str, int, int], None] | None,
+) -> OracleModel:
     sets = merge_context_sets(sets)
     encoding = _frames_encoding(sets, cfg.encoding)
     drop_head = cfg.drop_head and all(s.drops is not None for s in sets)
     torch = _torch()
-    if cfg.threads:
-        torch.set_num_threads(cfg.threads)
     torch.manual_seed(cfg.seed)
     card = OracleCard(
         model_id=model_id,
