@@ -273,7 +273,9 @@ def _live_case(launch: Any, args: argparse.Namespace) -> tuple[Any, Any]:
         return None, None
     from anunnaki.assurance import load_live_case
 
-    case = load_live_case(launch.path, folder if isinstance(folder, str) else None, warn=_warn)
+    case = load_live_case(
+        launch.path, folder if isinstance(folder, str) else None, warn=_warn, loaded=launch
+    )
     if case is None:
         return None, None
     print(
