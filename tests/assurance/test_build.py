@@ -230,3 +230,14 @@ obstacles:
     assert "S-Blind" in case.nodes["G-Sees"].supported_by
     assert validate_gsn(gsn_document(case)) == []
     assert case.coverage()["by_status"] == {"undeveloped": ["G-Sees", "G-Sn1"]}
+
+
+def test_a_launch_already_loaded_gives_the_same_case(uav: Case) -> None:
+    from anunnaki.launch import load_launch
+
+    again = build_case(UAV, root=ROOT, loaded=load_launch(UAV)).to_json()
+    first = uav.to_json()
+    for when in ("built", "build_seconds"):  # the clock's, not the case's
+        again.pop(when, None)
+        first.pop(when, None)
+    assert again == first

@@ -20,7 +20,7 @@ from __future__ import annotations
 import datetime as _dt
 import time
 from pathlib import Path
-from typing import Any, Literal
+from typing import TYPE_CHECKING, Any, Literal
 
 from anunnaki.assurance._case import Case, Evidence, Node, propagate
 from anunnaki.assurance._criteria import Criteria, load_criteria
@@ -29,6 +29,9 @@ from anunnaki.assurance._relax_text import acceptance
 from anunnaki.assurance._validate import element_type, validate
 from anunnaki.errors import ModelFileError
 from anunnaki.goals import GoalModel, did_you_mean
+
+if TYPE_CHECKING:
+    from anunnaki.launch import Launch
 
 __all__ = ["CRITERIA_FILE", "build_case", "case_from_model"]
 
@@ -47,6 +50,7 @@ def build_case(
     root: str | Path | None = None,
     tests: bool = False,
     prior: Case | None = None,
+    loaded: Launch | None = None,
 ) -> Case:
     """Build the assurance case of a launch file.
 
@@ -61,6 +65,8 @@ def build_case(
             otherwise they are ``not run`` and support nothing.
         prior: The case built before: a figure whose measurement is unchanged while an
             artefact it rests on changed since then is stale.
+        loaded: ``launch`` as the caller has loaded it already (``anunnaki run``): not read
+            again.
 
     Raises:
         ModelFileError: A bad launch or criteria file, a missing results file, a figure
@@ -73,7 +79,8 @@ def build_case(
     started = time.perf_counter()
     base = Path(root or Path.cwd()).resolve()
     launch_path = Path(launch)
-    loaded = load_launch(launch_path)
+    if loaded is None:
+        loaded = load_launch(launch_path)
     cfg = loaded.parts.config
     files: dict[str, Path] = {"launch": launch_path.resolve(), "goal_model": Path(cfg.goal_model)}
     if cfg.binding:

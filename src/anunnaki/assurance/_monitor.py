@@ -24,7 +24,7 @@ from __future__ import annotations
 import threading
 from collections.abc import Callable, Iterable, Mapping
 from pathlib import Path
-from typing import Any, Final
+from typing import TYPE_CHECKING, Any, Final
 
 from anunnaki import topics
 from anunnaki._closing import Closing
@@ -33,6 +33,9 @@ from anunnaki.assurance._live import LiveStatus, evaluate
 from anunnaki.bus import Bus, Sample
 from anunnaki.goals import NodeState
 from anunnaki.messages import body_of
+
+if TYPE_CHECKING:
+    from anunnaki.launch import Launch
 
 __all__ = [
     "HOLDING",
@@ -93,6 +96,7 @@ def load_live_case(
     case_dir: str | Path | None = None,
     *,
     warn: Callable[[str], None] | None = None,
+    loaded: Launch | None = None,
 ) -> Case | None:
     """The case a running launch evaluates: ``case_dir``'s, or built from the launch now.
 
@@ -100,6 +104,7 @@ def load_live_case(
     develops its goal model (a case without any evidence argues nothing: ``None``); a few
     tenths of a second. A case that cannot be built is said through ``warn`` and ``None``
     returned (the run goes on without one); a ``case_dir`` that cannot be read raises.
+    ``loaded``: the launch file as the caller has loaded it (not read again).
     """
     from anunnaki.assurance._build import CRITERIA_FILE, build_case
     from anunnaki.assurance._case import read_case
@@ -110,7 +115,7 @@ def load_live_case(
     if launch is None or not (Path(launch).parent / CRITERIA_FILE).is_file():
         return None
     try:
-        case = build_case(launch)
+        case = build_case(launch, loaded=loaded)
     except AnunnakiError as exc:
         if warn is not None:
             warn(f"assurance: no live case ({exc})")

@@ -19,7 +19,7 @@ from typing import Any
 
 from anunnaki._parent import stop_with_parent
 from anunnaki.bus import BusConfig, open_bus
-from anunnaki.cli import _dashboard
+from anunnaki.cli import _dashboard, _heap
 from anunnaki.launch import MailSink, load_launch, run_launch, signals_to
 from anunnaki.managed import DrawsScenarios, WritesReports
 from anunnaki.tokens import OPERATOR_TOKEN_ENV, user_operator_token
@@ -121,7 +121,7 @@ def _add_run_parser(sub: Any) -> None:
         help="start a local SMTP sink on 127.0.0.1:PORT for the run (the launch's notify.smtp "
         "points there) and print the mail it received at the end",
     )
-    p.set_defaults(run=run)
+    p.set_defaults(run=run, settles_heap=True)  # _heap.settle once the run is up
 
 
 def _add_node_parser(sub: Any) -> None:
@@ -228,6 +228,7 @@ def run(args: argparse.Namespace) -> int:
             manager=getattr(args, "manager", None),
             manager_seed=getattr(args, "manager_seed", None),
             on_knowledge=live_case,
+            on_running=_heap.settle,
         )
         if sink is not None:
             _print_mail(sink, result.decisions)
@@ -272,7 +273,9 @@ def _live_case(launch: Any, args: argparse.Namespace) -> tuple[Any, Any]:
         return None, None
     from anunnaki.assurance import load_live_case
 
-    case = load_live_case(launch.path, folder if isinstance(folder, str) else None, warn=_warn)
+    case = load_live_case(
+        launch.path, folder if isinstance(folder, str) else None, warn=_warn, loaded=launch
+    )
     if case is None:
         return None, None
     print(

@@ -12,6 +12,7 @@ import sys
 from collections.abc import Sequence
 
 from anunnaki import __version__
+from anunnaki.cli import _heap
 from anunnaki.errors import AnunnakiError
 
 __all__ = ["build_parser", "main"]
@@ -57,9 +58,25 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Run the command line; returns the exit code."""
-    parser = build_parser()
-    args = parser.parse_args(argv)
+    """Run the command line; returns the exit code.
+
+    The garbage collector is paused while the command brings itself up (:mod:`._heap`): a
+    command that sets ``settles_heap`` resumes it itself once it is up (``anunnaki run``),
+    the others as soon as the command line is parsed.
+    """
+    _heap.pause()
+    try:
+        parser = build_parser()
+        args = parser.parse_args(argv)
+        if not getattr(args, "settles_heap", False):
+            _heap.end(unfreeze=False)
+        return _run_command(args)
+    finally:
+        # the process's own command line (argv from sys.argv) exits next: keep it frozen
+        _heap.end(unfreeze=argv is not None)
+
+
+def _run_command(args: argparse.Namespace) -> int:
     try:
         code: int = args.run(args)
     except AnunnakiError as exc:

@@ -150,6 +150,7 @@ def run_launch(
     manager: str | None = None,
     manager_seed: int | None = None,
     on_knowledge: Callable[[Bus, Knowledge], object] | None = None,
+    on_running: Callable[[], object] | None = None,
 ) -> RunResult:
     """Run a launch: nodes (in this process or one process each), then the managed system.
 
@@ -179,6 +180,9 @@ def run_launch(
             log: :class:`anunnaki.assurance.CaseMonitor`). With ``processes`` the knowledge
             base is this process's connection to the nodes' file (what is recorded on it is
             committed by its ``flush``). What it returns is closed as ``on_bus``'s is.
+        on_running: Called once everything is up and the managed system has started, before
+            the run is watched (``anunnaki run`` resumes the garbage collector it paused
+            for the bring-up, freezing what the bring-up made: ``anunnaki.cli._heap``).
 
     Raises:
         LaunchError: A node failed at bring-up or did not become ready in time.
@@ -202,6 +206,7 @@ def run_launch(
         manager=manager,
         manager_seed=manager_seed,
         on_knowledge=on_knowledge,
+        on_running=on_running,
     )
     if not handle_signals:
         return runner.run()
@@ -230,10 +235,12 @@ class _Runner:
         manager: str | None = None,
         manager_seed: int | None = None,
         on_knowledge: Callable[[Bus, Knowledge], object] | None = None,
+        on_running: Callable[[], object] | None = None,
     ) -> None:
         self.launch = launch
         self.on_bus = on_bus
         self.on_knowledge = on_knowledge
+        self.on_running = on_running
         self.attached: list[object] = []  # what on_bus and on_knowledge returned: see _detach
         self.processes = processes
         self.managed = launch.managed
@@ -339,6 +346,7 @@ class _Runner:
         ``executor``: the run's one thread of delivery, if it has one (the system drains it).
         """
         if self.managed is None:
+            self._running()
             return None
         ctx = ManagedContext(
             bus=bus,
@@ -349,7 +357,12 @@ class _Runner:
             executor=executor,
         )
         self.running = self.managed.start(ctx)
+        self._running()
         return self.running
+
+    def _running(self) -> None:
+        if self.on_running is not None:
+            self.on_running()
 
     def _watch(
         self,
