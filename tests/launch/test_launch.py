@@ -275,6 +275,12 @@ def test_rover_with_the_node_classes_in_one_process(tmp_path: Path) -> None:
     result, out = run(p, speed=LIVE_SPEED, knowledge=str(tmp_path / "kb.db"))
     assert "4 nodes in one process" in out  # on threads of their own: a live run
     assert_the_live_rover_story(result, out)
+    # In one process every input is stamped with the instant it was published in (the bus
+    # delivers in publication order): no decision comes before the deterministic run's, so
+    # the fail-safe waits for the light to dim (tests/live_rover.py).
+    deterministic = run(EXAMPLE, speed=50)[0].decisions
+    for live, exact in zip(live_decisions(result.decisions), deterministic, strict=True):
+        assert exact.t <= live.t <= exact.t + LIVE_LAG, out
 
 
 def test_run_until_stops_at_the_given_trace_time() -> None:

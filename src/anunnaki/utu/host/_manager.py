@@ -76,7 +76,14 @@ from anunnaki.utu.host._host import (
     take_up,
     watched,
 )
-from anunnaki.utu.host._intake import IntakeBudget, MonitoredTopics, clock_feed, take_clock
+from anunnaki.utu.host._intake import (
+    IntakeBudget,
+    MonitoredTopics,
+    SimStamps,
+    clock_feed,
+    stamp_inputs,
+    take_clock,
+)
 from anunnaki.utu.host._threads import ThreadRunner
 
 __all__ = ["AutonomicManager"]
@@ -198,6 +205,9 @@ class AutonomicManager(Closing):
         # the monitored topics' queues (a manager with a bus)
         self._pull = MonitoredTopics(self._subscribe_topic)
         self._clock_sub: Any = None
+        #: The ``/clock`` heard, to stamp inputs on simulation time (a live manager's; one on
+        #: an executor stamps each at its step, which is the instant it was published in).
+        self._stamps: SimStamps | None = None
         self._stepped = False
         self._state_cache: AnalysisState | None = None
         record_run(self.knowledge, parts)
@@ -263,6 +273,7 @@ class AutonomicManager(Closing):
     def _connect(self, bus: Any) -> None:
         self._pull.watch(self.monitor_stage.topics)
         self._clock_sub = clock_feed(self.clock, self.parts.config.clock_topic, self._subscribe)
+        self._stamps = SimStamps() if self._clock_sub is not None else None
         who = f"utu:{self.name}"
         self._declared.append(listen_run_stop(bus, self.name, who, self.desk.heard_run_stop))
         self._declared += self.desk.declare(bus)
@@ -401,8 +412,9 @@ class AutonomicManager(Closing):
         limit = min(self.parts.config.queue, self.parts.config.intake)
         if self._budget is not None and self._live:
             limit = min(limit, self._budget.limit())  # a live step's time budget
-        self._inputs.extend(self._pull.take(limit, wall=wall))
-        take_clock(self.clock, self._clock_sub)
+        taken = self._pull.take(limit)
+        take_clock(self.clock, self._clock_sub, self._stamps)
+        self._inputs.extend(stamp_inputs(taken, wall=wall, stamps=self._stamps))
 
     def feed(self, topic: str, msg: Mapping[str, Any], *, t: float | None = None) -> None:
         """Queue one input message (what the bus subscription does); processed by ``step``.
@@ -643,6 +655,7 @@ class AutonomicManager(Closing):
         live loop's (:meth:`spin`); a run on an executor has no loop that could stall.
         """
         self._execute.run_inline()
+        self._stamps = None  # each input is taken in the instant it was published in
         self._inline = True
         self._live = True
         remove = executor.on_idle(self._at_present)

@@ -90,7 +90,13 @@ from anunnaki.utu.host._host import (
     take_up,
     watched,
 )
-from anunnaki.utu.host._intake import MonitoredTopics, clock_feed, take_clock
+from anunnaki.utu.host._intake import (
+    MonitoredTopics,
+    SimStamps,
+    clock_feed,
+    stamp_inputs,
+    take_clock,
+)
 
 __all__ = [
     "NODE_NAMES",
@@ -164,6 +170,8 @@ class UtuNode(Node):
         self._kb: Knowledge | None = knowledge
         self._own_kb = False
         self._clock_sub: Subscriber | None = None
+        #: The ``/clock`` heard, to stamp inputs on simulation time (the monitor's).
+        self._stamps: SimStamps | None = None
         self._origins: dict[str, str] = {}  # peer node -> the origin its cycles carry
         self.foreign = 0  # cycle messages refused as not from the peer they claim
         if self.needs_knowledge and knowledge is None:
@@ -182,6 +190,7 @@ class UtuNode(Node):
         if self.uses_clock:
             topic = self.config.clock_topic
             self._clock_sub = clock_feed(self.clock, topic, lambda t, q: self.pull(t, queue=q))
+            self._stamps = SimStamps() if self._clock_sub is not None else None
         self.own(listen_run_stop(self.bus, self.config.name, self.name, self._heard_run_stop))
         self.bring_up()
 
@@ -197,7 +206,7 @@ class UtuNode(Node):
 
     def _take_clock(self) -> None:
         """Apply the simulation times queued since the last call."""
-        take_clock(self.clock, self._clock_sub)
+        take_clock(self.clock, self._clock_sub, self._stamps)
 
     def _heard_run_stop(self, caller: str, reason: str) -> None:
         self.run_stopped = True
@@ -351,7 +360,9 @@ class MonitorNode(UtuNode):
         A batch goes out when something arrived, or as a watermark when the time moved on
         by at least ``1/rate`` since the last batch. The inputs are taken first, then the
         simulation time: a message published after its instant's ``/clock`` is never
-        stamped with an earlier time.
+        stamped with an earlier time. On simulation time each input is stamped with the
+        instant it was published in (:class:`~anunnaki.utu.host._intake.SimStamps`), or with
+        the step's time when that is not known or ``now`` is given.
         """
         wall = isinstance(self.clock, WallClock) and now is None
         with self._lock:
@@ -363,10 +374,11 @@ class MonitorNode(UtuNode):
                 self.config.intake,
                 MAX_BATCH // max(1, len(self._subs) + 1),
             )
-            inputs += self._subs.take(limit, wall=wall)
+            taken = self._subs.take(limit)
         ops = self.desk.take()
         if now is None:
             self._take_clock()
+        inputs += stamp_inputs(taken, wall=wall, stamps=self._stamps if now is None else None)
         t = self.clock.now() if now is None else float(now)
         if not inputs and not ops and t < self.stage.last_t + 1.0 / self.rate:
             return False
